@@ -1,0 +1,67 @@
+"""Cloth engines behind one interface, discovered through the `cloth_bench_ros.engines` entry points.
+
+Another package adds an engine by declaring, in its own setup.py:
+    entry_points={"cloth_bench_ros.engines": ["myengine = my_pkg.module:MyCloth"]}
+where MyCloth subclasses `cloth_bench_ros.engines.base.ClothEngine`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+
+from cloth_bench_ros.engines.base import ClothEngine, EngineError
+
+ENTRY_POINT_GROUP = "cloth_bench_ros.engines"
+
+# Engines of the paper that cannot be installed from PyPI or Debian: listed with the reason.
+UNAVAILABLE = {
+    "flex": "NVIDIA Flex 1.2 (SoftGym) needs CUDA and a source build; no package on PyPI or Debian",
+    "sofa": "SOFA 23.06 has no package on PyPI or Debian (binary releases and conda only)",
+}
+
+
+@dataclass(frozen=True)
+class EngineInfo:
+    name: str
+    available: bool
+    version: str
+    reason: str  # why it is unavailable, empty when available
+
+
+def _entry_points() -> dict:
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def engine_class(name: str) -> type[ClothEngine]:
+    """The engine class registered under `name`; EngineError if unknown or unavailable."""
+    eps = _entry_points()
+    if name in eps:
+        try:
+            return eps[name].load()
+        except ImportError as exc:
+            raise EngineError(f"engine {name} is not available: {exc}") from None
+    if name in UNAVAILABLE:
+        raise EngineError(f"engine {name} is not available: {UNAVAILABLE[name]}")
+    known = sorted(set(eps) | set(UNAVAILABLE))
+    raise EngineError(f"unknown engine {name!r} (known: {', '.join(known)})")
+
+
+def known_engines() -> list[EngineInfo]:
+    """Every registered or known engine with its availability, version and reason."""
+    infos = []
+    for name, ep in sorted(_entry_points().items()):
+        try:
+            cls = ep.load()
+            infos.append(EngineInfo(name, True, cls.version(), ""))
+        except ImportError as exc:
+            infos.append(EngineInfo(name, False, "", f"import failed: {exc}"))
+    for name, reason in UNAVAILABLE.items():
+        if name not in {i.name for i in infos}:
+            infos.append(EngineInfo(name, False, "", reason))
+    return infos
+
+
+def make_engine(name: str, rate_hz: float, params: dict | None = None, grid=None) -> ClothEngine:
+    """Instantiate engine `name` at `rate_hz` with validated parameters."""
+    return engine_class(name)(rate_hz, params, grid)

@@ -1,0 +1,163 @@
+"""The one interface every cloth engine implements, and the checks they share."""
+
+from __future__ import annotations
+
+import abc
+import math
+from dataclasses import dataclass, field
+from typing import ClassVar, Mapping
+
+import numpy as np
+
+from cloth_bench_ros.scene import ClothGrid
+
+
+class EngineError(ValueError):
+    """A user error in choosing or configuring an engine (unknown name, bad parameter)."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """One engine parameter: default, unit and the closed range [low, high] it must lie in."""
+
+    name: str
+    default: float | int | str | bool
+    unit: str
+    low: float | None = None
+    high: float | None = None
+    doc: str = ""
+    choices: tuple[str, ...] = ()
+
+    def validate(self, value: object) -> object:
+        if self.choices:
+            if value not in self.choices:
+                raise EngineError(f"parameter {self.name}={value!r} is not one of {', '.join(self.choices)}")
+            return value
+        if isinstance(self.default, bool):
+            if not isinstance(value, bool):
+                raise EngineError(f"parameter {self.name}={value!r} must be true or false")
+            return value
+        try:
+            number = float(value)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            raise EngineError(f"parameter {self.name}={value!r} is not a number") from None
+        if not math.isfinite(number):
+            raise EngineError(f"parameter {self.name}={value!r} is not finite")
+        if (self.low is not None and number < self.low) or (self.high is not None and number > self.high):
+            raise EngineError(
+                f"parameter {self.name}={value!r} {self.unit} is outside [{self.low}, {self.high}]"
+            )
+        return int(number) if isinstance(self.default, int) else number
+
+
+@dataclass(frozen=True)
+class Divergence:
+    step: int
+    reason: str
+
+
+# Divergence thresholds: a cloth vertex this far from the grippers, or this fast, has exploded.
+MAX_DISTANCE_FROM_GRIPPERS = 5.0  # m (the cloth is 0.86 m across its diagonal)
+MAX_VERTEX_SPEED = 100.0  # m/s
+
+
+def check_divergence(vertices: np.ndarray, previous: np.ndarray | None, dt: float,
+                     grippers_mid: np.ndarray) -> str | None:
+    """Why this state counts as diverged, or None."""
+    if not np.isfinite(vertices).all():
+        return "non-finite vertex positions"
+    reach = float(np.abs(vertices - grippers_mid).max())
+    if reach > MAX_DISTANCE_FROM_GRIPPERS:
+        return f"a vertex is {reach:.1f} m from the grippers"
+    if previous is not None:
+        speed = float(np.linalg.norm(vertices - previous, axis=1).max() / dt)
+        if speed > MAX_VERTEX_SPEED:
+            return f"a vertex moves at {speed:.0f} m/s"
+    return None
+
+
+class ClothEngine(abc.ABC):
+    """A cloth simulator for the benchmark scene: cloth, table, two point grasps.
+
+    Subclasses set `name` and `params`, build the scene in `_build` and advance it in `_step`.
+    The grasped corners are the first and last vertex of the grid's top row.
+    """
+
+    name: ClassVar[str]
+    params: ClassVar[tuple[Param, ...]]
+
+    def __init__(self, rate_hz: float, params: Mapping[str, object] | None = None,
+                 grid: ClothGrid | None = None) -> None:
+        if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
+            raise EngineError(f"rate must be a positive number of Hz, got {rate_hz}")
+        self.rate_hz = float(rate_hz)
+        self.grid = grid or ClothGrid()
+        self.config = self.validate_params(params or {})
+        self.divergence: Divergence | None = None
+        self.steps = 0
+        self._vertices: np.ndarray | None = None
+
+    @classmethod
+    def validate_params(cls, params: Mapping[str, object]) -> dict[str, object]:
+        """Defaults overlaid with `params`; EngineError on unknown names or bad values."""
+        schema = {p.name: p for p in cls.params}
+        unknown = sorted(set(params) - set(schema))
+        if unknown:
+            raise EngineError(
+                f"unknown {cls.name} parameter {', '.join(unknown)} (known: {', '.join(schema)})"
+            )
+        config = {p.name: p.default for p in cls.params}
+        config.update({k: schema[k].validate(v) for k, v in params.items()})
+        return config
+
+    @classmethod
+    def version(cls) -> str:
+        """Version of the underlying simulator."""
+        return "unknown"
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @property
+    def diverged(self) -> bool:
+        return self.divergence is not None
+
+    @property
+    def faces(self) -> np.ndarray:
+        return self.grid.faces()
+
+    def reset(self, seed: int, left_xyz: np.ndarray, right_xyz: np.ndarray) -> np.ndarray:
+        """Build the scene with the grasped corners at the grippers; the seed perturbs the cloth."""
+        self.divergence = None
+        self.steps = 0
+        self._vertices = self._reset(int(seed), np.asarray(left_xyz, float), np.asarray(right_xyz, float))
+        return self._vertices
+
+    def step(self, left_xyz: np.ndarray, right_xyz: np.ndarray) -> np.ndarray:
+        """Advance dt with the grippers moved to the targets; the vertices (n, 3) after it."""
+        if self._vertices is None:
+            raise RuntimeError("reset() before step()")
+        self.steps += 1
+        if self.divergence is not None:
+            return self._vertices
+        left, right = np.asarray(left_xyz, float), np.asarray(right_xyz, float)
+        try:
+            vertices = self._step(left, right)
+        except Exception as exc:  # an engine's own failure (e.g. a solver error) is a divergence
+            self.divergence = Divergence(self.steps, f"{type(exc).__name__}: {exc}")
+            return self._vertices
+        reason = check_divergence(vertices, self._vertices, self.dt, (left + right) / 2)
+        if reason is not None:
+            self.divergence = Divergence(self.steps, reason)
+        self._vertices = vertices
+        return vertices
+
+    @abc.abstractmethod
+    def _reset(self, seed: int, left: np.ndarray, right: np.ndarray) -> np.ndarray: ...
+
+    @abc.abstractmethod
+    def _step(self, left: np.ndarray, right: np.ndarray) -> np.ndarray: ...
+
+    def close(self) -> None:
+        """Free the simulator's resources."""

@@ -1,0 +1,114 @@
+"""Sim-to-real metrics (REFERENCE.md section 3).
+
+One-sided L1 Chamfer and Hausdorff distances from the simulated vertices V to the real cloud P
+(the nearest neighbour is taken under the L1 norm too), the stability L_s of a sequence of
+simulated frames, and step-latency statistics.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+def _points(name: str, a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (n, 3), got {a.shape}")
+    if len(a) == 0:
+        raise ValueError(f"{name} is empty")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name} holds non-finite values")
+    return a
+
+
+class RealCloud:
+    """A real point cloud P indexed once (k-d tree) so that several meshes can be scored on it."""
+
+    def __init__(self, points: np.ndarray) -> None:
+        self.points = _points("P", points)
+        self._tree = cKDTree(self.points, balanced_tree=False, compact_nodes=False)
+
+    def nearest_l1(self, vertices: np.ndarray) -> np.ndarray:
+        """For each vertex v, min over p of ||v - p||_1 (exact: the tree is searched in L1)."""
+        dist, _ = self._tree.query(_points("V", vertices), k=1, p=1)
+        return dist
+
+    def chamfer_hausdorff(self, vertices: np.ndarray) -> tuple[float, float]:
+        """(CD, HD) of the vertices against this cloud."""
+        d = self.nearest_l1(vertices)
+        return float(d.mean()), float(d.max())
+
+
+def chamfer_l1(V: np.ndarray, P: np.ndarray) -> float:
+    """CD(V, P) = mean over v in V of min over p in P of ||v - p||_1."""
+    return float(RealCloud(P).nearest_l1(V).mean())
+
+
+def hausdorff_l1(V: np.ndarray, P: np.ndarray) -> float:
+    """HD(V, P) = max over v in V of min over p in P of ||v - p||_1."""
+    return float(RealCloud(P).nearest_l1(V).max())
+
+
+def stability(frames: np.ndarray) -> float:
+    """L_s = (1/N) sum_{t=1}^{N-2} mean |(V_{t-1} + V_t + V_{t+1}) / 3 - V_t| over frames (N, n, 3)."""
+    frames = np.asarray(frames, dtype=np.float64)
+    if frames.ndim != 3 or frames.shape[2] != 3:
+        raise ValueError(f"frames must have shape (N, n, 3), got {frames.shape}")
+    acc = StabilityAccumulator()
+    for frame in frames:
+        acc.add(frame)
+    return acc.value
+
+
+class StabilityAccumulator:
+    """L_s computed online: O(1) memory, the same number as `stability` on the whole sequence."""
+
+    def __init__(self) -> None:
+        self._prev2: np.ndarray | None = None
+        self._prev1: np.ndarray | None = None
+        self._sum = 0.0
+        self.count = 0
+
+    def add(self, frame: np.ndarray) -> None:
+        frame = np.asarray(frame, dtype=np.float64)
+        if self._prev2 is not None:
+            filtered = (self._prev2 + self._prev1 + frame) / 3.0
+            self._sum += float(np.mean(np.abs(filtered - self._prev1)))
+        self._prev2, self._prev1 = self._prev1, frame
+        self.count += 1
+
+    @property
+    def value(self) -> float:
+        return self._sum / self.count if self.count else float("nan")
+
+
+@dataclass(frozen=True)
+class LatencyStats:
+    """Step-time statistics in seconds."""
+
+    count: int
+    mean: float
+    p50: float
+    p99: float
+    max: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {"count": self.count, "mean": self.mean, "p50": self.p50, "p99": self.p99, "max": self.max}
+
+
+def latency_stats(samples: np.ndarray) -> LatencyStats:
+    """Mean, median, 99th percentile and maximum of step times (NaN when there are none)."""
+    s = np.asarray(samples, dtype=np.float64)
+    if s.size == 0:
+        nan = float("nan")
+        return LatencyStats(0, nan, nan, nan, nan)
+    return LatencyStats(
+        int(s.size),
+        float(s.mean()),
+        float(np.percentile(s, 50)),
+        float(np.percentile(s, 99)),
+        float(s.max()),
+    )

@@ -1,0 +1,96 @@
+"""sensor_msgs/PointCloud2 <-> numpy, as sensor_msgs_py.point_cloud2 does it.
+
+Works on any message object with PointCloud2's fields (the real sensor_msgs class or the
+rosbags one); the classes to build with are passed in, so this module stays free of ROS.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import numpy as np
+
+# sensor_msgs/PointField datatypes
+INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
+_NUMPY_TYPES = {
+    INT8: "i1",
+    UINT8: "u1",
+    INT16: "i2",
+    UINT16: "u2",
+    INT32: "i4",
+    UINT32: "u4",
+    FLOAT32: "f4",
+    FLOAT64: "f8",
+}
+
+
+class PointCloudError(ValueError):
+    """A PointCloud2 that cannot be decoded (missing fields, bad sizes)."""
+
+
+def create_cloud_xyz32(header: Any, points: np.ndarray, cloud_type: type, field_type: type) -> Any:
+    """A dense-or-not PointCloud2 of x, y, z float32 (point_step 12), one row, native byte order."""
+    pts = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
+    fields = [
+        field_type(name=name, offset=4 * i, datatype=FLOAT32, count=1)
+        for i, name in enumerate("xyz")
+    ]
+    return cloud_type(
+        header=header,
+        height=1,
+        width=len(pts),
+        fields=fields,
+        is_bigendian=sys.byteorder != "little",
+        point_step=12,
+        row_step=12 * len(pts),
+        data=np.frombuffer(pts.tobytes(), dtype=np.uint8),
+        is_dense=bool(np.isfinite(pts).all()),
+    )
+
+
+def _as_bytes(data: Any) -> bytes | np.ndarray:
+    if isinstance(data, np.ndarray):
+        return data.view(np.uint8).ravel()
+    if isinstance(data, (bytes, bytearray, memoryview)):
+        return np.frombuffer(data, dtype=np.uint8)
+    return np.asarray(data, dtype=np.uint8)  # array.array or list from rclpy
+
+
+def read_xyz(cloud: Any) -> np.ndarray:
+    """The x, y, z of every point as float64 (n, 3), NaN points kept (see `drop_nan`)."""
+    by_name = {f.name: f for f in cloud.fields}
+    missing = [c for c in "xyz" if c not in by_name]
+    if missing:
+        names = ", ".join(sorted(by_name)) or "none"
+        raise PointCloudError(f"PointCloud2 has no {'/'.join(missing)} field (fields: {names})")
+    n = int(cloud.width) * int(cloud.height)
+    if n == 0:
+        return np.zeros((0, 3))
+    order = ">" if cloud.is_bigendian else "<"
+    point_step, row_step = int(cloud.point_step), int(cloud.row_step)
+    raw = _as_bytes(cloud.data)
+    if row_step < point_step * int(cloud.width) or len(raw) < row_step * int(cloud.height):
+        raise PointCloudError(
+            f"PointCloud2 data of {len(raw)} bytes does not hold {cloud.height} rows of "
+            f"{cloud.width} points (point_step {point_step}, row_step {row_step})"
+        )
+    # Drop the padding at the end of each row so that points are evenly spaced.
+    rows = raw[: row_step * int(cloud.height)].reshape(int(cloud.height), row_step)
+    packed = np.ascontiguousarray(rows[:, : point_step * int(cloud.width)]).reshape(n, point_step)
+    out = np.empty((n, 3))
+    for i, c in enumerate("xyz"):
+        f = by_name[c]
+        if f.datatype not in _NUMPY_TYPES:
+            raise PointCloudError(f"PointCloud2 field {c} has unknown datatype {f.datatype}")
+        dtype = np.dtype(order + _NUMPY_TYPES[f.datatype])
+        if f.offset + dtype.itemsize > point_step:
+            raise PointCloudError(f"PointCloud2 field {c} lies outside point_step {point_step}")
+        out[:, i] = packed[:, f.offset : f.offset + dtype.itemsize].copy().view(dtype).ravel()
+    return out
+
+
+def drop_nan(points: np.ndarray) -> tuple[np.ndarray, int]:
+    """Points whose three coordinates are finite, and how many were dropped."""
+    keep = np.isfinite(points).all(axis=1)
+    return points[keep], int(len(points) - keep.sum())

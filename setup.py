@@ -1,0 +1,37 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "cloth_bench_ros"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(include=[package_name, package_name + ".*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/config/presets", glob("config/presets/*.yaml")),
+    ],
+    package_data={package_name: ["py.typed"]},
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="cloth_bench_ros developers",
+    maintainer_email="cloth-bench@example.org",
+    description="Sim-to-real benchmark of cloth simulators as ROS 2 nodes",
+    license="MIT",
+    entry_points={
+        "console_scripts": [
+            "trajectory_publisher = cloth_bench_ros.nodes.trajectory_publisher:main",
+            "simulator = cloth_bench_ros.nodes.simulator:main",
+            "recorder = cloth_bench_ros.nodes.recorder:main",
+            "evaluator = cloth_bench_ros.nodes.evaluator:main",
+            "cloth-bench = cloth_bench_ros.cli:main",
+        ],
+        "cloth_bench_ros.engines": [
+            "mujoco = cloth_bench_ros.engines.mujoco_cloth:MujocoCloth",
+        ],
+    },
+)
