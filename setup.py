@@ -1,8 +1,18 @@
+import os
 from glob import glob
 
 from setuptools import find_packages, setup
 
 package_name = "cloth_bench_ros"
+
+
+def bag_files():
+    """Each bundled bag directory under bags/ goes to share/cloth_bench_ros/bags/<name>/."""
+    out = [("share/" + package_name + "/bags", glob("bags/*.md"))]
+    for bag in sorted(glob("bags/*/")):
+        out.append(("share/" + package_name + "/" + bag.rstrip("/"), glob(os.path.join(bag, "*"))))
+    return out
+
 
 setup(
     name=package_name,
@@ -14,7 +24,8 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/config/presets", glob("config/presets/*.yaml")),
-    ],
+    ]
+    + bag_files(),
     package_data={package_name: ["py.typed"]},
     install_requires=["setuptools"],
     zip_safe=True,

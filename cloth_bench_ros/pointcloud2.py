@@ -6,6 +6,7 @@ rosbags one); the classes to build with are passed in, so this module stays free
 
 from __future__ import annotations
 
+import array
 import sys
 from typing import Any
 
@@ -29,6 +30,13 @@ class PointCloudError(ValueError):
     """A PointCloud2 that cannot be decoded (missing fields, bad sizes)."""
 
 
+def _cloud_data(cloud_type: type, raw: bytes) -> object:
+    """PointCloud2.data in the form the class expects: rclpy's fast path is array.array('B')."""
+    if hasattr(cloud_type, "_fields_and_field_types"):  # an rclpy message class
+        return array.array("B", raw)
+    return np.frombuffer(raw, dtype=np.uint8)
+
+
 def create_cloud_xyz32(header: Any, points: np.ndarray, cloud_type: type, field_type: type) -> Any:
     """A dense-or-not PointCloud2 of x, y, z float32 (point_step 12), one row, native byte order."""
     pts = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
@@ -44,7 +52,7 @@ def create_cloud_xyz32(header: Any, points: np.ndarray, cloud_type: type, field_
         is_bigendian=sys.byteorder != "little",
         point_step=12,
         row_step=12 * len(pts),
-        data=np.frombuffer(pts.tobytes(), dtype=np.uint8),
+        data=_cloud_data(cloud_type, pts.tobytes()),
         is_dense=bool(np.isfinite(pts).all()),
     )
 

@@ -1,0 +1,172 @@
+"""Online scoring of simulated states against real frames (the evaluator node's core, no ROS).
+
+Real frames and simulated states arrive in any interleaving, each in time order. A real frame at
+time t is scored against the simulated state of the same time: the state stamped t when there is
+one, otherwise the linear interpolation of the two states that bracket t (at 100 Hz and 30 fps
+only every third real frame falls on a simulator step).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cloth_bench_ros.metrics import RealCloud, StabilityAccumulator, latency_stats
+from cloth_bench_ros.trajectory import Primitive
+
+
+@dataclass(frozen=True)
+class FrameScore:
+    engine: str
+    frame: int  # real frame index from the start of the quintic part
+    t: float  # s from the start of the quintic part
+    cd: float
+    hd: float
+    in_window: bool  # counts toward CD_d/HD_d (dynamic: before the change of phase) or CD_q/HD_q
+    diverged: bool
+
+
+@dataclass
+class _EngineState:
+    states: deque = field(default_factory=lambda: deque(maxlen=4096))  # (stamp_ns, vertices)
+    last_stamp: int = -1
+    stability: StabilityAccumulator = field(default_factory=StabilityAccumulator)
+    step_times: list = field(default_factory=list)
+    diverged_step: int | None = None
+    diverged_time: float | None = None
+    diverged_reason: str = ""
+
+
+class OnlineEvaluator:
+    """Pairs real frames with simulated states by stamp and scores them as they complete."""
+
+    def __init__(self, engines: list[str], primitive: Primitive, quintic_start_ns: int,
+                 change_of_phase_frame: int | None, fps: float = 30.0) -> None:
+        self.primitive = Primitive(primitive)
+        self.quintic_start_ns = int(quintic_start_ns)
+        self.change_of_phase_frame = change_of_phase_frame
+        self.fps = fps
+        self.engines = {name: _EngineState() for name in engines}
+        self._pending: deque[tuple[int, RealCloud | None]] = deque()
+        self.scores: list[FrameScore] = []
+        self.real_frames = 0
+        self.empty_frames = 0
+        self.nan_points_dropped = 0
+        self.unpaired_frames = 0
+
+    # inputs
+    def add_state(self, engine: str, stamp_ns: int, vertices: np.ndarray) -> None:
+        """A simulated state; states before the quintic part only advance the stamp."""
+        e = self.engines[engine]
+        e.last_stamp = stamp_ns
+        if stamp_ns < self.quintic_start_ns:
+            return
+        e.states.append((stamp_ns, vertices))
+        if e.diverged_step is None and np.isfinite(vertices).all():
+            e.stability.add(vertices)
+        self._score_ready()
+
+    def add_step(self, engine: str, stamp_ns: int, step: int, step_time: float, diverged: bool,
+                 reason: str = "") -> None:
+        """The simulator's report of one step: compute time and divergence."""
+        e = self.engines[engine]
+        if step > 0:
+            e.step_times.append(step_time)
+        if diverged and e.diverged_step is None:
+            e.diverged_step = step
+            e.diverged_time = (stamp_ns - self.quintic_start_ns) / 1e9
+            e.diverged_reason = reason
+
+    def add_real(self, stamp_ns: int, points: np.ndarray, nan_dropped: int = 0) -> None:
+        """A real frame (stamp in run time); an empty cloud is counted and skipped."""
+        self.real_frames += 1
+        self.nan_points_dropped += nan_dropped
+        if len(points) == 0:
+            self.empty_frames += 1
+            return
+        self._pending.append((stamp_ns, RealCloud(points)))
+        self._score_ready()
+
+    # scoring
+    def _state_at(self, e: _EngineState, t_ns: int) -> np.ndarray | None:
+        if e.last_stamp < t_ns:
+            return None
+        states = e.states
+        for i in range(len(states) - 1, -1, -1):
+            s, v = states[i]
+            if s == t_ns:
+                return v
+            if s < t_ns:
+                s1, v1 = states[i + 1]
+                w = (t_ns - s) / (s1 - s)
+                return (1.0 - w) * v + w * v1
+        return None  # older than the buffer: cannot happen while frames are scored in order
+
+    def _score_ready(self) -> None:
+        while self._pending:
+            stamp, cloud = self._pending[0]
+            if any(e.last_stamp < stamp for e in self.engines.values()):
+                return
+            self._pending.popleft()
+            self._score(stamp, cloud)
+
+    def _score(self, stamp: int, cloud: RealCloud) -> None:
+        t = (stamp - self.quintic_start_ns) / 1e9
+        frame = int(round(t * self.fps))
+        if self.primitive is Primitive.DYNAMIC and self.change_of_phase_frame is not None:
+            in_window = frame < self.change_of_phase_frame
+        else:
+            in_window = True
+        for name, e in self.engines.items():
+            vertices = self._state_at(e, stamp)
+            if vertices is None:
+                self.unpaired_frames += 1
+                continue
+            diverged = e.diverged_time is not None and t >= e.diverged_time - 1e-9
+            if diverged or not np.isfinite(vertices).all():
+                cd = hd = math.nan
+                diverged = True
+            else:
+                cd, hd = cloud.chamfer_hausdorff(vertices)
+            self.scores.append(FrameScore(name, frame, t, cd, hd, in_window, diverged))
+
+    def finish(self) -> None:
+        """Frames still waiting for a state never get one: count them as unpaired."""
+        self.unpaired_frames += len(self._pending) * len(self.engines)
+        self._pending.clear()
+
+    # results
+    def summary(self) -> dict[str, dict]:
+        """Per engine: CD/HD over the window, L_s, latency and divergence."""
+        out = {}
+        suffix = "d" if self.primitive is Primitive.DYNAMIC else "q"
+        for name, e in self.engines.items():
+            rows = [s for s in self.scores if s.engine == name]
+            window = [s for s in rows if s.in_window]
+            diverged_in_window = any(s.diverged for s in window)
+            cd = [s.cd for s in window]
+            hd = [s.hd for s in window]
+            out[name] = {
+                f"CD_{suffix}": math.nan if diverged_in_window or not cd else float(np.mean(cd)),
+                f"HD_{suffix}": math.nan if diverged_in_window or not hd else float(np.mean(hd)),
+                "L_s": e.stability.value,
+                "step_time": latency_stats(np.asarray(e.step_times)).as_dict(),
+                "frames_scored": len(rows),
+                "frames_in_window": len(window),
+                "diverged": e.diverged_step is not None,
+                "diverged_at_step": e.diverged_step,
+                "diverged_at_time": e.diverged_time,
+                "diverged_reason": e.diverged_reason,
+            }
+        return out
+
+    def real_summary(self) -> dict[str, int]:
+        return {
+            "frames": self.real_frames,
+            "empty_frames_skipped": self.empty_frames,
+            "nan_points_dropped": self.nan_points_dropped,
+            "unpaired_frames": self.unpaired_frames,
+        }

@@ -1,0 +1,1 @@
+"""ROS 2 nodes: thin rclpy nodes over the core, engine and data layers; each has a main()."""

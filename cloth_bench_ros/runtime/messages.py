@@ -1,0 +1,73 @@
+"""ROS 2 message classes of the embedded runtime: rosbags' types, constructible with defaults.
+
+rosbags' message classes are dataclasses whose every field is required; rclpy's take keyword
+arguments and default the rest. The classes here behave like rclpy's, serialise to the same CDR
+bytes (through rosbags) and are what `cloth_bench_ros.runtime` exports when rclpy is absent.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from cloth_bench_ros.data.messages import TYPESTORE
+
+_NUMPY = {
+    "bool": np.bool_, "byte": np.uint8, "char": np.uint8, "int8": np.int8, "uint8": np.uint8,
+    "int16": np.int16, "uint16": np.uint16, "int32": np.int32, "uint32": np.uint32,
+    "int64": np.int64, "uint64": np.uint64, "float32": np.float32, "float64": np.float64,
+}
+_classes: dict[str, type] = {}
+
+
+def _default(node: tuple) -> Any:
+    kind, detail = node
+    kind = int(kind)
+    if kind == 1:  # base type
+        name = detail[0]
+        if name == "string":
+            return ""
+        if name == "bool":
+            return False
+        return 0.0 if name.startswith("float") else 0
+    if kind == 2:  # nested message
+        return message_class(detail)()
+    (inner_kind, inner), length = detail
+    numeric = int(inner_kind) == 1 and inner[0] in _NUMPY
+    if kind == 3:  # fixed-size array
+        if numeric:
+            return np.zeros(length, dtype=_NUMPY[inner[0]])
+        return [_default((inner_kind, inner)) for _ in range(length)]
+    return np.zeros(0, dtype=_NUMPY[inner[0]]) if numeric else []  # sequence
+
+
+def message_class(typename: str) -> type:
+    """A subclass of rosbags' class for `typename` whose constructor defaults every field."""
+    if typename not in _classes:
+        base = TYPESTORE.types[typename]
+        fields = TYPESTORE.fielddefs[typename][1]
+
+        def __init__(self: Any, **kwargs: Any) -> None:
+            for name, node in fields:
+                if name not in kwargs:
+                    kwargs[name] = _default(node)
+            base.__init__(self, **kwargs)
+
+        _classes[typename] = type(typename.rsplit("/", 1)[-1], (base,), {"__init__": __init__})
+    return _classes[typename]
+
+
+Time = message_class("builtin_interfaces/msg/Time")
+Header = message_class("std_msgs/msg/Header")
+String = message_class("std_msgs/msg/String")
+Clock = message_class("rosgraph_msgs/msg/Clock")
+Point = message_class("geometry_msgs/msg/Point")
+Quaternion = message_class("geometry_msgs/msg/Quaternion")
+Pose = message_class("geometry_msgs/msg/Pose")
+PoseArray = message_class("geometry_msgs/msg/PoseArray")
+PointField = message_class("sensor_msgs/msg/PointField")
+PointCloud2 = message_class("sensor_msgs/msg/PointCloud2")
+KeyValue = message_class("diagnostic_msgs/msg/KeyValue")
+DiagnosticStatus = message_class("diagnostic_msgs/msg/DiagnosticStatus")
+DiagnosticArray = message_class("diagnostic_msgs/msg/DiagnosticArray")

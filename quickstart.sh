@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# The README's two commands:
+#   ./quickstart.sh run    install what is missing, then `cloth-bench run` on the bundled bag
+#   ./quickstart.sh test   install what is missing, then the test suite
+# Installs Debian packages (apt-get, as root or with sudo) and a virtual environment in .venv.
+set -euo pipefail
+cd "$(dirname "$0")"
+VENV="${CLOTH_BENCH_VENV:-.venv}"
+# Shared libraries that open3d loads at import time, and venv support for Debian's python3.
+SYSTEM_PACKAGES=(python3-venv libusb-1.0-0 libgl1 libegl1 libx11-6 libudev1 libgomp1)
+
+as_root() {
+  if [ "$(id -u)" -eq 0 ]; then "$@"
+  elif command -v sudo >/dev/null 2>&1; then sudo "$@"
+  else echo "quickstart: need root (or sudo) to run: $*" >&2; exit 1; fi
+}
+
+install_system() {
+  python3 -c 'import sys; sys.exit(sys.version_info < (3, 10))' \
+    || { echo "quickstart: Python 3.10 or later is required (found $(python3 --version))" >&2; exit 1; }
+  command -v dpkg-query >/dev/null 2>&1 || return 0  # not Debian/Ubuntu: install the list above by hand
+  local missing=()
+  for pkg in "${SYSTEM_PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+  done
+  if [ ${#missing[@]} -gt 0 ]; then
+    echo "quickstart: installing Debian packages: ${missing[*]}"
+    as_root apt-get update -qq
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  fi
+}
+
+install_python() {
+  [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
+  local stamp="$VENV/.cloth_bench_installed"
+  if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ setup.py -nt "$stamp" ]; then
+    echo "quickstart: installing Python packages into $VENV (first time: a few minutes)"
+    "$VENV/bin/python" -m pip install -q --upgrade pip
+    "$VENV/bin/python" -m pip install -q -r requirements.txt
+    "$VENV/bin/python" -m pip install -q -e .
+    touch "$stamp"
+  fi
+}
+
+job="${1:-run}"
+shift || true
+install_system
+install_python
+case "$job" in
+  run) exec "$VENV/bin/cloth-bench" run "$@" ;;
+  test) exec "$VENV/bin/python" -m pytest "$@" ;;
+  install) ;;
+  *) echo "usage: ./quickstart.sh run|test|install [args...]" >&2; exit 2 ;;
+esac
