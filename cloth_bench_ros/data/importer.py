@@ -1,0 +1,318 @@
+"""Import the published dataset (PLY/PCD folders) into one rosbag2 MCAP bag per trial.
+
+Layout (REFERENCE.md section 4): `<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`.
+Frame NNNNN is stamped NNNNN / 30 s; points are kept exactly (NaN included; the reader drops
+and counts them), optionally moved by a 4x4 transform, and stored as float32 x/y/z.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagWriter, TrialInfo
+from cloth_bench_ros.scene import REAL_FPS
+
+CLOTH_NAMES = {"chequered": "chequered", "cotton": "towel", "linen": "linen"}  # folder -> ours
+PRIMITIVES = ("dynamic", "quasi_static")
+
+# Change of phase (first contact) of the dynamic trials, real frame index (REFERENCE.md 3).
+CHANGE_OF_PHASE = {
+    ("chequered", 0): 95, ("chequered", 1): 95, ("chequered", 2): 99,
+    ("towel", 0): 99, ("towel", 1): 98, ("towel", 2): 99,
+    ("linen", 0): 90, ("linen", 1): 89, ("linen", 2): 89,
+}  # fmt: skip
+
+_TRIAL_DIR = re.compile(r"^(chequered|cotton|linen)_rag_(\d+)$")
+_FRAME_FILE = re.compile(r"^(\d{5})\.(ply|pcd)$")
+
+
+class CloudFileError(ValueError):
+    """A point-cloud file that cannot be read; str() is one line naming the file."""
+
+
+# ------------------------------------------------------------------------------- cloud files
+
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}  # fmt: skip
+
+
+def _header_lines(path: Path, data: bytes, end_marker: bytes) -> tuple[list[str], int]:
+    """Header lines up to and including the line starting with end_marker; offset after it."""
+    lines, pos = [], 0
+    while True:
+        nl = data.find(b"\n", pos)
+        if nl < 0:
+            raise CloudFileError(f"{path}: header has no {end_marker.decode()!r} line")
+        line = data[pos:nl].rstrip(b"\r").decode("ascii", errors="replace").strip()
+        pos = nl + 1
+        lines.append(line)
+        if line.split(" ")[0].encode() == end_marker:
+            return lines, pos
+        if len(lines) > 1000:
+            raise CloudFileError(f"{path}: header is too long or not a header")
+
+
+def _xyz(path: Path, table: np.ndarray) -> np.ndarray:
+    names = table.dtype.names or ()
+    missing = [c for c in "xyz" if c not in names]
+    if missing:
+        raise CloudFileError(f"{path}: no {'/'.join(missing)} field (fields: {', '.join(names) or 'none'})")
+    return np.stack([table[c].astype(np.float64) for c in "xyz"], axis=1)
+
+
+def read_ply(path: Path) -> np.ndarray:
+    """x, y, z of the vertex element of a PLY file (binary LE/BE or ASCII) as float64 (n, 3)."""
+    data = Path(path).read_bytes()
+    if not data.startswith(b"ply"):
+        raise CloudFileError(f"{path}: not a PLY file (no 'ply' magic)")
+    lines, offset = _header_lines(path, data, b"end_header")
+    fmt = None
+    elements: list[tuple[str, int, list[tuple[str, str]]]] = []
+    for line in lines[1:]:
+        words = line.split()
+        if not words or words[0] in ("comment", "obj_info", "end_header"):
+            continue
+        try:
+            if words[0] == "format":
+                fmt = words[1]
+            elif words[0] == "element":
+                elements.append((words[1], int(words[2]), []))
+            elif words[0] == "property":
+                if not elements:
+                    raise ValueError("property before any element")
+                if words[1] == "list":
+                    elements[-1][2].append((words[4], "list"))
+                else:
+                    elements[-1][2].append((words[2], _PLY_TYPES[words[1]]))
+            else:
+                raise ValueError(f"unknown header line {line!r}")
+        except (IndexError, KeyError, ValueError) as exc:
+            raise CloudFileError(f"{path}: bad PLY header line {line!r} ({exc})") from None
+    order = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": ""}.get(fmt or "")
+    if order is None:
+        raise CloudFileError(f"{path}: unsupported PLY format {fmt!r}")
+    skip = 0  # bytes (binary) or lines (ascii) of elements before the vertex element
+    for name, count, props in elements:
+        if name == "vertex":
+            if any(t == "list" for _, t in props):
+                raise CloudFileError(f"{path}: list property in the vertex element")
+            if not order:
+                rows = data[offset:].decode("ascii", errors="replace").splitlines()[skip : skip + count]
+                if len(rows) < count:
+                    raise CloudFileError(f"{path}: truncated, {len(rows)} of {count} vertices")
+                try:
+                    values = np.array([[float(v) for v in r.split()] for r in rows], dtype=np.float64)
+                    table = np.zeros(count, [(p, "f8") for p, _ in props])
+                    for i, (p, _) in enumerate(props):
+                        table[p] = values[:, i] if count else []
+                except (ValueError, IndexError) as exc:
+                    raise CloudFileError(f"{path}: bad ASCII vertex ({exc})") from None
+                return _xyz(path, table)
+            dtype = np.dtype([(p, order + t) for p, t in props])
+            start = offset + skip
+            if len(data) < start + count * dtype.itemsize:
+                got = max(0, (len(data) - start) // dtype.itemsize)
+                raise CloudFileError(f"{path}: truncated, {got} of {count} vertices")
+            return _xyz(path, np.frombuffer(data, dtype=dtype, count=count, offset=start))
+        if order:
+            if any(t == "list" for _, t in props):
+                raise CloudFileError(f"{path}: element {name!r} with list properties precedes the vertices")
+            skip += count * np.dtype([(p, order + t) for p, t in props]).itemsize
+        else:
+            skip += count
+    raise CloudFileError(f"{path}: no vertex element")
+
+
+_PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4",
+              ("I", 8): "i8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8"}  # fmt: skip
+
+
+def read_pcd(path: Path) -> np.ndarray:
+    """x, y, z of a PCD file (DATA ascii or binary) as float64 (n, 3), NaN points kept."""
+    data = Path(path).read_bytes()
+    lines, offset = _header_lines(path, data, b"DATA")
+    head: dict[str, list[str]] = {}
+    for line in lines:
+        if line and not line.startswith("#"):
+            key, *values = line.split()
+            head[key.upper()] = values
+    try:
+        fields = head["FIELDS"]
+        sizes = [int(s) for s in head["SIZE"]]
+        types = head["TYPE"]
+        counts = [int(c) for c in head.get("COUNT", ["1"] * len(fields))]
+        n = int(head["POINTS"][0]) if "POINTS" in head else int(head["WIDTH"][0]) * int(head["HEIGHT"][0])
+        mode = head["DATA"][0].lower()
+        if not len(fields) == len(sizes) == len(types) == len(counts):
+            raise ValueError("FIELDS, SIZE, TYPE and COUNT differ in length")
+        dtype = np.dtype([
+            (f if f != "_" else f"_pad{i}", _PCD_TYPES[(t.upper(), s)], (c,) if c > 1 else ())
+            for i, (f, s, t, c) in enumerate(zip(fields, sizes, types, counts))
+        ])  # fmt: skip
+    except (KeyError, IndexError, ValueError) as exc:
+        raise CloudFileError(f"{path}: bad PCD header ({type(exc).__name__}: {exc})") from None
+    if mode == "binary":
+        if len(data) < offset + n * dtype.itemsize:
+            got = max(0, (len(data) - offset) // dtype.itemsize)
+            raise CloudFileError(f"{path}: truncated, {got} of {n} points")
+        return _xyz(path, np.frombuffer(data, dtype=dtype.newbyteorder("<"), count=n, offset=offset))
+    if mode == "ascii":
+        text = data[offset:].decode("ascii", errors="replace").split("\n")
+        rows = [r.split() for r in text if r.strip()]
+        if len(rows) < n:
+            raise CloudFileError(f"{path}: truncated, {len(rows)} of {n} points")
+        width = sum(counts)
+        try:
+            values = np.array([[float(v) for v in r[:width]] for r in rows[:n]], dtype=np.float64).reshape(n, width)
+        except ValueError as exc:
+            raise CloudFileError(f"{path}: bad ASCII point ({exc})") from None
+        column = dict(zip(fields, np.cumsum([0, *counts[:-1]])))
+        missing = [c for c in "xyz" if c not in column]
+        if missing:
+            raise CloudFileError(f"{path}: no {'/'.join(missing)} field (fields: {', '.join(fields)})")
+        return values[:, [column[c] for c in "xyz"]]
+    raise CloudFileError(f"{path}: unsupported PCD DATA {mode!r} (ascii and binary are supported)")
+
+
+def read_cloud_file(path: Path) -> np.ndarray:
+    """Points of a .ply or .pcd file as float64 (n, 3)."""
+    path = Path(path)
+    try:
+        if path.suffix == ".ply":
+            return read_ply(path)
+        if path.suffix == ".pcd":
+            return read_pcd(path)
+    except OSError as exc:
+        raise CloudFileError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    raise CloudFileError(f"{path}: not a .ply or .pcd file")
+
+
+# ------------------------------------------------------------------------------- dataset import
+
+
+@dataclass(frozen=True)
+class DatasetTrial:
+    """One `<cloth>_rag_<trial>/<primitive>` folder of the dataset."""
+
+    cloth: str  # ours: chequered, towel, linen
+    trial: int
+    primitive: str
+    folder: Path  # .../<cloth>_rag_<trial>/<primitive>
+    frames: tuple[tuple[int, Path], ...]  # (frame index, file), sorted
+
+    @property
+    def bag_name(self) -> str:
+        return f"{self.cloth}_{self.trial}_{self.primitive}"
+
+
+def find_trials(root: Path) -> list[DatasetTrial]:
+    """The trial folders under root with their frame files; ValueError if none or malformed."""
+    root = Path(root)
+    if not root.is_dir():
+        raise ValueError(f"dataset root {root} is not a directory")
+    trials = []
+    for trial_dir in sorted(p for p in root.iterdir() if p.is_dir()):
+        m = _TRIAL_DIR.match(trial_dir.name)
+        if not m:
+            continue
+        cloth, index = CLOTH_NAMES[m.group(1)], int(m.group(2))
+        for primitive in PRIMITIVES:
+            cloud_dir = trial_dir / primitive / "cloud"
+            if not cloud_dir.is_dir():
+                continue
+            frames: dict[int, Path] = {}
+            for f in cloud_dir.iterdir():
+                fm = _FRAME_FILE.match(f.name)
+                if not fm:
+                    continue
+                k = int(fm.group(1))
+                if k in frames:
+                    raise ValueError(f"{cloud_dir}: frame {k:05d} exists as both {frames[k].name} and {f.name}")
+                frames[k] = f
+            if not frames:
+                raise ValueError(f"{cloud_dir}: no <NNNNN>.ply or .pcd frame files")
+            trials.append(DatasetTrial(cloth, index, primitive, trial_dir / primitive, tuple(sorted(frames.items()))))
+    if not trials:
+        raise ValueError(
+            f"dataset root {root} has no <cloth>_rag_<trial>/<primitive>/cloud folders "
+            f"(cloth in {', '.join(CLOTH_NAMES)}, primitive in {', '.join(PRIMITIVES)})"
+        )
+    return trials
+
+
+def _check_transform(transform: np.ndarray | None) -> np.ndarray | None:
+    if transform is None:
+        return None
+    t = np.asarray(transform, dtype=float)
+    if t.shape != (4, 4) or not np.isfinite(t).all():
+        raise ValueError(f"transform must be a finite 4x4 matrix, got shape {t.shape}")
+    if not np.allclose(t[3], [0, 0, 0, 1]):
+        raise ValueError(f"transform's last row must be 0 0 0 1, got {t[3].tolist()}")
+    return t
+
+
+def import_dataset(
+    root: Path,
+    out: Path,
+    transform: np.ndarray | None = None,
+    progress: bool = True,
+    overwrite: bool = False,
+) -> list[Path]:
+    """Write one bag per trial folder under root into out; returns the bag paths.
+
+    A bag is written under a temporary name and renamed when complete, so an error never
+    leaves a half-imported bag behind.
+    """
+    root, out = Path(root), Path(out)
+    t = _check_transform(transform)
+    trials = find_trials(root)
+    for tr in trials:
+        if tr.primitive == "dynamic" and (tr.cloth, tr.trial) not in CHANGE_OF_PHASE:
+            raise ValueError(f"{tr.folder}: no change-of-phase frame is known for {tr.cloth} trial {tr.trial}")
+    out.mkdir(parents=True, exist_ok=True)
+    bags = []
+    total = sum(len(tr.frames) for tr in trials)
+    with tqdm(total=total, unit="frame", disable=not progress, desc="import") as bar:
+        for tr in trials:
+            final = out / tr.bag_name
+            if final.exists() and not overwrite:
+                raise ValueError(f"bag {final} already exists (pass overwrite to replace it)")
+            info = TrialInfo(
+                cloth=tr.cloth,
+                trial=tr.trial,
+                primitive=tr.primitive,
+                change_of_phase_frame=CHANGE_OF_PHASE.get((tr.cloth, tr.trial)) if tr.primitive == "dynamic" else None,
+                source=f"imported from {tr.folder.relative_to(root).as_posix()}",
+                fps=REAL_FPS,
+                transform=(t if t is not None else np.eye(4)).tolist(),
+            )
+            partial = out / ".partial" / tr.bag_name  # same name, so the .mcap is named right
+            shutil.rmtree(partial, ignore_errors=True)
+            bar.set_description(tr.bag_name)
+            try:
+                with BagWriter(partial, info) as writer:
+                    for k, f in tr.frames:
+                        pts = read_cloud_file(f)
+                        if t is not None:
+                            pts = pts @ t[:3, :3].T + t[:3, 3]
+                        writer.write_cloud(CLOUD_TOPIC, round(k * 1_000_000_000 / REAL_FPS), pts)
+                        bar.update(1)
+                if final.exists():
+                    shutil.rmtree(final)
+                partial.rename(final)
+            finally:
+                shutil.rmtree(partial, ignore_errors=True)
+                if (out / ".partial").is_dir() and not any((out / ".partial").iterdir()):
+                    (out / ".partial").rmdir()
+            bags.append(final)
+    return bags
