@@ -1,0 +1,75 @@
+"""`cloth-bench` as a user meets it: bad input gets one clear line and exit status 2."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from cloth_bench_ros.trajectory import CSV_HEADER
+
+
+def cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "cloth_bench_ros.cli", *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=300)
+
+
+def assert_one_line_error(result, *words):
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert "Traceback" not in result.stderr
+    for word in words:
+        assert word in lines[0], lines[0]
+
+
+def test_missing_bag(tmp_path):
+    assert_one_line_error(cli("run", "--bag", str(tmp_path / "nope")), "nope")
+
+
+def test_random_bytes_bag(tmp_path):
+    bag = tmp_path / "random.mcap"
+    bag.write_bytes(os.urandom(4096))
+    assert_one_line_error(cli("run", "--bag", str(bag)), "random.mcap")
+
+
+def test_corrupt_bag(tmp_path, hanging_bag):
+    bad = tmp_path / "corrupt"
+    bad.mkdir()
+    for f in hanging_bag.iterdir():
+        data = f.read_bytes()
+        if f.suffix == ".mcap":
+            data = data[:64] + os.urandom(len(data) - 128) + data[-64:]
+        (bad / f.name).write_bytes(data)
+    result = cli("run", "--bag", str(bad))
+    assert_one_line_error(result, "corrupt")
+
+
+def test_bag_without_pointcloud2(tmp_path):
+    from cloth_bench_ros.data.bag import BagWriter
+    from cloth_bench_ros.data.messages import serialize
+    from cloth_bench_ros.runtime.messages import String
+
+    path = tmp_path / "strings"
+    with BagWriter(path) as bag:
+        bag.write("/chatter", "std_msgs/msg/String", 0, serialize(String(data="hi")))
+    assert_one_line_error(cli("run", "--bag", str(path)), "PointCloud2")
+
+
+@pytest.mark.parametrize("args,words", [
+    (["run", "--engine", "nosuch"], ["nosuch"]),
+    (["run", "--rate", "0"], ["rate"]),
+    (["run", "--rate", "-10"], ["rate"]),
+    (["run", "--cloth", "silk"], ["silk"]),
+    (["run", "--primitive", "twirl"], ["twirl"]),
+    (["trajectory", "--rate", "0"], ["rate"]),
+])
+def test_bad_arguments(args, words):
+    assert_one_line_error(cli(*args), *words)
+
+
+def test_trajectory_prints_csv():
+    result = cli("trajectory", "--primitive", "quasi_static", "--rate", "10")
+    assert result.returncode == 0
+    lines = result.stdout.splitlines()
+    assert lines[0] == CSV_HEADER and len(lines) == 142
