@@ -1,35 +1,73 @@
-"""Replays the PointCloud2 topic of a rosbag2 MCAP bag in simulation time."""
+"""Replays a rosbag2 MCAP bag's PointCloud2 topic in simulation time, or records topics to a bag.
+
+mode replay (default): each frame goes out once /clock reaches its stamp plus `time_offset`
+  (clock: sim, the benchmark), or on the wall clock (clock: wall) at `rate_factor` times real
+  time, from `start_offset` seconds into the bag, looping if `loop`.
+mode record: subscribes to `record_topics` ("topic:type" entries, e.g.
+  "/cloth_bench/mujoco/cloud:sensor_msgs/msg/PointCloud2") and writes every message to the bag
+  `output`; the bag is finalised on normal end, SIGINT and SIGTERM, and the node reports how many
+  messages it received and wrote.
+"""
 
 from __future__ import annotations
 
-from cloth_bench_ros.data.bag import TRIAL_STATUS_NAME, BagReader
+import time
+from functools import partial
+
+from cloth_bench_ros.data.bag import TRIAL_STATUS_NAME, BagReader, BagWriter
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.runtime import (
     Clock, DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, Time, deserialize_message,
-    make_qos, stamp_ns,
+    make_qos, message_type, serialize_message, stamp_ns,
 )
 from cloth_bench_ros.scene import SETTLE_DURATION
 
 
 class Recorder(Node):
-    """Publishes each bag frame once /clock reaches its stamp plus `time_offset`."""
-
     def __init__(self, **kwargs) -> None:
         super().__init__("recorder", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
+        self.mode = self.declare_parameter("mode", "replay").value
+        self.done = False
+        self.writer: BagWriter | None = None
+        if self.mode == "record":
+            self.start_recording()
+        elif self.mode == "replay":
+            self.start_replay()
+        else:
+            raise ValueError(f"recorder: unknown mode {self.mode!r} (valid: replay, record)")
+
+    # --- replay ------------------------------------------------------------------------------
+
+    def start_replay(self) -> None:
         path = self.declare_parameter("bag", "").value
         if not path:
             raise ValueError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
         # Bag stamps count from the start of the quintic part; the run starts with the settle phase.
         self.offset_ns = int(round(self.declare_parameter("time_offset", SETTLE_DURATION).value * 1e9))
+        clock = self.declare_parameter("clock", "sim").value
+        self.rate_factor = float(self.declare_parameter("rate_factor", 1.0).value)
+        self.start_offset_ns = int(round(self.declare_parameter("start_offset", 0.0).value * 1e9))
+        self.loop = bool(self.declare_parameter("loop", False).value)
+        if clock not in ("sim", "wall"):
+            raise ValueError(f"recorder: unknown clock {clock!r} (valid: sim, wall)")
+        if not self.rate_factor > 0:
+            raise ValueError(f"recorder: rate_factor must be > 0, got {self.rate_factor}")
         self.bag = BagReader(path)
-        topic = self.declare_parameter("topic", "").value or self.bag.cloud_topic()
-        self.frames = self.bag.raw_messages([topic])
-        self.next_frame = next(self.frames, None)
+        self.topic = self.declare_parameter("topic", "").value or self.bag.cloud_topic()
         self.published = 0
         self.cloud_pub = self.create_publisher(PointCloud2, "real/cloud", make_qos(10))
         self.trial_pub = self.create_publisher(DiagnosticArray, "real/trial", make_qos(1, latched=True))
         self.trial_pub.publish(self.trial_message())
-        self.create_subscription(Clock, "/clock", self.on_clock, make_qos(10))
+        self.rewind()
+        if clock == "sim":
+            self.create_subscription(Clock, "/clock", self.on_clock, make_qos(10))
+        else:
+            self.wall_start_ns = time.monotonic_ns()
+            self.wall_timer = self.create_timer(0.001, self.on_wall_tick)
+
+    def rewind(self) -> None:
+        self.frames = (f for f in self.bag.raw_messages([self.topic]) if f[2] >= self.start_offset_ns)
+        self.next_frame = next(self.frames, None)
         self.done = self.next_frame is None
 
     def trial_message(self) -> DiagnosticArray:
@@ -40,19 +78,62 @@ class Recorder(Node):
                                   message=str(self.bag.path), hardware_id="recorder", values=values)
         return DiagnosticArray(status=[status])
 
-    def on_clock(self, msg: Clock) -> None:
-        now = stamp_ns(msg.clock)
+    def publish_until(self, bag_time_ns: int, restamp_offset_ns: int) -> None:
+        """Publish every frame whose bag stamp is <= bag_time_ns, restamped by the offset."""
         while self.next_frame is not None:
             _, _, bag_stamp, cdr = self.next_frame
-            replay_stamp = bag_stamp + self.offset_ns
-            if replay_stamp > now:
+            if bag_stamp > bag_time_ns:
                 break
             cloud = deserialize_message(cdr, PointCloud2)
-            cloud.header.stamp = Time(nanoseconds=replay_stamp).to_msg()
+            cloud.header.stamp = Time(nanoseconds=bag_stamp + restamp_offset_ns).to_msg()
             self.cloud_pub.publish(cloud)
             self.published += 1
             self.next_frame = next(self.frames, None)
         self.done = self.next_frame is None
+
+    def on_clock(self, msg: Clock) -> None:
+        self.publish_until(stamp_ns(msg.clock) - self.offset_ns, self.offset_ns)
+
+    def on_wall_tick(self) -> None:
+        elapsed = (time.monotonic_ns() - self.wall_start_ns) * self.rate_factor
+        self.publish_until(int(elapsed) + self.start_offset_ns, 0)
+        if self.done and self.loop:
+            self.rewind()
+            self.wall_start_ns = time.monotonic_ns()
+        elif self.done:
+            self.destroy_timer(self.wall_timer)
+
+    # --- record ------------------------------------------------------------------------------
+
+    def start_recording(self) -> None:
+        output = self.declare_parameter("output", "").value
+        entries = list(self.declare_parameter("record_topics", [""]).value)
+        if not output:
+            raise ValueError("recorder: parameter 'output' is empty (bag directory to record into)")
+        topics = [e.rsplit(":", 1) for e in entries if e]
+        if not topics or any(len(t) != 2 for t in topics):
+            raise ValueError("recorder: record_topics needs entries 'topic:package/msg/Type'")
+        self.received = 0
+        self.writer = BagWriter(output)
+        for topic, typename in topics:
+            msg_type = message_type(typename)
+            name = self.resolve_topic_name(topic)
+            self.create_subscription(msg_type, topic, partial(self.on_record, name, typename), make_qos(1000))
+        self.get_logger().info(f"recording {', '.join(t for t, _ in topics)} to {output}")
+
+    def on_record(self, topic: str, typename: str, msg) -> None:
+        self.received += 1
+        stamp = stamp_ns(msg.header.stamp) if hasattr(msg, "header") else self.get_clock().now().nanoseconds
+        self.writer.write(topic, typename, stamp, serialize_message(msg))
+
+    def close(self) -> None:
+        """Finalise a recording and report received and written counts."""
+        if self.writer is not None and not self.writer.closed:
+            self.writer.close()
+            report = f"recorder: received {self.received} messages, wrote {self.writer.written}"
+            if self.received != self.writer.written:
+                self.get_logger().error(report + " (some were lost)")
+            print(report, flush=True)
 
 
 def main(args: list[str] | None = None) -> int:
