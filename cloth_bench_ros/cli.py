@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import warnings
 from pathlib import Path
 
 from cloth_bench_ros.trajectory import PRIMITIVES
@@ -24,8 +25,17 @@ def _rate(text: str) -> float:
     return rate
 
 
-def cmd_run(args: argparse.Namespace) -> int:
+def check_bag(bag: Path) -> None:
+    """Fail early, with one line, on a bag that has no readable PointCloud2 frame."""
     from cloth_bench_ros.data.bag import BagReader
+
+    reader = BagReader(bag)
+    topic = reader.cloud_topic()
+    if next(reader.raw_messages([topic]), None) is None:
+        raise UserError(f"bag {bag}: no PointCloud2 message on {topic} could be read")
+
+
+def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines import engine_class
     from cloth_bench_ros.engines.presets import CLOTHS
     from cloth_bench_ros.paths import bundled_bag
@@ -38,7 +48,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.cloth not in CLOTHS:
         raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
-    BagReader(bag).cloud_topic()  # fail early, with one line, on a bad bag
+    check_bag(bag)
     out = Path(args.output) if args.output else Path("results") / f"{args.cloth}_{args.primitive}_{int(args.rate)}hz_seed{args.seed}"
     config = RunConfig(bag=bag, engines=engines, rate_hz=args.rate, cloth=args.cloth, primitive=args.primitive,
                        seed=args.seed, pacing=args.pacing, output_dir=out)
@@ -118,6 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
+    warnings.formatwarning = lambda message, *_: f"cloth-bench: warning: {message}\n"
     from cloth_bench_ros.data.bag import BagError
 
     try:

@@ -33,6 +33,7 @@ class FrameScore:
 class _EngineState:
     states: deque = field(default_factory=lambda: deque(maxlen=4096))  # (stamp_ns, vertices)
     last_stamp: int = -1
+    last_step_stamp: int = -1
     stability: StabilityAccumulator = field(default_factory=StabilityAccumulator)
     step_times: list = field(default_factory=list)
     diverged_step: int | None = None
@@ -73,6 +74,7 @@ class OnlineEvaluator:
                  reason: str = "") -> None:
         """The simulator's report of one step: compute time and divergence."""
         e = self.engines[engine]
+        e.last_step_stamp = stamp_ns
         if step > 0:
             e.step_times.append(step_time)
         if diverged and e.diverged_step is None:
@@ -132,6 +134,10 @@ class OnlineEvaluator:
             else:
                 cd, hd = cloud.chamfer_hausdorff(vertices)
             self.scores.append(FrameScore(name, frame, t, cd, hd, in_window, diverged))
+
+    def complete(self, final_stamp_ns: int) -> bool:
+        """True once every engine has reported its state and step at the final stamp."""
+        return all(min(e.last_stamp, e.last_step_stamp) >= final_stamp_ns for e in self.engines.values())
 
     def finish(self) -> None:
         """Frames still waiting for a state never get one: count them as unpaired."""

@@ -29,7 +29,7 @@ class RealCloud:
 
     def __init__(self, points: np.ndarray) -> None:
         self.points = _points("P", points)
-        self._tree = cKDTree(self.points, balanced_tree=False, compact_nodes=False)
+        self._tree = cKDTree(self.points, leafsize=64, balanced_tree=False, compact_nodes=False)
 
     def nearest_l1(self, vertices: np.ndarray) -> np.ndarray:
         """For each vertex v, min over p of ||v - p||_1 (exact: the tree is searched in L1)."""

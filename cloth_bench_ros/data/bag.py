@@ -314,6 +314,8 @@ class BagReader:
             elif isinstance(rec, Metadata):
                 scan.metadata[rec.name] = dict(rec.metadata)
         scan.compression = ",".join(sorted(kinds)) or "none"
+        if scan.damage and scan.start_ns is None:
+            raise BagError(f"bag {path} is corrupt: no message could be read before the damage")
         if scan.damage:
             self._warn(scan.damage)
         return scan

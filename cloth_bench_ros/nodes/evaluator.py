@@ -69,13 +69,15 @@ class Evaluator(Node):
     def on_state(self, engine: str, msg: PointCloud2) -> None:
         self.core.add_state(engine, stamp_ns(msg.header.stamp), read_xyz(msg))
         self.publish_scores()
-        if all(e.last_stamp >= self.final_stamp for e in self.core.engines.values()):
+        if self.core.complete(self.final_stamp):
             self.finish()
 
     def on_step(self, engine: str, msg: DiagnosticArray) -> None:
         v = _values(msg)
         self.core.add_step(engine, stamp_ns(msg.header.stamp), int(v["step"]), float(v["step_time"]),
                            v["diverged"] == "true", msg.status[0].message)
+        if self.core.complete(self.final_stamp):
+            self.finish()
 
     def publish_scores(self) -> None:
         new = self.core.scores[self.published_scores :]
