@@ -36,6 +36,7 @@ class _EngineState:
     last_step_stamp: int = -1
     stability: StabilityAccumulator = field(default_factory=StabilityAccumulator)
     step_times: list = field(default_factory=list)
+    latencies: list = field(default_factory=list)  # s, target sent -> state received (wall clock)
     diverged_step: int | None = None
     diverged_time: float | None = None
     diverged_reason: str = ""
@@ -81,6 +82,10 @@ class OnlineEvaluator:
             e.diverged_step = step
             e.diverged_time = (stamp_ns - self.quintic_start_ns) / 1e9
             e.diverged_reason = reason
+
+    def add_latency(self, engine: str, latency_s: float) -> None:
+        """Wall time from a target leaving the trajectory publisher to the engine's state arriving."""
+        self.engines[engine].latencies.append(latency_s)
 
     def add_real(self, stamp_ns: int, points: np.ndarray, nan_dropped: int = 0) -> None:
         """A real frame (stamp in run time); an empty cloud is counted and skipped."""
@@ -145,8 +150,9 @@ class OnlineEvaluator:
         self._pending.clear()
 
     # results
-    def summary(self) -> dict[str, dict]:
-        """Per engine: CD/HD over the window, L_s, latency and divergence."""
+    def summary(self, period_s: float | None = None, wall_s: float | None = None,
+                sim_s: float | None = None) -> dict[str, dict]:
+        """Per engine: CD/HD over the window, L_s, step time, latency against the period, divergence."""
         out = {}
         suffix = "d" if self.primitive is Primitive.DYNAMIC else "q"
         for name, e in self.engines.items():
@@ -160,6 +166,9 @@ class OnlineEvaluator:
                 f"HD_{suffix}": math.nan if diverged_in_window or not hd else float(np.mean(hd)),
                 "L_s": e.stability.value,
                 "step_time": latency_stats(np.asarray(e.step_times)).as_dict(),
+                "latency": latency_stats(np.asarray(e.latencies)).as_dict(),
+                "deadline_misses": int(np.sum(np.asarray(e.latencies) > period_s)) if period_s else None,
+                "real_time_factor": sim_s / wall_s if sim_s and wall_s else None,
                 "frames_scored": len(rows),
                 "frames_in_window": len(window),
                 "diverged": e.diverged_step is not None,

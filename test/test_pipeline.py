@@ -62,3 +62,14 @@ def test_runs_at_10_and_1000_hz(hanging_bag, tmp_path, rate):
     assert m["frames_scored"] == 132
     assert m["step_time"]["count"] == round(7.4 * rate)
     assert m["diverged"] or np.isfinite(m["CD_d"])
+
+
+def test_realtime_pacing_reports_latency_deadline_misses_and_real_time_factor(hanging_bag, tmp_path):
+    summary = _run(hanging_bag, tmp_path, "rt", rate_hz=100.0, pacing="realtime")
+    m = summary["engines"]["mujoco"]
+    assert m["frames_scored"] == 132
+    assert m["latency"]["count"] == 741
+    assert 0 < m["latency"]["p50"] <= m["latency"]["p99"] <= m["latency"]["max"]
+    assert 0 <= m["deadline_misses"] <= 741
+    assert 0.5 < m["real_time_factor"] <= 1.05  # paced by the wall clock: about real time
+    assert summary["run"]["wall_time"] >= 7.4 * 0.95

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from functools import partial
 from pathlib import Path
 
@@ -11,7 +12,7 @@ from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.report import write_run_report
 from cloth_bench_ros.runtime import (
-    DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, make_qos, stamp_ns,
+    DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, make_qos, stamp_ns,
 )
 from cloth_bench_ros.scene import REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.trajectory import full_targets, parse_primitive
@@ -46,6 +47,10 @@ class Evaluator(Node):
             self.create_subscription(PointCloud2, f"{engine}/cloud", partial(self.on_state, engine), make_qos(100))
             self.create_subscription(DiagnosticArray, f"{engine}/step_time", partial(self.on_step, engine),
                                      make_qos(100))
+        self.create_subscription(PoseArray, "targets", self.on_target, make_qos(100))
+        self.period_s = 1.0 / rate_hz
+        self.target_sent: dict[int, int] = {}  # stamp -> monotonic ns when the target arrived
+        self.first_target_ns: int | None = None
         self.trial: dict = {}
         self.published_scores = 0
         self.summary: dict | None = None
@@ -66,8 +71,20 @@ class Evaluator(Node):
         self.core.add_real(stamp_ns(msg.header.stamp), points, dropped)
         self.publish_scores()
 
+    def on_target(self, msg: PoseArray) -> None:
+        now = time.monotonic_ns()
+        self.target_sent[stamp_ns(msg.header.stamp)] = now
+        if self.first_target_ns is None:
+            self.first_target_ns = now
+
     def on_state(self, engine: str, msg: PointCloud2) -> None:
-        self.core.add_state(engine, stamp_ns(msg.header.stamp), read_xyz(msg))
+        stamp = stamp_ns(msg.header.stamp)
+        sent = self.target_sent.get(stamp)
+        if sent is not None:
+            self.core.add_latency(engine, (time.monotonic_ns() - sent) / 1e9)
+            if len(self.engines) == 1:
+                del self.target_sent[stamp]
+        self.core.add_state(engine, stamp, read_xyz(msg))
         self.publish_scores()
         if self.core.complete(self.final_stamp):
             self.finish()
@@ -96,12 +113,15 @@ class Evaluator(Node):
         if self.done:
             return
         self.core.finish()
-        self.summary = {"run": {**self.run_info, "trial": self.trial}, "real": self.core.real_summary(),
-                        "engines": self.core.summary()}
+        wall_s = (time.monotonic_ns() - self.first_target_ns) / 1e9 if self.first_target_ns else None
+        engines = self.core.summary(self.period_s, wall_s, self.final_stamp / 1e9)
+        self.summary = {"run": {**self.run_info, "trial": self.trial, "wall_time": wall_s},
+                        "real": self.core.real_summary(), "engines": engines}
         statuses = []
         for engine, m in self.summary["engines"].items():
             flat = {k: v for k, v in m.items() if not isinstance(v, dict)}
-            flat.update({f"step_time_{k}": v for k, v in m["step_time"].items()})
+            for group in ("step_time", "latency"):
+                flat.update({f"{group}_{k}": v for k, v in m[group].items()})
             statuses.append(DiagnosticStatus(
                 level=DiagnosticStatus.ERROR if m["diverged"] else DiagnosticStatus.OK,
                 name=f"cloth_bench/{engine}/summary", message="diverged" if m["diverged"] else "ok",
