@@ -92,6 +92,34 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+def _read_transform(path: str):
+    """A 4x4 matrix from a .npy file or a text file of 16 numbers (spaces, commas or newlines)."""
+    import numpy as np
+
+    try:
+        if path.endswith(".npy"):
+            values = np.load(path).astype(float).ravel()
+        else:
+            values = np.array([float(x) for x in Path(path).read_text().replace(",", " ").split()])
+    except (OSError, ValueError) as exc:
+        raise UserError(f"transform {path}: cannot be read ({exc})") from None
+    if values.size != 16 or not np.isfinite(values).all():
+        raise UserError(f"transform {path}: needs 16 finite numbers (a 4x4 matrix), found {values.size}")
+    return values.reshape(4, 4)
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from cloth_bench_ros.data.importer import import_dataset
+
+    transform = _read_transform(args.transform) if args.transform else None
+    bags = import_dataset(Path(args.root), Path(args.out), transform=transform, progress=not args.quiet,
+                          overwrite=args.overwrite)
+    for bag in bags:
+        print(bag)
+    print(f"imported {len(bags)} trial(s) into {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="cloth-bench", description="Sim-to-real benchmark of cloth simulators.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log the nodes' messages")
@@ -115,6 +143,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     engines = sub.add_parser("engines", help="list known engines, their availability and version")
     engines.set_defaults(func=cmd_engines)
+
+    imp = sub.add_parser("import", help="turn the published dataset (PLY/PCD per frame) into one bag per trial")
+    imp.add_argument("root", help="dataset root: <root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd")
+    imp.add_argument("--out", required=True, help="directory for the bags")
+    imp.add_argument("--transform", help="4x4 matrix into the simulation frame (text file of 16 numbers, or .npy)")
+    imp.add_argument("--overwrite", action="store_true", help="replace bags that exist")
+    imp.add_argument("--quiet", action="store_true", help="no progress bar")
+    imp.set_defaults(func=cmd_import)
 
     bag = sub.add_parser("bag", help="bag tools")
     bag_sub = bag.add_subparsers(dest="bag_command", required=True, parser_class=_Parser)

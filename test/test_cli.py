@@ -73,3 +73,25 @@ def test_trajectory_prints_csv():
     assert result.returncode == 0
     lines = result.stdout.splitlines()
     assert lines[0] == CSV_HEADER and len(lines) == 142
+
+
+def test_import_command_with_a_transform_file(tmp_path):
+    from cloth_bench_ros.data.bag import BagReader
+    from test.test_importer import make_tree
+
+    make_tree(tmp_path / "data")
+    shift = tmp_path / "shift.txt"
+    shift.write_text("1 0 0 0.5\n0 1 0 0\n0 0 1 0\n0 0 0 1\n")
+    result = cli("import", str(tmp_path / "data"), "--out", str(tmp_path / "bags"), "--transform", str(shift),
+                 "--quiet")
+    assert result.returncode == 0, result.stderr
+    assert "imported 3 trial(s)" in result.stdout
+    trial = BagReader(tmp_path / "bags" / "towel_0_dynamic").trial
+    assert trial.transform[0][3] == 0.5 and trial.change_of_phase_frame == 99
+
+
+def test_import_command_refuses_a_bad_transform(tmp_path):
+    bad = tmp_path / "bad.txt"
+    bad.write_text("1 2 3")
+    assert_one_line_error(cli("import", str(tmp_path), "--out", str(tmp_path / "o"), "--transform", str(bad)),
+                          "bad.txt")
