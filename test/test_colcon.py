@@ -66,3 +66,22 @@ def test_installed_package_reads_its_installed_config(install, tmp_path):
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert str(install) in result.stdout.splitlines()[0]
+
+
+def test_package_xml_declares_format_3_ament_python_and_the_message_packages():
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(REPO / "package.xml").getroot()
+    assert root.get("format") == "3" and root.findtext("name") == "cloth_bench_ros"
+    assert root.find("export/build_type").text == "ament_python"
+    deps = {e.text for e in root.findall("exec_depend")}
+    for dep in ("rclpy", "sensor_msgs", "sensor_msgs_py", "geometry_msgs", "std_msgs", "diagnostic_msgs",
+                "rosgraph_msgs", "python3-numpy", "python3-scipy", "python3-yaml"):
+        assert dep in deps, dep
+
+
+def test_launch_file_compiles_and_declares_its_arguments():
+    source = (REPO / "launch" / "benchmark.launch.py").read_text()
+    compile(source, "benchmark.launch.py", "exec")
+    for arg in ("engines", "rate_hz", "primitive", "cloth", "bag", "seed", "pacing", "output_dir"):
+        assert f'"{arg}"' in source
