@@ -7,7 +7,7 @@ bytes (through rosbags) and are what `cloth_bench_ros.runtime` exports when rclp
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -21,37 +21,37 @@ _NUMPY = {
 _classes: dict[str, type] = {}
 
 
-def _default(node: tuple) -> Any:
-    kind, detail = node
-    kind = int(kind)
-    if kind == 1:  # base type
+def _factory(node: tuple) -> Callable[[], Any]:
+    """A zero-argument maker of a field's default value, as rclpy's constructors give it."""
+    kind, detail = int(node[0]), node[1]
+    if kind == 1:  # base type: an immutable constant
         name = detail[0]
-        if name == "string":
-            return ""
-        if name == "bool":
-            return False
-        return 0.0 if name.startswith("float") else 0
+        value: Any = "" if name == "string" else False if name == "bool" else 0.0 if name.startswith("float") else 0
+        return lambda: value
     if kind == 2:  # nested message
-        return message_class(detail)()
+        return lambda: message_class(detail)()
     (inner_kind, inner), length = detail
     numeric = int(inner_kind) == 1 and inner[0] in _NUMPY
     if kind == 3:  # fixed-size array
         if numeric:
-            return np.zeros(length, dtype=_NUMPY[inner[0]])
-        return [_default((inner_kind, inner)) for _ in range(length)]
-    return np.zeros(0, dtype=_NUMPY[inner[0]]) if numeric else []  # sequence
+            return lambda: np.zeros(length, dtype=_NUMPY[inner[0]])
+        element = _factory((inner_kind, inner))
+        return lambda: [element() for _ in range(length)]
+    if numeric:  # sequence
+        return lambda: np.zeros(0, dtype=_NUMPY[inner[0]])
+    return list
 
 
 def message_class(typename: str) -> type:
     """A subclass of rosbags' class for `typename` whose constructor defaults every field."""
     if typename not in _classes:
         base = TYPESTORE.types[typename]
-        fields = TYPESTORE.fielddefs[typename][1]
+        factories = [(name, _factory(node)) for name, node in TYPESTORE.fielddefs[typename][1]]
 
         def __init__(self: Any, **kwargs: Any) -> None:
-            for name, node in fields:
+            for name, make in factories:
                 if name not in kwargs:
-                    kwargs[name] = _default(node)
+                    kwargs[name] = make()
             base.__init__(self, **kwargs)
 
         _classes[typename] = type(typename.rsplit("/", 1)[-1], (base,), {"__init__": __init__})
