@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import signal
 import sys
+import threading
 from typing import Callable, Sequence
 
 from cloth_bench_ros.data.bag import BagError
@@ -12,18 +13,26 @@ from cloth_bench_ros.runtime import SingleThreadedExecutor, rclpy
 NAMESPACE = "cloth_bench"
 
 
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt  # SIGTERM ends the node as SIGINT does: through the finally below
+_stop_requested = threading.Event()
+
+
+def _request_stop(signum, frame) -> None:
+    # Only a flag: a callback is never cut in half, so what a node acknowledged it also finished.
+    _stop_requested.set()
 
 
 def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None = None) -> int:
     """Spin nodes in one executor until all are `done`, SIGINT/SIGTERM or shutdown.
 
-    Each node's close() runs on every way out (a recorder finalises its bag there). A user error
+    SIGINT and SIGTERM stop the loop between callbacks (rclpy's own handler, where installed, is
+    replaced for the node's lifetime). Each node's close() runs on every way out (a recorder
+    finalises its bag there). A user error
     (bad parameter, bag or engine) is one line on stderr and exit status 2, no traceback.
     """
-    signal.signal(signal.SIGTERM, _interrupt)
+    _stop_requested.clear()
     rclpy.init(args=args if args is not None else sys.argv)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _request_stop)
     nodes: list = []
     try:
         for factory in factories:
@@ -31,10 +40,8 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
         executor = SingleThreadedExecutor()
         for node in nodes:
             executor.add_node(node)
-        while rclpy.ok() and not all(getattr(n, "done", False) for n in nodes):
+        while rclpy.ok() and not _stop_requested.is_set() and not all(getattr(n, "done", False) for n in nodes):
             executor.spin_once(timeout_sec=0.1)
-        return 0
-    except KeyboardInterrupt:
         return 0
     except (ValueError, BagError) as exc:
         print(f"error: {exc}", file=sys.stderr)
