@@ -43,6 +43,7 @@ setup(
         ],
         "cloth_bench_ros.engines": [
             "mujoco = cloth_bench_ros.engines.mujoco_cloth:MujocoCloth",
+            "bullet = cloth_bench_ros.engines.bullet_cloth:BulletCloth",
         ],
     },
 )

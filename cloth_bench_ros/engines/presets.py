@@ -1,0 +1,106 @@
+"""Cloth parameter presets per engine x cloth x task, from config/presets/<engine>.yaml.
+
+A preset file reads
+    engine: mujoco
+    engine_version: "4.0.0"
+    provenance: "<where the numbers come from; what was changed for this engine version>"
+    presets: {towel: {dynamic: {param: value, ...}, quasi_static: {...}}, chequered: ..., linen: ...}
+Every problem with a file (missing keys, wrong types, unknown or out-of-range parameters) is an
+EngineError of one line naming the file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from cloth_bench_ros.engines.base import EngineError
+from cloth_bench_ros.paths import share_dir
+from cloth_bench_ros.trajectory import PRIMITIVES
+
+CLOTHS = ("towel", "chequered", "linen")
+REQUIRED_KEYS = ("engine", "engine_version", "provenance", "presets")
+
+
+def config_dir() -> Path:
+    """<repo>/config in a source checkout, else <prefix>/share/cloth_bench_ros/config."""
+    return share_dir("config")
+
+
+def preset_file(engine: str, config_dir_: Path | None = None) -> Path:
+    """The preset file of an engine: <config>/presets/<engine>.yaml (or <dir>/<engine>.yaml)."""
+    base = Path(config_dir_) if config_dir_ is not None else config_dir()
+    nested = base / "presets" / f"{engine}.yaml"
+    return nested if nested.is_file() or not (base / f"{engine}.yaml").is_file() else base / f"{engine}.yaml"
+
+
+def read_preset_file(path: Path) -> dict:
+    """The parsed, structurally checked preset file."""
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise EngineError(f"preset file {path}: cannot be read ({exc.strerror})") from None
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        line = f" at line {where.line + 1}" if where is not None else ""
+        raise EngineError(f"preset file {path}: not valid YAML{line}") from None
+    if not isinstance(data, dict):
+        raise EngineError(f"preset file {path}: expected a mapping with keys {', '.join(REQUIRED_KEYS)}")
+    missing = [k for k in REQUIRED_KEYS if k not in data]
+    if missing:
+        raise EngineError(f"preset file {path}: missing key {', '.join(missing)}")
+    if data["engine"] != path.stem:
+        raise EngineError(f"preset file {path}: engine is {data['engine']!r}, expected {path.stem!r}")
+    presets = data["presets"]
+    if not isinstance(presets, dict):
+        raise EngineError(f"preset file {path}: presets must map cloth -> primitive -> parameters")
+    for cloth, tasks in presets.items():
+        if cloth not in CLOTHS:
+            raise EngineError(f"preset file {path}: unknown cloth {cloth!r} (valid: {', '.join(CLOTHS)})")
+        if not isinstance(tasks, dict):
+            raise EngineError(f"preset file {path}: presets.{cloth} must map primitive -> parameters")
+        for primitive, values in tasks.items():
+            if primitive not in PRIMITIVES:
+                raise EngineError(
+                    f"preset file {path}: unknown primitive {primitive!r} in presets.{cloth} "
+                    f"(valid: {', '.join(PRIMITIVES)})"
+                )
+            if not isinstance(values, dict) or not all(isinstance(k, str) for k in values):
+                raise EngineError(f"preset file {path}: presets.{cloth}.{primitive} must map parameter -> value")
+    return data
+
+
+def load_preset(engine: str, cloth: str, primitive: str, config_dir: Path | None = None) -> dict:
+    """Parameters of `engine` for `cloth` and `primitive`, checked against the engine's schema.
+
+    An engine without a preset file (e.g. one added by another package) gets {} (its defaults).
+    """
+    if cloth not in CLOTHS:
+        raise EngineError(f"unknown cloth {cloth!r} (valid: {', '.join(CLOTHS)})")
+    if primitive not in PRIMITIVES:
+        raise EngineError(f"unknown primitive {primitive!r} (valid: {', '.join(PRIMITIVES)})")
+    path = preset_file(engine, config_dir)
+    if not path.is_file():
+        return {}
+    presets = read_preset_file(path)["presets"]
+    try:
+        values = dict(presets[cloth][primitive])
+    except KeyError:
+        raise EngineError(f"preset file {path}: no preset for {cloth} {primitive}") from None
+    _check_against_engine(engine, values, path, f"{cloth}.{primitive}")
+    return values
+
+
+def _check_against_engine(engine: str, values: dict, path: Path, where: str) -> None:
+    """EngineError naming the file if the engine's schema rejects a value (skipped if not installed)."""
+    from cloth_bench_ros.engines import engine_class  # late: the registry imports engines
+
+    try:
+        cls = engine_class(engine)
+    except EngineError:
+        return
+    try:
+        cls.validate_params(values)
+    except EngineError as exc:
+        raise EngineError(f"preset file {path}: presets.{where}: {exc}") from None
