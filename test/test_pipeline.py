@@ -73,3 +73,14 @@ def test_realtime_pacing_reports_latency_deadline_misses_and_real_time_factor(ha
     assert 0 <= m["deadline_misses"] <= 741
     assert 0.5 < m["real_time_factor"] <= 1.05  # paced by the wall clock: about real time
     assert summary["run"]["wall_time"] >= 7.4 * 0.95
+
+
+def test_two_engines_in_one_run_are_scored_against_the_same_bag(hanging_bag, tmp_path):
+    summary = _run(hanging_bag, tmp_path, "both", engines=["mujoco", "bullet"])
+    assert set(summary["engines"]) == {"mujoco", "bullet"}
+    for name, m in summary["engines"].items():
+        assert m["frames_scored"] == 132 and m["frames_in_window"] == 99, name
+        assert m["step_time"]["count"] == 740, name
+    rows = (tmp_path / "both" / "frames.csv").read_text().splitlines()[1:]
+    assert sorted({r.split(",")[0] for r in rows}) == ["bullet", "mujoco"] and len(rows) == 264
+    assert summary["engines"]["mujoco"]["CD_d"] != summary["engines"]["bullet"]["CD_d"]
