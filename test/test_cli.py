@@ -95,3 +95,12 @@ def test_import_command_refuses_a_bad_transform(tmp_path):
     bad.write_text("1 2 3")
     assert_one_line_error(cli("import", str(tmp_path), "--out", str(tmp_path / "o"), "--transform", str(bad)),
                           "bad.txt")
+
+
+def test_engines_lists_available_and_unavailable_engines_with_reasons():
+    result = cli("engines")
+    assert result.returncode == 0
+    rows = {line.split()[0]: line.split(None, 3) for line in result.stdout.splitlines()[1:]}
+    assert rows["mujoco"][1] == "yes" and rows["bullet"][1] == "yes"
+    assert rows["flex"][1] == "no" and "CUDA" in rows["flex"][3]
+    assert rows["sofa"][1] == "no" and "PyPI" in rows["sofa"][3]
