@@ -31,6 +31,16 @@ from cloth_bench_ros import scene
 from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
 from cloth_bench_ros.scene import ClothGrid
 
+# MuJoCo reports an unstable state (NaN/Inf/huge qpos, qvel or qacc) as a warning and resets the
+# data to the model's rest state; unhandled, it also writes MUJOCO_LOG.TXT into the working
+# directory. The engine reads the warning counters instead (see `_step`), so the text is dropped.
+mujoco.set_mju_user_warning(lambda text: None)
+_INSTABILITY_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQACC,
+)
+
 # Noise of the seeded initial state: i.i.d. normal per coordinate of every free vertex.
 SEED_NOISE_STD = 0.0005  # m
 # Mass of each grasped corner, so that the cloth cannot move it within a substep.
@@ -215,6 +225,10 @@ class MujocoCloth(ClothEngine):
             d.qpos[self._corner_q] = self._target + (k * self.h) * self._velocity - self._corner_rest
             d.qvel[self._corner_dof] = self._velocity
             mujoco.mj_step(m, d)
+            for w in _INSTABILITY_WARNINGS:
+                if d.warning[w].number:
+                    # MuJoCo has already reset the state: report it rather than return the reset.
+                    raise FloatingPointError(f"MuJoCo {w.name[5:]}: the state went NaN, Inf or huge")
         self._target[:] = self._goal
         return self._vertices_now()
 
