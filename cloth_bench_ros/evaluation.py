@@ -18,6 +18,9 @@ from cloth_bench_ros.metrics import RealCloud, StabilityAccumulator, latency_sta
 from cloth_bench_ros.trajectory import Primitive
 
 
+IRREGULAR_TOLERANCE = 0.25  # an interval off 1/fps by more than this fraction is reported
+
+
 @dataclass(frozen=True)
 class FrameScore:
     engine: str
@@ -58,6 +61,8 @@ class OnlineEvaluator:
         self.empty_frames = 0
         self.nan_points_dropped = 0
         self.unpaired_frames = 0
+        self.irregular_intervals = 0  # real frames not about 1/fps after the previous one
+        self._last_real_ns: int | None = None
 
     # inputs
     def add_state(self, engine: str, stamp_ns: int, vertices: np.ndarray) -> None:
@@ -91,6 +96,11 @@ class OnlineEvaluator:
         """A real frame (stamp in run time); an empty cloud is counted and skipped."""
         self.real_frames += 1
         self.nan_points_dropped += nan_dropped
+        if self._last_real_ns is not None:
+            interval = (stamp_ns - self._last_real_ns) / 1e9
+            if abs(interval * self.fps - 1.0) > IRREGULAR_TOLERANCE:
+                self.irregular_intervals += 1
+        self._last_real_ns = stamp_ns
         if len(points) == 0:
             self.empty_frames += 1
             return
@@ -184,4 +194,5 @@ class OnlineEvaluator:
             "empty_frames_skipped": self.empty_frames,
             "nan_points_dropped": self.nan_points_dropped,
             "unpaired_frames": self.unpaired_frames,
+            "irregular_intervals": self.irregular_intervals,
         }

@@ -104,3 +104,41 @@ def test_engines_lists_available_and_unavailable_engines_with_reasons():
     assert rows["mujoco"][1] == "yes" and rows["bullet"][1] == "yes"
     assert rows["flex"][1] == "no" and "CUDA" in rows["flex"][3]
     assert rows["sofa"][1] == "no" and "PyPI" in rows["sofa"][3]
+
+
+def test_cloud_without_xyz_names_the_bag(tmp_path):
+    from cloth_bench_ros.data.bag import BagWriter
+    from cloth_bench_ros.data.messages import serialize
+    from cloth_bench_ros.pointcloud2 import create_cloud_xyz32
+    from cloth_bench_ros.runtime.messages import Header, PointCloud2, PointField
+
+    msg = create_cloud_xyz32(Header(frame_id="world"), [[0, 0, 1]], PointCloud2, PointField)
+    msg.fields = msg.fields[:2]
+    path = tmp_path / "no_z"
+    with BagWriter(path) as bag:
+        bag.write("/cloth_bench/real/cloud", "sensor_msgs/msg/PointCloud2", 0, serialize(msg))
+    assert_one_line_error(cli("run", "--bag", str(path)), "no_z", "no z field")
+
+
+def test_nan_points_empty_clouds_and_irregular_frames_are_counted_and_reported(tmp_path):
+    import numpy as np
+    from cloth_bench_ros.data.bag import BagWriter, TrialInfo
+    from cloth_bench_ros.scene import ClothGrid
+
+    grid = ClothGrid(10, 10).vertices()
+    path = tmp_path / "messy"
+    trial = TrialInfo(cloth="towel", trial=0, primitive="dynamic", change_of_phase_frame=99, source="test")
+    with BagWriter(path, trial=trial) as bag:
+        for k in range(132):
+            if k == 50:
+                continue  # a dropped frame: one interval of 2/30 s
+            points = grid.copy()
+            if k % 10 == 0:
+                points[:3] = np.nan  # 3 NaN points in 13 frames
+            if k == 7:
+                points = points[:0]  # an empty cloud
+            bag.write_cloud("/cloth_bench/real/cloud", round(k * 1e9 / 30), points)
+    result = cli("run", "--bag", str(path), "--output", str(tmp_path / "out"))
+    assert result.returncode == 0, result.stderr
+    assert "real frames: 131 (1 empty skipped, 39 NaN points dropped, 0 unpaired, 1 intervals not at 30 Hz)" \
+        in result.stdout
