@@ -42,16 +42,19 @@ def run_pipeline(config: RunConfig) -> dict:
         nodes.append(TrajectoryPublisher(context=context, parameter_overrides=_params(
             primitive=config.primitive, rate_hz=float(config.rate_hz), engines=config.engines,
             pacing=config.pacing)))
+        # The evaluator subscribes to the targets before the simulators do: the embedded runtime
+        # delivers a message to its subscribers in subscription order, so the evaluator notes a
+        # target's send time before a simulator steps on it (else latency would miss the step).
+        evaluator = Evaluator(context=context, parameter_overrides=_params(
+            engines=config.engines, output_dir=str(config.output_dir or ""), cloth=config.cloth,
+            seed=int(config.seed), pacing=config.pacing, **common))
+        nodes.append(evaluator)
         for engine in config.engines:
             nx, nz = config.grid or (0, 0)
             nodes.append(Simulator(node_name=f"simulator_{engine}", context=context, parameter_overrides=_params(
                 engine=engine, cloth=config.cloth, seed=int(config.seed), grid_nx=nx, grid_nz=nz,
                 engine_params=yaml.safe_dump(config.engine_params.get(engine, {})), **common)))
         nodes.append(Recorder(context=context, parameter_overrides=_params(bag=str(config.bag), use_sim_time=True)))
-        evaluator = Evaluator(context=context, parameter_overrides=_params(
-            engines=config.engines, output_dir=str(config.output_dir or ""), cloth=config.cloth,
-            seed=int(config.seed), **common))
-        nodes.append(evaluator)
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)

@@ -31,7 +31,7 @@ def _nodes(context):
              parameters=[params_file, {"bag": bag}]),
     ]
     evaluator = Node(package="cloth_bench_ros", executable="evaluator", namespace="cloth_bench",
-                     parameters=[params_file, common, {"output_dir": arg("output_dir")}])
+                     parameters=[params_file, common, {"output_dir": arg("output_dir"), "pacing": arg("pacing")}])
     for engine in engines:
         nodes.append(Node(package="cloth_bench_ros", executable="simulator", name=f"simulator_{engine}",
                           namespace="cloth_bench",

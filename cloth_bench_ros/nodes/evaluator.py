@@ -47,10 +47,15 @@ class Evaluator(Node):
             self.create_subscription(PointCloud2, f"{engine}/cloud", partial(self.on_state, engine), make_qos(100))
             self.create_subscription(DiagnosticArray, f"{engine}/step_time", partial(self.on_step, engine),
                                      make_qos(100))
+        # Latency: lockstep measures from each target's arrival; realtime from the wall-clock
+        # schedule the targets should have kept (first target + sim time), so a simulator that
+        # falls behind shows its queueing delay too.
+        self.realtime = self.declare_parameter("pacing", "lockstep").value == "realtime"
         self.create_subscription(PoseArray, "targets", self.on_target, make_qos(100))
         self.period_s = 1.0 / rate_hz
         self.target_sent: dict[int, int] = {}  # stamp -> monotonic ns when the target arrived
         self.first_target_ns: int | None = None
+        self.first_target_stamp = 0
         self.trial: dict = {}
         self.published_scores = 0
         self.summary: dict | None = None
@@ -72,16 +77,19 @@ class Evaluator(Node):
         self.publish_scores()
 
     def on_target(self, msg: PoseArray) -> None:
-        now = time.monotonic_ns()
-        self.target_sent[stamp_ns(msg.header.stamp)] = now
+        now, stamp = time.monotonic_ns(), stamp_ns(msg.header.stamp)
         if self.first_target_ns is None:
-            self.first_target_ns = now
+            self.first_target_ns, self.first_target_stamp = now, stamp
+        if not self.realtime:
+            self.target_sent[stamp] = now
 
     def on_state(self, engine: str, msg: PointCloud2) -> None:
         stamp = stamp_ns(msg.header.stamp)
-        sent = self.target_sent.get(stamp)
-        if sent is not None:
-            self.core.add_latency(engine, (time.monotonic_ns() - sent) / 1e9)
+        if self.realtime and self.first_target_ns is not None:
+            due = self.first_target_ns + (stamp - self.first_target_stamp)
+            self.core.add_latency(engine, (time.monotonic_ns() - due) / 1e9)
+        elif stamp in self.target_sent:
+            self.core.add_latency(engine, (time.monotonic_ns() - self.target_sent[stamp]) / 1e9)
             if len(self.engines) == 1:
                 del self.target_sent[stamp]
         self.core.add_state(engine, stamp, read_xyz(msg))
