@@ -330,6 +330,19 @@ def cmd_import(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_synth(args: argparse.Namespace) -> int:
+    from cloth_bench_ros.data.synth import synth_command
+    from cloth_bench_ros.engines.presets import CLOTHS
+
+    if args.cloth not in CLOTHS:
+        raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
+    out = Path(args.out) if args.out else Path(f"{args.cloth}_{args.primitive}")
+    bag = synth_command(args.cloth, args.primitive, out, seed=args.seed, overwrite=args.overwrite,
+                        progress=not args.quiet)
+    print(f"synthetic bag written: {bag}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="cloth-bench", description="Sim-to-real benchmark of cloth simulators.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log the nodes' messages")
@@ -430,6 +443,15 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--overwrite", action="store_true", help="replace bags that exist")
     imp.add_argument("--quiet", action="store_true", help="no progress bar")
     imp.set_defaults(func=cmd_import)
+
+    synth = sub.add_parser("synth", help="make a synthetic reference bag (reference simulation seen by a virtual Kinect)")
+    synth.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel)")
+    synth.add_argument("--primitive", default="dynamic", choices=PRIMITIVES)
+    synth.add_argument("--out", help="bag directory (default <cloth>_<primitive>)")
+    synth.add_argument("--seed", type=int, default=0, help="sensor noise and reference seed (default 0)")
+    synth.add_argument("--overwrite", action="store_true", help="replace the bag if it exists")
+    synth.add_argument("--quiet", action="store_true", help="no progress bar")
+    synth.set_defaults(func=cmd_synth)
 
     bag = sub.add_parser("bag", help="bag tools")
     bag_sub = bag.add_subparsers(dest="bag_command", required=True, parser_class=_Parser)
