@@ -1,0 +1,265 @@
+"""Stability on hard cases: a suite of scenes that break cloth simulators (`cloth-bench stress`).
+
+Each case drives one engine directly (make_engine + the primitive's full target trajectory,
+possibly transformed: time-compressed, pushed lower, a gripper jump) with parameter overrides on
+top of the engine's towel preset, and reports:
+
+- diverged, at which step (the engine's own divergence flag: non-finite vertices, a vertex more
+  than 5 m from the grippers or faster than 100 m/s, or an exception inside the engine), why;
+- L_s over the states of the quintic part up to the divergence (as the evaluator computes it);
+- the largest vertex speed max_t max_v |v_t - v_{t-1}| / dt over the run (the divergence step
+  included when its state is finite);
+- the step time (mean, p99, max) and the number of steps run.
+
+A case runs in a worker process: an exception is an "error" row, a worker that dies (a crash in
+the engine's C code) a "crashed" row, a case that exceeds its wall-time budget is stopped and
+reported ("time limit"). Nothing a case does ends the suite.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+STRESS_FILE = "stress.jsonl"
+MAX_CASE_WALL_S = 120.0
+
+
+@dataclass(frozen=True)
+class StressCase:
+    name: str
+    engine: str
+    description: str
+    primitive: str = "dynamic"
+    rate_hz: float = 100.0
+    params: dict = field(default_factory=dict)  # overrides on top of the towel preset of the task
+    grid: tuple[int, int] | None = None
+    time_compression: float = 1.0  # the trajectory is played this many times faster
+    drag_height: float | None = None  # m: the grippers' lowest height above the table top (< 0: into it)
+    jump: float = 0.0  # m: the right gripper jumps this far outwards (x) 1 s into the quintic part
+    max_wall_s: float = MAX_CASE_WALL_S
+
+
+def _one_step(rate: float) -> dict:
+    """One internal step per target (the paper's frequency study)."""
+    return {"timestep": 1.0 / rate, "substeps": 1}
+
+
+def default_cases(engines: Sequence[str] = ("mujoco", "bullet")) -> list[StressCase]:
+    """The suite: the hard cases of issue 5 and some more, with each engine's own parameter names."""
+    cases: list[StressCase] = []
+    for e in engines:
+        stiff = ({"model": "edges", "edge_stiffness": 1e6} if e == "mujoco"
+                 else {"elastic": 1e5, "bending": 1e5} if e == "bullet" else {})
+        common = [
+            StressCase("fling_10hz", e, "fling at 10 Hz, one internal step per target (dt = 0.1 s)",
+                       "dynamic", 10.0, _one_step(10.0)),
+            StressCase("fling_100hz_one_step", e, "fling at 100 Hz, one internal step per target (dt = 0.01 s)",
+                       "dynamic", 100.0, _one_step(100.0)),
+            StressCase("stiff_cloth", e, "very stiff cloth (" + ", ".join(f"{k}={v:g}" for k, v in stiff.items()
+                       if not isinstance(v, str)) + "), fling at 100 Hz with the preset time step",
+                       "dynamic", 100.0, stiff),
+            StressCase("light_cloth", e, "very light cloth (mass 1 g), fling at 100 Hz",
+                       "dynamic", 100.0, {"mass": 0.001}),
+            StressCase("heavy_cloth", e, "very heavy cloth (mass 100 kg), fling at 100 Hz",
+                       "dynamic", 100.0, {"mass": 100.0}),
+            StressCase("fast_drag_onto_table", e,
+                       "quasi-static drag played 5x faster, grippers lowered to 2 cm above the table top",
+                       "quasi_static", 100.0, {}, time_compression=5.0, drag_height=0.02),
+            StressCase("fast_drag_into_table", e,
+                       "quasi-static drag played 5x faster, grippers driven 2 cm into the table",
+                       "quasi_static", 100.0, {}, time_compression=5.0, drag_height=-0.02),
+            StressCase("large_dt_high_damping", e, "dt = 0.1 s (10 Hz, one step per target) with damping 100",
+                       "dynamic", 10.0, {**_one_step(10.0), "damping": 100.0}),
+            StressCase("fine_mesh_one_step", e, "fine 21 x 29 mesh, fling at 100 Hz with one step per target",
+                       "dynamic", 100.0, _one_step(100.0), grid=(21, 29)),
+            StressCase("gripper_jump", e, "the right gripper jumps 0.3 m outwards in one step (tears the cloth)",
+                       "dynamic", 100.0, {}, jump=0.3),
+            StressCase("one_solver_iteration", e, "fling at 100 Hz, 1 solver iteration per internal step",
+                       "dynamic", 100.0, {"solver_iterations": 1}),
+            StressCase("self_collision_fling", e, "fling at 100 Hz with cloth self-collision",
+                       "dynamic", 100.0, {"self_collision": True}),
+            StressCase("no_damping_one_step", e, "fling at 100 Hz, one step per target, no damping",
+                       "dynamic", 100.0, {**_one_step(100.0), "damping": 0.0}),
+        ]
+        cases += common
+    return cases
+
+
+def case_targets(case: StressCase):
+    """(left, right, quintic_index, dt) of a case: the primitive's targets, transformed."""
+    from cloth_bench_ros import scene
+    from cloth_bench_ros.trajectory import full_targets
+
+    # Sampled every time_compression / rate s of trajectory time, played one sample per 1 / rate.
+    samples_per_s = case.rate_hz / case.time_compression
+    targets = full_targets(case.primitive, samples_per_s)
+    left, right = targets.left.copy(), targets.right.copy()
+    q = targets.quintic_index
+    if case.drag_height is not None:
+        z0 = float(scene.PREGRASP_LEFT[2])
+        lowest = min(left[q:, 2].min(), right[q:, 2].min())
+        scale = (z0 - (scene.TABLE_TOP_Z + case.drag_height)) / (z0 - lowest)
+        for g in (left, right):
+            g[q:, 2] = z0 + (g[q:, 2] - z0) * scale
+    if case.jump:
+        k = q + int(round(1.0 * samples_per_s))
+        right[k:, 0] += case.jump
+    return left, right, q, 1.0 / case.rate_hz
+
+
+def run_case(case: StressCase) -> dict:
+    """Run one case to its end, its divergence or its wall-time budget; never raises."""
+    from cloth_bench_ros.engines import make_engine
+    from cloth_bench_ros.engines.presets import load_preset
+    from cloth_bench_ros.metrics import StabilityAccumulator
+    from cloth_bench_ros.scene import ClothGrid
+
+    row = {"case": case.name, "engine": case.engine, "description": case.description,
+           "primitive": case.primitive, "rate_hz": case.rate_hz, "params": case.params,
+           "grid": f"{case.grid[0]}x{case.grid[1]}" if case.grid else None,
+           "status": "error", "diverged": False, "diverged_at_step": None, "diverged_at_time": None,
+           "diverged_reason": "", "L_s": math.nan, "max_vertex_speed": math.nan, "steps": 0,
+           "step_time_mean": math.nan, "step_time_p99": math.nan, "step_time_max": math.nan,
+           "wall_s": math.nan, "error": ""}
+    start = time.perf_counter()
+    engine = None
+    try:
+        left, right, q, dt = case_targets(case)
+        params = {**load_preset(case.engine, "towel", case.primitive), **case.params}
+        engine = make_engine(case.engine, case.rate_hz, params, ClothGrid(*case.grid) if case.grid else None)
+        previous = engine.reset(0, left[0], right[0]).copy()
+        stability = StabilityAccumulator()
+        times = []
+        max_speed = 0.0
+        row["status"] = "ok"
+        for k in range(1, len(left)):
+            t0 = time.perf_counter()
+            vertices = engine.step(left[k], right[k])
+            times.append(time.perf_counter() - t0)
+            vertices = np.array(vertices, dtype=float)
+            if np.isfinite(vertices).all():
+                max_speed = max(max_speed, float(np.linalg.norm(vertices - previous, axis=1).max() / dt))
+            if engine.diverged:
+                break
+            if k >= q:
+                stability.add(vertices)
+            previous = vertices
+            if time.perf_counter() - start > case.max_wall_s:
+                row["status"] = "time limit"
+                row["error"] = f"stopped after {case.max_wall_s:g} s of wall time at step {k} of {len(left) - 1}"
+                break
+        if engine.diverged:
+            d = engine.divergence
+            row.update(status="diverged", diverged=True, diverged_at_step=d.step,
+                       diverged_at_time=d.step * dt, diverged_reason=d.reason)
+        s = np.asarray(times)
+        row.update(L_s=stability.value, max_vertex_speed=max_speed, steps=len(times),
+                   step_time_mean=float(s.mean()) if len(s) else math.nan,
+                   step_time_p99=float(np.percentile(s, 99)) if len(s) else math.nan,
+                   step_time_max=float(s.max()) if len(s) else math.nan)
+        row["substeps"] = getattr(engine, "substeps", None)
+    except Exception as exc:  # a case that cannot even be built is a result too
+        row["status"] = "error"
+        row["error"] = f"{type(exc).__name__}: {exc}"
+    finally:
+        if engine is not None:
+            try:
+                engine.close()
+            except Exception:
+                pass
+    row["wall_s"] = time.perf_counter() - start
+    return row
+
+
+def run_suite(cases: Sequence[StressCase], out_dir: Path | None = None, workers: int | None = None,
+              progress: bool = True) -> list[dict]:
+    """Run every case in worker processes; rows in the order of `cases` (and to stress.jsonl)."""
+    from tqdm import tqdm
+
+    from cloth_bench_ros.sweep import _json_safe, default_workers, run_parallel
+
+    if out_dir is not None:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+    rows: dict[int, dict] = {}
+    index = {id(c): i for i, c in enumerate(cases)}
+    bar = tqdm(total=len(cases), desc="stress", unit="case", disable=not progress)
+
+    def done(case, row):
+        rows[index[id(case)]] = row
+        bar.set_postfix_str(f"{case.engine}/{case.name}: {row['status']}", refresh=False)
+        bar.update(1)
+
+    def crashed(case, message):
+        done(case, {"case": case.name, "engine": case.engine, "description": case.description,
+                    "primitive": case.primitive, "rate_hz": case.rate_hz, "params": case.params,
+                    "status": "crashed", "diverged": False, "error": message, "L_s": math.nan,
+                    "max_vertex_speed": math.nan, "step_time_mean": math.nan, "steps": 0})
+
+    try:
+        run_parallel(run_case, list(cases), workers or min(default_workers(), len(cases)),
+                     on_result=done, on_crash=crashed,
+                     log_path=Path(out_dir) / "workers.log" if out_dir is not None else None)
+    finally:
+        bar.close()
+    ordered = [rows[i] for i in sorted(rows)]
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / STRESS_FILE).write_text("".join(json.dumps(_json_safe(r), sort_keys=True) + "\n" for r in ordered))
+        (out / "stress.md").write_text(stress_table(ordered) + "\n")
+    return ordered
+
+
+def load_stress(path: Path) -> list[dict]:
+    path = Path(path)
+    if path.is_dir():
+        path = path / STRESS_FILE
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    for r in rows:
+        for k in ("L_s", "max_vertex_speed", "step_time_mean", "step_time_p99", "step_time_max"):
+            if r.get(k) is None:
+                r[k] = math.nan
+    return rows
+
+
+def _f(value, fmt: str) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return format(value, fmt)
+
+
+def stress_table(rows: Sequence[dict]) -> str:
+    """Markdown table: one row per case and engine."""
+    lines = ["| engine | case | rate Hz | status | diverged at step | L_s (m) | max vertex speed (m/s) "
+             "| step mean (ms) | step max (ms) | steps | why |",
+             "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+    for r in rows:
+        why = r.get("diverged_reason") or r.get("error") or ""
+        lines.append(
+            f"| {r['engine']} | {r['case']} | {r['rate_hz']:g} | {r['status']} | "
+            f"{r.get('diverged_at_step') if r.get('diverged_at_step') is not None else '-'} | "
+            f"{_f(r.get('L_s'), '.2e')} | {_f(r.get('max_vertex_speed'), '.3g')} | "
+            f"{_f(r.get('step_time_mean', math.nan) * 1e3, '.3f')} | {_f(r.get('step_time_max', math.nan) * 1e3, '.3f')} | "
+            f"{r.get('steps', 0)} | {why.replace('|', '/')} |")
+    return "\n".join(lines)
+
+
+def verdict(rows: Sequence[dict]) -> dict[str, list[str]]:
+    """engine -> names of the cases that diverged."""
+    out: dict[str, list[str]] = {}
+    for r in rows:
+        out.setdefault(r["engine"], [])
+        if r.get("diverged"):
+            out[r["engine"]].append(r["case"])
+    return out
+
+
+def case_dict(case: StressCase) -> dict:
+    return asdict(case)

@@ -1,0 +1,205 @@
+"""Sweeps: cells, parallel workers, resume, diverged and failed cells, settings mode, hil; real engines."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import pytest
+
+from cloth_bench_ros import sweep as sw
+from cloth_bench_ros.cli import main
+from test.conftest import write_hanging_cloth_bag
+
+GRID = (6, 8)
+
+
+@pytest.fixture(scope="module")
+def bag_dir(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("sweep_bags")
+    write_hanging_cloth_bag(d / "towel_dynamic")
+    write_hanging_cloth_bag(d / "towel_quasi_static", frames=420, primitive="quasi_static", change_of_phase_frame=None)
+    return d
+
+
+# ------------------------------------------------------------------------------ cells
+
+
+def test_paper_cells_are_the_product_with_unique_keys_and_frames_for_the_first_seed(bag_dir):
+    cells = sw.paper_cells(["mujoco", "bullet"], [10, 100, 1000], ["towel"], ["dynamic", "quasi_static"],
+                           range(3), bag_dir, GRID)
+    assert len(cells) == 2 * 3 * 2 * 3
+    assert len({c.key() for c in cells}) == len(cells)
+    assert len({c.ident() for c in cells}) == len(cells)
+    assert {c.seed for c in cells if c.keep_frames} == {0}
+    assert {c.config for c in cells} == {"grid=6x8"}
+    assert all(Path(c.bag).parent == bag_dir for c in cells)
+
+
+def test_step_per_target_sets_the_internal_step_to_the_rate(bag_dir):
+    cells = sw.paper_cells(["mujoco"], [10, 1000], ["towel"], ["dynamic"], [0], bag_dir, step_per_target=True)
+    assert {c.rate_hz: c.params["timestep"] for c in cells} == {10.0: 0.1, 1000.0: 0.001}
+    assert all(c.params["substeps"] == 1 and c.config == "step=1/rate" for c in cells)
+
+
+def test_find_bags_knows_bundled_and_importer_names_and_says_what_is_missing(tmp_path, bag_dir):
+    for trial in (0, 2):
+        (tmp_path / f"linen_{trial}_dynamic").mkdir()
+    (tmp_path / "linen_quasi_static_extra").mkdir()
+    assert [t for t, _ in sw.find_bags(tmp_path, "linen", "dynamic")] == [0, 2]
+    assert sw.find_bags(bag_dir, "towel", "quasi_static")[0][1].name == "towel_quasi_static"
+    with pytest.raises(ValueError, match="no bag named linen_quasi_static"):
+        sw.find_bags(tmp_path, "linen", "quasi_static")
+
+
+def test_settings_cells_are_a_factorial_over_the_axes_the_engine_has(bag_dir):
+    axes = {"grid": [(6, 8), (11, 15)], "self_collision": [False, True], "timestep": [None, 0.005],
+            "no_such_param": [1, 2]}
+    cells = sw.settings_cells(["mujoco"], 100.0, ["towel"], ["dynamic"], [0, 1], bag_dir, axes)
+    assert len(cells) == 2 * 2 * 2 * 2
+    configs = {c.config for c in cells}
+    assert "grid=6x8,self_collision=off,timestep=preset" in configs
+    assert "grid=11x15,self_collision=on,timestep=0.005" in configs
+    cell = next(c for c in cells if c.config == "grid=11x15,self_collision=on,timestep=0.005")
+    assert cell.grid == (11, 15) and cell.params == {"self_collision": True, "timestep": 0.005}
+    assert all(c.mode == "settings" for c in cells)
+
+
+def test_bad_overrides_and_grids_are_refused_before_any_work(bag_dir):
+    with pytest.raises(ValueError, match="unknown mujoco parameter"):
+        sw.paper_cells(["mujoco"], [100], ["towel"], ["dynamic"], [0], bag_dir, overrides={"mujoco": {"nope": 1}})
+    with pytest.raises(ValueError, match="outside"):
+        sw.paper_cells(["mujoco"], [100], ["towel"], ["dynamic"], [0], bag_dir, overrides={"mujoco": {"mass": -1}})
+    with pytest.raises(ValueError):
+        sw.parse_grid("1x5")
+    assert sw.parse_grid("16X22") == (16, 22)
+    assert sw.parse_overrides(["mujoco.self_collision=on", "bullet.mass=0.5", "mujoco.model=edges"]) == {
+        "mujoco": {"self_collision": True, "model": "edges"}, "bullet": {"mass": 0.5}}
+    with pytest.raises(ValueError, match="engine.param=value"):
+        sw.parse_overrides(["mass=1"])
+
+
+# --------------------------------------------------------------------- running, resume
+
+
+def test_sweep_appends_rows_and_resumes_without_recomputing(bag_dir, tmp_path):
+    cells = sw.paper_cells(["mujoco"], [100], ["towel"], ["dynamic"], [0, 1], bag_dir, GRID)
+    first = sw.run_sweep(cells, tmp_path, workers=2, progress=False)
+    assert (first.ran, first.skipped, first.errors) == (2, 0, 0)
+    rows = sw.load_rows(tmp_path)
+    assert sorted(r["seed"] for r in rows) == [0, 1]
+    r0 = next(r for r in rows if r["seed"] == 0)
+    assert r0["status"] == "ok" and 0 < r0["CD"] <= r0["HD"] < 1 and r0["step_count"] == 740
+    assert r0["frames_csv"] and (tmp_path / r0["frames_csv"]).is_file()  # first seed keeps its frames
+    assert next(r for r in rows if r["seed"] == 1)["frames_csv"] is None
+    assert r0["substeps"] == 5 and r0["engine_version"]
+
+    again = sw.run_sweep(cells, tmp_path, workers=2, progress=False)
+    assert (again.ran, again.skipped) == (0, 2)
+
+    # A line torn by an interrupted sweep is skipped; growing the sweep runs only the new cells.
+    with (tmp_path / sw.RESULTS_FILE).open("a") as f:
+        f.write('{"engine": "mujoco", "rate_hz": 100')
+    more = sw.paper_cells(["mujoco"], [100], ["towel"], ["dynamic"], [0, 1, 2], bag_dir, GRID)
+    grown = sw.run_sweep(more, tmp_path, workers=2, progress=False)
+    assert (grown.ran, grown.skipped) == (1, 2)
+    assert sorted(r["seed"] for r in sw.load_rows(tmp_path)) == [0, 1, 2]
+
+
+def test_a_diverged_cell_is_a_result_and_a_failing_cell_an_error_row(bag_dir, tmp_path):
+    # Bullet at 10 Hz with one 0.1 s step per target explodes during the fling (11 x 15 grid).
+    diverging = sw.paper_cells(["bullet"], [10], ["towel"], ["dynamic"], [0], bag_dir, step_per_target=True)
+    broken = sw.Cell("mujoco", 100.0, "towel", "dynamic", 0, str(tmp_path / "no_such_bag"), config="broken")
+    outcome = sw.run_sweep(diverging + [broken], tmp_path, workers=2, progress=False)
+    assert (outcome.ran, outcome.diverged, outcome.errors) == (2, 1, 1)
+    rows = {r["config"]: r for r in sw.load_rows(tmp_path)}
+    d = rows["step=1/rate"]
+    assert d["status"] == "diverged" and d["diverged"] and d["diverged_at_step"] > 0
+    assert math.isnan(d["CD"]) and d["diverged_reason"]
+    e = rows["broken"]
+    assert e["status"] == "error" and "no_such_bag" in e["error"]
+    # Errors are finished cells; --retry-errors runs them again.
+    assert sw.run_sweep(diverging + [broken], tmp_path, workers=1, progress=False).ran == 0
+    assert sw.run_sweep(diverging + [broken], tmp_path, workers=1, progress=False, retry_errors=True).ran == 1
+
+
+def _square_or_die(x: int) -> int:
+    if x == 3:
+        os._exit(13)  # a worker dying as an engine's segfault would
+    return x * x
+
+
+def test_a_dying_worker_is_retried_once_then_recorded_and_the_rest_finish():
+    results, crashes = {}, {}
+    sw.run_parallel(_square_or_die, list(range(6)), 2, on_result=results.__setitem__, on_crash=crashes.__setitem__)
+    assert results == {0: 0, 1: 1, 2: 4, 4: 16, 5: 25}
+    assert list(crashes) == [3] and "died" in crashes[3]
+
+
+# ------------------------------------------------------------------------------- CLI
+
+
+def test_cli_sweep_dry_run_counts_cells(bag_dir, tmp_path, capsys):
+    assert main(["sweep", "--bag-dir", str(bag_dir), "--cloth", "towel", "--seeds", "3", "--dry-run",
+                 "--output", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "36 cells" in out and "0 already" in out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--set", "mujoco.nope=1"], "unknown mujoco parameter nope"),
+    (["--grid", "1x5"], "grid"),
+    (["--cloth", "silk"], "unknown cloth 'silk'"),
+    (["--engine", "sofa"], "engine sofa is not available"),
+    (["--mode", "settings", "--rate", "10", "--rate", "100"], "one rate"),
+])
+def test_cli_sweep_user_errors_are_one_line(bag_dir, tmp_path, capsys, argv, message):
+    try:
+        code = main(["sweep", "--bag-dir", str(bag_dir), "--output", str(tmp_path), "--dry-run", *argv])
+    except SystemExit as exc:  # argparse's own usage errors
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_cli_sweep_runs_and_reports(bag_dir, tmp_path, capsys):
+    code = main(["sweep", "--engine", "mujoco", "--rate", "100", "--cloth", "towel", "--primitive", "dynamic",
+                 "--seeds", "1", "--grid", "6x8", "--workers", "1", "--bag-dir", str(bag_dir), "--output",
+                 str(tmp_path), "--no-progress", "--set", "mujoco.self_collision=true", "--report"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    row = sw.load_rows(tmp_path)[0]
+    assert row["params"] == {"self_collision": True} and row["config"] == "grid=6x8,self_collision=on"
+    assert (tmp_path / "report" / "report.md").is_file() and "| towel | CD_d |" in out
+
+
+def test_cli_run_accepts_grid_and_set(hanging_bag, tmp_path, capsys):
+    code = main(["run", "--bag", str(hanging_bag), "--grid", "6x8", "--set", "mujoco.solver_iterations=5",
+                 "--output", str(tmp_path)])
+    assert code == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["engines"]["mujoco"]["frames_scored"] == 132
+    assert main(["run", "--bag", str(hanging_bag), "--set", "bullet.mass=1"]) == 2
+    assert "not part of this run" in capsys.readouterr().err
+
+
+def test_hil_reports_latency_deadline_misses_and_real_time_factor(hanging_bag, tmp_path, capsys):
+    # An older measurement of the same cell is replaced, other rows are kept.
+    old = {"mode": "paper", "config": "grid=6x8", "engine": "mujoco", "rate_hz": 100.0, "cloth": "towel",
+           "primitive": "dynamic", "trial": 0, "seed": 0, "pacing": "realtime", "status": "ok", "latency_p50": 1.0}
+    sw.append_row(tmp_path / sw.RESULTS_FILE, old)
+    sw.append_row(tmp_path / sw.RESULTS_FILE, {**old, "rate_hz": 1000.0})
+    code = main(["hil", "--engine", "mujoco", "--rate", "100", "--bag", str(hanging_bag), "--grid", "6x8",
+                 "--output", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "lat p99 ms" in out and "deadline misses" in out
+    rows = sw.load_rows(tmp_path)
+    assert sorted(r["rate_hz"] for r in rows) == [100.0, 1000.0]
+    row = next(r for r in rows if r["rate_hz"] == 100.0)
+    assert row["pacing"] == "realtime" and row["latency_count"] == 741
+    assert 0 < row["latency_p50"] <= row["latency_p99"] <= row["latency_max"] < 1.0
+    assert 0 <= row["deadline_misses"] <= 741
+    assert 0.5 < row["real_time_factor"] <= 1.05  # paced by the wall clock
