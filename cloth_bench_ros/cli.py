@@ -44,7 +44,7 @@ def check_bag(bag: Path) -> None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.engines.presets import CLOTHS
+    from cloth_bench_ros.engines.presets import CLOTHS, load_preset
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.pipeline import RunConfig, run_pipeline
     from cloth_bench_ros.report import result_table
@@ -54,12 +54,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         engine_class(name)
     if args.cloth not in CLOTHS:
         raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
+    presets = Path(args.presets) if args.presets else None
+    for name in engines:  # a malformed preset file or bad value fails here, in one line
+        load_preset(name, args.cloth, args.primitive, presets)
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     check_bag(bag)
     out = Path(args.output) if args.output else Path("results") / f"{args.cloth}_{args.primitive}_{int(args.rate)}hz_seed{args.seed}"
     config = RunConfig(bag=bag, engines=engines, rate_hz=args.rate, cloth=args.cloth, primitive=args.primitive,
                        seed=args.seed, pacing=args.pacing, output_dir=out,
-                       engine_params=_overrides(getattr(args, "set", None), engines), grid=getattr(args, "grid", None))
+                       engine_params=_overrides(getattr(args, "set", None), engines), grid=getattr(args, "grid", None), presets_dir=presets)
     summary = run_pipeline(config)
     print(f"cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed}, bag {bag}")
     print(result_table(summary))
@@ -354,6 +357,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel)")
     run.add_argument("--primitive", default="dynamic", choices=PRIMITIVES, help="default dynamic")
     run.add_argument("--bag", help="rosbag2 MCAP bag to score against (default: the bundled one)")
+    run.add_argument("--presets", help="directory of <engine>.yaml presets (default: config/presets)")
     run.add_argument("--seed", type=int, default=0, help="perturbs the initial cloth (default 0)")
     run.add_argument("--pacing", default="lockstep", choices=("lockstep", "realtime"))
     run.add_argument("--output", help="report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)")

@@ -26,6 +26,7 @@ class RunConfig:
     output_dir: Path | None = None
     engine_params: dict[str, dict] = field(default_factory=dict)  # engine -> parameter overrides
     grid: tuple[int, int] | None = None  # (nx, nz) vertices; None: the engine's default
+    presets_dir: Path | None = None  # directory of <engine>.yaml presets; None: config/presets
 
 
 def _params(**values) -> list:
@@ -53,6 +54,7 @@ def run_pipeline(config: RunConfig) -> dict:
             nx, nz = config.grid or (0, 0)
             nodes.append(Simulator(node_name=f"simulator_{engine}", context=context, parameter_overrides=_params(
                 engine=engine, cloth=config.cloth, seed=int(config.seed), grid_nx=nx, grid_nz=nz,
+                presets_dir=str(config.presets_dir or ""),
                 engine_params=yaml.safe_dump(config.engine_params.get(engine, {})), **common)))
         nodes.append(Recorder(context=context, parameter_overrides=_params(bag=str(config.bag), use_sim_time=True)))
         executor = SingleThreadedExecutor(context=context)

@@ -142,3 +142,17 @@ def test_nan_points_empty_clouds_and_irregular_frames_are_counted_and_reported(t
     assert result.returncode == 0, result.stderr
     assert "real frames: 131 (1 empty skipped, 39 NaN points dropped, 0 unpaired, 1 intervals not at 30 Hz)" \
         in result.stdout
+
+
+@pytest.mark.parametrize("setting,words", [
+    ("mujoco.mass=-1", ["mass", "-1"]),
+    ("mujoco.stiffnesss=3", ["stiffnesss"]),
+    ("mujoco.poisson=0.9", ["poisson", "outside"]),
+])
+def test_bad_engine_parameters(setting, words):
+    assert_one_line_error(cli("run", "--set", setting), *words)
+
+
+def test_malformed_preset_file(tmp_path):
+    (tmp_path / "mujoco.yaml").write_text("engine: mujoco\npresets: {towel: {dynamic: [not, a, mapping]}}\n")
+    assert_one_line_error(cli("run", "--presets", str(tmp_path)), "mujoco.yaml")

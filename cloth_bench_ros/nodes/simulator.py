@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import yaml
@@ -37,7 +38,9 @@ class Simulator(Node):
         nx = int(self.declare_parameter("grid_nx", 0).value)
         nz = int(self.declare_parameter("grid_nz", 0).value)
         grid = ClothGrid(nx, nz) if nx and nz else None
-        params = {**load_preset(self.engine_name, cloth, primitive), **overrides}
+        presets_dir = self.declare_parameter("presets_dir", "").value
+        preset = load_preset(self.engine_name, cloth, primitive, Path(presets_dir) if presets_dir else None)
+        params = {**preset, **overrides}
         self.engine = make_engine(self.engine_name, rate_hz, params, grid)
         self.cloud_pub = self.create_publisher(PointCloud2, f"{self.engine_name}/cloud", make_qos(10))
         self.status_pub = self.create_publisher(DiagnosticArray, f"{self.engine_name}/step_time", make_qos(10))
