@@ -7,6 +7,7 @@ from pathlib import Path
 
 import yaml
 
+from cloth_bench_ros.nodes.common import close_nodes
 from cloth_bench_ros.nodes.evaluator import Evaluator
 from cloth_bench_ros.nodes.recorder import Recorder
 from cloth_bench_ros.nodes.simulator import Simulator
@@ -64,9 +65,5 @@ def run_pipeline(config: RunConfig) -> dict:
             executor.spin_once(timeout_sec=0.1)
         return evaluator.summary
     finally:
-        for node in nodes:
-            close = getattr(node, "close", None)
-            if close:
-                close()
-            node.destroy_node()
+        close_nodes(nodes)
         rclpy.shutdown(context=context)

@@ -119,6 +119,10 @@ class ClothEngine(abc.ABC):
     def dt(self) -> float:
         return 1.0 / self.rate_hz
 
+    def internal_steps(self, timestep: float, least: int) -> int:
+        """Internal steps per engine step: at least `least`, and none longer than `timestep`."""
+        return max(least, math.ceil(self.dt / timestep - 1e-9))
+
     @property
     def diverged(self) -> bool:
         return self.divergence is not None

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import math
 import os
 import sys
 import tempfile
@@ -166,7 +165,7 @@ class BulletCloth(ClothEngine):
                  grid: ClothGrid | None = None) -> None:
         super().__init__(rate_hz, params, grid)
         c = self.config
-        self.substeps = max(int(c["substeps"]), math.ceil(self.dt / float(c["timestep"]) - 1e-9))
+        self.substeps = self.internal_steps(float(c["timestep"]), int(c["substeps"]))
         self.h = self.dt / self.substeps
         self._rest = self.grid.vertices()
         self._corners = [self.grid.left_corner, self.grid.right_corner]

@@ -21,7 +21,6 @@ millimetres during the fling.
 
 from __future__ import annotations
 
-import math
 from typing import ClassVar, Mapping
 
 import mujoco
@@ -117,7 +116,7 @@ class MujocoCloth(ClothEngine):
                  grid: ClothGrid | None = None) -> None:
         super().__init__(rate_hz, params, grid)
         c = self.config
-        self.substeps = max(int(c["substeps"]), math.ceil(self.dt / float(c["timestep"]) - 1e-9))
+        self.substeps = self.internal_steps(float(c["timestep"]), int(c["substeps"]))
         self.h = self.dt / self.substeps
         self._rest = self.grid.vertices()
         self._corners = [self.grid.left_corner, self.grid.right_corner]

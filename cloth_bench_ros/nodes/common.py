@@ -21,6 +21,15 @@ def _request_stop(signum, frame) -> None:
     _stop_requested.set()
 
 
+def close_nodes(nodes: Sequence) -> None:
+    """Each node's close() (engines freed, recordings finalised), then destroy_node()."""
+    for node in nodes:
+        close = getattr(node, "close", None)
+        if close:
+            close()
+        node.destroy_node()
+
+
 def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None = None) -> int:
     """Spin nodes in one executor until all are `done`, SIGINT/SIGTERM or shutdown.
 
@@ -47,11 +56,7 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
         print(f"error: {exc}", file=sys.stderr)
         return 2
     finally:
-        for node in nodes:
-            close = getattr(node, "close", None)
-            if close:
-                close()
-            node.destroy_node()
+        close_nodes(nodes)
         if rclpy.ok():
             rclpy.shutdown()
 
