@@ -394,12 +394,12 @@ def write_synthetic_bag(config: SynthConfig, out_dir: Path, overwrite: bool = Fa
     `on_frame(k, reference_vertices, points)` sees every frame as it is written.
     """
     out_dir = Path(out_dir)
-    frames = synthetic_frames(config)
-    if progress:
-        from tqdm import tqdm
+    with BagWriter(out_dir, trial_info(config), overwrite=overwrite) as writer:  # fails before simulating
+        frames = synthetic_frames(config)
+        if progress:
+            from tqdm import tqdm
 
-        frames = tqdm(frames, total=config.frame_count, unit="frame", desc=out_dir.name)
-    with BagWriter(out_dir, trial_info(config), overwrite=overwrite) as writer:
+            frames = tqdm(frames, total=config.frame_count, unit="frame", desc=out_dir.name)
         for k, vertices, points in frames:
             writer.write_cloud(CLOUD_TOPIC, frame_stamp_ns(k, config.fps), points)
             if on_frame is not None:
