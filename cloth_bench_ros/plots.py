@@ -885,11 +885,16 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
         add_table(fig5_table(sel, cloth, f"fig5{suffix}"))
         doc.p("**paper** — " + PAPER_FIG5)
 
-    speed_sel = [r for r in rows if r.get("mode", "paper") == "paper" and r.get("pacing", "lockstep") == "lockstep"]
+    lockstep = [r for r in rows if r.get("mode", "paper") == "paper" and r.get("pacing", "lockstep") == "lockstep"]
+    speed_cloth = fig5_cloth if any(r["cloth"] == fig5_cloth for r in lockstep) else (cloths_of(lockstep) or [None])[0]
+    speed_sel = [r for r in lockstep if r["cloth"] == speed_cloth]  # one cloth: every configuration has it
     if speed_sel:
-        doc.h(2, "Speed against error")
+        doc.h(2, f"Speed against error ({speed_cloth})")
+        doc.p("One point per engine, rate and configuration (mean over seeds); x: engine compute per simulated "
+              "second (mean step time x rate; below 1 the engine alone is faster than real time); y: CD of the "
+              "task. The Pareto front joins the points that no other point beats in both.")
         p, front = plot_speed_error(speed_sel, out_dir / "speed_error.png",
-                                    "CD against compute per simulated second (all cloths pooled); Pareto front dashed")
+                                    f"{speed_cloth}: CD against compute per simulated second; Pareto front dashed")
         pareto += front
         add_img(p, "speed against error with its Pareto front (ours)")
         add_table(Table("pareto", ["task", "engine", "point", "compute s/s", "CD (m)"],
