@@ -2,7 +2,8 @@
 
 Runs the four nodes with pacing="realtime" (the trajectory publisher sends target k at wall time
 k / rate, as a robot controller would) on the towel preset and the bundled towel bag, and prints
-per rate: per-step latency (target sent -> state received) p50 / p99 / max, deadline misses
+per rate: per-step latency (the target's due time on that schedule -> state received, so a run
+that falls behind its schedule shows it) p50 / p99 / max, deadline misses
 (latency > 1 / rate), the real-time factor (simulated over wall time) and the engine's step time.
 
     .venv/bin/python benchmarks/bench_realtime.py [--engine mujoco] [--rates 100 1000]
@@ -54,8 +55,8 @@ def main() -> None:
                   f"{lat['max'] * 1e3:>10.3f} {misses:>16} {m['real_time_factor']:>6.3f} {st['p50'] * 1e3:>11.3f} "
                   f"{st['p99'] * 1e3:>11.3f} {st['max'] * 1e3:>11.3f}"
                   + (f"  diverged at step {m['diverged_at_step']}" if m["diverged"] else ""))
-    print("latency: target sent -> state received (wall clock); miss: latency > 1 / rate; "
-          "RTF: simulated time / wall time")
+    print("latency: the target's due time on the wall-clock schedule (first target + k / rate) -> state received, "
+          "so falling behind counts; miss: latency > 1 / rate; RTF: simulated time / wall time")
 
 
 if __name__ == "__main__":

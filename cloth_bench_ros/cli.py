@@ -293,7 +293,8 @@ def cmd_hil(args: argparse.Namespace) -> int:
               f"{r['latency_max'] * 1e3:>10.3f} {f'{misses} ({100 * misses / max(n, 1):.1f} %)':>18} "
               f"{r['real_time_factor']:>6.3f} {r['step_time_p50'] * 1e3:>11.3f} {r['step_time_p99'] * 1e3:>11.3f}  "
               + (f"diverged at step {r['diverged_at_step']}" if r["diverged"] else "ok"))
-    print("latency: target sent -> state received (wall clock); deadline: 1 / rate; RTF: simulated / wall time")
+    print("latency: the target's due time on the wall-clock schedule (first target + k / rate) -> state received, "
+          "so falling behind counts; miss: latency > 1 / rate; RTF: simulated / wall time")
     print(f"results: {out / sw.RESULTS_FILE} (render with `cloth-bench report {out}`)")
     return 0
 

@@ -775,7 +775,7 @@ def plot_latency(rows: Sequence[dict], path: Path) -> Path | None:
     ax.set_xticks(x, [f"{engine_label(k[0])}\n{k[1]:g} Hz\n{k[2]}" for k in keys], fontsize=8)
     ax.set_yscale("log")
     _plain_log(ax)
-    ax.set_ylabel("latency, target sent -> state received (ms)")
+    ax.set_ylabel("latency, target due -> state received (ms)")
     ax.grid(True, which="both", axis="y", alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title("per-step latency against the deadline")
@@ -916,7 +916,9 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
     if timed:
         doc.h(2, "Timing and hardware in the loop")
         doc.p("Step time: wall time of one engine step (all internal substeps) per target. Latency: wall time "
-              "from the target leaving the trajectory publisher to the engine's state reaching the evaluator. "
+              "until the engine's state reaches the evaluator, counted from the target's due time on the "
+              "wall-clock schedule (first target + k / rate) with realtime pacing, so a run that falls behind "
+              "its schedule shows it, and from the target's arrival with lockstep pacing. "
               "Deadline misses: steps whose latency exceeds 1 / rate (mean per run / steps per run). Real-time "
               "factor: simulated time over wall time of the run (lockstep runs as fast as they can; realtime "
               "runs are paced by the wall clock and cannot exceed 1). Medians over runs.")

@@ -160,6 +160,8 @@ def run_case(case: StressCase) -> dict:
             row.update(status="diverged", diverged=True, diverged_at_step=d.step,
                        diverged_at_time=d.step * dt, diverged_reason=d.reason)
         s = np.asarray(times)
+        if engine.diverged and max_speed == 0.0:
+            max_speed = math.nan  # the engine failed before any state could be compared
         row.update(L_s=stability.value, max_vertex_speed=max_speed, steps=len(times),
                    step_time_mean=float(s.mean()) if len(s) else math.nan,
                    step_time_p99=float(np.percentile(s, 99)) if len(s) else math.nan,
