@@ -21,7 +21,7 @@ import numpy as np
 
 from cloth_bench_ros.engines import known_engines, make_engine
 from cloth_bench_ros.engines.presets import CLOTHS, load_preset
-from cloth_bench_ros.trajectory import PRIMITIVES, full_targets
+from cloth_bench_ros.core.trajectory import PRIMITIVES, full_targets
 
 
 def time_steps(engine_name: str, rate_hz: float, params: dict, primitive: str,

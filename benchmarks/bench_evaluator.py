@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from cloth_bench_ros.metrics import RealCloud
-from cloth_bench_ros.scene import ClothGrid
+from cloth_bench_ros.core.metrics import RealCloud
+from cloth_bench_ros.core.scene import ClothGrid
 
 
 def brute_force(V: np.ndarray, P: np.ndarray) -> tuple[float, float]:

@@ -17,8 +17,8 @@ import time
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.pipeline import RunConfig, run_pipeline
-from cloth_bench_ros.trajectory import full_targets
+from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
+from cloth_bench_ros.core.trajectory import full_targets
 
 
 def bare_loop(engine_name: str, rate: float, cloth: str, primitive: str) -> float:

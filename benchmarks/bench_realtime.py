@@ -19,9 +19,9 @@ import os
 from pathlib import Path
 
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.pipeline import RunConfig, run_pipeline
-from cloth_bench_ros.sweep import parse_grid
-from cloth_bench_ros.trajectory import PRIMITIVES
+from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
+from cloth_bench_ros.studies.sweep import parse_grid
+from cloth_bench_ros.core.trajectory import PRIMITIVES
 
 
 def main() -> None:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from rosbags.highlevel import AnyReader
 
-from cloth_bench_ros import pointcloud2
+from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagReader, BagWriter, TrialInfo
 
 

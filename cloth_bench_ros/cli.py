@@ -8,7 +8,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from cloth_bench_ros.trajectory import PRIMITIVES
+from cloth_bench_ros.core.trajectory import PRIMITIVES
 
 
 class UserError(Exception):
@@ -29,7 +29,7 @@ def check_bag(bag: Path) -> None:
     """Fail early, with one line naming the bag, unless its first PointCloud2 frame decodes."""
     from cloth_bench_ros.data.bag import BagReader
     from cloth_bench_ros.data.messages import deserialize
-    from cloth_bench_ros.pointcloud2 import read_xyz
+    from cloth_bench_ros.core.pointcloud2 import read_xyz
 
     reader = BagReader(bag)
     topic = reader.cloud_topic()
@@ -46,8 +46,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines import engine_class
     from cloth_bench_ros.engines.presets import CLOTHS, load_preset
     from cloth_bench_ros.paths import bundled_bag
-    from cloth_bench_ros.pipeline import RunConfig, run_pipeline
-    from cloth_bench_ros.report import result_table
+    from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
+    from cloth_bench_ros.report.run_report import result_table
 
     engines = args.engine or ["mujoco"]
     for name in engines:
@@ -75,7 +75,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_trajectory(args: argparse.Namespace) -> int:
-    from cloth_bench_ros.trajectory import sample_quintic, to_csv
+    from cloth_bench_ros.core.trajectory import sample_quintic, to_csv
 
     sys.stdout.write(to_csv(sample_quintic(args.primitive, args.rate)))
     return 0
@@ -98,7 +98,7 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 
 def _grid(text: str) -> tuple[int, int]:
-    from cloth_bench_ros.sweep import parse_grid
+    from cloth_bench_ros.studies.sweep import parse_grid
 
     try:
         return parse_grid(text)
@@ -109,7 +109,7 @@ def _grid(text: str) -> tuple[int, int]:
 def _overrides(specs: list[str] | None, engines: list[str] | None = None) -> dict[str, dict]:
     """--set engine.param=value (repeatable) -> {engine: {param: value}}, checked against the schemas."""
     from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.sweep import parse_overrides
+    from cloth_bench_ros.studies.sweep import parse_overrides
 
     overrides = parse_overrides(specs)
     for engine, params in overrides.items():
@@ -126,7 +126,7 @@ def _available_engines() -> list[str]:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from cloth_bench_ros import sweep as sw
+    from cloth_bench_ros.studies import sweep as sw
     from cloth_bench_ros.engines.presets import CLOTHS
 
     settings = args.mode == "settings"
@@ -181,9 +181,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def _render(results: Path, out: Path, stress: Path | None, rate: float, cloth: str, tol_rel: float,
             tol_abs: float) -> int:
-    from cloth_bench_ros.plots import render_report
-    from cloth_bench_ros.stress import STRESS_FILE, load_stress
-    from cloth_bench_ros.sweep import RESULTS_FILE, load_rows
+    from cloth_bench_ros.report.document import render_report
+    from cloth_bench_ros.studies.stress import STRESS_FILE, load_stress
+    from cloth_bench_ros.studies.sweep import RESULTS_FILE, load_rows
 
     results = Path(results)
     results_file = results / RESULTS_FILE if results.is_dir() else results
@@ -220,7 +220,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_stress(args: argparse.Namespace) -> int:
-    from cloth_bench_ros.stress import default_cases, run_suite, stress_table, verdict
+    from cloth_bench_ros.studies.stress import default_cases, run_suite, stress_table, verdict
 
     engines = args.engine or [e for e in ("mujoco", "bullet") if e in _available_engines()]
     for name in engines:
@@ -253,7 +253,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
 
 def cmd_hil(args: argparse.Namespace) -> int:
-    from cloth_bench_ros import sweep as sw
+    from cloth_bench_ros.studies import sweep as sw
     from cloth_bench_ros.engines import engine_class
     from cloth_bench_ros.engines.presets import CLOTHS
     from cloth_bench_ros.paths import bundled_bag

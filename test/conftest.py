@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from cloth_bench_ros.data.bag import BagWriter, TrialInfo
-from cloth_bench_ros.scene import ClothGrid
+from cloth_bench_ros.core.scene import ClothGrid
 
 FPS = 30.0
 

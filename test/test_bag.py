@@ -119,7 +119,7 @@ def test_rosbags_and_mcap_readers_decode_the_same_points(tmp_path: Path) -> None
     bag = write_bag(tmp_path / "both", clouds, make_trial())
     ours = [pts for _, pts in BagReader(bag).clouds()]
 
-    from cloth_bench_ros.pointcloud2 import read_xyz
+    from cloth_bench_ros.core.pointcloud2 import read_xyz
 
     with AnyReader([bag]) as reader:
         conns = [c for c in reader.connections if c.topic == CLOUD_TOPIC]
@@ -338,7 +338,7 @@ def test_close_during_write_finishes_that_write_first(tmp_path: Path) -> None:
     w = BagWriter(tmp_path / "mid")
     w.write_cloud(CLOUD_TOPIC, 0, np.zeros((3, 3)))
     pts = np.ones((3, 3))
-    from cloth_bench_ros.pointcloud2 import create_cloud_xyz32
+    from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 
     msg = create_cloud_xyz32(
         messages.header(stamp(1)), pts, messages.msg_class(messages.POINTCLOUD2),

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from cloth_bench_ros.trajectory import CSV_HEADER
+from cloth_bench_ros.core.trajectory import CSV_HEADER
 
 
 def cli(*args, cwd=None):
@@ -109,7 +109,7 @@ def test_engines_lists_available_and_unavailable_engines_with_reasons():
 def test_cloud_without_xyz_names_the_bag(tmp_path):
     from cloth_bench_ros.data.bag import BagWriter
     from cloth_bench_ros.data.messages import serialize
-    from cloth_bench_ros.pointcloud2 import create_cloud_xyz32
+    from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
     from cloth_bench_ros.runtime.messages import Header, PointCloud2, PointField
 
     msg = create_cloud_xyz32(Header(frame_id="world"), [[0, 0, 1]], PointCloud2, PointField)
@@ -123,7 +123,7 @@ def test_cloud_without_xyz_names_the_bag(tmp_path):
 def test_nan_points_empty_clouds_and_irregular_frames_are_counted_and_reported(tmp_path):
     import numpy as np
     from cloth_bench_ros.data.bag import BagWriter, TrialInfo
-    from cloth_bench_ros.scene import ClothGrid
+    from cloth_bench_ros.core.scene import ClothGrid
 
     grid = ClothGrid(10, 10).vertices()
     path = tmp_path / "messy"

@@ -17,12 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from cloth_bench_ros import scene
+from cloth_bench_ros.core import scene
 from cloth_bench_ros.engines import engine_class, known_engines, make_engine
 from cloth_bench_ros.engines.base import ClothEngine, EngineError
 from cloth_bench_ros.engines.presets import CLOTHS, load_preset
-from cloth_bench_ros.scene import ClothGrid
-from cloth_bench_ros.trajectory import PRIMITIVES, full_targets
+from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.trajectory import PRIMITIVES, full_targets
 
 CORNER_TOLERANCE = 0.001  # m
 HANG, HANG_TOLERANCE = 0.70, 0.07  # m

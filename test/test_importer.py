@@ -102,7 +102,7 @@ def test_import_tree_frames_match_files_point_for_point(tmp_path: Path) -> None:
         assert trial.source == f"imported from {folder}/{primitive}"
         stamps, nan_rows = [], 0
         raw = [(t, msg) for _, t, msg in reader.messages(CLOUD_TOPIC)]
-        from cloth_bench_ros.pointcloud2 import read_xyz
+        from cloth_bench_ros.core.pointcloud2 import read_xyz
 
         for k, ((t, msg), ref) in enumerate(zip(raw, made[(folder, primitive)], strict=True)):
             stamps.append(t)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from cloth_bench_ros.metrics import (
+from cloth_bench_ros.core.metrics import (
     RealCloud, StabilityAccumulator, chamfer_l1, hausdorff_l1, latency_stats, stability,
 )
 

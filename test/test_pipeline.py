@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from cloth_bench_ros.pipeline import RunConfig, run_pipeline
+from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
 
 GRID = (6, 8)  # coarse mesh: fast, still a real MuJoCo cloth
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cloth_bench_ros.data.messages import deserialize, serialize
-from cloth_bench_ros.pointcloud2 import FLOAT32, FLOAT64, PointCloudError, create_cloud_xyz32, drop_nan, read_xyz
+from cloth_bench_ros.core.pointcloud2 import FLOAT32, FLOAT64, PointCloudError, create_cloud_xyz32, drop_nan, read_xyz
 from cloth_bench_ros.runtime.messages import Header, PointCloud2, PointField
 
 

@@ -21,7 +21,7 @@ BURST = textwrap.dedent('''
     import numpy as np
     from cloth_bench_ros.nodes.common import run_nodes
     from cloth_bench_ros.nodes.recorder import Recorder
-    from cloth_bench_ros.pointcloud2 import create_cloud_xyz32
+    from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
     from cloth_bench_ros.runtime import Header, Node, PointCloud2, PointField, Time, make_qos
 
     TOTAL = int(sys.argv[1])

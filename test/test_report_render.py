@@ -16,10 +16,10 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from cloth_bench_ros import plots
-from cloth_bench_ros import sweep as sw
+from cloth_bench_ros.report import document as plots
+from cloth_bench_ros.studies import sweep as sw
 from cloth_bench_ros.cli import main
-from cloth_bench_ros.stress import default_cases, run_case
+from cloth_bench_ros.studies.stress import default_cases, run_case
 from test.conftest import write_hanging_cloth_bag
 
 ENGINES = ["mujoco", "bullet"]

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from cloth_bench_ros import scene
+from cloth_bench_ros.core import scene
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.engines.presets import load_preset
-from cloth_bench_ros.stress import StressCase, case_targets, default_cases, load_stress, run_case, verdict
-from cloth_bench_ros.trajectory import full_targets
+from cloth_bench_ros.studies.stress import StressCase, case_targets, default_cases, load_stress, run_case, verdict
+from cloth_bench_ros.core.trajectory import full_targets
 
 ISSUE_CASES = {"fling_10hz", "stiff_cloth", "light_cloth", "fast_drag_into_table", "large_dt_high_damping"}
 

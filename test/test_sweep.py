@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from cloth_bench_ros import sweep as sw
+from cloth_bench_ros.studies import sweep as sw
 from cloth_bench_ros.cli import main
 from test.conftest import write_hanging_cloth_bag
 

@@ -8,15 +8,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cloth_bench_ros import scene
+from cloth_bench_ros.core import scene
 from cloth_bench_ros.data import synth
 from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagReader
 from cloth_bench_ros.data.importer import CLOTH_NAMES
 from cloth_bench_ros.engines import engine_class
-from cloth_bench_ros.metrics import chamfer_l1
+from cloth_bench_ros.core.metrics import chamfer_l1
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.scene import ClothGrid
-from cloth_bench_ros.trajectory import sample_quintic
+from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.trajectory import sample_quintic
 
 SMALL = synth.Camera(width=320, height=180)  # same optics (hfov 90 deg), 4x coarser pixels
 EXACT = synth.DepthNoise(sigma0=0.0, sigma2=0.0, flying_fraction=0.0, depth_step=0.0)

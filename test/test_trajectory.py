@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from cloth_bench_ros import scene
-from cloth_bench_ros.trajectory import (
+from cloth_bench_ros.core import scene
+from cloth_bench_ros.core.trajectory import (
     CSV_HEADER, Primitive, QuinticSegment, full_targets, quaternion_xyz, quintic_part, sample_quintic,
     sample_times, to_csv,
 )

@@ -28,7 +28,7 @@ from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
-from cloth_bench_ros import pointcloud2
+from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
 

@@ -16,7 +16,7 @@ import numpy as np
 from tqdm import tqdm
 
 from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagWriter, TrialInfo
-from cloth_bench_ros.scene import REAL_FPS
+from cloth_bench_ros.core.scene import REAL_FPS
 
 CLOTH_NAMES = {"chequered": "chequered", "cotton": "towel", "linen": "linen"}  # folder -> ours
 PRIMITIVES = ("dynamic", "quasi_static")

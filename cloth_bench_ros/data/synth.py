@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 import yaml
 
-from cloth_bench_ros import scene
+from cloth_bench_ros.core import scene
 from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagWriter, TrialInfo
 from cloth_bench_ros.data.importer import CHANGE_OF_PHASE
 from cloth_bench_ros.engines import engine_class, make_engine
 from cloth_bench_ros.paths import share_dir
-from cloth_bench_ros.scene import ClothGrid
-from cloth_bench_ros.trajectory import full_targets, parse_primitive, quintic_part
+from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quintic_part
 
 WALL_Y = -1.5  # m: a wall behind the scene, the background of the flying pixels
 

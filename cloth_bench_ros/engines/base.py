@@ -9,7 +9,7 @@ from typing import ClassVar, Mapping
 
 import numpy as np
 
-from cloth_bench_ros.scene import ClothGrid
+from cloth_bench_ros.core.scene import ClothGrid
 
 
 class EngineError(ValueError):

@@ -55,9 +55,9 @@ def _quiet_c_output():
 with _quiet_c_output():  # pybullet prints its build time on import
     import pybullet as pb
 
-from cloth_bench_ros import scene
+from cloth_bench_ros.core import scene
 from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
-from cloth_bench_ros.scene import ClothGrid
+from cloth_bench_ros.core.scene import ClothGrid
 
 # Noise of the seeded initial state: i.i.d. normal per coordinate of every free vertex.
 SEED_NOISE_STD = 0.0005  # m

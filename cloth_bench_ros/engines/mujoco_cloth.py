@@ -26,9 +26,9 @@ from typing import ClassVar, Mapping
 import mujoco
 import numpy as np
 
-from cloth_bench_ros import scene
+from cloth_bench_ros.core import scene
 from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
-from cloth_bench_ros.scene import ClothGrid
+from cloth_bench_ros.core.scene import ClothGrid
 
 # MuJoCo reports an unstable state (NaN/Inf/huge qpos, qvel or qacc) as a warning and resets the
 # data to the model's rest state; unhandled, it also writes MUJOCO_LOG.TXT into the working

@@ -17,7 +17,7 @@ import yaml
 
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.paths import share_dir
-from cloth_bench_ros.trajectory import PRIMITIVES
+from cloth_bench_ros.core.trajectory import PRIMITIVES
 
 CLOTHS = ("towel", "chequered", "linen")
 REQUIRED_KEYS = ("engine", "engine_version", "provenance", "presets")

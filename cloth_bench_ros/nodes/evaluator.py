@@ -7,15 +7,15 @@ from functools import partial
 from pathlib import Path
 
 from cloth_bench_ros.data.bag import trial_from_message
-from cloth_bench_ros.evaluation import OnlineEvaluator
+from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
-from cloth_bench_ros.pointcloud2 import drop_nan, read_xyz
-from cloth_bench_ros.report import write_run_report
+from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
+from cloth_bench_ros.report.run_report import write_run_report
 from cloth_bench_ros.runtime import (
     DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, make_qos, stamp_ns,
 )
-from cloth_bench_ros.scene import REAL_FPS, SETTLE_DURATION
-from cloth_bench_ros.trajectory import full_targets, parse_primitive
+from cloth_bench_ros.core.scene import REAL_FPS, SETTLE_DURATION
+from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
 
 
 def _values(msg: DiagnosticArray) -> dict[str, str]:

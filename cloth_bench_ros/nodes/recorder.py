@@ -20,7 +20,7 @@ from cloth_bench_ros.runtime import (
     Clock, DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, Time, deserialize_message,
     make_qos, message_type, serialize_message, stamp_ns,
 )
-from cloth_bench_ros.scene import SETTLE_DURATION
+from cloth_bench_ros.core.scene import SETTLE_DURATION
 
 
 class Recorder(Node):

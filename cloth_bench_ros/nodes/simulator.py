@@ -11,12 +11,12 @@ import yaml
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
-from cloth_bench_ros.pointcloud2 import create_cloud_xyz32
+from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.runtime import (
     DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, PoseArray,
     make_qos,
 )
-from cloth_bench_ros.scene import ClothGrid
+from cloth_bench_ros.core.scene import ClothGrid
 
 
 def _xyz(pose) -> np.ndarray:

@@ -8,7 +8,7 @@ from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.runtime import (
     Clock, Node, Pose, PoseArray, PointCloud2, Time, make_qos, stamp_ns,
 )
-from cloth_bench_ros.trajectory import full_targets, parse_primitive, quaternion_xyz
+from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
 
 PACINGS = ("lockstep", "realtime")
 

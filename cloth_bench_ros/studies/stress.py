@@ -94,8 +94,8 @@ def default_cases(engines: Sequence[str] = ("mujoco", "bullet")) -> list[StressC
 
 def case_targets(case: StressCase):
     """(left, right, quintic_index, dt) of a case: the primitive's targets, transformed."""
-    from cloth_bench_ros import scene
-    from cloth_bench_ros.trajectory import full_targets
+    from cloth_bench_ros.core import scene
+    from cloth_bench_ros.core.trajectory import full_targets
 
     # Sampled every time_compression / rate s of trajectory time, played one sample per 1 / rate.
     samples_per_s = case.rate_hz / case.time_compression
@@ -118,8 +118,8 @@ def run_case(case: StressCase) -> dict:
     """Run one case to its end, its divergence or its wall-time budget; never raises."""
     from cloth_bench_ros.engines import make_engine
     from cloth_bench_ros.engines.presets import load_preset
-    from cloth_bench_ros.metrics import StabilityAccumulator
-    from cloth_bench_ros.scene import ClothGrid
+    from cloth_bench_ros.core.metrics import StabilityAccumulator
+    from cloth_bench_ros.core.scene import ClothGrid
 
     row = {"case": case.name, "engine": case.engine, "description": case.description,
            "primitive": case.primitive, "rate_hz": case.rate_hz, "params": case.params,
@@ -185,7 +185,7 @@ def run_suite(cases: Sequence[StressCase], out_dir: Path | None = None, workers:
     """Run every case in worker processes; rows in the order of `cases` (and to stress.jsonl)."""
     from tqdm import tqdm
 
-    from cloth_bench_ros.sweep import _json_safe, default_workers, run_parallel
+    from cloth_bench_ros.studies.sweep import _json_safe, default_workers, run_parallel
 
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)

@@ -1,6 +1,6 @@
 """The report of a sweep (`cloth-bench report RESULTS`): tables, PNG plots, Markdown and HTML.
 
-From the rows of a results.jsonl (cloth_bench_ros.sweep) it renders:
+From the rows of a results.jsonl (cloth_bench_ros.studies.sweep) it renders:
 
 - the layout of the paper's Table II: mean +- std of CD_d, HD_d, CD_q, HD_q per cloth and engine
   (over seeds and trial bags), with the paper's numbers (REFERENCE.md section 5) beside ours in
@@ -811,7 +811,7 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
                   wanted_rate: float = 100.0, fig5_cloth: str = "towel", tol_rel: float = 0.05,
                   tol_abs: float = 0.002, title: str = "cloth_bench_ros: speed against error") -> ReportOutcome:
     """Render every table and plot of the rows into out_dir (report.md, report.html, *.png, *.csv)."""
-    from cloth_bench_ros.stress import stress_table, verdict
+    from cloth_bench_ros.studies.stress import stress_table, verdict
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

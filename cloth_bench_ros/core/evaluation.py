@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cloth_bench_ros.metrics import RealCloud, StabilityAccumulator, latency_stats
-from cloth_bench_ros.trajectory import Primitive
+from cloth_bench_ros.core.metrics import RealCloud, StabilityAccumulator, latency_stats
+from cloth_bench_ros.core.trajectory import Primitive
 
 
 IRREGULAR_TOLERANCE = 0.25  # an interval off 1/fps by more than this fraction is reported

@@ -14,7 +14,7 @@ from enum import Enum
 
 import numpy as np
 
-from cloth_bench_ros import scene
+from cloth_bench_ros.core import scene
 
 
 class Primitive(str, Enum):

@@ -296,7 +296,7 @@ def run_cell(cell: Cell, out_dir: str) -> dict:
     frames_dir = Path(out_dir) / "frames" / cell.ident() if cell.keep_frames else None
     try:
         from cloth_bench_ros.engines import engine_class
-        from cloth_bench_ros.pipeline import RunConfig, run_pipeline
+        from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
 
         config = RunConfig(bag=Path(cell.bag), engines=[cell.engine], rate_hz=cell.rate_hz, cloth=cell.cloth,
                            primitive=cell.primitive, seed=cell.seed, pacing=cell.pacing, output_dir=frames_dir,
