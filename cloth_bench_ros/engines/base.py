@@ -96,6 +96,9 @@ class ClothEngine(abc.ABC):
         self.divergence: Divergence | None = None
         self.steps = 0
         self._vertices: np.ndarray | None = None
+        self._mid = np.zeros(3)  # scratch of the divergence check, so a step allocates nothing for it
+        self._scratch: np.ndarray | None = None
+        self._row: np.ndarray | None = None
 
     @classmethod
     def validate_params(cls, params: Mapping[str, object]) -> dict[str, object]:
@@ -151,11 +154,29 @@ class ClothEngine(abc.ABC):
         except Exception as exc:  # an engine's own failure (e.g. a solver error) is a divergence
             self.divergence = Divergence(self.steps, f"{type(exc).__name__}: {exc}")
             return self._vertices
-        reason = check_divergence(vertices, self._vertices, self.dt, (left + right) / 2)
+        reason = self._check(vertices, left, right)
         if reason is not None:
             self.divergence = Divergence(self.steps, reason)
         self._vertices = vertices
         return vertices
+
+    def _check(self, vertices: np.ndarray, left: np.ndarray, right: np.ndarray) -> str | None:
+        """check_divergence, cheaply: two bounds computed in preallocated scratch arrays; the
+        exact reason only when a bound fails (NaN fails every comparison, so it gets there too)."""
+        if self._scratch is None or self._scratch.shape != vertices.shape:
+            self._scratch, self._row = np.empty_like(vertices, dtype=float), np.empty(len(vertices))
+        mid, buf = self._mid, self._scratch
+        np.add(left, right, out=mid)
+        mid *= 0.5
+        np.subtract(vertices, mid, out=buf)
+        np.abs(buf, out=buf)
+        reach = buf.max()
+        np.subtract(vertices, self._vertices, out=buf)
+        np.multiply(buf, buf, out=buf)
+        travel2 = buf.sum(axis=1, out=self._row).max()
+        if reach <= MAX_DISTANCE_FROM_GRIPPERS and travel2 <= (MAX_VERTEX_SPEED * self.dt) ** 2:
+            return None
+        return check_divergence(vertices, self._vertices, self.dt, mid)
 
     @abc.abstractmethod
     def _reset(self, seed: int, left: np.ndarray, right: np.ndarray) -> np.ndarray: ...

@@ -129,6 +129,7 @@ class MujocoCloth(ClothEngine):
         self._target = np.zeros((2, 3))  # gripper positions at the end of the last step
         self._goal = np.zeros((2, 3))
         self._velocity = np.zeros((2, 3))
+        self._corner_q_now = np.zeros((2, 3))  # scratch: corner displacement at one substep
 
     # -- model --------------------------------------------------------------------------------
 
@@ -185,6 +186,9 @@ class MujocoCloth(ClothEngine):
         if not (np.all(m.body_jntnum[bodies] == 3) and np.allclose(m.jnt_axis[joints], np.eye(3)[None])):
             raise RuntimeError("MuJoCo flex vertices are not point masses on world x, y, z slides")
         self._qadr = m.jnt_qposadr[joints]  # (n, 3): qpos = displacement from the rest grid
+        first = int(self._qadr[0, 0])
+        contiguous = np.array_equal(self._qadr.ravel(), np.arange(first, first + 3 * n))
+        self._qpos_slice = slice(first, first + 3 * n) if contiguous else None  # read as a view, no gather
         self._corner_q = self._qadr[self._corners]
         self._corner_dof = m.jnt_dofadr[joints[self._corners]]
         self._corner_rest = self._rest[self._corners]
@@ -197,6 +201,8 @@ class MujocoCloth(ClothEngine):
 
     def _vertices_now(self) -> np.ndarray:
         """Vertex positions from qpos (mjData.flexvert_xpos lags one substep after mj_step)."""
+        if self._qpos_slice is not None:
+            return np.add(self._rest, self.data.qpos[self._qpos_slice].reshape(self._rest.shape))
         return self._rest + self.data.qpos[self._qadr]
 
     # -- ClothEngine --------------------------------------------------------------------------
@@ -220,14 +226,19 @@ class MujocoCloth(ClothEngine):
         self._goal[0], self._goal[1] = left, right
         np.subtract(self._goal, self._target, out=self._velocity)
         self._velocity /= self.dt
+        corner = self._corner_q_now
         for k in range(self.substeps):
-            d.qpos[self._corner_q] = self._target + (k * self.h) * self._velocity - self._corner_rest
+            np.multiply(self._velocity, k * self.h, out=corner)  # target + k h v - rest, in place
+            np.add(self._target, corner, out=corner)
+            np.subtract(corner, self._corner_rest, out=corner)
+            d.qpos[self._corner_q] = corner
             d.qvel[self._corner_dof] = self._velocity
             mujoco.mj_step(m, d)
-            for w in _INSTABILITY_WARNINGS:
-                if d.warning[w].number:
-                    # MuJoCo has already reset the state: report it rather than return the reset.
-                    raise FloatingPointError(f"MuJoCo {w.name[5:]}: the state went NaN, Inf or huge")
+        # The counters only grow, so one look after the substeps sees a warning of any of them.
+        for w in _INSTABILITY_WARNINGS:
+            if d.warning[w].number:
+                # MuJoCo has already reset the state: report it rather than return the reset.
+                raise FloatingPointError(f"MuJoCo {w.name[5:]}: the state went NaN, Inf or huge")
         self._target[:] = self._goal
         return self._vertices_now()
 

@@ -1,4 +1,11 @@
-"""Steps one cloth engine per target and publishes the mesh vertices as PointCloud2."""
+"""Steps one cloth engine per target and publishes the mesh vertices as PointCloud2.
+
+The step path (`on_target`) is the critical path of hardware in the loop: its two outgoing
+messages are built once and filled in place, the gripper targets go into a preallocated array,
+and start-up work (model compilation, a throwaway step, the reset at the first target) is done
+in the constructor, before the first deadline. Optionally the process is pinned to a core, asks
+for SCHED_FIFO and freezes its start-up heap (`cpu`, `realtime_priority`, `freeze_gc`).
+"""
 
 from __future__ import annotations
 
@@ -12,15 +19,63 @@ from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
+from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.runtime import (
-    DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, PoseArray,
-    make_qos,
+    EMBEDDED, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, PoseArray,
+    make_qos, stamp_ns,
 )
+from cloth_bench_ros.runtime import realtime
 from cloth_bench_ros.core.scene import ClothGrid
 
 
-def _xyz(pose) -> np.ndarray:
-    return np.array([pose.position.x, pose.position.y, pose.position.z])
+def publish_serialises(node: Node) -> bool:
+    """True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
+    the embedded intra-process transport hands subscribers the object itself."""
+    return not EMBEDDED
+
+
+class StateMessages:
+    """The simulator's cloud and step status, built once; `fill` writes a step into them in place.
+
+    With a transport that passes message objects by reference (`in_place` False), fill builds
+    fresh messages instead, so that states still queued for a subscriber keep their own data.
+    """
+
+    STATUS_KEYS = ("step", "step_time", "diverged", "diverged_at_step", "skipped_targets")
+
+    def __init__(self, engine_name: str, n_vertices: int, in_place: bool) -> None:
+        self.engine_name, self.n_vertices, self.in_place = engine_name, n_vertices, in_place
+        self.cloud, self.xyz, self.status = self._build()
+
+    def _build(self) -> tuple[PointCloud2, np.ndarray, DiagnosticArray]:
+        header = Header(frame_id="world")
+        cloud = create_cloud_xyz32(header, np.zeros((self.n_vertices, 3)), PointCloud2, PointField)
+        if isinstance(cloud.data, np.ndarray):  # the embedded runtime's: a read-only view of bytes
+            cloud.data = cloud.data.copy()
+        xyz = np.frombuffer(cloud.data, dtype=np.float32).reshape(self.n_vertices, 3)
+        values = [KeyValue(key=k, value="") for k in self.STATUS_KEYS]
+        status = DiagnosticStatus(level=DiagnosticStatus.OK, name=f"cloth_bench/{self.engine_name}", message="ok",
+                                  hardware_id=self.engine_name, values=values)
+        return cloud, xyz, DiagnosticArray(header=header, status=[status])
+
+    def fill(self, stamp, vertices: np.ndarray, step: int, step_time: float, divergence,
+             skipped: int) -> tuple[PointCloud2, DiagnosticArray]:
+        """The two messages of one step (the vertex conversion to float32 is the one copy)."""
+        cloud, xyz, status = (self.cloud, self.xyz, self.status) if self.in_place else self._build()
+        cloud.header.stamp = stamp
+        np.copyto(xyz, vertices, casting="same_kind")
+        values = status.status[0].values
+        values[0].value = str(step)
+        values[1].value = repr(step_time)
+        values[4].value = str(skipped)
+        if divergence is not None:
+            cloud.is_dense = bool(np.isfinite(xyz).all())
+            s = status.status[0]
+            s.level, s.message = DiagnosticStatus.ERROR, f"diverged at step {divergence.step}: {divergence.reason}"
+            values[2].value, values[3].value = "true", str(divergence.step)
+        else:
+            values[2].value = "false"
+        return cloud, status
 
 
 class Simulator(Node):
@@ -44,42 +99,69 @@ class Simulator(Node):
         self.engine = make_engine(self.engine_name, rate_hz, params, grid)
         self.cloud_pub = self.create_publisher(PointCloud2, f"{self.engine_name}/cloud", make_qos(10))
         self.status_pub = self.create_publisher(DiagnosticArray, f"{self.engine_name}/step_time", make_qos(10))
-        self.create_subscription(PoseArray, "targets", self.on_target, make_qos(10))
         self.step = -1
+        self.skipped = 0
         self.reported_divergence = False
+        self.targets = full_targets(primitive, rate_hz)
+        self.stamps = np.array([self.targets.stamp_ns(k) for k in range(len(self.targets))], dtype=np.int64)
+        self.last_k = -1
+        self.grippers = np.zeros((2, 3))
+        self.left, self.right = self.grippers[0], self.grippers[1]
+        self.messages = StateMessages(self.engine_name, len(self.engine.grid.vertices()), publish_serialises(self))
+        self.prepared = self.warm_up()
+        self.realtime = realtime.apply(int(self.declare_parameter("cpu", -1).value),
+                                       int(self.declare_parameter("realtime_priority", 0).value),
+                                       bool(self.declare_parameter("freeze_gc", False).value))
+        # Subscribed last, once start-up is done, so the first target finds the engine ready. Keep-last 1,
+        # as a controller's command topic: a simulator that falls behind steps to the newest target and
+        # counts the ones it never saw (under transports that drop old samples: DDS and rclpy).
+        self.create_subscription(PoseArray, "targets", self.on_target, make_qos(1))
+        self.get_logger().info(f"{self.engine_name} ready; " + "; ".join(self.realtime.lines()))
+
+    def warm_up(self) -> np.ndarray:
+        """Start-up work before the first deadline: the reset at the trajectory's first target, one
+        throwaway step (first-call costs), the reset again; its vertices answer target 0."""
+        left, right = self.targets.left[0], self.targets.right[0]
+        self.engine.reset(self.seed, left, right)
+        self.engine.step(left, right)
+        vertices = self.engine.reset(self.seed, left, right)
+        self.messages.fill(self.messages.cloud.header.stamp, vertices, 0, 0.0, None, 0)
+        return vertices
 
     def on_target(self, msg: PoseArray) -> None:
-        left, right = _xyz(msg.poses[0]), _xyz(msg.poses[1])
+        """Step to this target; targets the transport dropped while the engine was busy are skipped."""
+        p, g = msg.poses, self.grippers
+        g[0, 0], g[0, 1], g[0, 2] = p[0].position.x, p[0].position.y, p[0].position.z
+        g[1, 0], g[1, 1], g[1, 2] = p[1].position.x, p[1].position.y, p[1].position.z
+        stamp = stamp_ns(msg.header.stamp)
+        k = int(np.searchsorted(self.stamps, stamp))
+        if k < len(self.stamps) and self.stamps[k] == stamp and k > self.last_k:
+            self.skipped += k - self.last_k - 1
+            self.last_k = k
         self.step += 1
         start = time.perf_counter()
         if self.step == 0:
-            vertices = self.engine.reset(self.seed, left, right)
+            vertices = self.first_state()
         else:
-            vertices = self.engine.step(left, right)
+            vertices = self.engine.step(self.left, self.right)
         step_time = time.perf_counter() - start
-        header = Header(stamp=msg.header.stamp, frame_id="world")
-        self.cloud_pub.publish(create_cloud_xyz32(header, vertices, PointCloud2, PointField))
-        self.status_pub.publish(self.status(header, step_time))
+        cloud, status = self.messages.fill(msg.header.stamp, vertices, self.step, step_time, self.engine.divergence,
+                                           self.skipped)
+        self.cloud_pub.publish(cloud)
+        self.status_pub.publish(status)
+        if self.realtime.frozen:
+            realtime.collect_young()  # after the state went out: off this step's deadline
         if self.engine.diverged and not self.reported_divergence:
             self.reported_divergence = True
             d = self.engine.divergence
             self.get_logger().error(f"{self.engine_name} diverged at step {d.step}: {d.reason}")
 
-    def status(self, header: Header, step_time: float) -> DiagnosticArray:
-        d = self.engine.divergence
-        status = DiagnosticStatus(
-            level=DiagnosticStatus.ERROR if d else DiagnosticStatus.OK,
-            name=f"cloth_bench/{self.engine_name}",
-            message=f"diverged at step {d.step}: {d.reason}" if d else "ok",
-            hardware_id=self.engine_name,
-            values=[
-                KeyValue(key="step", value=str(self.step)),
-                KeyValue(key="step_time", value=repr(step_time)),
-                KeyValue(key="diverged", value=str(d is not None).lower()),
-                KeyValue(key="diverged_at_step", value=str(d.step) if d else ""),
-            ],
-        )
-        return DiagnosticArray(header=header, status=[status])
+    def first_state(self) -> np.ndarray:
+        """The state at the first target: prepared by warm_up when the target is the trajectory's own."""
+        if self.prepared is not None and np.array_equal(self.grippers, [self.targets.left[0], self.targets.right[0]]):
+            vertices, self.prepared = self.prepared, None
+            return vertices
+        return self.engine.reset(self.seed, self.left, self.right)
 
     def close(self) -> None:
         self.engine.close()

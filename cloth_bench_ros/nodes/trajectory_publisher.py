@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+import time
 from functools import partial
+from pathlib import Path
 
+import numpy as np
+
+from cloth_bench_ros.core.hil_timing import TargetTimeline
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.runtime import (
     Clock, Node, Pose, PoseArray, PointCloud2, Time, make_qos, stamp_ns,
@@ -25,7 +30,11 @@ class TrajectoryPublisher(Node):
         self.min_clock_subscribers = int(self.declare_parameter("min_clock_subscribers", 0).value)
         if self.pacing not in PACINGS:
             raise ValueError(f"unknown pacing {self.pacing!r} (valid: {', '.join(PACINGS)})")
+        self.timing_log = self.declare_parameter("timing_log", "").value
+        duration = float(self.declare_parameter("duration", 0.0).value)
         self.targets = full_targets(primitive, rate_hz)
+        # duration > 0: only the targets of the first `duration` seconds (short real-time checks).
+        self.n_targets = min(len(self.targets), int(duration * rate_hz) + 1) if duration > 0 else len(self.targets)
         self.target_pub = self.create_publisher(PoseArray, "targets", make_qos(10))
         self.clock_pub = self.create_publisher(Clock, "/clock", make_qos(10))
         for engine in self.engines:
@@ -34,6 +43,11 @@ class TrajectoryPublisher(Node):
         self.reported: dict[str, int] = {}
         self.done = False
         self.pace_timer = None
+        # Realtime: the controller's view of each target (due, sent, state received), per engine.
+        stamps = np.array([self.targets.stamp_ns(k) for k in range(self.n_targets)], dtype=np.int64)
+        self.timelines = {engine: TargetTimeline(stamps) for engine in self.engines}
+        self.period_ns = round(1e9 / rate_hz)
+        self.wait_until_ns: int | None = None
         self.start_timer = self.create_timer(0.02, self.try_start)
 
     def try_start(self) -> None:
@@ -44,14 +58,13 @@ class TrajectoryPublisher(Node):
             return
         self.destroy_timer(self.start_timer)
         if self.pacing == "realtime":
-            self.pace_timer = self.create_timer(1.0 / self.targets.rate_hz, self.publish_next)
-        self.publish_next()
+            self.start_realtime()
+        else:
+            self.publish_next()
 
     def publish_next(self) -> None:
-        if self.k + 1 >= len(self.targets):
+        if self.k + 1 >= self.n_targets:
             self.done = True
-            if self.pace_timer is not None:
-                self.destroy_timer(self.pace_timer)
             return
         self.k += 1
         k, tg = self.k, self.targets
@@ -66,11 +79,59 @@ class TrajectoryPublisher(Node):
             pose.position.x, pose.position.y, pose.position.z = (float(c) for c in position)
             pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = qx, qy, qz, qw
             msg.poses.append(pose)
+        if self.pacing == "realtime":
+            now = time.monotonic_ns()
+            for timeline in self.timelines.values():
+                timeline.sent[k] = now
         self.target_pub.publish(msg)
+
+    # --- realtime: targets on the wall-clock schedule, as a controller sends them --------------
+
+    def start_realtime(self) -> None:
+        """Anchor the schedule now: target k is due k / rate from here; target 0 goes out at once."""
+        self.pace_timer = self.create_timer(1.0 / self.targets.rate_hz, self.publish_due)
+        now = time.monotonic_ns()
+        for timeline in self.timelines.values():
+            timeline.start(now)
+        self.publish_due()
+
+    def publish_due(self) -> None:
+        """Send every target due by now, in order (a late tick catches up); then wait for the last states."""
+        last = self.n_targets - 1
+        if self.k < last:
+            due = min(next(iter(self.timelines.values())).due_through(time.monotonic_ns(), self.period_ns), last)
+            while self.k < due:
+                self.publish_next()
+            if self.k == last:
+                # The last states may take a while to come back; a state that never does is lost.
+                self.wait_until_ns = time.monotonic_ns() + max(1_000_000_000, 100 * self.period_ns)
+        if self.k == last and (self.all_states_back() or time.monotonic_ns() > self.wait_until_ns):
+            self.finish_realtime()
+
+    def all_states_back(self) -> bool:
+        return all(t.received[-1] >= 0 for t in self.timelines.values())
+
+    def finish_realtime(self) -> None:
+        """Stop the schedule and write each engine's timeline (`timing_log` directory) if asked."""
+        if self.pace_timer is not None:
+            self.destroy_timer(self.pace_timer)
+            self.pace_timer = None
+        if self.timing_log:
+            from cloth_bench_ros.safe_io import atomic_write_text
+
+            Path(self.timing_log).mkdir(parents=True, exist_ok=True)
+            for engine, timeline in self.timelines.items():
+                atomic_write_text(Path(self.timing_log) / f"timeline_{engine}.csv", timeline.to_csv())
+        self.done = True
 
     def on_state(self, engine: str, msg: PointCloud2) -> None:
         self.reported[engine] = stamp_ns(msg.header.stamp)
-        if self.pacing != "lockstep" or self.k < 0:
+        if self.pacing == "realtime":
+            self.timelines[engine].mark_received(self.reported[engine], time.monotonic_ns())
+            if self.k == self.n_targets - 1 and not self.done and self.all_states_back():
+                self.finish_realtime()
+            return
+        if self.k < 0:
             return
         current = self.targets.stamp_ns(self.k)
         if all(self.reported.get(e, -1) >= current for e in self.engines):

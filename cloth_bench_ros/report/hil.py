@@ -1,0 +1,260 @@
+"""Hardware in the loop: the configuration chosen for a rate, and the report of real-time runs.
+
+- `recommend_for_rate`: from settings-sweep rows, the cheapest configuration that is both accurate
+  enough (CD within tolerance of the most accurate one, `document.recommend`'s rule) and fast
+  enough (the engine's step p99 under the period, times a budget fraction) at one rate.
+- `deadline_tables`: that criterion for every configuration of a settings sweep.
+- the recommendation file (config/hil_recommended.yaml): what `cloth-bench hil --config
+  recommended` falls back to without settings-sweep results, with its provenance.
+- `write_hil_report`: per engine, rate and configuration the latency p50 / p99 / p99.9 / max,
+  deadline misses, skipped targets, real-time factor, CPU load and the CD in lockstep; a plot of
+  latency over the run and a histogram per run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+# Imported from where issue 13's split leaves them (report/document.py on this branch).
+from cloth_bench_ros.report.document import (
+    Document, Table, _fmt, engine_label, finite, metric_name, recommend, settings_results,
+)
+
+RECOMMENDATION_KEYS = ("engine", "cloth", "primitive", "rate_hz", "config", "grid", "params", "cd", "step_p99_ms",
+                       "best_config", "best_cd", "tolerance_m", "meets_deadline")
+
+
+@dataclass(frozen=True)
+class Recommendation:
+    """The configuration to run an engine with at a rate, and why."""
+
+    engine: str
+    cloth: str
+    primitive: str
+    rate_hz: float
+    config: str  # the settings sweep's label of the configuration
+    grid: tuple[int, int] | None
+    params: dict = field(default_factory=dict)
+    cd: float = math.nan
+    step_p99_ms: float = math.nan  # measured in the settings sweep (lockstep) at this rate
+    best_config: str = ""
+    best_cd: float = math.nan
+    tolerance_m: float = math.nan
+    meets_deadline: bool = False  # step p99 under budget x period; False: the most accurate-enough cheapest
+
+    def as_dict(self) -> dict:
+        d = {k: getattr(self, k) for k in RECOMMENDATION_KEYS}
+        d["grid"] = list(self.grid) if self.grid else None
+        return d
+
+
+def _step_p99_ms(rows: Sequence[dict]) -> dict[str, float]:
+    """Median over seeds of the engine's step p99 per configuration, in ms."""
+    by: dict[str, list] = {}
+    for r in rows:
+        if r.get("status") == "ok":
+            by.setdefault(r["config"], []).append(r.get("step_time_p99"))
+    return {c: float(np.median(v)) * 1e3 if len(v := finite(vals)) else math.nan for c, vals in by.items()}
+
+
+def _grid_params(rows: Sequence[dict], config: str) -> tuple[tuple[int, int] | None, dict]:
+    row = next(r for r in rows if r["config"] == config)
+    grid = row.get("grid")
+    if isinstance(grid, str):
+        nx, _, nz = grid.partition("x")
+        grid = (int(nx), int(nz))
+    return (tuple(grid) if grid else None), dict(row.get("params") or {})
+
+
+def recommend_for_rate(rows: Sequence[dict], engine: str, cloth: str, primitive: str, rate_hz: float,
+                       tol_rel: float = 0.05, tol_abs: float = 0.002, budget: float = 1.0) -> Recommendation | None:
+    """The cheapest configuration within tolerance of the most accurate whose step p99 < budget / rate.
+
+    If no accurate-enough configuration meets the deadline, the cheapest accurate-enough one, with
+    meets_deadline False. None without stable settings-sweep rows for this engine, task and rate.
+    """
+    sel = [r for r in rows if r.get("mode") == "settings" and r["engine"] == engine and r["cloth"] == cloth
+           and r["primitive"] == primitive and float(r["rate_hz"]) == float(rate_hz)]
+    results = settings_results(sel)
+    best, cheapest, tol = recommend(results, tol_rel, tol_abs)
+    if best is None or cheapest is None:
+        return None
+    p99 = _step_p99_ms(sel)
+    period_ms = 1e3 / rate_hz
+    accurate = [r for r in results if r.stable and math.isfinite(r.cd.mean) and r.cd.mean <= best.cd.mean + tol]
+    fast = [r for r in accurate if p99.get(r.config, math.nan) < budget * period_ms]
+    choice = min(fast, key=lambda r: (r.step_ms, r.cd.mean)) if fast else cheapest
+    grid, params = _grid_params(sel, choice.config)
+    return Recommendation(engine, cloth, primitive, float(rate_hz), choice.config, grid, params, choice.cd.mean,
+                          p99.get(choice.config, math.nan), best.config, best.cd.mean, tol, bool(fast))
+
+
+def deadline_tables(rows: Sequence[dict], tol_rel: float = 0.05, tol_abs: float = 0.002,
+                    budget: float = 1.0) -> tuple[list[Table], list[str]]:
+    """Per engine, task and rate of a settings sweep: every configuration against the deadline."""
+    settings = [r for r in rows if r.get("mode") == "settings"]
+    keys = sorted({(r["engine"], r["cloth"], r["primitive"], float(r["rate_hz"])) for r in settings})
+    tables, notes = [], []
+    for engine, cloth, primitive, rate in keys:
+        sel = [r for r in settings if (r["engine"], r["cloth"], r["primitive"], float(r["rate_hz"]))
+               == (engine, cloth, primitive, rate)]
+        rec = recommend_for_rate(sel, engine, cloth, primitive, rate, tol_rel, tol_abs, budget)
+        p99 = _step_p99_ms(sel)
+        period_ms = 1e3 / rate
+        out = []
+        for r in sorted(settings_results(sel), key=lambda r: p99.get(r.config, math.inf)):
+            within = rec is not None and r.stable and r.cd.mean <= rec.best_cd + rec.tolerance_m
+            fast = p99.get(r.config, math.nan) < budget * period_ms
+            flag = "**recommended**" if rec is not None and r.config == rec.config else ""
+            out.append([r.config, _fmt(r.step_ms, 3), _fmt(p99.get(r.config), 3), "yes" if fast else "no",
+                        r.cd.text(4, False), "yes" if within else "no", flag])
+        tables.append(Table(f"deadline_{engine}_{cloth}_{primitive}_{rate:g}hz",
+                            ["configuration", "step mean ms", "step p99 ms", f"p99 < {budget * period_ms:g} ms",
+                             metric_name(primitive, "CD") + " (m)", "within tolerance", "notes"], out, "lrrlrll"))
+        if rec is None:
+            notes.append(f"{engine_label(engine)}, {cloth} {primitive} at {rate:g} Hz: no stable configuration.")
+        elif rec.meets_deadline:
+            notes.append(f"{engine_label(engine)}, {cloth} {primitive} at {rate:g} Hz: **`{rec.config}`** is the "
+                         f"cheapest configuration both within tolerance (CD {rec.cd:.4f} m, best {rec.best_cd:.4f} m) "
+                         f"and with step p99 {rec.step_p99_ms:.3f} ms under {budget * period_ms:g} ms.")
+        else:
+            notes.append(f"{engine_label(engine)}, {cloth} {primitive} at {rate:g} Hz: no configuration within "
+                         f"tolerance has a step p99 under {budget * period_ms:g} ms; the cheapest within tolerance is "
+                         f"`{rec.config}` (step p99 {rec.step_p99_ms:.3f} ms).")
+    return tables, notes
+
+
+# ------------------------------------------------------------------- recommendation file
+
+
+def recommendation_yaml(recs: Sequence[Recommendation], provenance: dict) -> str:
+    """The shipped recommendation file: provenance, then one entry per engine, task and rate."""
+    import yaml
+
+    return yaml.safe_dump({"provenance": provenance, "recommendations": [r.as_dict() for r in recs]},
+                          sort_keys=False, width=110)
+
+
+def load_recommendations(path: Path) -> list[Recommendation]:
+    """The entries of a recommendation file; ValueError naming the file on a malformed one."""
+    from cloth_bench_ros.safe_io import load_yaml_file
+
+    data = load_yaml_file(path)
+    entries = data.get("recommendations") if isinstance(data, dict) else None
+    if not isinstance(entries, list):
+        raise ValueError(f"recommendation file {path}: no 'recommendations' list")
+    out = []
+    for i, e in enumerate(entries):
+        if not isinstance(e, dict) or not {"engine", "cloth", "primitive", "rate_hz", "config"} <= set(e):
+            raise ValueError(f"recommendation file {path}: entry {i} lacks engine, cloth, primitive, rate_hz or config")
+        grid = e.get("grid")
+        if grid is not None and not (isinstance(grid, list) and len(grid) == 2 and all(isinstance(g, int) for g in grid)):
+            raise ValueError(f"recommendation file {path}: entry {i} grid is not [nx, nz]")
+        params = e.get("params") or {}
+        if not isinstance(params, dict):
+            raise ValueError(f"recommendation file {path}: entry {i} params is not a mapping")
+        out.append(Recommendation(str(e["engine"]), str(e["cloth"]), str(e["primitive"]), float(e["rate_hz"]),
+                                  str(e["config"]), tuple(grid) if grid else None, params,
+                                  **{k: e[k] for k in ("cd", "step_p99_ms", "best_config", "best_cd", "tolerance_m",
+                                                       "meets_deadline") if k in e}))
+    return out
+
+
+# ---------------------------------------------------------------------------- the report
+
+
+def _ms(value) -> str:
+    return _fmt(value, 3, 1e3)
+
+
+def hil_table(rows: Sequence[dict]) -> Table:
+    """Item 4 per run: latency percentiles, misses, skipped targets, RTF, load, CD in lockstep."""
+    out = []
+    for r in rows:
+        n = max(int(r.get("states") or 0), 1)
+        out.append([engine_label(r["engine"]), f"{r['rate_hz']:g}", r["config"],
+                    "3 processes" if r.get("processes") else "1 process",
+                    _ms(r["latency_p50"]), _ms(r["latency_p99"]), _ms(r["latency_p999"]), _ms(r["latency_max"]),
+                    f"{r['deadline_misses']} ({100 * r['deadline_misses'] / n:.2f} %)",
+                    f"{r['skipped']} of {r['sent']}", _fmt(r["real_time_factor"], 3),
+                    _ms(r.get("step_time_p99")), f"{100 * r['cpu_busy']:.0f} %" if r.get("cpu_busy") == r.get("cpu_busy")
+                    else "-", f"{r.get('loadavg_after', math.nan):.2f} / {r.get('cpu_count') or '?'}",
+                    _fmt(r.get("cd_lockstep"), 4), _fmt(r.get("cd_realtime"), 4),
+                    "ok" if not r.get("problems") else "; ".join(r["problems"])])
+    return Table("hil", ["engine", "rate Hz", "configuration", "layout", "lat p50 ms", "lat p99 ms", "lat p99.9 ms",
+                         "lat max ms", "deadline misses", "skipped targets", "RTF", "step p99 ms", "CPU busy",
+                         "load / cores", "CD lockstep (m)", "CD realtime (m)", "bookkeeping"], out,
+                 "lrllrrrrrrrrrrrrl")
+
+
+def plot_run(timeline, period_s: float, path: Path, title: str) -> Path:
+    """Latency over the run (left) and its histogram (right), deadline in red, skipped targets marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cloth_bench_ros.core.hil_timing import UNSET, latencies
+
+    got = timeline.received != UNSET
+    t = (timeline.stamps - timeline.stamps[0]) / 1e9
+    lat_ms = latencies(timeline) * 1e3
+    fig, (ax, hist) = plt.subplots(1, 2, figsize=(12, 4), gridspec_kw={"width_ratios": [2.2, 1]})
+    ax.plot(t[got], lat_ms, lw=0.6, color="tab:blue", label="latency (due -> state received)")
+    missing = ~got & (timeline.sent != UNSET)
+    if missing.any():
+        ax.scatter(t[missing], np.full(int(missing.sum()), period_s * 1e3), marker="|", color="tab:orange",
+                   label="skipped target", zorder=3)
+    ax.axhline(period_s * 1e3, color="red", lw=1, label="deadline = 1 / rate")
+    ax.set_xlabel("time in the run (s)")
+    ax.set_ylabel("latency (ms)")
+    if lat_ms.size and np.nanmax(lat_ms) > 20 * period_s * 1e3:
+        ax.set_yscale("log")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    if lat_ms.size:
+        hist.hist(lat_ms, bins=80, color="tab:blue", log=True)
+    hist.axvline(period_s * 1e3, color="red", lw=1)
+    hist.set_xlabel("latency (ms)")
+    hist.set_ylabel("targets")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def write_hil_report(rows: Sequence[dict], results_dir: Path, out_dir: Path) -> Path:
+    """hil.md and hil.html (table + per-run plots) and hil.csv in out_dir; the Markdown's path."""
+    from cloth_bench_ros.core.hil_timing import TargetTimeline
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    doc = Document("cloth_bench_ros: hardware in the loop")
+    doc.p("Latency: from the target's due time on the controller's wall-clock schedule (first target + k / rate) to "
+          "the state's arrival back at the controller (the trajectory publisher), so a late send and a simulator "
+          "that falls behind both count. A miss is a state later than one period; a skipped target is one the "
+          "simulator never stepped because a newer one was waiting (keep-last), counted beside the misses. RTF: "
+          "simulated over wall time. CPU busy: share of all cores busy during the run (/proc/stat), any process; "
+          "load: 1-minute load average at the end. CD lockstep: the same configuration run in lockstep.")
+    table = hil_table(rows)
+    doc.table(table)
+    table.write_csv(out_dir / "hil.csv")
+    for r in rows:
+        run_dir = Path(results_dir) / (r.get("run_dir") or "")
+        csv = run_dir / f"timeline_{r['engine']}.csv"
+        if r.get("run_dir") and csv.is_file():
+            name = f"latency_{r['run_dir']}.png"
+            plot_run(TargetTimeline.from_csv(csv.read_text()), 1.0 / r["rate_hz"], out_dir / name,
+                     f"{engine_label(r['engine'])} at {r['rate_hz']:g} Hz, {r['config']}")
+            doc.img(name, f"{engine_label(r['engine'])} {r['rate_hz']:g} Hz {r['config']}: latency over the run "
+                          f"and its histogram")
+    md = out_dir / "hil.md"
+    md.write_text(doc.markdown())
+    (out_dir / "hil.html").write_text(doc.html())
+    return md

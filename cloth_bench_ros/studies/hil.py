@@ -1,0 +1,348 @@
+"""Hardware in the loop: the node graph with targets on the wall clock, laid out as a robot sees it.
+
+Three groups of nodes, each in its own OS process over DDS (`processes=True`, the default):
+
+- controller: the trajectory publisher, the controller's stand-in. It sends target k when it is
+  due (first target + k / rate on the monotonic clock), receives the states, and keeps the
+  timeline (due, sent, received per target) from which latency is measured, where a controller
+  measures it: target due -> state received.
+- simulator: one engine alone in its process (optionally pinned to a core, SCHED_FIFO, heap
+  frozen). Its target subscription is keep-last 1: when late it steps to the newest target and
+  counts the targets it skipped.
+- observer: recorder and evaluator, off the critical path; they score the run's states (CD).
+
+`processes=False` composes the three groups in one process on the embedded intra-process
+transport instead (no target is ever dropped there: a late simulator queues).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing
+import os
+import signal
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import yaml
+
+from cloth_bench_ros.core.hil_timing import HilFigures, TargetTimeline, check_bookkeeping, hil_figures
+
+GROUPS = ("observer", "simulator", "controller")  # started in this order, so the controller starts last
+TIMELINE = "timeline_{engine}.csv"
+SIMULATOR_FILE = "simulator.json"
+SUMMARY_FILE = "summary.json"
+
+
+@dataclass(frozen=True)
+class HilConfig:
+    """One real-time run: engine, rate, scene, engine configuration and process settings."""
+
+    engine: str
+    rate_hz: float
+    bag: Path
+    cloth: str = "towel"
+    primitive: str = "dynamic"
+    seed: int = 0
+    grid: tuple[int, int] | None = None
+    params: tuple[tuple[str, object], ...] = ()  # sorted engine parameter overrides
+    config: str = "preset"  # the configuration's name (settings-sweep label)
+    processes: bool = True
+    cpu: int = -1  # core to pin the simulator to (-1: not pinned)
+    realtime_priority: int = 0  # SCHED_FIFO priority of the simulator (0: default scheduler)
+    freeze_gc: bool = True
+    duration: float = 0.0  # s of the trajectory to run (0: all of it, scored by the observer)
+
+    def ident(self) -> str:
+        from cloth_bench_ros.safe_io import safe_name
+
+        return safe_name(f"{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}_s{self.seed}_{self.config}",
+                         "HIL run name")
+
+
+@dataclass
+class HilResult:
+    """What a real-time run measured, and whether its bookkeeping adds up."""
+
+    config: HilConfig
+    figures: HilFigures
+    stepped: int
+    skipped: int
+    problems: list[str]  # bookkeeping that does not add up (empty: all does)
+    realtime: list[str]  # what the simulator process asked for and got (cpu, scheduler, gc)
+    load: dict  # CPU load during the run
+    step_time: dict = field(default_factory=dict)  # the engine's own step time (s): p50, p99, max
+    cd_realtime: float = math.nan  # CD of the states this run produced (skips change the physics)
+    cd_lockstep: float = math.nan  # CD of the same configuration in lockstep
+    diverged: bool = False
+    run_dir: Path | None = None
+
+    def row(self) -> dict:
+        """A flat JSON-safe row (hil.jsonl)."""
+        c = self.config
+        return {"engine": c.engine, "rate_hz": c.rate_hz, "cloth": c.cloth, "primitive": c.primitive,
+                "seed": c.seed, "config": c.config, "grid": f"{c.grid[0]}x{c.grid[1]}" if c.grid else None,
+                "params": dict(c.params), "processes": c.processes, **self.figures.as_dict(),
+                "stepped": self.stepped, "problems": self.problems, "realtime": self.realtime, **self.load,
+                "step_time_p50": self.step_time.get("p50"), "step_time_p99": self.step_time.get("p99"),
+                "step_time_max": self.step_time.get("max"), "cd_realtime": self.cd_realtime,
+                "cd_lockstep": self.cd_lockstep, "diverged": self.diverged,
+                "run_dir": self.run_dir.name if self.run_dir else None}
+
+
+# ----------------------------------------------------------------------------------- load
+
+
+def _cpu_times() -> tuple[int, int] | None:
+    """(busy, total) jiffies of all cores from /proc/stat, or None where there is none."""
+    try:
+        with open("/proc/stat") as f:
+            fields = [int(v) for v in f.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+    idle = fields[3] + fields[4]  # idle + iowait
+    return sum(fields) - idle, sum(fields)
+
+
+class LoadMeter:
+    """The machine's CPU load over a span: busy share of all cores (/proc/stat) and load averages."""
+
+    def __enter__(self) -> "LoadMeter":
+        self.start = _cpu_times()
+        self.loadavg_before = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+        return self
+
+    def __exit__(self, *exc) -> None:
+        end = _cpu_times()
+        self.busy = math.nan
+        if self.start and end and end[1] > self.start[1]:
+            self.busy = (end[0] - self.start[0]) / (end[1] - self.start[1])
+        self.loadavg_after = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+
+    def as_dict(self) -> dict:
+        return {"cpu_busy": self.busy, "loadavg_before": self.loadavg_before,
+                "loadavg_after": self.loadavg_after, "cpu_count": os.cpu_count()}
+
+
+# ---------------------------------------------------------------------------------- nodes
+
+
+def _parameters(config: HilConfig, group: str, run_dir: Path) -> list[tuple[str, dict]]:
+    """(node kind, parameter values) of each node of a group."""
+    common = {"primitive": config.primitive, "rate_hz": float(config.rate_hz)}
+    if group == "controller":
+        return [("trajectory_publisher", {**common, "engines": [config.engine], "pacing": "realtime",
+                                          "min_clock_subscribers": 2,
+                                          "timing_log": str(run_dir), "duration": float(config.duration)})]
+    if group == "simulator":
+        nx, nz = config.grid or (0, 0)
+        # No /clock: the simulator never reads time, and a 1 kHz /clock would sit on its critical path.
+        return [("simulator", {**common, "engine": config.engine, "cloth": config.cloth, "seed": int(config.seed),
+                               "grid_nx": nx, "grid_nz": nz, "engine_params": yaml.safe_dump(dict(config.params)),
+                               "use_sim_time": False, "cpu": int(config.cpu),
+                               "realtime_priority": int(config.realtime_priority),
+                               "freeze_gc": bool(config.freeze_gc)})]
+    return [("evaluator", {**common, "engines": [config.engine], "output_dir": str(run_dir), "cloth": config.cloth,
+                           "seed": int(config.seed), "pacing": "realtime", "use_sim_time": True}),
+            ("recorder", {"bag": str(config.bag), "use_sim_time": True})]
+
+
+def _make_nodes(config: HilConfig, group: str, run_dir: Path, context) -> list:
+    from cloth_bench_ros.nodes.evaluator import Evaluator
+    from cloth_bench_ros.nodes.recorder import Recorder
+    from cloth_bench_ros.nodes.simulator import Simulator
+    from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
+    from cloth_bench_ros.runtime import Parameter
+
+    kinds = {"trajectory_publisher": TrajectoryPublisher, "simulator": Simulator, "evaluator": Evaluator,
+             "recorder": Recorder}
+    nodes = []
+    for kind, values in _parameters(config, group, run_dir):
+        extra = {"node_name": f"simulator_{config.engine}"} if kind == "simulator" else {}
+        nodes.append(kinds[kind](context=context, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()],
+                                 **extra))
+    return nodes
+
+
+def _finished(group: str, nodes: list) -> bool:
+    """The controller ends once its timeline is written, the observer once the evaluator reported;
+    the simulator runs until it is told to stop."""
+    if group == "simulator":
+        return False
+    return all(getattr(n, "done", True) for n in nodes)
+
+
+def _write_simulator_file(run_dir: Path, nodes: list) -> None:
+    from cloth_bench_ros.nodes.simulator import Simulator
+    from cloth_bench_ros.safe_io import atomic_write_text
+
+    for node in nodes:
+        if isinstance(node, Simulator):
+            info = {"stepped": node.step + 1, "skipped": node.skipped, "realtime": node.realtime.lines()}
+            atomic_write_text(run_dir / SIMULATOR_FILE, json.dumps(info))
+
+
+# -------------------------------------------------------------------------------- running
+
+
+def _waited(config: HilConfig) -> list[str]:
+    """The groups whose end ends the run: a shortened run is not scored, so only the controller."""
+    return ["controller"] if config.duration else ["controller", "observer"]
+
+
+def _time_budget(config: HilConfig) -> float:
+    from cloth_bench_ros.core.trajectory import full_targets
+
+    run_s = config.duration or len(full_targets(config.primitive, config.rate_hz)) / config.rate_hz
+    return 3 * run_s + 90.0  # start-up, DDS discovery and a simulator far slower than real time
+
+
+def _run_in_process(config: HilConfig, run_dir: Path) -> None:
+    """All three groups in one process, one executor, the embedded intra-process transport."""
+    from cloth_bench_ros.nodes.common import close_nodes
+    from cloth_bench_ros.runtime import SingleThreadedExecutor, rclpy
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    groups: list[tuple[str, list]] = []
+    try:
+        for group in GROUPS:
+            groups.append((group, _make_nodes(config, group, run_dir, context)))
+        executor = SingleThreadedExecutor(context=context)
+        for _, nodes in groups:
+            for node in nodes:
+                executor.add_node(node)
+        deadline = time.monotonic() + _time_budget(config)
+        while not all(_finished(g, n) for g, n in groups if g in _waited(config)):
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"HIL {config.ident()}: the run did not finish in time")
+            executor.spin_once(timeout_sec=0.01)
+        _write_simulator_file(run_dir, [n for _, nodes in groups for n in nodes])
+    finally:
+        close_nodes([n for _, nodes in groups for n in nodes])
+        rclpy.shutdown(context=context)
+
+
+def serve_group(config: HilConfig, group: str, run_dir: str) -> None:
+    """One group in this process over DDS until it finishes or gets SIGTERM (a spawned process's target)."""
+    from cloth_bench_ros.nodes.common import close_nodes
+    from cloth_bench_ros.runtime import SingleThreadedExecutor, rclpy
+
+    log = os.open(Path(run_dir) / f"{group}.log", os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+    os.dup2(log, 1)
+    os.dup2(log, 2)
+    stopped = []
+    signal.signal(signal.SIGTERM, lambda *_: stopped.append(True))
+    context = dds_context()
+    nodes: list = []
+    try:
+        nodes = _make_nodes(config, group, Path(run_dir), context)
+        executor = SingleThreadedExecutor(context=context)
+        for node in nodes:
+            executor.add_node(node)
+        while not stopped and not _finished(group, nodes):
+            executor.spin_once(timeout_sec=0.05)
+        _write_simulator_file(Path(run_dir), nodes)
+    finally:
+        close_nodes(nodes)
+        rclpy.shutdown(context=context)
+
+
+def dds_context():
+    """A runtime context on the DDS transport (issue 8's Cyclone DDS transport)."""
+    raise NotImplementedError("the DDS transport is not available on this branch yet")
+
+
+def _run_processes(config: HilConfig, run_dir: Path) -> None:
+    """The three groups as three OS processes; the simulator is stopped once the others are done."""
+    ctx = multiprocessing.get_context("spawn")
+    procs = {g: ctx.Process(target=serve_group, args=(config, g, str(run_dir)), name=f"hil-{g}") for g in GROUPS}
+    deadline = time.monotonic() + _time_budget(config)
+    try:
+        for group in GROUPS:
+            procs[group].start()
+        for group in _waited(config):
+            procs[group].join(max(0.0, deadline - time.monotonic()))
+            if procs[group].is_alive():
+                raise RuntimeError(f"HIL {config.ident()}: the {group} process did not finish in time "
+                                   f"(see {run_dir / (group + '.log')})")
+            if procs[group].exitcode != 0:
+                raise RuntimeError(f"HIL {config.ident()}: the {group} process failed with exit status "
+                                   f"{procs[group].exitcode} (see {run_dir / (group + '.log')})")
+    finally:
+        for proc in procs.values():  # the simulator (and, on failure, the rest): SIGTERM, then wait
+            if proc.is_alive():
+                proc.terminate()
+        for proc in procs.values():
+            proc.join(10.0)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+
+
+def run_hil(config: HilConfig, out_dir: Path, lockstep: bool = True) -> HilResult:
+    """One real-time run (and, if asked, the same configuration in lockstep for its CD)."""
+    run_dir = Path(out_dir) / config.ident()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    for stale in (SIMULATOR_FILE, SUMMARY_FILE, TIMELINE.format(engine=config.engine)):
+        (run_dir / stale).unlink(missing_ok=True)
+    with LoadMeter() as load:
+        (_run_processes if config.processes else _run_in_process)(config, run_dir)
+    result = collect(config, run_dir, load.as_dict())
+    if lockstep:
+        result.cd_lockstep = lockstep_cd(config)
+    return result
+
+
+def collect(config: HilConfig, run_dir: Path, load: dict) -> HilResult:
+    """Read what the processes wrote: the controller's timeline, the simulator's counts, the summary."""
+    timeline_file = run_dir / TIMELINE.format(engine=config.engine)
+    if not timeline_file.is_file() or not (run_dir / SIMULATOR_FILE).is_file():
+        raise RuntimeError(f"HIL {config.ident()}: no timeline or simulator counts in {run_dir}")
+    timeline = TargetTimeline.from_csv(timeline_file.read_text())
+    sim = json.loads((run_dir / SIMULATOR_FILE).read_text())
+    result = HilResult(config, hil_figures(timeline, sim["skipped"], 1.0 / config.rate_hz), sim["stepped"],
+                       sim["skipped"], check_bookkeeping(timeline, sim["stepped"], sim["skipped"]),
+                       sim["realtime"], load, run_dir=run_dir)
+    if (run_dir / SUMMARY_FILE).is_file():
+        m = json.loads((run_dir / SUMMARY_FILE).read_text())["engines"][config.engine]
+        result.step_time = m["step_time"]
+        result.cd_realtime = _cd(m, config.primitive)
+        result.diverged = bool(m["diverged"])
+    return result
+
+
+def _cd(metrics: dict, primitive: str) -> float:
+    value = metrics.get("CD_d" if primitive == "dynamic" else "CD_q")
+    return math.nan if value is None else float(value)
+
+
+def lockstep_cd(config: HilConfig) -> float:
+    """CD of the same configuration run in lockstep (in one process: deterministic)."""
+    from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
+
+    summary = run_pipeline(RunConfig(bag=Path(config.bag), engines=[config.engine], rate_hz=config.rate_hz,
+                                     cloth=config.cloth, primitive=config.primitive, seed=config.seed,
+                                     engine_params={config.engine: dict(config.params)}, grid=config.grid))
+    return _cd(summary["engines"][config.engine], config.primitive)
+
+
+def write_results(results: list[HilResult], out_dir: Path) -> Path:
+    """Append each run's row to <out_dir>/hil.jsonl; its path."""
+    from cloth_bench_ros.studies.sweep import append_row
+
+    path = Path(out_dir) / "hil.jsonl"
+    for result in results:
+        append_row(path, result.row())
+    return path
+
+
+def with_config(config: HilConfig, label: str, grid: tuple[int, int] | None, params: dict) -> HilConfig:
+    """The same run with another engine configuration."""
+    return replace(config, config=label, grid=grid, params=tuple(sorted(params.items())))
+
+
+__all__ = ["HilConfig", "HilResult", "LoadMeter", "run_hil", "collect", "lockstep_cd", "write_results",
+           "with_config", "serve_group"]
