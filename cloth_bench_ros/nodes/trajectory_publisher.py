@@ -6,7 +6,7 @@ from functools import partial
 
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.runtime import (
-    Clock, Node, Pose, PoseArray, PointCloud2, Time, make_qos, stamp_ns,
+    Clock, Node, Pose, PoseArray, PointCloud2, Time, declare_float, make_qos, stamp_ns,
 )
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
 
@@ -19,7 +19,7 @@ class TrajectoryPublisher(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("trajectory_publisher", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
         primitive = parse_primitive(self.declare_parameter("primitive", "dynamic").value)
-        rate_hz = float(self.declare_parameter("rate_hz", 100.0).value)
+        rate_hz = declare_float(self, "rate_hz", 100.0)
         self.pacing = self.declare_parameter("pacing", "lockstep").value
         self.engines = list(self.declare_parameter("engines", ["mujoco"]).value)
         self.min_clock_subscribers = int(self.declare_parameter("min_clock_subscribers", 0).value)
