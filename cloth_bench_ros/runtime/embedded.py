@@ -40,6 +40,9 @@ from cloth_bench_ros.runtime.arguments import (
     RosArguments, expand_topic_name, parse_ros_args, remap_namespace, remap_node_name, remap_topic_name,
     validate_namespace, validate_node_name,
 )
+from cloth_bench_ros.runtime.transport import (  # noqa: F401 (re-exported as rclpy's names)
+    IntraProcessTransport, TopicEndpointInfo, TopicEndpointTypeEnum, make_transport, transport_choice,
+)
 from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
     InvalidParameterTypeException, Parameter, ParameterAlreadyDeclaredException, ParameterDescriptor,
     ParameterException, ParameterNotDeclaredException, ParameterType, ParameterUninitializedException,
@@ -139,7 +142,7 @@ def _time_source_qos() -> "QoSProfile":
 
 
 class Context:
-    """One process-wide graph: topics, the delivery queue and the shutdown flag."""
+    """One graph: its transport (intra-process or DDS), the delivery queue and the shutdown flag."""
 
     def __init__(self) -> None:
         self.args = RosArguments()
@@ -148,9 +151,13 @@ class Context:
         self.publishers: dict[str, list["Publisher"]] = {}
         self.queue: deque[tuple["Subscription", Any]] = deque()
         self.nodes: list["Node"] = []
+        self.transport: Any = IntraProcessTransport(self)
 
-    def init(self, args: list[str] | None = None) -> None:
+    def init(self, args: list[str] | None = None, *, domain_id: int | None = None,
+             transport: str | None = None) -> None:
+        """Parse the ROS arguments and open the transport (None: CLOTH_BENCH_TRANSPORT, else intra)."""
         self.args = parse_ros_args(args)
+        self.transport = make_transport(self, transport or transport_choice("intra"), domain_id)
         self._ok = True
 
     def ok(self) -> bool:
@@ -159,13 +166,17 @@ class Context:
     def shutdown(self) -> None:
         self._ok = False
         self.queue.clear()
+        self.transport.shutdown()
+        self.transport = IntraProcessTransport(self)
 
 
 _default_context = Context()
 
 
-def init(args: list[str] | None = None, context: Context | None = None) -> None:
-    (context or _default_context).init(args)
+def init(args: list[str] | None = None, context: Context | None = None, domain_id: int | None = None,
+         transport: str | None = None) -> None:
+    """rclpy.init; `transport` ('intra' or 'dds') is the embedded runtime's own addition."""
+    (context or _default_context).init(args, domain_id=domain_id, transport=transport)
 
 
 def ok(context: Context | None = None) -> bool:
@@ -195,28 +206,26 @@ class Publisher:
         ctx = self.node.context
         if not ctx.ok():
             return
-        if self.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:
-            self._history.append(msg)
-        for sub in ctx.subscriptions.get(self.topic_name, ()):
-            ctx.queue.append((sub, msg))
+        ctx.transport.publish(self, msg)
 
     def get_subscription_count(self) -> int:
-        return len(self.node.context.subscriptions.get(self.topic_name, ()))
+        """Subscriptions matched with this publisher (rmw: the writer's matched readers)."""
+        return self.node.context.transport.matched_subscriptions(self)
 
     def destroy(self) -> None:
-        pubs = self.node.context.publishers.get(self.topic_name, [])
-        if self in pubs:
-            pubs.remove(self)
+        self.node.context.transport.remove_publisher(self)
 
 
 class Subscription:
     def __init__(self, node: "Node", msg_type: type, topic: str, callback: Callable, qos: QoSProfile) -> None:
         self.node, self.msg_type, self.topic_name, self.callback, self.qos = node, msg_type, topic, callback, qos
 
+    def get_publisher_count(self) -> int:
+        """Publishers matched with this subscription (rmw: the reader's matched writers)."""
+        return self.node.context.transport.matched_publications(self)
+
     def destroy(self) -> None:
-        subs = self.node.context.subscriptions.get(self.topic_name, [])
-        if self in subs:
-            subs.remove(self)
+        self.node.context.transport.remove_subscription(self)
 
 
 class Timer:
@@ -303,6 +312,7 @@ class Node:
         self._clock = Clock(clock_type=ClockType.ROS_TIME)
         self._logger = _Logger(logging.getLogger(f"cloth_bench_ros.{self._name}"), self._name)
         self.context.nodes.append(self)
+        self.context.transport.graph_changed(self)
         # rclpy's TimeSource: use_sim_time declared as a bool; when true, /clock drives the clock.
         if self.declare_parameter("use_sim_time", False).value:
             self._clock.ros_time_is_active = True
@@ -374,19 +384,15 @@ class Node:
     # graph
     def create_publisher(self, msg_type: type, topic: str, qos_profile: QoSProfile | int) -> Publisher:
         pub = Publisher(self, msg_type, self.resolve_topic_name(topic), _qos(qos_profile))
-        self.context.publishers.setdefault(pub.topic_name, []).append(pub)
         self._publishers.append(pub)
+        self.context.transport.add_publisher(pub)
         return pub
 
     def create_subscription(self, msg_type: type, topic: str, callback: Callable,
                             qos_profile: QoSProfile | int) -> Subscription:
         sub = Subscription(self, msg_type, self.resolve_topic_name(topic), callback, _qos(qos_profile))
-        self.context.subscriptions.setdefault(sub.topic_name, []).append(sub)
         self._subscriptions.append(sub)
-        if sub.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:
-            for pub in self.context.publishers.get(sub.topic_name, ()):
-                for msg in pub._history:
-                    self.context.queue.append((sub, msg))
+        self.context.transport.add_subscription(sub)
         return sub
 
     def create_timer(self, timer_period_sec: float, callback: Callable, callback_group: Any = None,
@@ -403,10 +409,23 @@ class Node:
         return True
 
     def count_subscribers(self, topic: str) -> int:
-        return len(self.context.subscriptions.get(self.resolve_topic_name(topic), ()))
+        return len(self.get_subscriptions_info_by_topic(topic))
 
     def count_publishers(self, topic: str) -> int:
-        return len(self.context.publishers.get(self.resolve_topic_name(topic), ()))
+        return len(self.get_publishers_info_by_topic(topic))
+
+    def get_publishers_info_by_topic(self, topic_name: str, no_mangle: bool = False) -> list[TopicEndpointInfo]:
+        """Every publisher of the topic in the graph, with its node (rclpy; the name is expanded)."""
+        topic = topic_name if no_mangle else self.resolve_topic_name(topic_name, only_expand=True)
+        return self.context.transport.endpoints(topic, TopicEndpointTypeEnum.PUBLISHER)
+
+    def get_subscriptions_info_by_topic(self, topic_name: str, no_mangle: bool = False) -> list[TopicEndpointInfo]:
+        """Every subscription of the topic in the graph, with its node (rclpy; the name is expanded)."""
+        topic = topic_name if no_mangle else self.resolve_topic_name(topic_name, only_expand=True)
+        return self.context.transport.endpoints(topic, TopicEndpointTypeEnum.SUBSCRIPTION)
+
+    def get_node_names_and_namespaces(self) -> list[tuple[str, str]]:
+        return self.context.transport.node_names()
 
     def get_clock(self) -> Clock:
         return self._clock
@@ -424,6 +443,7 @@ class Node:
         self._timers.clear()
         if self in self.context.nodes:
             self.context.nodes.remove(self)
+            self.context.transport.graph_changed(self)
 
 
 class _Logger:
@@ -474,6 +494,7 @@ class SingleThreadedExecutor:
         return [t for n in self.nodes for t in n._timers if not t.cancelled]
 
     def _deliver_one(self) -> bool:
+        self.context.transport.receive()
         queue = self.context.queue
         for _ in range(len(queue)):
             sub, msg = queue.popleft()
@@ -493,15 +514,18 @@ class SingleThreadedExecutor:
         if ready is None:
             # Timers on a sim clock become due only through /clock: no point sleeping for them.
             waits = [t.time_until_next_call() for t in timers if t.follows_wall_time]
+            # The transport waits: a sleep in one process, a DDS wait set that a sample ends early.
+            transport = self.context.transport
             if not waits:
                 if timeout_sec:
-                    time.sleep(min(timeout_sec, 0.01))
+                    transport.wait(timeout_sec if transport.name == "dds" else min(timeout_sec, 0.01))
                 return
             wait = min(waits) / 1e9
             if timeout_sec is not None and wait > timeout_sec:
-                time.sleep(timeout_sec)
+                transport.wait(timeout_sec)
                 return
-            time.sleep(max(wait, 0.0))
+            if transport.wait(max(wait, 0.0)):
+                return  # a message came first: delivered on the next spin_once
             ready = next((t for t in timers if t.is_ready()), None)
         if ready is not None:
             ready.call()
