@@ -8,7 +8,7 @@ import threading
 from typing import Callable, Sequence
 
 from cloth_bench_ros.data.bag import BagError
-from cloth_bench_ros.runtime import SingleThreadedExecutor, rclpy
+from cloth_bench_ros.runtime import SingleThreadedExecutor, is_user_error, rclpy
 
 NAMESPACE = "cloth_bench"
 
@@ -39,11 +39,11 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
     (bad parameter, bag or engine) is one line on stderr and exit status 2, no traceback.
     """
     _stop_requested.clear()
-    rclpy.init(args=args if args is not None else sys.argv)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _request_stop)
     nodes: list = []
     try:
+        rclpy.init(args=args if args is not None else sys.argv)  # a bad --ros-args fails here
         for factory in factories:
             nodes.append(factory())
         executor = SingleThreadedExecutor()
@@ -52,8 +52,12 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
         while rclpy.ok() and not _stop_requested.is_set() and not all(getattr(n, "done", False) for n in nodes):
             executor.spin_once(timeout_sec=0.1)
         return 0
-    except (ValueError, BagError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    except Exception as exc:
+        # rclpy's parameter, name and argument errors are not ValueErrors: matched by class name
+        if not (isinstance(exc, (ValueError, BagError)) or is_user_error(exc)):
+            raise
+        print(f"error: {str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__}",
+              file=sys.stderr)
         return 2
     finally:
         close_nodes(nodes)

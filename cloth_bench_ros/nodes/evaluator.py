@@ -12,7 +12,8 @@ from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.report.run_report import write_run_report
 from cloth_bench_ros.runtime import (
-    DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, make_qos, stamp_ns,
+    DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, declare_float, make_qos,
+    stamp_ns,
 )
 from cloth_bench_ros.core.scene import REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
@@ -29,8 +30,8 @@ class Evaluator(Node):
         super().__init__("evaluator", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
         self.engines = list(self.declare_parameter("engines", ["mujoco"]).value)
         self.primitive = parse_primitive(self.declare_parameter("primitive", "dynamic").value)
-        rate_hz = float(self.declare_parameter("rate_hz", 100.0).value)
-        offset = float(self.declare_parameter("time_offset", SETTLE_DURATION).value)
+        rate_hz = declare_float(self, "rate_hz", 100.0)
+        offset = declare_float(self, "time_offset", SETTLE_DURATION)
         cut = int(self.declare_parameter("change_of_phase_frame", -1).value)
         self.output_dir = self.declare_parameter("output_dir", "").value
         self.run_info = {"primitive": self.primitive.value, "rate_hz": rate_hz, "engines": self.engines,

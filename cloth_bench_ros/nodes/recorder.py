@@ -18,7 +18,7 @@ from cloth_bench_ros.data.bag import TRIAL_STATUS_NAME, BagReader, BagWriter
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.runtime import (
     Clock, DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, Time, deserialize_message,
-    make_qos, message_type, serialize_message, stamp_ns,
+    declare_float, make_qos, message_type, serialize_message, stamp_ns, steady_clock,
 )
 from cloth_bench_ros.core.scene import SETTLE_DURATION
 
@@ -43,10 +43,10 @@ class Recorder(Node):
         if not path:
             raise ValueError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
         # Bag stamps count from the start of the quintic part; the run starts with the settle phase.
-        self.offset_ns = int(round(self.declare_parameter("time_offset", SETTLE_DURATION).value * 1e9))
+        self.offset_ns = int(round(declare_float(self, "time_offset", SETTLE_DURATION) * 1e9))
         clock = self.declare_parameter("clock", "sim").value
-        self.rate_factor = float(self.declare_parameter("rate_factor", 1.0).value)
-        self.start_offset_ns = int(round(self.declare_parameter("start_offset", 0.0).value * 1e9))
+        self.rate_factor = declare_float(self, "rate_factor", 1.0)
+        self.start_offset_ns = int(round(declare_float(self, "start_offset", 0.0) * 1e9))
         self.loop = bool(self.declare_parameter("loop", False).value)
         if clock not in ("sim", "wall"):
             raise ValueError(f"recorder: unknown clock {clock!r} (valid: sim, wall)")
@@ -63,7 +63,7 @@ class Recorder(Node):
             self.create_subscription(Clock, "/clock", self.on_clock, make_qos(10))
         else:
             self.wall_start_ns = time.monotonic_ns()
-            self.wall_timer = self.create_timer(0.001, self.on_wall_tick)
+            self.wall_timer = self.create_timer(0.001, self.on_wall_tick, clock=steady_clock())  # not sim time
 
     def rewind(self) -> None:
         self.frames = (f for f in self.bag.raw_messages([self.topic]) if f[2] >= self.start_offset_ns)

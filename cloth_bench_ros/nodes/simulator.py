@@ -22,7 +22,7 @@ from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.runtime import (
     EMBEDDED, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, PoseArray,
-    make_qos, stamp_ns,
+    declare_float, make_qos, stamp_ns,
 )
 from cloth_bench_ros.runtime import realtime
 from cloth_bench_ros.core.scene import ClothGrid
@@ -31,7 +31,7 @@ from cloth_bench_ros.core.scene import ClothGrid
 def publish_serialises(node: Node) -> bool:
     """True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
     the embedded intra-process transport hands subscribers the object itself."""
-    return not EMBEDDED
+    return not EMBEDDED or node.context.transport.name != "intra"
 
 
 class StateMessages:
@@ -85,7 +85,7 @@ class Simulator(Node):
         super().__init__(kwargs.pop("node_name", "simulator"),
                          namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
         self.engine_name = self.declare_parameter("engine", "mujoco").value
-        rate_hz = float(self.declare_parameter("rate_hz", 100.0).value)
+        rate_hz = declare_float(self, "rate_hz", 100.0)
         cloth = self.declare_parameter("cloth", "towel").value
         primitive = self.declare_parameter("primitive", "dynamic").value
         self.seed = int(self.declare_parameter("seed", 0).value)

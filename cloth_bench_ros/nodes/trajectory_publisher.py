@@ -11,7 +11,7 @@ import numpy as np
 from cloth_bench_ros.core.hil_timing import TargetTimeline
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.runtime import (
-    Clock, Node, Pose, PoseArray, PointCloud2, Time, make_qos, stamp_ns,
+    Clock, Node, Pose, PoseArray, PointCloud2, Time, declare_float, make_qos, stamp_ns,
 )
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
 
@@ -24,14 +24,14 @@ class TrajectoryPublisher(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("trajectory_publisher", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
         primitive = parse_primitive(self.declare_parameter("primitive", "dynamic").value)
-        rate_hz = float(self.declare_parameter("rate_hz", 100.0).value)
+        rate_hz = declare_float(self, "rate_hz", 100.0)
         self.pacing = self.declare_parameter("pacing", "lockstep").value
         self.engines = list(self.declare_parameter("engines", ["mujoco"]).value)
         self.min_clock_subscribers = int(self.declare_parameter("min_clock_subscribers", 0).value)
         if self.pacing not in PACINGS:
             raise ValueError(f"unknown pacing {self.pacing!r} (valid: {', '.join(PACINGS)})")
         self.timing_log = self.declare_parameter("timing_log", "").value
-        duration = float(self.declare_parameter("duration", 0.0).value)
+        duration = declare_float(self, "duration", 0.0)
         self.targets = full_targets(primitive, rate_hz)
         # duration > 0: only the targets of the first `duration` seconds (short real-time checks).
         self.n_targets = min(len(self.targets), int(duration * rate_hz) + 1) if duration > 0 else len(self.targets)

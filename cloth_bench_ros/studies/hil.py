@@ -205,7 +205,7 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
     from cloth_bench_ros.runtime import SingleThreadedExecutor, rclpy
 
     context = rclpy.Context()
-    rclpy.init(args=[], context=context)
+    rclpy.init(args=[], context=context, transport="intra")
     groups: list[tuple[str, list]] = []
     try:
         for group in GROUPS:
@@ -235,7 +235,8 @@ def serve_group(config: HilConfig, group: str, run_dir: str) -> None:
     os.dup2(log, 2)
     stopped = []
     signal.signal(signal.SIGTERM, lambda *_: stopped.append(True))
-    context = dds_context()
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context, transport="dds")
     nodes: list = []
     try:
         nodes = _make_nodes(config, group, Path(run_dir), context)
@@ -248,11 +249,6 @@ def serve_group(config: HilConfig, group: str, run_dir: str) -> None:
     finally:
         close_nodes(nodes)
         rclpy.shutdown(context=context)
-
-
-def dds_context():
-    """A runtime context on the DDS transport (issue 8's Cyclone DDS transport)."""
-    raise NotImplementedError("the DDS transport is not available on this branch yet")
 
 
 def _run_processes(config: HilConfig, run_dir: Path) -> None:
