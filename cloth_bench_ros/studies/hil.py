@@ -19,9 +19,10 @@ from __future__ import annotations
 
 import json
 import math
-import multiprocessing
 import os
 import signal
+import subprocess
+import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -225,57 +226,82 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
         rclpy.shutdown(context=context)
 
 
-def serve_group(config: HilConfig, group: str, run_dir: str) -> None:
-    """One group in this process over DDS until it finishes or gets SIGTERM (a spawned process's target)."""
+def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
+    """One group in this process over DDS until it finishes or gets SIGTERM (a child process's work)."""
     from cloth_bench_ros.nodes.common import close_nodes
     from cloth_bench_ros.runtime import SingleThreadedExecutor, rclpy
 
-    log = os.open(Path(run_dir) / f"{group}.log", os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
-    os.dup2(log, 1)
-    os.dup2(log, 2)
-    stopped = []
+    stopped: list[bool] = []
     signal.signal(signal.SIGTERM, lambda *_: stopped.append(True))
     context = rclpy.Context()
     rclpy.init(args=[], context=context, transport="dds")
     nodes: list = []
     try:
-        nodes = _make_nodes(config, group, Path(run_dir), context)
+        nodes = _make_nodes(config, group, run_dir, context)
+        if group == "controller":
+            while not stopped and not _graph_complete(nodes[0]):
+                time.sleep(0.01)  # discovery runs in Cyclone's threads; the node's timers wait
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)
         while not stopped and not _finished(group, nodes):
             executor.spin_once(timeout_sec=0.05)
-        _write_simulator_file(Path(run_dir), nodes)
+        _write_simulator_file(run_dir, nodes)
     finally:
         close_nodes(nodes)
         rclpy.shutdown(context=context)
 
 
+def _graph_complete(controller) -> bool:
+    """Every endpoint of the controller matched: targets heard by simulator and evaluator, /clock by
+    recorder and evaluator, and the simulator's states heard by the controller."""
+    states = [sub for sub in controller._subscriptions if sub.topic_name.endswith("/cloud")]
+    return (controller.target_pub.get_subscription_count() >= 2 and controller.clock_pub.get_subscription_count() >= 2
+            and all(sub.get_publisher_count() >= 1 for sub in states))
+
+
+def _config_json(config: HilConfig) -> str:
+    return json.dumps({**config.__dict__, "bag": str(config.bag), "params": [list(p) for p in config.params]})
+
+
+def _config_from_json(text: str) -> HilConfig:
+    d = json.loads(text)
+    return HilConfig(**{**d, "bag": Path(d["bag"]), "grid": tuple(d["grid"]) if d["grid"] else None,
+                        "params": tuple(tuple(p) for p in d["params"])})
+
+
 def _run_processes(config: HilConfig, run_dir: Path) -> None:
     """The three groups as three OS processes; the simulator is stopped once the others are done."""
-    ctx = multiprocessing.get_context("spawn")
-    procs = {g: ctx.Process(target=serve_group, args=(config, g, str(run_dir)), name=f"hil-{g}") for g in GROUPS}
+    procs: dict[str, subprocess.Popen] = {}
     deadline = time.monotonic() + _time_budget(config)
     try:
         for group in GROUPS:
-            procs[group].start()
+            with open(run_dir / f"{group}.log", "wb") as log:
+                procs[group] = subprocess.Popen(
+                    [sys.executable, "-m", "cloth_bench_ros.studies.hil", group, str(run_dir), _config_json(config)],
+                    stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         for group in _waited(config):
-            procs[group].join(max(0.0, deadline - time.monotonic()))
-            if procs[group].is_alive():
+            try:
+                code = procs[group].wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
                 raise RuntimeError(f"HIL {config.ident()}: the {group} process did not finish in time "
+                                   f"(see {run_dir / (group + '.log')})") from None
+            if code != 0:
+                raise RuntimeError(f"HIL {config.ident()}: the {group} process failed with exit status {code} "
                                    f"(see {run_dir / (group + '.log')})")
-            if procs[group].exitcode != 0:
-                raise RuntimeError(f"HIL {config.ident()}: the {group} process failed with exit status "
-                                   f"{procs[group].exitcode} (see {run_dir / (group + '.log')})")
     finally:
         for proc in procs.values():  # the simulator (and, on failure, the rest): SIGTERM, then wait
-            if proc.is_alive():
+            if proc.poll() is None:
                 proc.terminate()
         for proc in procs.values():
-            proc.join(10.0)
-            if proc.is_alive():
+            try:
+                proc.wait(10.0)
+            except subprocess.TimeoutExpired:
                 proc.kill()
-                proc.join()
+                proc.wait()
+    if procs["simulator"].returncode != 0:
+        raise RuntimeError(f"HIL {config.ident()}: the simulator process failed with exit status "
+                           f"{procs['simulator'].returncode} (see {run_dir / 'simulator.log'})")
 
 
 def run_hil(config: HilConfig, out_dir: Path, lockstep: bool = True) -> HilResult:
@@ -339,6 +365,9 @@ def with_config(config: HilConfig, label: str, grid: tuple[int, int] | None, par
     """The same run with another engine configuration."""
     return replace(config, config=label, grid=grid, params=tuple(sorted(params.items())))
 
+
+if __name__ == "__main__":  # python -m cloth_bench_ros.studies.hil GROUP RUN_DIR CONFIG_JSON
+    serve_group(_config_from_json(sys.argv[3]), sys.argv[1], Path(sys.argv[2]))
 
 __all__ = ["HilConfig", "HilResult", "LoadMeter", "run_hil", "collect", "lockstep_cd", "write_results",
            "with_config", "serve_group"]
