@@ -253,49 +253,78 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
 
 def cmd_hil(args: argparse.Namespace) -> int:
-    from cloth_bench_ros.studies import sweep as sw
     from cloth_bench_ros.engines import engine_class
     from cloth_bench_ros.engines.presets import CLOTHS
     from cloth_bench_ros.paths import bundled_bag
+    from cloth_bench_ros.report.hil import hil_table, text_table, write_hil_report
+    from cloth_bench_ros.studies import hil
+    from cloth_bench_ros.studies.sweep import config_label
 
-    engine_class(args.engine)
+    if args.export_recommended:
+        return _export_recommended(args)
+    engines = args.engine or ["mujoco"]
+    for name in engines:
+        engine_class(name)
     if args.cloth not in CLOTHS:
         raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
+    if args.config == "recommended" and args.grid:
+        raise UserError("--grid and --config recommended both choose the mesh: give one")
+    if args.duration < 0 or args.budget <= 0:
+        raise UserError("--duration must be >= 0 and --deadline-budget > 0")
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     check_bag(bag)
-    overrides = _overrides(args.set, [args.engine])
+    overrides = _overrides(args.set, engines)
     out = Path(args.output) if args.output else Path("results") / "hil"
-    out.mkdir(parents=True, exist_ok=True)
-    rates = args.rate or [100.0]
-    params = overrides.get(args.engine, {})
-    print(f"cloth-bench hil: {args.engine}, {args.cloth} {args.primitive}, targets paced by the wall clock; bag {bag}")
-    header = (f"{'engine':<8} {'rate Hz':>8} {'steps':>6} {'lat p50 ms':>10} {'lat p99 ms':>10} {'lat max ms':>10} "
-              f"{'deadline misses':>18} {'RTF':>6} {'step p50 ms':>11} {'step p99 ms':>11}  status")
-    rows = []
-    for rate in rates:
-        cell = sw.Cell(args.engine, float(rate), args.cloth, args.primitive, args.seed, str(bag), 0, "paper",
-                       sw.config_label(args.grid, params), args.grid, tuple(sorted(params.items())), "realtime", True)
-        row = sw.run_cell(cell, str(out))
-        rows.append(row)
-        if row["status"] == "error":
-            raise UserError(f"hil at {rate:g} Hz failed: {row['error']}")
-    keys = {sw.row_key(r) for r in rows}
-    kept = [r for r in sw.load_rows(out / sw.RESULTS_FILE) if sw.row_key(r) not in keys]
-    (out / sw.RESULTS_FILE).write_text("")
-    for r in kept + rows:
-        sw.append_row(out / sw.RESULTS_FILE, r)
-    print(header)
-    print("-" * len(header))
-    for r in rows:
-        n = r.get("latency_count") or 0
-        misses = r.get("deadline_misses") or 0
-        print(f"{r['engine']:<8} {r['rate_hz']:>8g} {n:>6} {r['latency_p50'] * 1e3:>10.3f} {r['latency_p99'] * 1e3:>10.3f} "
-              f"{r['latency_max'] * 1e3:>10.3f} {f'{misses} ({100 * misses / max(n, 1):.1f} %)':>18} "
-              f"{r['real_time_factor']:>6.3f} {r['step_time_p50'] * 1e3:>11.3f} {r['step_time_p99'] * 1e3:>11.3f}  "
-              + (f"diverged at step {r['diverged_at_step']}" if r["diverged"] else "ok"))
-    print("latency: the target's due time on the wall-clock schedule (first target + k / rate) -> state received, "
-          "so falling behind counts; miss: latency > 1 / rate; RTF: simulated / wall time")
-    print(f"results: {out / sw.RESULTS_FILE} (render with `cloth-bench report {out}`)")
+    settings = Path(args.settings) if args.settings else hil.DEFAULT_SETTINGS
+    layout = "one process" if args.in_process else "3 processes over DDS (controller, simulator, recorder+evaluator)"
+    print(f"cloth-bench hil: {args.cloth} {args.primitive}, targets on the wall clock, {layout}; bag {bag}")
+    results = []
+    for engine in engines:
+        for rate in args.rate or [100.0]:
+            params = dict(overrides.get(engine, {}))
+            config = hil.HilConfig(engine, float(rate), bag, args.cloth, args.primitive, args.seed, args.grid,
+                                   tuple(sorted(params.items())), config_label(args.grid, params),
+                                   not args.in_process, args.cpu, args.fifo, not args.no_freeze_gc, args.duration)
+            if args.config == "recommended":
+                rec, source = hil.recommended(engine, args.cloth, args.primitive, float(rate), settings,
+                                              args.tolerance_rel, args.tolerance_abs, args.budget)
+                config = hil.with_config(config, rec.config, rec.grid, {**rec.params, **params})
+                print(f"{engine} at {rate:g} Hz: recommended `{rec.config}` from {source}: CD {rec.cd:.4f} m "
+                      f"(best {rec.best_config}: {rec.best_cd:.4f} m), step p99 {rec.step_p99_ms:.3f} ms "
+                      + ("under" if rec.meets_deadline else "NOT under") + f" {1e3 * args.budget / rate:g} ms")
+            print(f"running {engine} at {rate:g} Hz, configuration {config.config} ...", flush=True)
+            result = hil.run_hil(config, out, lockstep=not args.no_lockstep)
+            results.append(result)
+            print("  simulator process: " + "; ".join(result.realtime))
+    rows = [r.row() for r in results]
+    hil.write_results(results, out)
+    print(text_table(hil_table(rows)))
+    print("latency: target due on the controller's wall-clock schedule -> state back at the controller; miss: latency "
+          "> 1 / rate; skipped: targets the simulator never stepped (a newer one was waiting); RTF: simulated / wall "
+          "time; CPU busy: all cores, any process, during the run")
+    report = write_hil_report(rows, out, out / "report")
+    print(f"results: {out / 'hil.jsonl'}; report: {report} (latency over time and histogram per run)")
+    return 1 if any(r.problems for r in results) else 0
+
+
+def _export_recommended(args: argparse.Namespace) -> int:
+    """hil --export-recommended FILE: the settings sweep's recommendation per engine, task and rate."""
+    from cloth_bench_ros.report.hil import all_recommendations, provenance, recommendation_yaml
+    from cloth_bench_ros.safe_io import atomic_write_text
+    from cloth_bench_ros.studies.sweep import load_rows
+
+    if not args.settings:
+        raise UserError("--export-recommended needs --settings RESULTS (a settings sweep's results)")
+    rows = load_rows(Path(args.settings))
+    recs = all_recommendations(rows, args.tolerance_rel, args.tolerance_abs, args.budget)
+    if not recs:
+        raise UserError(f"settings {args.settings}: no settings-sweep rows with a stable configuration")
+    atomic_write_text(Path(args.export_recommended), recommendation_yaml(
+        recs, provenance(rows, args.tolerance_rel, args.tolerance_abs, args.budget, args.note or "")))
+    for r in recs:
+        print(f"{r.engine} {r.cloth} {r.primitive} {r.rate_hz:g} Hz: {r.config} (CD {r.cd:.4f} m, step p99 "
+              f"{r.step_p99_ms:.3f} ms, deadline {'met' if r.meets_deadline else 'not met'})")
+    print(f"written: {args.export_recommended}")
     return 0
 
 
@@ -421,16 +450,36 @@ def build_parser() -> argparse.ArgumentParser:
     stress.add_argument("--no-progress", action="store_true", help="no progress bar")
     stress.set_defaults(func=cmd_stress)
 
-    hil = sub.add_parser("hil", help="hardware-in-the-loop timing: one run with targets paced by the wall clock")
-    hil.add_argument("--engine", default="mujoco", help="default mujoco")
+    hil = sub.add_parser("hil", help="hardware in the loop: targets on the wall clock, the simulator in its own process")
+    hil.add_argument("--engine", action="append", help="repeat for several (default mujoco)")
     hil.add_argument("--rate", type=_rate, action="append", help="Hz, repeat for several (default 100)")
+    hil.add_argument("--config", default="preset", choices=("preset", "recommended"),
+                     help="preset (with --grid/--set) or the settings sweep's recommendation for the rate")
+    hil.add_argument("--settings", help="settings-sweep results for --config recommended (default results/settings; "
+                                        "without a result there: config/hil_recommended.yaml)")
+    hil.add_argument("--tolerance-rel", type=float, default=0.05, help="recommendation: CD within this fraction "
+                                                                       "of the best (default 0.05)")
+    hil.add_argument("--tolerance-abs", type=float, default=0.002, help="... or this many metres (default 0.002)")
+    hil.add_argument("--deadline-budget", dest="budget", type=float, default=1.0,
+                     help="recommendation: step p99 under this fraction of the period (default 1)")
     hil.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel)")
     hil.add_argument("--primitive", default="dynamic", choices=PRIMITIVES, help="default dynamic")
     hil.add_argument("--bag", help="rosbag2 MCAP bag (default: the bundled one)")
     hil.add_argument("--seed", type=int, default=0)
     hil.add_argument("--grid", type=_grid, help="cloth mesh NXxNZ (default: the engine's)")
     hil.add_argument("--set", action="append", metavar="ENGINE.PARAM=VALUE", help="engine parameter override")
+    hil.add_argument("--cpu", type=int, default=-1, help="pin the simulator process to this core (default: not)")
+    hil.add_argument("--fifo", type=int, default=0, metavar="PRIORITY",
+                     help="ask SCHED_FIFO at this priority for the simulator (1-99; default 0: not)")
+    hil.add_argument("--no-freeze-gc", action="store_true", help="keep automatic garbage collection in the simulator")
+    hil.add_argument("--in-process", action="store_true", help="all nodes in one process (intra-process transport)")
+    hil.add_argument("--duration", type=float, default=0.0, help="s of the trajectory to run (default 0: all; a "
+                                                                  "shortened run is not scored)")
+    hil.add_argument("--no-lockstep", action="store_true", help="skip the lockstep run that gives the CD")
     hil.add_argument("--output", help="results directory (default results/hil)")
+    hil.add_argument("--export-recommended", metavar="FILE", help="write the recommendation of every engine, task "
+                                                                  "and rate in --settings to FILE and exit")
+    hil.add_argument("--note", help="--export-recommended: a provenance note (e.g. the sweep's command)")
     hil.set_defaults(func=cmd_hil)
 
     traj = sub.add_parser("trajectory", help="print the quintic part of a primitive as CSV")

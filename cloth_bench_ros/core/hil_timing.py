@@ -121,7 +121,7 @@ def hil_figures(timeline: TargetTimeline, skipped: int, period_s: float) -> HilF
     if got.size and timeline.anchor is not None:
         wall = (timeline.received[got[-1]] - timeline.due[0]) / 1e9
         sim = (timeline.stamps[got[-1]] - timeline.stamps[0]) / 1e9
-        rtf = sim / wall if wall > 0 else nan
+        rtf = float(sim / wall) if wall > 0 else nan
     return HilFigures(
         targets=len(timeline), sent=int(sent.sum()), states=states, skipped=int(skipped),
         lost=int(sent.sum()) - states - int(skipped), deadline_misses=int(np.sum(lat > period_s)),

@@ -22,7 +22,7 @@ from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.runtime import (
     EMBEDDED, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, PoseArray,
-    declare_float, make_qos, stamp_ns,
+    declare_float, make_qos, serialize_message, stamp_ns,
 )
 from cloth_bench_ros.runtime import realtime
 from cloth_bench_ros.core.scene import ClothGrid
@@ -105,6 +105,7 @@ class Simulator(Node):
         self.targets = full_targets(primitive, rate_hz)
         self.stamps = np.array([self.targets.stamp_ns(k) for k in range(len(self.targets))], dtype=np.int64)
         self.last_k = -1
+        self.step_times = np.full(len(self.stamps), np.nan)  # s per step, kept for a HIL report
         self.grippers = np.zeros((2, 3))
         self.left, self.right = self.grippers[0], self.grippers[1]
         self.messages = StateMessages(self.engine_name, len(self.engine.grid.vertices()), publish_serialises(self))
@@ -125,7 +126,9 @@ class Simulator(Node):
         self.engine.reset(self.seed, left, right)
         self.engine.step(left, right)
         vertices = self.engine.reset(self.seed, left, right)
-        self.messages.fill(self.messages.cloud.header.stamp, vertices, 0, 0.0, None, 0)
+        cloud, status = self.messages.fill(self.messages.cloud.header.stamp, vertices, 0, 0.0, None, 0)
+        serialize_message(cloud)  # the serialisers are generated on first use
+        serialize_message(status)
         return vertices
 
     def on_target(self, msg: PoseArray) -> None:
@@ -145,6 +148,8 @@ class Simulator(Node):
         else:
             vertices = self.engine.step(self.left, self.right)
         step_time = time.perf_counter() - start
+        if self.step < len(self.step_times):
+            self.step_times[self.step] = step_time
         cloud, status = self.messages.fill(msg.header.stamp, vertices, self.step, step_time, self.engine.divergence,
                                            self.skipped)
         self.cloud_pub.publish(cloud)

@@ -140,6 +140,34 @@ def recommendation_yaml(recs: Sequence[Recommendation], provenance: dict) -> str
                           sort_keys=False, width=110)
 
 
+def all_recommendations(rows: Sequence[dict], tol_rel: float = 0.05, tol_abs: float = 0.002,
+                        budget: float = 1.0) -> list[Recommendation]:
+    """`recommend_for_rate` for every engine, task and rate of a settings sweep's rows."""
+    keys = sorted({(r["engine"], r["cloth"], r["primitive"], float(r["rate_hz"])) for r in rows
+                   if r.get("mode") == "settings"})
+    recs = [recommend_for_rate(rows, *key, tol_rel, tol_abs, budget) for key in keys]
+    return [r for r in recs if r is not None]
+
+
+def provenance(rows: Sequence[dict], tol_rel: float, tol_abs: float, budget: float, note: str = "") -> dict:
+    """Where a recommendation file's numbers come from: the sweep's size, engines, machine load, rule."""
+    from datetime import datetime, timezone
+
+    settings = [r for r in rows if r.get("mode") == "settings"]
+    loads = finite(r.get("load_avg_1min") for r in settings)
+    return {
+        "generated": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "from": f"{len(settings)} settings-sweep cells (`cloth-bench sweep --mode settings`), lockstep",
+        "engines": sorted({f"{r['engine']} {r['engine_version']}" for r in settings if r.get("engine_version")}),
+        "rule": f"cheapest (mean step time) with CD <= best + max({tol_rel:g} x best, {tol_abs:g} m) and step p99 < "
+                f"{budget:g} x period; if none meets the deadline, the cheapest within tolerance (meets_deadline false)",
+        "machine": (f"{settings[0].get('cpu_count') if settings else '?'} cores; 1-minute load average during the "
+                    f"sweep {np.median(loads):.1f} (median, {loads.min():.1f}-{loads.max():.1f})" if len(loads)
+                    else "unknown"),
+        "note": note,
+    }
+
+
 def load_recommendations(path: Path) -> list[Recommendation]:
     """The entries of a recommendation file; ValueError naming the file on a malformed one."""
     from cloth_bench_ros.safe_io import load_yaml_file
@@ -190,6 +218,16 @@ def hil_table(rows: Sequence[dict]) -> Table:
                          "lat max ms", "deadline misses", "skipped targets", "RTF", "step p99 ms", "CPU busy",
                          "load / cores", "CD lockstep (m)", "CD realtime (m)", "bookkeeping"], out,
                  "lrllrrrrrrrrrrrrl")
+
+
+def text_table(table: Table) -> str:
+    """A table as fixed-width text for the terminal (numbers right-aligned)."""
+    cells = [table.headers] + [[str(c).replace("**", "") for c in row] for row in table.rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(table.headers))]
+    align = table.align or "l" * len(widths)
+    lines = ["  ".join(c.rjust(w) if a == "r" else c.ljust(w) for c, w, a in zip(row, widths, align)).rstrip()
+             for row in cells]
+    return "\n".join([lines[0], "-" * len(lines[0])] + lines[1:])
 
 
 def plot_run(timeline, period_s: float, path: Path, title: str) -> Path:

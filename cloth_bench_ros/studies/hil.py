@@ -17,6 +17,7 @@ transport instead (no target is ever dropped there: a late simulator queues).
 
 from __future__ import annotations
 
+import gc
 import json
 import math
 import os
@@ -27,6 +28,7 @@ import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from cloth_bench_ros.core.hil_timing import HilFigures, TargetTimeline, check_bookkeeping, hil_figures
@@ -181,7 +183,12 @@ def _write_simulator_file(run_dir: Path, nodes: list) -> None:
 
     for node in nodes:
         if isinstance(node, Simulator):
-            info = {"stepped": node.step + 1, "skipped": node.skipped, "realtime": node.realtime.lines()}
+            times = node.step_times[1 : node.step + 1]  # step 0 is the reset
+            times = times[np.isfinite(times)]
+            step_time = ({"p50": float(np.percentile(times, 50)), "p99": float(np.percentile(times, 99)),
+                          "max": float(times.max())} if times.size else {})
+            info = {"stepped": node.step + 1, "skipped": node.skipped, "realtime": node.realtime.lines(),
+                    "step_time": step_time}
             atomic_write_text(run_dir / SIMULATOR_FILE, json.dumps(info))
 
 
@@ -239,8 +246,10 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
     try:
         nodes = _make_nodes(config, group, run_dir, context)
         if group == "controller":
+            _warm_up_messages()
             while not stopped and not _graph_complete(nodes[0]):
                 time.sleep(0.01)  # discovery runs in Cyclone's threads; the node's timers wait
+            gc.freeze()  # start-up objects out of the collector's way (the simulator also stops it)
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)
@@ -250,6 +259,14 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
     finally:
         close_nodes(nodes)
         rclpy.shutdown(context=context)
+
+
+def _warm_up_messages() -> None:
+    """The controller's serialisers (targets out, states in) generated before the first deadline."""
+    from cloth_bench_ros.runtime import PointCloud2, PoseArray, deserialize_message, serialize_message
+
+    for msg_type in (PoseArray, PointCloud2):
+        deserialize_message(serialize_message(msg_type()), msg_type)
 
 
 def _graph_complete(controller) -> bool:
@@ -327,10 +344,9 @@ def collect(config: HilConfig, run_dir: Path, load: dict) -> HilResult:
     sim = json.loads((run_dir / SIMULATOR_FILE).read_text())
     result = HilResult(config, hil_figures(timeline, sim["skipped"], 1.0 / config.rate_hz), sim["stepped"],
                        sim["skipped"], check_bookkeeping(timeline, sim["stepped"], sim["skipped"]),
-                       sim["realtime"], load, run_dir=run_dir)
+                       sim["realtime"], load, sim.get("step_time") or {}, run_dir=run_dir)
     if (run_dir / SUMMARY_FILE).is_file():
         m = json.loads((run_dir / SUMMARY_FILE).read_text())["engines"][config.engine]
-        result.step_time = m["step_time"]
         result.cd_realtime = _cd(m, config.primitive)
         result.diverged = bool(m["diverged"])
     return result
@@ -364,6 +380,32 @@ def write_results(results: list[HilResult], out_dir: Path) -> Path:
 def with_config(config: HilConfig, label: str, grid: tuple[int, int] | None, params: dict) -> HilConfig:
     """The same run with another engine configuration."""
     return replace(config, config=label, grid=grid, params=tuple(sorted(params.items())))
+
+
+RECOMMENDED_FILE = "hil_recommended.yaml"
+DEFAULT_SETTINGS = Path("results") / "settings"  # where `cloth-bench sweep --mode settings` writes
+
+
+def recommended(engine: str, cloth: str, primitive: str, rate_hz: float, settings: Path | None = DEFAULT_SETTINGS,
+                tol_rel: float = 0.05, tol_abs: float = 0.002, budget: float = 1.0):
+    """The configuration `--config recommended` runs and where it comes from: the settings sweep's
+    results if they hold this engine, task and rate, else the shipped config/hil_recommended.yaml."""
+    from cloth_bench_ros.paths import share_dir
+    from cloth_bench_ros.report.hil import load_recommendations, recommend_for_rate
+    from cloth_bench_ros.studies.sweep import load_rows
+
+    if settings is not None and Path(settings).exists():
+        rec = recommend_for_rate(load_rows(Path(settings)), engine, cloth, primitive, rate_hz, tol_rel, tol_abs,
+                                 budget)
+        if rec is not None:
+            return rec, f"settings sweep {settings}"
+    shipped = share_dir("config") / RECOMMENDED_FILE
+    for rec in load_recommendations(shipped) if shipped.is_file() else []:
+        if (rec.engine, rec.cloth, rec.primitive, rec.rate_hz) == (engine, cloth, primitive, float(rate_hz)):
+            return rec, f"{shipped} (shipped; no settings-sweep result for it in {settings})"
+    raise ValueError(f"--config recommended: no settings-sweep result for {engine}, {cloth} {primitive} at "
+                     f"{rate_hz:g} Hz in {settings} and no entry in {shipped}; run `cloth-bench sweep --mode settings "
+                     f"--engine {engine} --rate {rate_hz:g} --cloth {cloth} --primitive {primitive}` first")
 
 
 if __name__ == "__main__":  # python -m cloth_bench_ros.studies.hil GROUP RUN_DIR CONFIG_JSON
