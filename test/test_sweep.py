@@ -1,4 +1,4 @@
-"""Sweeps: cells, parallel workers, resume, diverged and failed cells, settings mode, hil; real engines."""
+"""Sweeps: cells, parallel workers, resume, diverged and failed cells, settings mode; real engines (hil: test_hil.py)."""
 
 from __future__ import annotations
 

@@ -21,6 +21,7 @@ import gc
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -59,10 +60,9 @@ class HilConfig:
     duration: float = 0.0  # s of the trajectory to run (0: all of it, scored by the observer)
 
     def ident(self) -> str:
-        from cloth_bench_ros.safe_io import safe_name
-
-        return safe_name(f"{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}_s{self.seed}_{self.config}",
-                         "HIL run name")
+        """The run's directory name: engine, rate, task, seed and configuration, file-system safe."""
+        text = f"{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}_s{self.seed}_{self.config}"
+        return re.sub(r"[^A-Za-z0-9_.+-]+", "-", text)
 
 
 @dataclass
