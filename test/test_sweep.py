@@ -183,23 +183,3 @@ def test_cli_run_accepts_grid_and_set(hanging_bag, tmp_path, capsys):
     assert summary["engines"]["mujoco"]["frames_scored"] == 132
     assert main(["run", "--bag", str(hanging_bag), "--set", "bullet.mass=1"]) == 2
     assert "not part of this run" in capsys.readouterr().err
-
-
-def test_hil_reports_latency_deadline_misses_and_real_time_factor(hanging_bag, tmp_path, capsys):
-    # An older measurement of the same cell is replaced, other rows are kept.
-    old = {"mode": "paper", "config": "grid=6x8", "engine": "mujoco", "rate_hz": 100.0, "cloth": "towel",
-           "primitive": "dynamic", "trial": 0, "seed": 0, "pacing": "realtime", "status": "ok", "latency_p50": 1.0}
-    sw.append_row(tmp_path / sw.RESULTS_FILE, old)
-    sw.append_row(tmp_path / sw.RESULTS_FILE, {**old, "rate_hz": 1000.0})
-    code = main(["hil", "--engine", "mujoco", "--rate", "100", "--bag", str(hanging_bag), "--grid", "6x8",
-                 "--output", str(tmp_path)])
-    out = capsys.readouterr().out
-    assert code == 0, out
-    assert "lat p99 ms" in out and "deadline misses" in out
-    rows = sw.load_rows(tmp_path)
-    assert sorted(r["rate_hz"] for r in rows) == [100.0, 1000.0]
-    row = next(r for r in rows if r["rate_hz"] == 100.0)
-    assert row["pacing"] == "realtime" and row["latency_count"] == 741
-    assert 0 < row["latency_p50"] <= row["latency_p99"] <= row["latency_max"] < 1.0
-    assert 0 <= row["deadline_misses"] <= 741
-    assert 0.5 < row["real_time_factor"] <= 1.05  # paced by the wall clock
