@@ -4,7 +4,8 @@ import pytest
 
 from cloth_bench_ros.runtime import embedded as rclpy
 from cloth_bench_ros.runtime.embedded import (
-    DurabilityPolicy, InvalidParameterTypeException, Node, Parameter, ParameterNotDeclaredException, QoSProfile, SingleThreadedExecutor, Time,
+    DurabilityPolicy, InvalidParameterTypeException, Node, Parameter, ParameterNotDeclaredException,
+    QoSProfile, SingleThreadedExecutor, Time,
 )
 from cloth_bench_ros.runtime.messages import Clock, Header, Pose, PoseArray, String
 from cloth_bench_ros.data.messages import deserialize
