@@ -473,12 +473,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help="ask SCHED_FIFO at this priority for the simulator (1-99; default 0: not)")
     hil.add_argument("--no-freeze-gc", action="store_true", help="keep automatic garbage collection in the simulator")
     hil.add_argument("--in-process", action="store_true", help="all nodes in one process (intra-process transport)")
-    hil.add_argument("--duration", type=float, default=0.0, help="s of the trajectory to run (default 0: all; a "
-                                                                  "shortened run is not scored)")
+    hil.add_argument("--duration", type=float, default=0.0,
+                     help="s of the trajectory to run (default 0: all; a shortened run is not scored)")
     hil.add_argument("--no-lockstep", action="store_true", help="skip the lockstep run that gives the CD")
     hil.add_argument("--output", help="results directory (default results/hil)")
-    hil.add_argument("--export-recommended", metavar="FILE", help="write the recommendation of every engine, task "
-                                                                  "and rate in --settings to FILE and exit")
+    hil.add_argument("--export-recommended", metavar="FILE",
+                     help="write the recommendation of every engine, task and rate in --settings to FILE and exit")
     hil.add_argument("--note", help="--export-recommended: a provenance note (e.g. the sweep's command)")
     hil.set_defaults(func=cmd_hil)
 

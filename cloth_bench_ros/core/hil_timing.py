@@ -41,7 +41,8 @@ class TargetTimeline:
 
     def due_through(self, now_ns: int, period_ns: int) -> int:
         """Index of the last target due by now, rounding to the nearest schedule point (a tick
-        that fires a little before its due time still sends its target)."""
+        that fires a little before its due time still sends its target).
+        """
         return int(np.searchsorted(self.due, now_ns + period_ns // 2, side="right")) - 1
 
     def index_of(self, stamp_ns: int) -> int:

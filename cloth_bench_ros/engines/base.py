@@ -162,7 +162,8 @@ class ClothEngine(abc.ABC):
 
     def _check(self, vertices: np.ndarray, left: np.ndarray, right: np.ndarray) -> str | None:
         """check_divergence, cheaply: two bounds computed in preallocated scratch arrays; the
-        exact reason only when a bound fails (NaN fails every comparison, so it gets there too)."""
+        exact reason only when a bound fails (NaN fails every comparison, so it gets there too).
+        """
         if self._scratch is None or self._scratch.shape != vertices.shape:
             self._scratch, self._row = np.empty_like(vertices, dtype=float), np.empty(len(vertices))
         mid, buf = self._mid, self._scratch

@@ -30,7 +30,8 @@ from cloth_bench_ros.core.scene import ClothGrid
 
 def publish_serialises(node: Node) -> bool:
     """True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
-    the embedded intra-process transport hands subscribers the object itself."""
+    the embedded intra-process transport hands subscribers the object itself.
+    """
     return not EMBEDDED or node.context.transport.name != "intra"
 
 
@@ -121,7 +122,8 @@ class Simulator(Node):
 
     def warm_up(self) -> np.ndarray:
         """Start-up work before the first deadline: the reset at the trajectory's first target, one
-        throwaway step (first-call costs), the reset again; its vertices answer target 0."""
+        throwaway step (first-call costs), the reset again; its vertices answer target 0.
+        """
         left, right = self.targets.left[0], self.targets.right[0]
         self.engine.reset(self.seed, left, right)
         self.engine.step(left, right)

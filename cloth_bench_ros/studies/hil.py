@@ -171,7 +171,8 @@ def _make_nodes(config: HilConfig, group: str, run_dir: Path, context) -> list:
 
 def _finished(group: str, nodes: list) -> bool:
     """The controller ends once its timeline is written, the observer once the evaluator reported;
-    the simulator runs until it is told to stop."""
+    the simulator runs until it is told to stop.
+    """
     if group == "simulator":
         return False
     return all(getattr(n, "done", True) for n in nodes)
@@ -271,7 +272,8 @@ def _warm_up_messages() -> None:
 
 def _graph_complete(controller) -> bool:
     """Every endpoint of the controller matched: targets heard by simulator and evaluator, /clock by
-    recorder and evaluator, and the simulator's states heard by the controller."""
+    recorder and evaluator, and the simulator's states heard by the controller.
+    """
     states = [sub for sub in controller._subscriptions if sub.topic_name.endswith("/cloud")]
     return (controller.target_pub.get_subscription_count() >= 2 and controller.clock_pub.get_subscription_count() >= 2
             and all(sub.get_publisher_count() >= 1 for sub in states))
@@ -389,7 +391,8 @@ DEFAULT_SETTINGS = Path("results") / "settings"  # where `cloth-bench sweep --mo
 def recommended(engine: str, cloth: str, primitive: str, rate_hz: float, settings: Path | None = DEFAULT_SETTINGS,
                 tol_rel: float = 0.05, tol_abs: float = 0.002, budget: float = 1.0):
     """The configuration `--config recommended` runs and where it comes from: the settings sweep's
-    results if they hold this engine, task and rate, else the shipped config/hil_recommended.yaml."""
+    results if they hold this engine, task and rate, else the shipped config/hil_recommended.yaml.
+    """
     from cloth_bench_ros.paths import share_dir
     from cloth_bench_ros.report.hil import load_recommendations, recommend_for_rate
     from cloth_bench_ros.studies.sweep import load_rows
