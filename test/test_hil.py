@@ -196,6 +196,12 @@ def test_recommendation_is_the_cheapest_accurate_enough_within_the_deadline(tmp_
     tight = recommend_for_rate(rows, "mujoco", "towel", "dynamic", 100.0, 0.05, 0.002, budget=0.3)
     assert (tight.config, tight.meets_deadline) == ("fine", False)  # none within 3 ms: cheapest accurate
     assert recommend_for_rate(rows, "mujoco", "towel", "dynamic", 1000.0) is None
+    from cloth_bench_ros.report.document import render_report
+
+    outcome = render_report(rows, tmp_path, tmp_path / "report")  # the settings report shows the criterion
+    table = outcome.tables["deadline_mujoco_towel_dynamic_100hz"]
+    assert [row[0] for row in table.rows] == ["coarse", "fine", "accurate"]  # by step p99
+    assert [row[3] for row in table.rows] == ["yes", "yes", "no"] and table.rows[1][-1] == "**recommended**"
 
 
 def test_recommended_falls_back_to_the_shipped_file_with_its_provenance(tmp_path, capsys):

@@ -958,6 +958,14 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
         for t in s_tables:
             doc.h(3, t.name.replace("settings_", "").replace("_", " "))
             add_table(t)
+        from cloth_bench_ros.report.hil import deadline_tables  # issue 10: the deadline criterion
+
+        d_tables, d_notes = deadline_tables(rows, tol_rel, tol_abs)
+        doc.h(3, "Fast enough for the rate: step p99 under the period (hardware in the loop)")
+        for n in d_notes:
+            doc.p(n)
+        for t in d_tables:
+            add_table(t)
 
     if stress_rows:
         doc.h(2, "Stress suite: hard cases")
