@@ -66,9 +66,10 @@ def main() -> None:
                     result = hil.run_hil(config, args.output)
                     results.append(result)
                     f = result.figures
+                    step_p99 = result.step_time.get("p99", math.nan)
                     print(f"  {engine} {rate:g} Hz {config.config}: latency p99 {f.latency_p99 * 1e3:.3f} ms, "
-                          f"{f.deadline_misses} misses, {f.skipped} skipped of {f.sent}; step p99 "
-                          f"{result.step_time.get('p99', math.nan) * 1e3:.3f} ms; CPU busy "
+                          f"{f.deadline_misses} misses, {f.skipped} skipped of {f.sent}; step p99 {step_p99 * 1e3:.3f} "
+                          f"ms (latency p99 / step p99 = {f.latency_p99 / step_p99:.2f}); CPU busy "
                           f"{100 * result.load['cpu_busy']:.0f} %; {'; '.join(result.realtime)}", flush=True)
     rows = [r.row() for r in results]
     hil.write_results(results, args.output)

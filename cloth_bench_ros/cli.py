@@ -470,7 +470,7 @@ def build_parser() -> argparse.ArgumentParser:
     hil.add_argument("--set", action="append", metavar="ENGINE.PARAM=VALUE", help="engine parameter override")
     hil.add_argument("--cpu", type=int, default=-1, help="pin the simulator process to this core (default: not)")
     hil.add_argument("--fifo", type=int, default=0, metavar="PRIORITY",
-                     help="ask SCHED_FIFO at this priority for the simulator (1-99; default 0: not)")
+                     help="ask SCHED_FIFO at this priority for the simulator and the controller (1-99; default 0: not)")
     hil.add_argument("--no-freeze-gc", action="store_true", help="keep automatic garbage collection in the simulator")
     hil.add_argument("--in-process", action="store_true", help="all nodes in one process (intra-process transport)")
     hil.add_argument("--duration", type=float, default=0.0,

@@ -179,6 +179,10 @@ def test_process_settings_report_what_the_system_granted():
     finally:
         gc.unfreeze()
         gc.enable()
+    outcome = realtime.apply(-1, 0, True)
+    assert not gc.isenabled()
+    realtime.release(outcome)
+    assert gc.isenabled() and gc.get_freeze_count() == 0
 
 
 def _settings_row(config: str, cd: float, mean_ms: float, p99_ms: float, grid: str | None = None) -> dict:
@@ -230,6 +234,7 @@ def test_cli_hil_in_process_with_the_recommended_configuration(hanging_bag, tmp_
     assert code == 0, out
     assert f"recommended `grid=6x8` from settings sweep {settings}" in out and "under 10 ms" in out
     assert "lat p99.9 ms" in out and "1 process" in out and (tmp_path / "o" / "hil.jsonl").is_file()
+    assert gc.isenabled()  # the simulator froze the heap of this process and gave it back
     assert main(["hil", "--config", "recommended", "--grid", "6x8", "--bag", str(hanging_bag)]) == 2
     assert main(["hil", "--engine", "nosuch"]) == 2
     assert math.isfinite(hil.HilConfig("mujoco", 100.0, hanging_bag).rate_hz)

@@ -172,6 +172,7 @@ class Simulator(Node):
 
     def close(self) -> None:
         self.engine.close()
+        realtime.release(self.realtime)
 
 
 def main(args: list[str] | None = None) -> int:

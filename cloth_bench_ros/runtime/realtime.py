@@ -20,6 +20,8 @@ class RealtimeOutcome:
     scheduler: str
     gc: str
     frozen: bool  # the heap was frozen and automatic collection is off: call collect_young()
+    previous_cpus: frozenset[int] | None = None  # the affinity before pinning, restored by release()
+    previous_policy: int | None = None  # the scheduler before SCHED_FIFO, restored by release()
 
     def lines(self) -> list[str]:
         return [f"cpu: {self.cpu}", f"scheduler: {self.scheduler}", f"gc: {self.gc}"]
@@ -93,5 +95,19 @@ def collect_young() -> None:
 
 def apply(cpu: int, fifo_priority: int, freeze_gc: bool) -> RealtimeOutcome:
     """Pin, request SCHED_FIFO and freeze the heap as asked; what the system granted."""
+    cpus = frozenset(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+    policy = os.sched_getscheduler(0) if hasattr(os, "sched_getscheduler") else None
     return RealtimeOutcome(pin_to_cpu(cpu), request_fifo(fifo_priority),
-                           freeze_heap() if freeze_gc else "automatic collection (not frozen)", freeze_gc)
+                           freeze_heap() if freeze_gc else "automatic collection (not frozen)", freeze_gc,
+                           cpus, policy)
+
+
+def release(outcome: RealtimeOutcome) -> None:
+    """Undo `apply` (a simulator composed into a longer-lived process, e.g. `hil --in-process`)."""
+    if outcome.frozen:
+        gc.unfreeze()
+        gc.enable()
+    if outcome.previous_cpus is not None and outcome.cpu.startswith("pinned"):
+        os.sched_setaffinity(0, outcome.previous_cpus)
+    if outcome.previous_policy is not None and outcome.scheduler.startswith("SCHED_FIFO"):
+        os.sched_setscheduler(0, outcome.previous_policy, os.sched_param(0))

@@ -55,7 +55,7 @@ class HilConfig:
     config: str = "preset"  # the configuration's name (settings-sweep label)
     processes: bool = True
     cpu: int = -1  # core to pin the simulator to (-1: not pinned)
-    realtime_priority: int = 0  # SCHED_FIFO priority of the simulator (0: default scheduler)
+    realtime_priority: int = 0  # SCHED_FIFO priority of the simulator and the controller (0: not asked)
     freeze_gc: bool = True
     duration: float = 0.0  # s of the trajectory to run (0: all of it, scored by the observer)
 
@@ -237,7 +237,7 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
 def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
     """One group in this process over DDS until it finishes or gets SIGTERM (a child process's work)."""
     from cloth_bench_ros.nodes.common import close_nodes
-    from cloth_bench_ros.runtime import SingleThreadedExecutor, rclpy
+    from cloth_bench_ros.runtime import SingleThreadedExecutor, rclpy, realtime
 
     stopped: list[bool] = []
     signal.signal(signal.SIGTERM, lambda *_: stopped.append(True))
@@ -251,6 +251,8 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
             while not stopped and not _graph_complete(nodes[0]):
                 time.sleep(0.01)  # discovery runs in Cyclone's threads; the node's timers wait
             gc.freeze()  # start-up objects out of the collector's way (the simulator also stops it)
+            # The controller is the robot's real-time loop: the same scheduling request as the simulator.
+            print(f"controller: {realtime.request_fifo(config.realtime_priority)}", flush=True)
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)
