@@ -162,7 +162,8 @@ def test_process_settings_report_what_the_system_granted():
     before = os.sched_getaffinity(0)
     core = min(before)
     try:
-        assert realtime.pin_to_cpu(core) == f"pinned to core {core}" and os.sched_getaffinity(0) == {core}
+        assert realtime.pin_to_cpu(core).startswith(f"pinned to core {core} (") and os.sched_getaffinity(0) == {core}
+        assert all(os.sched_getaffinity(tid) == {core} for tid in realtime.threads())
     finally:
         os.sched_setaffinity(0, before)
     assert "refused" in realtime.pin_to_cpu(100_000)

@@ -2,7 +2,10 @@
 
 Each request reports what it got: Linux refuses SCHED_FIFO to a process without CAP_SYS_NICE
 (or an RLIMIT_RTPRIO above 0), and a core outside the process's allowed set cannot be pinned.
-A refusal is a result to print, never an exception.
+A refusal is a result to print, never an exception. Linux schedules threads, not processes, and
+a DDS participant receives in threads of its own (Cyclone's recvUC, dq.builtins, tev, ...):
+affinity and scheduler are set for every thread the process has when asked (/proc/self/task),
+and threads started later inherit them from the thread that starts them.
 """
 
 from __future__ import annotations
@@ -27,17 +30,36 @@ class RealtimeOutcome:
         return [f"cpu: {self.cpu}", f"scheduler: {self.scheduler}", f"gc: {self.gc}"]
 
 
+def threads() -> list[int]:
+    """Thread ids of this process (Linux: /proc/self/task), else [0] (the calling thread)."""
+    try:
+        return sorted(int(t) for t in os.listdir("/proc/self/task"))
+    except (OSError, ValueError):
+        return [0]
+
+
 def pin_to_cpu(cpu: int) -> str:
-    """Pin this process to one core (-1: leave it); the outcome as a sentence."""
+    """Pin every thread of this process to one core (-1: leave it); the outcome as a sentence."""
     if cpu < 0:
         return f"not pinned (allowed cores {_allowed()})"
     if not hasattr(os, "sched_setaffinity"):
         return f"pinning to core {cpu} refused: os.sched_setaffinity is not available on this system"
     try:
         os.sched_setaffinity(0, {cpu})
+        tids = threads()
+        for tid in tids:
+            _ignore_gone(os.sched_setaffinity, tid, {cpu})
     except (OSError, ValueError) as exc:
         return f"pinning to core {cpu} refused ({exc}); allowed cores {_allowed()}"
-    return f"pinned to core {cpu}"
+    return f"pinned to core {cpu} ({len(tids)} threads)"
+
+
+def _ignore_gone(call, tid: int, *args) -> None:
+    """call(tid, *args), unless the thread has ended meanwhile."""
+    try:
+        call(tid, *args)
+    except ProcessLookupError:
+        pass
 
 
 def _allowed() -> str:
@@ -58,13 +80,16 @@ def request_fifo(priority: int) -> str:
         return f"SCHED_FIFO {priority} refused: priority outside [{low}, {high}]"
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        tids = threads()
+        for tid in tids:
+            _ignore_gone(os.sched_setscheduler, tid, os.SCHED_FIFO, os.sched_param(priority))
     except PermissionError:
         return (f"SCHED_FIFO {priority} refused: not permitted (needs CAP_SYS_NICE or an RLIMIT_RTPRIO "
                 f"of at least {priority}, e.g. `ulimit -r {priority}` or /etc/security/limits.conf); "
                 f"running on SCHED_OTHER")
     except OSError as exc:
         return f"SCHED_FIFO {priority} refused ({exc}); running on SCHED_OTHER"
-    return f"SCHED_FIFO priority {priority}"
+    return f"SCHED_FIFO priority {priority} ({len(tids)} threads)"
 
 
 def freeze_heap() -> str:
@@ -107,7 +132,8 @@ def release(outcome: RealtimeOutcome) -> None:
     if outcome.frozen:
         gc.unfreeze()
         gc.enable()
-    if outcome.previous_cpus is not None and outcome.cpu.startswith("pinned"):
-        os.sched_setaffinity(0, outcome.previous_cpus)
-    if outcome.previous_policy is not None and outcome.scheduler.startswith("SCHED_FIFO"):
-        os.sched_setscheduler(0, outcome.previous_policy, os.sched_param(0))
+    for tid in threads():
+        if outcome.previous_cpus is not None and outcome.cpu.startswith("pinned"):
+            _ignore_gone(os.sched_setaffinity, tid, outcome.previous_cpus)
+        if outcome.previous_policy is not None and outcome.scheduler.startswith("SCHED_FIFO"):
+            _ignore_gone(os.sched_setscheduler, tid, outcome.previous_policy, os.sched_param(0))
