@@ -316,3 +316,23 @@ def test_the_readme_rate_hz_1000_works(context):
     rclpy.init(args=["prog", "--ros-args", "-p", "rate_hz:=1000"], context=context)
     node = TrajectoryPublisher(context=context)
     assert node.targets.rate_hz == 1000.0
+
+
+def test_the_recorders_wall_clock_replay_runs_under_use_sim_time(context):
+    """Its timer is on a steady clock: on the node's sim clock (rclpy's default) it would never fire."""
+    from pathlib import Path
+
+    from cloth_bench_ros.nodes.recorder import Recorder
+
+    bag = Path(__file__).resolve().parents[1] / "bags" / "towel_dynamic"
+    rclpy.init(args=["prog", "--ros-args", "-p", "use_sim_time:=true", "-p", "clock:=wall", "-p", "rate_factor:=50",
+                     "-p", f"bag:={bag}"], context=context)
+    recorder = Recorder(context=context)
+    ex = SingleThreadedExecutor(context=context)
+    ex.add_node(recorder)
+    for _ in range(2000):
+        if recorder.done:
+            break
+        ex.spin_once(timeout_sec=0.01)
+    assert recorder.done and recorder.published == len(list(recorder.bag.raw_messages([recorder.topic])))
+    assert recorder.get_clock().now().nanoseconds == 0  # no /clock: sim time never started
