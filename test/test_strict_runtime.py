@@ -299,7 +299,7 @@ def test_rclpy_exception_classes_count_as_user_errors():
     (["-p", "primitive:=3"], "primitive"),
 ])
 def test_a_node_with_a_bad_argument_prints_one_line_and_exits_2(tmp_path, args, expected):
-    """BRIEF's user-error rule over rcl/rclpy's errors (arguments.c, parse.c, node.py _apply_descriptor)."""
+    """A user error is one line and exit 2, for rcl/rclpy's errors too (arguments.c, parse.c, node.py)."""
     bad = _params_file(tmp_path, "/**/simulator*:\n  ros__parameters:\n    seed: 1\n")
     args = [a.replace("{bad}", str(bad)) for a in args]
     env = {**os.environ, "CLOTH_BENCH_EMBEDDED": "1"}
