@@ -16,7 +16,7 @@ import pytest
 from cloth_bench_ros.runtime import declare_float, is_user_error, steady_clock
 from cloth_bench_ros.runtime import embedded as rclpy
 from cloth_bench_ros.runtime.embedded import (
-    InvalidParameterTypeException, Node, Parameter, ParameterAlreadyDeclaredException,
+    InvalidParameterException, InvalidParameterTypeException, Node, Parameter, ParameterAlreadyDeclaredException,
     ParameterDescriptor, ParameterNotDeclaredException, ParameterType, ParameterUninitializedException,
     RCLInvalidROSArgsError, ReliabilityPolicy, SingleThreadedExecutor, Time, UnknownROSArgsError,
 )
@@ -181,6 +181,8 @@ def test_declared_types_undeclared_and_uninitialised(context):
     with pytest.raises(ValueError, match="NOT_SET"):
         node.declare_parameter("no_default")
     assert node.declare_parameter("anything", None, ParameterDescriptor(dynamic_typing=True)).value is None
+    with pytest.raises(InvalidParameterException):  # rclpy/validate_parameter_name.py
+        node.declare_parameter("", 1)
 
 
 def test_use_sim_time_must_be_a_bool(context):

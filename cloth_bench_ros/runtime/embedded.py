@@ -44,8 +44,9 @@ from cloth_bench_ros.runtime.transport import (  # noqa: F401 (re-exported as rc
     IntraProcessTransport, TopicEndpointInfo, TopicEndpointTypeEnum, make_transport, transport_choice,
 )
 from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
-    InvalidParameterTypeException, Parameter, ParameterAlreadyDeclaredException, ParameterDescriptor,
-    ParameterException, ParameterNotDeclaredException, ParameterType, ParameterUninitializedException,
+    InvalidParameterException, InvalidParameterTypeException, Parameter, ParameterAlreadyDeclaredException,
+    ParameterDescriptor, ParameterException, ParameterNotDeclaredException, ParameterType,
+    ParameterUninitializedException,
     RCLError, RCLInvalidROSArgsError, UnknownROSArgsError, load_params_file,
 )
 
@@ -247,6 +248,8 @@ class Node:
     # parameters (rclpy/node.py declare_parameters, _apply_descriptor, get_parameter)
     def declare_parameter(self, name: str, value: Any = None, descriptor: ParameterDescriptor | None = None,
                           ignore_override: bool = False) -> Parameter:
+        if not name:
+            raise InvalidParameterException(name)
         descriptor = dataclasses.replace(descriptor) if descriptor is not None else ParameterDescriptor()
         if isinstance(value, ParameterType):
             if value == ParameterType.NOT_SET:

@@ -133,6 +133,13 @@ class ParameterAlreadyDeclaredException(ParameterException):
         ParameterException.__init__(self, "Parameter(s) already declared", parameters)
 
 
+class InvalidParameterException(ParameterException):
+    """A parameter name rclpy refuses (validate_parameter_name: an empty one)."""
+
+    def __init__(self, parameter_name: str) -> None:
+        ParameterException.__init__(self, "Invalid parameter name", parameter_name)
+
+
 class InvalidParameterTypeException(ParameterException):
     """An override's type is not the declared type."""
 
