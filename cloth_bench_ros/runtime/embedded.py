@@ -1,12 +1,16 @@
-"""An embedded, single-process stand-in for the subset of rclpy that the nodes use.
+"""An embedded stand-in for the subset of rclpy that the nodes use.
 
-It composes nodes in one process as a component container with intra-process communication
-would, and runs their callbacks deterministically: messages are delivered in the order they were
+Messages travel over the context's transport (runtime/transport.py): intra-process by default,
+or DDS (runtime/dds/: Cyclone DDS speaking ROS 2's wire protocol) between processes. In-process it
+composes nodes as a component container with intra-process communication would, and runs their
+callbacks deterministically: messages are delivered in the order they were
 published (one FIFO for the whole context), timers fire on the node's clock (runtime/clock.py),
 and a node with use_sim_time follows /clock. What it provides (and nothing more; README
 "Without ROS 2" lists it in full):
 
-- rclpy.init(args), ok(), shutdown(), spin(node), spin_once(node, timeout_sec)
+- rclpy.init(args, domain_id=, transport=), ok(), shutdown(), spin(node), spin_once(node, timeout_sec)
+- graph queries: Node.get_publishers_info_by_topic, get_subscriptions_info_by_topic,
+  get_node_names_and_namespaces; Subscription.get_publisher_count
 - rclpy.node.Node(name, namespace=, parameter_overrides=, context=, cli_args=): create_publisher,
   create_subscription, create_timer, destroy_timer, declare_parameter, get_parameter,
   has_parameter, get_logger, get_clock, get_name, get_namespace, count_subscribers,
