@@ -63,7 +63,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     config = RunConfig(bag=bag, engines=engines, rate_hz=args.rate, cloth=args.cloth, primitive=args.primitive,
                        seed=args.seed, pacing=args.pacing, output_dir=out,
                        engine_params=_overrides(getattr(args, "set", None), engines), grid=getattr(args, "grid", None), presets_dir=presets)
-    summary = run_pipeline(config)
+    if getattr(args, "processes", False):
+        from cloth_bench_ros.studies.processes import ProcessRunError, run_processes
+
+        try:
+            summary = run_processes(config)
+        except ProcessRunError as exc:
+            raise UserError(f"run --processes: {exc}") from None
+    else:
+        summary = run_pipeline(config)
     print(f"cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed}, bag {bag}")
     print(result_table(summary))
     real = summary["real"]
@@ -390,6 +398,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--presets", help="directory of <engine>.yaml presets (default: config/presets)")
     run.add_argument("--seed", type=int, default=0, help="perturbs the initial cloth (default 0)")
     run.add_argument("--pacing", default="lockstep", choices=("lockstep", "realtime"))
+    run.add_argument("--processes", action="store_true",
+                     help="one OS process per node over DDS on loopback (default: all nodes in this process)")
     run.add_argument("--output", help="report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)")
     run.add_argument("--grid", type=_grid, help="cloth mesh NXxNZ vertices, e.g. 6x8 (default: the engine's, 11x15)")
     run.add_argument("--set", action="append", metavar="ENGINE.PARAM=VALUE",

@@ -37,7 +37,7 @@ def _nodes(context):
     common = {"primitive": primitive, "rate_hz": float(arg("rate_hz")), "cloth": cloth, "engines": engines}
     nodes = [
         _node("trajectory_publisher", "trajectory_publisher", params_file, common,
-              {"pacing": pacing, "min_clock_subscribers": len(engines) + 2}),
+              {"pacing": pacing}),
         _node("recorder", "recorder", params_file, {"bag": bag}),
     ]
     evaluator = _node("evaluator", "evaluator", params_file, common,

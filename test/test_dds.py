@@ -39,15 +39,20 @@ def spin_until(executor, condition, timeout: float = 20.0) -> None:
 
 
 ECHO_NODE = """
+import signal
 from cloth_bench_ros.runtime import embedded as rclpy, messages as M
+stop = []
+signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
 rclpy.init(args=[], transport="dds")
 node = rclpy.Node("echo", namespace="/dds_test")
 pub = node.create_publisher(M.PointCloud2, "pong", 10)
 node.create_subscription(M.PointCloud2, "ping", pub.publish, 10)
 executor = rclpy.SingleThreadedExecutor()
 executor.add_node(node)
-while rclpy.ok():
+while not stop:
     executor.spin_once(timeout_sec=0.1)
+node.destroy_node()
+rclpy.shutdown()  # the participant leaves: the others see its nodes go at once
 """
 
 
@@ -86,3 +91,23 @@ def test_two_processes_exchange_a_cloud_and_see_each_others_nodes(dds_env):
         rclpy.shutdown(context=context)
         child.terminate()
         child.wait(10)
+
+
+def test_nodes_of_a_process_that_ends_leave_the_graph(dds_env):
+    child = subprocess.Popen([sys.executable, "-c", ECHO_NODE], env=dds_env)
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context, transport="dds")
+    try:
+        node = rclpy.Node("watcher", namespace="/dds_test", context=context)
+        executor = rclpy.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        spin_until(executor, lambda: ("echo", "/dds_test") in node.get_node_names_and_namespaces())
+        child.terminate()  # SIGTERM: the node process shuts down cleanly
+        child.wait(10)
+        spin_until(executor, lambda: ("echo", "/dds_test") not in node.get_node_names_and_namespaces()
+                   and not node.get_publishers_info_by_topic("pong"))
+        assert node.get_node_names_and_namespaces() == [("watcher", "/dds_test")]
+    finally:
+        rclpy.shutdown(context=context)
+        if child.poll() is None:
+            child.kill()

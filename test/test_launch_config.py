@@ -152,7 +152,8 @@ def test_every_launch_argument_reaches_its_node(monkeypatch, tmp_path):
             instance, context = _start(node, tmp_path)
             started[instance.get_name()] = (instance, context)
         tp = started["trajectory_publisher"][0]
-        assert (tp.pacing, tp.engines, tp.min_clock_subscribers) == ("realtime", ["mujoco", "bullet"], 4)
+        assert (tp.pacing, tp.engines) == ("realtime", ["mujoco", "bullet"])
+        assert tp.wait_for_recorder and tp.wait_for_evaluator
         assert tp.targets.rate_hz == 1000.0 and not tp.get_parameter("use_sim_time").value
         recorder = started["recorder"][0]
         assert Path(recorder.bag.path) == bag and recorder.get_parameter("use_sim_time").value
@@ -176,3 +177,28 @@ def test_the_default_launch_replays_the_bundled_bag_of_the_task(monkeypatch, tmp
         assert Path(recorder.bag.path) == ROOT / "bags" / "linen_quasi_static"
     finally:
         context.shutdown()
+
+
+def test_ros2_run_with_the_params_file_lets_the_command_line_win(tmp_path):
+    """`--params-file config/benchmark.yaml -p bag:=...`: the -p rule lands in the file's `/**` entry."""
+    from cloth_bench_ros.nodes.recorder import Recorder
+    from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
+
+    bag = ROOT / "bags" / "linen_dynamic"
+    common = ["--ros-args", "-r", "__ns:=/cloth_bench", "--params-file", str(ROOT / "config" / "benchmark.yaml")]
+    contexts = []
+    try:
+        for cls, extra in ((Recorder, ["-p", f"bag:={bag}", "-p", "time_offset:=2"]),
+                           (TrajectoryPublisher, ["-p", "pacing:=realtime", "-p", "rate_hz:=1000"])):
+            contexts.append(rclpy.Context())
+            rclpy.init(args=["prog", *common, *extra], context=contexts[-1])
+            node = cls(context=contexts[-1])
+            if cls is Recorder:
+                assert Path(node.bag.path) == bag and node.offset_ns == 2_000_000_000
+                assert node.get_parameter("use_sim_time").value
+            else:
+                assert (node.pacing, node.targets.rate_hz) == ("realtime", 1000.0)
+                assert not node.get_parameter("use_sim_time").value
+    finally:
+        for context in contexts:
+            context.shutdown()

@@ -16,7 +16,7 @@ import pytest
 from cloth_bench_ros.runtime import declare_float, is_user_error, steady_clock
 from cloth_bench_ros.runtime import embedded as rclpy
 from cloth_bench_ros.runtime.embedded import (
-    InvalidParameterTypeException, Node, Parameter, ParameterAlreadyDeclaredException,
+    InvalidParameterException, InvalidParameterTypeException, Node, Parameter, ParameterAlreadyDeclaredException,
     ParameterDescriptor, ParameterNotDeclaredException, ParameterType, ParameterUninitializedException,
     RCLInvalidROSArgsError, ReliabilityPolicy, SingleThreadedExecutor, Time, UnknownROSArgsError,
 )
@@ -181,6 +181,8 @@ def test_declared_types_undeclared_and_uninitialised(context):
     with pytest.raises(ValueError, match="NOT_SET"):
         node.declare_parameter("no_default")
     assert node.declare_parameter("anything", None, ParameterDescriptor(dynamic_typing=True)).value is None
+    with pytest.raises(InvalidParameterException):  # rclpy/validate_parameter_name.py
+        node.declare_parameter("", 1)
 
 
 def test_use_sim_time_must_be_a_bool(context):
@@ -299,6 +301,7 @@ def test_rclpy_exception_classes_count_as_user_errors():
     (["-p", "primitive:=3"], "primitive"),
 ])
 def test_a_node_with_a_bad_argument_prints_one_line_and_exits_2(tmp_path, args, expected):
+    """A user error is one line and exit 2, for rcl/rclpy's errors too (arguments.c, parse.c, node.py)."""
     bad = _params_file(tmp_path, "/**/simulator*:\n  ros__parameters:\n    seed: 1\n")
     args = [a.replace("{bad}", str(bad)) for a in args]
     env = {**os.environ, "CLOTH_BENCH_EMBEDDED": "1"}
@@ -316,3 +319,23 @@ def test_the_readme_rate_hz_1000_works(context):
     rclpy.init(args=["prog", "--ros-args", "-p", "rate_hz:=1000"], context=context)
     node = TrajectoryPublisher(context=context)
     assert node.targets.rate_hz == 1000.0
+
+
+def test_the_recorders_wall_clock_replay_runs_under_use_sim_time(context):
+    """Its timer is on a steady clock: on the node's sim clock (rclpy's default) it would never fire."""
+    from pathlib import Path
+
+    from cloth_bench_ros.nodes.recorder import Recorder
+
+    bag = Path(__file__).resolve().parents[1] / "bags" / "towel_dynamic"
+    rclpy.init(args=["prog", "--ros-args", "-p", "use_sim_time:=true", "-p", "clock:=wall", "-p", "rate_factor:=50",
+                     "-p", f"bag:={bag}"], context=context)
+    recorder = Recorder(context=context)
+    ex = SingleThreadedExecutor(context=context)
+    ex.add_node(recorder)
+    for _ in range(2000):
+        if recorder.done:
+            break
+        ex.spin_once(timeout_sec=0.01)
+    assert recorder.done and recorder.published == len(list(recorder.bag.raw_messages([recorder.topic])))
+    assert recorder.get_clock().now().nanoseconds == 0  # no /clock: sim time never started

@@ -15,7 +15,7 @@ import time
 from functools import partial
 
 from cloth_bench_ros.data.bag import TRIAL_STATUS_NAME, BagReader, BagWriter
-from cloth_bench_ros.nodes.common import NAMESPACE, run_node
+from cloth_bench_ros.nodes.common import NAMESPACE, REPLAY_STATUS_NAME, run_node
 from cloth_bench_ros.runtime import (
     Clock, DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, Time, deserialize_message,
     declare_float, make_qos, message_type, serialize_message, stamp_ns, steady_clock,
@@ -57,7 +57,10 @@ class Recorder(Node):
         self.published = 0
         self.cloud_pub = self.create_publisher(PointCloud2, "real/cloud", make_qos(10))
         self.trial_pub = self.create_publisher(DiagnosticArray, "real/trial", make_qos(1, latched=True))
-        self.trial_pub.publish(self.trial_message())
+        trial = self.trial_message()
+        if clock == "sim":
+            trial.status.append(self.replay_status())
+        self.trial_pub.publish(trial)
         self.rewind()
         if clock == "sim":
             self.create_subscription(Clock, "/clock", self.on_clock, make_qos(10))
@@ -77,6 +80,14 @@ class Recorder(Node):
         status = DiagnosticStatus(level=DiagnosticStatus.OK, name=TRIAL_STATUS_NAME,
                                   message=str(self.bag.path), hardware_id="recorder", values=values)
         return DiagnosticArray(status=[status])
+
+    def replay_status(self) -> DiagnosticStatus:
+        """The run-time stamps of every frame the sim-clock replay will send (common.REPLAY_STATUS_NAME)."""
+        stamps = [s + self.offset_ns for _, _, s, _ in self.bag.raw_messages([self.topic]) if s >= self.start_offset_ns]
+        return DiagnosticStatus(level=DiagnosticStatus.OK, name=REPLAY_STATUS_NAME, hardware_id="recorder",
+                                message=f"{len(stamps)} frames, sent as /clock reaches their stamps",
+                                values=[KeyValue(key="frames", value=str(len(stamps))),
+                                        KeyValue(key="stamps_ns", value=",".join(map(str, stamps)))])
 
     def publish_until(self, bag_time_ns: int, restamp_offset_ns: int) -> None:
         """Publish every frame whose bag stamp is <= bag_time_ns, restamped by the offset."""

@@ -22,6 +22,7 @@ if EMBEDDED:
     from cloth_bench_ros.runtime.embedded import ClockType as _ClockType
     from cloth_bench_ros.runtime.embedded import (
         DurabilityPolicy,
+        HistoryPolicy,
         Node,
         Parameter,
         ParameterDescriptor,
@@ -55,7 +56,7 @@ else:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.serialization import deserialize_message, serialize_message
     from rclpy.time import Time
     from rosgraph_msgs.msg import Clock
@@ -91,10 +92,14 @@ def stamp_ns(stamp) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
-def make_qos(depth: int, latched: bool = False) -> QoSProfile:
-    """Reliable, keep-last `depth`; latched = transient local (late joiners get the last ones)."""
+def make_qos(depth: int, latched: bool = False, keep_all: bool = False) -> QoSProfile:
+    """Reliable, keep-last `depth`; latched = transient local (late joiners get the last ones).
+
+    keep_all: keep every sample until taken (a reader that must lose nothing, whatever its pace).
+    """
     return QoSProfile(
         depth=depth,
+        history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST,
         reliability=ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
     )

@@ -9,6 +9,7 @@ wildcards in a remap) is refused with one line rather than ignored.
 from __future__ import annotations
 
 import re
+import sys
 from dataclasses import dataclass, field
 
 from cloth_bench_ros.runtime.parameters import (
@@ -66,11 +67,11 @@ def _remap_rule(text: str) -> RemapRule:
 
 
 def parse_ros_args(args: list[str] | None) -> RosArguments:
-    """Every `--ros-args ... [--]` section of `args`, in order; unknown ROS arguments refused."""
+    """Every `--ros-args ... [--]` section of `args` (None: sys.argv, as rclpy.init), in order."""
     parsed = RosArguments()
     unknown: list[str] = []
     inside = False
-    args = list(args or [])
+    args = list(sys.argv if args is None else args)
     i = 0
     while i < len(args):
         arg = args[i]

@@ -1,24 +1,28 @@
-"""An embedded, single-process stand-in for the subset of rclpy that the nodes use.
+"""An embedded stand-in for the subset of rclpy that the nodes use.
 
-It composes nodes in one process as a component container with intra-process communication
-would, and runs their callbacks deterministically: messages are delivered in the order they were
-published (one FIFO for the whole context), timers fire on the steady clock, and a node with
-use_sim_time follows /clock. What it provides (and nothing more):
+Messages travel over the context's transport (runtime/transport.py): intra-process by default,
+or DDS (runtime/dds/: Cyclone DDS speaking ROS 2's wire protocol) between processes. In-process it
+composes nodes as a component container with intra-process communication would, and runs their
+callbacks deterministically: messages are delivered in the order they were
+published (one FIFO for the whole context), timers fire on the node's clock (runtime/clock.py),
+and a node with use_sim_time follows /clock. What it provides (and nothing more; README
+"Without ROS 2" lists it in full):
 
-- rclpy.init(args), ok(), shutdown(), spin(node), spin_once(node, timeout_sec)
-- rclpy.node.Node(name, namespace=, parameter_overrides=, context=): create_publisher,
+- rclpy.init(args, domain_id=, transport=), ok(), shutdown(), spin(node), spin_once(node, timeout_sec)
+- graph queries: Node.get_publishers_info_by_topic, get_subscriptions_info_by_topic,
+  get_node_names_and_namespaces; Subscription.get_publisher_count
+- rclpy.node.Node(name, namespace=, parameter_overrides=, context=, cli_args=): create_publisher,
   create_subscription, create_timer, destroy_timer, declare_parameter, get_parameter,
   has_parameter, get_logger, get_clock, get_name, get_namespace, count_subscribers,
-  count_publishers, destroy_node
-- Publisher.publish / get_subscription_count; Timer.cancel; Clock.now(); Time(nanoseconds=),
-  Time.from_msg, .to_msg(), .nanoseconds
+  count_publishers, destroy_node; parameters with rclpy's types and checks (runtime/parameters.py)
+- Publisher.publish (TypeError for another message type) / get_subscription_count; Timer.cancel;
+  Clock.now(); Time(nanoseconds=), Time.from_msg, .to_msg(), .nanoseconds
 - rclpy.qos: QoSProfile(depth=, reliability=, durability=, history=) and the policy enums;
   TRANSIENT_LOCAL publishers hand their last `depth` messages to late subscribers
 - rclpy.executors.SingleThreadedExecutor: add_node, remove_node, spin, spin_once, shutdown,
   and spin_until_idle() (returns once no message is queued and no timer is armed)
 - rclpy.serialization.serialize_message / deserialize_message (CDR through rosbags)
-- command-line parameters: --ros-args -p name:=value, --params-file FILE, -r __ns:=/ns,
-  -r __node:=name
+- the --ros-args command line as rcl parses it: -p, --params-file, -r remaps (runtime/arguments.py)
 
 Queues are unbounded (intra-process delivery loses nothing); QoS depth only bounds the
 transient-local history.
@@ -29,13 +33,13 @@ from __future__ import annotations
 import dataclasses
 import enum
 import logging
-import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable
 
 from cloth_bench_ros.data import messages as cdr
 from cloth_bench_ros.runtime import messages
+from cloth_bench_ros.runtime.clock import Clock, ClockType, Time, Timer  # noqa: F401 (rclpy's names)
 from cloth_bench_ros.runtime.arguments import (
     RosArguments, expand_topic_name, parse_ros_args, remap_namespace, remap_node_name, remap_topic_name,
     validate_namespace, validate_node_name,
@@ -44,8 +48,9 @@ from cloth_bench_ros.runtime.transport import (  # noqa: F401 (re-exported as rc
     IntraProcessTransport, TopicEndpointInfo, TopicEndpointTypeEnum, make_transport, transport_choice,
 )
 from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
-    InvalidParameterTypeException, Parameter, ParameterAlreadyDeclaredException, ParameterDescriptor,
-    ParameterException, ParameterNotDeclaredException, ParameterType, ParameterUninitializedException,
+    InvalidParameterException, InvalidParameterTypeException, Parameter, ParameterAlreadyDeclaredException,
+    ParameterDescriptor, ParameterException, ParameterNotDeclaredException, ParameterType,
+    ParameterUninitializedException,
     RCLError, RCLInvalidROSArgsError, UnknownROSArgsError, load_params_file,
 )
 
@@ -83,54 +88,7 @@ def _qos(qos: QoSProfile | int) -> QoSProfile:
     return QoSProfile(depth=qos) if isinstance(qos, int) else qos
 
 
-# --- time ------------------------------------------------------------------------------------
-
-
-class Time:
-    """A point in ROS time, in integer nanoseconds."""
-
-    def __init__(self, *, seconds: float = 0, nanoseconds: int = 0) -> None:
-        self.nanoseconds = int(seconds * 1_000_000_000) + int(nanoseconds)
-
-    @classmethod
-    def from_msg(cls, msg: Any) -> "Time":
-        return cls(nanoseconds=int(msg.sec) * 1_000_000_000 + int(msg.nanosec))
-
-    def to_msg(self) -> Any:
-        sec, nanosec = divmod(self.nanoseconds, 1_000_000_000)
-        return messages.Time(sec=sec, nanosec=nanosec)
-
-    def __repr__(self) -> str:
-        return f"Time(nanoseconds={self.nanoseconds})"
-
-
-class ClockType(enum.IntEnum):
-    """rclpy.clock_type.ClockType."""
-
-    UNINITIALIZED = 0
-    ROS_TIME = 1
-    SYSTEM_TIME = 2
-    STEADY_TIME = 3
-
-
-class Clock:
-    """rclpy's Clock: ROS time (system time, or the last /clock once sim time is active), system or steady.
-
-    As rclpy's time source, a ROS clock with sim time active reads 0 until the first /clock message
-    (rclpy/time_source.py: "Zero time is a special value that means time is uninitialized").
-    """
-
-    def __init__(self, *, clock_type: ClockType = ClockType.SYSTEM_TIME) -> None:
-        self.clock_type = clock_type
-        self.ros_time_is_active = False
-        self.sim_time_ns = 0
-
-    def now(self) -> Time:
-        if self.clock_type == ClockType.STEADY_TIME:
-            return Time(nanoseconds=time.monotonic_ns())
-        if self.clock_type == ClockType.ROS_TIME and self.ros_time_is_active:
-            return Time(nanoseconds=self.sim_time_ns)
-        return Time(nanoseconds=time.time_ns())
+# --- time: runtime/clock.py ---------------------------------------------------------------
 
 
 def _time_source_qos() -> "QoSProfile":
@@ -228,51 +186,6 @@ class Subscription:
         self.node.context.transport.remove_subscription(self)
 
 
-class Timer:
-    """An rcl timer on a clock (the node's by default: sim time under use_sim_time).
-
-    The first call is due one period after creation; a call moves the next one by whole periods,
-    skipping the ones missed (rcl/src/rcl/timer.c rcl_timer_call). On a sim clock it is due only
-    when /clock has reached it: waiting does not make it due.
-    """
-
-    def __init__(self, period: float, callback: Callable, clock: Clock) -> None:
-        self.period_ns = max(1, int(period * 1e9))
-        self.callback = callback
-        self.clock = clock
-        self.next_ns = clock.now().nanoseconds + self.period_ns
-        self.cancelled = False
-
-    def cancel(self) -> None:
-        self.cancelled = True
-
-    def is_canceled(self) -> bool:
-        return self.cancelled
-
-    def reset(self) -> None:
-        self.cancelled = False
-        self.next_ns = self.clock.now().nanoseconds + self.period_ns
-
-    def is_ready(self) -> bool:
-        return not self.cancelled and self.clock.now().nanoseconds >= self.next_ns
-
-    def time_until_next_call(self) -> int | None:
-        """ns until the next call on this timer's clock; None once cancelled."""
-        return None if self.cancelled else self.next_ns - self.clock.now().nanoseconds
-
-    @property
-    def follows_wall_time(self) -> bool:
-        """False for a timer on an active sim clock: only /clock messages make it due."""
-        return not (self.clock.clock_type == ClockType.ROS_TIME and self.clock.ros_time_is_active)
-
-    def call(self) -> None:
-        now = self.clock.now().nanoseconds
-        self.next_ns += self.period_ns
-        if self.next_ns <= now:
-            self.next_ns += (1 + (now - self.next_ns) // self.period_ns) * self.period_ns
-        self.callback()
-
-
 class Node:
     """The rclpy.node.Node subset listed in this module's docstring."""
 
@@ -339,6 +252,8 @@ class Node:
     # parameters (rclpy/node.py declare_parameters, _apply_descriptor, get_parameter)
     def declare_parameter(self, name: str, value: Any = None, descriptor: ParameterDescriptor | None = None,
                           ignore_override: bool = False) -> Parameter:
+        if not name:
+            raise InvalidParameterException(name)
         descriptor = dataclasses.replace(descriptor) if descriptor is not None else ParameterDescriptor()
         if isinstance(value, ParameterType):
             if value == ParameterType.NOT_SET:

@@ -133,6 +133,13 @@ class ParameterAlreadyDeclaredException(ParameterException):
         ParameterException.__init__(self, "Parameter(s) already declared", parameters)
 
 
+class InvalidParameterException(ParameterException):
+    """A parameter name rclpy refuses (validate_parameter_name: an empty one)."""
+
+    def __init__(self, parameter_name: str) -> None:
+        ParameterException.__init__(self, "Invalid parameter name", parameter_name)
+
+
 class InvalidParameterTypeException(ParameterException):
     """An override's type is not the declared type."""
 
@@ -255,10 +262,10 @@ class Overrides:
         return out
 
 
-def _events_tree(events: list, path: str) -> Any:
-    """Mapping/sequence/scalar tree of YAML events; aliases refused as rcl refuses them."""
+def _events_tree(events: list, path: str) -> list:
+    """The mapping/sequence/scalar tree of each YAML document; aliases refused as rcl refuses them."""
     stack: list[list] = []
-    root: Any = None
+    roots: list = []
     for event in events:
         node: Any = None
         if isinstance(event, yaml.AliasEvent):
@@ -276,9 +283,9 @@ def _events_tree(events: list, path: str) -> Any:
             continue
         if stack:
             stack[-1][2].append(node)
-        elif root is None:
-            root = node
-    return root
+        else:
+            roots.append(node)
+    return roots
 
 
 def _line(event: Any) -> int:
@@ -354,8 +361,7 @@ def load_params_file(path: str | Path, into: Overrides | None = None) -> Overrid
         mark = getattr(exc, "problem_mark", None)
         raise ParamsFileError(f"params file {path}: not YAML"
                               + (f" (line {mark.line + 1})" if mark else "")) from None
-    root = _events_tree(events, str(path))
-    if root is not None:
+    for root in _events_tree(events, str(path)):  # rcl reads every document of the file
         _node_entries(root, "", str(path), out)
     return out
 
@@ -368,7 +374,7 @@ def parse_param_rule(rule: str, into: Overrides) -> None:
     if not sep or not name or not text or (colon and not _NAME_TOKEN.fullmatch(node_key)):
         raise RCLInvalidROSArgsError(f"Couldn't parse parameter override rule: '-p {rule}'")
     try:
-        root = _events_tree(list(yaml.parse(text, Loader=yaml.SafeLoader)), "-p")
+        (root,) = _events_tree(list(yaml.parse(text, Loader=yaml.SafeLoader)), "-p")
         into.set(node_key, name, _value(root, f"-p {rule}"))
     except (ValueError, yaml.YAMLError, ParamsFileError, TypeError):
         raise RCLInvalidROSArgsError(f"Couldn't parse parameter override rule: '-p {rule}'") from None

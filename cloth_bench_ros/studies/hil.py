@@ -137,7 +137,6 @@ def _parameters(config: HilConfig, group: str, run_dir: Path) -> list[tuple[str,
     common = {"primitive": config.primitive, "rate_hz": float(config.rate_hz)}
     if group == "controller":
         return [("trajectory_publisher", {**common, "engines": [config.engine], "pacing": "realtime",
-                                          "min_clock_subscribers": 2,
                                           "timing_log": str(run_dir), "duration": float(config.duration)})]
     if group == "simulator":
         nx, nz = config.grid or (0, 0)
@@ -246,10 +245,8 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
     nodes: list = []
     try:
         nodes = _make_nodes(config, group, run_dir, context)
-        if group == "controller":
+        if group == "controller":  # it starts sending once its graph is complete (graph_ready)
             _warm_up_messages()
-            while not stopped and not _graph_complete(nodes[0]):
-                time.sleep(0.01)  # discovery runs in Cyclone's threads; the node's timers wait
             gc.freeze()  # start-up objects out of the collector's way (the simulator also stops it)
             # The controller is the robot's real-time loop: the same scheduling request as the simulator.
             print(f"controller: {realtime.request_fifo(config.realtime_priority)}", flush=True)
@@ -270,15 +267,6 @@ def _warm_up_messages() -> None:
 
     for msg_type in (PoseArray, PointCloud2):
         deserialize_message(serialize_message(msg_type()), msg_type)
-
-
-def _graph_complete(controller) -> bool:
-    """Every endpoint of the controller matched: targets heard by simulator and evaluator, /clock by
-    recorder and evaluator, and the simulator's states heard by the controller.
-    """
-    states = [sub for sub in controller._subscriptions if sub.topic_name.endswith("/cloud")]
-    return (controller.target_pub.get_subscription_count() >= 2 and controller.clock_pub.get_subscription_count() >= 2
-            and all(sub.get_publisher_count() >= 1 for sub in states))
 
 
 def _config_json(config: HilConfig) -> str:

@@ -12,7 +12,7 @@ from cloth_bench_ros.nodes.evaluator import Evaluator
 from cloth_bench_ros.nodes.recorder import Recorder
 from cloth_bench_ros.nodes.simulator import Simulator
 from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
-from cloth_bench_ros.runtime import Parameter, SingleThreadedExecutor, rclpy
+from cloth_bench_ros.runtime import EMBEDDED, Parameter, SingleThreadedExecutor, rclpy
 
 
 @dataclass
@@ -37,7 +37,9 @@ def _params(**values) -> list:
 def run_pipeline(config: RunConfig) -> dict:
     """Run trajectory publisher, one simulator per engine, recorder and evaluator to the end."""
     context = rclpy.Context()
-    rclpy.init(args=[], context=context)
+    # Composed in one process on the intra-process transport, whatever CLOTH_BENCH_TRANSPORT says
+    # (that switch is for the node console scripts): deterministic, and parallel sweeps stay apart.
+    rclpy.init(args=[], context=context, **({"transport": "intra"} if EMBEDDED else {}))
     common = dict(primitive=config.primitive, rate_hz=float(config.rate_hz), use_sim_time=True)
     nodes = []
     try:

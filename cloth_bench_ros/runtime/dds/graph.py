@@ -13,7 +13,9 @@ from __future__ import annotations
 import uuid
 from typing import Any
 
-from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
+from cyclonedds.builtin import (
+    BuiltinDataReader, BuiltinTopicDcpsParticipant, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription,
+)
 from cyclonedds.core import InstanceState
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
@@ -57,6 +59,7 @@ class Graph:
             TopicEndpointTypeEnum.PUBLISHER: BuiltinDataReader(participant, BuiltinTopicDcpsPublication),
             TopicEndpointTypeEnum.SUBSCRIPTION: BuiltinDataReader(participant, BuiltinTopicDcpsSubscription),
         }
+        self.participants = BuiltinDataReader(participant, BuiltinTopicDcpsParticipant)
         self.local: dict[Any, NodeEntitiesInfo_] = {}  # embedded Node -> its entry
         self.remote: dict[bytes, list[NodeEntitiesInfo_]] = {}  # participant GID -> its nodes
         self.endpoint_cache: dict[TopicEndpointTypeEnum, dict[uuid.UUID, Any]] = {k: {} for k in self.builtin}
@@ -81,6 +84,9 @@ class Graph:
         for sample in self.reader.take(N=1000):
             if isinstance(sample, ParticipantEntitiesInfo_):  # the latest of each participant wins
                 self.remote[_key(sample.gid)] = list(sample.node_entities_info_seq)
+        for sample in self.participants.take(N=1000):  # a participant that left takes its nodes along
+            if sample.sample_info.instance_state != InstanceState.Alive:
+                self.remote.pop(sample.key.bytes, None)
         for kind, reader in self.builtin.items():
             cache = self.endpoint_cache[kind]
             for sample in reader.take(N=1000):

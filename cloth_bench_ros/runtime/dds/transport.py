@@ -139,6 +139,8 @@ class DdsTransport:
 
     def receive(self) -> None:
         """Take every sample that arrived, in subscription order, into the context's queue."""
+        if not self.waitset.wait(0):  # one call answers "anything at all?"
+            return
         queue = self.context.queue
         for sub, (reader, _) in list(self.readers.items()):
             ros_type = sub.msg_type.__msgtype__
