@@ -296,7 +296,8 @@ def cmd_hil(args: argparse.Namespace) -> int:
             if args.config == "recommended":
                 rec, source = hil.recommended(engine, args.cloth, args.primitive, float(rate), settings,
                                               args.tolerance_rel, args.tolerance_abs, args.budget)
-                config = hil.with_config(config, rec.config, rec.grid, {**rec.params, **params})
+                label = rec.config + (f",{config_label(None, params)}" if params else "")  # --set on top
+                config = hil.with_config(config, label, rec.grid, {**rec.params, **params})
                 print(f"{engine} at {rate:g} Hz: recommended `{rec.config}` from {source}: CD {rec.cd:.4f} m "
                       f"(best {rec.best_config}: {rec.best_cd:.4f} m), step p99 {rec.step_p99_ms:.3f} ms "
                       + ("under" if rec.meets_deadline else "NOT under") + f" {1e3 * args.budget / rate:g} ms")
