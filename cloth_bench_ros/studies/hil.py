@@ -1,6 +1,7 @@
 """Hardware in the loop: the node graph with targets on the wall clock, laid out as a robot sees it.
 
-Three groups of nodes, each in its own OS process over DDS (`processes=True`, the default):
+Three groups of nodes, each in its own OS process over DDS (`processes=True`, the default), on
+loopback only (interface lo, no multicast, peer 127.0.0.1) and on ROS_DOMAIN_ID or a random domain:
 
 - controller: the trajectory publisher, the controller's stand-in. It sends target k when it is
   due (first target + k / rate on the monotonic clock), receives the states, and keeps the
@@ -21,6 +22,7 @@ import gc
 import json
 import math
 import os
+import random
 import re
 import signal
 import subprocess
@@ -281,6 +283,11 @@ def _config_from_json(text: str) -> HilConfig:
 
 def _run_processes(config: HilConfig, run_dir: Path) -> None:
     """The three groups as three OS processes; the simulator is stopped once the others are done."""
+    from cloth_bench_ros.runtime.dds import loopback_environment
+
+    # As `cloth-bench run --processes`: DDS on loopback only, on ROS_DOMAIN_ID or a random domain.
+    domain = int(os.environ["ROS_DOMAIN_ID"]) if os.environ.get("ROS_DOMAIN_ID") else random.randint(1, 200)
+    env = {**os.environ, **loopback_environment(domain)}
     procs: dict[str, subprocess.Popen] = {}
     deadline = time.monotonic() + _time_budget(config)
     try:
@@ -288,7 +295,7 @@ def _run_processes(config: HilConfig, run_dir: Path) -> None:
             with open(run_dir / f"{group}.log", "wb") as log:
                 procs[group] = subprocess.Popen(
                     [sys.executable, "-m", "cloth_bench_ros.studies.hil", group, str(run_dir), _config_json(config)],
-                    stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+                    env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         for group in _waited(config):
             try:
                 code = procs[group].wait(max(0.0, deadline - time.monotonic()))
