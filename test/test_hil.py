@@ -189,7 +189,7 @@ def test_process_settings_report_what_the_system_granted():
 def _settings_row(config: str, cd: float, mean_ms: float, p99_ms: float, grid: str | None = None) -> dict:
     return {"mode": "settings", "engine": "mujoco", "cloth": "towel", "primitive": "dynamic", "rate_hz": 100.0,
             "config": config, "status": "ok", "seed": 0, "CD": cd, "HD": 2 * cd, "step_time_mean": mean_ms / 1e3,
-            "step_time_p99": p99_ms / 1e3, "grid": grid, "params": {"solver_iterations": 5} if grid else {}}
+            "step_time_p50": mean_ms / 1e3, "step_time_p99": p99_ms / 1e3, "grid": grid, "params": {"solver_iterations": 5} if grid else {}}
 
 
 def test_recommendation_is_the_cheapest_accurate_enough_within_the_deadline(tmp_path):
