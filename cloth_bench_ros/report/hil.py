@@ -216,15 +216,15 @@ def hil_table(rows: Sequence[dict]) -> Table:
                     "3 processes" if r.get("processes") else "1 process",
                     _ms(r["latency_p50"]), _ms(r["latency_p99"]), _ms(r["latency_p999"]), _ms(r["latency_max"]),
                     f"{r['deadline_misses']} ({100 * r['deadline_misses'] / n:.2f} %)",
-                    f"{r['skipped']} of {r['sent']}", _fmt(r["real_time_factor"], 3),
+                    f"{r['skipped']} of {r['sent']}", _ms(r.get("send_lag_p99")), _fmt(r["real_time_factor"], 3),
                     _ms(r.get("step_time_p99")), f"{100 * r['cpu_busy']:.0f} %" if r.get("cpu_busy") == r.get("cpu_busy")
                     else "-", f"{r.get('loadavg_after', math.nan):.2f} / {r.get('cpu_count') or '?'}",
                     _fmt(r.get("cd_lockstep"), 4), _fmt(r.get("cd_realtime"), 4),
                     "ok" if not r.get("problems") else "; ".join(r["problems"])])
     return Table("hil", ["engine", "rate Hz", "configuration", "layout", "lat p50 ms", "lat p99 ms", "lat p99.9 ms",
-                         "lat max ms", "deadline misses", "skipped targets", "RTF", "step p99 ms", "CPU busy",
+                         "lat max ms", "deadline misses", "skipped targets", "send lag p99 ms", "RTF", "step p99 ms", "CPU busy",
                          "load / cores", "CD lockstep (m)", "CD realtime (m)", "bookkeeping"], out,
-                 "lrllrrrrrrrrrrrrl")
+                 "lrllrrrrrrrrrrrrrl")
 
 
 def text_table(table: Table) -> str:
