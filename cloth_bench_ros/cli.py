@@ -27,7 +27,7 @@ def _rate(text: str) -> float:
 
 def check_bag(bag: Path) -> None:
     """Fail early, with one line naming the bag, unless its first PointCloud2 frame decodes."""
-    from cloth_bench_ros.data.bag import BagReader
+    from cloth_bench_ros.data import BagReader
     from cloth_bench_ros.data.messages import deserialize
     from cloth_bench_ros.core.pointcloud2 import read_xyz
 
@@ -91,7 +91,7 @@ def cmd_engines(args: argparse.Namespace) -> int:
 
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
-    from cloth_bench_ros.data.bag import describe
+    from cloth_bench_ros.data import describe
 
     print(describe(Path(args.path)))
     return 0
@@ -471,7 +471,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
     warnings.formatwarning = lambda message, *_: f"cloth-bench: warning: {message}\n"
-    from cloth_bench_ros.data.bag import BagError
+    from cloth_bench_ros.data import BagError
 
     try:
         return args.func(args)

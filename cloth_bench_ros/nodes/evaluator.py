@@ -6,7 +6,7 @@ import time
 from functools import partial
 from pathlib import Path
 
-from cloth_bench_ros.data.bag import trial_from_message
+from cloth_bench_ros.data.trial import trial_from_message
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz

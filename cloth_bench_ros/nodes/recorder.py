@@ -14,7 +14,8 @@ from __future__ import annotations
 import time
 from functools import partial
 
-from cloth_bench_ros.data.bag import TRIAL_STATUS_NAME, BagReader, BagWriter
+from cloth_bench_ros.data import BagReader, BagWriter
+from cloth_bench_ros.data.trial import TRIAL_STATUS_NAME
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.runtime import (
     Clock, DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, Time, deserialize_message,
