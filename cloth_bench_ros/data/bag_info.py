@@ -10,7 +10,6 @@ import numpy as np
 
 from cloth_bench_ros.data.bag_reader import BagReader
 from cloth_bench_ros.data.errors import BagWarning
-from cloth_bench_ros.data.messages import POINTCLOUD2
 
 def describe(path: str | os.PathLike[str], validate: bool = True) -> str:
     """Human-readable summary of a bag (for `cloth-bench bag info`); BagError if unreadable.
@@ -26,6 +25,7 @@ def describe(path: str | os.PathLike[str], validate: bool = True) -> str:
         f"bag:          {reader.path}",
         f"files:        {', '.join(f.name for f in reader.files)} ({size / 1e6:.1f} MB)",
         f"storage:      mcap, chunk compression {reader.compression}",
+        f"metadata:     {reader.metadata_summary}",
         f"complete:     {'yes' if reader.complete else 'no (truncated)'}",
     ]
     if start is not None and end is not None:
@@ -47,8 +47,7 @@ def describe(path: str | os.PathLike[str], validate: bool = True) -> str:
         lines.append(f"source:       {trial.source}")
         if not np.allclose(trial.transform, np.eye(4)):
             lines.append(f"transform:    {json.dumps(trial.transform)}")
-    if validate and any(m == POINTCLOUD2 for m in reader.topics.values()):
-        topic = reader.cloud_topic()
+    for topic in reader.cloud_topics if validate else []:
         sizes = [len(p) for _, p in reader.clouds(topic)]
         s = reader.stats
         pts = f"{min(sizes)}..{max(sizes)} points per frame" if sizes else "no points"

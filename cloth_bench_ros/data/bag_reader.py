@@ -7,6 +7,7 @@ reads). Schemas are `ros2msg` text and payloads CDR.
 from __future__ import annotations
 
 import os
+import stat
 import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -14,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema
 from mcap.reader import SeekingReader
 from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk
@@ -23,6 +23,7 @@ from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
 from cloth_bench_ros.data.errors import BagError, BagWarning
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
+from cloth_bench_ros.data.metadata import read_metadata
 from cloth_bench_ros.data.trial import (
     CLOUD_TOPIC, CUSTOM_DATA_PREFIX, MCAP_TRIAL_RECORD, TRIAL_TOPIC, TrialInfo, trial_from_message,
 )
@@ -68,6 +69,17 @@ def _stamp_from_cdr(cdr: bytes) -> int:
     return sec * 1_000_000_000 + nsec
 
 
+def _regular_file(path: Path) -> Path:
+    """path, if it is a regular file (a FIFO or device would block or never end)."""
+    try:
+        mode = path.stat().st_mode
+    except OSError as exc:
+        raise BagError(f"bag {path} cannot be read ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(mode):
+        raise BagError(f"bag {path} is not a regular file")
+    return path
+
+
 def _schema_name(schemas: dict[int, Schema], channel: Channel) -> str:
     schema = schemas.get(channel.schema_id)
     return schema.name if schema is not None else ""
@@ -88,10 +100,9 @@ class BagReader:
         self._files = [self._open_file(p) for p in self._locate()]
         self.topics: dict[str, str] = {}
         self.message_counts: dict[str, int] = {}
-        for topic in self._bag_meta.get("topics_with_message_count") or []:
-            meta = topic.get("topic_metadata", {})
-            self.topics[meta["name"]] = meta["type"]
-            self.message_counts[meta["name"]] = int(topic.get("message_count", 0))
+        for topic in self._bag_meta.get("topics", []):
+            self.topics[topic["name"]] = topic["type"]
+            self.message_counts[topic["name"]] = topic["message_count"]
         for f in self._files:
             self.topics.update(f.topics)
             if not self._bag_meta:
@@ -111,40 +122,32 @@ class BagReader:
             raise BagError(f"bag {path} does not exist")
         if path.is_file() and path.name == "metadata.yaml":
             path = self.path = path.parent
-        if path.is_file():
-            return [path]
+        if not path.is_dir():
+            return [_regular_file(path)]
         meta_path = path / "metadata.yaml"
         if not meta_path.exists():
-            files = sorted(path.glob("*.mcap"))
+            files = [_regular_file(f) for f in sorted(path.glob("*.mcap"))]
             if not files:
                 raise BagError(f"{path} is not a rosbag2 bag (no metadata.yaml and no .mcap file)")
             self._warn(f"bag {path} has no metadata.yaml (recording interrupted?); reading its .mcap files")
             return files
-        try:
-            doc = yaml.safe_load(meta_path.read_text(encoding="utf-8"))
-            info = doc["rosbag2_bagfile_information"]
-            storage = info["storage_identifier"]
-            names = [str(x) for x in info["relative_file_paths"]]
-            for t in info.get("topics_with_message_count") or []:
-                t["topic_metadata"]["name"], t["topic_metadata"]["type"]  # noqa: B018
-        except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError) as exc:
-            what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc).splitlines()[0]
-            raise BagError(f"bag {meta_path} is not valid rosbag2 metadata ({what})") from None
-        if storage != "mcap":
-            raise BagError(f"bag {path} uses storage {storage!r}; only mcap is supported")
-        if info.get("compression_mode") not in (None, "", "none", "NONE"):
+        info = read_metadata(meta_path)
+        if info["storage_identifier"] != "mcap":
+            raise BagError(f"bag {path} uses storage {info['storage_identifier']!r}; only mcap is supported")
+        if info["compression_mode"] not in ("", "none", "NONE"):
             raise BagError(
-                f"bag {path} uses file/message compression {info.get('compression_mode')!r}; "
+                f"bag {path} uses file/message compression {info['compression_mode']!r}; "
                 "only MCAP chunk compression is supported"
             )
-        files = [path / Path(n).name for n in names]
+        # Names from the file never leave the bag directory.
+        files = [path / Path(n).name for n in info["relative_file_paths"]]
         missing = [str(f) for f in files if not f.exists()]
         if missing:
             raise BagError(f"bag {path} lists missing file(s): {', '.join(missing)}")
         if not files:
             raise BagError(f"bag {path} lists no storage file in metadata.yaml")
         self._bag_meta = info
-        return files
+        return [_regular_file(f) for f in files]
 
     def _open_file(self, path: Path) -> _McapFile:
         try:
@@ -286,6 +289,13 @@ class BagReader:
         return all(f.complete for f in self._files)
 
     @property
+    def metadata_summary(self) -> str:
+        """metadata.yaml's version and distro, or why there is none."""
+        if not self._bag_meta:
+            return "no metadata.yaml"
+        return f"version {self._bag_meta['version']}, ros_distro {self._bag_meta['ros_distro'] or 'not set'}"
+
+    @property
     def custom_data(self) -> dict[str, str]:
         return dict(self._bag_meta.get("custom_data") or {})
 
@@ -326,18 +336,27 @@ class BagReader:
             raise BagError(f"bag {self.path} has invalid trial metadata ({exc})") from None
         return None
 
-    def cloud_topic(self, preferred: str = CLOUD_TOPIC) -> str:
-        """The PointCloud2 topic to score: `preferred` if present, else the only one."""
-        clouds = sorted(t for t, m in self.topics.items() if m == POINTCLOUD2)
-        if preferred in clouds:
-            return preferred
+    @property
+    def cloud_topics(self) -> list[str]:
+        """Every PointCloud2 topic of the bag, sorted."""
+        return sorted(t for t, m in self.topics.items() if m == POINTCLOUD2)
+
+    def cloud_topic(self, chosen: str | None = None) -> str:
+        """The PointCloud2 topic to score: `chosen`, else CLOUD_TOPIC if present, else the only one."""
+        clouds = self.cloud_topics
+        if chosen:
+            if chosen not in clouds:
+                what = f"is {self.topics[chosen]}" if chosen in self.topics else "does not exist"
+                raise BagError(f"bag {self.path}: topic {chosen} {what} (PointCloud2 topics: "
+                               f"{', '.join(clouds) or 'none'})")
+            return chosen
+        if CLOUD_TOPIC in clouds:
+            return CLOUD_TOPIC
         if not clouds:
             raise BagError(f"bag {self.path} has no {POINTCLOUD2} topic")
         if len(clouds) > 1:
-            raise BagError(
-                f"bag {self.path} has no {preferred} and several {POINTCLOUD2} topics "
-                f"({', '.join(clouds)}); name one"
-            )
+            raise BagError(f"bag {self.path} has several {POINTCLOUD2} topics ({', '.join(clouds)}); "
+                           "choose one with --topic")
         return clouds[0]
 
     def raw_messages(
@@ -376,11 +395,13 @@ class BagReader:
             try:
                 msg = messages.deserialize(cdr, POINTCLOUD2)
             except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
-                raise BagError(f"bag {self.path}: message {i} on {topic} is not a valid PointCloud2 ({exc})") from None
+                what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                raise BagError(f"bag {self.path}: frame {i} on {topic} (stamp {stamp / 1e9:.3f} s) "
+                               f"is not a valid PointCloud2 ({what})") from None
             try:
                 pts = pointcloud2.read_xyz(msg)
             except pointcloud2.PointCloudError as exc:
-                raise BagError(f"bag {self.path}: message {i} on {topic}: {exc}") from None
+                raise BagError(f"bag {self.path}: frame {i} on {topic} (stamp {stamp / 1e9:.3f} s): {exc}") from None
             stats.messages += 1
             if prev is not None and abs((stamp - prev) - period) > IRREGULAR_TOLERANCE * period:
                 stats.irregular_intervals += 1

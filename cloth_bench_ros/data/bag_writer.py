@@ -22,8 +22,8 @@ from cloth_bench_ros.data.errors import BagError
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
 from cloth_bench_ros.data.trial import CUSTOM_DATA_PREFIX, MCAP_TRIAL_RECORD, TRIAL_TOPIC, TrialInfo, trial_message
 
-METADATA_VERSION = 8  # rosbag2 metadata.yaml version (Iron layout; Humble to Rolling read it)
-ROS_DISTRO = "humble"
+METADATA_VERSION = 9  # rosbag2 metadata.yaml version that Jazzy writes
+ROS_DISTRO = "jazzy"  # the distro whose layout (version 9) and type hashes (RIHS01) are written
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
 
@@ -36,20 +36,24 @@ def _dump_yaml(data: Any) -> str:
     return yaml.dump(data, Dumper=_NoAliasDumper, sort_keys=False)
 
 
-def _qos_yaml(latched: bool) -> str:
-    """offered_qos_profiles as rosbag2 (version 8) stores it: a YAML string of rmw enums."""
-    profile = {
-        "history": 1,  # keep last
+def _qos_profiles(latched: bool) -> list[dict[str, Any]]:
+    """offered_qos_profiles as rosbag2 version 9 stores them: rmw policy names, not enum values."""
+    return [{
+        "history": "keep_last",
         "depth": 1 if latched else 10,
-        "reliability": 1,  # reliable
-        "durability": 1 if latched else 2,  # transient local / volatile
+        "reliability": "reliable",
+        "durability": "transient_local" if latched else "volatile",
         "deadline": {"sec": 0, "nsec": 0},
         "lifespan": {"sec": 0, "nsec": 0},
-        "liveliness": 1,  # automatic
+        "liveliness": "automatic",
         "liveliness_lease_duration": {"sec": 0, "nsec": 0},
         "avoid_ros_namespace_conventions": False,
-    }
-    return _dump_yaml([profile]).strip()
+    }]
+
+
+def _qos_yaml(latched: bool) -> str:
+    """The MCAP channel's offered_qos_profiles: the same list dumped to a YAML string."""
+    return _dump_yaml(_qos_profiles(latched)).strip()
 
 
 class BagWriter:
@@ -130,23 +134,26 @@ class BagWriter:
             raise BagError(f"bag {self.path}: {exc}") from None
         if msgtype not in self._schemas:
             self._schemas[msgtype] = self._mcap.register_schema(msgtype, "ros2msg", definition.encode())
-        qos = _qos_yaml(latched=topic == TRIAL_TOPIC)
-        self._channels[topic] = self._mcap.register_channel(
-            topic, "cdr", self._schemas[msgtype], {"offered_qos_profiles": qos}
-        )
+        metadata = {"offered_qos_profiles": _qos_yaml(latched=topic == TRIAL_TOPIC),
+                    "topic_type_hash": messages.type_hash(msgtype)}
+        self._channels[topic] = self._mcap.register_channel(topic, "cdr", self._schemas[msgtype], metadata)
         self._types[topic] = msgtype
         self.counts[topic] = 0
         return self._channels[topic]
 
-    def write(self, topic: str, msgtype: str, stamp_ns: int, cdr: bytes) -> bool:
-        """Append one CDR message logged at stamp_ns; False (and counted) if already closed."""
+    def write(self, topic: str, msgtype: str, stamp_ns: int, cdr: bytes, log_time_ns: int | None = None) -> bool:
+        """Append one CDR message logged at log_time_ns (default stamp_ns); False if already closed.
+
+        rosbag2 logs the receive time; a recorder passes it as log_time_ns (the header stamp stays
+        in the message). Refused writes are counted in `rejected`.
+        """
         with self._lock:
             self._depth += 1
             try:
                 if self._closed or self._close_pending:
                     self.rejected += 1
                     return False
-                stamp = int(stamp_ns)
+                stamp = int(stamp_ns if log_time_ns is None else log_time_ns)
                 if stamp < 0:
                     raise BagError(f"bag {self.path}: negative stamp {stamp} ns on {topic}")
                 channel = self._channel(topic, msgtype)
@@ -198,7 +205,7 @@ class BagWriter:
         info = self._metadata()
         try:
             self._mcap.add_metadata(
-                "rosbag2", {"serialized_metadata": _dump_yaml(info), "ROS_DISTRO": ROS_DISTRO}
+                "rosbag2", {"serialized_metadata": _dump_yaml(info)}
             )
             self._mcap.finish()
             self._stream.flush()
@@ -227,7 +234,7 @@ class BagWriter:
                         "name": topic,
                         "type": msgtype,
                         "serialization_format": "cdr",
-                        "offered_qos_profiles": _qos_yaml(latched=topic == TRIAL_TOPIC),
+                        "offered_qos_profiles": _qos_profiles(latched=topic == TRIAL_TOPIC),
                         "type_description_hash": messages.type_hash(msgtype),
                     },
                     "message_count": self.counts[topic],

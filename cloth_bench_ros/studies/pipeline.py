@@ -28,10 +28,18 @@ class RunConfig:
     engine_params: dict[str, dict] = field(default_factory=dict)  # engine -> parameter overrides
     grid: tuple[int, int] | None = None  # (nx, nz) vertices; None: the engine's default
     presets_dir: Path | None = None  # directory of <engine>.yaml presets; None: config/presets
+    replay: dict = field(default_factory=dict)  # recorder parameters for plain bags (topic, start_time, ...)
+    change_of_phase_frame: int | None = None  # None: the bag's own
+    record_comparison: Path | None = None  # comparison MCAP bag to write
+    comparison_figures: bool = False  # qualitative figure and animation in output_dir
 
 
 def _params(**values) -> list:
     return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def _cut(config: RunConfig) -> int:
+    return -1 if config.change_of_phase_frame is None else int(config.change_of_phase_frame)
 
 
 def run_pipeline(config: RunConfig) -> dict:
@@ -49,7 +57,8 @@ def run_pipeline(config: RunConfig) -> dict:
         # target's send time before a simulator steps on it (else latency would miss the step).
         evaluator = Evaluator(context=context, parameter_overrides=_params(
             engines=config.engines, output_dir=str(config.output_dir or ""), cloth=config.cloth,
-            seed=int(config.seed), pacing=config.pacing, **common))
+            seed=int(config.seed), pacing=config.pacing, record_comparison=str(config.record_comparison or ""),
+            comparison_figures=config.comparison_figures, change_of_phase_frame=_cut(config), **common))
         nodes.append(evaluator)
         for engine in config.engines:
             nx, nz = config.grid or (0, 0)
@@ -57,7 +66,10 @@ def run_pipeline(config: RunConfig) -> dict:
                 engine=engine, cloth=config.cloth, seed=int(config.seed), grid_nx=nx, grid_nz=nz,
                 presets_dir=str(config.presets_dir or ""),
                 engine_params=yaml.safe_dump(config.engine_params.get(engine, {})), **common)))
-        nodes.append(Recorder(context=context, parameter_overrides=_params(bag=str(config.bag), use_sim_time=True)))
+        nodes.append(Recorder(context=context, parameter_overrides=_params(
+            bag=str(config.bag), cloth=config.cloth, change_of_phase_frame=_cut(config),
+            align_engine=config.engines[0], grid_nx=(config.grid or (0, 0))[0], grid_nz=(config.grid or (0, 0))[1],
+            **common, **config.replay)))
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)
