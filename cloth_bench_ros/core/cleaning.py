@@ -26,7 +26,7 @@ class CleaningConfig:
     table_plane: bool = True  # remove the table's plane (RANSAC, near-horizontal, near the table)
     table_distance: float = 0.01  # m: points this close to the plane belong to it
     sor_neighbors: int = 20
-    sor_std_ratio: float = 2.0
+    sor_std_ratio: float = 3.0  # gentle: a cloud cleaned once already keeps its edges
     voxel: float = 0.0  # m; 0: no down-sampling
 
 

@@ -156,8 +156,11 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     plan = ReplayPlan(trial, topic, len(stamps), start, cleaning=stats, frames_source=frames_source,
                       nan_points_dropped=nan_dropped if stats is None else stats.non_finite)
     counts = {"before_start": 0, "after_trajectory": 0, "empty_after_cleaning": 0, "to_send": 0}
+    # A frame within the start's precision of it is at the start (not before it).
+    tolerance = max(int(round(start.precision_s * 1e9)), 1000)  # 1 us: stamps given in decimal seconds
     for stamp, points in zip(stamps, clouds):
         t_ns = stamp - start.bag_ns
+        t_ns = 0 if -tolerance <= t_ns < 0 else t_ns
         if t_ns < 0:
             counts["before_start"] += 1
         elif t_ns > end_ns:
