@@ -10,6 +10,7 @@ the fine step.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
 
 import numpy as np
 
@@ -50,14 +51,15 @@ class SearchSettings:
 def given_start(text: str, first_ns: int) -> StartTime:
     """`--start-time`: an absolute stamp (>= 1e9 s) or seconds from the bag's first message."""
     try:
-        value = float(text)
-    except ValueError:
+        value = Decimal(text.strip())  # exact: an epoch stamp in float64 loses its nanoseconds
+    except InvalidOperation:
         raise AlignmentError(f"start time {text!r} is not a number of seconds") from None
-    if not np.isfinite(value):
+    if not value.is_finite():
         raise AlignmentError(f"start time {text!r} is not finite")
+    ns = int((value * 1_000_000_000).to_integral_value())
     if value >= EPOCH_THRESHOLD_S:
-        return StartTime(int(round(value * 1e9)), "--start-time (absolute stamp)", 0.0)
-    return StartTime(first_ns + int(round(value * 1e9)), "--start-time (seconds from the first message)", 0.0)
+        return StartTime(ns, "--start-time (absolute stamp)", 0.0)
+    return StartTime(first_ns + ns, "--start-time (seconds from the first message)", 0.0)
 
 
 def targets_start(stamps_ns: list[int], positions: list[np.ndarray], topic: str) -> StartTime:
@@ -69,8 +71,9 @@ def targets_start(stamps_ns: list[int], positions: list[np.ndarray], topic: str)
         if pos.shape != first.shape:
             raise AlignmentError(f"targets topic {topic}: message {k} has {len(pos)} poses, the first {len(first)}")
         if np.abs(pos - first).max() > MOTION_THRESHOLD:
+            # The motion began between the last target at rest and this one.
             period = (stamp - stamps_ns[k - 1]) / 1e9 if k > 0 else 0.0
-            return StartTime(stamps_ns[k - 1] if k > 0 else stamp, f"targets topic {topic}", period)
+            return StartTime(stamps_ns[k - 1] if k > 0 else stamp, f"targets topic {topic}", period / 2)
     raise AlignmentError(f"targets topic {topic}: the grippers never move more than {MOTION_THRESHOLD * 1e3:g} mm")
 
 
