@@ -356,9 +356,11 @@ def _read_transform(path: str):
 def cmd_import(args: argparse.Namespace) -> int:
     from cloth_bench_ros.data.importer import import_dataset
 
+    from cloth_bench_ros.core.cleaning import scene_cleaning
+
     transform = _read_transform(args.transform) if args.transform else None
     bags = import_dataset(Path(args.root), Path(args.out), transform=transform, progress=not args.quiet,
-                          overwrite=args.overwrite)
+                          overwrite=args.overwrite, cleaning=scene_cleaning(voxel=args.voxel) if args.clean else None)
     for bag in bags:
         print(bag)
     print(f"imported {len(bags)} trial(s) into {args.out}")
@@ -495,6 +497,9 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--out", required=True, help="directory for the bags")
     imp.add_argument("--transform", help="4x4 matrix into the simulation frame (text file of 16 numbers, or .npy)")
     imp.add_argument("--overwrite", action="store_true", help="replace bags that exist")
+    imp.add_argument("--clean", action="store_true",
+                     help="crop to the workspace, remove the table plane and outliers (core.cleaning) before writing")
+    imp.add_argument("--voxel", type=float, default=0.0, metavar="M", help="with --clean: voxel size (default off)")
     imp.add_argument("--quiet", action="store_true", help="no progress bar")
     imp.set_defaults(func=cmd_import)
 

@@ -63,6 +63,15 @@ def workspace_box(gripper_positions: np.ndarray, margin: float = WORKSPACE_MARGI
     return tuple(float(v) for v in lo), tuple(float(v) for v in hi)
 
 
+def scene_cleaning(primitives: tuple[str, ...] = ("dynamic", "quasi_static"), voxel: float = 0.0) -> CleaningConfig:
+    """The cleaning for the benchmark scene: the workspace box of the primitives' gripper paths."""
+    from cloth_bench_ros.core.trajectory import full_targets
+
+    paths = [full_targets(p, 100.0) for p in primitives]
+    lo, hi = workspace_box(np.concatenate([np.concatenate([t.left, t.right]) for t in paths]))
+    return CleaningConfig(lo, hi, voxel=voxel)
+
+
 def _remove_table(points: np.ndarray, distance: float) -> np.ndarray:
     """Keep-mask without the largest near-horizontal plane close to the known table height."""
     import open3d as o3d

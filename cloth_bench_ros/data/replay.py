@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from cloth_bench_ros.core import pointcloud2
-from cloth_bench_ros.core.cleaning import CleaningConfig, CleaningStats, clean, workspace_box
+from cloth_bench_ros.core.cleaning import CleaningConfig, CleaningStats, clean, scene_cleaning
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.data import alignment, messages
 from cloth_bench_ros.data.bag_reader import IRREGULAR_TOLERANCE, BagReader
@@ -116,9 +116,7 @@ def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig
         raise ValueError(f"clean mode {options.clean!r} is not one of {', '.join(CLEAN_MODES)}")
     if options.clean == "off" or (options.clean == "auto" and project_bag):
         return None
-    targets = full_targets(options.primitive, options.rate_hz)
-    lo, hi = workspace_box(np.concatenate([targets.left, targets.right]))
-    return CleaningConfig(lo, hi, voxel=options.voxel)
+    return scene_cleaning((options.primitive,), options.voxel)
 
 
 def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> ReplayPlan:
