@@ -89,6 +89,14 @@ def _check_figures(out: Path, summary: dict) -> None:
     assert animation.stat().st_size > 0
     if animation.suffix == ".gif":
         assert Image.open(animation).n_frames == comparison["animation_frames"] > 10
+    from cloth_bench_ros.report.comparison import comparison_section
+    from cloth_bench_ros.report.document import Document
+
+    doc, report = Document("t"), out.parent / "report"
+    report.mkdir()
+    copied = comparison_section(doc, out.parent, report)
+    assert [p.name for p in copied] == ["camera_qualitative.png", f"camera_{animation.name}"]
+    assert "camera_qualitative.png" in doc.markdown() and all(p.stat().st_size > 0 for p in copied)
 
 
 def test_bag_info_lists_every_cloud_topic(camera_bag, capsys):

@@ -215,3 +215,23 @@ def write_comparison(pairs: list, summary: dict, bag_path: Path | None, figures_
         anim_path, frames = animation(pairs, figures_dir / "animation")
         out["animation"], out["animation_frames"] = str(anim_path), frames
     return out
+
+
+def comparison_section(doc: Any, results_dir: Path, out_dir: Path) -> list[Path]:
+    """The report's hook: each run directory (results_dir or one level below) with a qualitative
+    figure (`cloth-bench run --figures`) gets a section with it and its animation, copied to out_dir."""
+    found = sorted({*results_dir.glob("qualitative.png"), *results_dir.glob("*/qualitative.png")})
+    if not found:
+        return []
+    doc.h(2, "Qualitative comparison (the paper's Fig. 4)")
+    doc.p("Simulated mesh in red over the real cloud in black at the paper's time steps, CD/HD (m) under each "
+          "panel, one row per engine; the animation shows the whole trial.")
+    copied = []
+    for figure in found:
+        run = figure.parent.name
+        for src in [figure, *sorted(figure.parent.glob("animation.*"))]:
+            dst = out_dir / f"{run}_{src.name}"
+            shutil.copyfile(src, dst)
+            copied.append(dst)
+            doc.img(dst.name, f"{run}: {'qualitative figure' if src == figure else 'animation'}")
+    return copied
