@@ -94,6 +94,12 @@ def cmd_run(args: argparse.Namespace) -> int:
                        replay=_replay_params(args), change_of_phase_frame=args.change_of_phase_frame,
                        record_comparison=Path(args.record_comparison) if args.record_comparison else None,
                        comparison_figures=args.figures)
+    if config.record_comparison is not None:  # checked before the run, not after it
+        from cloth_bench_ros.safe_io import check_output_dir
+
+        if config.record_comparison.exists() and any(config.record_comparison.iterdir()):
+            raise UserError(f"comparison bag {config.record_comparison} already exists (not empty)")
+        check_output_dir(config.record_comparison)
     summary = run_pipeline(config)
     print(f"cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed}, bag {bag}")
     print(result_table(summary))

@@ -114,6 +114,10 @@ def test_several_cloud_topics_need_a_choice_and_a_bad_frame_is_named(camera_bag,
     assert len(err.splitlines()) == 1 and "several" in err and "--topic" in err and IR_TOPIC in err
     assert cli.main(["run", "--bag", str(path), "--topic", "/nope", "--output", str(tmp_path / "o")]) == 2
     assert "/nope does not exist" in capsys.readouterr().err
+    (tmp_path / "taken" / "x").mkdir(parents=True)
+    assert cli.main(["run", "--bag", str(path), "--topic", CAMERA_TOPIC, "--record-comparison", str(tmp_path / "taken"),
+                     "--output", str(tmp_path / "o")]) == 2
+    assert "already exists" in capsys.readouterr().err
 
 
 def test_unresolvable_frame_is_one_line_naming_it(tmp_path, capsys):
