@@ -45,7 +45,7 @@ def check_bag(bag: Path, topic: str | None = None) -> None:
 def _replay_params(args: argparse.Namespace) -> dict:
     """Recorder parameters for bags that do not say everything (plain `ros2 bag record` output)."""
     params = {"topic": args.topic or "", "start_time": args.start_time or "", "targets_topic": args.targets_topic or "",
-              "clean": args.clean, "voxel": float(args.voxel), "align_window": float(args.align_window),
+              "clean": args.clean, "voxel": float(args.voxel), "table_plane": args.table_plane, "align_window": float(args.align_window),
               "align_step": float(args.align_step)}
     if args.transform:
         params["transform"] = [float(v) for v in _read_transform(args.transform).ravel()]
@@ -412,6 +412,9 @@ def build_parser() -> argparse.ArgumentParser:
     scoring.add_argument("--clean", default="auto", choices=("auto", "on", "off"),
                          help="crop, table plane, outliers (default auto: on for bags without the project's metadata)")
     scoring.add_argument("--voxel", type=float, default=0.0, metavar="M", help="voxel down-sampling size (default off)")
+    scoring.add_argument("--table-plane", default="auto", choices=("auto", "remove", "keep"),
+                         help="remove the table plane; it also removes cloth lying flat on the table "
+                              "(default auto: remove for dynamic, keep for quasi_static)")
     scoring.add_argument("--align-window", type=float, default=1.0, metavar="S",
                          help="seconds of motion the automatic alignment compares (default 1)")
     scoring.add_argument("--align-step", type=float, default=1.0 / 30.0, metavar="S",

@@ -256,3 +256,14 @@ def test_cleaning_crops_removes_table_and_outliers_and_counts_them():
     assert stats.voxel_merged > 0 and stats.points_out == len(out)
     assert sum(v for k, v in stats.as_dict().items() if k not in ("frames", "points_in", "points_out")) \
         == stats.points_in - stats.points_out
+
+
+def test_table_plane_is_kept_where_the_cloth_lies_on_the_table():
+    from cloth_bench_ros.data.replay import cleaning_config
+
+    assert cleaning_config(ReplayOptions(primitive="dynamic"), project_bag=False).table_plane
+    assert not cleaning_config(ReplayOptions(primitive="quasi_static"), project_bag=False).table_plane
+    assert cleaning_config(ReplayOptions(primitive="quasi_static", table_plane="remove"), False).table_plane
+    assert cleaning_config(ReplayOptions(), project_bag=True) is None  # the project's bags are clean already
+    with pytest.raises(ValueError, match="table plane mode"):
+        cleaning_config(ReplayOptions(table_plane="maybe"), False)

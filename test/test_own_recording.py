@@ -44,6 +44,7 @@ def test_camera_recording_is_scored_with_automatic_alignment(camera_bag, tmp_pat
     assert abs(cd - cd0) <= 0.10 * cd0, (cd, cd0)
     cleaning = summary["real"]["cleaning"]
     assert cleaning["outside_box"] > 0 and cleaning["table_plane"] > 0 and cleaning["non_finite"] > 0
+    assert cleaning["settings"]["table_plane"] is True and cleaning["settings"]["sor_std_ratio"] == 3.0
     assert summary["real"]["frames_from"] == "tf from /tf_static"
     assert "real frames: 137 on the topic = " in printed and "(adds up)" in printed
     assert "automatic (reference simulation), precision +/-" in printed

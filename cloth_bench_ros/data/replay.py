@@ -9,7 +9,7 @@ add up to the frames on the topic; the evaluator then accounts for those it was 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -26,6 +26,7 @@ from cloth_bench_ros.data.trial import TARGETS_TOPIC, TrialInfo
 
 WORLD = "world"
 CLEAN_MODES = ("auto", "on", "off")
+TABLE_MODES = ("auto", "remove", "keep")
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,7 @@ class ReplayOptions:
     transform: tuple | None = None  # 16 numbers, row-major: replaces tf for every cloud
     clean: str = "auto"  # auto: on for bags without project metadata
     voxel: float = 0.0
+    table_plane: str = "auto"  # remove, keep, or auto: remove for dynamic (scored before contact), keep for quasi_static
     rate_hz: float = 100.0
     align_engine: str = "mujoco"
     search: alignment.SearchSettings = alignment.SearchSettings()
@@ -57,6 +59,7 @@ class ReplayPlan:
     frames: list[tuple[int, np.ndarray]] = field(default_factory=list)
     counts: dict[str, int] = field(default_factory=dict)
     cleaning: CleaningStats | None = None
+    cleaning_config: CleaningConfig | None = None
     frames_source: str = ""
     nan_points_dropped: int = 0
     irregular_intervals: int = 0  # stamp steps off 1/fps by more than IRREGULAR_TOLERANCE
@@ -66,7 +69,8 @@ class ReplayPlan:
         return {"topic": self.topic, "frames_in_bag": self.frames_in_bag, **self.counts,
                 "start": self.start.as_dict(), "frames": self.frames_source,
                 "nan_points_dropped": self.nan_points_dropped, "irregular_intervals": self.irregular_intervals,
-                "cleaning": self.cleaning.as_dict() if self.cleaning else None}
+                "cleaning": None if self.cleaning is None else {
+                    **self.cleaning.as_dict(), "settings": asdict(self.cleaning_config)}}
 
 
 def _trial(reader: BagReader, options: ReplayOptions, topic: str) -> TrialInfo:
@@ -116,7 +120,11 @@ def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig
         raise ValueError(f"clean mode {options.clean!r} is not one of {', '.join(CLEAN_MODES)}")
     if options.clean == "off" or (options.clean == "auto" and project_bag):
         return None
-    return scene_cleaning((options.primitive,), options.voxel)
+    if options.table_plane not in TABLE_MODES:
+        raise ValueError(f"table plane mode {options.table_plane!r} is not one of {', '.join(TABLE_MODES)}")
+    # Removing the plane also removes cloth lying flat on the table, which the quasi-static drag scores.
+    remove = options.table_plane == "remove" or (options.table_plane == "auto" and options.primitive == "dynamic")
+    return replace(scene_cleaning((options.primitive,), options.voxel), table_plane=remove)
 
 
 def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> ReplayPlan:
@@ -151,7 +159,8 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     start = _start(reader, options, project_bag, stamps, clouds, reference)
     targets = full_targets(options.primitive, options.rate_hz)
     end_ns = targets.stamp_ns(len(targets) - 1) - int(round(targets.quintic_start * 1e9))
-    plan = ReplayPlan(trial, topic, len(stamps), start, cleaning=stats, frames_source=frames_source,
+    plan = ReplayPlan(trial, topic, len(stamps), start, cleaning=stats, cleaning_config=config,
+                      frames_source=frames_source,
                       nan_points_dropped=nan_dropped if stats is None else stats.non_finite)
     counts = {"before_start": 0, "after_trajectory": 0, "empty_after_cleaning": 0, "to_send": 0}
     # A frame within the start's precision of it is at the start (not before it).

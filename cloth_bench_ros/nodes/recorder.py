@@ -95,6 +95,7 @@ class Recorder(Node):
             transform=tuple(transform) if len(transform) == 16 else None,
             clean=self.declare_parameter("clean", "auto").value,
             voxel=float(self.declare_parameter("voxel", 0.0).value),
+            table_plane=self.declare_parameter("table_plane", "auto").value,
             rate_hz=float(self.declare_parameter("rate_hz", 100.0).value),
             align_engine=self.declare_parameter("align_engine", "mujoco").value,
             search=search,
