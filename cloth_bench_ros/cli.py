@@ -100,7 +100,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         if config.record_comparison.exists() and any(config.record_comparison.iterdir()):
             raise UserError(f"comparison bag {config.record_comparison} already exists (not empty)")
         check_output_dir(config.record_comparison)
-    summary = run_pipeline(config)
+    if getattr(args, "processes", False):
+        from cloth_bench_ros.studies.processes import ProcessRunError, run_processes
+
+        try:
+            summary = run_processes(config)
+        except ProcessRunError as exc:
+            raise UserError(f"run --processes: {exc}") from None
+    else:
+        summary = run_pipeline(config)
     print(f"cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed}, bag {bag}")
     print(result_table(summary))
     _print_real(summary)
@@ -400,6 +408,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--presets", help="directory of <engine>.yaml presets (default: config/presets)")
     run.add_argument("--seed", type=int, default=0, help="perturbs the initial cloth (default 0)")
     run.add_argument("--pacing", default="lockstep", choices=("lockstep", "realtime"))
+    run.add_argument("--processes", action="store_true",
+                     help="one OS process per node over DDS on loopback (default: all nodes in this process)")
     run.add_argument("--output", help="report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)")
     scoring = run.add_argument_group("scoring your own recording (see README)")
     scoring.add_argument("--topic", help="PointCloud2 topic to score (default: the project's, else the only one)")

@@ -11,6 +11,7 @@ import numpy as np
 from cloth_bench_ros.data.bag_reader import BagReader
 from cloth_bench_ros.data.errors import BagWarning
 
+
 def describe(path: str | os.PathLike[str], validate: bool = True) -> str:
     """Human-readable summary of a bag (for `cloth-bench bag info`); BagError if unreadable.
 

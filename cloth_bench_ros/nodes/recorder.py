@@ -25,10 +25,10 @@ from cloth_bench_ros.data.replay import ReplayOptions, plan_replay
 from cloth_bench_ros.data.trial import TRIAL_STATUS_NAME
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
-from cloth_bench_ros.nodes.common import NAMESPACE, run_node
+from cloth_bench_ros.nodes.common import NAMESPACE, REPLAY_STATUS_NAME, run_node
 from cloth_bench_ros.runtime import (
     Clock, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, Time,
-    make_qos, message_type, serialize_message, stamp_ns,
+    declare_float, make_qos, message_type, serialize_message, stamp_ns, steady_clock,
 )
 
 
@@ -52,10 +52,10 @@ class Recorder(Node):
         if not path:
             raise ValueError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
         # Frames are stamped from the start of the quintic part; the run starts with the settle phase.
-        self.offset_ns = int(round(self.declare_parameter("time_offset", SETTLE_DURATION).value * 1e9))
+        self.offset_ns = int(round(declare_float(self, "time_offset", SETTLE_DURATION) * 1e9))
         clock = self.declare_parameter("clock", "sim").value
-        self.rate_factor = float(self.declare_parameter("rate_factor", 1.0).value)
-        self.start_offset_ns = int(round(self.declare_parameter("start_offset", 0.0).value * 1e9))
+        self.rate_factor = declare_float(self, "rate_factor", 1.0)
+        self.start_offset_ns = int(round(declare_float(self, "start_offset", 0.0) * 1e9))
         self.loop = bool(self.declare_parameter("loop", False).value)
         if clock not in ("sim", "wall"):
             raise ValueError(f"recorder: unknown clock {clock!r} (valid: sim, wall)")
@@ -70,12 +70,15 @@ class Recorder(Node):
         self.cloud_pub = self.create_publisher(PointCloud2, "real/cloud", make_qos(10))
         self.trial_pub = self.create_publisher(DiagnosticArray, "real/trial", make_qos(1, latched=True))
         self.rewind()
-        self.trial_pub.publish(self.trial_message())
+        trial = self.trial_message()
+        if clock == "sim":
+            trial.status.append(self.replay_status())
+        self.trial_pub.publish(trial)
         if clock == "sim":
             self.create_subscription(Clock, "/clock", self.on_clock, make_qos(10))
         else:
             self.wall_start_ns = time.monotonic_ns()
-            self.wall_timer = self.create_timer(0.001, self.on_wall_tick)
+            self.wall_timer = self.create_timer(0.001, self.on_wall_tick, clock=steady_clock())  # not sim time
 
     def replay_options(self) -> ReplayOptions:
         """What the bag does not say, from the node's parameters."""
@@ -83,8 +86,8 @@ class Recorder(Node):
         transform = list(self.declare_parameter("transform", [0.0]).value)
         if transform != [0.0] and len(transform) != 16:
             raise ValueError(f"recorder: transform needs 16 numbers (a 4x4 matrix), got {len(transform)}")
-        search = SearchSettings(window=float(self.declare_parameter("align_window", 1.0).value),
-                                coarse_step=float(self.declare_parameter("align_step", 1.0 / 30.0).value))
+        search = SearchSettings(window=declare_float(self, "align_window", 1.0),
+                                coarse_step=declare_float(self, "align_step", 1.0 / 30.0))
         return ReplayOptions(
             cloth=self.declare_parameter("cloth", "towel").value,
             primitive=self.declare_parameter("primitive", "dynamic").value,
@@ -94,9 +97,9 @@ class Recorder(Node):
             targets_topic=self.declare_parameter("targets_topic", "").value,
             transform=tuple(transform) if len(transform) == 16 else None,
             clean=self.declare_parameter("clean", "auto").value,
-            voxel=float(self.declare_parameter("voxel", 0.0).value),
+            voxel=declare_float(self, "voxel", 0.0),
             table_plane=self.declare_parameter("table_plane", "auto").value,
-            rate_hz=float(self.declare_parameter("rate_hz", 100.0).value),
+            rate_hz=declare_float(self, "rate_hz", 100.0),
             align_engine=self.declare_parameter("align_engine", "mujoco").value,
             search=search,
         )
@@ -132,6 +135,14 @@ class Recorder(Node):
         status = DiagnosticStatus(level=DiagnosticStatus.OK, name=TRIAL_STATUS_NAME,
                                   message=str(self.bag.path), hardware_id="recorder", values=values)
         return DiagnosticArray(status=[status])
+
+    def replay_status(self) -> DiagnosticStatus:
+        """The run-time stamps of every frame the sim-clock replay will send (common.REPLAY_STATUS_NAME)."""
+        stamps = [t + self.offset_ns for t, _ in self.plan.frames if t >= self.start_offset_ns]
+        return DiagnosticStatus(level=DiagnosticStatus.OK, name=REPLAY_STATUS_NAME, hardware_id="recorder",
+                                message=f"{len(stamps)} frames, sent as /clock reaches their stamps",
+                                values=[KeyValue(key="frames", value=str(len(stamps))),
+                                        KeyValue(key="stamps_ns", value=",".join(map(str, stamps)))])
 
     def publish_until(self, t_ns: int, restamp_offset_ns: int) -> None:
         """Publish every frame at or before t_ns (from the motion's start), restamped by the offset."""

@@ -218,8 +218,11 @@ def write_comparison(pairs: list, summary: dict, bag_path: Path | None, figures_
 
 
 def comparison_section(doc: Any, results_dir: Path, out_dir: Path) -> list[Path]:
-    """The report's hook: each run directory (results_dir or one level below) with a qualitative
-    figure (`cloth-bench run --figures`) gets a section with it and its animation, copied to out_dir."""
+    """The report's hook: each run directory with a qualitative figure gets a section.
+
+    Run directories are results_dir or one level below; the figure (`cloth-bench run --figures`)
+    and its animation are copied to out_dir.
+    """
     found = sorted({*results_dir.glob("qualitative.png"), *results_dir.glob("*/qualitative.png")})
     if not found:
         return []
