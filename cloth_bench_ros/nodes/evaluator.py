@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import json
 import time
 from functools import partial
 from pathlib import Path
 
-from cloth_bench_ros.data.bag import trial_from_message
-from cloth_bench_ros.core.evaluation import OnlineEvaluator
+from cloth_bench_ros.data.trial import trial_from_message
+from cloth_bench_ros.core.evaluation import OnlineEvaluator, frame_accounting
 from cloth_bench_ros.nodes.common import NAMESPACE, publishers_matched, replay_stamps, run_node
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
+from cloth_bench_ros.report.comparison import write_comparison
 from cloth_bench_ros.report.run_report import write_run_report
 from cloth_bench_ros.runtime import (
     DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, declare_float, make_qos,
@@ -34,13 +36,18 @@ class Evaluator(Node):
         offset = declare_float(self, "time_offset", SETTLE_DURATION)
         cut = int(self.declare_parameter("change_of_phase_frame", -1).value)
         self.output_dir = self.declare_parameter("output_dir", "").value
+        self.comparison_bag = self.declare_parameter("record_comparison", "").value
+        self.comparison_figures = bool(self.declare_parameter("comparison_figures", False).value)
         self.run_info = {"primitive": self.primitive.value, "rate_hz": rate_hz, "engines": self.engines,
                          "cloth": self.declare_parameter("cloth", "towel").value,
                          "seed": int(self.declare_parameter("seed", 0).value)}
         targets = full_targets(self.primitive, rate_hz)
         self.final_stamp = targets.stamp_ns(len(targets) - 1)
         self.core = OnlineEvaluator(self.engines, self.primitive, int(round(offset * 1e9)),
-                                    cut if cut >= 0 else None, REAL_FPS)
+                                    cut if cut >= 0 else None, REAL_FPS,
+                                    keep_pairs=bool(self.comparison_bag or self.comparison_figures))
+        self.replay: dict = {}  # the recorder's frame accounting, from the trial message
+        self.expected_real_frames: int | None = None  # as announced by the recorder
         # Inputs keep every sample until taken: a slow evaluator delays, never loses, a frame.
         data_qos = make_qos(100, keep_all=True)
         self.inputs = [self.create_subscription(PointCloud2, "real/cloud", self.on_real, data_qos),
@@ -82,6 +89,11 @@ class Evaluator(Node):
         stamps = replay_stamps(msg)
         if stamps is not None:
             self.expected_real = {s for s in stamps if s <= self.final_stamp}
+        values = _values(msg)
+        if "replay" in values:
+            self.replay = json.loads(values["replay"])
+        if "frames_to_send" in values:
+            self.expected_real_frames = int(values["frames_to_send"])
         trial = trial_from_message(msg)
         if trial is None:
             return
@@ -158,8 +170,16 @@ class Evaluator(Node):
         self.core.finish()
         wall_s = (time.monotonic_ns() - self.first_target_ns) / 1e9 if self.first_target_ns else None
         engines = self.core.summary(self.period_s, wall_s, self.final_stamp / 1e9)
+        real = self.core.real_summary()
+        # NaN points and stamp intervals are counted by the recorder on every frame of the bag.
+        real["nan_points_dropped"] += int(self.replay.get("nan_points_dropped", 0))
+        real["irregular_intervals"] = int(self.replay.get("irregular_intervals", real["irregular_intervals"]))
+        accounting = frame_accounting(self.replay, real)
         self.summary = {"run": {**self.run_info, "trial": self.trial, "wall_time": wall_s},
-                        "real": self.core.real_summary(), "engines": engines}
+                        "real": {**real, "accounting": accounting,
+                                 "alignment": self.replay.get("start"), "frames_from": self.replay.get("frames"),
+                                 "cleaning": self.replay.get("cleaning"), "topic": self.replay.get("topic")},
+                        "engines": engines}
         statuses = []
         for engine, m in self.summary["engines"].items():
             flat = {k: v for k, v in m.items() if not isinstance(v, dict)}
@@ -170,6 +190,10 @@ class Evaluator(Node):
                 name=f"cloth_bench/{engine}/summary", message="diverged" if m["diverged"] else "ok",
                 hardware_id=engine, values=[KeyValue(key=k, value=str(v)) for k, v in flat.items()]))
         self.metrics_pub.publish(DiagnosticArray(status=statuses))
+        if self.comparison_bag or (self.comparison_figures and self.output_dir):
+            self.summary["comparison"] = write_comparison(
+                self.core.pairs, self.summary, Path(self.comparison_bag) if self.comparison_bag else None,
+                Path(self.output_dir) if self.comparison_figures and self.output_dir else None)
         if self.output_dir:
             write_run_report(Path(self.output_dir), self.summary, self.core.scores)
             self.get_logger().info(f"report written to {self.output_dir}")

@@ -23,30 +23,11 @@ import yaml
 
 from cloth_bench_ros.nodes.common import NAMESPACE
 from cloth_bench_ros.runtime.dds import loopback_environment
-from cloth_bench_ros.studies.pipeline import RunConfig
+from cloth_bench_ros.studies.pipeline import RunConfig, node_parameters
 
 
 class ProcessRunError(RuntimeError):
     """A node process failed or the run did not end in time; str() names the node and its last line."""
-
-
-def node_parameters(config: RunConfig, output_dir: Path) -> dict[str, dict]:
-    """{node name: parameters}, the in-process run's (run_pipeline) for each node."""
-    common = {"primitive": config.primitive, "rate_hz": float(config.rate_hz), "use_sim_time": True}
-    nodes = {
-        "trajectory_publisher": {"primitive": config.primitive, "rate_hz": float(config.rate_hz),
-                                 "engines": list(config.engines), "pacing": config.pacing},
-        "evaluator": {**common, "engines": list(config.engines), "output_dir": str(output_dir),
-                      "cloth": config.cloth, "seed": int(config.seed), "pacing": config.pacing},
-        "recorder": {"bag": str(config.bag), "use_sim_time": True},
-    }
-    nx, nz = config.grid or (0, 0)
-    for engine in config.engines:
-        nodes[f"simulator_{engine}"] = {
-            **common, "engine": engine, "cloth": config.cloth, "seed": int(config.seed), "grid_nx": nx,
-            "grid_nz": nz, "presets_dir": str(config.presets_dir or ""),
-            "engine_params": yaml.safe_dump(config.engine_params.get(engine, {}))}
-    return nodes
 
 
 def _command(name: str, params_file: Path) -> list[str]:
