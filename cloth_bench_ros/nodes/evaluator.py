@@ -114,6 +114,10 @@ class Evaluator(Node):
         now, stamp = time.monotonic_ns(), stamp_ns(msg.header.stamp)
         if self.first_target_ns is None:
             self.first_target_ns, self.first_target_stamp = now, stamp
+        elif self.realtime:
+            # The schedule starts at the earliest arrival less its sim time: a first target that
+            # reached this node late must not shift every later deadline (negative latencies).
+            self.first_target_ns = min(self.first_target_ns, now - (stamp - self.first_target_stamp))
         if not self.realtime:
             self.target_sent[stamp] = now
 
