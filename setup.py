@@ -27,7 +27,7 @@ setup(
     ]
     + bag_files(),
     package_data={package_name: ["py.typed"]},
-    install_requires=["setuptools"],
+    install_requires=["setuptools", "optuna>=3.6", "cmaes>=0.10", "dask[distributed]>=2024.1"],
     zip_safe=True,
     maintainer="cloth_bench_ros developers",
     maintainer_email="cloth-bench@example.org",

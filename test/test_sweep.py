@@ -131,9 +131,15 @@ def _square_or_die(x: int) -> int:
     return x * x
 
 
-def test_a_dying_worker_is_retried_once_then_recorded_and_the_rest_finish():
+def test_a_task_that_kills_its_workers_is_retried_then_recorded_and_the_rest_finish():
+    import dask
+
+    from cloth_bench_ros.studies.executor import open_client, run_tasks
+
     results, crashes = {}, {}
-    sw.run_parallel(_square_or_die, list(range(6)), 2, on_result=results.__setitem__, on_crash=crashes.__setitem__)
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1}), open_client(workers=2) as client:
+        run_tasks(client, _square_or_die, list(range(6)), on_result=results.__setitem__,
+                  on_crash=crashes.__setitem__)
     assert results == {0: 0, 1: 1, 2: 4, 4: 16, 5: 25}
     assert list(crashes) == [3] and "died" in crashes[3]
 
