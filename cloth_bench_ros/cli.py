@@ -164,10 +164,11 @@ def _render(results: Path, out: Path, stress: Path | None, rate: float, cloth: s
 
     results = Path(results)
     results_file = results / RESULTS_FILE if results.is_dir() else results
-    if not results_file.is_file():
+    identifications = find_identifications(results_file.parent) if results_file.parent.is_dir() else []
+    if not results_file.is_file() and not identifications:
         raise UserError(f"results {results}: no {RESULTS_FILE} there (run `cloth-bench sweep` first)")
     rows = load_rows(results_file)
-    if not rows:
+    if not rows and not identifications:
         raise UserError(f"results {results_file}: holds no result rows")
     if stress is None and (results_file.parent / STRESS_FILE).is_file():
         stress = results_file.parent / STRESS_FILE
@@ -175,7 +176,7 @@ def _render(results: Path, out: Path, stress: Path | None, rate: float, cloth: s
         raise UserError(f"stress results {stress}: no such file or directory")
     stress_rows = load_stress(Path(stress)) if stress is not None else None
     outcome = render_report(rows, results_file.parent, out, stress_rows, rate, cloth, tol_rel, tol_abs,
-                            identifications=find_identifications(results_file.parent))
+                            identifications=identifications)
     if "table2" in outcome.tables:
         print(outcome.tables["table2"].markdown())
     for note in outcome.recommendations:
@@ -213,6 +214,46 @@ def cmd_stress(args: argparse.Namespace) -> int:
         n = sum(r["engine"] == engine for r in rows)
         print(f"{engine}: {len(diverged)} of {n} cases diverged" + (f" ({', '.join(diverged)})" if diverged else ""))
     print(f"stress: {out}/stress.jsonl, {out}/stress.md")
+    return 0
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    from cloth_bench_ros.engines.presets import CLOTHS
+    from cloth_bench_ros.paths import bundled_bag
+    from cloth_bench_ros.studies.identify import IdentifySpec, identify
+
+    if args.cloth not in CLOTHS:
+        raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
+    for name, value, least in (("--trials", args.trials, 1), ("--validate-seeds", args.validate_seeds, 0),
+                               ("--seed", args.seed, 0), ("--max-frames", args.max_frames or 1, 1),
+                               ("--batch", args.batch or 1, 1), ("--workers", args.workers or 1, 1)):
+        if value < least:
+            raise UserError(f"{name} must be at least {least}, got {value}")
+    if not (args.span > 1 and args.span < float("inf")):
+        raise UserError(f"--span must be a finite factor > 1, got {args.span}")
+    bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
+    check_bag(bag)
+    fixed = _overrides(args.set, [args.engine]).get(args.engine, {})
+    out = Path(args.output) if args.output else Path("results") / "identify" / f"{args.engine}_{args.cloth}_{args.primitive}"
+    spec = IdentifySpec(args.engine, args.cloth, args.primitive, bag, out, args.sampler, args.trials, args.objective,
+                        [p.strip() for p in args.params.split(",") if p.strip()] if args.params else [], args.seed,
+                        args.rate, args.grid, fixed, args.span, args.max_frames, args.batch, args.validate_seeds,
+                        Path(args.bag_dir) if args.bag_dir else None)
+    print(f"cloth-bench identify: {args.engine}, {args.cloth} {args.primitive}, {args.objective.upper()}, "
+          f"sampler {args.sampler}, {args.trials} trials each; bag {bag}; output {out}", flush=True)
+    outcome = identify(spec, args.scheduler, args.workers, progress=not args.no_progress)
+    s = outcome.summary
+    for name, result in s["per_sampler"].items():
+        print(f"{name:<6} best {args.objective.upper()} {result['value']:.5f} m after {result['trials']} trials")
+    print(f"identified ({s['best_sampler']}): " + ", ".join(f"{k}={v:.6g}" for k, v in s["params"].items()))
+    print(f"{args.objective.upper()} on seed {args.seed}: preset {s['preset_value']:.5f} m -> identified "
+          f"{s['value']:.5f} m")
+    for v in s["validation"]:
+        print(f"held-out seeds, {Path(v['bag']).name}: preset {v['preset']['mean']:.5f} ± {v['preset']['std']:.5f} m, "
+              f"identified {v['identified']['mean']:.5f} ± {v['identified']['std']:.5f} m "
+              f"({v['identified']['ok']} of {v['identified']['n']} runs ok)")
+    print(f"preset: {outcome.preset_file} (use: cloth-bench run --presets {out}); "
+          f"{outcome.wall_s:.0f} s; report: cloth-bench report {out}")
     return 0
 
 
@@ -386,6 +427,33 @@ def build_parser() -> argparse.ArgumentParser:
     stress.add_argument("--output", help="results directory (default results/stress)")
     stress.add_argument("--no-progress", action="store_true", help="no progress bar")
     stress.set_defaults(func=cmd_stress)
+
+    ident = sub.add_parser("identify", help="fit an engine's cloth parameters to a bag (CMA-ES and Bayesian optimisation)")
+    ident.add_argument("--engine", default="mujoco", help="default mujoco")
+    ident.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel)")
+    ident.add_argument("--primitive", default="dynamic", choices=PRIMITIVES, help="default dynamic")
+    ident.add_argument("--bag", help="rosbag2 MCAP bag to fit (default: the bundled one)")
+    ident.add_argument("--sampler", default="both", choices=("cmaes", "tpe", "gp", "both"),
+                       help="cmaes, tpe (Bayesian optimisation), gp (Gaussian-process BO, needs PyTorch) or both "
+                            "(CMA-ES and TPE, keep the best; default)")
+    ident.add_argument("--trials", type=int, default=500, help="trials per sampler (default 500, as the paper)")
+    ident.add_argument("--objective", default="cd", choices=("cd", "hd"), help="metric of the task window (default cd)")
+    ident.add_argument("--params", help="comma-separated parameters to fit (default: the engine's identified set)")
+    ident.add_argument("--seed", type=int, default=0, help="seed of every trial (default 0)")
+    ident.add_argument("--rate", type=_rate, default=100.0, help="simulator rate in Hz (default 100)")
+    ident.add_argument("--grid", type=_grid, help="cloth mesh NXxNZ (default: the engine's)")
+    ident.add_argument("--set", action="append", metavar="ENGINE.PARAM=VALUE", help="fixed override, not fitted")
+    ident.add_argument("--span", type=float, default=10.0,
+                       help="log-scale ranges reach this factor either side of the preset (default 10)")
+    ident.add_argument("--max-frames", type=int, help="score only the first N frames of the window (faster)")
+    ident.add_argument("--batch", type=int, help="trials in flight (default: the cluster's worker threads)")
+    ident.add_argument("--validate-seeds", type=int, default=5, help="held-out seeds to validate on (default 5)")
+    ident.add_argument("--bag-dir", help="other trials' bags of the cloth and task for validation")
+    ident.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+    ident.add_argument("--scheduler", help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
+    ident.add_argument("--output", help="directory (default results/identify/<engine>_<cloth>_<primitive>)")
+    ident.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ident.set_defaults(func=cmd_identify)
 
     hil = sub.add_parser("hil", help="hardware-in-the-loop timing: one run with targets paced by the wall clock")
     hil.add_argument("--engine", default="mujoco", help="default mujoco")

@@ -222,7 +222,8 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
     doc = Document(title)
     pareto: list[dict] = []
     recs: list[dict] = []
-    doc.extend(overview_section(rows))
+    if rows:
+        doc.extend(overview_section(rows))
     configs = paper_configs(rows)
     paper = paper_rows(rows, configs[0]) if configs else []
     if paper:
@@ -233,7 +234,8 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
     if paper:
         doc.extend(frames_section(paper, results_dir))
     doc.extend(timing_section(rows))
-    doc.extend(stability_section(rows))
+    if rows:
+        doc.extend(stability_section(rows))
     doc.extend(settings_section(rows, tol_rel, tol_abs, recs))
     if stress_rows:
         doc.extend(stress_section(stress_rows))
