@@ -72,8 +72,9 @@ def default_params(engine: str) -> list[str]:
 
 
 def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> dict[str, Any]:
-    """name -> Optuna distribution: the schema's range; where it spans decades, a log range within a
-    factor `span` of the base (preset) value. ValueError for a parameter that cannot be fitted."""
+    """name -> Optuna distribution: the schema's range; where it spans decades (high >= 100 low, or
+    100 times the base value when low is 0), a log range within a factor `span` either side of the
+    base (preset) value. ValueError for a parameter that cannot be fitted."""
     from optuna.distributions import FloatDistribution
 
     from cloth_bench_ros.engines import engine_class
@@ -88,7 +89,8 @@ def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> 
             raise ValueError(f"--params: {engine} parameter {name} is not a number with a range")
         value = float(base.get(name, p.default))
         low, high = float(p.low), float(p.high)
-        if value > 0 and high > 100 * max(low, value / span / 10):
+        decades = high >= 100 * low if low > 0 else value > 0 and high >= 100 * value
+        if decades and value > 0:
             space[name] = FloatDistribution(max(low, value / span), min(high, value * span), log=True)
         else:
             space[name] = FloatDistribution(low, high)
