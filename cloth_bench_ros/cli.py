@@ -106,6 +106,15 @@ def _grid(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _scheduler(text: str) -> str:
+    from cloth_bench_ros.studies.executor import check_scheduler_address
+
+    try:
+        return check_scheduler_address(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _overrides(specs: list[str] | None, engines: list[str] | None = None) -> dict[str, dict]:
     """--set engine.param=value (repeatable) -> {engine: {param: value}}, checked against the schemas."""
     from cloth_bench_ros.engines import engine_class
@@ -383,7 +392,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--seeds", type=int, help="number of seeds (default 20; settings mode 2)")
     sweep.add_argument("--seed-start", type=int, default=0, help="first seed (default 0)")
     sweep.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
-    sweep.add_argument("--scheduler", help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
+    sweep.add_argument("--scheduler", type=_scheduler, help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
     sweep.add_argument("--output", help="results directory (default results/sweep or results/settings)")
     sweep.add_argument("--bag-dir", help="directory of <cloth>_<task> or <cloth>_<trial>_<task> bags "
                                          "(default: the bundled bags)")
@@ -422,7 +431,7 @@ def build_parser() -> argparse.ArgumentParser:
     stress.add_argument("--case", action="append", help="only these cases (repeat; see --list)")
     stress.add_argument("--list", action="store_true", help="list the cases and exit")
     stress.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
-    stress.add_argument("--scheduler", help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
+    stress.add_argument("--scheduler", type=_scheduler, help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
     stress.add_argument("--max-wall-s", type=float, help="wall-time budget per case (default 120 s)")
     stress.add_argument("--output", help="results directory (default results/stress)")
     stress.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -450,7 +459,7 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--validate-seeds", type=int, default=5, help="held-out seeds to validate on (default 5)")
     ident.add_argument("--bag-dir", help="other trials' bags of the cloth and task for validation")
     ident.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
-    ident.add_argument("--scheduler", help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
+    ident.add_argument("--scheduler", type=_scheduler, help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
     ident.add_argument("--output", help="directory (default results/identify/<engine>_<cloth>_<primitive>)")
     ident.add_argument("--no-progress", action="store_true", help="no progress bar")
     ident.set_defaults(func=cmd_identify)

@@ -160,6 +160,8 @@ def test_cli_sweep_dry_run_counts_cells(bag_dir, tmp_path, capsys):
     (["--cloth", "silk"], "unknown cloth 'silk'"),
     (["--engine", "sofa"], "engine sofa is not available"),
     (["--mode", "settings", "--rate", "10", "--rate", "100"], "one rate"),
+    (["--seed-start", "-3"], "--seed-start must be >= 0"),
+    (["--scheduler", "localhost"], "is not tcp://HOST:PORT"),
 ])
 def test_cli_sweep_user_errors_are_one_line(bag_dir, tmp_path, capsys, argv, message):
     try:
@@ -209,3 +211,29 @@ def test_hil_reports_latency_deadline_misses_and_real_time_factor(hanging_bag, t
     assert 0 < row["latency_p50"] <= row["latency_p99"] <= row["latency_max"] < 1.0
     assert 0 <= row["deadline_misses"] <= 741
     assert 0.5 < row["real_time_factor"] <= 1.05  # paced by the wall clock
+
+
+@pytest.mark.parametrize("line, message", [
+    ("[1, 2, 3]", "must be a JSON object"),
+    ('{"engine": "mujoco", "cloth": "towel"}', "lacks rate_hz"),
+    ('{"engine": "../../etc", "rate_hz": 100, "cloth": "towel", "primitive": "dynamic", "seed": 0}',
+     "not a safe file name part"),
+    ('{"engine": "mujoco", "rate_hz": 100, "cloth": "towel", "primitive": "dynamic", "seed": 0, '
+     '"frames_csv": "../../outside.csv"}', "points outside"),
+    ('{"engine": "mujoco", "rate_hz": -5, "cloth": "towel", "primitive": "dynamic", "seed": 0}',
+     "not a positive number"),
+])
+def test_report_refuses_untrusted_rows_in_one_line(tmp_path, capsys, line, message):
+    (tmp_path / sw.RESULTS_FILE).write_text(line + "\n")
+    assert main(["report", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and f"{sw.RESULTS_FILE}:1" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_locked_results_directory_refuses_a_second_study(tmp_path):
+    with sw.ResultsLock(tmp_path, "sweep"):
+        with pytest.raises(ValueError, match="is in use by sweep"):
+            with sw.ResultsLock(tmp_path, "identify"):
+                pass
+    with sw.ResultsLock(tmp_path, "identify"):  # released on exit
+        pass
