@@ -166,26 +166,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def _render(results: Path, out: Path, stress: Path | None, rate: float, cloth: str, tol_rel: float,
             tol_abs: float) -> int:
-    from cloth_bench_ros.report.document import render_report
-    from cloth_bench_ros.report.identification import find_identifications
-    from cloth_bench_ros.studies.results import RESULTS_FILE, load_rows
-    from cloth_bench_ros.studies.stress import STRESS_FILE, load_stress
+    from cloth_bench_ros.report.document import report_directory
 
-    results = Path(results)
-    results_file = results / RESULTS_FILE if results.is_dir() else results
-    identifications = find_identifications(results_file.parent) if results_file.parent.is_dir() else []
-    if not results_file.is_file() and not identifications:
-        raise UserError(f"results {results}: no {RESULTS_FILE} there (run `cloth-bench sweep` first)")
-    rows = load_rows(results_file)
-    if not rows and not identifications:
-        raise UserError(f"results {results_file}: holds no result rows")
-    if stress is None and (results_file.parent / STRESS_FILE).is_file():
-        stress = results_file.parent / STRESS_FILE
-    if stress is not None and not Path(stress).exists():
-        raise UserError(f"stress results {stress}: no such file or directory")
-    stress_rows = load_stress(Path(stress)) if stress is not None else None
-    outcome = render_report(rows, results_file.parent, out, stress_rows, rate, cloth, tol_rel, tol_abs,
-                            identifications=identifications)
+    outcome = report_directory(Path(results), out, stress, rate, cloth, tol_rel, tol_abs)
     if "table2" in outcome.tables:
         print(outcome.tables["table2"].markdown())
     for note in outcome.recommendations:

@@ -244,3 +244,27 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
     tables = {t.name: t for t in doc.tables()}
     md, html, images = write_document(doc, out_dir, csv_only=[results_table(rows)])
     return ReportOutcome(md, html, images, tables, recs, pareto)
+
+
+def report_directory(results: Path, out: Path, stress: Path | None = None, wanted_rate: float = 100.0,
+                     fig5_cloth: str = "towel", tol_rel: float = 0.05, tol_abs: float = 0.002) -> ReportOutcome:
+    """`cloth-bench report`: the report of a results.jsonl (or its directory), with the stress suite and the
+    identifications found beside it; ValueError (one line) when there is nothing usable to report."""
+    from cloth_bench_ros.report.identification import find_identifications
+    from cloth_bench_ros.studies.results import RESULTS_FILE, load_rows
+    from cloth_bench_ros.studies.stress import STRESS_FILE, load_stress
+
+    results_file = results / RESULTS_FILE if results.is_dir() else results
+    identifications = find_identifications(results_file.parent) if results_file.parent.is_dir() else []
+    if not results_file.is_file() and not identifications:
+        raise ValueError(f"results {results}: no {RESULTS_FILE} there (run `cloth-bench sweep` first)")
+    rows = load_rows(results_file)
+    if not rows and not identifications:
+        raise ValueError(f"results {results_file}: holds no result rows")
+    if stress is None and (results_file.parent / STRESS_FILE).is_file():
+        stress = results_file.parent / STRESS_FILE
+    if stress is not None and not Path(stress).exists():
+        raise ValueError(f"stress results {stress}: no such file or directory")
+    stress_rows = load_stress(Path(stress)) if stress is not None else None
+    return render_report(rows, results_file.parent, out, stress_rows, wanted_rate, fig5_cloth, tol_rel, tol_abs,
+                         identifications=identifications)
