@@ -129,3 +129,23 @@ def test_killing_the_client_leaves_no_worker_process(bag_dir, tmp_path):
         client.wait(timeout=30)
     gone, alive = psutil.wait_procs(children, timeout=30)
     assert not alive, [(p.pid, p.name()) for p in alive]
+
+
+def test_a_worker_keeps_the_trees_of_the_clouds_it_has_scored():
+    import numpy as np
+
+    from cloth_bench_ros.core import metrics
+
+    rng = np.random.default_rng(0)
+    a, b = rng.uniform(size=(300, 3)), rng.uniform(size=(300, 3))
+    try:
+        metrics.keep_trees(500)
+        first = metrics.RealCloud.of(a)
+        assert metrics.RealCloud.of(a.copy()) is first  # same points: the tree is not built again
+        assert metrics.RealCloud.of(b) is not first
+        assert metrics.RealCloud.of(a) is not first  # 600 points > 500: the least recent was dropped
+        v = rng.uniform(size=(20, 3))
+        assert first.chamfer_hausdorff(v) == metrics.RealCloud(a).chamfer_hausdorff(v)
+    finally:
+        metrics.keep_trees(0)
+    assert metrics.RealCloud.of(a) is not metrics.RealCloud.of(a)  # off outside workers

@@ -34,7 +34,8 @@ def _plain_log(ax, axis: str = "xy") -> None:
         a.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:.3g}") if few else FuncFormatter(lambda v, _: ""))
 
 
-def _savefig(fig, path: Path) -> Path:
+def save_figure(fig, path: Path) -> Path:
+    """tight_layout, save as PNG, close; the path."""
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -89,7 +90,7 @@ def plot_fig5(rows: Sequence[dict], cloth: str, path: Path, title: str) -> Path:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
     fig.suptitle(title, fontsize=11)
-    return _savefig(fig, path)
+    return save_figure(fig, path)
 
 
 def speed_error_points(rows: Sequence[dict], label_key: str = "rate") -> tuple[list, list]:
@@ -152,7 +153,7 @@ def plot_speed_error(rows: Sequence[dict], path: Path, title: str, label_key: st
         else:
             ax.text(0.5, 0.5, "no runs of this task", transform=ax.transAxes, ha="center", color="gray")
     fig.suptitle(title, fontsize=11)
-    return _savefig(fig, path), fronts
+    return save_figure(fig, path), fronts
 
 
 _SHORT = {"grid": "", "self_collision": "sc:", "timestep": "dt:", "solver_iterations": "it:", "substeps": "sub:"}
@@ -219,7 +220,7 @@ def plot_settings(rows: Sequence[dict], path: Path, title: str, recommended: Seq
                     Line2D([], [], color="red", marker="*", mfc="none", ls="", ms=12, label="recommended")]
         ax.legend(handles=handles, fontsize=7, loc="best")
     fig.suptitle(title, fontsize=11)
-    return _savefig(fig, path)
+    return save_figure(fig, path)
 
 
 def frames_file(results_dir: Path, row: dict) -> Path | None:
@@ -277,7 +278,7 @@ def plot_frames(rows: Sequence[dict], results_dir: Path, cloth: str, path: Path)
             ax.grid(True, alpha=0.3)
             if ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=7)
-    return _savefig(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_latency(rows: Sequence[dict], path: Path) -> Path | None:
@@ -304,5 +305,5 @@ def plot_latency(rows: Sequence[dict], path: Path) -> Path | None:
     ax.grid(True, which="both", axis="y", alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title("per-step latency against the deadline")
-    return _savefig(fig, path)
+    return save_figure(fig, path)
 

@@ -95,7 +95,7 @@ def importance_table(ident: dict, suffix: str) -> Table:
 
 def plot_convergence(ident: dict, path: Path) -> Path | None:
     """Best objective so far against trials, one line per sampler (failed trials marked)."""
-    from cloth_bench_ros.report.figures import _savefig, plt
+    from cloth_bench_ros.report.figures import save_figure, plt
 
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
     drawn = False
@@ -124,7 +124,7 @@ def plot_convergence(ident: dict, path: Path) -> Path | None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(f"{engine_label(ident['engine'])} {ident['cloth']} {ident['primitive']}: convergence")
-    return _savefig(fig, path)
+    return save_figure(fig, path)
 
 
 def identification_section(ident: dict, rows: Sequence[dict] = ()) -> list[Block]:
