@@ -64,7 +64,7 @@ def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]
 
 def evaluate(trial: Trial) -> dict:
     """Run one trial; never raises. status ok (value finite), diverged (reason, step) or error."""
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     out = {"number": trial.number, "sampler": trial.sampler, "params": dict(trial.params), "value": math.nan,
            "status": "error", "reason": "", "step": None, "CD": math.nan, "HD": math.nan, "frames": 0}
     engine = None
@@ -122,6 +122,7 @@ def evaluate(trial: Trial) -> dict:
             except Exception:
                 pass
     out["wall_s"] = time.perf_counter() - start
+    out["cpu_s"] = time.process_time() - cpu_start  # what the trial costs on an idle core
     return out
 
 
