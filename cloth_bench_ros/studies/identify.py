@@ -246,11 +246,10 @@ def identify(spec: IdentifySpec, scheduler: str | None = None, workers: int | No
              progress: bool = True) -> IdentifyOutcome:
     """Run the identification of `spec` and its validation; write the preset and identification.json."""
     from cloth_bench_ros.engines.presets import load_preset
+    from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.executor import open_client
     from cloth_bench_ros.studies.identify_output import validate, write_outputs
     from cloth_bench_ros.studies.results import ResultsLock, append_row
-
-    from cloth_bench_ros.safe_io import check_output_dir
 
     start = time.perf_counter()
     spec.output = check_output_dir(spec.output)
@@ -268,19 +267,25 @@ def identify(spec: IdentifySpec, scheduler: str | None = None, workers: int | No
         if not math.isfinite(_best_value(studies[best])):
             raise ValueError(f"identify: no trial of {', '.join(samplers)} finished without diverging "
                              f"(see {spec.output / TRIALS_FILE})")
-        fitted = dict(studies[best].best_params)
-        validation = validate(client, spec, {**spec.fixed, **fitted}, progress)
-    summary = {"engine": spec.engine, "cloth": spec.cloth, "primitive": spec.primitive, "bag": str(spec.bag),
-               "objective": spec.objective, "seed": spec.seed, "rate_hz": spec.rate_hz,
-               "grid": list(spec.grid) if spec.grid else None, "fixed": spec.fixed, "max_frames": spec.max_frames,
-               "space": {n: [d.low, d.high, d.log] for n, d in space.items()}, "samplers": samplers,
-               "best_sampler": best, "params": fitted, "value": _best_value(studies[best]),
-               "preset_params": {n: base.get(n) for n in names}, "preset_value": before["value"],
-               "preset_status": before["status"],
-               "per_sampler": {s: {"value": _best_value(st), "params": st.best_params
-                                   if math.isfinite(_best_value(st)) else {}, "convergence": convergence(st),
-                                   "importance": importance(st), "trials": len(convergence(st))}
-                               for s, st in studies.items()},
-               "validation": validation, "wall_s": time.perf_counter() - start}
-    preset = write_outputs(spec, base, summary)
+        validation = validate(client, spec, {**spec.fixed, **studies[best].best_params}, progress)
+        summary = summarise(spec, space, base, before, studies, best, validation)
+        summary["wall_s"] = time.perf_counter() - start
+        preset = write_outputs(spec, base, summary)
     return IdentifyOutcome(summary, preset, summary["wall_s"])
+
+
+def summarise(spec: IdentifySpec, space: dict, base: dict, before: dict, studies: dict, best: str,
+              validation: list) -> dict:
+    """Everything identification.json keeps: the problem, each sampler's result, the kept one, validation."""
+    return {"engine": spec.engine, "cloth": spec.cloth, "primitive": spec.primitive, "bag": str(spec.bag),
+            "objective": spec.objective, "seed": spec.seed, "rate_hz": spec.rate_hz,
+            "grid": list(spec.grid) if spec.grid else None, "fixed": spec.fixed, "max_frames": spec.max_frames,
+            "space": {n: [d.low, d.high, d.log] for n, d in space.items()}, "samplers": list(studies),
+            "best_sampler": best, "params": dict(studies[best].best_params), "value": _best_value(studies[best]),
+            "preset_params": {n: base.get(n) for n in space}, "preset_value": before["value"],
+            "preset_status": before["status"],
+            "per_sampler": {s: {"value": _best_value(st),
+                                "params": st.best_params if math.isfinite(_best_value(st)) else {},
+                                "convergence": convergence(st), "importance": importance(st),
+                                "trials": len(convergence(st))} for s, st in studies.items()},
+            "validation": validation}
