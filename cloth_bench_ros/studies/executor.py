@@ -128,34 +128,44 @@ def worker_slots(client: Any) -> int:
 def run_tasks(client: Any, func: Callable, items: Sequence, on_result: Callable[[Any, Any], None],
               on_crash: Callable[[Any, str], None], args: tuple = (), in_flight: int | None = None) -> None:
     """func(item, *args) for every item on the cluster, at most `in_flight` at a time (default:
-    twice the worker threads); on_result(item, result) in the client as each finishes."""
-    from distributed import as_completed
+    twice the worker threads); on_result(item, result) in the client as each finishes.
+
+    A worker that dies takes the scheduler's count of every task it held up by one, so a task
+    beside the one that kills its workers can be declared killed too: such a task is submitted
+    once more, and only a task that is killed again goes to on_crash."""
+    from distributed import KilledWorker, as_completed
 
     limit = in_flight or 2 * worker_slots(client)
-    pending = list(items)[::-1]
+    pending = list(enumerate(items))[::-1]
     futures = as_completed()
-    owner: dict[str, Any] = {}
+    owner: dict[str, tuple[int, Any]] = {}
+    retried: set[int] = set()
 
-    def submit() -> None:
-        item = pending.pop()
+    def submit(index: int, item: Any) -> None:
         future = client.submit(func, item, *args, pure=False)
-        owner[future.key] = item
+        owner[future.key] = (index, item)
         futures.add(future)
 
     for _ in range(min(limit, len(pending))):
-        submit()
+        submit(*pending.pop())
     for future in futures:
-        item = owner.pop(future.key)
+        index, item = owner.pop(future.key)
         try:
             result = future.result()
-        except Exception as exc:  # KilledWorker (the task killed its workers) and the like
+        except KilledWorker as exc:
+            if index not in retried:
+                retried.add(index)
+                submit(index, item)
+                continue
+            on_crash(item, _crash_message(exc))
+        except Exception as exc:  # a task that cannot even be sent or unpickled, and the like
             on_crash(item, _crash_message(exc))
         else:
             on_result(item, result)
         finally:
             future.release()
         if pending:
-            submit()
+            submit(*pending.pop())
 
 
 def _crash_message(exc: BaseException) -> str:
