@@ -7,7 +7,8 @@ client keeps the study (which cells, the Optuna study, the results file); worker
 
 - A worker lost in the middle of a task (killed, out of memory, a segfault in an engine) loses
   no task: the scheduler runs it again on another worker; a task that kills
-  `distributed.scheduler.allowed-failures` + 1 workers is reported to `on_crash`.
+  `distributed.scheduler.allowed-failures` + 1 workers is run once more alone, and reported to
+  `on_crash` if it kills its workers again.
 - Every worker keeps the k-d trees of the real clouds it has scored (`WORKER_TREE_CACHE_POINTS`
   points at most), so a cell on a bag the worker has seen builds no tree again.
 - The processes of a LocalCluster are children of the client; each watches its parent through a
@@ -130,34 +131,30 @@ def run_tasks(client: Any, func: Callable, items: Sequence, on_result: Callable[
     """func(item, *args) for every item on the cluster, at most `in_flight` at a time (default:
     twice the worker threads); on_result(item, result) in the client as each finishes.
 
-    A worker that dies takes the scheduler's count of every task it held up by one, so a task
-    beside the one that kills its workers can be declared killed too: such a task is submitted
-    once more, and only a task that is killed again goes to on_crash."""
+    A worker that dies counts against every task it held, so a task beside the one that kills its
+    workers can be declared killed too. Killed tasks run again at the end, one at a time: an
+    innocent one then finishes, and only the one that kills its workers alone goes to on_crash."""
     from distributed import KilledWorker, as_completed
 
     limit = in_flight or 2 * worker_slots(client)
-    pending = list(enumerate(items))[::-1]
+    pending = list(items)[::-1]
     futures = as_completed()
-    owner: dict[str, tuple[int, Any]] = {}
-    retried: set[int] = set()
+    owner: dict[str, Any] = {}
+    suspects: list = []
 
-    def submit(index: int, item: Any) -> None:
+    def submit(item: Any) -> None:
         future = client.submit(func, item, *args, pure=False)
-        owner[future.key] = (index, item)
+        owner[future.key] = item
         futures.add(future)
 
     for _ in range(min(limit, len(pending))):
-        submit(*pending.pop())
+        submit(pending.pop())
     for future in futures:
-        index, item = owner.pop(future.key)
+        item = owner.pop(future.key)
         try:
             result = future.result()
-        except KilledWorker as exc:
-            if index not in retried:
-                retried.add(index)
-                submit(index, item)
-                continue
-            on_crash(item, _crash_message(exc))
+        except KilledWorker:
+            suspects.append(item)
         except Exception as exc:  # a task that cannot even be sent or unpickled, and the like
             on_crash(item, _crash_message(exc))
         else:
@@ -165,7 +162,17 @@ def run_tasks(client: Any, func: Callable, items: Sequence, on_result: Callable[
         finally:
             future.release()
         if pending:
-            submit(*pending.pop())
+            submit(pending.pop())
+    for item in suspects:
+        future = client.submit(func, item, *args, pure=False)
+        try:
+            result = future.result()
+        except Exception as exc:
+            on_crash(item, _crash_message(exc))
+        else:
+            on_result(item, result)
+        finally:
+            future.release()
 
 
 def _crash_message(exc: BaseException) -> str:
