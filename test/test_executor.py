@@ -149,3 +149,15 @@ def test_a_worker_keeps_the_trees_of_the_clouds_it_has_scored():
     finally:
         metrics.keep_trees(0)
     assert metrics.RealCloud.of(a) is not metrics.RealCloud.of(a)  # off outside workers
+
+
+def test_the_local_cluster_listens_on_loopback_only():
+    from cloth_bench_ros.studies.executor import open_client
+
+    with open_client(workers=1) as client:
+        assert client.scheduler.address.startswith("tcp://127.0.0.1:")
+        me = psutil.Process(os.getpid())
+        listening = [c.laddr for p in [me] + me.children(recursive=True) for c in p.net_connections(kind="inet")
+                     if c.status == psutil.CONN_LISTEN]
+    assert len(listening) >= 3  # scheduler, its HTTP routes, the worker (and its nanny)
+    assert all(addr.ip == "127.0.0.1" for addr in listening), listening

@@ -102,7 +102,9 @@ def open_client(scheduler: str | None = None, workers: int | None = None,
         return
     cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
                            host="127.0.0.1", dashboard_address=None, memory_limit=0,
-                           silence_logs=logging.ERROR)
+                           silence_logs=logging.ERROR,
+                           # No dashboard; the scheduler's HTTP routes (health) on a free loopback port.
+                           scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"})
     try:
         client = Client(cluster)
         try:
