@@ -58,7 +58,8 @@ def _stop(procs) -> None:
 def test_sweep_and_identify_on_an_external_scheduler_survive_a_killed_worker(bag_dir, tmp_path):
     info = tmp_path / "scheduler.json"
     scheduler = subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
-                                  "--no-dashboard", "--dashboard-address", "127.0.0.1:0", "--scheduler-file", str(info)], env=ENV,
+                                  "--no-dashboard", "--dashboard-address", "127.0.0.1:0",
+                                  "--scheduler-file", str(info)], env=ENV,
                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     procs = [scheduler]
     try:
@@ -66,7 +67,8 @@ def test_sweep_and_identify_on_an_external_scheduler_survive_a_killed_worker(bag
         address = json.loads(info.read_text())["address"]
         assert address.startswith("tcp://127.0.0.1:")
         workers = [subprocess.Popen([str(BIN / "dask"), "worker", address, "--nthreads", "1", "--no-nanny",
-                                     "--host", "127.0.0.1", "--no-dashboard", "--dashboard-address", "127.0.0.1:0"], env=ENV,
+                                     "--host", "127.0.0.1", "--no-dashboard",
+                                     "--dashboard-address", "127.0.0.1:0"], env=ENV,
                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for _ in range(2)]
         procs += workers
         _wait(lambda: all(psutil.Process(p.pid).net_connections(kind="inet") for p in workers), 60, "the workers")

@@ -9,7 +9,6 @@ recommendation, the stress suite, and parameter identification when the director
 
 from __future__ import annotations
 
-import math
 import re
 from collections import Counter
 from dataclasses import dataclass
@@ -44,8 +43,13 @@ def results_table(rows: Sequence[dict]) -> Table:
     keys: list[str] = []
     for r in rows:
         keys += [k for k in r if k not in keys]
-    cell = lambda v: ";".join(f"{a}={b}" for a, b in v.items()) if isinstance(v, dict) else ("" if v is None else f"{v}")  # noqa: E731
-    return Table("results", keys, [[cell(r.get(k)) for k in keys] for r in rows])
+    return Table("results", keys, [[_csv_cell(r.get(k)) for k in keys] for r in rows])
+
+
+def _csv_cell(value: object) -> str:
+    if isinstance(value, dict):
+        return ";".join(f"{a}={b}" for a, b in value.items())
+    return "" if value is None else f"{value}"
 
 
 def overview_section(rows: Sequence[dict]) -> list[Block]:

@@ -73,15 +73,18 @@ def before_after_table(ident: dict, suffix: str) -> Table:
     rows = [[f"seed {ident.get('seed', 0)} (fitted)", "identification bag", fmt_sig(_num(ident.get("preset_value")), 4),
              fmt_sig(_num(ident.get("value")), 4), "1 / 1"]]
     for v in ident["validation"]:
-        if not isinstance(v, dict) or not isinstance(v.get("preset"), dict) or not isinstance(v.get("identified"), dict):
+        if not isinstance(v, dict) or not all(isinstance(v.get(k), dict) for k in ("preset", "identified")):
             continue
         p, i = v["preset"], v["identified"]
-        text = lambda s: (f"{_num(s.get('mean')):.4g} ± {_num(s.get('std')):.2g}" if math.isfinite(_num(s.get("mean")))  # noqa: E731
-                          else "-")
-        rows.append(["held-out seeds", Path(str(v.get("bag", ""))).name, text(p), text(i),
+        rows.append(["held-out seeds", Path(str(v.get("bag", ""))).name, _mean_std(p), _mean_std(i),
                      f"{i.get('ok', 0)} / {i.get('n', 0)} ok ({p.get('ok', 0)} / {p.get('n', 0)} preset)"])
     return Table(f"identification_{suffix}", ["runs", "bag", f"{metric} preset (m)", f"{metric} identified (m)",
                                               "runs ok"], rows, "llrrl")
+
+
+def _mean_std(stat: dict) -> str:
+    mean = _num(stat.get("mean"))
+    return f"{mean:.4g} ± {_num(stat.get('std')):.2g}" if math.isfinite(mean) else "-"
 
 
 def importance_table(ident: dict, suffix: str) -> Table:
@@ -135,7 +138,8 @@ def identification_section(ident: dict, rows: Sequence[dict] = ()) -> list[Block
     return [
         heading(2, f"Parameter identification: {engine_label(ident['engine'])}, {ident['cloth']} {ident['primitive']}"),
         paragraph(f"Minimised {str(ident['objective']).upper()} of the task window against `{ident.get('bag', '?')}` "
-                  f"with seed {ident.get('seed', 0)} held constant: {trials}; kept **{ident.get('best_sampler', '?')}**. "
+                  f"with seed {ident.get('seed', 0)} held constant: {trials}; "
+                  f"kept **{ident.get('best_sampler', '?')}**. "
                   f"Engine version {ident.get('engine_version', '?')}, {ident.get('date', '?')} on "
                   f"{ident.get('machine', '?')}, {_num(ident.get('wall_s')) / 60:.1f} min of wall time. The preset "
                   f"file is `{ident.get('preset_file', '?')}` (`cloth-bench run --presets <that directory>`). "

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
-from cloth_bench_ros.studies.objective import OBJECTIVES, Trial, evaluate
+from cloth_bench_ros.studies.objective import Trial, evaluate
 
 SAMPLERS = ("cmaes", "tpe", "gp", "both")
 DEFAULT_TRIALS = 500
@@ -209,6 +209,10 @@ def _best_value(study: Any) -> float:
         return math.nan
 
 
+def _finite_or_inf(value: float) -> float:
+    return value if math.isfinite(value) else math.inf
+
+
 def convergence(study: Any) -> list[list]:
     """[number, value or None, best so far or None] per finished trial, in trial order."""
     from optuna.trial import TrialState
@@ -263,7 +267,7 @@ def identify(spec: IdentifySpec, scheduler: str | None = None, workers: int | No
         before = client.submit(evaluate, trial_of(spec, {}, -1, "preset"), pure=False).result()
         studies = {s: run_sampler(client, spec, s, space, lambda r: append_row(spec.output / TRIALS_FILE, r),
                                   progress) for s in samplers}
-        best = min(studies, key=lambda s: _best_value(studies[s]) if math.isfinite(_best_value(studies[s])) else math.inf)
+        best = min(studies, key=lambda s: _finite_or_inf(_best_value(studies[s])))
         if not math.isfinite(_best_value(studies[best])):
             raise ValueError(f"identify: no trial of {', '.join(samplers)} finished without diverging "
                              f"(see {spec.output / TRIALS_FILE})")
