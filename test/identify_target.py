@@ -19,7 +19,8 @@ def write_engine_target_bag(path: Path, engine: str, params: dict, grid: tuple[i
                             rate_hz: float = 100.0, seed: int = 0, cloth: str = "towel",
                             primitive: str = "dynamic") -> Path:
     """The engine's own vertices at 30 Hz (linear between steps, as the evaluator pairs them): a bag
-    whose noise floor is 0 for the same engine, seed and parameters."""
+    whose noise floor is 0 for the same engine, seed and parameters.
+    """
     targets = full_targets(primitive, rate_hz)
     sim = make_engine(engine, rate_hz, {**load_preset(engine, cloth, primitive), **params}, ClothGrid(*grid))
     states = [sim.reset(seed, targets.left[0], targets.right[0]).copy()]

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
+
 @dataclass
 class Table:
     """A table: rendered to Markdown and HTML, and written as CSV (file stem `name`)."""
@@ -129,10 +130,10 @@ class Document:
                 f"<style>{style}</style></head>\n<body>\n" + "\n".join(body) + "\n</body></html>\n")
 
 
-
 def write_document(doc: Document, out_dir: Path, csv_only: Sequence[Table] = ()) -> tuple[Path, Path, list[Path]]:
     """Draw the figures, write one CSV per table (and per `csv_only` table), report.md and report.html
-    (atomically) into out_dir."""
+    (atomically) into out_dir.
+    """
     from cloth_bench_ros.safe_io import atomic_write_text
 
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -221,6 +221,7 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
                   identifications: Sequence[dict] = ()) -> ReportOutcome:
     """Render every table and figure of the rows into out_dir (report.md, report.html, *.png, *.csv)."""
     from cloth_bench_ros.report.identification import identification_section
+    from cloth_bench_ros.report.comparison import comparison_section
 
     results_dir, out_dir = Path(results_dir), Path(out_dir)
     doc = Document(title)
@@ -245,6 +246,7 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
         doc.extend(stress_section(stress_rows))
     for ident in identifications:
         doc.extend(identification_section(ident, rows))
+    doc.extend(comparison_section(results_dir))
     tables = {t.name: t for t in doc.tables()}
     md, html, images = write_document(doc, out_dir, csv_only=[results_table(rows)])
     return ReportOutcome(md, html, images, tables, recs, pareto)
@@ -253,7 +255,8 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
 def report_directory(results: Path, out: Path, stress: Path | None = None, wanted_rate: float = 100.0,
                      fig5_cloth: str = "towel", tol_rel: float = 0.05, tol_abs: float = 0.002) -> ReportOutcome:
     """`cloth-bench report`: the report of a results.jsonl (or its directory), with the stress suite and the
-    identifications found beside it; ValueError (one line) when there is nothing usable to report."""
+    identifications found beside it; ValueError (one line) when there is nothing usable to report.
+    """
     from cloth_bench_ros.report.identification import find_identifications
     from cloth_bench_ros.studies.results import RESULTS_FILE, load_rows
     from cloth_bench_ros.studies.stress import STRESS_FILE, load_stress

@@ -1,5 +1,6 @@
 """The report's figures (matplotlib, Agg backend: no display): Fig. 5 layout, speed against error,
-settings, per-frame scores, latency."""
+settings, per-frame scores, latency.
+"""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import numpy as np  # noqa: E402
 from cloth_bench_ros.report.statistics import (  # noqa: E402
     ENGINE_COLOR, FPS, compute_per_sim_second, engine_label, engines_of, finite, group, metric_name, pareto_front,
     rates_of, stat)
+
 
 def _plain_log(ax, axis: str = "xy") -> None:
     """Log-axis tick labels as plain numbers (0.2, 10, 1000) rather than 2 x 10^-1."""
@@ -44,7 +46,8 @@ def save_figure(fig, path: Path) -> Path:
 
 def plot_fig5(rows: Sequence[dict], cloth: str, path: Path, title: str) -> Path:
     """Step time, L_s, CD_d and CD_q against rate per engine (log-log), mean +- std over seeds.
-    Rates at which some runs diverged are marked with an open marker and their count."""
+    Rates at which some runs diverged are marked with an open marker and their count.
+    """
     sel = [r for r in rows if r["cloth"] == cloth]
     fig, axes = plt.subplots(2, 2, figsize=(10, 7.5))
     panels = [("step_time_mean", None, 1e3, "step time (ms)"), ("L_s", None, 1.0, "L_s (m)"),
@@ -121,7 +124,8 @@ def speed_error_front(rows: Sequence[dict]) -> list[dict]:
 
 def plot_speed_error(rows: Sequence[dict], path: Path, title: str, label_key: str = "rate") -> tuple[Path, list]:
     """CD against compute per simulated second, one point per engine x rate (x config), with the
-    Pareto front (minimal compute and CD) per task. Returns the path and the front points."""
+    Pareto front (minimal compute and CD) per task. Returns the path and the front points.
+    """
     fig, axes = plt.subplots(1, 2, figsize=(12, 5))
     fronts = []
     for ax, prim in zip(axes, ("dynamic", "quasi_static")):
@@ -160,7 +164,7 @@ _SHORT = {"grid": "", "self_collision": "sc:", "timestep": "dt:", "solver_iterat
 
 
 def short_config(label: str) -> str:
-    """"grid=11x15,self_collision=off,timestep=0.005" -> "11x15 sc:off dt:0.005"."""
+    """Short label: "grid=11x15,self_collision=off,timestep=0.005" -> "11x15 sc:off dt:0.005"."""
     parts = []
     for item in label.split(","):
         name, _, value = item.partition("=")
@@ -171,7 +175,8 @@ def short_config(label: str) -> str:
 def plot_settings(rows: Sequence[dict], path: Path, title: str, recommended: Sequence[str] = ()) -> Path:
     """One engine's settings sweep: CD against compute per configuration and task. Colour: mesh;
     marker: internal time step; open marker: self-collision on; the Pareto front dashed and
-    labelled; the recommended configuration starred."""
+    labelled; the recommended configuration starred.
+    """
     from matplotlib.lines import Line2D
 
     prims = [p for p in ("dynamic", "quasi_static") if any(r["primitive"] == p for r in rows)]
@@ -246,7 +251,8 @@ def _read_frames(path: Path) -> dict[str, np.ndarray]:
 
 def plot_frames(rows: Sequence[dict], results_dir: Path, cloth: str, path: Path) -> Path | None:
     """Per-frame CD and HD over time for each task, engine and rate (first seed and trial),
-    with the change of phase of the dynamic trial marked."""
+    with the change of phase of the dynamic trial marked.
+    """
     sel = [r for r in rows if r["cloth"] == cloth and r.get("frames_csv")]
     prims = [p for p in ("dynamic", "quasi_static") if any(r["primitive"] == p for r in sel)]
     if not prims:
@@ -306,4 +312,3 @@ def plot_latency(rows: Sequence[dict], path: Path) -> Path | None:
     ax.legend(fontsize=8)
     ax.set_title("per-step latency against the deadline")
     return save_figure(fig, path)
-

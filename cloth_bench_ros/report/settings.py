@@ -12,6 +12,7 @@ from cloth_bench_ros.report.statistics import (
     Stat, compute_per_sim_second, engine_label, engines_of, finite, fmt_fixed, fmt_sig, group, metric_name,
     pareto_front, stat)
 
+
 @dataclass
 class ConfigResult:
     engine: str
@@ -68,8 +69,7 @@ def settings_tables(rows: Sequence[dict], tol_rel: float, tol_abs: float) -> tup
         best, cheap, tol = recommend(group_results, tol_rel, tol_abs)
         front = pareto_front([(r.step_ms, r.cd.mean) if r.stable else (math.nan, math.nan) for r in group_results])
         rows_out = []
-        for i, r in sorted(enumerate(group_results), key=lambda x: (x[1].step_ms if math.isfinite(x[1].step_ms)
-                                                                     else math.inf)):
+        for i, r in sorted(enumerate(group_results), key=lambda x: (x[1].step_ms if math.isfinite(x[1].step_ms) else math.inf)):
             flags = []
             if best is not None and r is best:
                 flags.append("most accurate")
@@ -119,4 +119,3 @@ def settings_tables(rows: Sequence[dict], tol_rel: float, tol_abs: float) -> tup
         else:
             notes.append(f"{engine_label(e)}: no single configuration is within tolerance in every group.")
     return tables, notes, recs
-

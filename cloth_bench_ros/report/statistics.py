@@ -136,4 +136,3 @@ def table_rate(rows: Sequence[dict], wanted: float) -> float | None:
     if not rates:
         return None
     return float(wanted) if float(wanted) in rates else rates.most_common(1)[0][0]
-

@@ -49,7 +49,6 @@ PAPER_FIG5 = (
 )
 
 
-
 def table2(rows: Sequence[dict], rate: float) -> Table:
     """Paper Table II layout: cloth x metric rows; ours per engine, then the paper's four engines."""
     sel = [r for r in rows if float(r["rate_hz"]) == rate]
@@ -156,4 +155,3 @@ def errors_table(rows: Sequence[dict]) -> Table:
     out = [[r["engine"], f"{r['rate_hz']:g}", r["cloth"], r["primitive"], str(r["seed"]), r.get("config", ""),
             (r.get("error") or "")[:200]] for r in errs]
     return Table("errors", ["engine", "rate Hz", "cloth", "task", "seed", "config", "error"], out)
-

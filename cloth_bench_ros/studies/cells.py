@@ -72,9 +72,8 @@ class Cell:
         return dict(self.overrides)
 
 
-
 def config_label(grid: tuple[int, int] | None, overrides: dict) -> str:
-    """A canonical name of a configuration: "preset" or "grid=6x8,param=value,...". """
+    """A canonical name of a configuration: "preset" or "grid=6x8,param=value,..."."""
     parts = []
     if grid is not None:
         parts.append(f"grid={grid[0]}x{grid[1]}")
@@ -137,7 +136,8 @@ def paper_cells(engines: Sequence[str] = DEFAULT_ENGINES, rates: Sequence[float]
                 keep_frames_seeds: Iterable[int] | None = None) -> list[Cell]:
     """The cells of the paper's layout. step_per_target: internal time step = 1 / rate, one
     engine step per target (the paper's frequency study), instead of the preset's time step.
-    keep_frames_seeds: seeds whose per-frame scores are kept (default: the first seed)."""
+    keep_frames_seeds: seeds whose per-frame scores are kept (default: the first seed).
+    """
     overrides = overrides or {}
     _check_engines(engines, overrides)
     keep = set(keep_frames_seeds) if keep_frames_seeds is not None else set(list(seeds)[:1])

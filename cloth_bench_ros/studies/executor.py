@@ -135,7 +135,8 @@ def run_tasks(client: Any, func: Callable, items: Sequence, on_result: Callable[
 
     A worker that dies counts against every task it held, so a task beside the one that kills its
     workers can be declared killed too. Killed tasks run again at the end, one at a time: an
-    innocent one then finishes, and only the one that kills its workers alone goes to on_crash."""
+    innocent one then finishes, and only the one that kills its workers alone goes to on_crash.
+    """
     from distributed import KilledWorker, as_completed
 
     limit = in_flight or 2 * worker_slots(client)

@@ -74,7 +74,8 @@ def default_params(engine: str) -> list[str]:
 def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> dict[str, Any]:
     """name -> Optuna distribution: the schema's range; where it spans decades (high >= 100 low, or
     100 times the base value when low is 0), a log range within a factor `span` either side of the
-    base (preset) value. ValueError for a parameter that cannot be fitted."""
+    base (preset) value. ValueError for a parameter that cannot be fitted.
+    """
     from optuna.distributions import FloatDistribution
 
     from cloth_bench_ros.engines import engine_class
@@ -99,7 +100,8 @@ def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> 
 
 def make_sampler(name: str, seed: int) -> Any:
     """The Optuna sampler `name` (cmaes, tpe or gp), seeded. CMA-ES starts at the centre of the space,
-    which is the preset for the log-scale parameters (their ranges are a factor `span` either side)."""
+    which is the preset for the log-scale parameters (their ranges are a factor `span` either side).
+    """
     import optuna
 
     if name == "cmaes":
@@ -124,7 +126,8 @@ def samplers_of(choice: str) -> list[str]:
 
 def open_study(spec: IdentifySpec, sampler: str) -> Any:
     """The sampler's study in the journal beside the results (created, or loaded to resume); trials
-    left running by an interrupted identification are marked failed."""
+    left running by an interrupted identification are marked failed.
+    """
     import optuna
     from optuna.storages import JournalStorage
     from optuna.trial import TrialState

@@ -1,5 +1,6 @@
 """What an identification leaves behind: its validation through the node graph, the preset file and
-identification.json (everything the report needs, so the report needs no Optuna)."""
+identification.json (everything the report needs, so the report needs no Optuna).
+"""
 
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ PRESETS_DIR = "presets"
 
 def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
     """Seeds other than the identification's, on its bag and the other trials' bags of the cloth and task,
-    each with the engine's preset and with the identified parameters."""
+    each with the engine's preset and with the identified parameters.
+    """
     bags = {Path(spec.bag).resolve(): 0}
     try:
         for trial, path in find_bags(spec.bag_dir or Path(spec.bag).parent, spec.cloth, spec.primitive):

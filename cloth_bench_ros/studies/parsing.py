@@ -29,7 +29,7 @@ def parse_settings_axes(specs: Sequence[str]) -> dict[str, list]:
 
 
 def parse_grid(text: str) -> tuple[int, int]:
-    """"11x15" -> (11, 15); ValueError on anything else."""
+    """Grid text to vertices: "11x15" -> (11, 15); ValueError on anything else."""
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
     if not m or int(m.group(1)) < 2 or int(m.group(2)) < 2:
         raise ValueError(f"grid {text!r} is not NXxNZ with at least 2 vertices per side (e.g. 11x15)")
