@@ -17,6 +17,9 @@ INSTALL_REQUIRES = [
     "cyclonedds>=11.0,<12",
     "mcap>=1.1",
     "tqdm>=4.60",
+    "optuna>=3.6",
+    "cmaes>=0.10",
+    "dask[distributed]>=2024.1",
     "matplotlib>=3.6",
 ]
 EXTRAS_REQUIRE = {

@@ -143,7 +143,7 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 
 def _grid(text: str) -> tuple[int, int]:
-    from cloth_bench_ros.studies.sweep import parse_grid
+    from cloth_bench_ros.studies.parsing import parse_grid
 
     try:
         return parse_grid(text)
@@ -151,10 +151,19 @@ def _grid(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _scheduler(text: str) -> str:
+    from cloth_bench_ros.studies.executor import check_scheduler_address
+
+    try:
+        return check_scheduler_address(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _overrides(specs: list[str] | None, engines: list[str] | None = None) -> dict[str, dict]:
     """--set engine.param=value (repeatable) -> {engine: {param: value}}, checked against the schemas."""
     from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.studies.sweep import parse_overrides
+    from cloth_bench_ros.studies.parsing import parse_overrides
 
     overrides = parse_overrides(specs)
     for engine, params in overrides.items():
@@ -172,51 +181,27 @@ def _available_engines() -> list[str]:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies import sweep as sw
-    from cloth_bench_ros.engines.presets import CLOTHS
 
     settings = args.mode == "settings"
     engines = args.engine or [e for e in sw.DEFAULT_ENGINES if e in _available_engines()]
-    cloths = args.cloth or (["towel"] if settings else list(sw.DEFAULT_CLOTHS))
-    for cloth in cloths:
-        if cloth not in CLOTHS:
-            raise UserError(f"unknown cloth {cloth!r} (valid: {', '.join(CLOTHS)})")
-    primitives = args.primitive or list(sw.DEFAULT_PRIMITIVES)
-    n_seeds = args.seeds if args.seeds is not None else (sw.SETTINGS_SEEDS if settings else sw.DEFAULT_SEEDS)
-    if n_seeds < 1:
-        raise UserError(f"--seeds must be at least 1, got {n_seeds}")
-    seeds = list(range(args.seed_start, args.seed_start + n_seeds))
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
-    overrides = _overrides(args.set, engines)
-    bag_dir = Path(args.bag_dir) if args.bag_dir else None
+    plan = sw.SweepPlan(args.mode, engines, args.rate or [], args.cloth or [], args.primitive or list(sw.DEFAULT_PRIMITIVES),
+                        args.seeds, args.seed_start, Path(args.bag_dir) if args.bag_dir else None, args.grid,
+                        _overrides(args.set, engines), args.pacing, args.step_per_target, args.keep_frames,
+                        args.axis or [])
+    cells = plan.cells()
     out = Path(args.output) if args.output else Path("results") / ("settings" if settings else "sweep")
-    if settings:
-        if args.rate and len(args.rate) > 1:
-            raise UserError("--mode settings runs at one rate: give --rate once")
-        if args.grid:
-            raise UserError("--mode settings sweeps the grid itself: use --axis grid=6x8,11x15 instead of --grid")
-        axes = sw.parse_settings_axes(args.axis) if args.axis else None
-        cells = sw.settings_cells(engines, (args.rate or [sw.SETTINGS_RATE])[0], cloths, primitives, seeds,
-                                  bag_dir, axes, overrides)
-    else:
-        if args.axis:
-            raise UserError("--axis is for --mode settings")
-        keep = {"first": seeds[:1], "all": seeds, "none": []}[args.keep_frames]
-        cells = sw.paper_cells(engines, args.rate or list(sw.DEFAULT_RATES), cloths, primitives, seeds, bag_dir,
-                               args.grid, overrides, args.pacing, args.step_per_target, keep)
     if args.dry_run:
-        done = {sw.row_key(r) for r in sw.load_rows(out / sw.RESULTS_FILE)}
-        todo = [c for c in cells if c.key() not in done]
-        cost = sum(sw.estimated_cost(c) for c in todo)
-        workers = args.workers or sw.default_workers()
-        print(f"cloth-bench sweep: {len(cells)} cells, {len(cells) - len(todo)} already in {out / sw.RESULTS_FILE}; "
-              f"about {cost / 60:.0f} core-minutes left, {cost / 60 / workers:.0f} min on {workers} workers")
+        print(sw.estimate(cells, out, args.workers))
         return 0
+    where = f"scheduler {args.scheduler}" if args.scheduler else f"{args.workers or sw.default_workers()} local workers"
     print(f"cloth-bench sweep ({args.mode}): {len(engines)} engines x {len(set(c.rate_hz for c in cells))} rates x "
-          f"{len(cloths)} cloths x {len(primitives)} tasks x {len(seeds)} seeds"
-          + (f" x {len({c.config for c in cells})} configurations" if settings else "")
-          + f" = {len(cells)} cells -> {out / sw.RESULTS_FILE}", flush=True)
-    outcome = sw.run_sweep(cells, out, args.workers, progress=not args.no_progress, retry_errors=args.retry_errors)
+          f"{len({c.cloth for c in cells})} cloths x {len({c.primitive for c in cells})} tasks x "
+          f"{len(plan.seeds())} seeds" + (f" x {len({c.config for c in cells})} configurations" if settings else "")
+          + f" = {len(cells)} cells -> {out / sw.RESULTS_FILE} on {where}", flush=True)
+    outcome = sw.run_sweep(cells, out, args.workers, progress=not args.no_progress, retry_errors=args.retry_errors,
+                           scheduler=args.scheduler)
     print(f"sweep: {outcome.ran} cells run in {outcome.wall_s:.1f} s ({outcome.skipped} already done), "
           f"{outcome.diverged} diverged, {outcome.errors} errors; results: {outcome.results}")
     if args.report:
@@ -226,23 +211,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def _render(results: Path, out: Path, stress: Path | None, rate: float, cloth: str, tol_rel: float,
             tol_abs: float) -> int:
-    from cloth_bench_ros.report.document import render_report
-    from cloth_bench_ros.studies.stress import STRESS_FILE, load_stress
-    from cloth_bench_ros.studies.sweep import RESULTS_FILE, load_rows
+    from cloth_bench_ros.report.document import report_directory
 
-    results = Path(results)
-    results_file = results / RESULTS_FILE if results.is_dir() else results
-    if not results_file.is_file():
-        raise UserError(f"results {results}: no {RESULTS_FILE} there (run `cloth-bench sweep` first)")
-    rows = load_rows(results_file)
-    if not rows:
-        raise UserError(f"results {results_file}: holds no result rows")
-    if stress is None and (results_file.parent / STRESS_FILE).is_file():
-        stress = results_file.parent / STRESS_FILE
-    if stress is not None and not Path(stress).exists():
-        raise UserError(f"stress results {stress}: no such file or directory")
-    stress_rows = load_stress(Path(stress)) if stress is not None else None
-    outcome = render_report(rows, results_file.parent, out, stress_rows, rate, cloth, tol_rel, tol_abs)
+    outcome = report_directory(Path(results), out, stress, rate, cloth, tol_rel, tol_abs)
     if "table2" in outcome.tables:
         print(outcome.tables["table2"].markdown())
     for note in outcome.recommendations:
@@ -265,35 +236,61 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_stress(args: argparse.Namespace) -> int:
-    from cloth_bench_ros.studies.stress import default_cases, run_suite, stress_table, verdict
+    from cloth_bench_ros.studies.stress import run_suite, select_cases, stress_table, verdict
 
     engines = args.engine or [e for e in ("mujoco", "bullet") if e in _available_engines()]
-    for name in engines:
-        from cloth_bench_ros.engines import engine_class
-
-        engine_class(name)
-    cases = default_cases(engines)
+    cases = select_cases(engines, args.case, args.max_wall_s)
     if args.list:
         for c in cases:
             print(f"{c.engine:<8} {c.name:<24} {c.description}")
         return 0
-    if args.case:
-        names = {c.name for c in cases}
-        unknown = sorted(set(args.case) - names)
-        if unknown:
-            raise UserError(f"unknown stress case {', '.join(unknown)} (known: {', '.join(sorted(names))})")
-        cases = [c for c in cases if c.name in args.case]
-    if args.max_wall_s is not None:
-        from dataclasses import replace
-
-        cases = [replace(c, max_wall_s=args.max_wall_s) for c in cases]
     out = Path(args.output) if args.output else Path("results") / "stress"
-    rows = run_suite(cases, out, args.workers, progress=not args.no_progress)
-    print(stress_table(rows))
+    rows = run_suite(cases, out, args.workers, progress=not args.no_progress, scheduler=args.scheduler)
+    print(stress_table(rows).markdown())
     for engine, diverged in verdict(rows).items():
         n = sum(r["engine"] == engine for r in rows)
         print(f"{engine}: {len(diverged)} of {n} cases diverged" + (f" ({', '.join(diverged)})" if diverged else ""))
     print(f"stress: {out}/stress.jsonl, {out}/stress.md")
+    return 0
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    from cloth_bench_ros.engines.presets import CLOTHS
+    from cloth_bench_ros.paths import bundled_bag
+    from cloth_bench_ros.studies.identify import IdentifySpec, identify
+
+    if args.cloth not in CLOTHS:
+        raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
+    for name, value, least in (("--trials", args.trials, 1), ("--validate-seeds", args.validate_seeds, 0),
+                               ("--seed", args.seed, 0), ("--max-frames", args.max_frames or 1, 1),
+                               ("--batch", args.batch or 1, 1), ("--workers", args.workers or 1, 1)):
+        if value < least:
+            raise UserError(f"{name} must be at least {least}, got {value}")
+    if not (args.span > 1 and args.span < float("inf")):
+        raise UserError(f"--span must be a finite factor > 1, got {args.span}")
+    bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
+    check_bag(bag)
+    fixed = _overrides(args.set, [args.engine]).get(args.engine, {})
+    out = Path(args.output) if args.output else Path("results") / "identify" / f"{args.engine}_{args.cloth}_{args.primitive}"
+    spec = IdentifySpec(args.engine, args.cloth, args.primitive, bag, out, args.sampler, args.trials, args.objective,
+                        [p.strip() for p in args.params.split(",") if p.strip()] if args.params else [], args.seed,
+                        args.rate, args.grid, fixed, args.span, args.max_frames, args.batch, args.validate_seeds,
+                        Path(args.bag_dir) if args.bag_dir else None)
+    print(f"cloth-bench identify: {args.engine}, {args.cloth} {args.primitive}, {args.objective.upper()}, "
+          f"sampler {args.sampler}, {args.trials} trials each; bag {bag}; output {out}", flush=True)
+    outcome = identify(spec, args.scheduler, args.workers, progress=not args.no_progress)
+    s = outcome.summary
+    for name, result in s["per_sampler"].items():
+        print(f"{name:<6} best {args.objective.upper()} {result['value']:.5f} m after {result['trials']} trials")
+    print(f"identified ({s['best_sampler']}): " + ", ".join(f"{k}={v:.6g}" for k, v in s["params"].items()))
+    print(f"{args.objective.upper()} on seed {args.seed}: preset {s['preset_value']:.5f} m -> identified "
+          f"{s['value']:.5f} m")
+    for v in s["validation"]:
+        print(f"held-out seeds, {Path(v['bag']).name}: preset {v['preset']['mean']:.5f} ± {v['preset']['std']:.5f} m, "
+              f"identified {v['identified']['mean']:.5f} ± {v['identified']['std']:.5f} m "
+              f"({v['identified']['ok']} of {v['identified']['n']} runs ok)")
+    print(f"preset: {outcome.preset_file} (use: cloth-bench run --presets {out}); "
+          f"{outcome.wall_s:.0f} s; report: cloth-bench report {out}")
     return 0
 
 
@@ -477,7 +474,8 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--primitive", action="append", choices=PRIMITIVES, help="task, repeat (default both)")
     sweep.add_argument("--seeds", type=int, help="number of seeds (default 20; settings mode 2)")
     sweep.add_argument("--seed-start", type=int, default=0, help="first seed (default 0)")
-    sweep.add_argument("--workers", type=int, help="worker processes (default: all cores)")
+    sweep.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+    sweep.add_argument("--scheduler", type=_scheduler, help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
     sweep.add_argument("--output", help="results directory (default results/sweep or results/settings)")
     sweep.add_argument("--bag-dir", help="directory of <cloth>_<task> or <cloth>_<trial>_<task> bags "
                                          "(default: the bundled bags)")
@@ -515,11 +513,39 @@ def build_parser() -> argparse.ArgumentParser:
     stress.add_argument("--engine", action="append", help="repeat for several (default: mujoco and bullet)")
     stress.add_argument("--case", action="append", help="only these cases (repeat; see --list)")
     stress.add_argument("--list", action="store_true", help="list the cases and exit")
-    stress.add_argument("--workers", type=int, help="worker processes (default: all cores)")
+    stress.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+    stress.add_argument("--scheduler", type=_scheduler, help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
     stress.add_argument("--max-wall-s", type=float, help="wall-time budget per case (default 120 s)")
     stress.add_argument("--output", help="results directory (default results/stress)")
     stress.add_argument("--no-progress", action="store_true", help="no progress bar")
     stress.set_defaults(func=cmd_stress)
+
+    ident = sub.add_parser("identify", help="fit an engine's cloth parameters to a bag (CMA-ES and Bayesian optimisation)")
+    ident.add_argument("--engine", default="mujoco", help="default mujoco")
+    ident.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel)")
+    ident.add_argument("--primitive", default="dynamic", choices=PRIMITIVES, help="default dynamic")
+    ident.add_argument("--bag", help="rosbag2 MCAP bag to fit (default: the bundled one)")
+    ident.add_argument("--sampler", default="both", choices=("cmaes", "tpe", "gp", "both"),
+                       help="cmaes, tpe (Bayesian optimisation), gp (Gaussian-process BO, needs PyTorch) or both "
+                            "(CMA-ES and TPE, keep the best; default)")
+    ident.add_argument("--trials", type=int, default=500, help="trials per sampler (default 500, as the paper)")
+    ident.add_argument("--objective", default="cd", choices=("cd", "hd"), help="metric of the task window (default cd)")
+    ident.add_argument("--params", help="comma-separated parameters to fit (default: the engine's identified set)")
+    ident.add_argument("--seed", type=int, default=0, help="seed of every trial (default 0)")
+    ident.add_argument("--rate", type=_rate, default=100.0, help="simulator rate in Hz (default 100)")
+    ident.add_argument("--grid", type=_grid, help="cloth mesh NXxNZ (default: the engine's)")
+    ident.add_argument("--set", action="append", metavar="ENGINE.PARAM=VALUE", help="fixed override, not fitted")
+    ident.add_argument("--span", type=float, default=10.0,
+                       help="log-scale ranges reach this factor either side of the preset (default 10)")
+    ident.add_argument("--max-frames", type=int, help="score only the first N frames of the window (faster)")
+    ident.add_argument("--batch", type=int, help="trials in flight (default: the cluster's worker threads)")
+    ident.add_argument("--validate-seeds", type=int, default=5, help="held-out seeds to validate on (default 5)")
+    ident.add_argument("--bag-dir", help="other trials' bags of the cloth and task for validation")
+    ident.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+    ident.add_argument("--scheduler", type=_scheduler, help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
+    ident.add_argument("--output", help="directory (default results/identify/<engine>_<cloth>_<primitive>)")
+    ident.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ident.set_defaults(func=cmd_identify)
 
     hil = sub.add_parser("hil", help="hardware in the loop: targets on the wall clock, the simulator in its own process")
     hil.add_argument("--engine", action="append", help="repeat for several (default mujoco)")

@@ -91,11 +91,11 @@ def _check_figures(out: Path, summary: dict) -> None:
     if animation.suffix == ".gif":
         assert Image.open(animation).n_frames == comparison["animation_frames"] > 10
     from cloth_bench_ros.report.comparison import comparison_section
-    from cloth_bench_ros.report.document import Document
+    from cloth_bench_ros.report.blocks import Document, write_document
 
     doc, report = Document("t"), out.parent / "report"
-    report.mkdir()
-    copied = comparison_section(doc, out.parent, report)
+    doc.extend(comparison_section(out.parent))
+    _, _, copied = write_document(doc, report)
     assert [p.name for p in copied] == ["camera_qualitative.png", f"camera_{animation.name}"]
     assert "camera_qualitative.png" in doc.markdown() and all(p.stat().st_size > 0 for p in copied)
 

@@ -81,3 +81,10 @@ def test_cli_stress_lists_cases_and_refuses_unknown_ones(capsys):
     assert "fast_drag_into_table" in capsys.readouterr().out
     assert main(["stress", "--case", "nope"]) == 2
     assert "unknown stress case nope" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "0", "inf"])
+def test_cli_stress_refuses_a_bad_wall_time_budget(capsys, value):
+    assert main(["stress", "--max-wall-s", value, "--list"]) == 2
+    err = capsys.readouterr().err
+    assert "--max-wall-s must be" in err and len(err.strip().splitlines()) == 1

@@ -131,9 +131,15 @@ def _square_or_die(x: int) -> int:
     return x * x
 
 
-def test_a_dying_worker_is_retried_once_then_recorded_and_the_rest_finish():
+def test_a_task_that_kills_its_workers_is_retried_then_recorded_and_the_rest_finish():
+    import dask
+
+    from cloth_bench_ros.studies.executor import open_client, run_tasks
+
     results, crashes = {}, {}
-    sw.run_parallel(_square_or_die, list(range(6)), 2, on_result=results.__setitem__, on_crash=crashes.__setitem__)
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1}), open_client(workers=2) as client:
+        run_tasks(client, _square_or_die, list(range(6)), on_result=results.__setitem__,
+                  on_crash=crashes.__setitem__)
     assert results == {0: 0, 1: 1, 2: 4, 4: 16, 5: 25}
     assert list(crashes) == [3] and "died" in crashes[3]
 
@@ -154,6 +160,8 @@ def test_cli_sweep_dry_run_counts_cells(bag_dir, tmp_path, capsys):
     (["--cloth", "silk"], "unknown cloth 'silk'"),
     (["--engine", "sofa"], "engine sofa is not available"),
     (["--mode", "settings", "--rate", "10", "--rate", "100"], "one rate"),
+    (["--seed-start", "-3"], "--seed-start must be >= 0"),
+    (["--scheduler", "localhost"], "is not tcp://HOST:PORT"),
 ])
 def test_cli_sweep_user_errors_are_one_line(bag_dir, tmp_path, capsys, argv, message):
     try:
@@ -183,3 +191,29 @@ def test_cli_run_accepts_grid_and_set(hanging_bag, tmp_path, capsys):
     assert summary["engines"]["mujoco"]["frames_scored"] == 132
     assert main(["run", "--bag", str(hanging_bag), "--set", "bullet.mass=1"]) == 2
     assert "not part of this run" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("line, message", [
+    ("[1, 2, 3]", "must be a JSON object"),
+    ('{"engine": "mujoco", "cloth": "towel"}', "lacks rate_hz"),
+    ('{"engine": "../../etc", "rate_hz": 100, "cloth": "towel", "primitive": "dynamic", "seed": 0}',
+     "not a safe file name part"),
+    ('{"engine": "mujoco", "rate_hz": 100, "cloth": "towel", "primitive": "dynamic", "seed": 0, '
+     '"frames_csv": "../../outside.csv"}', "points outside"),
+    ('{"engine": "mujoco", "rate_hz": -5, "cloth": "towel", "primitive": "dynamic", "seed": 0}',
+     "not a positive number"),
+])
+def test_report_refuses_untrusted_rows_in_one_line(tmp_path, capsys, line, message):
+    (tmp_path / sw.RESULTS_FILE).write_text(line + "\n")
+    assert main(["report", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and f"{sw.RESULTS_FILE}:1" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_locked_results_directory_refuses_a_second_study(tmp_path):
+    with sw.ResultsLock(tmp_path, "sweep"):
+        with pytest.raises(ValueError, match="is in use by sweep"):
+            with sw.ResultsLock(tmp_path, "identify"):
+                pass
+    with sw.ResultsLock(tmp_path, "identify"):  # released on exit
+        pass

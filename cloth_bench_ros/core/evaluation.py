@@ -108,7 +108,7 @@ class OnlineEvaluator:
         if len(points) == 0:
             self.empty_frames += 1
             return
-        self._pending.append((stamp_ns, RealCloud(points)))
+        self._pending.append((stamp_ns, RealCloud.of(points)))
         self._score_ready()
 
     # scoring

@@ -7,6 +7,7 @@ simulated frames, and step-latency statistics.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +32,23 @@ class RealCloud:
         self.points = _points("P", points)
         self._tree = cKDTree(self.points, leafsize=64, balanced_tree=False, compact_nodes=False)
 
+    @classmethod
+    def of(cls, points: np.ndarray) -> "RealCloud":
+        """RealCloud(points), from the process's tree cache when `keep_trees` enabled it."""
+        if _TREE_CACHE_LIMIT <= 0:
+            return cls(points)
+        points = np.ascontiguousarray(points, dtype=float)
+        key = (points.shape, hashlib.blake2b(points.tobytes(), digest_size=16).digest())
+        global _TREE_CACHE_POINTS
+        cloud = _TREE_CACHE.pop(key, None)
+        if cloud is None:
+            cloud = cls(points)
+            _TREE_CACHE_POINTS += len(cloud.points)
+        _TREE_CACHE[key] = cloud  # most recently used last
+        while _TREE_CACHE_POINTS > _TREE_CACHE_LIMIT and len(_TREE_CACHE) > 1:
+            _TREE_CACHE_POINTS -= len(_TREE_CACHE.pop(next(iter(_TREE_CACHE))).points)
+        return cloud
+
     def nearest_l1(self, vertices: np.ndarray) -> np.ndarray:
         """For each vertex v, min over p of ||v - p||_1 (exact: the tree is searched in L1)."""
         dist, _ = self._tree.query(_points("V", vertices), k=1, p=1)
@@ -40,6 +58,21 @@ class RealCloud:
         """(CD, HD) of the vertices against this cloud."""
         d = self.nearest_l1(vertices)
         return float(d.mean()), float(d.max())
+
+
+_TREE_CACHE: dict = {}
+_TREE_CACHE_POINTS = 0
+_TREE_CACHE_LIMIT = 0
+
+
+def keep_trees(max_points: int) -> None:
+    """Keep the k-d trees of the clouds scored in this process (up to `max_points` points in all):
+    a study's worker that scores the same bag again finds its trees built (0 turns the cache off).
+    """
+    global _TREE_CACHE_LIMIT, _TREE_CACHE_POINTS
+    _TREE_CACHE_LIMIT = int(max_points)
+    _TREE_CACHE.clear()
+    _TREE_CACHE_POINTS = 0
 
 
 def chamfer_l1(V: np.ndarray, P: np.ndarray) -> float:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import shutil
 from collections import defaultdict
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -217,24 +218,28 @@ def write_comparison(pairs: list, summary: dict, bag_path: Path | None, figures_
     return out
 
 
-def comparison_section(doc: Any, results_dir: Path, out_dir: Path) -> list[Path]:
-    """The report's hook: each run directory with a qualitative figure gets a section.
+def comparison_section(results_dir: Path) -> list:
+    """Report blocks: each run directory with a qualitative figure (`cloth-bench run --figures`).
 
-    Run directories are results_dir or one level below; the figure (`cloth-bench run --figures`)
-    and its animation are copied to out_dir.
+    Run directories are results_dir or one level below; the figure and its animation are copied
+    into the report directory when the report is written.
     """
+    from cloth_bench_ros.report.blocks import figure_block, heading, paragraph
+
     found = sorted({*results_dir.glob("qualitative.png"), *results_dir.glob("*/qualitative.png")})
     if not found:
         return []
-    doc.h(2, "Qualitative comparison (the paper's Fig. 4)")
-    doc.p("Simulated mesh in red over the real cloud in black at the paper's time steps, CD/HD (m) under each "
-          "panel, one row per engine; the animation shows the whole trial.")
-    copied = []
+    blocks = [heading(2, "Qualitative comparison (the paper's Fig. 4)"), paragraph(
+        "Simulated mesh in red over the real cloud in black at the paper's time steps, CD/HD (m) under each "
+        "panel, one row per engine; the animation shows the whole trial.")]
     for figure in found:
         run = figure.parent.name
         for src in [figure, *sorted(figure.parent.glob("animation.*"))]:
-            dst = out_dir / f"{run}_{src.name}"
-            shutil.copyfile(src, dst)
-            copied.append(dst)
-            doc.img(dst.name, f"{run}: {'qualitative figure' if src == figure else 'animation'}")
-    return copied
+            what = "qualitative figure" if src == figure else "animation"
+            blocks.append(figure_block(f"{run}_{src.name}", f"{run}: {what}", partial(_copy_into, src)))
+    return blocks
+
+
+def _copy_into(src: Path, dst: Path) -> Path:
+    shutil.copyfile(src, dst)
+    return dst

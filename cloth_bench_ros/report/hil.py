@@ -20,10 +20,9 @@ from typing import Sequence
 
 import numpy as np
 
-# Imported from where issue 13's split leaves them (report/document.py on this branch).
-from cloth_bench_ros.report.document import (
-    Document, Table, _fmt, engine_label, finite, metric_name, recommend, settings_results,
-)
+from cloth_bench_ros.report.blocks import Document, Table, figure_block, paragraph, table_block, write_document
+from cloth_bench_ros.report.settings import recommend, settings_results
+from cloth_bench_ros.report.statistics import engine_label, finite, fmt_fixed as _fmt, metric_name
 
 RECOMMENDATION_KEYS = ("engine", "cloth", "primitive", "rate_hz", "config", "grid", "params", "cd", "step_p99_ms",
                        "best_config", "best_cd", "tolerance_m", "meets_deadline")
@@ -281,25 +280,22 @@ def write_hil_report(rows: Sequence[dict], results_dir: Path, out_dir: Path) -> 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     doc = Document("cloth_bench_ros: hardware in the loop")
-    doc.p("Latency: from the target's due time on the controller's wall-clock schedule (first target + k / rate) to "
-          "the state's arrival back at the controller (the trajectory publisher), so a late send and a simulator "
-          "that falls behind both count. A miss is a state later than one period; a skipped target is one the "
-          "simulator never stepped because a newer one was waiting (keep-last), counted beside the misses. RTF: "
-          "simulated over wall time. CPU busy: share of all cores busy during the run (/proc/stat), any process; "
-          "load: 1-minute load average at the end. CD lockstep: the same configuration run in lockstep.")
+    doc.extend([paragraph("Latency: from the target's due time on the controller's wall-clock schedule (first target + k / rate) to "
+                          "the state's arrival back at the controller (the trajectory publisher), so a late send and a simulator "
+                          "that falls behind both count. A miss is a state later than one period; a skipped target is one the "
+                          "simulator never stepped because a newer one was waiting (keep-last), counted beside the misses. RTF: "
+                          "simulated over wall time. CPU busy: share of all cores busy during the run (/proc/stat), any process; "
+                          "load: 1-minute load average at the end. CD lockstep: the same configuration run in lockstep.")])
     table = hil_table(rows)
-    doc.table(table)
-    table.write_csv(out_dir / "hil.csv")
+    doc.extend([table_block(table)])
     for r in rows:
         run_dir = Path(results_dir) / (r.get("run_dir") or "")
         csv = run_dir / f"timeline_{r['engine']}.csv"
         if r.get("run_dir") and csv.is_file():
-            name = f"latency_{r['run_dir']}.png"
-            plot_run(TargetTimeline.from_csv(csv.read_text()), 1.0 / r["rate_hz"], out_dir / name,
-                     f"{engine_label(r['engine'])} at {r['rate_hz']:g} Hz, {r['config']}")
-            doc.img(name, f"{engine_label(r['engine'])} {r['rate_hz']:g} Hz {r['config']}: latency over the run "
-                          f"and its histogram")
-    md = out_dir / "hil.md"
-    md.write_text(doc.markdown())
-    (out_dir / "hil.html").write_text(doc.html())
+            title = f"{engine_label(r['engine'])} at {r['rate_hz']:g} Hz, {r['config']}"
+            draw = (lambda path, timeline=TargetTimeline.from_csv(csv.read_text()), period=1.0 / r["rate_hz"],
+                    title=title: plot_run(timeline, period, path, title) or path)
+            doc.extend([figure_block(f"latency_{r['run_dir']}.png", f"{engine_label(r['engine'])} {r['rate_hz']:g} Hz "
+                                     f"{r['config']}: latency over the run and its histogram", draw)])
+    md, _, _ = write_document(doc, out_dir, names=("hil.md", "hil.html"))
     return md

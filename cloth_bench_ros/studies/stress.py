@@ -23,9 +23,12 @@ import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from cloth_bench_ros.report.blocks import Table
 
 STRESS_FILE = "stress.jsonl"
 MAX_CASE_WALL_S = 120.0
@@ -89,6 +92,29 @@ def default_cases(engines: Sequence[str] = ("mujoco", "bullet")) -> list[StressC
                        "dynamic", 100.0, {**_one_step(100.0), "damping": 0.0}),
         ]
         cases += common
+    return cases
+
+
+def select_cases(engines: Sequence[str], names: Sequence[str] | None = None,
+                 max_wall_s: float | None = None) -> list[StressCase]:
+    """The suite for `engines`, only the cases `names` if given, with another wall-time budget if given."""
+    from dataclasses import replace
+
+    from cloth_bench_ros.engines import engine_class
+
+    for name in engines:
+        engine_class(name)
+    cases = default_cases(engines)
+    if names:
+        known = {c.name for c in cases}
+        unknown = sorted(set(names) - known)
+        if unknown:
+            raise ValueError(f"unknown stress case {', '.join(unknown)} (known: {', '.join(sorted(known))})")
+        cases = [c for c in cases if c.name in names]
+    if max_wall_s is not None:
+        if not (math.isfinite(max_wall_s) and max_wall_s > 0):
+            raise ValueError(f"--max-wall-s must be a number of seconds > 0, got {max_wall_s}")
+        cases = [replace(c, max_wall_s=max_wall_s) for c in cases]
     return cases
 
 
@@ -180,54 +206,78 @@ def run_case(case: StressCase) -> dict:
     return row
 
 
+def crashed_row(case: StressCase, message: str) -> dict:
+    """The row of a case whose worker died (a crash in the engine's C code) on every try."""
+    return {"case": case.name, "engine": case.engine, "description": case.description,
+            "primitive": case.primitive, "rate_hz": case.rate_hz, "params": case.params,
+            "status": "crashed", "diverged": False, "error": message, "L_s": math.nan,
+            "max_vertex_speed": math.nan, "step_time_mean": math.nan, "steps": 0}
+
+
 def run_suite(cases: Sequence[StressCase], out_dir: Path | None = None, workers: int | None = None,
-              progress: bool = True) -> list[dict]:
-    """Run every case in worker processes; rows in the order of `cases` (and to stress.jsonl)."""
+              progress: bool = True, scheduler: str | None = None) -> list[dict]:
+    """Run every case on the executor; rows in the order of `cases` (and to stress.jsonl, stress.md)."""
     from tqdm import tqdm
 
-    from cloth_bench_ros.studies.sweep import _json_safe, default_workers, run_parallel
+    from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
+    from cloth_bench_ros.studies.executor import default_workers, open_client, run_tasks
+    from cloth_bench_ros.studies.results import json_safe
 
     if out_dir is not None:
-        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        out_dir = check_output_dir(out_dir)
     rows: dict[int, dict] = {}
     index = {id(c): i for i, c in enumerate(cases)}
     bar = tqdm(total=len(cases), desc="stress", unit="case", disable=not progress)
 
-    def done(case, row):
+    def done(case: StressCase, row: dict) -> None:
         rows[index[id(case)]] = row
         bar.set_postfix_str(f"{case.engine}/{case.name}: {row['status']}", refresh=False)
         bar.update(1)
 
-    def crashed(case, message):
-        done(case, {"case": case.name, "engine": case.engine, "description": case.description,
-                    "primitive": case.primitive, "rate_hz": case.rate_hz, "params": case.params,
-                    "status": "crashed", "diverged": False, "error": message, "L_s": math.nan,
-                    "max_vertex_speed": math.nan, "step_time_mean": math.nan, "steps": 0})
-
     try:
-        run_parallel(run_case, list(cases), workers or min(default_workers(), len(cases)),
-                     on_result=done, on_crash=crashed,
-                     log_path=Path(out_dir) / "workers.log" if out_dir is not None else None)
+        with open_client(scheduler, workers or min(default_workers(), len(cases)),
+                         Path(out_dir) / "workers.log" if out_dir is not None else None) as client:
+            run_tasks(client, run_case, list(cases), on_result=done,
+                      on_crash=lambda case, message: done(case, crashed_row(case, message)))
     finally:
         bar.close()
     ordered = [rows[i] for i in sorted(rows)]
     if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / STRESS_FILE).write_text("".join(json.dumps(_json_safe(r), sort_keys=True) + "\n" for r in ordered))
-        (out / "stress.md").write_text(stress_table(ordered) + "\n")
+        atomic_write_text(Path(out_dir) / STRESS_FILE,
+                          "".join(json.dumps(json_safe(r), sort_keys=True) + "\n" for r in ordered))
+        atomic_write_text(Path(out_dir) / "stress.md", stress_table(ordered).markdown() + "\n")
     return ordered
 
 
 def load_stress(path: Path) -> list[dict]:
+    """Rows of a stress.jsonl, checked as untrusted input (ValueError of one line naming the file)."""
+    from cloth_bench_ros.safe_io import UnsafeInputError, read_text_bounded, safe_name
+
     path = Path(path)
     if path.is_dir():
         path = path / STRESS_FILE
-    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    for r in rows:
+    rows = []
+    for number, line in enumerate(read_text_bounded(path).splitlines(), 1):
+        if not line.strip():
+            continue
+        where = f"{path}:{number}"
+        try:
+            r = json.loads(line)
+        except json.JSONDecodeError:
+            raise ValueError(f"{where}: not a JSON line") from None
+        if not isinstance(r, dict) or not all(k in r for k in ("case", "engine", "rate_hz", "status")):
+            raise ValueError(f"{where}: a stress row must be a JSON object with case, engine, rate_hz and status")
+        try:
+            safe_name(r["case"], "case")
+            safe_name(r["engine"], "engine")
+        except UnsafeInputError as exc:
+            raise ValueError(f"{where}: {exc}") from None
+        if isinstance(r["rate_hz"], bool) or not isinstance(r["rate_hz"], (int, float)):
+            raise ValueError(f"{where}: rate_hz {r['rate_hz']!r} is not a number")
         for k in ("L_s", "max_vertex_speed", "step_time_mean", "step_time_p99", "step_time_max"):
             if r.get(k) is None:
                 r[k] = math.nan
+        rows.append(r)
     return rows
 
 
@@ -237,20 +287,24 @@ def _f(value, fmt: str) -> str:
     return format(value, fmt)
 
 
-def stress_table(rows: Sequence[dict]) -> str:
-    """Markdown table: one row per case and engine."""
-    lines = ["| engine | case | rate Hz | status | diverged at step | L_s (m) | max vertex speed (m/s) "
-             "| step mean (ms) | step max (ms) | steps | why |",
-             "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+def stress_table(rows: Sequence[dict]) -> Table:
+    """One row per case and engine; stress.md and the report both render this table."""
+    from cloth_bench_ros.report.blocks import Table
+
+    headers = ["engine", "case", "rate Hz", "status", "diverged at step", "L_s (m)", "max vertex speed (m/s)",
+               "step mean (ms)", "step max (ms)", "steps", "why"]
+    out = []
     for r in rows:
-        why = r.get("diverged_reason") or r.get("error") or ""
-        lines.append(
-            f"| {r['engine']} | {r['case']} | {r['rate_hz']:g} | {r['status']} | "
-            f"{r.get('diverged_at_step') if r.get('diverged_at_step') is not None else '-'} | "
-            f"{_f(r.get('L_s'), '.2e')} | {_f(r.get('max_vertex_speed'), '.3g')} | "
-            f"{_f(r.get('step_time_mean', math.nan) * 1e3, '.3f')} | {_f(r.get('step_time_max', math.nan) * 1e3, '.3f')} | "
-            f"{r.get('steps', 0)} | {why.replace('|', '/')} |")
-    return "\n".join(lines)
+        step = r.get("diverged_at_step")
+        out.append([r["engine"], r["case"], f"{r['rate_hz']:g}", r["status"], "-" if step is None else str(step),
+                    _f(r.get("L_s"), ".2e"), _f(r.get("max_vertex_speed"), ".3g"),
+                    _f(_scaled(r.get("step_time_mean"), 1e3), ".3f"), _f(_scaled(r.get("step_time_max"), 1e3), ".3f"),
+                    str(r.get("steps", 0)), r.get("diverged_reason") or r.get("error") or ""])
+    return Table("stress", headers, out, "llrlrrrrrrl")
+
+
+def _scaled(value, scale: float):
+    return value * scale if isinstance(value, (int, float)) else None
 
 
 def verdict(rows: Sequence[dict]) -> dict[str, list[str]]:

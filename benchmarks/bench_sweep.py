@@ -1,0 +1,47 @@
+"""Sweep throughput on the Dask executor against the same cells run one after another in this process.
+
+Runs a slice of the default sweep (MuJoCo and Bullet, towel, both tasks, 100 Hz, `--seeds` seeds,
+the bundled bags) twice: serially in-process (the baseline), then with `run_sweep` on a local
+cluster of `--workers` processes. Prints both wall times, the ratio, and the full default sweep
+(720 cells) extrapolated from the measured cells: measured / estimated cost of these cells times
+the estimated cost of the 720. Goal of issue 13: the full sweep under 30 minutes on 2 idle cores.
+
+    .venv/bin/python benchmarks/bench_sweep.py [--workers 2] [--seeds 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+
+from cloth_bench_ros.studies import sweep as sw
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--seeds", type=int, default=2)
+    args = parser.parse_args()
+    cells = sw.paper_cells(["mujoco", "bullet"], [100.0], ["towel"], ["dynamic", "quasi_static"],
+                           range(args.seeds), keep_frames_seeds=[])
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        for cell in cells:
+            sw.run_cell(cell, tmp)
+        serial = time.perf_counter() - start
+        outcome = sw.run_sweep(cells, Path(tmp) / "dask", args.workers, progress=False)
+    assert outcome.errors == 0, [r.get("error") for r in outcome.rows]
+    full = sw.SweepPlan(engines=["mujoco", "bullet"]).cells()
+    scale = sum(sw.estimated_cost(c) for c in full) / sum(sw.estimated_cost(c) for c in cells)
+    print(f"{len(cells)} cells: serial in-process {serial:.1f} s, Dask on {args.workers} workers "
+          f"{outcome.wall_s:.1f} s (ratio {serial / outcome.wall_s:.2f}); load average {os.getloadavg()[0]:.1f} "
+          f"on {os.cpu_count()} cores")
+    print(f"full default sweep ({len(full)} cells), extrapolated: {serial * scale / 60:.0f} core-minutes, "
+          f"{outcome.wall_s * scale / 60:.0f} min on {args.workers} workers (goal: < 30 min on 2 idle cores)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,159 @@
+"""The blocks of a report: tables (Markdown, HTML, CSV) and the document that holds them."""
+
+from __future__ import annotations
+
+import csv
+import html
+import io
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+
+@dataclass
+class Table:
+    """A table: rendered to Markdown and HTML, and written as CSV (file stem `name`)."""
+
+    name: str  # file stem of its CSV
+    headers: list[str]
+    rows: list[list[str]]
+    align: str = ""  # per column: l or r
+
+    def markdown(self) -> str:
+        align = self.align or "l" * len(self.headers)
+        sep = ["---:" if a == "r" else "---" for a in align]
+        esc = lambda s: str(s).replace("|", "/")  # noqa: E731
+        lines = ["| " + " | ".join(esc(h) for h in self.headers) + " |", "| " + " | ".join(sep) + " |"]
+        lines += ["| " + " | ".join(esc(c) for c in row) + " |" for row in self.rows]
+        return "\n".join(lines)
+
+    def html(self) -> str:
+        align = self.align or "l" * len(self.headers)
+        head = "".join(f"<th>{_inline_html(h)}</th>" for h in self.headers)
+        body = "".join(
+            "<tr>" + "".join(f'<td class="{"num" if a == "r" else ""}">{_inline_html(c)}</td>'
+                             for c, a in zip(row, align)) + "</tr>\n" for row in self.rows)
+        return f"<table>\n<thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody>\n</table>"
+
+    def write_csv(self, path: Path) -> None:
+        from cloth_bench_ros.safe_io import atomic_write_text
+
+        buffer = io.StringIO()
+        w = csv.writer(buffer)
+        w.writerow([_plain(h) for h in self.headers])
+        w.writerows([[_plain(c) for c in row] for row in self.rows])
+        atomic_write_text(path, buffer.getvalue())
+
+
+def _plain(text) -> str:
+    return str(text).replace("**", "")
+
+
+def _inline_html(text) -> str:
+    out = html.escape(str(text))
+    out = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", out)
+    return re.sub(r"`(.+?)`", r"<code>\1</code>", out)
+
+
+Block = tuple  # ("h", level, text) | ("p", text) | ("table", Table) | ("figure", Figure) | ("img", file, caption)
+
+
+@dataclass
+class Figure:
+    """A figure to draw when the report is written: draw(path) saves it there (None: nothing to show)."""
+
+    name: str  # file name in the report directory
+    caption: str
+    draw: Callable[[Path], "Path | None"]
+
+
+def heading(level: int, text: str) -> Block:
+    return ("h", level, text)
+
+
+def paragraph(text: str) -> Block:
+    return ("p", text)
+
+
+def table_block(table: Table) -> Block:
+    return ("table", table)
+
+
+def figure_block(name: str, caption: str, draw: Callable[[Path], "Path | None"]) -> Block:
+    return ("figure", Figure(name, caption, draw))
+
+
+@dataclass
+class Document:
+    """A report as a list of blocks; section builders return blocks, `write_document` writes the files."""
+
+    title: str
+    blocks: list = field(default_factory=list)
+
+    def extend(self, blocks: list) -> None:
+        self.blocks.extend(blocks)
+
+    def tables(self) -> list[Table]:
+        return [b[1] for b in self.blocks if b[0] == "table"]
+
+    def markdown(self) -> str:
+        out = [f"# {self.title}", ""]
+        for b in self.blocks:
+            if b[0] == "h":
+                out += ["#" * b[1] + " " + b[2], ""]
+            elif b[0] == "p":
+                out += [b[1], ""]
+            elif b[0] == "table":
+                out += [b[1].markdown(), ""]
+            elif b[0] == "img":
+                out += [f"![{b[2]}]({b[1]})", "", f"*{b[2]}*", ""]
+        return "\n".join(out)
+
+    def html(self) -> str:
+        body = [f"<h1>{html.escape(self.title)}</h1>"]
+        for b in self.blocks:
+            if b[0] == "h":
+                body.append(f"<h{b[1]}>{html.escape(b[2])}</h{b[1]}>")
+            elif b[0] == "p":
+                body.append(f"<p>{_inline_html(b[1])}</p>")
+            elif b[0] == "table":
+                body.append(b[1].html())
+            elif b[0] == "img":
+                body.append(f'<figure><img src="{html.escape(b[1])}" alt="{html.escape(b[2])}">'
+                            f"<figcaption>{_inline_html(b[2])}</figcaption></figure>")
+        style = ("body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em}"
+                 "table{border-collapse:collapse;margin:1em 0;font-size:0.9em}"
+                 "th,td{border:1px solid #ccc;padding:3px 6px}td.num{text-align:right}"
+                 "th{background:#f0f0f0}img{max-width:100%}figcaption{font-style:italic}")
+        return (f"<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{html.escape(self.title)}</title>"
+                f"<style>{style}</style></head>\n<body>\n" + "\n".join(body) + "\n</body></html>\n")
+
+
+def write_document(doc: Document, out_dir: Path, csv_only: Sequence[Table] = (),
+                   names: tuple[str, str] = ("report.md", "report.html")) -> tuple[Path, Path, list[Path]]:
+    """Draw the figures, write one CSV per table (and per `csv_only` table), report.md and report.html
+    (atomically) into out_dir.
+    """
+    from cloth_bench_ros.safe_io import atomic_write_text
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for t in csv_only:
+        t.write_csv(out_dir / f"{t.name}.csv")
+    images: list[Path] = []
+    blocks = []
+    for b in doc.blocks:
+        if b[0] == "figure":
+            path = b[1].draw(out_dir / b[1].name)
+            if path is None:
+                continue
+            images.append(path)
+            b = ("img", path.name, b[1].caption)
+        elif b[0] == "table":
+            b[1].write_csv(out_dir / f"{b[1].name}.csv")
+        blocks.append(b)
+    doc.blocks = blocks
+    md_path, html_path = out_dir / names[0], out_dir / names[1]
+    atomic_write_text(md_path, doc.markdown())
+    atomic_write_text(html_path, doc.html())
+    return md_path, html_path, images

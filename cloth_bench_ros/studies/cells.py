@@ -1,0 +1,207 @@
+"""The cells of a study: one pipeline run each (engine, rate, cloth, task, trial bag, seed, configuration).
+
+Two kinds of sweep build cells:
+
+- paper (`cloth-bench sweep`): engines x rates x cloths x tasks x trials x seeds with the
+  engines' presets, the layout of the paper's Table II and Fig. 5;
+- settings (`cloth-bench sweep --mode settings`): per engine, a factorial sweep over the settings
+  that cost time (mesh resolution, self-collision, internal time step, solver iterations) at one
+  rate, to find the cheapest configuration within a tolerance of the most accurate one.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from itertools import product
+from pathlib import Path
+from typing import Iterable, Sequence
+
+from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
+
+DEFAULT_RATES = (10.0, 100.0, 1000.0)
+DEFAULT_ENGINES = ("mujoco", "bullet")
+DEFAULT_CLOTHS = ("towel", "chequered", "linen")
+DEFAULT_PRIMITIVES = ("dynamic", "quasi_static")
+DEFAULT_SEEDS = 20
+PRESET = "preset"
+
+# Settings sweep (mode "settings"): the settings that cost time, each axis a list of values;
+# None means "the preset's value". The cells are the full factorial product.
+DEFAULT_SETTINGS_AXES: dict[str, list] = {
+    "grid": [(6, 8), (11, 15), (16, 22)],
+    "self_collision": [False, True],
+    "timestep": [None, 0.005, 0.01],
+    "solver_iterations": [None, 5],
+}
+SETTINGS_RATE = 100.0
+SETTINGS_SEEDS = 2
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One pipeline run of a sweep."""
+
+    engine: str
+    rate_hz: float
+    cloth: str
+    primitive: str
+    seed: int
+    bag: str
+    trial: int = 0
+    mode: str = "paper"
+    config: str = PRESET  # name of the engine configuration (grid + overrides)
+    grid: tuple[int, int] | None = None
+    overrides: tuple[tuple[str, object], ...] = ()  # sorted (parameter, value) pairs
+    pacing: str = "lockstep"
+    keep_frames: bool = False  # write summary.json + frames.csv of this run (per-frame plots)
+
+    def key(self) -> tuple:
+        """What makes a cell unique in a results file (resume compares these with row_key)."""
+        return result_key({name: getattr(self, name) for name in KEY_FIELDS})
+
+    def ident(self) -> str:
+        """A file-system-safe name of the cell."""
+        text = (f"{self.mode}_{self.config}_{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}"
+                f"_t{self.trial}_s{self.seed}_{self.pacing}")
+        return re.sub(r"[^A-Za-z0-9_.=-]+", "-", text)
+
+    @property
+    def params(self) -> dict:
+        """The parameter overrides on top of the preset."""
+        return dict(self.overrides)
+
+
+def config_label(grid: tuple[int, int] | None, overrides: dict) -> str:
+    """A canonical name of a configuration: "preset" or "grid=6x8,param=value,..."."""
+    parts = []
+    if grid is not None:
+        parts.append(f"grid={grid[0]}x{grid[1]}")
+    for name in sorted(overrides):
+        value = overrides[name]
+        if isinstance(value, bool):
+            value = "on" if value else "off"
+        parts.append(f"{name}={value:g}" if isinstance(value, float) else f"{name}={value}")
+    return ",".join(parts) or PRESET
+
+
+_BAG_NAME = r"^{cloth}(?:_(\d+))?_{primitive}$"
+
+
+def find_bags(bag_dir: Path | None, cloth: str, primitive: str) -> list[tuple[int, Path]]:
+    """(trial, path) of every bag for a cloth and task in `bag_dir` (default: the bundled bags).
+
+    Names `<cloth>_<primitive>` (the bundled ones) and `<cloth>_<trial>_<primitive>` (the
+    importer's) both count. ValueError if there is none.
+    """
+    from cloth_bench_ros.paths import share_dir
+
+    base = Path(bag_dir) if bag_dir is not None else share_dir("bags")
+    pattern = re.compile(_BAG_NAME.format(cloth=re.escape(cloth), primitive=re.escape(primitive)))
+    found = []
+    if base.is_dir():
+        for path in sorted(base.iterdir()):
+            m = pattern.match(path.name)
+            if m and path.is_dir():
+                found.append((int(m.group(1)) if m.group(1) else _bag_trial(path), path))
+    if not found:
+        raise ValueError(f"bag directory {base}: no bag named {cloth}_{primitive} or {cloth}_<trial>_{primitive}")
+    return sorted(found)
+
+
+def _bag_trial(path: Path) -> int:
+    from cloth_bench_ros.data.bag import BagReader
+
+    try:
+        trial = BagReader(path).trial
+    except Exception:  # an unreadable bag is reported by the cell that runs it
+        return 0
+    return int(trial.trial) if trial is not None else 0
+
+
+def _check_engines(engines: Iterable[str], overrides: dict[str, dict]) -> None:
+    """EngineError (a ValueError) on an unknown engine or a bad override, before any work."""
+    from cloth_bench_ros.engines import engine_class
+
+    for name in engines:
+        cls = engine_class(name)
+        cls.validate_params(overrides.get(name, {}))
+
+
+def paper_cells(engines: Sequence[str] = DEFAULT_ENGINES, rates: Sequence[float] = DEFAULT_RATES,
+                cloths: Sequence[str] = DEFAULT_CLOTHS, primitives: Sequence[str] = DEFAULT_PRIMITIVES,
+                seeds: Sequence[int] = tuple(range(DEFAULT_SEEDS)), bag_dir: Path | None = None,
+                grid: tuple[int, int] | None = None, overrides: dict[str, dict] | None = None,
+                pacing: str = "lockstep", step_per_target: bool = False,
+                keep_frames_seeds: Iterable[int] | None = None) -> list[Cell]:
+    """The cells of the paper's layout. step_per_target: internal time step = 1 / rate, one
+    engine step per target (the paper's frequency study), instead of the preset's time step.
+    keep_frames_seeds: seeds whose per-frame scores are kept (default: the first seed).
+    """
+    overrides = overrides or {}
+    _check_engines(engines, overrides)
+    keep = set(keep_frames_seeds) if keep_frames_seeds is not None else set(list(seeds)[:1])
+    cells = []
+    for cloth, primitive in product(cloths, primitives):
+        for trial, bag in find_bags(bag_dir, cloth, primitive):
+            for engine, rate, seed in product(engines, rates, seeds):
+                params = dict(overrides.get(engine, {}))
+                label = config_label(grid, params)
+                if step_per_target:
+                    params.update(timestep=1.0 / float(rate), substeps=1)
+                    label = "step=1/rate" if label == PRESET else f"{label},step=1/rate"
+                cells.append(Cell(engine, float(rate), cloth, primitive, int(seed), str(bag), trial, "paper",
+                                  label, grid, tuple(sorted(params.items())), pacing, seed in keep))
+    return cells
+
+
+def settings_cells(engines: Sequence[str] = DEFAULT_ENGINES, rate: float = SETTINGS_RATE,
+                   cloths: Sequence[str] = ("towel",), primitives: Sequence[str] = DEFAULT_PRIMITIVES,
+                   seeds: Sequence[int] = tuple(range(SETTINGS_SEEDS)), bag_dir: Path | None = None,
+                   axes: dict[str, list] | None = None, overrides: dict[str, dict] | None = None) -> list[Cell]:
+    """Factorial sweep over the settings that cost time, per engine, at one rate.
+
+    axes: parameter -> values ("grid" -> [(nx, nz), ...]); None as a value means the preset's.
+    An axis naming a parameter that an engine does not have is skipped for that engine.
+    """
+    from cloth_bench_ros.engines import engine_class
+
+    axes = dict(DEFAULT_SETTINGS_AXES if axes is None else axes)
+    overrides = overrides or {}
+    _check_engines(engines, overrides)
+    grids = axes.pop("grid", [None])
+    cells = []
+    for engine in engines:
+        schema = {p.name for p in engine_class(engine).params}
+        names = [n for n in axes if n in schema]
+        combos = []
+        for grid in grids:
+            for values in product(*(axes[n] for n in names)):
+                params = dict(overrides.get(engine, {}))
+                params.update({n: v for n, v in zip(names, values) if v is not None})
+                engine_class(engine).validate_params(params)
+                parts = [f"grid={grid[0]}x{grid[1]}" if grid else "grid=default"]
+                for n, v in zip(names, values):
+                    shown = PRESET if v is None else ("on" if v is True else "off" if v is False else f"{v:g}")
+                    parts.append(f"{n}={shown}")
+                fixed = {k: v for k, v in overrides.get(engine, {}).items() if k not in names}
+                if fixed:  # --set values shared by every configuration are part of its name
+                    parts.append(config_label(None, fixed))
+                combos.append((",".join(parts), tuple(grid) if grid else None, tuple(sorted(params.items()))))
+        for cloth, primitive in product(cloths, primitives):
+            for trial, bag in find_bags(bag_dir, cloth, primitive):
+                for (label, grid, params), seed in product(combos, seeds):
+                    cells.append(Cell(engine, float(rate), cloth, primitive, int(seed), str(bag), trial,
+                                      "settings", label, grid, params, "lockstep", False))
+    return cells
+
+
+def estimated_cost(cell: Cell) -> float:
+    """A rough cost of a cell in seconds of one core (for ordering; measured on 11 x 15 at 100 Hz)."""
+    duration = 7.4 if cell.primitive == "dynamic" else 17.0  # settle phase + quintic part, s
+    params = cell.params
+    nx, nz = cell.grid or (11, 15)
+    timestep = float(params.get("timestep", 0.002 if cell.engine == "mujoco" else 0.0025))
+    internal_steps = duration * max(cell.rate_hz, 1.0 / timestep)
+    per_internal_step = 0.4e-3 * (nx * nz / 165.0) * (1.7 if cell.engine == "bullet" else 1.0)
+    return internal_steps * per_internal_step + duration * cell.rate_hz * 0.25e-3 + 1.0

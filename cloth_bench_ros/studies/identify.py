@@ -1,0 +1,298 @@
+"""Parameter identification (`cloth-bench identify`): the paper's CMA-ES and Bayesian optimisation with Optuna.
+
+The study minimises the chosen metric (CD or HD of the task's window) of an engine against a bag
+over a set of the engine's parameters, with the seed held constant. Samplers: CMA-ES
+(`CmaEsSampler`, started at the preset), Bayesian optimisation with TPE (`TPESampler`, the
+default BO: no extra dependency) or with a Gaussian process (`GPSampler`, only where PyTorch is
+installed); `both` runs CMA-ES and BO and keeps the better, as the paper did. Optuna's study stays
+with the client (ask and tell, a batch of trials in flight on the Dask workers); every trial is
+kept in an Optuna journal file beside the results, so an interrupted identification resumes.
+A diverged trial is a failed trial with its reason and step. The result is a preset file in the
+config/presets format (`cloth-bench run --presets DIR`) with its provenance, validated on other
+seeds (and the other trials' bags) against the engine's preset through the full node graph.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import warnings
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+from cloth_bench_ros.studies.objective import Trial, evaluate
+
+SAMPLERS = ("cmaes", "tpe", "gp", "both")
+DEFAULT_TRIALS = 500
+DEFAULT_SPAN = 10.0
+JOURNAL_FILE = "study.journal"
+TRIALS_FILE = "trials.jsonl"
+SUMMARY_FILE = "identification.json"
+# What the reference identified per engine (REFERENCE.md section 6); others: every ranged number.
+DEFAULT_PARAMS = {"mujoco": ("mass", "young", "poisson", "thickness", "damping"),
+                  "bullet": ("mass", "elastic", "damping", "bending")}
+NOT_FITTED = ("timestep", "substeps", "solver_iterations")
+
+
+@dataclass
+class IdentifySpec:
+    """What to identify, against what, how; checked by `check()`."""
+
+    engine: str
+    cloth: str
+    primitive: str
+    bag: Path
+    output: Path
+    sampler: str = "both"
+    trials: int = DEFAULT_TRIALS  # per sampler
+    objective: str = "cd"
+    params: Sequence[str] = ()
+    seed: int = 0
+    rate_hz: float = 100.0
+    grid: tuple[int, int] | None = None
+    fixed: dict = field(default_factory=dict)  # overrides on top of the preset, not fitted
+    span: float = DEFAULT_SPAN
+    max_frames: int | None = None
+    batch: int | None = None  # trials in flight (default: the cluster's worker threads)
+    validate_seeds: int = 5
+    bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
+
+
+def default_params(engine: str) -> list[str]:
+    """The parameters fitted by default: the reference's set, else every ranged number of the schema."""
+    from cloth_bench_ros.engines import engine_class
+
+    schema = engine_class(engine).params
+    if engine in DEFAULT_PARAMS:
+        return list(DEFAULT_PARAMS[engine])
+    return [p.name for p in schema if p.low is not None and p.high is not None and not p.choices
+            and not isinstance(p.default, bool) and p.name not in NOT_FITTED]
+
+
+def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> dict[str, Any]:
+    """name -> Optuna distribution: the schema's range; where it spans decades (high >= 100 low, or
+    100 times the base value when low is 0), a log range within a factor `span` either side of the
+    base (preset) value. ValueError for a parameter that cannot be fitted.
+    """
+    from optuna.distributions import FloatDistribution
+
+    from cloth_bench_ros.engines import engine_class
+
+    schema = {p.name: p for p in engine_class(engine).params}
+    space = {}
+    for name in names:
+        p = schema.get(name)
+        if p is None:
+            raise ValueError(f"--params: unknown {engine} parameter {name} (known: {', '.join(schema)})")
+        if p.choices or isinstance(p.default, bool) or p.low is None or p.high is None:
+            raise ValueError(f"--params: {engine} parameter {name} is not a number with a range")
+        value = float(base.get(name, p.default))
+        low, high = float(p.low), float(p.high)
+        decades = high >= 100 * low if low > 0 else value > 0 and high >= 100 * value
+        if decades and value > 0:
+            space[name] = FloatDistribution(max(low, value / span), min(high, value * span), log=True)
+        else:
+            space[name] = FloatDistribution(low, high)
+    return space
+
+
+def make_sampler(name: str, seed: int) -> Any:
+    """The Optuna sampler `name` (cmaes, tpe or gp), seeded. CMA-ES starts at the centre of the space,
+    which is the preset for the log-scale parameters (their ranges are a factor `span` either side).
+    """
+    import optuna
+
+    if name == "cmaes":
+        return optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
+    if name == "tpe":
+        return optuna.samplers.TPESampler(seed=seed, multivariate=True, n_startup_trials=10)
+    if name == "gp":
+        try:
+            import torch  # noqa: F401
+        except ImportError:
+            raise ValueError("--sampler gp needs PyTorch (pip install torch); use tpe or cmaes") from None
+        return optuna.samplers.GPSampler(seed=seed)
+    raise ValueError(f"unknown sampler {name!r} (valid: {', '.join(SAMPLERS)})")
+
+
+def samplers_of(choice: str) -> list[str]:
+    """The samplers a --sampler choice runs (both: CMA-ES, then BO with TPE)."""
+    if choice not in SAMPLERS:
+        raise ValueError(f"unknown sampler {choice!r} (valid: {', '.join(SAMPLERS)})")
+    return ["cmaes", "tpe"] if choice == "both" else [choice]
+
+
+def open_study(spec: IdentifySpec, sampler: str) -> Any:
+    """The sampler's study in the journal beside the results (created, or loaded to resume); trials
+    left running by an interrupted identification are marked failed.
+    """
+    import optuna
+    from optuna.storages import JournalStorage
+    from optuna.trial import TrialState
+
+    try:
+        from optuna.storages.journal import JournalFileBackend as Backend
+    except ImportError:  # optuna < 4
+        from optuna.storages import JournalFileStorage as Backend
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
+    storage = JournalStorage(Backend(str(spec.output / JOURNAL_FILE)))
+    study = optuna.create_study(study_name=f"{spec.engine}-{spec.cloth}-{spec.primitive}-{sampler}",
+                                storage=storage, sampler=make_sampler(sampler, spec.seed),
+                                direction="minimize", load_if_exists=True)
+    for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
+        study.tell(t.number, state=TrialState.FAIL)
+    return study
+
+
+def trial_of(spec: IdentifySpec, params: dict, number: int, sampler: str) -> Trial:
+    return Trial(spec.engine, spec.cloth, spec.primitive, str(spec.bag),
+                 tuple(sorted({**spec.fixed, **params}.items())), spec.objective, spec.seed, spec.rate_hz,
+                 spec.grid, spec.max_frames, number, sampler)
+
+
+def run_sampler(client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any,
+                progress: bool) -> Any:
+    """Ask and tell until the study holds `spec.trials` finished trials, a batch in flight on the cluster."""
+    from distributed import as_completed
+    from optuna.trial import TrialState
+    from tqdm import tqdm
+
+    from cloth_bench_ros.studies.executor import worker_slots
+
+    study = open_study(spec, sampler)
+    finished = len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)))
+    left = max(0, spec.trials - finished)
+    batch = spec.batch or worker_slots(client)
+    bar = tqdm(total=spec.trials, initial=spec.trials - left, desc=f"identify {sampler}", unit="trial",
+               disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    running = as_completed()
+    asked: dict[str, Any] = {}
+
+    def ask() -> None:
+        nonlocal left
+        trial = study.ask(space)
+        future = client.submit(evaluate, trial_of(spec, trial.params, trial.number, sampler), pure=False)
+        asked[future.key] = trial
+        running.add(future)
+        left -= 1
+
+    for _ in range(min(batch, left)):
+        ask()
+    for future in running:
+        trial = asked.pop(future.key)
+        try:
+            result = future.result()
+        except Exception as exc:  # the trial killed every worker that tried it
+            result = {"number": trial.number, "sampler": sampler, "params": trial.params, "value": math.nan,
+                      "status": "error", "reason": f"{type(exc).__name__}: {exc}", "step": None}
+        future.release()
+        if result["status"] == "ok":
+            study.tell(trial, result["value"])
+        else:
+            trial.set_user_attr("status", result["status"])
+            trial.set_user_attr("reason", str(result["reason"])[:500])
+            trial.set_user_attr("step", result["step"])
+            study.tell(trial, state=TrialState.FAIL)
+        record(result)
+        bar.set_postfix(best=f"{_best_value(study):.5f}", refresh=False)
+        bar.update(1)
+        if left > 0:
+            ask()
+    bar.close()
+    return study
+
+
+def _best_value(study: Any) -> float:
+    try:
+        return float(study.best_value)
+    except ValueError:
+        return math.nan
+
+
+def _finite_or_inf(value: float) -> float:
+    return value if math.isfinite(value) else math.inf
+
+
+def convergence(study: Any) -> list[list]:
+    """[number, value or None, best so far or None] per finished trial, in trial order."""
+    from optuna.trial import TrialState
+
+    out, best = [], math.inf
+    for t in sorted(study.get_trials(deepcopy=False), key=lambda t: t.number):
+        if t.state not in (TrialState.COMPLETE, TrialState.FAIL):
+            continue
+        value = t.value if t.state == TrialState.COMPLETE else None
+        if value is not None:
+            best = min(best, value)
+        out.append([t.number, value, best if math.isfinite(best) else None])
+    return out
+
+
+def importance(study: Any) -> dict[str, float]:
+    """Parameter importance (PED-ANOVA: no extra dependency); {} with too few finished trials."""
+    import optuna
+
+    try:
+        evaluator = optuna.importance.PedAnovaImportanceEvaluator()
+        return {k: float(v) for k, v in optuna.importance.get_param_importances(study, evaluator=evaluator).items()}
+    except Exception:  # too few complete trials, or every value equal
+        return {}
+
+
+@dataclass
+class IdentifyOutcome:
+    summary: dict
+    preset_file: Path
+    wall_s: float
+
+
+def identify(spec: IdentifySpec, scheduler: str | None = None, workers: int | None = None,
+             progress: bool = True) -> IdentifyOutcome:
+    """Run the identification of `spec` and its validation; write the preset and identification.json."""
+    from cloth_bench_ros.engines.presets import load_preset
+    from cloth_bench_ros.safe_io import check_output_dir
+    from cloth_bench_ros.studies.executor import open_client
+    from cloth_bench_ros.studies.identify_output import validate, write_outputs
+    from cloth_bench_ros.studies.results import ResultsLock, append_row
+
+    start = time.perf_counter()
+    spec.output = check_output_dir(spec.output)
+    base = {**load_preset(spec.engine, spec.cloth, spec.primitive), **spec.fixed}
+    names = list(spec.params) or default_params(spec.engine)
+    space = search_space(spec.engine, names, base, spec.span)
+    samplers = samplers_of(spec.sampler)
+    for s in samplers:
+        make_sampler(s, spec.seed)  # a missing dependency fails before any work
+    with ResultsLock(spec.output, "identify"), open_client(scheduler, workers, spec.output / "workers.log") as client:
+        before = client.submit(evaluate, trial_of(spec, {}, -1, "preset"), pure=False).result()
+        studies = {s: run_sampler(client, spec, s, space, lambda r: append_row(spec.output / TRIALS_FILE, r),
+                                  progress) for s in samplers}
+        best = min(studies, key=lambda s: _finite_or_inf(_best_value(studies[s])))
+        if not math.isfinite(_best_value(studies[best])):
+            raise ValueError(f"identify: no trial of {', '.join(samplers)} finished without diverging "
+                             f"(see {spec.output / TRIALS_FILE})")
+        validation = validate(client, spec, {**spec.fixed, **studies[best].best_params}, progress)
+        summary = summarise(spec, space, base, before, studies, best, validation)
+        summary["wall_s"] = time.perf_counter() - start
+        preset = write_outputs(spec, base, summary)
+    return IdentifyOutcome(summary, preset, summary["wall_s"])
+
+
+def summarise(spec: IdentifySpec, space: dict, base: dict, before: dict, studies: dict, best: str,
+              validation: list) -> dict:
+    """Everything identification.json keeps: the problem, each sampler's result, the kept one, validation."""
+    return {"engine": spec.engine, "cloth": spec.cloth, "primitive": spec.primitive, "bag": str(spec.bag),
+            "objective": spec.objective, "seed": spec.seed, "rate_hz": spec.rate_hz,
+            "grid": list(spec.grid) if spec.grid else None, "fixed": spec.fixed, "max_frames": spec.max_frames,
+            "space": {n: [d.low, d.high, d.log] for n, d in space.items()}, "samplers": list(studies),
+            "best_sampler": best, "params": dict(studies[best].best_params), "value": _best_value(studies[best]),
+            "preset_params": {n: base.get(n) for n in space}, "preset_value": before["value"],
+            "preset_status": before["status"],
+            "per_sampler": {s: {"value": _best_value(st),
+                                "params": st.best_params if math.isfinite(_best_value(st)) else {},
+                                "convergence": convergence(st), "importance": importance(st),
+                                "trials": len(convergence(st))} for s, st in studies.items()},
+            "validation": validation}

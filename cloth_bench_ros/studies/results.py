@@ -1,0 +1,204 @@
+"""The results file of a study: typed rows, one key per cell, untrusted reading, one locked writer.
+
+<dir>/results.jsonl holds one JSON object per finished cell. Rows are read as untrusted input:
+a line torn by an interrupted study is skipped (its cell runs again), but a line that is JSON and
+not an object, lacks a key, has a name that is not a safe file-name part or a frames_csv path
+outside the directory is a `ResultsError` (one line naming the file and line; exit 2 from the
+CLI). Only one study writes a directory at a time: `ResultsLock` holds an exclusive lock on
+<dir>/.results.lock for the whole study, and a second study on the same directory refuses to
+start (the kernel drops the lock when its holder dies, even by SIGKILL: no stale lock).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import math
+import os
+import socket
+from pathlib import Path
+from typing import Any, Mapping, TypedDict
+
+from cloth_bench_ros.safe_io import UnsafeInputError, confined_path, read_text_bounded, safe_name
+
+RESULTS_FILE = "results.jsonl"
+LOCK_FILE = ".results.lock"
+MAX_RESULTS_BYTES = 512 * 1024 * 1024
+
+# What makes a cell unique, with the default of each field that older rows may lack.
+KEY_FIELDS: dict[str, Any] = {"mode": "paper", "config": "preset", "engine": None, "rate_hz": None, "cloth": None,
+                              "primitive": None, "trial": 0, "seed": None, "pacing": "lockstep"}
+NAME_FIELDS = ("mode", "engine", "cloth", "primitive", "pacing")
+NUMERIC_FIELDS = ("CD", "HD", "L_s", "step_time_mean", "step_time_p50", "step_time_p99", "step_time_max",
+                  "latency_mean", "latency_p50", "latency_p99", "latency_max", "real_time_factor", "cell_wall_s")
+
+
+class ResultsError(ValueError):
+    """A results file or directory that cannot be used; str() is one line naming it and the problem."""
+
+
+class ResultRow(TypedDict, total=False):
+    """One line of results.jsonl: the cell, then what its run measured (NaN where it has no value)."""
+
+    mode: str
+    config: str
+    engine: str
+    rate_hz: float
+    cloth: str
+    primitive: str
+    trial: int
+    seed: int
+    pacing: str
+    bag: str
+    grid: str | None
+    params: dict
+    status: str  # ok | diverged | error
+    error: str
+    CD: float
+    HD: float
+    L_s: float
+    diverged: bool
+    diverged_at_step: int | None
+    diverged_reason: str
+    frames_csv: str | None
+    cell_wall_s: float
+    engine_version: str
+
+
+def result_key(fields: Mapping[str, Any]) -> tuple:
+    """The unique key of a cell from its fields (a Cell's or a row's); missing fields take their default."""
+    values = []
+    for name, default in KEY_FIELDS.items():
+        value = fields.get(name, default)
+        if value is None:
+            raise KeyError(name)
+        values.append(float(value) if name == "rate_hz" else int(value) if name in ("trial", "seed") else value)
+    return tuple(values)
+
+
+def row_key(row: Mapping[str, Any]) -> tuple:
+    """The key of a results row (the same as its Cell.key())."""
+    return result_key(row)
+
+
+def json_safe(value: Any) -> Any:
+    """value with every non-finite float as None (JSON has no NaN), recursively."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return value
+
+
+def check_row(row: Any, base: Path, where: str) -> ResultRow:
+    """The row if it is a usable results row, else ResultsError naming `where`."""
+    if not isinstance(row, dict):
+        raise ResultsError(f"{where}: a result row must be a JSON object, found {type(row).__name__}")
+    missing = [k for k, default in KEY_FIELDS.items() if default is None and k not in row]
+    if missing:
+        raise ResultsError(f"{where}: result row lacks {', '.join(missing)}")
+    try:
+        for name in NAME_FIELDS:
+            if name in row:
+                safe_name(row[name], name)
+        if not isinstance(row.get("config", ""), str) or len(row.get("config", "")) > 500:
+            raise ResultsError(f"{where}: config must be a string of at most 500 characters")
+        rate = row["rate_hz"]
+        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not (math.isfinite(rate) and rate > 0):
+            raise ResultsError(f"{where}: rate_hz {rate!r} is not a positive number")
+        for name in ("seed", "trial"):
+            if name in row and (isinstance(row[name], bool) or not isinstance(row[name], int) or row[name] < 0):
+                raise ResultsError(f"{where}: {name} {row[name]!r} is not a whole number >= 0")
+        frames = row.get("frames_csv")
+        if frames is not None:
+            if not isinstance(frames, str):
+                raise ResultsError(f"{where}: frames_csv must be a path or null")
+            confined_path(base, frames)
+    except UnsafeInputError as exc:
+        raise ResultsError(f"{where}: {exc}") from None
+    for name in NUMERIC_FIELDS:
+        value = row.get(name)
+        if value is None and name in row:
+            row[name] = math.nan
+        elif name in row and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            raise ResultsError(f"{where}: {name} {value!r} is not a number")
+    return row  # type: ignore[return-value]
+
+
+def results_path(path: Path) -> Path:
+    """<path>/results.jsonl for a directory, else the path itself."""
+    path = Path(path)
+    return path / RESULTS_FILE if path.is_dir() else path
+
+
+def load_rows(path: Path) -> list[ResultRow]:
+    """Rows of a results.jsonl (null metrics back to NaN); a torn line is skipped, a bad row refused."""
+    path = results_path(path)
+    if not path.exists():
+        return []
+    try:
+        text = read_text_bounded(path, MAX_RESULTS_BYTES)
+    except UnsafeInputError as exc:
+        raise ResultsError(str(exc)) from None
+    rows = []
+    for number, line in enumerate(text.splitlines(), 1):
+        line = line.strip()
+        if not line:
+            continue
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line cut short by an interrupted study: that cell runs again
+        rows.append(check_row(row, path.parent, f"{path}:{number}"))
+    return rows
+
+
+def append_row(path: Path, row: Mapping[str, Any]) -> None:
+    """One JSON line, flushed to disk; after a line torn by an interrupted study, on a line of its own."""
+    path = Path(path)
+    data = (json.dumps(json_safe(dict(row)), sort_keys=True) + "\n").encode()
+    with path.open("ab") as f:
+        if f.tell() > 0:
+            with path.open("rb") as r:
+                r.seek(-1, os.SEEK_END)
+                if r.read(1) != b"\n":
+                    data = b"\n" + data
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+
+
+class ResultsLock:
+    """Exclusive lock of a results directory for one study: `with ResultsLock(dir, "sweep"):`.
+
+    A second study on a locked directory gets ResultsError naming who holds it. The lock is an
+    flock(2) on <dir>/.results.lock: the kernel releases it when the holder exits or is killed.
+    """
+
+    def __init__(self, directory: Path, what: str) -> None:
+        self.directory = Path(directory)
+        self.what = what
+        self._fd: int | None = None
+
+    def __enter__(self) -> "ResultsLock":
+        path = self.directory / LOCK_FILE
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "another study"
+            os.close(fd)
+            raise ResultsError(f"results directory {self.directory} is in use by {holder}; wait for it to "
+                               f"finish or choose another --output") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{self.what} (pid {os.getpid()} on {socket.gethostname()})\n".encode(), 0)
+        self._fd = fd
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._fd is not None:
+            os.ftruncate(self._fd, 0)
+            os.close(self._fd)  # closing the descriptor releases the lock
+            self._fd = None
