@@ -8,6 +8,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.core.trajectory import PRIMITIVES
 
 
@@ -15,14 +16,23 @@ class UserError(Exception):
     """Bad input from the user: printed as one line, exit status 2."""
 
 
+def _option(check, name: str):
+    """An argparse type from a validation check: its one-line error becomes argparse's."""
+    def parse(text: str):
+        try:
+            return check(text, name)
+        except validation.InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    parse.__name__ = name  # argparse names the type in some messages
+    return parse
+
+
 def _rate(text: str) -> float:
-    try:
-        rate = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"rate {text!r} is not a number") from None
-    if not rate > 0 or rate == float("inf"):
-        raise argparse.ArgumentTypeError(f"rate must be > 0 Hz, got {text}")
-    return rate
+    return _option(lambda t, n: validation.rate_hz(validation.parse_number(t, n), n), "rate")(text)
+
+
+def _seed(text: str) -> int:
+    return _option(lambda t, n: validation.seed(validation.parse_integer(t, n), n), "seed")(text)
 
 
 def check_bag(bag: Path) -> None:
@@ -49,17 +59,23 @@ def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
     from cloth_bench_ros.report.run_report import result_table
 
-    engines = args.engine or ["mujoco"]
+    from cloth_bench_ros.safe_io import check_output_dir
+
+    engines = validation.unique(args.engine or ["mujoco"], "--engine")
     for name in engines:
         engine_class(name)
     if args.cloth not in CLOTHS:
         raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
     presets = Path(args.presets) if args.presets else None
-    for name in engines:  # a malformed preset file or bad value fails here, in one line
+    for name in engines:  # a missing directory, malformed preset file or bad value fails here, in one line
         load_preset(name, args.cloth, args.primitive, presets)
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     check_bag(bag)
     out = Path(args.output) if args.output else Path("results") / f"{args.cloth}_{args.primitive}_{int(args.rate)}hz_seed{args.seed}"
+    try:  # an unwritable or occupied --output is found before the run, not after it
+        check_output_dir(out)
+    except ValueError as exc:
+        raise UserError(f"--output {exc}") from None
     config = RunConfig(bag=bag, engines=engines, rate_hz=args.rate, cloth=args.cloth, primitive=args.primitive,
                        seed=args.seed, pacing=args.pacing, output_dir=out,
                        engine_params=_overrides(getattr(args, "set", None), engines), grid=getattr(args, "grid", None), presets_dir=presets)
@@ -98,24 +114,21 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 
 def _grid(text: str) -> tuple[int, int]:
-    from cloth_bench_ros.studies.sweep import parse_grid
-
-    try:
-        return parse_grid(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    return _option(validation.parse_grid, "grid")(text)
 
 
 def _overrides(specs: list[str] | None, engines: list[str] | None = None) -> dict[str, dict]:
     """--set engine.param=value (repeatable) -> {engine: {param: value}}, checked against the schemas."""
     from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.studies.sweep import parse_overrides
 
-    overrides = parse_overrides(specs)
+    overrides = validation.parse_overrides(specs)
     for engine, params in overrides.items():
         if engines is not None and engine not in engines:
             raise UserError(f"--set {engine}.…: engine {engine} is not part of this run ({', '.join(engines)})")
-        engine_class(engine).validate_params(params)
+        try:
+            engine_class(engine).validate_params(params)
+        except ValueError as exc:
+            raise UserError(f"--set {engine}: {exc}") from None
     return overrides
 
 
@@ -359,7 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--primitive", default="dynamic", choices=PRIMITIVES, help="default dynamic")
     run.add_argument("--bag", help="rosbag2 MCAP bag to score against (default: the bundled one)")
     run.add_argument("--presets", help="directory of <engine>.yaml presets (default: config/presets)")
-    run.add_argument("--seed", type=int, default=0, help="perturbs the initial cloth (default 0)")
+    run.add_argument("--seed", type=_seed, default=0, help="perturbs the initial cloth (default 0)")
     run.add_argument("--pacing", default="lockstep", choices=("lockstep", "realtime"))
     run.add_argument("--output", help="report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)")
     run.add_argument("--grid", type=_grid, help="cloth mesh NXxNZ vertices, e.g. 6x8 (default: the engine's, 11x15)")
@@ -427,7 +440,7 @@ def build_parser() -> argparse.ArgumentParser:
     hil.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel)")
     hil.add_argument("--primitive", default="dynamic", choices=PRIMITIVES, help="default dynamic")
     hil.add_argument("--bag", help="rosbag2 MCAP bag (default: the bundled one)")
-    hil.add_argument("--seed", type=int, default=0)
+    hil.add_argument("--seed", type=_seed, default=0)
     hil.add_argument("--grid", type=_grid, help="cloth mesh NXxNZ (default: the engine's)")
     hil.add_argument("--set", action="append", metavar="ENGINE.PARAM=VALUE", help="engine parameter override")
     hil.add_argument("--output", help="results directory (default results/hil)")
@@ -453,7 +466,7 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel)")
     synth.add_argument("--primitive", default="dynamic", choices=PRIMITIVES)
     synth.add_argument("--out", help="bag directory (default <cloth>_<primitive>)")
-    synth.add_argument("--seed", type=int, default=0, help="sensor noise and reference seed (default 0)")
+    synth.add_argument("--seed", type=_seed, default=0, help="sensor noise and reference seed (default 0)")
     synth.add_argument("--overwrite", action="store_true", help="replace the bag if it exists")
     synth.add_argument("--quiet", action="store_true", help="no progress bar")
     synth.set_defaults(func=cmd_synth)
@@ -476,10 +489,21 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except (UserError, ValueError, OSError, BagError) as exc:
-        print(f"cloth-bench: error: {exc}", file=sys.stderr)
+        print(f"cloth-bench: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
+    except Exception as exc:  # noqa: BLE001 - a bug: one line (the traceback with --verbose), status 1
+        if args.verbose:
+            raise
+        print(f"cloth-bench: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              f"(a bug; --verbose shows the traceback)", file=sys.stderr)
+        return 1
+
+
+def _one_line(exc: BaseException) -> str:
+    """str(exc) on one line (an OSError without a file name still says what failed)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":

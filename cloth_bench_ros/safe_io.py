@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import stat
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -107,6 +110,36 @@ def check_output_dir(path: str | Path) -> Path:
     except OSError as exc:
         raise UnsafeInputError(f"{path}: cannot write there ({exc.strerror or exc})") from None
     return path
+
+
+@contextmanager
+def staged_directory(final: str | Path, overwrite: bool = False) -> Iterator[Path]:
+    """A directory to fill beside `final`, renamed to `final` only when the block completes.
+
+    On any error (or a signal) nothing is left at `final`, and an old `final` stays as it was:
+    readers see the old directory or the complete new one. The checks (exists, writable) run
+    before the block starts. The staged path ends in final's name (a bag names its file after it).
+    """
+    final = Path(final)
+    if final.exists() and not final.is_dir():
+        raise UnsafeInputError(f"{final}: exists and is not a directory")
+    if final.is_dir() and any(final.iterdir()) and not overwrite:
+        raise UnsafeInputError(f"{final}: already exists (not empty; overwrite to replace it)")
+    check_output_dir(final.parent)
+    stage = Path(tempfile.mkdtemp(prefix=f".{final.name}.partial-", dir=final.parent))
+    try:
+        yield stage / final.name
+        old = stage / ".replaced"
+        if final.exists():
+            final.rename(old)
+        try:
+            (stage / final.name).rename(final)
+        except BaseException:
+            if old.exists():
+                old.rename(final)
+            raise
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
 
 
 def safe_name(text: Any, what: str = "name") -> str:

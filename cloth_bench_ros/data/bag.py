@@ -28,6 +28,7 @@ from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
@@ -80,10 +81,9 @@ class TrialInfo:
         if not (math.isfinite(self.fps) and self.fps > 0):
             raise ValueError(f"trial fps must be a positive number, got {self.fps}")
         self.transform = t.tolist()
-        self.trial = int(self.trial)
+        self.trial = validation.integer(self.trial, "trial", 0)
         self.fps = float(self.fps)
-        if self.change_of_phase_frame is not None:
-            self.change_of_phase_frame = int(self.change_of_phase_frame)
+        self.change_of_phase_frame = validation.frame_index(self.change_of_phase_frame, "change_of_phase_frame")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able dict."""

@@ -6,6 +6,7 @@ import time
 from functools import partial
 from pathlib import Path
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.data.bag import trial_from_message
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
@@ -36,6 +37,10 @@ class Evaluator(Node):
         self.run_info = {"primitive": self.primitive.value, "rate_hz": rate_hz, "engines": self.engines,
                          "cloth": self.declare_parameter("cloth", "towel").value,
                          "seed": int(self.declare_parameter("seed", 0).value)}
+        # Every value through the one validation layer; an error names the node and parameter.
+        validation.node_parameters(self, {
+            "rate_hz": validation.rate_hz, "time_offset": validation.time_offset, "seed": validation.seed,
+            "change_of_phase_frame": lambda v, n: validation.frame_index(v, n, unset=-1)})
         targets = full_targets(self.primitive, rate_hz)
         self.final_stamp = targets.stamp_ns(len(targets) - 1)
         self.core = OnlineEvaluator(self.engines, self.primitive, int(round(offset * 1e9)),

@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from functools import partial
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.data.bag import TRIAL_STATUS_NAME, BagReader, BagWriter
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.runtime import (
@@ -21,6 +22,8 @@ from cloth_bench_ros.runtime import (
     make_qos, message_type, serialize_message, stamp_ns,
 )
 from cloth_bench_ros.core.scene import SETTLE_DURATION
+
+MAX_RATE_FACTOR = 1e6  # wall-clock replay speed
 
 
 class Recorder(Node):
@@ -43,15 +46,20 @@ class Recorder(Node):
         if not path:
             raise ValueError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
         # Bag stamps count from the start of the quintic part; the run starts with the settle phase.
-        self.offset_ns = int(round(self.declare_parameter("time_offset", SETTLE_DURATION).value * 1e9))
+        self.declare_parameter("time_offset", SETTLE_DURATION)
         clock = self.declare_parameter("clock", "sim").value
-        self.rate_factor = float(self.declare_parameter("rate_factor", 1.0).value)
-        self.start_offset_ns = int(round(self.declare_parameter("start_offset", 0.0).value * 1e9))
-        self.loop = bool(self.declare_parameter("loop", False).value)
+        self.declare_parameter("rate_factor", 1.0)
+        self.declare_parameter("start_offset", 0.0)
+        self.declare_parameter("loop", False)
+        # Every value through the one validation layer; an error names the node and parameter.
+        p = validation.node_parameters(self, {
+            "time_offset": validation.time_offset, "start_offset": validation.time_offset,
+            "rate_factor": lambda v, n: validation.positive(v, n, MAX_RATE_FACTOR), "loop": validation.boolean})
+        self.offset_ns = int(round(p["time_offset"] * 1e9))
+        self.start_offset_ns = int(round(p["start_offset"] * 1e9))
+        self.rate_factor, self.loop = p["rate_factor"], p["loop"]
         if clock not in ("sim", "wall"):
             raise ValueError(f"recorder: unknown clock {clock!r} (valid: sim, wall)")
-        if not self.rate_factor > 0:
-            raise ValueError(f"recorder: rate_factor must be > 0, got {self.rate_factor}")
         self.bag = BagReader(path)
         self.topic = self.declare_parameter("topic", "").value or self.bag.cloud_topic()
         self.published = 0

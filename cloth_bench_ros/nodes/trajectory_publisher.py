@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from functools import partial
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.runtime import (
     Clock, Node, Pose, PoseArray, PointCloud2, Time, make_qos, stamp_ns,
@@ -23,6 +24,10 @@ class TrajectoryPublisher(Node):
         self.pacing = self.declare_parameter("pacing", "lockstep").value
         self.engines = list(self.declare_parameter("engines", ["mujoco"]).value)
         self.min_clock_subscribers = int(self.declare_parameter("min_clock_subscribers", 0).value)
+        # Every value through the one validation layer; an error names the node and parameter.
+        validation.node_parameters(self, {
+            "rate_hz": validation.rate_hz,
+            "min_clock_subscribers": lambda v, n: validation.integer(v, n, 0, 10_000)})
         if self.pacing not in PACINGS:
             raise ValueError(f"unknown pacing {self.pacing!r} (valid: {', '.join(PACINGS)})")
         self.targets = full_targets(primitive, rate_hz)
