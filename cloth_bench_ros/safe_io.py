@@ -81,8 +81,13 @@ def load_yaml_file(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> Any:
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """Write beside `path`, flush to disk, then rename over it: readers see the old or the new file."""
     path = Path(path)
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        mode = 0o644  # mkstemp's 0600 would hide results and bags from other users
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        os.fchmod(fd, mode)
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()

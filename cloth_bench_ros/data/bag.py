@@ -32,6 +32,7 @@ from cloth_bench_ros import validation
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
+from cloth_bench_ros.safe_io import atomic_write_text
 
 CLOUD_TOPIC = "/cloth_bench/real/cloud"
 TARGETS_TOPIC = "/cloth_bench/targets"
@@ -684,6 +685,34 @@ class BagWriter:
                 self._close_pending = True
             else:
                 self._finish()
+            return dict(self.counts)
+
+    def abandon(self) -> dict[str, int]:
+        """After a failed write (disk full): keep the file as it is, recount it, write metadata.yaml.
+
+        The .mcap then ends at the damage without a summary (BagReader reads it up to there, with a
+        warning); `written` and `counts` become what is readable in it, never what was lost.
+        """
+        with self._lock:
+            if (self.path / "metadata.yaml").exists():
+                return dict(self.counts)  # finalised before the failure
+            self._closed = True
+            try:
+                self._stream.close()
+            except OSError:
+                pass  # the bytes that did not fit are lost; the file holds a prefix of the stream
+            counts: dict[str, int] = {}
+            self._start = self._end = None
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", BagWarning)
+                    reader = BagReader(self.mcap_path)
+                counts, self._start, self._end = reader.message_counts, reader.start_ns, reader.end_ns
+            except BagError:
+                pass  # nothing readable before the damage
+            self.counts = {topic: counts.get(topic, 0) for topic in self._types}
+            self.written = sum(self.counts.values())
+            atomic_write_text(self.path / "metadata.yaml", _dump_yaml({"rosbag2_bagfile_information": self._metadata()}))
             return dict(self.counts)
 
     def _finish(self) -> None:

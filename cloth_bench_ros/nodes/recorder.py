@@ -11,6 +11,8 @@ mode record: subscribes to `record_topics` ("topic:type" entries, e.g.
 
 from __future__ import annotations
 
+import errno
+import shutil
 import time
 from functools import partial
 
@@ -24,6 +26,17 @@ from cloth_bench_ros.runtime import (
 from cloth_bench_ros.core.scene import SETTLE_DURATION
 
 MAX_RATE_FACTOR = 1e6  # wall-clock replay speed
+# Record mode on a filling disk: stop while the open chunk (<= 1 MiB), the summary and
+# metadata.yaml still fit; a small reserve file keeps room for metadata.yaml if another
+# process fills the disk first.
+DISK_MARGIN_BYTES = 4 * 1024 * 1024
+DISK_CHECK_EVERY_BYTES = 256 * 1024
+RESERVE_NAME = ".cloth_bench_reserve"
+RESERVE_BYTES = 64 * 1024
+
+
+class RecordingStopped(ValueError):
+    """A recording that cannot go on (disk full, write error); str() is one line naming the bag."""
 
 
 class Recorder(Node):
@@ -122,7 +135,14 @@ class Recorder(Node):
         if not topics or any(len(t) != 2 for t in topics):
             raise ValueError("recorder: record_topics needs entries 'topic:package/msg/Type'")
         self.received = 0
+        self.stopped = False
+        self.unchecked_bytes = 0
         self.writer = BagWriter(output)
+        self.reserve = self.writer.path / RESERVE_NAME
+        try:  # room for metadata.yaml even if something else fills the disk
+            self.reserve.write_bytes(bytes(RESERVE_BYTES))
+        except OSError as exc:
+            self.stop_recording(exc, failed_write=True)
         for topic, typename in topics:
             msg_type = message_type(typename)
             name = self.resolve_topic_name(topic)
@@ -131,15 +151,53 @@ class Recorder(Node):
 
     def on_record(self, topic: str, typename: str, msg) -> None:
         self.received += 1
+        if self.stopped:
+            return  # counted as received, not written
         stamp = stamp_ns(msg.header.stamp) if hasattr(msg, "header") else self.get_clock().now().nanoseconds
-        self.writer.write(topic, typename, stamp, serialize_message(msg))
+        cdr = serialize_message(msg)
+        self.unchecked_bytes += len(cdr)
+        if self.unchecked_bytes >= DISK_CHECK_EVERY_BYTES:
+            self.unchecked_bytes = 0
+            free = shutil.disk_usage(self.writer.path).free
+            if free < DISK_MARGIN_BYTES:  # stop while the bag can still be finished cleanly
+                self.stop_recording(OSError(errno.ENOSPC, f"disk nearly full, {free} bytes left"), False)
+        try:
+            self.writer.write(topic, typename, stamp, cdr)
+        except OSError as exc:
+            self.stop_recording(exc, failed_write=True)
+
+    def stop_recording(self, exc: OSError, failed_write: bool) -> None:
+        """End the recording on a full disk or write error: finalise what is on disk, then one error line.
+
+        After a failed write the MCAP writer's state no longer matches the file, so the bag is
+        kept as written (`BagWriter.abandon`) instead of finished over the gap.
+        """
+        self.stopped = True
+        self.reserve.unlink(missing_ok=True)
+        if failed_write:
+            self.writer.abandon()
+        else:
+            self.close_writer()
+        reason = exc.strerror or str(exc)
+        raise RecordingStopped(f"recorder: bag {self.writer.path}: {reason}; recording stopped, the bag keeps "
+                               f"the {self.writer.written} messages written before")
+
+    def close_writer(self) -> None:
+        """Finalise the bag; if finishing it fails (disk full), keep what is on disk."""
+        if not self.writer.closed:
+            try:
+                self.writer.close()
+            except OSError:
+                self.writer.abandon()
+        self.reserve.unlink(missing_ok=True)
 
     def close(self) -> None:
         """Finalise a recording and report received and written counts."""
-        if self.writer is not None and not self.writer.closed:
-            self.writer.close()
+        if self.writer is not None and not getattr(self, "reported", False):
+            self.reported = True
+            self.close_writer()
             report = f"recorder: received {self.received} messages, wrote {self.writer.written}"
-            if self.received != self.writer.written:
+            if self.received != self.writer.written and not self.stopped:  # a stop has said so already
                 self.get_logger().error(report + " (some were lost)")
             print(report, flush=True)
 
