@@ -72,6 +72,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         load_preset(name, args.cloth, args.primitive, presets)
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     check_bag(bag)
+    overrides = _overrides(getattr(args, "set", None), engines)
     out = Path(args.output) if args.output else Path("results") / f"{args.cloth}_{args.primitive}_{int(args.rate)}hz_seed{args.seed}"
     try:  # an unwritable or occupied --output is found before the run, not after it
         check_output_dir(out)
@@ -79,7 +80,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise UserError(f"--output {exc}") from None
     config = RunConfig(bag=bag, engines=engines, rate_hz=args.rate, cloth=args.cloth, primitive=args.primitive,
                        seed=args.seed, pacing=args.pacing, output_dir=out,
-                       engine_params=_overrides(getattr(args, "set", None), engines), grid=getattr(args, "grid", None), presets_dir=presets)
+                       engine_params=overrides, grid=getattr(args, "grid", None), presets_dir=presets)
     summary = run_pipeline(config)
     print(f"cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed}, bag {bag}")
     print(result_table(summary))

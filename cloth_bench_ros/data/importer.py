@@ -185,6 +185,8 @@ def read_pcd(path: Path) -> np.ndarray:
             (f if f != "_" else f"_pad{i}", _PCD_TYPES[(t.upper(), s)], (c,) if c > 1 else ())
             for i, (f, s, t, c) in enumerate(zip(fields, sizes, types, counts))
         ])  # fmt: skip
+    except validation.InputError as exc:
+        raise CloudFileError(f"{path}: bad PCD header ({exc})") from None
     except (KeyError, IndexError, ValueError) as exc:
         raise CloudFileError(f"{path}: bad PCD header ({type(exc).__name__}: {exc})") from None
     if mode == "binary":
