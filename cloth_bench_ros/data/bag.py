@@ -11,7 +11,6 @@ bags/README.md.
 from __future__ import annotations
 
 import json
-import math
 import os
 import threading
 import warnings
@@ -79,11 +78,9 @@ class TrialInfo:
         t = np.asarray(self.transform, dtype=float)
         if t.shape != (4, 4) or not np.isfinite(t).all():
             raise ValueError(f"trial transform must be a finite 4x4 matrix, got shape {t.shape}")
-        if not (math.isfinite(self.fps) and self.fps > 0):
-            raise ValueError(f"trial fps must be a positive number, got {self.fps}")
         self.transform = t.tolist()
         self.trial = validation.integer(self.trial, "trial", 0)
-        self.fps = float(self.fps)
+        self.fps = validation.positive(self.fps, "trial fps", 10_000.0)
         self.change_of_phase_frame = validation.frame_index(self.change_of_phase_frame, "change_of_phase_frame")
 
     def to_dict(self) -> dict[str, Any]:

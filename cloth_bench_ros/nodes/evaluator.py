@@ -12,6 +12,7 @@ from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.report.run_report import write_run_report
+from cloth_bench_ros.safe_io import check_output_dir
 from cloth_bench_ros.runtime import (
     DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, make_qos, stamp_ns,
 )
@@ -41,6 +42,11 @@ class Evaluator(Node):
         validation.node_parameters(self, {
             "rate_hz": validation.rate_hz, "time_offset": validation.time_offset, "seed": validation.seed,
             "change_of_phase_frame": lambda v, n: validation.frame_index(v, n, unset=-1)})
+        if self.output_dir:  # an unwritable report directory is found now, not after the run
+            try:
+                check_output_dir(self.output_dir)
+            except ValueError as exc:
+                raise validation.InputError(f"evaluator: parameter output_dir: {exc}") from None
         targets = full_targets(self.primitive, rate_hz)
         self.final_stamp = targets.stamp_ns(len(targets) - 1)
         self.core = OnlineEvaluator(self.engines, self.primitive, int(round(offset * 1e9)),
