@@ -118,6 +118,17 @@ def test_cli_refuses_bad_values_before_any_work(capsys, tmp_path, monkeypatch, a
     assert not (tmp_path / "results").exists()
 
 
+@pytest.mark.parametrize("argv,words", [
+    (["run", "--engine", "mujoco", "--engine", "mujoco"], ["--engine", "mujoco"]),
+    (["run", "--grid", "3000x3000"], ["--grid", "3000"]),
+])
+def test_cli_refusals_in_a_real_process(tmp_path, argv, words):
+    result = subprocess.run([sys.executable, "-m", "cloth_bench_ros.cli", *argv], capture_output=True, text=True,
+                            timeout=120, cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert_one_line(result.returncode, result.stderr, *words)
+    assert result.stdout == "" and not (tmp_path / "results").exists()
+
+
 def test_presets_dir_without_the_engine_file_is_refused(capsys, tmp_path):
     code, _, err = run_main(capsys, cli.main, ["run", "--presets", str(tmp_path)])
     assert_one_line(code, err, str(tmp_path), "mujoco.yaml")
