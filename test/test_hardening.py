@@ -22,7 +22,6 @@ import pytest
 from cloth_bench_ros import cli, validation
 from cloth_bench_ros.data import synth
 from cloth_bench_ros.data.bag import BagReader
-from cloth_bench_ros.data.importer import import_dataset
 from cloth_bench_ros.nodes import evaluator, recorder, simulator, trajectory_publisher
 from test.test_importer import write_pcd, write_ply
 
@@ -72,7 +71,8 @@ def tree_digest(path: Path) -> dict[str, str]:
     (lambda v: validation.unique(v, "--engine"), ["mujoco", "mujoco"], ["--engine", "mujoco", "twice"]),
     (lambda v: validation.parameter_mapping(v, "parameter engine_params"), "{mass: ", ["engine_params", "YAML"]),
     (lambda v: validation.parameter_mapping(v, "parameter engine_params"), "[1, 2]", ["engine_params", "mapping"]),
-    (lambda v: validation.parameter_mapping(v, "parameter engine_params"), "{a: &x [1], b: *x}", ["engine_params", "a is list"]),
+    (lambda v: validation.parameter_mapping(v, "parameter engine_params"), "{a: &x [1], b: *x}",
+     ["engine_params", "a is list"]),
     (lambda v: validation.parse_overrides(v), ["mujoco.mass=1", "mujoco.mass=2"], ["mujoco.mass", "twice"]),
 ])
 def test_validation_refuses_in_one_line_naming_the_input(check, value, words):
@@ -175,7 +175,8 @@ def _bag_with_metadata_edit(tmp_path: Path, old: str, new: str) -> Path:
 def test_negative_change_of_phase_frame_in_a_bag_is_refused(capsys, tmp_path):
     bag = _bag_with_metadata_edit(tmp_path, "cloth_bench.change_of_phase_frame: '99'",
                                   "cloth_bench.change_of_phase_frame: '-5'")
-    for argv in (["bag", "info", str(bag)], ["run", "--grid", "4x4", "--bag", str(bag), "--output", str(tmp_path / "o")]):
+    run = ["run", "--grid", "4x4", "--bag", str(bag), "--output", str(tmp_path / "o")]
+    for argv in (["bag", "info", str(bag)], run):
         code, out, err = run_main(capsys, cli.main, argv)
         assert_one_line(code, err, str(bag), "change_of_phase_frame", "-5")
         assert "CD_d" not in out  # never scored as "nothing, status ok"
@@ -233,7 +234,8 @@ def test_import_refuses_malformed_cloud_headers(capsys, tmp_path, name, edit, wo
     pts = np.arange(9, dtype=float).reshape(3, 3)
     (write_ply if name.endswith(".ply") else lambda p, x: write_pcd(p, x, ascii=False))(cloud / name, pts)
     (cloud / name).write_bytes(edit((cloud / name).read_bytes()))
-    code, _, err = run_main(capsys, cli.main, ["import", str(tmp_path / "data"), "--out", str(tmp_path / "out"), "--quiet"])
+    argv = ["import", str(tmp_path / "data"), "--out", str(tmp_path / "out"), "--quiet"]
+    code, _, err = run_main(capsys, cli.main, argv)
     assert_one_line(code, err, name, *words)
     assert not any((tmp_path / "out").iterdir()) if (tmp_path / "out").exists() else True
 
