@@ -202,6 +202,8 @@ def test_negative_change_of_phase_frame_in_a_bag_is_refused(capsys, tmp_path):
     (recorder.main, ["bag:=" + str(BUNDLED), "start_offset:=1.0e+300"], ["recorder", "start_offset"]),
     (evaluator.main, ["change_of_phase_frame:=-5"], ["evaluator", "change_of_phase_frame", "-5"]),
     (evaluator.main, ["seed:=-2"], ["evaluator", "seed", "-2"]),
+    (evaluator.main, ["engines:=[mujoco, mujoco]"], ["evaluator", "engines", "mujoco", "twice"]),
+    (trajectory_publisher.main, ["engines:=[bullet, bullet]"], ["trajectory_publisher", "engines", "twice"]),
     (evaluator.main, ["output_dir:=/dev/null/run"], ["evaluator", "output_dir", "/dev/null/run"]),
     (trajectory_publisher.main, ["rate_hz:=-100.0"], ["trajectory_publisher", "rate_hz", "-100"]),
     (trajectory_publisher.main, ["min_clock_subscribers:=-1"], ["trajectory_publisher", "min_clock_subscribers"]),

@@ -41,6 +41,7 @@ class Evaluator(Node):
         # Every value through the one validation layer; an error names the node and parameter.
         validation.node_parameters(self, {
             "rate_hz": validation.rate_hz, "time_offset": validation.time_offset, "seed": validation.seed,
+            "engines": validation.unique,
             "change_of_phase_frame": lambda v, n: validation.frame_index(v, n, unset=-1)})
         if self.output_dir:  # an unwritable report directory is found now, not after the run
             try:

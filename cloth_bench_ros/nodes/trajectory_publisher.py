@@ -26,7 +26,7 @@ class TrajectoryPublisher(Node):
         self.min_clock_subscribers = int(self.declare_parameter("min_clock_subscribers", 0).value)
         # Every value through the one validation layer; an error names the node and parameter.
         validation.node_parameters(self, {
-            "rate_hz": validation.rate_hz,
+            "rate_hz": validation.rate_hz, "engines": validation.unique,
             "min_clock_subscribers": lambda v, n: validation.integer(v, n, 0, 10_000)})
         if self.pacing not in PACINGS:
             raise ValueError(f"unknown pacing {self.pacing!r} (valid: {', '.join(PACINGS)})")
