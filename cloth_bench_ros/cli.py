@@ -145,7 +145,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines.presets import CLOTHS
 
     settings = args.mode == "settings"
-    engines = args.engine or [e for e in sw.DEFAULT_ENGINES if e in _available_engines()]
+    engines = validation.unique(args.engine or [e for e in sw.DEFAULT_ENGINES if e in _available_engines()], "--engine")
     cloths = args.cloth or (["towel"] if settings else list(sw.DEFAULT_CLOTHS))
     for cloth in cloths:
         if cloth not in CLOTHS:
@@ -237,7 +237,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_stress(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies.stress import default_cases, run_suite, stress_table, verdict
 
-    engines = args.engine or [e for e in ("mujoco", "bullet") if e in _available_engines()]
+    default = [e for e in ("mujoco", "bullet") if e in _available_engines()]
+    engines = validation.unique(args.engine or default, "--engine")
     for name in engines:
         from cloth_bench_ros.engines import engine_class
 

@@ -109,6 +109,8 @@ def test_validation_accepts_what_is_right():
     (["run", "--seed", "-1"], ["--seed", "-1"]),
     (["run", "--seed", "2.5"], ["--seed", "2.5"]),
     (["hil", "--seed", "-1"], ["--seed", "-1"]),
+    (["sweep", "--engine", "mujoco", "--engine", "mujoco", "--dry-run"], ["--engine", "twice"]),
+    (["stress", "--engine", "bullet", "--engine", "bullet", "--list"], ["--engine", "twice"]),
     (["trajectory", "--rate", "1e9"], ["--rate"]),
 ])
 def test_cli_refuses_bad_values_before_any_work(capsys, tmp_path, monkeypatch, argv, words):
