@@ -5,6 +5,26 @@ from setuptools import find_packages, setup
 
 package_name = "cloth_bench_ros"
 
+# The same requirement lines as requirements.txt (test/test_package.py checks it), so that
+# `pip install .` or `pip install git+URL` gives a working CLI outside the quickstart venv.
+INSTALL_REQUIRES = [
+    "numpy>=1.24",
+    "scipy>=1.10",
+    "PyYAML>=6.0",
+    "mujoco>=3.3",
+    "pybullet>=3.2.6",
+    "rosbags>=0.10",
+    "cyclonedds>=11.0,<12",
+    "mcap>=1.1",
+    "tqdm>=4.60",
+    "matplotlib>=3.6",
+]
+EXTRAS_REQUIRE = {
+    "synth": ["open3d>=0.18"],  # `cloth-bench synth` only (virtual camera outlier removal); large
+    "test": ["pytest>=7.0", "mcap-ros2-support>=0.5", "colcon-common-extensions>=0.3", "flake8>=6.0",
+             "pydocstyle>=6.3"],
+}
+
 
 def bag_files():
     """Each bundled bag directory under bags/ goes to share/cloth_bench_ros/bags/<name>/."""
@@ -20,14 +40,16 @@ setup(
     packages=find_packages(include=[package_name, package_name + ".*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
-        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name, ["package.xml", "LICENSE"]),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/config/presets", glob("config/presets/*.yaml")),
     ]
     + bag_files(),
     package_data={package_name: ["py.typed"]},
-    install_requires=["setuptools"],
+    python_requires=">=3.10",
+    install_requires=INSTALL_REQUIRES,
+    extras_require=EXTRAS_REQUIRE,
     zip_safe=True,
     maintainer="cloth_bench_ros developers",
     maintainer_email="cloth-bench@example.org",

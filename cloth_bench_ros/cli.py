@@ -36,21 +36,64 @@ def _seed(text: str) -> int:
     return _option(lambda t, n: validation.seed(validation.parse_integer(t, n), n), "seed")(text)
 
 
-def check_bag(bag: Path) -> None:
-    """Fail early, with one line naming the bag, unless its first PointCloud2 frame decodes."""
-    from cloth_bench_ros.data.bag import BagReader
+def _number(check, name: str):
+    """An argparse type for a number checked by `check(value, name)` (validation.positive, ...)."""
+    return _option(lambda t, n: check(validation.parse_number(t, n), n), name)
+
+
+def _frame(text: str) -> int | None:
+    return _option(lambda t, n: validation.frame_index(validation.parse_integer(t, n), n), "change-of-phase-frame")(text)
+
+
+def check_bag(bag: Path, topic: str | None = None) -> None:
+    """Fail early, with one line naming the bag, unless the chosen cloud topic's first frame decodes."""
+    from cloth_bench_ros.data import BagReader
     from cloth_bench_ros.data.messages import deserialize
     from cloth_bench_ros.core.pointcloud2 import read_xyz
 
     reader = BagReader(bag)
-    topic = reader.cloud_topic()
+    topic = reader.cloud_topic(topic)
     first = next(reader.raw_messages([topic]), None)
     if first is None:
         raise UserError(f"bag {bag}: no PointCloud2 message on {topic} could be read")
     try:
-        read_xyz(deserialize(first[3], first[1]))
+        msg = deserialize(first[3], first[1])
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
+        what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise UserError(f"bag {bag}: frame 0 on {topic} (stamp {first[2] / 1e9:.3f} s) "
+                        f"is not a valid PointCloud2 ({what})") from None
+    try:
+        read_xyz(msg)
     except ValueError as exc:
-        raise UserError(f"bag {bag}, topic {topic}: {exc}") from None
+        raise UserError(f"bag {bag}: frame 0 on {topic} (stamp {first[2] / 1e9:.3f} s): {exc}") from None
+
+
+def _replay_params(args: argparse.Namespace) -> dict:
+    """Recorder parameters for bags that do not say everything (plain `ros2 bag record` output)."""
+    params = {"topic": args.topic or "", "start_time": args.start_time or "", "targets_topic": args.targets_topic or "",
+              "clean": args.clean, "voxel": float(args.voxel), "table_plane": args.table_plane, "align_window": float(args.align_window),
+              "align_step": float(args.align_step)}
+    if args.transform:
+        params["transform"] = [float(v) for v in _read_transform(args.transform).ravel()]
+    return params
+
+
+def _print_real(summary: dict) -> None:
+    from cloth_bench_ros.core.evaluation import accounting_line
+
+    real = summary["real"]
+    acc = real["accounting"]
+    print(accounting_line(acc))
+    start = real.get("alignment") or {}
+    if start:
+        print(f"start of the motion: bag time {start['bag_ns'] / 1e9:.3f} s, {start['method']}, "
+              f"precision +/- {start['precision_s'] * 1e3:.1f} ms")
+    print(f"real points: {real['nan_points_dropped']} NaN points dropped, "
+          f"{real['irregular_intervals']} intervals not at 30 Hz" + (
+              f", frames from {real['frames_from']}" if real.get("frames_from") else ""))
+    if acc["scored"] == 0:
+        raise UserError(f"bag: no frame was scored ({accounting_line(acc)[len('real frames: '):]}); "
+                        "check --start-time/--topic/--primitive")
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -71,8 +114,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     for name in engines:  # a missing directory, malformed preset file or bad value fails here, in one line
         load_preset(name, args.cloth, args.primitive, presets)
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
-    check_bag(bag)
+    check_bag(bag, args.topic)
     overrides = _overrides(getattr(args, "set", None), engines)
+    replay = _replay_params(args)
     out = Path(args.output) if args.output else Path("results") / f"{args.cloth}_{args.primitive}_{int(args.rate)}hz_seed{args.seed}"
     try:  # an unwritable or occupied --output is found before the run, not after it
         check_output_dir(out)
@@ -80,15 +124,33 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise UserError(f"--output {exc}") from None
     config = RunConfig(bag=bag, engines=engines, rate_hz=args.rate, cloth=args.cloth, primitive=args.primitive,
                        seed=args.seed, pacing=args.pacing, output_dir=out,
-                       engine_params=overrides, grid=getattr(args, "grid", None), presets_dir=presets)
-    summary = run_pipeline(config)
+                       engine_params=overrides, grid=getattr(args, "grid", None), presets_dir=presets,
+                       replay=replay, change_of_phase_frame=args.change_of_phase_frame,
+                       record_comparison=Path(args.record_comparison) if args.record_comparison else None,
+                       comparison_figures=args.figures)
+    if config.record_comparison is not None:  # checked before the run, not after it
+        if config.record_comparison.exists() and any(config.record_comparison.iterdir()):
+            raise UserError(f"comparison bag {config.record_comparison} already exists (not empty)")
+        try:
+            check_output_dir(config.record_comparison)
+        except ValueError as exc:
+            raise UserError(f"--record-comparison {exc}") from None
+    if getattr(args, "processes", False):
+        from cloth_bench_ros.studies.processes import ProcessRunError, run_processes
+
+        try:
+            summary = run_processes(config)
+        except ProcessRunError as exc:
+            raise UserError(f"run --processes: {exc}") from None
+    else:
+        summary = run_pipeline(config)
     print(f"cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed}, bag {bag}")
     print(result_table(summary))
-    real = summary["real"]
-    print(f"real frames: {real['frames']} ({real['empty_frames_skipped']} empty skipped, "
-          f"{real['nan_points_dropped']} NaN points dropped, {real['unpaired_frames']} unpaired, "
-          f"{real['irregular_intervals']} intervals not at 30 Hz)")
+    _print_real(summary)
     print(f"report: {out}/summary.json, {out}/frames.csv")
+    for key in ("bag", "figure", "animation"):
+        if key in summary.get("comparison", {}):
+            print(f"comparison {key}: {summary['comparison'][key]}")
     return 0
 
 
@@ -109,7 +171,7 @@ def cmd_engines(args: argparse.Namespace) -> int:
 
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
-    from cloth_bench_ros.data.bag import describe
+    from cloth_bench_ros.data import describe
 
     print(describe(Path(args.path)))
     return 0
@@ -341,9 +403,11 @@ def _read_transform(path: str):
 def cmd_import(args: argparse.Namespace) -> int:
     from cloth_bench_ros.data.importer import import_dataset
 
+    from cloth_bench_ros.core.cleaning import scene_cleaning
+
     transform = _read_transform(args.transform) if args.transform else None
     bags = import_dataset(Path(args.root), Path(args.out), transform=transform, progress=not args.quiet,
-                          overwrite=args.overwrite)
+                          overwrite=args.overwrite, cleaning=scene_cleaning(voxel=args.voxel) if args.clean else None)
     for bag in bags:
         print(bag)
     print(f"imported {len(bags)} trial(s) into {args.out}")
@@ -377,7 +441,31 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--presets", help="directory of <engine>.yaml presets (default: config/presets)")
     run.add_argument("--seed", type=_seed, default=0, help="perturbs the initial cloth (default 0)")
     run.add_argument("--pacing", default="lockstep", choices=("lockstep", "realtime"))
+    run.add_argument("--processes", action="store_true",
+                     help="one OS process per node over DDS on loopback (default: all nodes in this process)")
     run.add_argument("--output", help="report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)")
+    scoring = run.add_argument_group("scoring your own recording (see README)")
+    scoring.add_argument("--topic", help="PointCloud2 topic to score (default: the project's, else the only one)")
+    scoring.add_argument("--start-time", metavar="S", help="start of the motion in bag time: an absolute stamp "
+                         "(>= 1e9 s) or seconds from the first message (default: targets topic, else automatic)")
+    scoring.add_argument("--targets-topic", help="recorded PoseArray gripper targets whose first motion is the start")
+    scoring.add_argument("--change-of-phase-frame", type=_frame, metavar="N",
+                         help="last frame of the dynamic window (default: the bag's metadata, else none)")
+    scoring.add_argument("--transform", metavar="FILE", help="4x4 matrix into world for every cloud, instead of tf")
+    scoring.add_argument("--clean", default="auto", choices=("auto", "on", "off"),
+                         help="crop, table plane, outliers (default auto: on for bags without the project's metadata)")
+    scoring.add_argument("--voxel", type=_number(validation.non_negative, "voxel"), default=0.0, metavar="M",
+                         help="voxel down-sampling size (default off)")
+    scoring.add_argument("--table-plane", default="auto", choices=("auto", "remove", "keep"),
+                         help="remove the table plane; it also removes cloth lying flat on the table "
+                              "(default auto: remove for dynamic, keep for quasi_static)")
+    scoring.add_argument("--align-window", type=_number(validation.positive, "align-window"), default=1.0, metavar="S",
+                         help="seconds of motion the automatic alignment compares (default 1)")
+    scoring.add_argument("--align-step", type=_number(validation.positive, "align-step"), default=1.0 / 30.0, metavar="S",
+                         help="coarse step of the automatic alignment (default 1/30 s; refined 8x)")
+    scoring.add_argument("--record-comparison", metavar="DIR", help="write a comparison bag (Foxglove/RViz)")
+    scoring.add_argument("--figures", action="store_true",
+                         help="qualitative figure (paper Fig. 4) and animation in the report directory")
     run.add_argument("--grid", type=_grid, help="cloth mesh NXxNZ vertices, e.g. 6x8 (default: the engine's, 11x15)")
     run.add_argument("--set", action="append", metavar="ENGINE.PARAM=VALUE",
                      help="override an engine parameter on top of the preset (repeatable)")
@@ -462,6 +550,10 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--out", required=True, help="directory for the bags")
     imp.add_argument("--transform", help="4x4 matrix into the simulation frame (text file of 16 numbers, or .npy)")
     imp.add_argument("--overwrite", action="store_true", help="replace bags that exist")
+    imp.add_argument("--clean", action="store_true",
+                     help="crop to the workspace, remove the table plane and outliers (core.cleaning) before writing")
+    imp.add_argument("--voxel", type=_number(validation.non_negative, "voxel"), default=0.0, metavar="M",
+                     help="with --clean: voxel size (default off)")
     imp.add_argument("--quiet", action="store_true", help="no progress bar")
     imp.set_defaults(func=cmd_import)
 
@@ -487,7 +579,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
     warnings.formatwarning = lambda message, *_: f"cloth-bench: warning: {message}\n"
-    from cloth_bench_ros.data.bag import BagError
+    from cloth_bench_ros.data import BagError
 
     try:
         return args.func(args)

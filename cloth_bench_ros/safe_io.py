@@ -63,14 +63,16 @@ class _BoundedLoader(yaml.SafeLoader):
 
 def load_yaml_bounded(text: str, source: str) -> Any:
     """yaml.safe_load with an alias limit; errors are one line naming `source`."""
-    loader = _BoundedLoader(text)
+    loader = None
     try:
+        loader = _BoundedLoader(text)  # the reader refuses non-printable characters here already
         return loader.get_single_data()
     except yaml.YAMLError as exc:
         reason = " ".join(str(exc).split())
         raise UnsafeInputError(f"{source}: not valid YAML ({reason})") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def load_yaml_file(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> Any:

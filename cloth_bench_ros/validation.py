@@ -170,7 +170,7 @@ def parse_integer(text: str, name: str) -> int:
 
 
 def parse_grid(text: str, name: str = "grid") -> tuple[int, int]:
-    """"11x15" -> (11, 15), bounded by `grid`; nothing is allocated before the check."""
+    """Parse "11x15" -> (11, 15), bounded by `grid`; nothing is allocated before the check."""
     m = _GRID.fullmatch(text)
     if not m:
         raise InputError(f"{name} {text!r} is not NXxNZ (e.g. 11x15)")

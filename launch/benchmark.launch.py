@@ -1,7 +1,9 @@
-"""ros2 launch cloth_bench_ros benchmark.launch.py [engine:=mujoco] [rate_hz:=100.0] [bag:=PATH] ...
+"""ros2 launch cloth_bench_ros benchmark.launch.py [engines:=mujoco,bullet] [rate_hz:=100.0] [bag:=PATH] ...
 
-The node graph of DESIGN.md, one process per node; the launch ends when the evaluator has
-written its report.
+The node graph of DESIGN.md, one process per node, output on the screen; the launch ends when
+the evaluator has written its report. Launch arguments win over config/benchmark.yaml: every
+node has a name and a namespace, so launch_ros writes its dict parameters under the node's full
+name into a params file passed after benchmark.yaml, and rclpy applies that key last.
 """
 
 import os
@@ -14,28 +16,35 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+NAMESPACE = "cloth_bench"
+
+
+def _node(executable, name, params_file, *overrides):
+    return Node(package="cloth_bench_ros", executable=executable, name=name, namespace=NAMESPACE,
+                output="screen", parameters=[params_file, *overrides])
+
 
 def _nodes(context):
     share = get_package_share_directory("cloth_bench_ros")
     params_file = os.path.join(share, "config", "benchmark.yaml")
-    arg = lambda name: LaunchConfiguration(name).perform(context)  # noqa: E731
+
+    def arg(name):
+        return LaunchConfiguration(name).perform(context)
+
     engines = [e.strip() for e in arg("engines").split(",") if e.strip()]
-    primitive, cloth = arg("primitive"), arg("cloth")
+    primitive, cloth, pacing, seed = arg("primitive"), arg("cloth"), arg("pacing"), int(arg("seed"))
     bag = arg("bag") or os.path.join(share, "bags", f"{cloth}_{primitive}")
     common = {"primitive": primitive, "rate_hz": float(arg("rate_hz")), "cloth": cloth, "engines": engines}
     nodes = [
-        Node(package="cloth_bench_ros", executable="trajectory_publisher", namespace="cloth_bench",
-             parameters=[params_file, common, {"pacing": arg("pacing"),
-                                               "min_clock_subscribers": len(engines) + 2}]),
-        Node(package="cloth_bench_ros", executable="recorder", namespace="cloth_bench",
-             parameters=[params_file, {"bag": bag}]),
+        _node("trajectory_publisher", "trajectory_publisher", params_file, common,
+              {"pacing": pacing}),
+        _node("recorder", "recorder", params_file, {"bag": bag}),
     ]
-    evaluator = Node(package="cloth_bench_ros", executable="evaluator", namespace="cloth_bench",
-                     parameters=[params_file, common, {"output_dir": arg("output_dir"), "pacing": arg("pacing")}])
+    evaluator = _node("evaluator", "evaluator", params_file, common,
+                      {"output_dir": arg("output_dir"), "pacing": pacing, "seed": seed})
     for engine in engines:
-        nodes.append(Node(package="cloth_bench_ros", executable="simulator", name=f"simulator_{engine}",
-                          namespace="cloth_bench",
-                          parameters=[params_file, common, {"engine": engine, "seed": int(arg("seed"))}]))
+        nodes.append(_node("simulator", f"simulator_{engine}", params_file, common,
+                           {"engine": engine, "seed": seed}))
     shutdown = RegisterEventHandler(OnProcessExit(target_action=evaluator,
                                                   on_exit=[EmitEvent(event=Shutdown(reason="report written"))]))
     return nodes + [evaluator, shutdown]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import random
 from pathlib import Path
 
 import numpy as np
@@ -30,3 +32,23 @@ def write_hanging_cloth_bag(path: Path, frames: int = 132, points_per_side: int 
 @pytest.fixture(scope="session")
 def hanging_bag(tmp_path_factory) -> Path:
     return write_hanging_cloth_bag(tmp_path_factory.mktemp("bags") / "hanging")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def dds_on_loopback():
+    """Every DDS participant of the run (here and in the node processes tests start) on loopback.
+
+    Interface lo, no multicast, peer 127.0.0.1, on a random ROS domain so parallel runs stay apart.
+    """
+    from cloth_bench_ros.runtime.dds import loopback_environment
+
+    entries = {**loopback_environment(random.randint(1, 200)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    saved = {key: os.environ.get(key) for key in [*entries, "ROS_STATIC_PEERS"]}
+    os.environ.update(entries)
+    os.environ.pop("ROS_STATIC_PEERS", None)
+    yield entries
+    for key, value in saved.items():
+        if value is None:
+            os.environ.pop(key, None)
+        else:
+            os.environ[key] = value

@@ -75,7 +75,7 @@ def test_package_xml_declares_format_3_ament_python_and_the_message_packages():
     assert root.get("format") == "3" and root.findtext("name") == "cloth_bench_ros"
     assert root.find("export/build_type").text == "ament_python"
     deps = {e.text for e in root.findall("exec_depend")}
-    for dep in ("rclpy", "sensor_msgs", "sensor_msgs_py", "geometry_msgs", "std_msgs", "diagnostic_msgs",
+    for dep in ("rclpy", "sensor_msgs", "ament_index_python", "geometry_msgs", "std_msgs", "diagnostic_msgs",
                 "rosgraph_msgs", "python3-numpy", "python3-scipy", "python3-yaml"):
         assert dep in deps, dep
 

@@ -35,11 +35,8 @@ BUNDLED = REPO / "bags" / "towel_dynamic"
 FRAMES = 24  # of the bundled bag, rewritten in 32 KiB chunks so that there are chunks to swap
 
 # Cases that fail in code owned by another issue's engineer (to be removed once merged).
-ISSUE9_CDR = ("issue 9: a corrupt PointCloud2 (CDR) inside a valid bag is a SerdeError mid-run, "
-              "not one line naming bag and frame")
 ISSUE13_ROWS = "issue 13: results rows that are JSON but not objects are not refused (report's load_rows)"
 KNOWN: dict[tuple[str, int], str] = {
-    **{("run", i): ISSUE9_CDR for i in (3, 4, 7, 15, 19, 24, 25)},
     ("report", 5): "issue 13: frames_csv of a row is opened wherever it points (/etc/passwd: KeyError 't')",
     ("report", 6): ISSUE13_ROWS,  # row 1 is null
     ("report", 13): ISSUE13_ROWS,  # row 1 is []

@@ -338,7 +338,7 @@ def _record_until_full(tmp_path: Path, out: Path, wrap: list[str] | None = None,
 
 def _check_stopped_recording(result, out: Path, complete: bool) -> None:
     line = assert_one_line(result.returncode, result.stderr, "recorder", str(out))
-    report = [l for l in result.stdout.splitlines() if l.startswith("recorder:")]
+    report = [row for row in result.stdout.splitlines() if row.startswith("recorder:")]
     assert len(report) == 1, result.stdout
     received, written = (int(w) for w in report[0].replace(",", "").split() if w.isdigit())
     assert f"keeps the {written} messages" in line

@@ -184,3 +184,16 @@ def test_duplicate_frame_formats(tmp_path: Path) -> None:
     write_pcd(cloud / "00000.pcd", np.zeros((1, 3)), ascii=True)
     with pytest.raises(ValueError, match="both"):
         find_trials(tmp_path)
+
+
+def test_import_can_clean_through_the_one_cleaning_module(tmp_path: Path) -> None:
+    from cloth_bench_ros.core.cleaning import CleaningConfig, clean
+
+    made = make_tree(tmp_path / "data")
+    config = CleaningConfig((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5), table_plane=False, sor_neighbors=0)
+    bags = import_dataset(tmp_path / "data", tmp_path / "bags", progress=False, cleaning=config)
+    reader = BagReader(bags[1])  # towel_0_dynamic
+    for (_, pts), ref in zip(reader.clouds(), made[("cotton_rag_0", "dynamic")], strict=True):
+        expected = clean(ref, config)
+        assert 0 < len(pts) == len(expected) < len(ref)
+        np.testing.assert_allclose(pts, expected, atol=1e-6)

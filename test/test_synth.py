@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from cloth_bench_ros.core import scene
+from cloth_bench_ros.core import cleaning
 from cloth_bench_ros.data import synth
 from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagReader
 from cloth_bench_ros.data.importer import CLOTH_NAMES
@@ -107,7 +108,7 @@ def test_outlier_removal_drops_injected_outliers():
     inliers = np.column_stack([rng.uniform(0, 0.5, 20000), rng.normal(0, 0.002, 20000), rng.uniform(0.3, 1.0, 20000)])
     outliers = rng.uniform([-0.3, -0.3, 0.2], [0.8, 0.3, 1.3], (200, 3))
     outliers = outliers[np.abs(outliers[:, 1]) > 0.03]  # off the sheet
-    kept = synth.remove_outliers(np.concatenate([inliers, outliers]), neighbors=20, std_ratio=2.0)
+    kept = cleaning.remove_outliers(np.concatenate([inliers, outliers]), neighbors=20, std_ratio=2.0)
     off_sheet = np.abs(kept[:, 1]) > 0.03
     assert off_sheet.sum() <= 0.05 * len(outliers)
     assert (~off_sheet).sum() >= 0.95 * len(inliers)

@@ -49,7 +49,7 @@ class OnlineEvaluator:
     """Pairs real frames with simulated states by stamp and scores them as they complete."""
 
     def __init__(self, engines: list[str], primitive: Primitive, quintic_start_ns: int,
-                 change_of_phase_frame: int | None, fps: float = 30.0) -> None:
+                 change_of_phase_frame: int | None, fps: float = 30.0, keep_pairs: bool = False) -> None:
         self.primitive = Primitive(primitive)
         self.quintic_start_ns = int(quintic_start_ns)
         self.change_of_phase_frame = change_of_phase_frame
@@ -60,9 +60,13 @@ class OnlineEvaluator:
         self.real_frames = 0
         self.empty_frames = 0
         self.nan_points_dropped = 0
-        self.unpaired_frames = 0
+        self.unpaired_frames = 0  # (engine, frame) pairs without a state
+        self.scored_frames = 0  # real frames scored by at least one engine
+        self.unpaired_real_frames = 0  # real frames no engine had a state for
         self.irregular_intervals = 0  # real frames not about 1/fps after the previous one
         self._last_real_ns: int | None = None
+        self.keep_pairs = keep_pairs  # keep (score, real points, vertices) for the comparison outputs
+        self.pairs: list[tuple[FrameScore, np.ndarray, np.ndarray]] = []
 
     # inputs
     def add_state(self, engine: str, stamp_ns: int, vertices: np.ndarray) -> None:
@@ -137,11 +141,13 @@ class OnlineEvaluator:
             in_window = frame < self.change_of_phase_frame
         else:
             in_window = True
+        paired = False
         for name, e in self.engines.items():
             vertices = self._state_at(e, stamp)
             if vertices is None:
                 self.unpaired_frames += 1
                 continue
+            paired = True
             diverged = e.diverged_time is not None and t >= e.diverged_time - 1e-9
             if diverged or not np.isfinite(vertices).all():
                 cd = hd = math.nan
@@ -149,6 +155,12 @@ class OnlineEvaluator:
             else:
                 cd, hd = cloud.chamfer_hausdorff(vertices)
             self.scores.append(FrameScore(name, frame, t, cd, hd, in_window, diverged))
+            if self.keep_pairs:
+                self.pairs.append((self.scores[-1], cloud.points, np.array(vertices)))
+        if paired:
+            self.scored_frames += 1
+        else:
+            self.unpaired_real_frames += 1
 
     def complete(self, final_stamp_ns: int) -> bool:
         """True once every engine has reported its state and step at the final stamp."""
@@ -157,6 +169,7 @@ class OnlineEvaluator:
     def finish(self) -> None:
         """Frames still waiting for a state never get one: count them as unpaired."""
         self.unpaired_frames += len(self._pending) * len(self.engines)
+        self.unpaired_real_frames += len(self._pending)
         self._pending.clear()
 
     # results
@@ -194,5 +207,39 @@ class OnlineEvaluator:
             "empty_frames_skipped": self.empty_frames,
             "nan_points_dropped": self.nan_points_dropped,
             "unpaired_frames": self.unpaired_frames,
+            "scored_frames": self.scored_frames,
+            "unpaired_real_frames": self.unpaired_real_frames,
             "irregular_intervals": self.irregular_intervals,
         }
+
+
+FRAME_FATES = ("scored", "before_start", "after_trajectory", "empty", "unpaired", "skipped_by_start_offset",
+               "not_received")
+
+
+def frame_accounting(replay: dict, real: dict) -> dict:
+    """What became of every frame on the bag's topic: the recorder's sorting plus the evaluator's.
+
+    replay: the recorder's counts (frames_in_bag, before_start, after_trajectory,
+    empty_after_cleaning, to_send, ...); real: `OnlineEvaluator.real_summary()`. The fates add up
+    to frames_in_bag unless frames went missing in transport, which `not_received` then counts.
+    """
+    sent = replay.get("to_send", real["frames"]) - replay.get("skipped_by_start_offset", 0)
+    fates = {
+        "scored": real["scored_frames"],
+        "before_start": replay.get("before_start", 0),
+        "after_trajectory": replay.get("after_trajectory", 0),
+        "empty": replay.get("empty_after_cleaning", 0) + real["empty_frames_skipped"],
+        "unpaired": real["unpaired_real_frames"],
+        "skipped_by_start_offset": replay.get("skipped_by_start_offset", 0),
+        "not_received": max(0, sent - real["frames"]),
+    }
+    total = replay.get("frames_in_bag", real["frames"])
+    return {"frames_in_bag": total, **fates, "adds_up": sum(fates.values()) == total}
+
+
+def accounting_line(acc: dict) -> str:
+    """One line: the bag's count and what became of each frame, e.g. for the CLI."""
+    parts = [f"{acc[k]} {k.replace('_', ' ')}" for k in FRAME_FATES if acc.get(k) or k == "scored"]
+    check = "adds up" if acc["adds_up"] else "DOES NOT add up"
+    return f"real frames: {acc['frames_in_bag']} on the topic = {' + '.join(parts)} ({check})"

@@ -67,6 +67,10 @@ def _as_bytes(data: Any) -> bytes | np.ndarray:
 
 def read_xyz(cloud: Any) -> np.ndarray:
     """The x, y, z of every point as float64 (n, 3), NaN points kept (see `drop_nan`)."""
+    names = [f.name for f in cloud.fields]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise PointCloudError(f"PointCloud2 has two fields named {', '.join(twice)}")
     by_name = {f.name: f for f in cloud.fields}
     missing = [c for c in "xyz" if c not in by_name]
     if missing:

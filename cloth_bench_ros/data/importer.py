@@ -2,7 +2,7 @@
 
 Layout (REFERENCE.md section 4): `<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`.
 Frame NNNNN is stamped NNNNN / 30 s; points are kept exactly (NaN included; the reader drops
-and counts them), optionally moved by a 4x4 transform, and stored as float32 x/y/z.
+and counts them), optionally moved by a 4x4 transform, and stored as float32 x/y/z; `--clean` runs them through core.cleaning first.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from tqdm import tqdm
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagWriter, TrialInfo
+from cloth_bench_ros.core.cleaning import CleaningConfig, clean
 from cloth_bench_ros.core.scene import REAL_FPS
 from cloth_bench_ros.safe_io import check_output_dir, staged_directory
 
@@ -300,8 +301,12 @@ def import_dataset(
     transform: np.ndarray | None = None,
     progress: bool = True,
     overwrite: bool = False,
+    cleaning: CleaningConfig | None = None,
 ) -> list[Path]:
     """Write one bag per trial folder under root into out; returns the bag paths.
+
+    With `cleaning`, each transformed cloud goes through the one cleaning pipeline
+    (core.cleaning) before it is written; without, points are kept exactly.
 
     A bag is written under a temporary name and renamed when complete, so an error never
     leaves a half-imported bag behind.
@@ -336,6 +341,8 @@ def import_dataset(
                     pts = read_cloud_file(f)
                     if t is not None:
                         pts = pts @ t[:3, :3].T + t[:3, 3]
+                    if cleaning is not None:
+                        pts = clean(pts, cleaning)
                     writer.write_cloud(CLOUD_TOPIC, round(k * 1_000_000_000 / REAL_FPS), pts)
                     bar.update(1)
             bags.append(final)

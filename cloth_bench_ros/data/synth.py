@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from cloth_bench_ros.core import scene
+from cloth_bench_ros.core import cleaning, scene
 from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagWriter, TrialInfo
 from cloth_bench_ros.data.importer import CHANGE_OF_PHASE
 from cloth_bench_ros.engines import engine_class, make_engine
@@ -185,6 +185,12 @@ class Sensor:
     max_points: int = 2000  # per frame, after outlier removal (keeps 6 bags within 25 MB)
     resolution: float = 2.0**-13  # m: points snap to this grid (0.12 mm), so zstd halves the bag
 
+    @property
+    def cleaning(self) -> cleaning.CleaningConfig:
+        """The crop (above the table top) and outlier removal of the one cleaning pipeline."""
+        return cleaning.CleaningConfig(self.crop_min, self.crop_max, table_plane=False,
+                                       sor_neighbors=self.sor_neighbors, sor_std_ratio=self.sor_std_ratio)
+
 
 def noisy_depth(depth: np.ndarray, cloth: np.ndarray, noise: DepthNoise, rng: np.random.Generator) -> np.ndarray:
     """Depth image with ray noise on every pixel and flying pixels on the cloth's silhouette."""
@@ -209,17 +215,6 @@ def _fly(out: np.ndarray, depth: np.ndarray, cloth: np.ndarray, noise: DepthNois
     out[fly] = front[fly] + mix * (behind[fly] - front[fly])
 
 
-def remove_outliers(points: np.ndarray, neighbors: int, std_ratio: float) -> np.ndarray:
-    """open3d statistical outlier removal: drop points whose mean neighbour distance is unusual."""
-    import open3d as o3d
-
-    if len(points) <= neighbors:
-        return points
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, float)))
-    _, keep = cloud.remove_statistical_outlier(nb_neighbors=neighbors, std_ratio=std_ratio)
-    return np.asarray(points)[np.asarray(keep, dtype=np.int64)]
-
-
 def observe(
     sensor: Sensor,
     triangles: np.ndarray,
@@ -240,8 +235,7 @@ def observe(
     measured = noisy_depth(depth, cloth, sensor.noise, rng)
     v, u = np.nonzero(cloth)  # segmentation: the cloth's pixels, flying ones included
     points = cam.back_project(u.astype(float), v.astype(float), measured[v, u])
-    inside = np.all((points >= sensor.crop_min) & (points <= sensor.crop_max), axis=1)
-    points = remove_outliers(points[inside], sensor.sor_neighbors, sensor.sor_std_ratio)
+    points = cleaning.clean(points, sensor.cleaning)
     if len(points) > sensor.max_points:
         points = points[np.sort(rng.choice(len(points), sensor.max_points, replace=False))]
     return np.round(points / sensor.resolution) * sensor.resolution if sensor.resolution > 0 else points

@@ -5,12 +5,26 @@ from __future__ import annotations
 import signal
 import sys
 import threading
-from typing import Callable, Sequence
+from typing import Callable, Iterable, Sequence
 
 from cloth_bench_ros.data.bag import BagError
-from cloth_bench_ros.runtime import SingleThreadedExecutor, rclpy
+from cloth_bench_ros.runtime.transport import transport_choice
+from cloth_bench_ros.runtime import EMBEDDED, SingleThreadedExecutor, is_user_error, rclpy
 
 NAMESPACE = "cloth_bench"
+# The recorder's announcement, beside the trial on real/trial: the run-time stamps of the frames it
+# replays on /clock. DDS gives no order across topics, so the evaluator closes the run only once
+# it holds every announced frame up to the last target, not at the last engine state.
+REPLAY_STATUS_NAME = "cloth_bench/recorder/replay"
+
+
+def replay_stamps(msg) -> list[int] | None:
+    """The stamps (ns) announced in a real/trial DiagnosticArray, or None without an announcement."""
+    for status in msg.status:
+        if status.name == REPLAY_STATUS_NAME:
+            text = {kv.key: kv.value for kv in status.values}.get("stamps_ns", "")
+            return [int(s) for s in text.split(",") if s]
+    return None
 
 
 _stop_requested = threading.Event()
@@ -30,8 +44,34 @@ def close_nodes(nodes: Sequence) -> None:
         node.destroy_node()
 
 
-def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None = None) -> int:
+def node_keys(infos: Iterable) -> set[tuple[str, str]]:
+    """(namespace, name) of the nodes behind a get_*_info_by_topic answer."""
+    return {(info.node_namespace, info.node_name) for info in infos}
+
+
+def publishers_matched(node, subscription) -> int:
+    """Publishers matched with a subscription (rclpy >= Iron), else those in the graph (Humble)."""
+    count = getattr(subscription, "get_publisher_count", None)
+    return count() if count is not None else node.count_publishers(subscription.topic_name)
+
+
+def all_subscriptions_matched(node, publisher) -> bool:
+    """True once the publisher has matched every subscription of its topic that the graph lists.
+
+    Under DDS, discovery is asynchronous and pairwise: a reader another node has created is in the
+    graph before this publisher's writer has matched it, and a reliable volatile writer delivers
+    only to matched readers. Both counts include this node's own subscriptions.
+    """
+    listed = len(node.get_subscriptions_info_by_topic(publisher.topic_name))
+    return listed > 0 and publisher.get_subscription_count() >= listed
+
+
+def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None = None,
+              transport: str | None = None) -> int:
     """Spin nodes in one executor until all are `done`, SIGINT/SIGTERM or shutdown.
+
+    In the embedded runtime the nodes talk over `transport` (default: CLOTH_BENCH_TRANSPORT, else
+    intra: nodes composed in one process, as in a component container).
 
     SIGINT and SIGTERM stop the loop between callbacks (rclpy's own handler, where installed, is
     replaced for the node's lifetime). Each node's close() runs on every way out (a recorder
@@ -39,11 +79,13 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
     (bad parameter, bag or engine) is one line on stderr and exit status 2, no traceback.
     """
     _stop_requested.clear()
-    rclpy.init(args=args if args is not None else sys.argv)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _request_stop)
     nodes: list = []
     try:
+        # a bad --ros-args (or CLOTH_BENCH_TRANSPORT) fails here
+        init_options = {"transport": transport or transport_choice("intra")} if EMBEDDED else {}
+        rclpy.init(args=args if args is not None else sys.argv, **init_options)
         for factory in factories:
             nodes.append(factory())
         executor = SingleThreadedExecutor()
@@ -52,8 +94,12 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
         while rclpy.ok() and not _stop_requested.is_set() and not all(getattr(n, "done", False) for n in nodes):
             executor.spin_once(timeout_sec=0.1)
         return 0
-    except (ValueError, BagError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    except Exception as exc:
+        # rclpy's parameter, name and argument errors are not ValueErrors: matched by class name
+        if not (isinstance(exc, (ValueError, BagError)) or is_user_error(exc)):
+            raise
+        print(f"error: {str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__}",
+              file=sys.stderr)
         return 2
     finally:
         close_nodes(nodes)
@@ -62,5 +108,9 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
 
 
 def run_node(factory: Callable[[], object], args: list[str] | None = None) -> int:
-    """run_nodes for a single node: what `ros2 run cloth_bench_ros <node>` executes."""
-    return run_nodes([factory], args)
+    """run_nodes for a single node: what `ros2 run cloth_bench_ros <node>` executes.
+
+    In the embedded runtime it talks DDS unless CLOTH_BENCH_TRANSPORT=intra, so that console
+    scripts in separate processes make one graph, as under `ros2 run`.
+    """
+    return run_nodes([factory], args, transport_choice("dds") if EMBEDDED else None)

@@ -2,19 +2,22 @@
 
 from __future__ import annotations
 
+import json
 import time
 from functools import partial
 from pathlib import Path
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.data.bag import trial_from_message
-from cloth_bench_ros.core.evaluation import OnlineEvaluator
-from cloth_bench_ros.nodes.common import NAMESPACE, run_node
+from cloth_bench_ros.data.trial import trial_from_message
+from cloth_bench_ros.core.evaluation import OnlineEvaluator, frame_accounting
+from cloth_bench_ros.nodes.common import NAMESPACE, publishers_matched, replay_stamps, run_node
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
+from cloth_bench_ros.report.comparison import write_comparison
 from cloth_bench_ros.report.run_report import write_run_report
 from cloth_bench_ros.safe_io import check_output_dir
 from cloth_bench_ros.runtime import (
-    DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, make_qos, stamp_ns,
+    DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, declare_float, make_qos,
+    stamp_ns, steady_clock,
 )
 from cloth_bench_ros.core.scene import REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
@@ -29,20 +32,25 @@ class Evaluator(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("evaluator", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
-        self.engines = list(self.declare_parameter("engines", ["mujoco"]).value)
+        self.declare_parameter("engines", ["mujoco"])
         self.primitive = parse_primitive(self.declare_parameter("primitive", "dynamic").value)
-        rate_hz = float(self.declare_parameter("rate_hz", 100.0).value)
-        offset = float(self.declare_parameter("time_offset", SETTLE_DURATION).value)
-        cut = int(self.declare_parameter("change_of_phase_frame", -1).value)
+        declare_float(self, "rate_hz", 100.0)
+        declare_float(self, "time_offset", SETTLE_DURATION)
+        self.declare_parameter("change_of_phase_frame", -1)
         self.output_dir = self.declare_parameter("output_dir", "").value
-        self.run_info = {"primitive": self.primitive.value, "rate_hz": rate_hz, "engines": self.engines,
-                         "cloth": self.declare_parameter("cloth", "towel").value,
-                         "seed": int(self.declare_parameter("seed", 0).value)}
+        self.comparison_bag = self.declare_parameter("record_comparison", "").value
+        self.declare_parameter("comparison_figures", False)
+        cloth = self.declare_parameter("cloth", "towel").value
+        self.declare_parameter("seed", 0)
         # Every value through the one validation layer; an error names the node and parameter.
-        validation.node_parameters(self, {
+        p = validation.node_parameters(self, {
             "rate_hz": validation.rate_hz, "time_offset": validation.time_offset, "seed": validation.seed,
-            "engines": validation.unique,
+            "engines": validation.unique, "comparison_figures": validation.boolean,
             "change_of_phase_frame": lambda v, n: validation.frame_index(v, n, unset=-1)})
+        self.engines, rate_hz, offset, cut = p["engines"], p["rate_hz"], p["time_offset"], p["change_of_phase_frame"]
+        self.comparison_figures = p["comparison_figures"]
+        self.run_info = {"primitive": self.primitive.value, "rate_hz": rate_hz, "engines": self.engines,
+                         "cloth": cloth, "seed": p["seed"]}
         if self.output_dir:  # an unwritable report directory is found now, not after the run
             try:
                 check_output_dir(self.output_dir)
@@ -50,15 +58,26 @@ class Evaluator(Node):
                 raise validation.InputError(f"evaluator: parameter output_dir: {exc}") from None
         targets = full_targets(self.primitive, rate_hz)
         self.final_stamp = targets.stamp_ns(len(targets) - 1)
-        self.core = OnlineEvaluator(self.engines, self.primitive, int(round(offset * 1e9)),
-                                    cut if cut >= 0 else None, REAL_FPS)
-        self.metrics_pub = self.create_publisher(DiagnosticArray, "metrics", make_qos(100))
-        self.create_subscription(PointCloud2, "real/cloud", self.on_real, make_qos(100))
-        self.create_subscription(DiagnosticArray, "real/trial", self.on_trial, make_qos(1, latched=True))
+        self.core = OnlineEvaluator(self.engines, self.primitive, int(round(offset * 1e9)), cut, REAL_FPS,
+                                    keep_pairs=bool(self.comparison_bag or self.comparison_figures))
+        self.replay: dict = {}  # the recorder's frame accounting, from the trial message
+        self.expected_real_frames: int | None = None  # as announced by the recorder
+        # Inputs keep every sample until taken: a slow evaluator delays, never loses, a frame.
+        data_qos = make_qos(100, keep_all=True)
+        self.inputs = [self.create_subscription(PointCloud2, "real/cloud", self.on_real, data_qos),
+                       self.create_subscription(DiagnosticArray, "real/trial", self.on_trial, make_qos(1, latched=True))]
         for engine in self.engines:
-            self.create_subscription(PointCloud2, f"{engine}/cloud", partial(self.on_state, engine), make_qos(100))
-            self.create_subscription(DiagnosticArray, f"{engine}/step_time", partial(self.on_step, engine),
-                                     make_qos(100))
+            self.inputs.append(self.create_subscription(PointCloud2, f"{engine}/cloud", partial(self.on_state, engine),
+                                                        data_qos))
+            self.inputs.append(self.create_subscription(DiagnosticArray, f"{engine}/step_time",
+                                                        partial(self.on_step, engine), data_qos))
+        # Ready (the `metrics` publisher appears, which the trajectory publisher waits for) once every
+        # input is matched with a publisher and the recorder's trial (and replay) announcement is in.
+        self.metrics_pub = None
+        self.trial_received = False
+        self.expected_real: set[int] | None = None  # announced stamps up to the last target
+        self.received_real: set[int] = set()
+        self.ready_timer = self.create_timer(0.02, self.check_ready, clock=steady_clock())
         # Latency: lockstep measures from each target's arrival; realtime from the wall-clock
         # schedule the targets should have kept (first target + sim time), so a simulator that
         # falls behind shows its queueing delay too.
@@ -73,7 +92,22 @@ class Evaluator(Node):
         self.summary: dict | None = None
         self.done = False
 
+    def check_ready(self) -> None:
+        if self.trial_received and all(publishers_matched(self, sub) for sub in self.inputs):
+            self.destroy_timer(self.ready_timer)
+            self.metrics_pub = self.create_publisher(DiagnosticArray, "metrics", make_qos(100))
+            self.publish_scores()
+
     def on_trial(self, msg: DiagnosticArray) -> None:
+        self.trial_received = True
+        stamps = replay_stamps(msg)
+        if stamps is not None:
+            self.expected_real = {s for s in stamps if s <= self.final_stamp}
+        values = _values(msg)
+        if "replay" in values:
+            self.replay = json.loads(values["replay"])
+        if "frames_to_send" in values:
+            self.expected_real_frames = int(values["frames_to_send"])
         trial = trial_from_message(msg)
         if trial is None:
             return
@@ -86,7 +120,9 @@ class Evaluator(Node):
     def on_real(self, msg: PointCloud2) -> None:
         points, dropped = drop_nan(read_xyz(msg))
         self.core.add_real(stamp_ns(msg.header.stamp), points, dropped)
+        self.received_real.add(stamp_ns(msg.header.stamp))
         self.publish_scores()
+        self.finish_if_complete()
 
     def on_target(self, msg: PoseArray) -> None:
         now, stamp = time.monotonic_ns(), stamp_ns(msg.header.stamp)
@@ -106,17 +142,26 @@ class Evaluator(Node):
                 del self.target_sent[stamp]
         self.core.add_state(engine, stamp, read_xyz(msg))
         self.publish_scores()
-        if self.core.complete(self.final_stamp):
-            self.finish()
+        self.finish_if_complete()
 
     def on_step(self, engine: str, msg: DiagnosticArray) -> None:
         v = _values(msg)
         self.core.add_step(engine, stamp_ns(msg.header.stamp), int(v["step"]), float(v["step_time"]),
                            v["diverged"] == "true", msg.status[0].message)
-        if self.core.complete(self.final_stamp):
+        self.finish_if_complete()
+
+    def finish_if_complete(self) -> None:
+        """Finish once every engine's last state and step and every announced real frame are in.
+
+        DDS gives no order across topics: they may arrive in any order.
+        """
+        frames_in = self.expected_real is None or self.expected_real <= self.received_real
+        if frames_in and self.core.complete(self.final_stamp):
             self.finish()
 
     def publish_scores(self) -> None:
+        if self.metrics_pub is None:  # not ready yet: published once it is
+            return
         new = self.core.scores[self.published_scores :]
         self.published_scores = len(self.core.scores)
         for s in new:
@@ -132,11 +177,23 @@ class Evaluator(Node):
         """Close the run: summary on `metrics`, report files, done."""
         if self.done:
             return
+        if self.metrics_pub is None:
+            self.destroy_timer(self.ready_timer)
+            self.metrics_pub = self.create_publisher(DiagnosticArray, "metrics", make_qos(100))
+            self.publish_scores()
         self.core.finish()
         wall_s = (time.monotonic_ns() - self.first_target_ns) / 1e9 if self.first_target_ns else None
         engines = self.core.summary(self.period_s, wall_s, self.final_stamp / 1e9)
+        real = self.core.real_summary()
+        # NaN points and stamp intervals are counted by the recorder on every frame of the bag.
+        real["nan_points_dropped"] += int(self.replay.get("nan_points_dropped", 0))
+        real["irregular_intervals"] = int(self.replay.get("irregular_intervals", real["irregular_intervals"]))
+        accounting = frame_accounting(self.replay, real)
         self.summary = {"run": {**self.run_info, "trial": self.trial, "wall_time": wall_s},
-                        "real": self.core.real_summary(), "engines": engines}
+                        "real": {**real, "accounting": accounting,
+                                 "alignment": self.replay.get("start"), "frames_from": self.replay.get("frames"),
+                                 "cleaning": self.replay.get("cleaning"), "topic": self.replay.get("topic")},
+                        "engines": engines}
         statuses = []
         for engine, m in self.summary["engines"].items():
             flat = {k: v for k, v in m.items() if not isinstance(v, dict)}
@@ -147,6 +204,10 @@ class Evaluator(Node):
                 name=f"cloth_bench/{engine}/summary", message="diverged" if m["diverged"] else "ok",
                 hardware_id=engine, values=[KeyValue(key=k, value=str(v)) for k, v in flat.items()]))
         self.metrics_pub.publish(DiagnosticArray(status=statuses))
+        if self.comparison_bag or (self.comparison_figures and self.output_dir):
+            self.summary["comparison"] = write_comparison(
+                self.core.pairs, self.summary, Path(self.comparison_bag) if self.comparison_bag else None,
+                Path(self.output_dir) if self.comparison_figures and self.output_dir else None)
         if self.output_dir:
             write_run_report(Path(self.output_dir), self.summary, self.core.scores)
             self.get_logger().info(f"report written to {self.output_dir}")

@@ -1,6 +1,8 @@
 """Replays a rosbag2 MCAP bag's PointCloud2 topic in simulation time, or records topics to a bag.
 
-mode replay (default): each frame goes out once /clock reaches its stamp plus `time_offset`
+mode replay (default): the bag's cloud topic is read once (data.replay.plan_replay: transformed to
+  world, cleaned, aligned, every frame accounted for); the trial message on real/trial announces
+  `frames_to_send`, and each frame goes out once /clock reaches its stamp plus `time_offset`
   (clock: sim, the benchmark), or on the wall clock (clock: wall) at `rate_factor` times real
   time, from `start_offset` seconds into the bag, looping if `loop`.
 mode record: subscribes to `record_topics` ("topic:type" entries, e.g.
@@ -12,18 +14,25 @@ mode record: subscribes to `record_topics` ("topic:type" entries, e.g.
 from __future__ import annotations
 
 import errno
+import json
 import shutil
 import time
 from functools import partial
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.data.bag import TRIAL_STATUS_NAME, BagReader, BagWriter
-from cloth_bench_ros.nodes.common import NAMESPACE, run_node
+from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
+from cloth_bench_ros.core.scene import SETTLE_DURATION, ClothGrid
+from cloth_bench_ros.data import BagReader, BagWriter
+from cloth_bench_ros.data.alignment import SearchSettings, reference_motion
+from cloth_bench_ros.data.replay import ReplayOptions, plan_replay
+from cloth_bench_ros.data.trial import TRIAL_STATUS_NAME
+from cloth_bench_ros.engines import make_engine
+from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.nodes.common import NAMESPACE, REPLAY_STATUS_NAME, run_node
 from cloth_bench_ros.runtime import (
-    Clock, DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, Time, deserialize_message,
-    make_qos, message_type, serialize_message, stamp_ns,
+    Clock, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, Time,
+    declare_float, make_qos, message_type, serialize_message, stamp_ns, steady_clock,
 )
-from cloth_bench_ros.core.scene import SETTLE_DURATION
 
 MAX_RATE_FACTOR = 1e6  # wall-clock replay speed
 # Record mode on a filling disk: stop while the open chunk (<= 1 MiB), the summary and
@@ -58,11 +67,11 @@ class Recorder(Node):
         path = self.declare_parameter("bag", "").value
         if not path:
             raise ValueError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
-        # Bag stamps count from the start of the quintic part; the run starts with the settle phase.
-        self.declare_parameter("time_offset", SETTLE_DURATION)
+        # Frames are stamped from the start of the quintic part; the run starts with the settle phase.
+        declare_float(self, "time_offset", SETTLE_DURATION)
         clock = self.declare_parameter("clock", "sim").value
-        self.declare_parameter("rate_factor", 1.0)
-        self.declare_parameter("start_offset", 0.0)
+        declare_float(self, "rate_factor", 1.0)
+        declare_float(self, "start_offset", 0.0)
         self.declare_parameter("loop", False)
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(self, {
@@ -74,40 +83,105 @@ class Recorder(Node):
         if clock not in ("sim", "wall"):
             raise ValueError(f"recorder: unknown clock {clock!r} (valid: sim, wall)")
         self.bag = BagReader(path)
-        self.topic = self.declare_parameter("topic", "").value or self.bag.cloud_topic()
+        options = self.replay_options()
+        self.declare_parameter("grid_nx", 0)  # 0: the preset's grid
+        self.declare_parameter("grid_nz", 0)
+        side = partial(validation.integer, low=0, high=validation.MAX_GRID_SIDE)
+        g = validation.node_parameters(self, {"grid_nx": side, "grid_nz": side})
+        nx, nz = g["grid_nx"], g["grid_nz"]
+        self.plan = plan_replay(self.bag, options, partial(self.reference_motion, options, nx, nz))
+        self.topic = self.plan.topic
         self.published = 0
         self.cloud_pub = self.create_publisher(PointCloud2, "real/cloud", make_qos(10))
         self.trial_pub = self.create_publisher(DiagnosticArray, "real/trial", make_qos(1, latched=True))
-        self.trial_pub.publish(self.trial_message())
         self.rewind()
+        trial = self.trial_message()
+        if clock == "sim":
+            trial.status.append(self.replay_status())
+        self.trial_pub.publish(trial)
         if clock == "sim":
             self.create_subscription(Clock, "/clock", self.on_clock, make_qos(10))
         else:
             self.wall_start_ns = time.monotonic_ns()
-            self.wall_timer = self.create_timer(0.001, self.on_wall_tick)
+            self.wall_timer = self.create_timer(0.001, self.on_wall_tick, clock=steady_clock())  # not sim time
+
+    def replay_options(self) -> ReplayOptions:
+        """What the bag does not say, from the node's parameters."""
+        self.declare_parameter("change_of_phase_frame", -1)
+        transform = list(self.declare_parameter("transform", [0.0]).value)
+        if transform != [0.0] and len(transform) != 16:
+            raise ValueError(f"recorder: transform needs 16 numbers (a 4x4 matrix), got {len(transform)}")
+        for name, default in (("align_window", 1.0), ("align_step", 1.0 / 30.0), ("voxel", 0.0), ("rate_hz", 100.0)):
+            declare_float(self, name, default)
+        p = validation.node_parameters(self, {
+            "change_of_phase_frame": lambda v, n: validation.frame_index(v, n, unset=-1),
+            "align_window": validation.positive, "align_step": validation.positive,
+            "voxel": validation.non_negative, "rate_hz": validation.rate_hz})
+        search = SearchSettings(window=p["align_window"], coarse_step=p["align_step"])
+        return ReplayOptions(
+            cloth=self.declare_parameter("cloth", "towel").value,
+            primitive=self.declare_parameter("primitive", "dynamic").value,
+            change_of_phase_frame=p["change_of_phase_frame"],
+            topic=self.declare_parameter("topic", "").value,
+            start_time=self.declare_parameter("start_time", "").value,
+            targets_topic=self.declare_parameter("targets_topic", "").value,
+            transform=tuple(transform) if len(transform) == 16 else None,
+            clean=self.declare_parameter("clean", "auto").value,
+            voxel=p["voxel"],
+            table_plane=self.declare_parameter("table_plane", "auto").value,
+            rate_hz=p["rate_hz"],
+            align_engine=self.declare_parameter("align_engine", "mujoco").value,
+            search=search,
+        )
+
+    @staticmethod
+    def reference_motion(options: ReplayOptions, nx: int, nz: int, seconds: float):
+        """The reference simulation the automatic alignment compares the bag with (the run's engine and grid)."""
+        preset = load_preset(options.align_engine, options.cloth, options.primitive)
+        engine = make_engine(options.align_engine, options.rate_hz, preset, ClothGrid(nx, nz) if nx and nz else None)
+        try:
+            return reference_motion(engine, options.primitive, options.rate_hz, seconds)
+        finally:
+            engine.close()
+
+    @property
+    def frames_to_send(self) -> int:
+        """How many real frames this replay publishes (the evaluator waits for as many)."""
+        return len(self.plan.frames)
 
     def rewind(self) -> None:
-        self.frames = (f for f in self.bag.raw_messages([self.topic]) if f[2] >= self.start_offset_ns)
+        skipped = sum(1 for t, _ in self.plan.frames if t < self.start_offset_ns)
+        self.plan.counts["skipped_by_start_offset"] = skipped
+        self.frames = iter([f for f in self.plan.frames if f[0] >= self.start_offset_ns])
         self.next_frame = next(self.frames, None)
         self.done = self.next_frame is None
 
     def trial_message(self) -> DiagnosticArray:
-        """The bag's trial metadata (cloth, primitive, change of phase, ...) as key/values."""
-        info = self.bag.trial.to_strings() if self.bag.trial else {}
+        """The trial (cloth, primitive, change of phase, ...) and the replay's frame accounting."""
+        info = self.plan.trial.to_strings()
+        info["replay"] = json.dumps(self.plan.accounting())
+        info["frames_to_send"] = str(self.frames_to_send - self.plan.counts["skipped_by_start_offset"])
         values = [KeyValue(key=k, value=v) for k, v in info.items()]
         status = DiagnosticStatus(level=DiagnosticStatus.OK, name=TRIAL_STATUS_NAME,
                                   message=str(self.bag.path), hardware_id="recorder", values=values)
         return DiagnosticArray(status=[status])
 
-    def publish_until(self, bag_time_ns: int, restamp_offset_ns: int) -> None:
-        """Publish every frame whose bag stamp is <= bag_time_ns, restamped by the offset."""
+    def replay_status(self) -> DiagnosticStatus:
+        """The run-time stamps of every frame the sim-clock replay will send (common.REPLAY_STATUS_NAME)."""
+        stamps = [t + self.offset_ns for t, _ in self.plan.frames if t >= self.start_offset_ns]
+        return DiagnosticStatus(level=DiagnosticStatus.OK, name=REPLAY_STATUS_NAME, hardware_id="recorder",
+                                message=f"{len(stamps)} frames, sent as /clock reaches their stamps",
+                                values=[KeyValue(key="frames", value=str(len(stamps))),
+                                        KeyValue(key="stamps_ns", value=",".join(map(str, stamps)))])
+
+    def publish_until(self, t_ns: int, restamp_offset_ns: int) -> None:
+        """Publish every frame at or before t_ns (from the motion's start), restamped by the offset."""
         while self.next_frame is not None:
-            _, _, bag_stamp, cdr = self.next_frame
-            if bag_stamp > bag_time_ns:
+            frame_t, points = self.next_frame
+            if frame_t > t_ns:
                 break
-            cloud = deserialize_message(cdr, PointCloud2)
-            cloud.header.stamp = Time(nanoseconds=bag_stamp + restamp_offset_ns).to_msg()
-            self.cloud_pub.publish(cloud)
+            header = Header(stamp=Time(nanoseconds=frame_t + restamp_offset_ns).to_msg(), frame_id="world")
+            self.cloud_pub.publish(create_cloud_xyz32(header, points, PointCloud2, PointField))
             self.published += 1
             self.next_frame = next(self.frames, None)
         self.done = self.next_frame is None
@@ -153,7 +227,6 @@ class Recorder(Node):
         self.received += 1
         if self.stopped:
             return  # counted as received, not written
-        stamp = stamp_ns(msg.header.stamp) if hasattr(msg, "header") else self.get_clock().now().nanoseconds
         cdr = serialize_message(msg)
         self.unchecked_bytes += len(cdr)
         if self.unchecked_bytes >= DISK_CHECK_EVERY_BYTES:
@@ -162,7 +235,8 @@ class Recorder(Node):
             if free < DISK_MARGIN_BYTES:  # stop while the bag can still be finished cleanly
                 self.stop_recording(OSError(errno.ENOSPC, f"disk nearly full, {free} bytes left"), False)
         try:
-            self.writer.write(topic, typename, stamp, cdr)
+            # As rosbag2 records: log time is the receive time, the header stamp stays in the message.
+            self.writer.write(topic, typename, 0, cdr, log_time_ns=self.get_clock().now().nanoseconds)
         except OSError as exc:
             self.stop_recording(exc, failed_write=True)
 

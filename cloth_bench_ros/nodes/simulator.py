@@ -14,7 +14,7 @@ from cloth_bench_ros.nodes.common import NAMESPACE, run_node
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.runtime import (
     DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, PoseArray,
-    make_qos,
+    declare_float, make_qos,
 )
 from cloth_bench_ros.core.scene import ClothGrid
 
@@ -38,7 +38,7 @@ class Simulator(Node):
         super().__init__(kwargs.pop("node_name", "simulator"),
                          namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
         self.engine_name = self.declare_parameter("engine", "mujoco").value
-        rate_hz = float(self.declare_parameter("rate_hz", 100.0).value)
+        rate_hz = declare_float(self, "rate_hz", 100.0)
         cloth = self.declare_parameter("cloth", "towel").value
         primitive = self.declare_parameter("primitive", "dynamic").value
         self.seed = int(self.declare_parameter("seed", 0).value)

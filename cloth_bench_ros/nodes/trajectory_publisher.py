@@ -5,9 +5,11 @@ from __future__ import annotations
 from functools import partial
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.nodes.common import NAMESPACE, run_node
+from cloth_bench_ros.nodes.common import (
+    NAMESPACE, all_subscriptions_matched, node_keys, publishers_matched, run_node,
+)
 from cloth_bench_ros.runtime import (
-    Clock, Node, Pose, PoseArray, PointCloud2, Time, make_qos, stamp_ns,
+    Clock, Node, Pose, PoseArray, PointCloud2, Time, declare_float, make_qos, stamp_ns,
 )
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
 
@@ -20,32 +22,58 @@ class TrajectoryPublisher(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("trajectory_publisher", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
         primitive = parse_primitive(self.declare_parameter("primitive", "dynamic").value)
-        rate_hz = float(self.declare_parameter("rate_hz", 100.0).value)
+        declare_float(self, "rate_hz", 100.0)
         self.pacing = self.declare_parameter("pacing", "lockstep").value
-        self.engines = list(self.declare_parameter("engines", ["mujoco"]).value)
-        self.min_clock_subscribers = int(self.declare_parameter("min_clock_subscribers", 0).value)
+        self.declare_parameter("engines", ["mujoco"])
+        self.declare_parameter("wait_for_recorder", True)
+        self.declare_parameter("wait_for_evaluator", True)
         # Every value through the one validation layer; an error names the node and parameter.
-        validation.node_parameters(self, {
+        p = validation.node_parameters(self, {
             "rate_hz": validation.rate_hz, "engines": validation.unique,
-            "min_clock_subscribers": lambda v, n: validation.integer(v, n, 0, 10_000)})
+            "wait_for_recorder": validation.boolean, "wait_for_evaluator": validation.boolean})
+        self.engines, rate_hz = p["engines"], p["rate_hz"]
+        self.wait_for_recorder, self.wait_for_evaluator = p["wait_for_recorder"], p["wait_for_evaluator"]
         if self.pacing not in PACINGS:
             raise ValueError(f"unknown pacing {self.pacing!r} (valid: {', '.join(PACINGS)})")
         self.targets = full_targets(primitive, rate_hz)
         self.target_pub = self.create_publisher(PoseArray, "targets", make_qos(10))
         self.clock_pub = self.create_publisher(Clock, "/clock", make_qos(10))
-        for engine in self.engines:
-            self.create_subscription(PointCloud2, f"{engine}/cloud", partial(self.on_state, engine), make_qos(10))
+        self.state_subs = {engine: self.create_subscription(PointCloud2, f"{engine}/cloud",
+                                                            partial(self.on_state, engine), make_qos(10))
+                           for engine in self.engines}
         self.k = -1
         self.reported: dict[str, int] = {}
         self.done = False
         self.pace_timer = None
         self.start_timer = self.create_timer(0.02, self.try_start)
 
+    def graph_ready(self) -> bool:
+        """Who is there, by node, not how many subscribers.
+
+        For each engine a node that subscribes `targets` and publishes `<engine>/cloud`, matched
+        both ways; the recorder (publishes real/cloud, follows /clock) with every /clock
+        subscription matched; the evaluator (subscribes `targets`, publishes `metrics` once its
+        inputs are matched); every `targets` subscription matched.
+        """
+        target_readers = node_keys(self.get_subscriptions_info_by_topic("targets"))
+        for engine, sub in self.state_subs.items():
+            simulators = target_readers & node_keys(self.get_publishers_info_by_topic(f"{engine}/cloud"))
+            if not simulators or not publishers_matched(self, sub):
+                return False
+        if not all_subscriptions_matched(self, self.target_pub):
+            return False
+        if self.wait_for_recorder:
+            clock_readers = node_keys(self.get_subscriptions_info_by_topic("/clock"))
+            if not clock_readers & node_keys(self.get_publishers_info_by_topic("real/cloud")):
+                return False
+            if not all_subscriptions_matched(self, self.clock_pub):
+                return False
+        return not self.wait_for_evaluator or bool(
+            target_readers & node_keys(self.get_publishers_info_by_topic("metrics")))
+
     def try_start(self) -> None:
-        """Start once every simulator (and every sim-time node) is listening."""
-        if self.target_pub.get_subscription_count() < len(self.engines):
-            return
-        if self.clock_pub.get_subscription_count() < self.min_clock_subscribers:
+        """Start once the graph is complete (graph_ready); polled on a timer until then."""
+        if not self.graph_ready():
             return
         self.destroy_timer(self.start_timer)
         if self.pacing == "realtime":

@@ -971,6 +971,9 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
         t.align = "llrlrrrrrrl"
         add_table(t)
 
+    from cloth_bench_ros.report.comparison import comparison_section  # qualitative figures of runs (issue 9)
+    images += comparison_section(doc, results_dir, out_dir)
+
     md_path, html_path = out_dir / "report.md", out_dir / "report.html"
     md_path.write_text(doc.markdown())
     html_path.write_text(doc.html())

@@ -18,10 +18,14 @@ if not EMBEDDED:
 
 if EMBEDDED:
     from cloth_bench_ros.runtime import embedded as rclpy  # noqa: F811
+    from cloth_bench_ros.runtime.embedded import Clock as _RosClock
+    from cloth_bench_ros.runtime.embedded import ClockType as _ClockType
     from cloth_bench_ros.runtime.embedded import (
         DurabilityPolicy,
+        HistoryPolicy,
         Node,
         Parameter,
+        ParameterDescriptor,
         QoSProfile,
         ReliabilityPolicy,
         SingleThreadedExecutor,
@@ -46,10 +50,13 @@ else:
     from builtin_interfaces.msg import Time as _TimeMsg  # noqa: F401
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion
+    from rcl_interfaces.msg import ParameterDescriptor
+    from rclpy.clock import Clock as _RosClock
+    from rclpy.clock_type import ClockType as _ClockType
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.serialization import deserialize_message, serialize_message
     from rclpy.time import Time
     from rosgraph_msgs.msg import Clock
@@ -85,10 +92,44 @@ def stamp_ns(stamp) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
-def make_qos(depth: int, latched: bool = False) -> QoSProfile:
-    """Reliable, keep-last `depth`; latched = transient local (late joiners get the last ones)."""
+def make_qos(depth: int, latched: bool = False, keep_all: bool = False) -> QoSProfile:
+    """Reliable, keep-last `depth`; latched = transient local (late joiners get the last ones).
+
+    keep_all: keep every sample until taken (a reader that must lose nothing, whatever its pace).
+    """
     return QoSProfile(
         depth=depth,
+        history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST,
         reliability=ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
     )
+
+
+# Exceptions that are the user's input (a parameter, a name, a --ros-args argument, a params
+# file), by class name so that rclpy's own (rclpy.exceptions.ParameterException,
+# NameValidationException, _rclpy.RCLInvalidROSArgsError, UnknownROSArgsError) and the embedded
+# runtime's twins are both one line and exit status 2.
+USER_ERROR_CLASSES = frozenset({"ParameterException", "NameValidationException", "RCLInvalidROSArgsError",
+                                "UnknownROSArgsError"})
+
+
+def is_user_error(exc: BaseException) -> bool:
+    """True for rclpy's (or the embedded runtime's) parameter, name and argument errors."""
+    return any(cls.__name__ in USER_ERROR_CLASSES for cls in type(exc).__mro__)
+
+
+def declare_float(node, name: str, default: float) -> float:
+    """A double parameter that also takes an integer (`-p rate_hz:=1000`), in rclpy and embedded alike.
+
+    rclpy refuses an INTEGER override for a parameter declared DOUBLE; declared with dynamic
+    typing, any type is accepted and this is the one place that keeps numbers and refuses the rest.
+    """
+    value = node.declare_parameter(name, float(default), ParameterDescriptor(dynamic_typing=True)).value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"parameter {name}: expected a number (double or integer), got {value!r}")
+    return float(value)
+
+
+def steady_clock():
+    """A steady clock for timers that must follow the wall clock even under use_sim_time."""
+    return _RosClock(clock_type=_ClockType.STEADY_TIME)

@@ -1,24 +1,28 @@
-"""An embedded, single-process stand-in for the subset of rclpy that the nodes use.
+"""An embedded stand-in for the subset of rclpy that the nodes use.
 
-It composes nodes in one process as a component container with intra-process communication
-would, and runs their callbacks deterministically: messages are delivered in the order they were
-published (one FIFO for the whole context), timers fire on the steady clock, and a node with
-use_sim_time follows /clock. What it provides (and nothing more):
+Messages travel over the context's transport (runtime/transport.py): intra-process by default,
+or DDS (runtime/dds/: Cyclone DDS speaking ROS 2's wire protocol) between processes. In-process it
+composes nodes as a component container with intra-process communication would, and runs their
+callbacks deterministically: messages are delivered in the order they were
+published (one FIFO for the whole context), timers fire on the node's clock (runtime/clock.py),
+and a node with use_sim_time follows /clock. What it provides (and nothing more; README
+"Without ROS 2" lists it in full):
 
-- rclpy.init(args), ok(), shutdown(), spin(node), spin_once(node, timeout_sec)
-- rclpy.node.Node(name, namespace=, parameter_overrides=, context=): create_publisher,
+- rclpy.init(args, domain_id=, transport=), ok(), shutdown(), spin(node), spin_once(node, timeout_sec)
+- graph queries: Node.get_publishers_info_by_topic, get_subscriptions_info_by_topic,
+  get_node_names_and_namespaces; Subscription.get_publisher_count
+- rclpy.node.Node(name, namespace=, parameter_overrides=, context=, cli_args=): create_publisher,
   create_subscription, create_timer, destroy_timer, declare_parameter, get_parameter,
   has_parameter, get_logger, get_clock, get_name, get_namespace, count_subscribers,
-  count_publishers, destroy_node
-- Publisher.publish / get_subscription_count; Timer.cancel; Clock.now(); Time(nanoseconds=),
-  Time.from_msg, .to_msg(), .nanoseconds
+  count_publishers, destroy_node; parameters with rclpy's types and checks (runtime/parameters.py)
+- Publisher.publish (TypeError for another message type) / get_subscription_count; Timer.cancel;
+  Clock.now(); Time(nanoseconds=), Time.from_msg, .to_msg(), .nanoseconds
 - rclpy.qos: QoSProfile(depth=, reliability=, durability=, history=) and the policy enums;
   TRANSIENT_LOCAL publishers hand their last `depth` messages to late subscribers
 - rclpy.executors.SingleThreadedExecutor: add_node, remove_node, spin, spin_once, shutdown,
   and spin_until_idle() (returns once no message is queued and no timer is armed)
 - rclpy.serialization.serialize_message / deserialize_message (CDR through rosbags)
-- command-line parameters: --ros-args -p name:=value, --params-file FILE, -r __ns:=/ns,
-  -r __node:=name
+- the --ros-args command line as rcl parses it: -p, --params-file, -r remaps (runtime/arguments.py)
 
 Queues are unbounded (intra-process delivery loses nothing); QoS depth only bounds the
 transient-local history.
@@ -26,19 +30,29 @@ transient-local history.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
-import fnmatch
 import logging
-import time
 from collections import deque
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Callable
-
-import yaml
 
 from cloth_bench_ros.data import messages as cdr
 from cloth_bench_ros.runtime import messages
+from cloth_bench_ros.runtime.clock import Clock, ClockType, Time, Timer  # noqa: F401 (rclpy's names)
+from cloth_bench_ros.runtime.arguments import (
+    RosArguments, expand_topic_name, parse_ros_args, remap_namespace, remap_node_name, remap_topic_name,
+    validate_namespace, validate_node_name,
+)
+from cloth_bench_ros.runtime.transport import (  # noqa: F401 (re-exported as rclpy's names)
+    IntraProcessTransport, TopicEndpointInfo, TopicEndpointTypeEnum, make_transport, transport_choice,
+)
+from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
+    InvalidParameterException, InvalidParameterTypeException, Parameter, ParameterAlreadyDeclaredException,
+    ParameterDescriptor, ParameterException, ParameterNotDeclaredException, ParameterType,
+    ParameterUninitializedException,
+    RCLError, RCLInvalidROSArgsError, UnknownROSArgsError, load_params_file,
+)
 
 
 # --- qos -------------------------------------------------------------------------------------
@@ -74,146 +88,34 @@ def _qos(qos: QoSProfile | int) -> QoSProfile:
     return QoSProfile(depth=qos) if isinstance(qos, int) else qos
 
 
-# --- time ------------------------------------------------------------------------------------
+# --- time: runtime/clock.py ---------------------------------------------------------------
 
 
-class Time:
-    """A point in ROS time, in integer nanoseconds."""
-
-    def __init__(self, *, seconds: float = 0, nanoseconds: int = 0) -> None:
-        self.nanoseconds = int(seconds * 1_000_000_000) + int(nanoseconds)
-
-    @classmethod
-    def from_msg(cls, msg: Any) -> "Time":
-        return cls(nanoseconds=int(msg.sec) * 1_000_000_000 + int(msg.nanosec))
-
-    def to_msg(self) -> Any:
-        sec, nanosec = divmod(self.nanoseconds, 1_000_000_000)
-        return messages.Time(sec=sec, nanosec=nanosec)
-
-    def __repr__(self) -> str:
-        return f"Time(nanoseconds={self.nanoseconds})"
+def _time_source_qos() -> "QoSProfile":
+    """The /clock subscription of rclpy's TimeSource: depth 1, best effort (time_source.py)."""
+    return QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
-class Clock:
-    """ROS time of one node: the steady clock, or the last /clock message under use_sim_time."""
-
-    def __init__(self) -> None:
-        self.sim_time_ns: int | None = None
-
-    def now(self) -> Time:
-        if self.sim_time_ns is not None:
-            return Time(nanoseconds=self.sim_time_ns)
-        return Time(nanoseconds=time.time_ns())
-
-
-# --- parameters ------------------------------------------------------------------------------
-
-
-class Parameter:
-    """A named parameter value, as rclpy.parameter.Parameter (value access only)."""
-
-    def __init__(self, name: str, type_: Any = None, value: Any = None) -> None:
-        self.name = name
-        self.value = value
-
-    def __repr__(self) -> str:
-        return f"Parameter({self.name!r}, value={self.value!r})"
-
-
-class ParameterError(ValueError):
-    """A parameter that was not declared, or a value of the wrong type."""
-
-
-def _coerce(name: str, default: Any, value: Any) -> Any:
-    """Keep the declared type as rclpy does; an integer is accepted where a double is declared."""
-    if default is None or value is None:
-        return value
-    if isinstance(default, bool) != isinstance(value, bool):
-        raise ParameterError(f"parameter {name}: expected {type(default).__name__}, got {value!r}")
-    if isinstance(default, float) and isinstance(value, int):
-        return float(value)
-    if isinstance(default, (int, float, str)) and not isinstance(value, type(default)):
-        raise ParameterError(f"parameter {name}: expected {type(default).__name__}, got {value!r}")
-    if isinstance(default, list) and not isinstance(value, list):
-        raise ParameterError(f"parameter {name}: expected a list, got {value!r}")
-    return value
-
-
-# --- context ---------------------------------------------------------------------------------
-
-
-@dataclass
-class _Args:
-    overrides: dict[str, dict[str, Any]]  # node pattern -> name -> value
-    namespace: str | None = None
-    node_name: str | None = None
-
-
-def _parse_ros_args(args: list[str] | None) -> _Args:
-    parsed = _Args({})
-    if not args or "--ros-args" not in args:
-        return parsed
-    rest = args[args.index("--ros-args") + 1 :]
-    i = 0
-    while i < len(rest):
-        flag = rest[i]
-        if flag == "--":
-            break
-        if flag in ("-p", "--param") and i + 1 < len(rest):
-            name, _, text = rest[i + 1].partition(":=")
-            parsed.overrides.setdefault("/**", {})[name] = yaml.safe_load(text)
-            i += 2
-        elif flag == "--params-file" and i + 1 < len(rest):
-            for pattern, params in load_params_file(rest[i + 1]).items():
-                parsed.overrides.setdefault(pattern, {}).update(params)
-            i += 2
-        elif flag in ("-r", "--remap") and i + 1 < len(rest):
-            key, _, value = rest[i + 1].partition(":=")
-            if key == "__ns":
-                parsed.namespace = value
-            elif key == "__node":
-                parsed.node_name = value
-            i += 2
-        else:
-            i += 1
-    return parsed
-
-
-def load_params_file(path: str | Path) -> dict[str, dict[str, Any]]:
-    """A ROS 2 parameter file: {node pattern: {name: value}} from the ros__parameters form."""
-    with open(path) as f:
-        doc = yaml.safe_load(f) or {}
-    out: dict[str, dict[str, Any]] = {}
-    for pattern, body in doc.items():
-        params = (body or {}).get("ros__parameters", {})
-        out[pattern] = _flatten(params)
-    return out
-
-
-def _flatten(params: dict, prefix: str = "") -> dict[str, Any]:
-    flat: dict[str, Any] = {}
-    for key, value in params.items():
-        if isinstance(value, dict):
-            flat.update(_flatten(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
+# --- parameters and arguments: runtime/parameters.py, runtime/arguments.py ---------------------
 
 
 class Context:
-    """One process-wide graph: topics, the delivery queue and the shutdown flag."""
+    """One graph: its transport (intra-process or DDS), the delivery queue and the shutdown flag."""
 
     def __init__(self) -> None:
-        self.args = _Args({})
+        self.args = RosArguments()
         self._ok = False
         self.subscriptions: dict[str, list["Subscription"]] = {}
         self.publishers: dict[str, list["Publisher"]] = {}
         self.queue: deque[tuple["Subscription", Any]] = deque()
         self.nodes: list["Node"] = []
+        self.transport: Any = IntraProcessTransport(self)
 
-    def init(self, args: list[str] | None = None) -> None:
-        self.args = _parse_ros_args(args)
+    def init(self, args: list[str] | None = None, *, domain_id: int | None = None,
+             transport: str | None = None) -> None:
+        """Parse the ROS arguments and open the transport (None: CLOTH_BENCH_TRANSPORT, else intra)."""
+        self.args = parse_ros_args(args)
+        self.transport = make_transport(self, transport or transport_choice("intra"), domain_id)
         self._ok = True
 
     def ok(self) -> bool:
@@ -222,13 +124,17 @@ class Context:
     def shutdown(self) -> None:
         self._ok = False
         self.queue.clear()
+        self.transport.shutdown()
+        self.transport = IntraProcessTransport(self)
 
 
 _default_context = Context()
 
 
-def init(args: list[str] | None = None, context: Context | None = None) -> None:
-    (context or _default_context).init(args)
+def init(args: list[str] | None = None, context: Context | None = None, domain_id: int | None = None,
+         transport: str | None = None) -> None:
+    """rclpy.init; `transport` ('intra' or 'dds') is the embedded runtime's own addition."""
+    (context or _default_context).init(args, domain_id=domain_id, transport=transport)
 
 
 def ok(context: Context | None = None) -> bool:
@@ -242,65 +148,42 @@ def shutdown(context: Context | None = None) -> None:
 # --- node ------------------------------------------------------------------------------------
 
 
-def _resolve(name: str, namespace: str, node_name: str) -> str:
-    if name.startswith("/"):
-        return name
-    if name.startswith("~/"):
-        return f"{namespace.rstrip('/')}/{node_name}/{name[2:]}"
-    return f"{namespace.rstrip('/')}/{name}"
-
-
 class Publisher:
     def __init__(self, node: "Node", msg_type: type, topic: str, qos: QoSProfile) -> None:
         self.node, self.msg_type, self.topic_name, self.qos = node, msg_type, topic, qos
         self._history: deque = deque(maxlen=max(1, qos.depth))
 
     def publish(self, msg: Any) -> None:
+        """As rclpy: a message of the publisher's type, or its serialized bytes; else TypeError."""
+        if isinstance(msg, bytes):
+            msg = deserialize_message(msg, self.msg_type)
+        elif not (isinstance(msg, self.msg_type)
+                  or getattr(type(msg), "__msgtype__", None) == self.msg_type.__msgtype__):
+            # rosbags' class of the same ROS type (what deserialize_message returns) is that type
+            raise TypeError(f"Expected {self.msg_type}, got {type(msg)}")
         ctx = self.node.context
         if not ctx.ok():
             return
-        if self.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:
-            self._history.append(msg)
-        for sub in ctx.subscriptions.get(self.topic_name, ()):
-            ctx.queue.append((sub, msg))
+        ctx.transport.publish(self, msg)
 
     def get_subscription_count(self) -> int:
-        return len(self.node.context.subscriptions.get(self.topic_name, ()))
+        """Subscriptions matched with this publisher (rmw: the writer's matched readers)."""
+        return self.node.context.transport.matched_subscriptions(self)
 
     def destroy(self) -> None:
-        pubs = self.node.context.publishers.get(self.topic_name, [])
-        if self in pubs:
-            pubs.remove(self)
+        self.node.context.transport.remove_publisher(self)
 
 
 class Subscription:
     def __init__(self, node: "Node", msg_type: type, topic: str, callback: Callable, qos: QoSProfile) -> None:
         self.node, self.msg_type, self.topic_name, self.callback, self.qos = node, msg_type, topic, callback, qos
 
+    def get_publisher_count(self) -> int:
+        """Publishers matched with this subscription (rmw: the reader's matched writers)."""
+        return self.node.context.transport.matched_publications(self)
+
     def destroy(self) -> None:
-        subs = self.node.context.subscriptions.get(self.topic_name, [])
-        if self in subs:
-            subs.remove(self)
-
-
-class Timer:
-    """Fires every `period` seconds of the steady clock, the first time one period after creation."""
-
-    def __init__(self, period: float, callback: Callable) -> None:
-        self.period_ns = max(1, int(period * 1e9))
-        self.callback = callback
-        self.next_ns = time.monotonic_ns() + self.period_ns
-        self.cancelled = False
-
-    def cancel(self) -> None:
-        self.cancelled = True
-
-    def is_canceled(self) -> bool:
-        return self.cancelled
-
-    def reset(self) -> None:
-        self.cancelled = False
-        self.next_ns = time.monotonic_ns() + self.period_ns
+        self.node.context.transport.remove_subscription(self)
 
 
 class Node:
@@ -313,32 +196,40 @@ class Node:
         namespace: str | None = None,
         parameter_overrides: list[Parameter] | None = None,
         context: Context | None = None,
+        cli_args: list[str] | None = None,
+        use_global_arguments: bool = True,
         **_: Any,
     ) -> None:
         self.context = context or _default_context
         if not self.context.ok():
             raise RuntimeError("rclpy.init() has not been called")
-        args = self.context.args
-        self._name = args.node_name or node_name
-        ns = args.namespace if args.namespace is not None else (namespace or "/")
+        local = parse_ros_args(cli_args) if cli_args else RosArguments()
+        global_args = self.context.args if use_global_arguments else RosArguments()
+        self._remaps = local.remaps + global_args.remaps  # rcl: local rules first, first match wins
+        validate_node_name(node_name)
+        self._name = remap_node_name(self._remaps, node_name)
+        ns = remap_namespace(self._remaps, node_name, namespace or "/")
         self._namespace = ns if ns.startswith("/") else "/" + ns
-        self._overrides: dict[str, Any] = {}
+        validate_node_name(self._name)
+        validate_namespace(self._namespace)
         full = f"{self._namespace.rstrip('/')}/{self._name}"
-        for pattern, params in args.overrides.items():
-            if pattern in ("/**", "**") or fnmatch.fnmatch(full, pattern) or pattern in (self._name, full):
-                self._overrides.update(params)
-        for p in parameter_overrides or []:
-            self._overrides[p.name] = p.value
+        self._overrides: dict[str, Parameter] = {}
+        for args in (global_args, local):  # rclpy node.cpp get_parameters: global, then the node's
+            self._overrides.update(args.overrides.for_node(full))
+        self._overrides.update({p.name: p for p in parameter_overrides or []})
         self._parameters: dict[str, Parameter] = {}
-        self._declared_defaults: dict[str, Any] = {}
+        self._descriptors: dict[str, ParameterDescriptor] = {}
         self._timers: list[Timer] = []
         self._subscriptions: list[Subscription] = []
         self._publishers: list[Publisher] = []
-        self._clock = Clock()
+        self._clock = Clock(clock_type=ClockType.ROS_TIME)
         self._logger = _Logger(logging.getLogger(f"cloth_bench_ros.{self._name}"), self._name)
         self.context.nodes.append(self)
+        self.context.transport.graph_changed(self)
+        # rclpy's TimeSource: use_sim_time declared as a bool; when true, /clock drives the clock.
         if self.declare_parameter("use_sim_time", False).value:
-            self.create_subscription(messages.Clock, "/clock", self._on_clock, 10)
+            self._clock.ros_time_is_active = True
+            self.create_subscription(messages.Clock, "/clock", self._on_clock, _time_source_qos())
 
     def _on_clock(self, msg: Any) -> None:
         self._clock.sim_time_ns = Time.from_msg(msg.clock).nanoseconds
@@ -350,45 +241,79 @@ class Node:
     def get_namespace(self) -> str:
         return self._namespace
 
-    def resolve_topic_name(self, topic: str) -> str:
-        return _resolve(topic, self._namespace, self._name)
+    def get_fully_qualified_name(self) -> str:
+        return f"{self._namespace.rstrip('/')}/{self._name}"
 
-    # parameters
-    def declare_parameter(self, name: str, value: Any = None, descriptor: Any = None) -> Parameter:
+    def resolve_topic_name(self, topic: str, *, only_expand: bool = False) -> str:
+        """The topic expanded and, unless only_expand, remapped (rcl_node_resolve_name)."""
+        full = expand_topic_name(topic, self._name, self._namespace)
+        return full if only_expand else remap_topic_name(self._remaps, full, self._name, self._namespace)
+
+    # parameters (rclpy/node.py declare_parameters, _apply_descriptor, get_parameter)
+    def declare_parameter(self, name: str, value: Any = None, descriptor: ParameterDescriptor | None = None,
+                          ignore_override: bool = False) -> Parameter:
+        if not name:
+            raise InvalidParameterException(name)
+        descriptor = dataclasses.replace(descriptor) if descriptor is not None else ParameterDescriptor()
+        if isinstance(value, ParameterType):
+            if value == ParameterType.NOT_SET:
+                raise ValueError(f"Cannot declare parameter {{{name}}} as statically typed of type NOT_SET")
+            if descriptor.dynamic_typing:
+                raise ValueError(f"When declaring parameter {{{name}}} passing a descriptor with"
+                                 "`dynamic_typing=True` is not allowed when the parameter type is provided")
+            descriptor.type, value = int(value), None
+        elif not descriptor.dynamic_typing:
+            descriptor.type = int(ParameterType.from_parameter_value(value))
+            if descriptor.type == ParameterType.NOT_SET:
+                raise ValueError("Cannot declare a statically typed parameter with default value "
+                                 "of type PARAMETER_NOT_SET")
+        if not ignore_override and name in self._overrides:
+            value = self._overrides[name].value
+        parameter = Parameter(name, value=value)
         if name in self._parameters:
-            raise ParameterError(f"parameter {name} is already declared")
-        chosen = _coerce(name, value, self._overrides[name]) if name in self._overrides else value
-        self._parameters[name] = Parameter(name, value=chosen)
-        return self._parameters[name]
+            raise ParameterAlreadyDeclaredException([name])
+        if descriptor.dynamic_typing:
+            descriptor.type = int(parameter.type_)
+        elif parameter.type_ != ParameterType.NOT_SET and parameter.type_ != descriptor.type:
+            raise InvalidParameterTypeException(parameter, ParameterType(descriptor.type).name)
+        descriptor.name = name
+        self._parameters[name], self._descriptors[name] = parameter, descriptor
+        return parameter
 
     def has_parameter(self, name: str) -> bool:
         return name in self._parameters
 
     def get_parameter(self, name: str) -> Parameter:
         if name not in self._parameters:
-            raise ParameterError(f"parameter {name} is not declared on node {self._name}")
-        return self._parameters[name]
+            raise ParameterNotDeclaredException(name)
+        parameter = self._parameters[name]
+        if parameter.type_ == ParameterType.NOT_SET and not self._descriptors[name].dynamic_typing:
+            raise ParameterUninitializedException(name)
+        return parameter
+
+    def describe_parameter(self, name: str) -> ParameterDescriptor:
+        if name not in self._descriptors:
+            raise ParameterNotDeclaredException(name)
+        return self._descriptors[name]
 
     # graph
     def create_publisher(self, msg_type: type, topic: str, qos_profile: QoSProfile | int) -> Publisher:
         pub = Publisher(self, msg_type, self.resolve_topic_name(topic), _qos(qos_profile))
-        self.context.publishers.setdefault(pub.topic_name, []).append(pub)
         self._publishers.append(pub)
+        self.context.transport.add_publisher(pub)
         return pub
 
     def create_subscription(self, msg_type: type, topic: str, callback: Callable,
                             qos_profile: QoSProfile | int) -> Subscription:
         sub = Subscription(self, msg_type, self.resolve_topic_name(topic), callback, _qos(qos_profile))
-        self.context.subscriptions.setdefault(sub.topic_name, []).append(sub)
         self._subscriptions.append(sub)
-        if sub.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:
-            for pub in self.context.publishers.get(sub.topic_name, ()):
-                for msg in pub._history:
-                    self.context.queue.append((sub, msg))
+        self.context.transport.add_subscription(sub)
         return sub
 
-    def create_timer(self, timer_period_sec: float, callback: Callable, **_: Any) -> Timer:
-        timer = Timer(timer_period_sec, callback)
+    def create_timer(self, timer_period_sec: float, callback: Callable, callback_group: Any = None,
+                     clock: Clock | None = None, **_: Any) -> Timer:
+        """A timer on `clock`, by default the node's (sim time under use_sim_time, as rclpy)."""
+        timer = Timer(timer_period_sec, callback, clock or self._clock)
         self._timers.append(timer)
         return timer
 
@@ -399,10 +324,23 @@ class Node:
         return True
 
     def count_subscribers(self, topic: str) -> int:
-        return len(self.context.subscriptions.get(self.resolve_topic_name(topic), ()))
+        return len(self.get_subscriptions_info_by_topic(topic))
 
     def count_publishers(self, topic: str) -> int:
-        return len(self.context.publishers.get(self.resolve_topic_name(topic), ()))
+        return len(self.get_publishers_info_by_topic(topic))
+
+    def get_publishers_info_by_topic(self, topic_name: str, no_mangle: bool = False) -> list[TopicEndpointInfo]:
+        """Every publisher of the topic in the graph, with its node (rclpy; the name is expanded)."""
+        topic = topic_name if no_mangle else self.resolve_topic_name(topic_name, only_expand=True)
+        return self.context.transport.endpoints(topic, TopicEndpointTypeEnum.PUBLISHER)
+
+    def get_subscriptions_info_by_topic(self, topic_name: str, no_mangle: bool = False) -> list[TopicEndpointInfo]:
+        """Every subscription of the topic in the graph, with its node (rclpy; the name is expanded)."""
+        topic = topic_name if no_mangle else self.resolve_topic_name(topic_name, only_expand=True)
+        return self.context.transport.endpoints(topic, TopicEndpointTypeEnum.SUBSCRIPTION)
+
+    def get_node_names_and_namespaces(self) -> list[tuple[str, str]]:
+        return self.context.transport.node_names()
 
     def get_clock(self) -> Clock:
         return self._clock
@@ -420,6 +358,7 @@ class Node:
         self._timers.clear()
         if self in self.context.nodes:
             self.context.nodes.remove(self)
+            self.context.transport.graph_changed(self)
 
 
 class _Logger:
@@ -470,6 +409,7 @@ class SingleThreadedExecutor:
         return [t for n in self.nodes for t in n._timers if not t.cancelled]
 
     def _deliver_one(self) -> bool:
+        self.context.transport.receive()
         queue = self.context.queue
         for _ in range(len(queue)):
             sub, msg = queue.popleft()
@@ -485,19 +425,25 @@ class SingleThreadedExecutor:
         if not self.context.ok() or self._deliver_one():
             return
         timers = self._armed_timers()
-        if not timers:
-            if timeout_sec:
-                time.sleep(min(timeout_sec, 0.01))
-            return
-        timer = min(timers, key=lambda t: t.next_ns)
-        wait = (timer.next_ns - time.monotonic_ns()) / 1e9
-        if wait > 0:
-            if timeout_sec is not None and wait > timeout_sec:
-                time.sleep(timeout_sec)
+        ready = next((t for t in timers if t.is_ready()), None)
+        if ready is None:
+            # Timers on a sim clock become due only through /clock: no point sleeping for them.
+            waits = [t.time_until_next_call() for t in timers if t.follows_wall_time]
+            # The transport waits: a sleep in one process, a DDS wait set that a sample ends early.
+            transport = self.context.transport
+            if not waits:
+                if timeout_sec:
+                    transport.wait(timeout_sec if transport.name == "dds" else min(timeout_sec, 0.01))
                 return
-            time.sleep(wait)
-        timer.next_ns += timer.period_ns
-        timer.callback()
+            wait = min(waits) / 1e9
+            if timeout_sec is not None and wait > timeout_sec:
+                transport.wait(timeout_sec)
+                return
+            if transport.wait(max(wait, 0.0)):
+                return  # a message came first: delivered on the next spin_once
+            ready = next((t for t in timers if t.is_ready()), None)
+        if ready is not None:
+            ready.call()
 
     def spin(self) -> None:
         while self.context.ok():
@@ -505,7 +451,7 @@ class SingleThreadedExecutor:
 
     def spin_until_idle(self) -> None:
         """Spin until no message is queued and no timer is armed (the run is complete)."""
-        while self.context.ok() and (self.context.queue or self._armed_timers()):
+        while self.context.ok() and (self.context.queue or any(t.follows_wall_time for t in self._armed_timers())):
             self.spin_once(0.1)
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:

@@ -12,7 +12,7 @@ from cloth_bench_ros.nodes.evaluator import Evaluator
 from cloth_bench_ros.nodes.recorder import Recorder
 from cloth_bench_ros.nodes.simulator import Simulator
 from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
-from cloth_bench_ros.runtime import Parameter, SingleThreadedExecutor, rclpy
+from cloth_bench_ros.runtime import EMBEDDED, Parameter, SingleThreadedExecutor, rclpy
 
 
 @dataclass
@@ -28,36 +28,63 @@ class RunConfig:
     engine_params: dict[str, dict] = field(default_factory=dict)  # engine -> parameter overrides
     grid: tuple[int, int] | None = None  # (nx, nz) vertices; None: the engine's default
     presets_dir: Path | None = None  # directory of <engine>.yaml presets; None: config/presets
+    replay: dict = field(default_factory=dict)  # recorder parameters for plain bags (topic, start_time, ...)
+    change_of_phase_frame: int | None = None  # None: the bag's own
+    record_comparison: Path | None = None  # comparison MCAP bag to write
+    comparison_figures: bool = False  # qualitative figure and animation in output_dir
 
 
-def _params(**values) -> list:
+def _params(values: dict) -> list:
     return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def _cut(config: RunConfig) -> int:
+    return -1 if config.change_of_phase_frame is None else int(config.change_of_phase_frame)
+
+
+def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[str, dict]:
+    """{node name: parameters} of every node of the graph; the one source for both kinds of run."""
+    out = config.output_dir if output_dir is None else output_dir
+    common = {"primitive": config.primitive, "rate_hz": float(config.rate_hz), "use_sim_time": True}
+    nx, nz = config.grid or (0, 0)
+    nodes = {
+        "trajectory_publisher": {"primitive": config.primitive, "rate_hz": float(config.rate_hz),
+                                 "engines": list(config.engines), "pacing": config.pacing},
+        "evaluator": {**common, "engines": list(config.engines), "output_dir": str(out or ""),
+                      "cloth": config.cloth, "seed": int(config.seed), "pacing": config.pacing,
+                      "record_comparison": str(config.record_comparison or ""),
+                      "comparison_figures": config.comparison_figures, "change_of_phase_frame": _cut(config)},
+    }
+    for engine in config.engines:
+        nodes[f"simulator_{engine}"] = {
+            **common, "engine": engine, "cloth": config.cloth, "seed": int(config.seed), "grid_nx": nx,
+            "grid_nz": nz, "presets_dir": str(config.presets_dir or ""),
+            "engine_params": yaml.safe_dump(config.engine_params.get(engine, {}))}
+    nodes["recorder"] = {**common, "bag": str(config.bag), "cloth": config.cloth,
+                         "change_of_phase_frame": _cut(config), "align_engine": config.engines[0],
+                         "grid_nx": nx, "grid_nz": nz, **config.replay}
+    return nodes
 
 
 def run_pipeline(config: RunConfig) -> dict:
     """Run trajectory publisher, one simulator per engine, recorder and evaluator to the end."""
     context = rclpy.Context()
-    rclpy.init(args=[], context=context)
-    common = dict(primitive=config.primitive, rate_hz=float(config.rate_hz), use_sim_time=True)
+    # Composed in one process on the intra-process transport, whatever CLOTH_BENCH_TRANSPORT says
+    # (that switch is for the node console scripts): deterministic, and parallel sweeps stay apart.
+    rclpy.init(args=[], context=context, **({"transport": "intra"} if EMBEDDED else {}))
+    params = node_parameters(config)
     nodes = []
     try:
-        nodes.append(TrajectoryPublisher(context=context, parameter_overrides=_params(
-            primitive=config.primitive, rate_hz=float(config.rate_hz), engines=config.engines,
-            pacing=config.pacing)))
+        nodes.append(TrajectoryPublisher(context=context, parameter_overrides=_params(params["trajectory_publisher"])))
         # The evaluator subscribes to the targets before the simulators do: the embedded runtime
         # delivers a message to its subscribers in subscription order, so the evaluator notes a
         # target's send time before a simulator steps on it (else latency would miss the step).
-        evaluator = Evaluator(context=context, parameter_overrides=_params(
-            engines=config.engines, output_dir=str(config.output_dir or ""), cloth=config.cloth,
-            seed=int(config.seed), pacing=config.pacing, **common))
+        evaluator = Evaluator(context=context, parameter_overrides=_params(params["evaluator"]))
         nodes.append(evaluator)
         for engine in config.engines:
-            nx, nz = config.grid or (0, 0)
-            nodes.append(Simulator(node_name=f"simulator_{engine}", context=context, parameter_overrides=_params(
-                engine=engine, cloth=config.cloth, seed=int(config.seed), grid_nx=nx, grid_nz=nz,
-                presets_dir=str(config.presets_dir or ""),
-                engine_params=yaml.safe_dump(config.engine_params.get(engine, {})), **common)))
-        nodes.append(Recorder(context=context, parameter_overrides=_params(bag=str(config.bag), use_sim_time=True)))
+            name = f"simulator_{engine}"
+            nodes.append(Simulator(node_name=name, context=context, parameter_overrides=_params(params[name])))
+        nodes.append(Recorder(context=context, parameter_overrides=_params(params["recorder"])))
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)

@@ -1,0 +1,201 @@
+"""What the recorder replays from a bag: every frame of the topic, accounted for.
+
+`plan_replay` reads the cloud topic once: decodes each cloud (organized, with rgb and NaNs or
+not), moves it from its frame_id to `world` (the bag's /tf_static and /tf, or a fixed 4x4),
+cleans it, finds the start of the quintic part in bag time, and sorts every frame into exactly
+one of: before the start, after the trajectory, empty (after cleaning), or to send. The counts
+add up to the frames on the topic; the evaluator then accounts for those it was sent.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from cloth_bench_ros.core import pointcloud2
+from cloth_bench_ros.core.cleaning import CleaningConfig, CleaningStats, clean, scene_cleaning
+from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.data import alignment, messages
+from cloth_bench_ros.data.bag_reader import IRREGULAR_TOLERANCE, BagReader
+from cloth_bench_ros.data.errors import BagError
+from cloth_bench_ros.data.messages import POINTCLOUD2, POSE_ARRAY
+from cloth_bench_ros.data.tf_buffer import TF_MESSAGE, TF_TOPICS, TfBuffer, TransformError, apply
+from cloth_bench_ros.data.trial import TARGETS_TOPIC, TrialInfo
+
+WORLD = "world"
+CLEAN_MODES = ("auto", "on", "off")
+TABLE_MODES = ("auto", "remove", "keep")
+
+
+@dataclass(frozen=True)
+class ReplayOptions:
+    """What the bag does not say, and how to treat it (CLI options / recorder parameters)."""
+
+    cloth: str = "towel"
+    primitive: str = "dynamic"
+    change_of_phase_frame: int | None = None
+    topic: str = ""  # "" : the project's cloud topic, else the only PointCloud2 topic
+    start_time: str = ""  # "" : targets topic, bag stamps (project bags) or automatic
+    targets_topic: str = ""  # "" : TARGETS_TOPIC when the bag has it
+    transform: tuple | None = None  # 16 numbers, row-major: replaces tf for every cloud
+    clean: str = "auto"  # auto: on for bags without project metadata
+    voxel: float = 0.0
+    table_plane: str = "auto"  # remove, keep, or auto: remove for dynamic (scored before contact), keep for quasi_static
+    rate_hz: float = 100.0
+    align_engine: str = "mujoco"
+    search: alignment.SearchSettings = alignment.SearchSettings()
+
+
+@dataclass
+class ReplayPlan:
+    """Frames to send (t_ns from the start of the quintic part, world points) and the accounting."""
+
+    trial: TrialInfo
+    topic: str
+    frames_in_bag: int
+    start: alignment.StartTime
+    frames: list[tuple[int, np.ndarray]] = field(default_factory=list)
+    counts: dict[str, int] = field(default_factory=dict)
+    cleaning: CleaningStats | None = None
+    cleaning_config: CleaningConfig | None = None
+    frames_source: str = ""
+    nan_points_dropped: int = 0
+    irregular_intervals: int = 0  # stamp steps off 1/fps by more than IRREGULAR_TOLERANCE
+
+    def accounting(self) -> dict[str, Any]:
+        """The recorder's share of the frame accounting, for the summary."""
+        return {"topic": self.topic, "frames_in_bag": self.frames_in_bag, **self.counts,
+                "start": self.start.as_dict(), "frames": self.frames_source,
+                "nan_points_dropped": self.nan_points_dropped, "irregular_intervals": self.irregular_intervals,
+                "cleaning": None if self.cleaning is None else {
+                    **self.cleaning.as_dict(), "settings": asdict(self.cleaning_config)}}
+
+
+def _trial(reader: BagReader, options: ReplayOptions, topic: str) -> TrialInfo:
+    if reader.trial is not None:
+        return reader.trial
+    return TrialInfo(cloth=options.cloth, trial=0, primitive=options.primitive,
+                     change_of_phase_frame=options.change_of_phase_frame,
+                     source=f"plain rosbag2 recording {reader.path}, topic {topic}")
+
+
+def _to_world(reader: BagReader, options: ReplayOptions) -> tuple[Any, str]:
+    """A function (frame_id, stamp_ns) -> 4x4 into world, and a sentence saying where it comes from."""
+    if options.transform is not None:
+        fixed = np.asarray(options.transform, dtype=float).reshape(4, 4)
+        return (lambda frame, stamp: fixed), "--transform matrix applied to every cloud"
+    buffer = TfBuffer()
+    tf_topics = [t for t in TF_TOPICS if reader.topics.get(t) == TF_MESSAGE]
+    if tf_topics:
+        buffer.add_messages((topic, msg) for topic, _, msg in reader.messages(tf_topics))
+    source = f"tf from {', '.join(tf_topics)}" if tf_topics else "clouds already in world"
+    return (lambda frame, stamp: buffer.lookup(WORLD, frame, stamp)), source
+
+
+def _targets(reader: BagReader, topic: str) -> tuple[list[int], list[np.ndarray]]:
+    stamps, positions = [], []
+    for _, stamp, msg in reader.messages([topic]):
+        stamps.append(stamp)
+        positions.append(np.array([[p.position.x, p.position.y, p.position.z] for p in msg.poses]))
+    return stamps, positions
+
+
+def _decode(reader: BagReader, topic: str, index: int, stamp: int, cdr: bytes) -> tuple[np.ndarray, str]:
+    try:
+        msg = messages.deserialize(cdr, POINTCLOUD2)
+        return pointcloud2.read_xyz(msg), msg.header.frame_id
+    except pointcloud2.PointCloudError as exc:
+        raise BagError(f"bag {reader.path}: frame {index} on {topic} (stamp {stamp / 1e9:.3f} s): {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
+        what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise BagError(f"bag {reader.path}: frame {index} on {topic} (stamp {stamp / 1e9:.3f} s) "
+                       f"is not a valid PointCloud2 ({what})") from None
+
+
+def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig | None:
+    """The cleaning of a replay, or None when off (project bags are cleaned when written)."""
+    if options.clean not in CLEAN_MODES:
+        raise ValueError(f"clean mode {options.clean!r} is not one of {', '.join(CLEAN_MODES)}")
+    if options.clean == "off" or (options.clean == "auto" and project_bag):
+        return None
+    if options.table_plane not in TABLE_MODES:
+        raise ValueError(f"table plane mode {options.table_plane!r} is not one of {', '.join(TABLE_MODES)}")
+    # Removing the plane also removes cloth lying flat on the table, which the quasi-static drag scores.
+    remove = options.table_plane == "remove" or (options.table_plane == "auto" and options.primitive == "dynamic")
+    return replace(scene_cleaning((options.primitive,), options.voxel), table_plane=remove)
+
+
+def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> ReplayPlan:
+    """Read, transform, clean, align and sort every frame of the topic (see module doc).
+
+    `reference` is a callable (seconds) -> (t, vertices) of the reference simulation, needed
+    only when the start must be searched automatically.
+    """
+    topic = reader.cloud_topic(options.topic or None)
+    project_bag = reader.trial is not None
+    trial = _trial(reader, options, topic)
+    to_world, frames_source = _to_world(reader, options)
+    config = cleaning_config(options, project_bag)
+    stats = CleaningStats() if config is not None else None
+    stamps, clouds, nan_dropped = [], [], 0
+    for index, (_, _, stamp, cdr) in enumerate(reader.raw_messages([topic])):
+        points, frame_id = _decode(reader, topic, index, stamp, cdr)
+        try:
+            matrix = to_world(frame_id, stamp)
+        except TransformError as exc:
+            raise BagError(f"bag {reader.path}: frame {index} on {topic}: {exc}") from None
+        points = apply(matrix, points.reshape(-1, 3)) if not np.allclose(matrix, np.eye(4)) else points
+        if config is not None:
+            points = clean(points, config, stats)
+        else:
+            points, dropped = pointcloud2.drop_nan(points)
+            nan_dropped += dropped
+        stamps.append(stamp)
+        clouds.append(points)
+    if not stamps:
+        raise BagError(f"bag {reader.path}: topic {topic} holds no message")
+    start = _start(reader, options, project_bag, stamps, clouds, reference)
+    targets = full_targets(options.primitive, options.rate_hz)
+    end_ns = targets.stamp_ns(len(targets) - 1) - int(round(targets.quintic_start * 1e9))
+    plan = ReplayPlan(trial, topic, len(stamps), start, cleaning=stats, cleaning_config=config,
+                      frames_source=frames_source,
+                      nan_points_dropped=nan_dropped if stats is None else stats.non_finite)
+    counts = {"before_start": 0, "after_trajectory": 0, "empty_after_cleaning": 0, "to_send": 0}
+    # A frame within the start's precision of it is at the start (not before it).
+    tolerance = max(int(round(start.precision_s * 1e9)), 1000)  # 1 us: stamps given in decimal seconds
+    for stamp, points in zip(stamps, clouds):
+        t_ns = stamp - start.bag_ns
+        t_ns = 0 if -tolerance <= t_ns < 0 else t_ns
+        if t_ns < 0:
+            counts["before_start"] += 1
+        elif t_ns > end_ns:
+            counts["after_trajectory"] += 1
+        elif len(points) == 0:
+            counts["empty_after_cleaning"] += 1
+        else:
+            counts["to_send"] += 1
+            plan.frames.append((t_ns, points))
+    plan.counts = counts
+    period = 1e9 / trial.fps
+    steps = np.diff(np.asarray(stamps, dtype=np.int64))
+    plan.irregular_intervals = int(np.sum(np.abs(steps - period) > IRREGULAR_TOLERANCE * period))
+    return plan
+
+
+def _start(reader: BagReader, options: ReplayOptions, project_bag: bool, stamps: list[int],
+           clouds: list[np.ndarray], reference) -> alignment.StartTime:
+    if options.start_time:
+        return alignment.given_start(options.start_time, min(stamps))
+    targets_topic = options.targets_topic or (TARGETS_TOPIC if not project_bag else "")
+    if options.targets_topic and reader.topics.get(targets_topic) != POSE_ARRAY:
+        raise BagError(f"bag {reader.path} has no {POSE_ARRAY} topic {targets_topic}")
+    if targets_topic and reader.topics.get(targets_topic) == POSE_ARRAY:
+        return alignment.targets_start(*_targets(reader, targets_topic), targets_topic)
+    if project_bag:
+        return alignment.StartTime(0, "bag stamps (the project's bags count from the start of the motion)", 0.0)
+    if reference is None:
+        raise alignment.AlignmentError("automatic alignment needs a reference simulation")
+    t_ref, states = reference(options.search.window)
+    return alignment.search_start(stamps, clouds, t_ref, states, options.search)

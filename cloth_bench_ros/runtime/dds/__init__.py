@@ -1,0 +1,10 @@
+"""The DDS transport of the embedded runtime: Cyclone DDS with rmw_cyclonedds' conventions.
+
+idl.py: the rosidl IDL types; qos.py: QoS and discovery settings; graph.py: ros_discovery_info
+and the node of every endpoint; transport.py: the transport a Context uses.
+"""
+
+from cloth_bench_ros.runtime.dds.qos import LOOPBACK_URI, loopback_environment
+from cloth_bench_ros.runtime.dds.transport import DdsTransport, dds_topic_name
+
+__all__ = ["LOOPBACK_URI", "DdsTransport", "dds_topic_name", "loopback_environment"]

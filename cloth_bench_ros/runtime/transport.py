@@ -1,0 +1,127 @@
+"""How the embedded runtime moves messages: intra-process (the default) or DDS (runtime/dds/).
+
+A Context owns one transport. Publishers and subscriptions register with it; `publish` hands it a
+message; the executor calls `receive` to move arrived messages into the context's queue and `wait`
+to block until one may have arrived; the graph queries (`endpoints`, matched counts) answer what
+rclpy's get_publishers_info_by_topic / get_subscriptions_info_by_topic and
+Publisher.get_subscription_count answer.
+
+CLOTH_BENCH_TRANSPORT=intra|dds chooses it where the caller does not: the node console scripts
+default to dds (one process per node), `cloth-bench run` and sweeps to intra.
+"""
+
+from __future__ import annotations
+
+import enum
+import os
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from cloth_bench_ros.runtime.embedded import Context, Node, Publisher, Subscription
+
+TRANSPORTS = ("intra", "dds")
+
+
+class TopicEndpointTypeEnum(enum.IntEnum):
+    """rclpy.topic_endpoint_info.TopicEndpointTypeEnum."""
+
+    INVALID = 0
+    PUBLISHER = 1
+    SUBSCRIPTION = 2
+
+
+@dataclass(frozen=True)
+class TopicEndpointInfo:
+    """rclpy.topic_endpoint_info.TopicEndpointInfo: who publishes or subscribes a topic, and how."""
+
+    node_name: str
+    node_namespace: str
+    topic_type: str
+    endpoint_type: TopicEndpointTypeEnum
+    endpoint_gid: list[int] = field(default_factory=list)
+    qos_profile: Any = None
+
+
+def transport_choice(default: str) -> str:
+    """CLOTH_BENCH_TRANSPORT if set (intra or dds), else `default`; ValueError for another value."""
+    choice = os.environ.get("CLOTH_BENCH_TRANSPORT", "").strip().lower() or default
+    if choice not in TRANSPORTS:
+        raise ValueError(f"CLOTH_BENCH_TRANSPORT: unknown transport {choice!r} (valid: intra, dds)")
+    return choice
+
+
+def make_transport(context: "Context", name: str, domain_id: int | None = None) -> Any:
+    """The transport `name` ('intra' or 'dds') for a context."""
+    if name == "dds":
+        from cloth_bench_ros.runtime.dds.transport import DdsTransport
+
+        return DdsTransport(context, domain_id)
+    if name != "intra":
+        raise ValueError(f"unknown transport {name!r} (valid: intra, dds)")
+    return IntraProcessTransport(context)
+
+
+class IntraProcessTransport:
+    """Nodes of one context in one process: one FIFO, callbacks in publish order, nothing lost."""
+
+    name = "intra"
+
+    def __init__(self, context: "Context") -> None:
+        self.context = context
+
+    def add_publisher(self, pub: "Publisher") -> None:
+        self.context.publishers.setdefault(pub.topic_name, []).append(pub)
+
+    def remove_publisher(self, pub: "Publisher") -> None:
+        pubs = self.context.publishers.get(pub.topic_name, [])
+        if pub in pubs:
+            pubs.remove(pub)
+
+    def add_subscription(self, sub: "Subscription") -> None:
+        self.context.subscriptions.setdefault(sub.topic_name, []).append(sub)
+        if sub.qos.durability == 1:  # TRANSIENT_LOCAL: late joiners get the publishers' history
+            for pub in self.context.publishers.get(sub.topic_name, ()):
+                for msg in pub._history:
+                    self.context.queue.append((sub, msg))
+
+    def remove_subscription(self, sub: "Subscription") -> None:
+        subs = self.context.subscriptions.get(sub.topic_name, [])
+        if sub in subs:
+            subs.remove(sub)
+
+    def publish(self, pub: "Publisher", msg: Any) -> None:
+        if pub.qos.durability == 1:
+            pub._history.append(msg)
+        for sub in self.context.subscriptions.get(pub.topic_name, ()):
+            self.context.queue.append((sub, msg))
+
+    def matched_subscriptions(self, pub: "Publisher") -> int:
+        return len(self.context.subscriptions.get(pub.topic_name, ()))
+
+    def matched_publications(self, sub: "Subscription") -> int:
+        return len(self.context.publishers.get(sub.topic_name, ()))
+
+    def endpoints(self, topic: str, kind: TopicEndpointTypeEnum) -> list[TopicEndpointInfo]:
+        table = self.context.publishers if kind == TopicEndpointTypeEnum.PUBLISHER else self.context.subscriptions
+        return [TopicEndpointInfo(e.node.get_name(), e.node.get_namespace(), e.msg_type.__msgtype__, kind,
+                                  qos_profile=e.qos) for e in table.get(topic, ())]
+
+    def node_names(self) -> list[tuple[str, str]]:
+        return [(n.get_name(), n.get_namespace()) for n in self.context.nodes]
+
+    def graph_changed(self, node: "Node") -> None:
+        """Nothing to announce: every node of the graph is in this context."""
+
+    def receive(self) -> None:
+        """Nothing to fetch: publish() queues directly."""
+
+    def wait(self, timeout_sec: float | None) -> bool:
+        """Nothing can arrive while waiting in one process: sleep; False (no message came)."""
+        if timeout_sec:
+            time.sleep(timeout_sec)
+        return False
+
+    def shutdown(self) -> None:
+        """No resources to release."""
