@@ -208,7 +208,6 @@ def test_negative_change_of_phase_frame_in_a_bag_is_refused(capsys, tmp_path):
     (trajectory_publisher.main, ["engines:=[bullet, bullet]"], ["trajectory_publisher", "engines", "twice"]),
     (evaluator.main, ["output_dir:=/dev/null/run"], ["evaluator", "output_dir", "/dev/null/run"]),
     (trajectory_publisher.main, ["rate_hz:=-100.0"], ["trajectory_publisher", "rate_hz", "-100"]),
-    (trajectory_publisher.main, ["min_clock_subscribers:=-1"], ["trajectory_publisher", "min_clock_subscribers"]),
 ])
 def test_node_refuses_bad_parameter_naming_it(capsys, main, params, words):
     argv = ["node", "--ros-args"] + [a for p in params for a in ("-p", p)]
