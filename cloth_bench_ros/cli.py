@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 import warnings
 from pathlib import Path
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.core.trajectory import PRIMITIVES
 
 
@@ -15,14 +17,32 @@ class UserError(Exception):
     """Bad input from the user: printed as one line, exit status 2."""
 
 
+def _option(check, name: str):
+    """An argparse type from a validation check: its one-line error becomes argparse's."""
+    def parse(text: str):
+        try:
+            return check(text, name)
+        except validation.InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    parse.__name__ = name  # argparse names the type in some messages
+    return parse
+
+
 def _rate(text: str) -> float:
-    try:
-        rate = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"rate {text!r} is not a number") from None
-    if not rate > 0 or rate == float("inf"):
-        raise argparse.ArgumentTypeError(f"rate must be > 0 Hz, got {text}")
-    return rate
+    return _option(lambda t, n: validation.rate_hz(validation.parse_number(t, n), n), "rate")(text)
+
+
+def _seed(text: str) -> int:
+    return _option(lambda t, n: validation.seed(validation.parse_integer(t, n), n), "seed")(text)
+
+
+def _number(check, name: str):
+    """An argparse type for a number checked by `check(value, name)` (validation.positive, ...)."""
+    return _option(lambda t, n: check(validation.parse_number(t, n), n), name)
+
+
+def _frame(text: str) -> int | None:
+    return _option(lambda t, n: validation.frame_index(validation.parse_integer(t, n), n), "change-of-phase-frame")(text)
 
 
 def check_bag(bag: Path, topic: str | None = None) -> None:
@@ -37,9 +57,15 @@ def check_bag(bag: Path, topic: str | None = None) -> None:
     if first is None:
         raise UserError(f"bag {bag}: no PointCloud2 message on {topic} could be read")
     try:
-        read_xyz(deserialize(first[3], first[1]))
+        msg = deserialize(first[3], first[1])
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
+        what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise UserError(f"bag {bag}: frame 0 on {topic} (stamp {first[2] / 1e9:.3f} s) "
+                        f"is not a valid PointCloud2 ({what})") from None
+    try:
+        read_xyz(msg)
     except ValueError as exc:
-        raise UserError(f"bag {bag}, topic {topic}: {exc}") from None
+        raise UserError(f"bag {bag}: frame 0 on {topic} (stamp {first[2] / 1e9:.3f} s): {exc}") from None
 
 
 def _replay_params(args: argparse.Namespace) -> dict:
@@ -77,29 +103,38 @@ def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
     from cloth_bench_ros.report.run_report import result_table
 
-    engines = args.engine or ["mujoco"]
+    from cloth_bench_ros.safe_io import check_output_dir
+
+    engines = validation.unique(args.engine or ["mujoco"], "--engine")
     for name in engines:
         engine_class(name)
     if args.cloth not in CLOTHS:
         raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
     presets = Path(args.presets) if args.presets else None
-    for name in engines:  # a malformed preset file or bad value fails here, in one line
+    for name in engines:  # a missing directory, malformed preset file or bad value fails here, in one line
         load_preset(name, args.cloth, args.primitive, presets)
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     check_bag(bag, args.topic)
+    overrides = _overrides(getattr(args, "set", None), engines)
+    replay = _replay_params(args)
     out = Path(args.output) if args.output else Path("results") / f"{args.cloth}_{args.primitive}_{int(args.rate)}hz_seed{args.seed}"
+    try:  # an unwritable or occupied --output is found before the run, not after it
+        check_output_dir(out)
+    except ValueError as exc:
+        raise UserError(f"--output {exc}") from None
     config = RunConfig(bag=bag, engines=engines, rate_hz=args.rate, cloth=args.cloth, primitive=args.primitive,
                        seed=args.seed, pacing=args.pacing, output_dir=out,
-                       engine_params=_overrides(getattr(args, "set", None), engines), grid=getattr(args, "grid", None), presets_dir=presets,
-                       replay=_replay_params(args), change_of_phase_frame=args.change_of_phase_frame,
+                       engine_params=overrides, grid=getattr(args, "grid", None), presets_dir=presets,
+                       replay=replay, change_of_phase_frame=args.change_of_phase_frame,
                        record_comparison=Path(args.record_comparison) if args.record_comparison else None,
                        comparison_figures=args.figures)
     if config.record_comparison is not None:  # checked before the run, not after it
-        from cloth_bench_ros.safe_io import check_output_dir
-
         if config.record_comparison.exists() and any(config.record_comparison.iterdir()):
             raise UserError(f"comparison bag {config.record_comparison} already exists (not empty)")
-        check_output_dir(config.record_comparison)
+        try:
+            check_output_dir(config.record_comparison)
+        except ValueError as exc:
+            raise UserError(f"--record-comparison {exc}") from None
     if getattr(args, "processes", False):
         from cloth_bench_ros.studies.processes import ProcessRunError, run_processes
 
@@ -143,12 +178,7 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 
 def _grid(text: str) -> tuple[int, int]:
-    from cloth_bench_ros.studies.parsing import parse_grid
-
-    try:
-        return parse_grid(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    return _option(validation.parse_grid, "grid")(text)
 
 
 def _scheduler(text: str) -> str:
@@ -163,13 +193,15 @@ def _scheduler(text: str) -> str:
 def _overrides(specs: list[str] | None, engines: list[str] | None = None) -> dict[str, dict]:
     """--set engine.param=value (repeatable) -> {engine: {param: value}}, checked against the schemas."""
     from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.studies.parsing import parse_overrides
 
-    overrides = parse_overrides(specs)
+    overrides = validation.parse_overrides(specs)
     for engine, params in overrides.items():
         if engines is not None and engine not in engines:
             raise UserError(f"--set {engine}.…: engine {engine} is not part of this run ({', '.join(engines)})")
-        engine_class(engine).validate_params(params)
+        try:
+            engine_class(engine).validate_params(params)
+        except ValueError as exc:
+            raise UserError(f"--set {engine}: {exc}") from None
     return overrides
 
 
@@ -183,7 +215,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies import sweep as sw
 
     settings = args.mode == "settings"
-    engines = args.engine or [e for e in sw.DEFAULT_ENGINES if e in _available_engines()]
+    engines = validation.unique(args.engine or [e for e in sw.DEFAULT_ENGINES if e in _available_engines()], "--engine")
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
     plan = sw.SweepPlan(args.mode, engines, args.rate or [], args.cloth or [], args.primitive or list(sw.DEFAULT_PRIMITIVES),
@@ -238,7 +270,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_stress(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies.stress import run_suite, select_cases, stress_table, verdict
 
-    engines = args.engine or [e for e in ("mujoco", "bullet") if e in _available_engines()]
+    engines = validation.unique(args.engine or [e for e in ("mujoco", "bullet") if e in _available_engines()], "--engine")
     cases = select_cases(engines, args.case, args.max_wall_s)
     if args.list:
         for c in cases:
@@ -433,7 +465,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--primitive", default="dynamic", choices=PRIMITIVES, help="default dynamic")
     run.add_argument("--bag", help="rosbag2 MCAP bag to score against (default: the bundled one)")
     run.add_argument("--presets", help="directory of <engine>.yaml presets (default: config/presets)")
-    run.add_argument("--seed", type=int, default=0, help="perturbs the initial cloth (default 0)")
+    run.add_argument("--seed", type=_seed, default=0, help="perturbs the initial cloth (default 0)")
     run.add_argument("--pacing", default="lockstep", choices=("lockstep", "realtime"))
     run.add_argument("--processes", action="store_true",
                      help="one OS process per node over DDS on loopback (default: all nodes in this process)")
@@ -443,18 +475,19 @@ def build_parser() -> argparse.ArgumentParser:
     scoring.add_argument("--start-time", metavar="S", help="start of the motion in bag time: an absolute stamp "
                          "(>= 1e9 s) or seconds from the first message (default: targets topic, else automatic)")
     scoring.add_argument("--targets-topic", help="recorded PoseArray gripper targets whose first motion is the start")
-    scoring.add_argument("--change-of-phase-frame", type=int, metavar="N",
+    scoring.add_argument("--change-of-phase-frame", type=_frame, metavar="N",
                          help="last frame of the dynamic window (default: the bag's metadata, else none)")
     scoring.add_argument("--transform", metavar="FILE", help="4x4 matrix into world for every cloud, instead of tf")
     scoring.add_argument("--clean", default="auto", choices=("auto", "on", "off"),
                          help="crop, table plane, outliers (default auto: on for bags without the project's metadata)")
-    scoring.add_argument("--voxel", type=float, default=0.0, metavar="M", help="voxel down-sampling size (default off)")
+    scoring.add_argument("--voxel", type=_number(validation.non_negative, "voxel"), default=0.0, metavar="M",
+                         help="voxel down-sampling size (default off)")
     scoring.add_argument("--table-plane", default="auto", choices=("auto", "remove", "keep"),
                          help="remove the table plane; it also removes cloth lying flat on the table "
                               "(default auto: remove for dynamic, keep for quasi_static)")
-    scoring.add_argument("--align-window", type=float, default=1.0, metavar="S",
+    scoring.add_argument("--align-window", type=_number(validation.positive, "align-window"), default=1.0, metavar="S",
                          help="seconds of motion the automatic alignment compares (default 1)")
-    scoring.add_argument("--align-step", type=float, default=1.0 / 30.0, metavar="S",
+    scoring.add_argument("--align-step", type=_number(validation.positive, "align-step"), default=1.0 / 30.0, metavar="S",
                          help="coarse step of the automatic alignment (default 1/30 s; refined 8x)")
     scoring.add_argument("--record-comparison", metavar="DIR", help="write a comparison bag (Foxglove/RViz)")
     scoring.add_argument("--figures", action="store_true",
@@ -562,7 +595,7 @@ def build_parser() -> argparse.ArgumentParser:
     hil.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel)")
     hil.add_argument("--primitive", default="dynamic", choices=PRIMITIVES, help="default dynamic")
     hil.add_argument("--bag", help="rosbag2 MCAP bag (default: the bundled one)")
-    hil.add_argument("--seed", type=int, default=0)
+    hil.add_argument("--seed", type=_seed, default=0)
     hil.add_argument("--grid", type=_grid, help="cloth mesh NXxNZ (default: the engine's)")
     hil.add_argument("--set", action="append", metavar="ENGINE.PARAM=VALUE", help="engine parameter override")
     hil.add_argument("--cpu", type=int, default=-1, help="pin the simulator process to this core (default: not)")
@@ -594,7 +627,8 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--overwrite", action="store_true", help="replace bags that exist")
     imp.add_argument("--clean", action="store_true",
                      help="crop to the workspace, remove the table plane and outliers (core.cleaning) before writing")
-    imp.add_argument("--voxel", type=float, default=0.0, metavar="M", help="with --clean: voxel size (default off)")
+    imp.add_argument("--voxel", type=_number(validation.non_negative, "voxel"), default=0.0, metavar="M",
+                     help="with --clean: voxel size (default off)")
     imp.add_argument("--quiet", action="store_true", help="no progress bar")
     imp.set_defaults(func=cmd_import)
 
@@ -602,7 +636,7 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel)")
     synth.add_argument("--primitive", default="dynamic", choices=PRIMITIVES)
     synth.add_argument("--out", help="bag directory (default <cloth>_<primitive>)")
-    synth.add_argument("--seed", type=int, default=0, help="sensor noise and reference seed (default 0)")
+    synth.add_argument("--seed", type=_seed, default=0, help="sensor noise and reference seed (default 0)")
     synth.add_argument("--overwrite", action="store_true", help="replace the bag if it exists")
     synth.add_argument("--quiet", action="store_true", help="no progress bar")
     synth.set_defaults(func=cmd_synth)
@@ -624,11 +658,25 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return args.func(args)
+    except BrokenPipeError:  # `cloth-bench ... | head`: the reader left, nothing to say
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except (UserError, ValueError, OSError, BagError) as exc:
-        print(f"cloth-bench: error: {exc}", file=sys.stderr)
+        print(f"cloth-bench: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
+    except Exception as exc:  # noqa: BLE001 - a bug: one line (the traceback with --verbose), status 1
+        if args.verbose:
+            raise
+        print(f"cloth-bench: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              f"(a bug; --verbose shows the traceback)", file=sys.stderr)
+        return 1
+
+
+def _one_line(exc: BaseException) -> str:
+    """str(exc) on one line (an OSError without a file name still says what failed)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":

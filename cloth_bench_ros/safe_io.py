@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import stat
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -60,14 +63,16 @@ class _BoundedLoader(yaml.SafeLoader):
 
 def load_yaml_bounded(text: str, source: str) -> Any:
     """yaml.safe_load with an alias limit; errors are one line naming `source`."""
-    loader = _BoundedLoader(text)
+    loader = None
     try:
+        loader = _BoundedLoader(text)  # the reader refuses non-printable characters here already
         return loader.get_single_data()
     except yaml.YAMLError as exc:
         reason = " ".join(str(exc).split())
         raise UnsafeInputError(f"{source}: not valid YAML ({reason})") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def load_yaml_file(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> Any:
@@ -78,8 +83,13 @@ def load_yaml_file(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> Any:
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """Write beside `path`, flush to disk, then rename over it: readers see the old or the new file."""
     path = Path(path)
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        mode = 0o644  # mkstemp's 0600 would hide results and bags from other users
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        os.fchmod(fd, mode)
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
@@ -107,6 +117,36 @@ def check_output_dir(path: str | Path) -> Path:
     except OSError as exc:
         raise UnsafeInputError(f"{path}: cannot write there ({exc.strerror or exc})") from None
     return path
+
+
+@contextmanager
+def staged_directory(final: str | Path, overwrite: bool = False) -> Iterator[Path]:
+    """A directory to fill beside `final`, renamed to `final` only when the block completes.
+
+    On any error (or a signal) nothing is left at `final`, and an old `final` stays as it was:
+    readers see the old directory or the complete new one. The checks (exists, writable) run
+    before the block starts. The staged path ends in final's name (a bag names its file after it).
+    """
+    final = Path(final)
+    if final.exists() and not final.is_dir():
+        raise UnsafeInputError(f"{final}: exists and is not a directory")
+    if final.is_dir() and any(final.iterdir()) and not overwrite:
+        raise UnsafeInputError(f"{final}: already exists (not empty; overwrite to replace it)")
+    check_output_dir(final.parent)
+    stage = Path(tempfile.mkdtemp(prefix=f".{final.name}.partial-", dir=final.parent))
+    try:
+        yield stage / final.name
+        old = stage / ".replaced"
+        if final.exists():
+            final.rename(old)
+        try:
+            (stage / final.name).rename(final)
+        except BaseException:
+            if old.exists():
+                old.rename(final)
+            raise
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
 
 
 def safe_name(text: Any, what: str = "name") -> str:

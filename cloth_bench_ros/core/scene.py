@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cloth_bench_ros import validation
+
 CLOTH_WIDTH = 0.50  # m, the grasped edge (along x)
 CLOTH_LENGTH = 0.70  # m, the hanging length (along -z)
 GRAVITY = -9.81  # m/s^2 along z
@@ -48,6 +50,9 @@ class ClothGrid:
     width: float = CLOTH_WIDTH
     length: float = CLOTH_LENGTH
     top_z: float = float(GRIPPER_START_LEFT[2])
+
+    def __post_init__(self) -> None:
+        validation.grid(self.nx, self.nz)  # bounded before any mesh is allocated
 
     def vertices(self) -> np.ndarray:
         """Rest positions, shape (nx * nz, 3), in metres."""

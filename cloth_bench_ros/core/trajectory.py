@@ -14,6 +14,7 @@ from enum import Enum
 
 import numpy as np
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.core import scene
 
 
@@ -188,8 +189,7 @@ def quintic_part(primitive: Primitive | str) -> PrimitiveTrajectory:
 
 def sample_times(duration: float, rate_hz: float) -> np.ndarray:
     """t = k / rate for k = 0 .. floor(duration * rate), the end included when it falls on a step."""
-    if not rate_hz > 0 or not math.isfinite(rate_hz):
-        raise ValueError(f"rate must be a positive number of Hz, got {rate_hz}")
+    rate_hz = validation.rate_hz(rate_hz)  # bounded before anything is allocated
     n = int(math.floor(duration * rate_hz + 1e-9)) + 1
     return np.arange(n) / rate_hz
 

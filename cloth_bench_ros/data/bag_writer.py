@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import threading
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -18,9 +19,10 @@ from mcap.writer import Writer as McapWriter
 
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
-from cloth_bench_ros.data.errors import BagError
+from cloth_bench_ros.data.errors import BagError, BagWarning
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
 from cloth_bench_ros.data.trial import CUSTOM_DATA_PREFIX, MCAP_TRIAL_RECORD, TRIAL_TOPIC, TrialInfo, trial_message
+from cloth_bench_ros.safe_io import atomic_write_text
 
 METADATA_VERSION = 9  # rosbag2 metadata.yaml version that Jazzy writes
 ROS_DISTRO = "jazzy"  # the distro whose layout (version 9) and type hashes (RIHS01) are written
@@ -195,6 +197,36 @@ class BagWriter:
                 self._close_pending = True
             else:
                 self._finish()
+            return dict(self.counts)
+
+    def abandon(self) -> dict[str, int]:
+        """After a failed write (disk full): keep the file as it is, recount it, write metadata.yaml.
+
+        The .mcap then ends at the damage without a summary (BagReader reads it up to there, with a
+        warning); `written` and `counts` become what is readable in it, never what was lost.
+        """
+        from cloth_bench_ros.data.bag_reader import BagReader  # the reader imports the trial layer too
+
+        with self._lock:
+            if (self.path / "metadata.yaml").exists():
+                return dict(self.counts)  # finalised before the failure
+            self._closed = True
+            try:
+                self._stream.close()
+            except OSError:
+                pass  # the bytes that did not fit are lost; the file holds a prefix of the stream
+            counts: dict[str, int] = {}
+            self._start = self._end = None
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", BagWarning)
+                    reader = BagReader(self.mcap_path)
+                counts, self._start, self._end = reader.message_counts, reader.start_ns, reader.end_ns
+            except BagError:
+                pass  # nothing readable before the damage
+            self.counts = {topic: counts.get(topic, 0) for topic in self._types}
+            self.written = sum(self.counts.values())
+            atomic_write_text(self.path / "metadata.yaml", _dump_yaml({"rosbag2_bagfile_information": self._metadata()}))
             return dict(self.counts)
 
     def _finish(self) -> None:

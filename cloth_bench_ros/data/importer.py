@@ -8,16 +8,17 @@ and counts them), optionally moved by a 4x4 transform, and stored as float32 x/y
 from __future__ import annotations
 
 import re
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagWriter, TrialInfo
 from cloth_bench_ros.core.cleaning import CleaningConfig, clean
 from cloth_bench_ros.core.scene import REAL_FPS
+from cloth_bench_ros.safe_io import check_output_dir, staged_directory
 
 CLOTH_NAMES = {"chequered": "chequered", "cotton": "towel", "linen": "linen"}  # folder -> ours
 PRIMITIVES = ("dynamic", "quasi_static")
@@ -29,6 +30,7 @@ CHANGE_OF_PHASE = {
     ("linen", 0): 90, ("linen", 1): 89, ("linen", 2): 89,
 }  # fmt: skip
 
+MAX_POINTS = 100_000_000  # per cloud file: far above a 1280 x 720 depth image
 _TRIAL_DIR = re.compile(r"^(chequered|cotton|linen)_rag_(\d+)$")
 _FRAME_FILE = re.compile(r"^(\d{5})\.(ply|pcd)$")
 
@@ -87,7 +89,8 @@ def read_ply(path: Path) -> np.ndarray:
             if words[0] == "format":
                 fmt = words[1]
             elif words[0] == "element":
-                elements.append((words[1], int(words[2]), []))
+                count = validation.integer(_int(words[2]), f"element {words[1]} count", 0, MAX_POINTS)
+                elements.append((words[1], count, []))
             elif words[0] == "property":
                 if not elements:
                     raise ValueError("property before any element")
@@ -99,6 +102,8 @@ def read_ply(path: Path) -> np.ndarray:
                 raise ValueError(f"unknown header line {line!r}")
         except (IndexError, KeyError, ValueError) as exc:
             raise CloudFileError(f"{path}: bad PLY header line {line!r} ({exc})") from None
+    if len([e for e in elements if e[0] == "vertex"]) > 1:
+        raise CloudFileError(f"{path}: more than one vertex element")
     order = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": ""}.get(fmt or "")
     if order is None:
         raise CloudFileError(f"{path}: unsupported PLY format {fmt!r}")
@@ -138,6 +143,25 @@ _PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("I", 1): "i1", ("I", 2): "i2", ("
               ("I", 8): "i8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8"}  # fmt: skip
 
 
+def _int(word: str) -> int:
+    """A header integer, strictly decimal ("5", not "5.0" nor "five")."""
+    return validation.parse_integer(word, "header value")
+
+
+def _pcd_points(head: dict[str, list[str]]) -> int:
+    """POINTS, or WIDTH x HEIGHT; each non-negative, and equal where both are given."""
+    width = validation.integer(_int(head["WIDTH"][0]), "WIDTH", 0, MAX_POINTS) if "WIDTH" in head else None
+    height = validation.integer(_int(head["HEIGHT"][0]), "HEIGHT", 0, MAX_POINTS) if "HEIGHT" in head else None
+    if "POINTS" in head:
+        n = validation.integer(_int(head["POINTS"][0]), "POINTS", 0, MAX_POINTS)
+        if width is not None and height is not None and width * height != n:
+            raise ValueError(f"POINTS {n} is not WIDTH x HEIGHT = {width} x {height}")
+        return n
+    if width is None or height is None:
+        raise KeyError("POINTS (or WIDTH and HEIGHT)")
+    return validation.integer(width * height, "WIDTH x HEIGHT", 0, MAX_POINTS)
+
+
 def read_pcd(path: Path) -> np.ndarray:
     """x, y, z of a PCD file (DATA ascii or binary) as float64 (n, 3), NaN points kept."""
     data = Path(path).read_bytes()
@@ -149,17 +173,21 @@ def read_pcd(path: Path) -> np.ndarray:
             head[key.upper()] = values
     try:
         fields = head["FIELDS"]
-        sizes = [int(s) for s in head["SIZE"]]
+        sizes = [validation.integer(_int(s), "SIZE", 1, 8) for s in head["SIZE"]]
         types = head["TYPE"]
-        counts = [int(c) for c in head.get("COUNT", ["1"] * len(fields))]
-        n = int(head["POINTS"][0]) if "POINTS" in head else int(head["WIDTH"][0]) * int(head["HEIGHT"][0])
+        counts = [validation.integer(_int(c), "COUNT", 1, 1024) for c in head.get("COUNT", ["1"] * len(fields))]
+        n = _pcd_points(head)
         mode = head["DATA"][0].lower()
         if not len(fields) == len(sizes) == len(types) == len(counts):
             raise ValueError("FIELDS, SIZE, TYPE and COUNT differ in length")
+        if len(set(fields) - {"_"}) != len([f for f in fields if f != "_"]):
+            raise ValueError(f"a field name is given twice in FIELDS {' '.join(fields)}")
         dtype = np.dtype([
             (f if f != "_" else f"_pad{i}", _PCD_TYPES[(t.upper(), s)], (c,) if c > 1 else ())
             for i, (f, s, t, c) in enumerate(zip(fields, sizes, types, counts))
         ])  # fmt: skip
+    except validation.InputError as exc:
+        raise CloudFileError(f"{path}: bad PCD header ({exc})") from None
     except (KeyError, IndexError, ValueError) as exc:
         raise CloudFileError(f"{path}: bad PCD header ({type(exc).__name__}: {exc})") from None
     if mode == "binary":
@@ -243,6 +271,11 @@ def find_trials(root: Path) -> list[DatasetTrial]:
             if not frames:
                 raise ValueError(f"{cloud_dir}: no <NNNNN>.ply or .pcd frame files")
             trials.append(DatasetTrial(cloth, index, primitive, trial_dir / primitive, tuple(sorted(frames.items()))))
+    by_name: dict[str, DatasetTrial] = {}
+    for tr in trials:  # e.g. cotton_rag_1 and cotton_rag_01: one would silently replace the other
+        if tr.bag_name in by_name:
+            raise ValueError(f"{by_name[tr.bag_name].folder} and {tr.folder} both map to trial {tr.bag_name}")
+        by_name[tr.bag_name] = tr
     if not trials:
         raise ValueError(
             f"dataset root {root} has no <cloth>_rag_<trial>/<primitive>/cloud folders "
@@ -284,14 +317,15 @@ def import_dataset(
     for tr in trials:
         if tr.primitive == "dynamic" and (tr.cloth, tr.trial) not in CHANGE_OF_PHASE:
             raise ValueError(f"{tr.folder}: no change-of-phase frame is known for {tr.cloth} trial {tr.trial}")
-    out.mkdir(parents=True, exist_ok=True)
+    check_output_dir(out)
+    for tr in trials:  # every existing bag is found before the first one is written
+        if (out / tr.bag_name).exists() and not overwrite:
+            raise ValueError(f"bag {out / tr.bag_name} already exists (pass overwrite to replace it)")
     bags = []
     total = sum(len(tr.frames) for tr in trials)
     with tqdm(total=total, unit="frame", disable=not progress, desc="import") as bar:
         for tr in trials:
             final = out / tr.bag_name
-            if final.exists() and not overwrite:
-                raise ValueError(f"bag {final} already exists (pass overwrite to replace it)")
             info = TrialInfo(
                 cloth=tr.cloth,
                 trial=tr.trial,
@@ -301,25 +335,15 @@ def import_dataset(
                 fps=REAL_FPS,
                 transform=(t if t is not None else np.eye(4)).tolist(),
             )
-            partial = out / ".partial" / tr.bag_name  # same name, so the .mcap is named right
-            shutil.rmtree(partial, ignore_errors=True)
             bar.set_description(tr.bag_name)
-            try:
-                with BagWriter(partial, info) as writer:
-                    for k, f in tr.frames:
-                        pts = read_cloud_file(f)
-                        if t is not None:
-                            pts = pts @ t[:3, :3].T + t[:3, 3]
-                        if cleaning is not None:
-                            pts = clean(pts, cleaning)
-                        writer.write_cloud(CLOUD_TOPIC, round(k * 1_000_000_000 / REAL_FPS), pts)
-                        bar.update(1)
-                if final.exists():
-                    shutil.rmtree(final)
-                partial.rename(final)
-            finally:
-                shutil.rmtree(partial, ignore_errors=True)
-                if (out / ".partial").is_dir() and not any((out / ".partial").iterdir()):
-                    (out / ".partial").rmdir()
+            with staged_directory(final, overwrite) as staged, BagWriter(staged, info) as writer:
+                for k, f in tr.frames:
+                    pts = read_cloud_file(f)
+                    if t is not None:
+                        pts = pts @ t[:3, :3].T + t[:3, 3]
+                    if cleaning is not None:
+                        pts = clean(pts, cleaning)
+                    writer.write_cloud(CLOUD_TOPIC, round(k * 1_000_000_000 / REAL_FPS), pts)
+                    bar.update(1)
             bags.append(final)
     return bags

@@ -25,6 +25,7 @@ from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagWriter, TrialInfo
 from cloth_bench_ros.data.importer import CHANGE_OF_PHASE
 from cloth_bench_ros.engines import engine_class, make_engine
 from cloth_bench_ros.paths import share_dir
+from cloth_bench_ros.safe_io import staged_directory
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quintic_part
 
@@ -385,19 +386,25 @@ def write_synthetic_bag(config: SynthConfig, out_dir: Path, overwrite: bool = Fa
                         on_frame: Callable[[int, np.ndarray, np.ndarray], None] | None = None) -> Path:
     """Render `config` into a rosbag2 MCAP bag at out_dir (clouds on CLOUD_TOPIC); the bag path.
 
-    `on_frame(k, reference_vertices, points)` sees every frame as it is written.
+    `on_frame(k, reference_vertices, points)` sees every frame as it is written. The bag is
+    written beside out_dir and renamed when complete: a failed run leaves no bag (and an old one
+    intact), never one that reads as complete without its clouds.
     """
     out_dir = Path(out_dir)
-    with BagWriter(out_dir, trial_info(config), overwrite=overwrite) as writer:  # fails before simulating
-        frames = synthetic_frames(config)
-        if progress:
-            from tqdm import tqdm
+    with staged_directory(out_dir, overwrite) as staged:  # output checks fail before simulating
+        with BagWriter(staged, trial_info(config)) as writer:
+            frames = synthetic_frames(config)
+            if progress:
+                from tqdm import tqdm
 
-            frames = tqdm(frames, total=config.frame_count, unit="frame", desc=out_dir.name)
-        for k, vertices, points in frames:
-            writer.write_cloud(CLOUD_TOPIC, frame_stamp_ns(k, config.fps), points)
-            if on_frame is not None:
-                on_frame(k, vertices, points)
+                frames = tqdm(frames, total=config.frame_count, unit="frame", desc=out_dir.name)
+            for k, vertices, points in frames:
+                writer.write_cloud(CLOUD_TOPIC, frame_stamp_ns(k, config.fps), points)
+                if on_frame is not None:
+                    on_frame(k, vertices, points)
+            if writer.counts.get(CLOUD_TOPIC, 0) != config.frame_count:
+                raise SynthError(f"synthetic bag {out_dir}: {writer.counts.get(CLOUD_TOPIC, 0)} of "
+                                 f"{config.frame_count} frames rendered")
     return out_dir
 
 

@@ -7,12 +7,12 @@ MCAP metadata record and the first message on `TRIAL_TOPIC`; see bags/README.md.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.data import messages
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY
 
@@ -47,13 +47,10 @@ class TrialInfo:
         t = np.asarray(self.transform, dtype=float)
         if t.shape != (4, 4) or not np.isfinite(t).all():
             raise ValueError(f"trial transform must be a finite 4x4 matrix, got shape {t.shape}")
-        if not (math.isfinite(self.fps) and self.fps > 0):
-            raise ValueError(f"trial fps must be a positive number, got {self.fps}")
         self.transform = t.tolist()
-        self.trial = int(self.trial)
-        self.fps = float(self.fps)
-        if self.change_of_phase_frame is not None:
-            self.change_of_phase_frame = int(self.change_of_phase_frame)
+        self.trial = validation.integer(self.trial, "trial", 0)
+        self.fps = validation.positive(self.fps, "trial fps", 10_000.0)
+        self.change_of_phase_frame = validation.frame_index(self.change_of_phase_frame, "change_of_phase_frame")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able dict."""

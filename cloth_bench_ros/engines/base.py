@@ -9,6 +9,7 @@ from typing import ClassVar, Mapping
 
 import numpy as np
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.core.scene import ClothGrid
 
 
@@ -29,25 +30,22 @@ class Param:
     choices: tuple[str, ...] = ()
 
     def validate(self, value: object) -> object:
-        if self.choices:
-            if value not in self.choices:
-                raise EngineError(f"parameter {self.name}={value!r} is not one of {', '.join(self.choices)}")
-            return value
-        if isinstance(self.default, bool):
-            if not isinstance(value, bool):
-                raise EngineError(f"parameter {self.name}={value!r} must be true or false")
-            return value
+        """`value` checked against this parameter's type and range (validation's rules)."""
+        name = f"parameter {self.name}"
         try:
-            number = float(value)  # type: ignore[arg-type]
-        except (TypeError, ValueError):
-            raise EngineError(f"parameter {self.name}={value!r} is not a number") from None
-        if not math.isfinite(number):
-            raise EngineError(f"parameter {self.name}={value!r} is not finite")
-        if (self.low is not None and number < self.low) or (self.high is not None and number > self.high):
-            raise EngineError(
-                f"parameter {self.name}={value!r} {self.unit} is outside [{self.low}, {self.high}]"
-            )
-        return int(number) if isinstance(self.default, int) else number
+            if self.choices:
+                return validation.choice(value, name, self.choices)
+            if isinstance(self.default, bool):
+                return validation.boolean(value, name)
+            if isinstance(self.default, int):
+                return validation.integer(value, name, _int_bound(self.low), _int_bound(self.high))
+            return validation.number(value, name, self.low, self.high, unit=self.unit)
+        except validation.InputError as exc:
+            raise EngineError(str(exc)) from None
+
+
+def _int_bound(bound: float | None) -> int | None:
+    return None if bound is None else int(bound)
 
 
 @dataclass(frozen=True)
@@ -88,9 +86,10 @@ class ClothEngine(abc.ABC):
 
     def __init__(self, rate_hz: float, params: Mapping[str, object] | None = None,
                  grid: ClothGrid | None = None) -> None:
-        if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
-            raise EngineError(f"rate must be a positive number of Hz, got {rate_hz}")
-        self.rate_hz = float(rate_hz)
+        try:
+            self.rate_hz = validation.rate_hz(rate_hz)
+        except validation.InputError as exc:
+            raise EngineError(str(exc)) from None
         self.grid = grid or ClothGrid()
         self.config = self.validate_params(params or {})
         self.divergence: Divergence | None = None

@@ -13,14 +13,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
-
+from cloth_bench_ros import validation
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.core.trajectory import PRIMITIVES
+from cloth_bench_ros.safe_io import UnsafeInputError, load_yaml_file
 
 CLOTHS = ("towel", "chequered", "linen")
 REQUIRED_KEYS = ("engine", "engine_version", "provenance", "presets")
+MAX_PRESET_BYTES = 1024 * 1024
 
 
 def config_dir() -> Path:
@@ -29,7 +30,15 @@ def config_dir() -> Path:
 
 
 def preset_file(engine: str, config_dir_: Path | None = None) -> Path:
-    """The preset file of an engine: <config>/presets/<engine>.yaml (or <dir>/<engine>.yaml)."""
+    """The preset file of an engine: <config>/presets/<engine>.yaml (or <dir>/<engine>.yaml).
+
+    A directory given by the user must exist (EngineError naming it), never falling back silently.
+    """
+    if config_dir_ is not None:
+        try:
+            validation.existing_dir(config_dir_, "presets directory")
+        except validation.InputError as exc:
+            raise EngineError(str(exc)) from None
     base = Path(config_dir_) if config_dir_ is not None else config_dir()
     nested = base / "presets" / f"{engine}.yaml"
     return nested if nested.is_file() or not (base / f"{engine}.yaml").is_file() else base / f"{engine}.yaml"
@@ -38,13 +47,9 @@ def preset_file(engine: str, config_dir_: Path | None = None) -> Path:
 def read_preset_file(path: Path) -> dict:
     """The parsed, structurally checked preset file."""
     try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise EngineError(f"preset file {path}: cannot be read ({exc.strerror})") from None
-    except yaml.YAMLError as exc:
-        where = getattr(exc, "problem_mark", None)
-        line = f" at line {where.line + 1}" if where is not None else ""
-        raise EngineError(f"preset file {path}: not valid YAML{line}") from None
+        data = load_yaml_file(path, MAX_PRESET_BYTES)
+    except UnsafeInputError as exc:
+        raise EngineError(f"preset file {exc}") from None
     if not isinstance(data, dict):
         raise EngineError(f"preset file {path}: expected a mapping with keys {', '.join(REQUIRED_KEYS)}")
     missing = [k for k in REQUIRED_KEYS if k not in data]
@@ -82,6 +87,8 @@ def load_preset(engine: str, cloth: str, primitive: str, config_dir: Path | None
         raise EngineError(f"unknown primitive {primitive!r} (valid: {', '.join(PRIMITIVES)})")
     path = preset_file(engine, config_dir)
     if not path.is_file():
+        if config_dir is not None:  # the user named a directory: a missing file is not "defaults"
+            raise EngineError(f"presets directory {config_dir}: no {engine}.yaml (nor presets/{engine}.yaml)")
         return {}
     presets = read_preset_file(path)["presets"]
     try:

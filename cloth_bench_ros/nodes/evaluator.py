@@ -7,12 +7,14 @@ import time
 from functools import partial
 from pathlib import Path
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.data.trial import trial_from_message
 from cloth_bench_ros.core.evaluation import OnlineEvaluator, frame_accounting
 from cloth_bench_ros.nodes.common import NAMESPACE, publishers_matched, replay_stamps, run_node
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.report.comparison import write_comparison
 from cloth_bench_ros.report.run_report import write_run_report
+from cloth_bench_ros.safe_io import check_output_dir
 from cloth_bench_ros.runtime import (
     DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, declare_float, make_qos,
     stamp_ns, steady_clock,
@@ -30,21 +32,33 @@ class Evaluator(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("evaluator", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
-        self.engines = list(self.declare_parameter("engines", ["mujoco"]).value)
+        self.declare_parameter("engines", ["mujoco"])
         self.primitive = parse_primitive(self.declare_parameter("primitive", "dynamic").value)
-        rate_hz = declare_float(self, "rate_hz", 100.0)
-        offset = declare_float(self, "time_offset", SETTLE_DURATION)
-        cut = int(self.declare_parameter("change_of_phase_frame", -1).value)
+        declare_float(self, "rate_hz", 100.0)
+        declare_float(self, "time_offset", SETTLE_DURATION)
+        self.declare_parameter("change_of_phase_frame", -1)
         self.output_dir = self.declare_parameter("output_dir", "").value
         self.comparison_bag = self.declare_parameter("record_comparison", "").value
-        self.comparison_figures = bool(self.declare_parameter("comparison_figures", False).value)
+        self.declare_parameter("comparison_figures", False)
+        cloth = self.declare_parameter("cloth", "towel").value
+        self.declare_parameter("seed", 0)
+        # Every value through the one validation layer; an error names the node and parameter.
+        p = validation.node_parameters(self, {
+            "rate_hz": validation.rate_hz, "time_offset": validation.time_offset, "seed": validation.seed,
+            "engines": validation.unique, "comparison_figures": validation.boolean,
+            "change_of_phase_frame": lambda v, n: validation.frame_index(v, n, unset=-1)})
+        self.engines, rate_hz, offset, cut = p["engines"], p["rate_hz"], p["time_offset"], p["change_of_phase_frame"]
+        self.comparison_figures = p["comparison_figures"]
         self.run_info = {"primitive": self.primitive.value, "rate_hz": rate_hz, "engines": self.engines,
-                         "cloth": self.declare_parameter("cloth", "towel").value,
-                         "seed": int(self.declare_parameter("seed", 0).value)}
+                         "cloth": cloth, "seed": p["seed"]}
+        if self.output_dir:  # an unwritable report directory is found now, not after the run
+            try:
+                check_output_dir(self.output_dir)
+            except ValueError as exc:
+                raise validation.InputError(f"evaluator: parameter output_dir: {exc}") from None
         targets = full_targets(self.primitive, rate_hz)
         self.final_stamp = targets.stamp_ns(len(targets) - 1)
-        self.core = OnlineEvaluator(self.engines, self.primitive, int(round(offset * 1e9)),
-                                    cut if cut >= 0 else None, REAL_FPS,
+        self.core = OnlineEvaluator(self.engines, self.primitive, int(round(offset * 1e9)), cut, REAL_FPS,
                                     keep_pairs=bool(self.comparison_bag or self.comparison_figures))
         self.replay: dict = {}  # the recorder's frame accounting, from the trial message
         self.expected_real_frames: int | None = None  # as announced by the recorder

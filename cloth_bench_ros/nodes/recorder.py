@@ -13,10 +13,13 @@ mode record: subscribes to `record_topics` ("topic:type" entries, e.g.
 
 from __future__ import annotations
 
+import errno
 import json
+import shutil
 import time
 from functools import partial
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.core.scene import SETTLE_DURATION, ClothGrid
 from cloth_bench_ros.data import BagReader, BagWriter
@@ -30,6 +33,19 @@ from cloth_bench_ros.runtime import (
     Clock, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, Time,
     declare_float, make_qos, message_type, serialize_message, stamp_ns, steady_clock,
 )
+
+MAX_RATE_FACTOR = 1e6  # wall-clock replay speed
+# Record mode on a filling disk: stop while the open chunk (<= 1 MiB), the summary and
+# metadata.yaml still fit; a small reserve file keeps room for metadata.yaml if another
+# process fills the disk first.
+DISK_MARGIN_BYTES = 4 * 1024 * 1024
+DISK_CHECK_EVERY_BYTES = 256 * 1024
+RESERVE_NAME = ".cloth_bench_reserve"
+RESERVE_BYTES = 64 * 1024
+
+
+class RecordingStopped(ValueError):
+    """A recording that cannot go on (disk full, write error); str() is one line naming the bag."""
 
 
 class Recorder(Node):
@@ -52,18 +68,27 @@ class Recorder(Node):
         if not path:
             raise ValueError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
         # Frames are stamped from the start of the quintic part; the run starts with the settle phase.
-        self.offset_ns = int(round(declare_float(self, "time_offset", SETTLE_DURATION) * 1e9))
+        declare_float(self, "time_offset", SETTLE_DURATION)
         clock = self.declare_parameter("clock", "sim").value
-        self.rate_factor = declare_float(self, "rate_factor", 1.0)
-        self.start_offset_ns = int(round(declare_float(self, "start_offset", 0.0) * 1e9))
-        self.loop = bool(self.declare_parameter("loop", False).value)
+        declare_float(self, "rate_factor", 1.0)
+        declare_float(self, "start_offset", 0.0)
+        self.declare_parameter("loop", False)
+        # Every value through the one validation layer; an error names the node and parameter.
+        p = validation.node_parameters(self, {
+            "time_offset": validation.time_offset, "start_offset": validation.time_offset,
+            "rate_factor": lambda v, n: validation.positive(v, n, MAX_RATE_FACTOR), "loop": validation.boolean})
+        self.offset_ns = int(round(p["time_offset"] * 1e9))
+        self.start_offset_ns = int(round(p["start_offset"] * 1e9))
+        self.rate_factor, self.loop = p["rate_factor"], p["loop"]
         if clock not in ("sim", "wall"):
             raise ValueError(f"recorder: unknown clock {clock!r} (valid: sim, wall)")
-        if not self.rate_factor > 0:
-            raise ValueError(f"recorder: rate_factor must be > 0, got {self.rate_factor}")
         self.bag = BagReader(path)
         options = self.replay_options()
-        nx, nz = (int(self.declare_parameter(n, 0).value) for n in ("grid_nx", "grid_nz"))
+        self.declare_parameter("grid_nx", 0)  # 0: the preset's grid
+        self.declare_parameter("grid_nz", 0)
+        side = partial(validation.integer, low=0, high=validation.MAX_GRID_SIDE)
+        g = validation.node_parameters(self, {"grid_nx": side, "grid_nz": side})
+        nx, nz = g["grid_nx"], g["grid_nz"]
         self.plan = plan_replay(self.bag, options, partial(self.reference_motion, options, nx, nz))
         self.topic = self.plan.topic
         self.published = 0
@@ -82,24 +107,29 @@ class Recorder(Node):
 
     def replay_options(self) -> ReplayOptions:
         """What the bag does not say, from the node's parameters."""
-        cut = int(self.declare_parameter("change_of_phase_frame", -1).value)
+        self.declare_parameter("change_of_phase_frame", -1)
         transform = list(self.declare_parameter("transform", [0.0]).value)
         if transform != [0.0] and len(transform) != 16:
             raise ValueError(f"recorder: transform needs 16 numbers (a 4x4 matrix), got {len(transform)}")
-        search = SearchSettings(window=declare_float(self, "align_window", 1.0),
-                                coarse_step=declare_float(self, "align_step", 1.0 / 30.0))
+        for name, default in (("align_window", 1.0), ("align_step", 1.0 / 30.0), ("voxel", 0.0), ("rate_hz", 100.0)):
+            declare_float(self, name, default)
+        p = validation.node_parameters(self, {
+            "change_of_phase_frame": lambda v, n: validation.frame_index(v, n, unset=-1),
+            "align_window": validation.positive, "align_step": validation.positive,
+            "voxel": validation.non_negative, "rate_hz": validation.rate_hz})
+        search = SearchSettings(window=p["align_window"], coarse_step=p["align_step"])
         return ReplayOptions(
             cloth=self.declare_parameter("cloth", "towel").value,
             primitive=self.declare_parameter("primitive", "dynamic").value,
-            change_of_phase_frame=cut if cut >= 0 else None,
+            change_of_phase_frame=p["change_of_phase_frame"],
             topic=self.declare_parameter("topic", "").value,
             start_time=self.declare_parameter("start_time", "").value,
             targets_topic=self.declare_parameter("targets_topic", "").value,
             transform=tuple(transform) if len(transform) == 16 else None,
             clean=self.declare_parameter("clean", "auto").value,
-            voxel=declare_float(self, "voxel", 0.0),
+            voxel=p["voxel"],
             table_plane=self.declare_parameter("table_plane", "auto").value,
-            rate_hz=declare_float(self, "rate_hz", 100.0),
+            rate_hz=p["rate_hz"],
             align_engine=self.declare_parameter("align_engine", "mujoco").value,
             search=search,
         )
@@ -179,7 +209,14 @@ class Recorder(Node):
         if not topics or any(len(t) != 2 for t in topics):
             raise ValueError("recorder: record_topics needs entries 'topic:package/msg/Type'")
         self.received = 0
+        self.stopped = False
+        self.unchecked_bytes = 0
         self.writer = BagWriter(output)
+        self.reserve = self.writer.path / RESERVE_NAME
+        try:  # room for metadata.yaml even if something else fills the disk
+            self.reserve.write_bytes(bytes(RESERVE_BYTES))
+        except OSError as exc:
+            self.stop_recording(exc, failed_write=True)
         for topic, typename in topics:
             msg_type = message_type(typename)
             name = self.resolve_topic_name(topic)
@@ -188,15 +225,53 @@ class Recorder(Node):
 
     def on_record(self, topic: str, typename: str, msg) -> None:
         self.received += 1
-        # As rosbag2 records: log time is the receive time, the header stamp stays in the message.
-        self.writer.write(topic, typename, 0, serialize_message(msg), log_time_ns=self.get_clock().now().nanoseconds)
+        if self.stopped:
+            return  # counted as received, not written
+        cdr = serialize_message(msg)
+        self.unchecked_bytes += len(cdr)
+        if self.unchecked_bytes >= DISK_CHECK_EVERY_BYTES:
+            self.unchecked_bytes = 0
+            free = shutil.disk_usage(self.writer.path).free
+            if free < DISK_MARGIN_BYTES:  # stop while the bag can still be finished cleanly
+                self.stop_recording(OSError(errno.ENOSPC, f"disk nearly full, {free} bytes left"), False)
+        try:
+            # As rosbag2 records: log time is the receive time, the header stamp stays in the message.
+            self.writer.write(topic, typename, 0, cdr, log_time_ns=self.get_clock().now().nanoseconds)
+        except OSError as exc:
+            self.stop_recording(exc, failed_write=True)
+
+    def stop_recording(self, exc: OSError, failed_write: bool) -> None:
+        """End the recording on a full disk or write error: finalise what is on disk, then one error line.
+
+        After a failed write the MCAP writer's state no longer matches the file, so the bag is
+        kept as written (`BagWriter.abandon`) instead of finished over the gap.
+        """
+        self.stopped = True
+        self.reserve.unlink(missing_ok=True)
+        if failed_write:
+            self.writer.abandon()
+        else:
+            self.close_writer()
+        reason = exc.strerror or str(exc)
+        raise RecordingStopped(f"recorder: bag {self.writer.path}: {reason}; recording stopped, the bag keeps "
+                               f"the {self.writer.written} messages written before")
+
+    def close_writer(self) -> None:
+        """Finalise the bag; if finishing it fails (disk full), keep what is on disk."""
+        if not self.writer.closed:
+            try:
+                self.writer.close()
+            except OSError:
+                self.writer.abandon()
+        self.reserve.unlink(missing_ok=True)
 
     def close(self) -> None:
         """Finalise a recording and report received and written counts."""
-        if self.writer is not None and not self.writer.closed:
-            self.writer.close()
+        if self.writer is not None and not getattr(self, "reported", False):
+            self.reported = True
+            self.close_writer()
             report = f"recorder: received {self.received} messages, wrote {self.writer.written}"
-            if self.received != self.writer.written:
+            if self.received != self.writer.written and not self.stopped:  # a stop has said so already
                 self.get_logger().error(report + " (some were lost)")
             print(report, flush=True)
 

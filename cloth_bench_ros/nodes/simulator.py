@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.nodes.common import NAMESPACE, run_node
@@ -79,6 +79,14 @@ class StateMessages:
         return cloud, status
 
 
+def _grid_side(value: object, name: str) -> int:
+    """0 (the engine's default) or 2..MAX_GRID_SIDE vertices."""
+    n = validation.integer(value, name, 0, validation.MAX_GRID_SIDE)
+    if n == 1:
+        raise validation.InputError(f"{name}: 1 vertex per side is no cloth (0 keeps the engine's default, else >= 2)")
+    return n
+
+
 class Simulator(Node):
     """One engine: reset on the first target, one step per further target."""
 
@@ -90,11 +98,19 @@ class Simulator(Node):
         cloth = self.declare_parameter("cloth", "towel").value
         primitive = self.declare_parameter("primitive", "dynamic").value
         self.seed = int(self.declare_parameter("seed", 0).value)
-        overrides = yaml.safe_load(self.declare_parameter("engine_params", "{}").value) or {}
-        nx = int(self.declare_parameter("grid_nx", 0).value)
-        nz = int(self.declare_parameter("grid_nz", 0).value)
-        grid = ClothGrid(nx, nz) if nx and nz else None
+        self.declare_parameter("engine_params", "{}")
+        self.declare_parameter("grid_nx", 0)
+        self.declare_parameter("grid_nz", 0)
         presets_dir = self.declare_parameter("presets_dir", "").value
+        # Every value through the one validation layer; an error names the node and parameter.
+        checked = validation.node_parameters(self, {
+            "rate_hz": validation.rate_hz, "seed": validation.seed, "engine_params": validation.parameter_mapping,
+            "grid_nx": _grid_side, "grid_nz": _grid_side})
+        overrides, nx, nz = checked["engine_params"], checked["grid_nx"], checked["grid_nz"]
+        if (nx == 0) != (nz == 0):
+            raise validation.InputError(f"{self.get_name()}: parameters grid_nx and grid_nz: set both or neither "
+                                        f"(got {nx} and {nz})")
+        grid = ClothGrid(nx, nz) if nx and nz else None
         preset = load_preset(self.engine_name, cloth, primitive, Path(presets_dir) if presets_dir else None)
         params = {**preset, **overrides}
         self.engine = make_engine(self.engine_name, rate_hz, params, grid)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.core.hil_timing import TargetTimeline
 from cloth_bench_ros.nodes.common import (
     NAMESPACE, all_subscriptions_matched, node_keys, publishers_matched, run_node,
@@ -26,11 +27,17 @@ class TrajectoryPublisher(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("trajectory_publisher", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
         primitive = parse_primitive(self.declare_parameter("primitive", "dynamic").value)
-        rate_hz = declare_float(self, "rate_hz", 100.0)
+        declare_float(self, "rate_hz", 100.0)
         self.pacing = self.declare_parameter("pacing", "lockstep").value
-        self.engines = list(self.declare_parameter("engines", ["mujoco"]).value)
-        self.wait_for_recorder = bool(self.declare_parameter("wait_for_recorder", True).value)
-        self.wait_for_evaluator = bool(self.declare_parameter("wait_for_evaluator", True).value)
+        self.declare_parameter("engines", ["mujoco"])
+        self.declare_parameter("wait_for_recorder", True)
+        self.declare_parameter("wait_for_evaluator", True)
+        # Every value through the one validation layer; an error names the node and parameter.
+        p = validation.node_parameters(self, {
+            "rate_hz": validation.rate_hz, "engines": validation.unique,
+            "wait_for_recorder": validation.boolean, "wait_for_evaluator": validation.boolean})
+        self.engines, rate_hz = p["engines"], p["rate_hz"]
+        self.wait_for_recorder, self.wait_for_evaluator = p["wait_for_recorder"], p["wait_for_evaluator"]
         if self.pacing not in PACINGS:
             raise ValueError(f"unknown pacing {self.pacing!r} (valid: {', '.join(PACINGS)})")
         self.timing_log = self.declare_parameter("timing_log", "").value
