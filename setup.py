@@ -28,6 +28,7 @@ setup(
     + bag_files(),
     package_data={package_name: ["py.typed"]},
     install_requires=["setuptools"],
+    extras_require={"newton": ["warp-lang>=1.17", "newton>=1.8"]},
     zip_safe=True,
     maintainer="cloth_bench_ros developers",
     maintainer_email="cloth-bench@example.org",
@@ -44,6 +45,7 @@ setup(
         "cloth_bench_ros.engines": [
             "mujoco = cloth_bench_ros.engines.mujoco_cloth:MujocoCloth",
             "bullet = cloth_bench_ros.engines.bullet_cloth:BulletCloth",
+            "newton = cloth_bench_ros.engines.newton_cloth:NewtonCloth",
         ],
     },
 )
