@@ -340,9 +340,10 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
     if args.cloth not in CLOTHS:
         raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
-    out = Path(args.out) if args.out else Path(f"{args.cloth}_{args.primitive}")
+    suffix = "" if args.reference == "mujoco" else "_" + args.reference.replace("-", "_")
+    out = Path(args.out) if args.out else Path(f"{args.cloth}_{args.primitive}{suffix}")
     bag = synth_command(args.cloth, args.primitive, out, seed=args.seed, overwrite=args.overwrite,
-                        progress=not args.quiet)
+                        progress=not args.quiet, reference=args.reference)
     print(f"synthetic bag written: {bag}")
     return 0
 
@@ -454,6 +455,9 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--primitive", default="dynamic", choices=PRIMITIVES)
     synth.add_argument("--out", help="bag directory (default <cloth>_<primitive>)")
     synth.add_argument("--seed", type=int, default=0, help="sensor noise and reference seed (default 0)")
+    synth.add_argument("--reference", default="mujoco", choices=("mujoco", "newton-vbd"),
+                       help="reference model: mujoco (config/synth.yaml, default) or newton-vbd "
+                            "(config/synth_newton_vbd.yaml); default bag name <cloth>_<primitive>[_newton_vbd]")
     synth.add_argument("--overwrite", action="store_true", help="replace the bag if it exists")
     synth.add_argument("--quiet", action="store_true", help="no progress bar")
     synth.set_defaults(func=cmd_synth)

@@ -185,8 +185,11 @@ class NewtonCloth(ClothEngine):
     def _make_solver(self):
         c = self.config
         if self._vbd:
+            radius = float(c["particle_radius"])
             return newton.solvers.SolverVBD(self.model, iterations=int(c["solver_iterations"]),
-                                            particle_enable_self_contact=bool(c["self_collision"]))
+                                            particle_enable_self_contact=bool(c["self_collision"]),
+                                            particle_self_contact_margin=2 * radius,  # two cloth layers touch
+                                            particle_self_contact_gap=2 * radius)
         return newton.solvers.SolverXPBD(self.model, iterations=int(c["solver_iterations"]))
 
     # -- stepping -----------------------------------------------------------------------------
