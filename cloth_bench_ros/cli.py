@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -82,11 +83,17 @@ def cmd_trajectory(args: argparse.Namespace) -> int:
 
 
 def cmd_engines(args: argparse.Namespace) -> int:
-    from cloth_bench_ros.engines import known_engines
+    from cloth_bench_ros.engines import engine_class, known_engines
 
     print(f"{'engine':<10} {'available':<10} {'version':<10} reason")
     for info in known_engines():
         print(f"{info.name:<10} {'yes' if info.available else 'no':<10} {info.version or '-':<10} {info.reason}")
+    if getattr(args, "warm", False):
+        for info in known_engines():
+            if info.available:
+                start = time.perf_counter()
+                engine_class(info.name).warm()
+                print(f"warmed {info.name} in {time.perf_counter() - start:.1f} s")
     return 0
 
 
@@ -440,6 +447,8 @@ def build_parser() -> argparse.ArgumentParser:
     traj.set_defaults(func=cmd_trajectory)
 
     engines = sub.add_parser("engines", help="list known engines, their availability and version")
+    engines.add_argument("--warm", action="store_true",
+                         help="also compile what makes an engine's first run slow (Newton: Warp's kernel cache)")
     engines.set_defaults(func=cmd_engines)
 
     imp = sub.add_parser("import", help="turn the published dataset (PLY/PCD per frame) into one bag per trial")

@@ -104,6 +104,18 @@ class NewtonCloth(ClothEngine):
         except PackageNotFoundError:
             return f"unknown (warp {wp.config.version})"
 
+    @classmethod
+    def warm(cls) -> None:
+        """Compile every kernel both models use (with and without self-collision) into Warp's cache."""
+        grid = ClothGrid(3, 3)
+        left, right = grid.vertices()[grid.left_corner], grid.vertices()[grid.right_corner]
+        for model in MODELS:
+            for self_collision in (False, True):
+                engine = cls(100.0, {"model": model, "self_collision": self_collision}, grid)
+                engine.reset(0, left, right)
+                engine.step(left, right)
+                engine.close()
+
     def __init__(self, rate_hz: float, params: Mapping[str, object] | None = None,
                  grid: ClothGrid | None = None) -> None:
         super().__init__(rate_hz, params, grid)

@@ -36,8 +36,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-ENGINE_LABEL = {"mujoco": "MuJoCo", "bullet": "Bullet", "flex": "Flex", "sofa": "SOFA"}
-ENGINE_COLOR = {"mujoco": "tab:blue", "bullet": "tab:orange", "flex": "tab:green", "sofa": "tab:red"}
+ENGINE_LABEL = {"mujoco": "MuJoCo", "bullet": "Bullet", "flex": "Flex", "sofa": "SOFA", "newton": "Newton"}
+ENGINE_COLOR = {"mujoco": "tab:blue", "bullet": "tab:orange", "flex": "tab:green", "sofa": "tab:red",
+                "newton": "tab:purple"}
 METRICS = ("CD_d", "HD_d", "CD_q", "HD_q")
 PAPER_ENGINES = ("mujoco", "bullet", "flex", "sofa")
 FPS = 30.0
@@ -970,6 +971,14 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
         t.rows = [[c.strip() for c in line.strip("|").split("|")] for line in md[2:]]
         t.align = "llrlrrrrrrl"
         add_table(t)
+
+    from cloth_bench_ros.report.cross_reference import cross_reference_section  # late: it imports this module
+
+    xref = cross_reference_section(rows)
+    if xref is not None:
+        doc.h(2, xref[0])
+        doc.p(xref[1])
+        add_table(xref[2])
 
     md_path, html_path = out_dir / "report.md", out_dir / "report.html"
     md_path.write_text(doc.markdown())
