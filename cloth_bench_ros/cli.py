@@ -97,6 +97,37 @@ def cmd_engines(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_cross_reference(args: argparse.Namespace) -> int:
+    from cloth_bench_ros.engines.presets import CLOTHS
+    from cloth_bench_ros.report import cross_reference as xr
+    from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
+    from cloth_bench_ros.studies import sweep as sw
+
+    if args.cloth not in CLOTHS:
+        raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
+    if args.seeds < 1:
+        raise UserError(f"--seeds must be at least 1, got {args.seeds}")
+    if not args.rate > 0:
+        raise UserError(f"--rate must be a positive number of Hz, got {args.rate:g}")
+    available = _available_engines()
+    entrants = [(e, o) for e, o in xr.DEFAULT_ENTRANTS if e in available]
+    cells = xr.cross_reference_cells(args.cloth, args.primitive or ["dynamic", "quasi_static"],
+                                     range(args.seeds), args.rate, entrants)
+    for bag in sorted({c.bag for c in cells}):
+        check_bag(Path(bag))
+    out = check_output_dir(args.output)
+    results = out / sw.RESULTS_FILE
+    done = {sw.row_key(r) for r in sw.load_rows(results)}
+    todo = [c for c in cells if c.key() not in done]
+    print(f"cloth-bench cross-reference: {len(cells)} runs, {len(cells) - len(todo)} already in {results}")
+    xr.run_cross_reference(todo, out, on_row=lambda row: sw.append_row(results, row))
+    table = xr.cross_reference_table(sw.load_rows(results))
+    text = table.markdown() if table is not None else "(no rows)"
+    atomic_write_text(out / "cross_reference.md", text + "\n")
+    print(text)
+    return 0
+
+
 def cmd_bag_info(args: argparse.Namespace) -> int:
     from cloth_bench_ros.data.bag import describe
 
@@ -229,7 +260,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_stress(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies.stress import default_cases, run_suite, stress_table, verdict
 
-    engines = args.engine or [e for e in ("mujoco", "bullet") if e in _available_engines()]
+    engines = args.engine or [e for e in ("mujoco", "bullet", "newton") if e in _available_engines()]
     for name in engines:
         from cloth_bench_ros.engines import engine_class
 
@@ -378,7 +409,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep = sub.add_parser("sweep", help="many runs in parallel: engines x rates x cloths x tasks x seeds")
     sweep.add_argument("--mode", default="paper", choices=("paper", "settings"),
                        help="paper: the paper's layout (default); settings: sweep the settings that cost time")
-    sweep.add_argument("--engine", action="append", help="repeat for several (default: mujoco and bullet)")
+    sweep.add_argument("--engine", action="append", help="repeat for several (default: mujoco, bullet, newton)")
     sweep.add_argument("--rate", type=_rate, action="append",
                        help="Hz, repeat for several (default 10, 100, 1000; settings mode: one rate, default 100)")
     sweep.add_argument("--cloth", action="append", help="repeat (default all three; settings mode: towel)")
@@ -420,7 +451,7 @@ def build_parser() -> argparse.ArgumentParser:
     report.set_defaults(func=cmd_report)
 
     stress = sub.add_parser("stress", help="run the suite of hard cases; reports divergence, never fails")
-    stress.add_argument("--engine", action="append", help="repeat for several (default: mujoco and bullet)")
+    stress.add_argument("--engine", action="append", help="repeat for several (default: mujoco, bullet, newton)")
     stress.add_argument("--case", action="append", help="only these cases (repeat; see --list)")
     stress.add_argument("--list", action="store_true", help="list the cases and exit")
     stress.add_argument("--workers", type=int, help="worker processes (default: all cores)")
@@ -450,6 +481,16 @@ def build_parser() -> argparse.ArgumentParser:
     engines.add_argument("--warm", action="store_true",
                          help="also compile what makes an engine's first run slow (Newton: Warp's kernel cache)")
     engines.set_defaults(func=cmd_engines)
+
+    xref = sub.add_parser("cross-reference", help="score every engine against both synthetic references")
+    xref.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel; needs its "
+                      "<cloth>_<task>_newton_vbd bags)")
+    xref.add_argument("--primitive", action="append", choices=PRIMITIVES, help="task (repeatable; default both)")
+    xref.add_argument("--seeds", type=int, default=3, help="seeds 0..N-1 per engine (default 3)")
+    xref.add_argument("--rate", type=float, default=100.0, help="simulator rate in Hz (default 100)")
+    xref.add_argument("--output", default="results/cross_reference",
+                      help="results directory: results.jsonl (resumed) and cross_reference.md")
+    xref.set_defaults(func=cmd_cross_reference)
 
     imp = sub.add_parser("import", help="turn the published dataset (PLY/PCD per frame) into one bag per trial")
     imp.add_argument("root", help="dataset root: <root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd")

@@ -18,9 +18,9 @@ from cloth_bench_ros.core.trajectory import full_targets
 ISSUE_CASES = {"fling_10hz", "stiff_cloth", "light_cloth", "fast_drag_into_table", "large_dt_high_damping"}
 
 
-def test_the_suite_has_the_issue_cases_for_both_engines_with_real_parameter_names():
-    cases = default_cases(["mujoco", "bullet"])
-    for engine in ("mujoco", "bullet"):
+def test_the_suite_has_the_issue_cases_for_every_engine_with_real_parameter_names():
+    cases = default_cases(["mujoco", "bullet", "newton"])
+    for engine in ("mujoco", "bullet", "newton"):
         names = {c.name for c in cases if c.engine == engine}
         assert ISSUE_CASES <= names and len(names) >= 8
     for c in cases:  # every override passes the engine's own schema on top of the preset
