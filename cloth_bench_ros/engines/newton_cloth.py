@@ -70,7 +70,8 @@ class NewtonCloth(ClothEngine):
     params: ClassVar[tuple[Param, ...]] = (
         Param("model", "xpbd", "", doc="xpbd (springs + bending, Flex class) or vbd (triangle FEM, SOFA class)",
               choices=MODELS),
-        Param("mass", 0.5, "kg", 1e-4, 100.0, "mass of the whole cloth"),
+        Param("mass", 0.5, "kg", 1e-4, 100.0,
+              "mass of the whole cloth, spread by area over the free (not grasped) vertices"),
         Param("spring_stiffness", 100.0, "N/m", 0.0, 1e7,
               "stiffness of the structural, shear and bending springs (model xpbd); too stiff for the "
               "particle mass and substep diverges (1000 did at 11x15 and 2 ms)"),
@@ -168,6 +169,8 @@ class NewtonCloth(ClothEngine):
         for corner in self._corners:
             builder.particle_mass[corner] = 0.0
             builder.particle_flags[corner] = int(builder.particle_flags[corner]) & ~int(newton.ParticleFlags.ACTIVE)
+        free = sum(builder.particle_mass)  # the free particles carry the whole mass
+        builder.particle_mass = [m * float(c["mass"]) / free for m in builder.particle_mass]
         if self._vbd:
             builder.color(include_bending=True)
         model = builder.finalize()
@@ -212,7 +215,7 @@ class NewtonCloth(ClothEngine):
         for k in range(1, self.substeps + 1):
             for s in (a, b):
                 wp.launch(_move_grasps, dim=2, inputs=[self._start, self._velocity, self._index, k * self.h],
-                          outputs=[s.particle_q, s.particle_qd])
+                          outputs=[s.particle_q, s.particle_qd], device=DEVICE)
             a.clear_forces()
             self._pipeline.collide(a, self._contacts)
             self.solver.step(a, b, self._control, self._contacts, self.h)
