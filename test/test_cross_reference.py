@@ -89,3 +89,16 @@ def test_cross_reference_table_scores_every_engine_on_every_reference(short_bags
     heading, note, section_table = xr.cross_reference_section(rows)
     assert "towel" in heading and "100 Hz" in note and section_table.rows == table.rows
     assert xr.cross_reference_table([{**r, "mode": "paper"} for r in rows]) is None
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["--cloth", "silk"], ["unknown cloth 'silk'"]),
+    (["--seeds", "0"], ["--seeds must be at least 1"]),
+    (["--rate", "-5"], ["--rate must be a positive number"]),
+])
+def test_cross_reference_command_refuses_bad_input_in_one_line(argv, words, capsys, tmp_path):
+    from cloth_bench_ros.cli import main
+
+    assert main(["cross-reference", "--output", str(tmp_path / "x"), *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and all(w in err for w in words)
