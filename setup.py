@@ -24,6 +24,7 @@ INSTALL_REQUIRES = [
 ]
 EXTRAS_REQUIRE = {
     "synth": ["open3d>=0.18"],  # `cloth-bench synth` only (virtual camera outlier removal); large
+    "newton": ["warp-lang>=1.17", "newton>=1.8"],  # the third engine (Warp on the CPU)
     "test": ["pytest>=7.0", "mcap-ros2-support>=0.5", "colcon-common-extensions>=0.3", "flake8>=6.0",
              "pydocstyle>=6.3"],
 }
@@ -69,6 +70,7 @@ setup(
         "cloth_bench_ros.engines": [
             "mujoco = cloth_bench_ros.engines.mujoco_cloth:MujocoCloth",
             "bullet = cloth_bench_ros.engines.bullet_cloth:BulletCloth",
+            "newton = cloth_bench_ros.engines.newton_cloth:NewtonCloth",
         ],
     },
 )

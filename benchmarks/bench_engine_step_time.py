@@ -3,7 +3,9 @@
 Runs the full trajectory (settle phase + quintic part) of a primitive on the default 11 x 15
 grid, timing every engine.step() with perf_counter, and prints per engine and rate the
 internal substeps, the median and 95th-percentile step time (up to a divergence), the real-time factor (dt over
-the mean step time) and whether the engine diverged.
+the mean step time), the mean step time as a multiple of MuJoCo's at the same rate (measured in this
+process, so the machine's load affects both alike) and whether the engine diverged. Newton runs in
+both of its cloth models (vbd, its preset's, and xpbd).
 
     .venv/bin/python benchmarks/bench_engine_step_time.py [--primitive dynamic] [--cloth towel]
         [--rates 10 100 1000] [--engines mujoco bullet] [--seconds 7.4] [--one-step-per-target]
@@ -22,6 +24,10 @@ import numpy as np
 from cloth_bench_ros.engines import known_engines, make_engine
 from cloth_bench_ros.engines.presets import CLOTHS, load_preset
 from cloth_bench_ros.core.trajectory import PRIMITIVES, full_targets
+
+# Cloth models timed per engine (overrides of the preset); engines not listed run their preset.
+VARIANTS = {"newton": [{"model": "vbd"}, {"model": "xpbd"}]}
+BASELINE = "mujoco"
 
 
 def time_steps(engine_name: str, rate_hz: float, params: dict, primitive: str,
@@ -54,21 +60,26 @@ def main() -> None:
     args = parser.parse_args()
 
     available = {i.name: i.version for i in known_engines() if i.available}
-    engines = args.engines or sorted(available)
+    engines = args.engines or sorted(available, key=lambda n: (n != BASELINE, n))
     print(f"{args.cloth} {args.primitive} preset, 11 x 15 grid; step time per engine.step()")
-    print(f"{'engine':<16} {'rate Hz':>8} {'substeps':>8} {'median ms':>10} {'p95 ms':>8} "
-          f"{'real-time x':>11}  diverged")
+    print(f"{'engine':<28} {'rate Hz':>8} {'substeps':>8} {'median ms':>10} {'p95 ms':>8} "
+          f"{'real-time x':>11} {'x ' + BASELINE:>9}  diverged")
+    baseline: dict[float, float] = {}
     for name in engines:
-        params = load_preset(name, args.cloth, args.primitive)
-        label = f"{name} {available.get(name, '?')}"
-        for rate in args.rates:
-            run_params = {**params, "timestep": 1.0 / rate, "substeps": 1} if args.one_step_per_target else params
-            times, engine = time_steps(name, rate, run_params, args.primitive, args.seconds)
-            d = engine.divergence
-            realtime = (1.0 / rate) / times.mean()
-            print(f"{label:<16} {rate:>8g} {getattr(engine, 'substeps', 1):>8} {1e3 * np.median(times):>10.3f} "
-                  f"{1e3 * np.percentile(times, 95):>8.3f} {realtime:>11.2f}  "
-                  f"{f'at step {d.step}: {d.reason}' if d else 'no'}")
+        for variant in VARIANTS.get(name, [{}]):
+            params = {**load_preset(name, args.cloth, args.primitive), **variant}
+            label = f"{name} {available.get(name, '?')}" + (f" {variant['model']}" if variant else "")
+            for rate in args.rates:
+                run_params = {**params, "timestep": 1.0 / rate, "substeps": 1} if args.one_step_per_target else params
+                times, engine = time_steps(name, rate, run_params, args.primitive, args.seconds)
+                d = engine.divergence
+                realtime = (1.0 / rate) / times.mean()
+                if name == BASELINE:
+                    baseline[rate] = float(times.mean())
+                ratio = f"{times.mean() / baseline[rate]:.2f}" if rate in baseline else "-"
+                print(f"{label:<28} {rate:>8g} {getattr(engine, 'substeps', 1):>8} {1e3 * np.median(times):>10.3f} "
+                      f"{1e3 * np.percentile(times, 95):>8.3f} {realtime:>11.2f} {ratio:>9}  "
+                      f"{f'at step {d.step}: {d.reason}' if d else 'no'}", flush=True)
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -162,11 +163,48 @@ def cmd_trajectory(args: argparse.Namespace) -> int:
 
 
 def cmd_engines(args: argparse.Namespace) -> int:
-    from cloth_bench_ros.engines import known_engines
+    from cloth_bench_ros.engines import engine_class, known_engines
 
     print(f"{'engine':<10} {'available':<10} {'version':<10} reason")
     for info in known_engines():
         print(f"{info.name:<10} {'yes' if info.available else 'no':<10} {info.version or '-':<10} {info.reason}")
+    if getattr(args, "warm", False):
+        for info in known_engines():
+            if info.available:
+                start = time.perf_counter()
+                engine_class(info.name).warm()
+                print(f"warmed {info.name} in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def cmd_cross_reference(args: argparse.Namespace) -> int:
+    from cloth_bench_ros.engines.presets import CLOTHS
+    from cloth_bench_ros.report import cross_reference as xr
+    from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
+    from cloth_bench_ros.studies import sweep as sw
+
+    if args.cloth not in CLOTHS:
+        raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
+    if args.seeds < 1:
+        raise UserError(f"--seeds must be at least 1, got {args.seeds}")
+    if not args.rate > 0:
+        raise UserError(f"--rate must be a positive number of Hz, got {args.rate:g}")
+    available = _available_engines()
+    entrants = [(e, o) for e, o in xr.DEFAULT_ENTRANTS if e in available]
+    cells = xr.cross_reference_cells(args.cloth, args.primitive or ["dynamic", "quasi_static"],
+                                     range(args.seeds), args.rate, entrants)
+    for bag in sorted({c.bag for c in cells}):
+        check_bag(Path(bag))
+    out = check_output_dir(args.output)
+    results = out / sw.RESULTS_FILE
+    done = {sw.row_key(r) for r in sw.load_rows(results)}
+    todo = [c for c in cells if c.key() not in done]
+    print(f"cloth-bench cross-reference: {len(cells)} runs, {len(cells) - len(todo)} already in {results}")
+    xr.run_cross_reference(todo, out, on_row=lambda row: sw.append_row(results, row))
+    table = xr.cross_reference_table(sw.load_rows(results))
+    text = table.markdown() if table is not None else "(no rows)"
+    atomic_write_text(out / "cross_reference.md", text + "\n")
+    print(text)
     return 0
 
 
@@ -270,7 +308,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_stress(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies.stress import run_suite, select_cases, stress_table, verdict
 
-    engines = validation.unique(args.engine or [e for e in ("mujoco", "bullet") if e in _available_engines()], "--engine")
+    engines = validation.unique(args.engine or [e for e in ("mujoco", "bullet", "newton") if e in _available_engines()],
+                                "--engine")
     cases = select_cases(engines, args.case, args.max_wall_s)
     if args.list:
         for c in cases:
@@ -446,9 +485,10 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
     if args.cloth not in CLOTHS:
         raise UserError(f"unknown cloth {args.cloth!r} (valid: {', '.join(CLOTHS)})")
-    out = Path(args.out) if args.out else Path(f"{args.cloth}_{args.primitive}")
+    suffix = "" if args.reference == "mujoco" else "_" + args.reference.replace("-", "_")
+    out = Path(args.out) if args.out else Path(f"{args.cloth}_{args.primitive}{suffix}")
     bag = synth_command(args.cloth, args.primitive, out, seed=args.seed, overwrite=args.overwrite,
-                        progress=not args.quiet)
+                        progress=not args.quiet, reference=args.reference)
     print(f"synthetic bag written: {bag}")
     return 0
 
@@ -500,7 +540,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep = sub.add_parser("sweep", help="many runs in parallel: engines x rates x cloths x tasks x seeds")
     sweep.add_argument("--mode", default="paper", choices=("paper", "settings"),
                        help="paper: the paper's layout (default); settings: sweep the settings that cost time")
-    sweep.add_argument("--engine", action="append", help="repeat for several (default: mujoco and bullet)")
+    sweep.add_argument("--engine", action="append", help="repeat for several (default: mujoco, bullet, newton)")
     sweep.add_argument("--rate", type=_rate, action="append",
                        help="Hz, repeat for several (default 10, 100, 1000; settings mode: one rate, default 100)")
     sweep.add_argument("--cloth", action="append", help="repeat (default all three; settings mode: towel)")
@@ -543,7 +583,7 @@ def build_parser() -> argparse.ArgumentParser:
     report.set_defaults(func=cmd_report)
 
     stress = sub.add_parser("stress", help="run the suite of hard cases; reports divergence, never fails")
-    stress.add_argument("--engine", action="append", help="repeat for several (default: mujoco and bullet)")
+    stress.add_argument("--engine", action="append", help="repeat for several (default: mujoco, bullet, newton)")
     stress.add_argument("--case", action="append", help="only these cases (repeat; see --list)")
     stress.add_argument("--list", action="store_true", help="list the cases and exit")
     stress.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
@@ -618,7 +658,19 @@ def build_parser() -> argparse.ArgumentParser:
     traj.set_defaults(func=cmd_trajectory)
 
     engines = sub.add_parser("engines", help="list known engines, their availability and version")
+    engines.add_argument("--warm", action="store_true",
+                         help="also compile what makes an engine's first run slow (Newton: Warp's kernel cache)")
     engines.set_defaults(func=cmd_engines)
+
+    xref = sub.add_parser("cross-reference", help="score every engine against both synthetic references")
+    xref.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel; needs its "
+                      "<cloth>_<task>_newton_vbd bags)")
+    xref.add_argument("--primitive", action="append", choices=PRIMITIVES, help="task (repeatable; default both)")
+    xref.add_argument("--seeds", type=int, default=3, help="seeds 0..N-1 per engine (default 3)")
+    xref.add_argument("--rate", type=float, default=100.0, help="simulator rate in Hz (default 100)")
+    xref.add_argument("--output", default="results/cross_reference",
+                      help="results directory: results.jsonl (resumed) and cross_reference.md")
+    xref.set_defaults(func=cmd_cross_reference)
 
     imp = sub.add_parser("import", help="turn the published dataset (PLY/PCD per frame) into one bag per trial")
     imp.add_argument("root", help="dataset root: <root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd")
@@ -637,6 +689,9 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--primitive", default="dynamic", choices=PRIMITIVES)
     synth.add_argument("--out", help="bag directory (default <cloth>_<primitive>)")
     synth.add_argument("--seed", type=_seed, default=0, help="sensor noise and reference seed (default 0)")
+    synth.add_argument("--reference", default="mujoco", choices=("mujoco", "newton-vbd"),
+                       help="reference model: mujoco (config/synth.yaml, default) or newton-vbd "
+                            "(config/synth_newton_vbd.yaml); default bag name <cloth>_<primitive>[_newton_vbd]")
     synth.add_argument("--overwrite", action="store_true", help="replace the bag if it exists")
     synth.add_argument("--quiet", action="store_true", help="no progress bar")
     synth.set_defaults(func=cmd_synth)

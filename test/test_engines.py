@@ -35,11 +35,13 @@ ENGINES = sorted(info.name for info in known_engines() if info.available)
 MODELS: dict[str, list[dict]] = {
     "mujoco": [{"model": "shell"}, {"model": "edges"}],
     "bullet": [{"model": "mass_spring"}, {"model": "neo_hookean", "timestep": 0.001}],
+    "newton": [{"model": "xpbd"}, {"model": "vbd"}],
 }
 # A case built to diverge per engine: 10 Hz, one internal step per target, very stiff cloth.
 DIVERGING: dict[str, dict] = {
     "mujoco": {"model": "edges", "edge_stiffness": 1e6, "timestep": 0.1},
     "bullet": {"model": "mass_spring", "elastic": 1e6, "bending": 1e6, "damping": 0.0, "timestep": 0.1},
+    "newton": {"model": "xpbd", "spring_stiffness": 1e6, "spring_damping": 0.0, "timestep": 0.1},
 }
 
 VARIANTS = [

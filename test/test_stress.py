@@ -18,9 +18,9 @@ from cloth_bench_ros.core.trajectory import full_targets
 ISSUE_CASES = {"fling_10hz", "stiff_cloth", "light_cloth", "fast_drag_into_table", "large_dt_high_damping"}
 
 
-def test_the_suite_has_the_issue_cases_for_both_engines_with_real_parameter_names():
-    cases = default_cases(["mujoco", "bullet"])
-    for engine in ("mujoco", "bullet"):
+def test_the_suite_has_the_issue_cases_for_every_engine_with_real_parameter_names():
+    cases = default_cases(["mujoco", "bullet", "newton"])
+    for engine in ("mujoco", "bullet", "newton"):
         names = {c.name for c in cases if c.engine == engine}
         assert ISSUE_CASES <= names and len(names) >= 8
     for c in cases:  # every override passes the engine's own schema on top of the preset
@@ -61,7 +61,7 @@ def test_cli_stress_finds_a_diverging_case_per_engine_and_exits_0(tmp_path, caps
     out = capsys.readouterr().out
     assert code == 0, out
     rows = load_stress(tmp_path)
-    assert len(rows) == 4 and {r["status"] for r in rows} <= {"ok", "diverged"}
+    assert len(rows) == 6 and {r["status"] for r in rows} <= {"ok", "diverged"}  # mujoco, bullet, newton
     v = verdict(rows)
     assert v["mujoco"] and v["bullet"]  # at least one diverging case per engine
     assert "stiff_cloth" in v["mujoco"] and "fling_10hz" in v["bullet"]
@@ -72,7 +72,7 @@ def test_cli_stress_finds_a_diverging_case_per_engine_and_exits_0(tmp_path, caps
         if r["diverged"]:
             assert r["diverged_at_step"] >= 1 and r["diverged_reason"]
     assert "mujoco: 1 of 2 cases diverged (stiff_cloth)" in out
-    assert (tmp_path / "stress.md").read_text().count("\n") == 2 + 4
+    assert (tmp_path / "stress.md").read_text().count("\n") == 2 + 6
     json.loads((tmp_path / "stress.jsonl").read_text().splitlines()[0])
 
 

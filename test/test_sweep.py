@@ -65,6 +65,12 @@ def test_settings_cells_are_a_factorial_over_the_axes_the_engine_has(bag_dir):
     cell = next(c for c in cells if c.config == "grid=11x15,self_collision=on,timestep=0.005")
     assert cell.grid == (11, 15) and cell.params == {"self_collision": True, "timestep": 0.005}
     assert all(c.mode == "settings" for c in cells)
+    # Newton has every time-costing axis (mesh, substep, iterations, contacts) in its schema.
+    axes = {"grid": [(6, 8), (11, 15)], "self_collision": [False, True], "timestep": [None, 0.005],
+            "solver_iterations": [None, 5]}
+    newton = sw.settings_cells(["newton"], 100.0, ["towel"], ["dynamic"], [0], bag_dir, axes)
+    assert len(newton) == 2 * 2 * 2 * 2
+    assert "grid=6x8,self_collision=on,timestep=0.005,solver_iterations=5" in {c.config for c in newton}
 
 
 def test_bad_overrides_and_grids_are_refused_before_any_work(bag_dir):
@@ -151,7 +157,7 @@ def test_cli_sweep_dry_run_counts_cells(bag_dir, tmp_path, capsys):
     assert main(["sweep", "--bag-dir", str(bag_dir), "--cloth", "towel", "--seeds", "3", "--dry-run",
                  "--output", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "36 cells" in out and "0 already" in out
+    assert "54 cells" in out and "0 already" in out  # mujoco, bullet, newton x 3 rates x 2 tasks x 3 seeds
 
 
 @pytest.mark.parametrize("argv, message", [

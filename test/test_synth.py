@@ -242,3 +242,19 @@ def test_bundled_bags_are_complete_and_within_budget():
             assert trial.source.startswith("synthetic: reference mujoco shell cloth 31x43, integrator discrete")
             total += sum(f.stat().st_size for f in path.iterdir())
     assert total <= 25_000_000
+
+
+def test_bundled_newton_reference_bags_for_the_towel():
+    from cloth_bench_ros.report.cross_reference import reference_bag
+
+    for primitive, frames in (("dynamic", 132), ("quasi_static", 420)):
+        path = reference_bag("towel", primitive, "newton-vbd")
+        reader = BagReader(path)
+        stamps = [s for s, _ in reader.clouds(CLOUD_TOPIC)]
+        assert stamps == [round(k * 1e9 / 30) for k in range(frames)], path
+        assert reader.complete and reader.stats.nan_points_dropped == 0
+        trial = reader.trial
+        assert (trial.cloth, trial.primitive) == ("towel", primitive)
+        assert trial.source.startswith("synthetic: reference newton vbd cloth 31x43, 300 Hz, self-collision on")
+    bags = bundled_bag("towel", "dynamic").parent
+    assert sum(f.stat().st_size for f in bags.rglob("*") if f.is_file()) <= 40_000_000  # all of bags/

@@ -36,9 +36,16 @@ class SynthError(ValueError):
     """A synthetic reference that cannot be made (bad config/synth.yaml, diverged reference)."""
 
 
-def config_path() -> Path:
-    """config/synth.yaml of the source tree or of the installed package."""
-    return share_dir("config") / "synth.yaml"
+# Reference models (`cloth-bench synth --reference`): name -> file under config/. MuJoCo is the default.
+REFERENCES = {"mujoco": "synth.yaml", "newton-vbd": "synth_newton_vbd.yaml"}
+DEFAULT_REFERENCE = "mujoco"
+
+
+def config_path(reference: str = DEFAULT_REFERENCE) -> Path:
+    """config/synth.yaml (or the file of another reference) of the source tree or installed package."""
+    if reference not in REFERENCES:
+        raise SynthError(f"unknown synthetic reference {reference!r} (valid: {', '.join(REFERENCES)})")
+    return share_dir("config") / REFERENCES[reference]
 
 
 # ------------------------------------------------------------------------------------- camera
@@ -280,10 +287,12 @@ class SynthConfig:
         """One line naming the reference model and the camera (the bag's `source`)."""
         p = dict(self.params)
         cam, noise = self.sensor.camera, self.sensor.noise
-        physics = ", ".join(f"{k} {p[k]:g}" for k in ("mass", "young", "poisson", "thickness", "friction") if k in p)
+        physics = ", ".join(f"{k} {p[k]:g}" for k in ("mass", "young", "poisson", "thickness", "bending",
+                                                      "tri_stiffness", "friction") if k in p)
+        integrator = f"integrator {p['integrator']}, " if "integrator" in p else ""
         return (
             f"synthetic: reference {self.engine} {p.get('model', '')} cloth {self.grid[0]}x{self.grid[1]}, "
-            f"integrator {p.get('integrator', '')}, {self.rate_hz:g} Hz, self-collision "
+            f"{integrator}{self.rate_hz:g} Hz, self-collision "
             f"{'on' if p.get('self_collision') else 'off'} ({physics}), seed {self.seed}; "
             f"virtual Azure Kinect {cam.width}x{cam.height} hfov {cam.hfov_deg:g} deg at "
             f"({', '.join(f'{x:g}' for x in cam.position)}) looking along -y, z-buffer visibility, "
@@ -296,13 +305,13 @@ class SynthConfig:
 
 
 def reference_config(cloth: str, primitive: str, seed: int = 0, path: Path | None = None,
-                     **overrides: Any) -> SynthConfig:
-    """The reference model of `cloth` and `primitive` from config/synth.yaml; SynthError if unknown.
-
-    `overrides` replace SynthConfig fields (e.g. a coarser grid or a shorter duration for tests).
+                     reference: str = DEFAULT_REFERENCE, **overrides: Any) -> SynthConfig:
+    """The reference model of `cloth` and `primitive` from the reference's config file (config/synth.yaml
+    for MuJoCo); SynthError if unknown. `overrides` replace SynthConfig fields (e.g. a coarser grid
+    or a shorter duration for tests).
     """
     primitive = parse_primitive(primitive).value
-    path = path or config_path()
+    path = path or config_path(reference)
     try:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
         ref = doc["reference"]
@@ -409,6 +418,7 @@ def write_synthetic_bag(config: SynthConfig, out_dir: Path, overwrite: bool = Fa
 
 
 def synth_command(cloth: str, primitive: str, out: Path, seed: int = 0, overwrite: bool = False,
-                  progress: bool = True) -> Path:
-    """`cloth-bench synth`: the synthetic bag of a cloth and primitive, from config/synth.yaml."""
-    return write_synthetic_bag(reference_config(cloth, primitive, seed), Path(out), overwrite, progress)
+                  progress: bool = True, reference: str = DEFAULT_REFERENCE) -> Path:
+    """`cloth-bench synth`: the synthetic bag of a cloth and primitive from a reference's config."""
+    config = reference_config(cloth, primitive, seed, reference=reference)
+    return write_synthetic_bag(config, Path(out), overwrite, progress)

@@ -117,6 +117,10 @@ class ClothEngine(abc.ABC):
         """Version of the underlying simulator."""
         return "unknown"
 
+    @classmethod
+    def warm(cls) -> None:
+        """Do once what would make an engine's first run slow (e.g. compiling kernels into a cache)."""
+
     @property
     def dt(self) -> float:
         return 1.0 / self.rate_hz

@@ -15,10 +15,6 @@ every substep along the straight line from the previous target to the new one.
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import os
-import sys
 import tempfile
 from importlib.metadata import PackageNotFoundError, version as package_version
 from pathlib import Path
@@ -26,33 +22,9 @@ from typing import ClassVar, Mapping
 
 import numpy as np
 
+from cloth_bench_ros.engines.quiet import quiet_c_output
 
-_LIBC = ctypes.CDLL(None)
-
-
-@contextlib.contextmanager
-def _quiet_c_output():
-    """Silence what Bullet's C++ code prints (build time on stderr, mesh statistics on stdout)."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    try:
-        saved = [os.dup(1), os.dup(2)]
-    except OSError:  # no standard file descriptors: nothing to silence
-        yield
-        return
-    with open(os.devnull, "w") as devnull:
-        os.dup2(devnull.fileno(), 1)
-        os.dup2(devnull.fileno(), 2)
-        try:
-            yield
-        finally:
-            _LIBC.fflush(None)  # C stdio buffers what Bullet printed: drop it while still silenced
-            for fd, copy in zip((1, 2), saved):
-                os.dup2(copy, fd)
-                os.close(copy)
-
-
-with _quiet_c_output():  # pybullet prints its build time on import
+with quiet_c_output():  # pybullet prints its build time on import
     import pybullet as pb
 
 from cloth_bench_ros.core import scene
@@ -210,7 +182,7 @@ class BulletCloth(ClothEngine):
             collisionMargin=float(c["collision_margin"]), frictionCoeff=float(c["friction"]),
             useSelfCollision=int(c["self_collision"]), useFaceContact=1, physicsClientId=cid,
         )
-        with _quiet_c_output():
+        with quiet_c_output():
             self._cloth = self._load_cloth(common)
         if self._cloth < 0:
             raise RuntimeError(f"PyBullet could not load the cloth mesh {self._mesh}")

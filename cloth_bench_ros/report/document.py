@@ -209,6 +209,14 @@ def settings_section(rows: Sequence[dict], tol_rel: float, tol_abs: float, recs:
     return blocks
 
 
+def cross_reference_blocks(rows: Sequence[dict]) -> list[Block]:
+    """Each engine against each synthetic reference (the reference's bias as numbers)."""
+    from cloth_bench_ros.report.cross_reference import cross_reference_section
+
+    xref = cross_reference_section(rows)
+    return [] if xref is None else [heading(2, xref[0]), paragraph(xref[1]), table_block(xref[2])]
+
+
 def stress_section(stress_rows: Sequence[dict]) -> list[Block]:
     """The stress suite: which hard cases each engine survives."""
     from cloth_bench_ros.studies.stress import stress_table, verdict
@@ -251,6 +259,7 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
         doc.extend(stress_section(stress_rows))
     for ident in identifications:
         doc.extend(identification_section(ident, rows))
+    doc.extend(cross_reference_blocks(rows))
     doc.extend(comparison_section(results_dir))
     tables = {t.name: t for t in doc.tables()}
     md, html, images = write_document(doc, out_dir, csv_only=[results_table(rows)])

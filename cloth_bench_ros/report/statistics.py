@@ -9,8 +9,9 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-ENGINE_LABEL = {"mujoco": "MuJoCo", "bullet": "Bullet", "flex": "Flex", "sofa": "SOFA"}
-ENGINE_COLOR = {"mujoco": "tab:blue", "bullet": "tab:orange", "flex": "tab:green", "sofa": "tab:red"}
+ENGINE_LABEL = {"mujoco": "MuJoCo", "bullet": "Bullet", "flex": "Flex", "sofa": "SOFA", "newton": "Newton"}
+ENGINE_COLOR = {"mujoco": "tab:blue", "bullet": "tab:orange", "flex": "tab:green", "sofa": "tab:red",
+                "newton": "tab:purple"}
 METRICS = ("CD_d", "HD_d", "CD_q", "HD_q")
 PAPER_ENGINES = ("mujoco", "bullet", "flex", "sofa")
 FPS = 30.0

@@ -20,7 +20,7 @@ from typing import Iterable, Sequence
 from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
 
 DEFAULT_RATES = (10.0, 100.0, 1000.0)
-DEFAULT_ENGINES = ("mujoco", "bullet")
+DEFAULT_ENGINES = ("mujoco", "bullet", "newton")
 DEFAULT_CLOTHS = ("towel", "chequered", "linen")
 DEFAULT_PRIMITIVES = ("dynamic", "quasi_static")
 DEFAULT_SEEDS = 20
@@ -203,5 +203,5 @@ def estimated_cost(cell: Cell) -> float:
     nx, nz = cell.grid or (11, 15)
     timestep = float(params.get("timestep", 0.002 if cell.engine == "mujoco" else 0.0025))
     internal_steps = duration * max(cell.rate_hz, 1.0 / timestep)
-    per_internal_step = 0.4e-3 * (nx * nz / 165.0) * (1.7 if cell.engine == "bullet" else 1.0)
+    per_internal_step = 0.4e-3 * (nx * nz / 165.0) * {"bullet": 1.7, "newton": 5.0}.get(cell.engine, 1.0)
     return internal_steps * per_internal_step + duration * cell.rate_hz * 0.25e-3 + 1.0

@@ -54,12 +54,15 @@ def _one_step(rate: float) -> dict:
     return {"timestep": 1.0 / rate, "substeps": 1}
 
 
-def default_cases(engines: Sequence[str] = ("mujoco", "bullet")) -> list[StressCase]:
+def default_cases(engines: Sequence[str] = ("mujoco", "bullet", "newton")) -> list[StressCase]:
     """The suite: the hard cases of issue 5 and some more, with each engine's own parameter names."""
     cases: list[StressCase] = []
     for e in engines:
         stiff = ({"model": "edges", "edge_stiffness": 1e6} if e == "mujoco"
-                 else {"elastic": 1e5, "bending": 1e5} if e == "bullet" else {})
+                 else {"elastic": 1e5, "bending": 1e5} if e == "bullet"
+                 else {"tri_stiffness": 1e6, "tri_area_stiffness": 1e6, "spring_stiffness": 1e5} if e == "newton"
+                 else {})
+        damping = "tri_damping" if e == "newton" else "damping"  # Newton's preset model is vbd
         common = [
             StressCase("fling_10hz", e, "fling at 10 Hz, one internal step per target (dt = 0.1 s)",
                        "dynamic", 10.0, _one_step(10.0)),
@@ -79,7 +82,7 @@ def default_cases(engines: Sequence[str] = ("mujoco", "bullet")) -> list[StressC
                        "quasi-static drag played 5x faster, grippers driven 2 cm into the table",
                        "quasi_static", 100.0, {}, time_compression=5.0, drag_height=-0.02),
             StressCase("large_dt_high_damping", e, "dt = 0.1 s (10 Hz, one step per target) with damping 100",
-                       "dynamic", 10.0, {**_one_step(10.0), "damping": 100.0}),
+                       "dynamic", 10.0, {**_one_step(10.0), damping: 100.0}),
             StressCase("fine_mesh_one_step", e, "fine 21 x 29 mesh, fling at 100 Hz with one step per target",
                        "dynamic", 100.0, _one_step(100.0), grid=(21, 29)),
             StressCase("gripper_jump", e, "the right gripper jumps 0.3 m outwards in one step (tears the cloth)",
@@ -89,7 +92,7 @@ def default_cases(engines: Sequence[str] = ("mujoco", "bullet")) -> list[StressC
             StressCase("self_collision_fling", e, "fling at 100 Hz with cloth self-collision",
                        "dynamic", 100.0, {"self_collision": True}),
             StressCase("no_damping_one_step", e, "fling at 100 Hz, one step per target, no damping",
-                       "dynamic", 100.0, {**_one_step(100.0), "damping": 0.0}),
+                       "dynamic", 100.0, {**_one_step(100.0), damping: 0.0}),
         ]
         cases += common
     return cases
