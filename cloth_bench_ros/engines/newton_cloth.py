@@ -36,9 +36,9 @@ with quiet_c_output():  # Warp's C++ init warns on stderr that there is no CUDA 
     wp.init()
 import newton  # noqa: E402
 
-from cloth_bench_ros.core import scene
-from cloth_bench_ros.core.scene import ClothGrid
-from cloth_bench_ros.engines.base import ClothEngine, Param
+from cloth_bench_ros.core import scene  # noqa: E402  (after Warp's quiet init)
+from cloth_bench_ros.core.scene import ClothGrid  # noqa: E402
+from cloth_bench_ros.engines.base import ClothEngine, Param  # noqa: E402
 
 # Noise of the seeded initial state: i.i.d. normal per coordinate of every free vertex.
 SEED_NOISE_STD = 0.0005  # m

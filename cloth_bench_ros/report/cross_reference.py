@@ -43,7 +43,7 @@ def reference_bag(cloth: str, primitive: str, reference: str) -> Path:
 
 
 def entrant_name(engine: str, overrides: dict) -> str:
-    """"newton (vbd)" for an engine with a model override, else the engine's label."""
+    """An entrant's name: "newton (vbd)" for an engine with a model override, else the engine's label."""
     model = overrides.get("model")
     return f"{engine_label(engine)} ({model})" if model else engine_label(engine)
 
