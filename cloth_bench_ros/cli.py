@@ -215,6 +215,14 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bag_rewrite(args: argparse.Namespace) -> int:
+    from cloth_bench_ros.data.bag_rewrite import rewrite_bag
+
+    counts = rewrite_bag(Path(args.src), Path(args.dst))
+    print(f"rewrote {args.src} -> {args.dst}: {sum(counts.values())} messages, unchanged (checked)")
+    return 0
+
+
 def _grid(text: str) -> tuple[int, int]:
     return _option(validation.parse_grid, "grid")(text)
 
@@ -701,6 +709,11 @@ def build_parser() -> argparse.ArgumentParser:
     info = bag_sub.add_parser("info", help="describe a bag: topics, frames, trial metadata")
     info.add_argument("path")
     info.set_defaults(func=cmd_bag_info)
+    rewrite = bag_sub.add_parser("rewrite", help="copy a bag into the current writer's layout (rosbag2 Jazzy, "
+                                 "metadata version 9, type hashes); messages and trial unchanged")
+    rewrite.add_argument("src", help="bag to read")
+    rewrite.add_argument("dst", help="new bag directory (must not exist or be empty)")
+    rewrite.set_defaults(func=cmd_bag_rewrite)
     return parser
 
 

@@ -377,6 +377,14 @@ class BagReader:
                     pass
                 yield topic, msgtype, stamp, rec.data
 
+    def logged_messages(self, topics: Iterable[str] | str | None = None) -> Iterator[tuple[str, str, int, bytes]]:
+        """(topic, msgtype, log_time_ns, cdr) in record order: the MCAP log time, not the header stamp."""
+        wanted = {topics} if isinstance(topics, str) else (set(topics) if topics is not None else None)
+        for mf in self._files:
+            for rec, topic in self._records(mf, wanted):
+                if isinstance(rec, Message):
+                    yield topic, mf.topics.get(topic) or self.topics.get(topic, ""), rec.log_time, rec.data
+
     def clouds(self, topic: str | None = None) -> Iterator[tuple[int, np.ndarray]]:
         """(stamp_ns, float64 (n, 3) points) of each non-empty cloud, NaN points dropped.
 

@@ -1,0 +1,76 @@
+"""`cloth-bench bag rewrite`: copy a bag into the current writer's layout, messages unchanged.
+
+Older bags of the project (metadata version 8, no `topic_type_hash` on the MCAP channels) are
+read with BagReader and written again with BagWriter; the copy is then read back and compared.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+from cloth_bench_ros.data.bag_reader import BagReader
+from cloth_bench_ros.data.bag_writer import BagWriter
+from cloth_bench_ros.data.errors import BagError
+from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, serialize
+from cloth_bench_ros.data.trial import CUSTOM_DATA_PREFIX, TRIAL_TOPIC, trial_message
+
+
+def _custom_data(trial_strings: dict[str, str] | None) -> dict[str, str]:
+    return {CUSTOM_DATA_PREFIX + k: v for k, v in (trial_strings or {}).items()}
+
+
+def _check_same(src: BagReader, dst: BagReader) -> None:
+    """BagError unless dst holds src's messages (topic, type, log time, bytes, order) and trial."""
+    if src.trial != dst.trial or src.custom_data != dst.custom_data:
+        raise BagError(f"bag {dst.path}: trial metadata differs from {src.path} after the rewrite")
+    old, new = list(src.logged_messages()), list(dst.logged_messages())
+    if len(old) != len(new):
+        raise BagError(f"bag {dst.path}: {len(new)} messages after the rewrite, {src.path} has {len(old)}")
+    for i, (a, b) in enumerate(zip(old, new)):
+        if a[:3] != b[:3] or bytes(a[3]) != bytes(b[3]):
+            raise BagError(f"bag {dst.path}: message {i} ({a[0]}) differs from {src.path} after the rewrite")
+
+
+def rewrite_bag(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> dict[str, int]:
+    """Write the bag src anew at dst with BagWriter (current layout); messages per topic.
+
+    Payloads, topics, types, log times and trial metadata stay the same, which is checked by
+    reading dst back; BagError (and no dst) if src cannot be carried over unchanged.
+    """
+    src_path, dst_path = Path(src), Path(dst)
+    if dst_path.exists() and src_path.exists() and dst_path.resolve() == src_path.resolve():
+        raise BagError(f"bag {dst_path}: give a new directory, not the source bag itself")
+    reader = BagReader(src_path)
+    if not reader.complete:
+        raise BagError(f"bag {src_path} is truncated; rewriting would keep only part of it")
+    trial = reader.trial
+    if reader.custom_data != _custom_data(trial.to_strings() if trial else None):
+        raise BagError(f"bag {src_path}: custom_data holds more than the trial; the writer would drop it")
+    created = not dst_path.exists()
+    writer = BagWriter(dst_path, trial)
+    try:
+        # BagWriter writes the trial message itself, first; the source's must be that very message.
+        expected_first = None if trial is None else (TRIAL_TOPIC, DIAGNOSTIC_ARRAY, 0, serialize(trial_message(trial)))
+        for topic, msgtype, log_ns, cdr in reader.logged_messages():
+            if expected_first is not None:
+                if (topic, msgtype, log_ns, bytes(cdr)) != expected_first:
+                    raise BagError(f"bag {src_path} does not open with the trial message the writer writes; "
+                                   "rewriting would change its messages")
+                expected_first = None
+                continue
+            writer.write(topic, msgtype, log_ns, cdr, log_time_ns=log_ns)
+        if expected_first is not None:
+            raise BagError(f"bag {src_path} has trial metadata but no trial message; rewriting would add one")
+        counts = writer.close()
+        _check_same(reader, BagReader(dst_path))
+    except BaseException:
+        writer.close()
+        if created:
+            shutil.rmtree(dst_path, ignore_errors=True)
+        else:
+            for made in (writer.mcap_path, dst_path / "metadata.yaml"):
+                made.unlink(missing_ok=True)
+        raise
+    return counts
