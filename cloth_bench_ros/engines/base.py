@@ -98,6 +98,11 @@ class ClothEngine(abc.ABC):
         self._mid = np.zeros(3)  # scratch of the divergence check, so a step allocates nothing for it
         self._scratch: np.ndarray | None = None
         self._row: np.ndarray | None = None
+        self._rest = self.grid.vertices()
+        self._corners = [self.grid.left_corner, self.grid.right_corner]
+        if "timestep" in self.config and "substeps" in self.config:  # the one substep rule of the engines
+            self.substeps = self.internal_steps(float(self.config["timestep"]), int(self.config["substeps"]))
+            self.h = self.dt / self.substeps
 
     @classmethod
     def validate_params(cls, params: Mapping[str, object]) -> dict[str, object]:

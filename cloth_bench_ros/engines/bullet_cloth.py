@@ -137,10 +137,6 @@ class BulletCloth(ClothEngine):
                  grid: ClothGrid | None = None) -> None:
         super().__init__(rate_hz, params, grid)
         c = self.config
-        self.substeps = self.internal_steps(float(c["timestep"]), int(c["substeps"]))
-        self.h = self.dt / self.substeps
-        self._rest = self.grid.vertices()
-        self._corners = [self.grid.left_corner, self.grid.right_corner]
         self._fem = c["model"] == "neo_hookean"
         self._tmp = tempfile.TemporaryDirectory(prefix="cloth_bench_bullet_")
         if self._fem:

@@ -115,11 +115,6 @@ class MujocoCloth(ClothEngine):
     def __init__(self, rate_hz: float, params: Mapping[str, object] | None = None,
                  grid: ClothGrid | None = None) -> None:
         super().__init__(rate_hz, params, grid)
-        c = self.config
-        self.substeps = self.internal_steps(float(c["timestep"]), int(c["substeps"]))
-        self.h = self.dt / self.substeps
-        self._rest = self.grid.vertices()
-        self._corners = [self.grid.left_corner, self.grid.right_corner]
         try:
             self.model = mujoco.MjModel.from_xml_string(self._mjcf())
         except ValueError as exc:  # MuJoCo's compiler rejects a parameter combination

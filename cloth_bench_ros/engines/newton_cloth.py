@@ -121,10 +121,6 @@ class NewtonCloth(ClothEngine):
                  grid: ClothGrid | None = None) -> None:
         super().__init__(rate_hz, params, grid)
         c = self.config
-        self.substeps = self.internal_steps(float(c["timestep"]), int(c["substeps"]))
-        self.h = self.dt / self.substeps
-        self._rest = self.grid.vertices()
-        self._corners = [self.grid.left_corner, self.grid.right_corner]
         self._vbd = c["model"] == "vbd"
         with wp.ScopedDevice(DEVICE):
             self.model = self._build_model()
