@@ -18,7 +18,7 @@ import numpy as np
 from rosbags.highlevel import AnyReader
 
 from cloth_bench_ros.core import pointcloud2
-from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagReader, BagWriter, TrialInfo
+from cloth_bench_ros.data import CLOUD_TOPIC, BagReader, BagWriter, TrialInfo
 
 
 def make_bag(path: Path, frames: int, points: int) -> int:

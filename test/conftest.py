@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cloth_bench_ros.data.bag import BagWriter, TrialInfo
+from cloth_bench_ros.data import BagWriter, TrialInfo
 from cloth_bench_ros.core.scene import ClothGrid
 
 FPS = 30.0

@@ -8,7 +8,7 @@ import numpy as np
 
 from cloth_bench_ros.core.scene import SETTLE_DURATION, ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets
-from cloth_bench_ros.data.bag import BagWriter, TrialInfo
+from cloth_bench_ros.data import BagWriter, TrialInfo
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 

@@ -15,7 +15,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
 from cloth_bench_ros.data import messages
-from cloth_bench_ros.data.bag import (
+from cloth_bench_ros.data import (
     CLOUD_TOPIC,
     TARGETS_TOPIC,
     TRIAL_TOPIC,

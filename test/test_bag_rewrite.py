@@ -13,7 +13,7 @@ from mcap.writer import Writer as McapWriter
 
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.data import messages
-from cloth_bench_ros.data.bag import CLOUD_TOPIC, TARGETS_TOPIC, BagError, BagReader, BagWriter, TrialInfo
+from cloth_bench_ros.data import CLOUD_TOPIC, TARGETS_TOPIC, BagError, BagReader, BagWriter, TrialInfo
 from cloth_bench_ros.data.bag_rewrite import rewrite_bag
 
 BAGS = Path(__file__).resolve().parent.parent / "bags"

@@ -46,7 +46,7 @@ def test_corrupt_bag(tmp_path, hanging_bag):
 
 
 def test_bag_without_pointcloud2(tmp_path):
-    from cloth_bench_ros.data.bag import BagWriter
+    from cloth_bench_ros.data import BagWriter
     from cloth_bench_ros.data.messages import serialize
     from cloth_bench_ros.runtime.messages import String
 
@@ -76,7 +76,7 @@ def test_trajectory_prints_csv():
 
 
 def test_import_command_with_a_transform_file(tmp_path):
-    from cloth_bench_ros.data.bag import BagReader
+    from cloth_bench_ros.data import BagReader
     from test.test_importer import make_tree
 
     make_tree(tmp_path / "data")
@@ -107,7 +107,7 @@ def test_engines_lists_available_and_unavailable_engines_with_reasons():
 
 
 def test_cloud_without_xyz_names_the_bag(tmp_path):
-    from cloth_bench_ros.data.bag import BagWriter
+    from cloth_bench_ros.data import BagWriter
     from cloth_bench_ros.data.messages import serialize
     from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
     from cloth_bench_ros.runtime.messages import Header, PointCloud2, PointField
@@ -122,7 +122,7 @@ def test_cloud_without_xyz_names_the_bag(tmp_path):
 
 def test_nan_points_empty_clouds_and_irregular_frames_are_counted_and_reported(tmp_path):
     import numpy as np
-    from cloth_bench_ros.data.bag import BagWriter, TrialInfo
+    from cloth_bench_ros.data import BagWriter, TrialInfo
     from cloth_bench_ros.core.scene import ClothGrid
 
     grid = ClothGrid(10, 10).vertices()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from cloth_bench_ros.data import synth
-from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagReader
+from cloth_bench_ros.data import CLOUD_TOPIC, BagReader
 from cloth_bench_ros.report import cross_reference as xr
 from cloth_bench_ros.report.statistics import stat
 from cloth_bench_ros.studies.sweep import Cell

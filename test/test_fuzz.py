@@ -23,7 +23,7 @@ import pytest
 from mcap.reader import SeekingReader
 
 from cloth_bench_ros import cli
-from cloth_bench_ros.data.bag import BagReader, BagWriter
+from cloth_bench_ros.data import BagReader, BagWriter
 from cloth_bench_ros.studies import sweep as sw
 
 SEED = 20261122

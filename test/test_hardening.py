@@ -21,7 +21,7 @@ import pytest
 
 from cloth_bench_ros import cli, validation
 from cloth_bench_ros.data import synth
-from cloth_bench_ros.data.bag import BagReader
+from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.nodes import evaluator, recorder, simulator, trajectory_publisher
 from test.test_importer import write_pcd, write_ply
 

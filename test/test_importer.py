@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagReader
+from cloth_bench_ros.data import CLOUD_TOPIC, BagReader
 from cloth_bench_ros.data.importer import (
     CloudFileError,
     find_trials,

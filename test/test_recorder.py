@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from cloth_bench_ros.data.bag import BagReader
+from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.nodes.common import run_nodes
 from cloth_bench_ros.runtime import embedded as rclpy
 from cloth_bench_ros.runtime import Node, PointCloud2, SingleThreadedExecutor, make_qos, stamp_ns

@@ -11,7 +11,7 @@ import pytest
 from cloth_bench_ros.core import scene
 from cloth_bench_ros.core import cleaning
 from cloth_bench_ros.data import synth
-from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagReader
+from cloth_bench_ros.data import CLOUD_TOPIC, BagReader
 from cloth_bench_ros.data.importer import CLOTH_NAMES
 from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.core.metrics import chamfer_l1

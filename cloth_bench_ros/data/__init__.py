@@ -1,15 +1,24 @@
 """Data layer: rosbag2 MCAP bags (read, write, inspect) and the dataset importer."""
 
 from cloth_bench_ros.data.bag_info import describe
-from cloth_bench_ros.data.bag_reader import BagReader, CloudStats
-from cloth_bench_ros.data.bag_writer import BagWriter
+from cloth_bench_ros.data.bag_reader import IRREGULAR_TOLERANCE, BagReader, CloudStats
+from cloth_bench_ros.data.bag_writer import METADATA_VERSION, ROS_DISTRO, BagWriter
 from cloth_bench_ros.data.errors import BagError, BagWarning
 from cloth_bench_ros.data.messages import deserialize, serialize
-from cloth_bench_ros.data.trial import CLOUD_TOPIC, TARGETS_TOPIC, TRIAL_TOPIC, TrialInfo
+from cloth_bench_ros.data.trial import (
+    CLOUD_TOPIC, CUSTOM_DATA_PREFIX, MCAP_TRIAL_RECORD, TARGETS_TOPIC, TRIAL_STATUS_NAME, TRIAL_TOPIC,
+    TrialInfo, trial_from_message, trial_message,
+)
 
 __all__ = [
     "CLOUD_TOPIC",
+    "CUSTOM_DATA_PREFIX",
+    "IRREGULAR_TOLERANCE",
+    "MCAP_TRIAL_RECORD",
+    "METADATA_VERSION",
+    "ROS_DISTRO",
     "TARGETS_TOPIC",
+    "TRIAL_STATUS_NAME",
     "TRIAL_TOPIC",
     "BagError",
     "BagReader",
@@ -20,4 +29,6 @@ __all__ = [
     "describe",
     "deserialize",
     "serialize",
+    "trial_from_message",
+    "trial_message",
 ]

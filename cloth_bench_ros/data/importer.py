@@ -15,7 +15,7 @@ import numpy as np
 from tqdm import tqdm
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagWriter, TrialInfo
+from cloth_bench_ros.data import CLOUD_TOPIC, BagWriter, TrialInfo
 from cloth_bench_ros.core.cleaning import CleaningConfig, clean
 from cloth_bench_ros.core.scene import REAL_FPS
 from cloth_bench_ros.safe_io import check_output_dir, staged_directory

@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 
 from cloth_bench_ros.core import cleaning, scene
-from cloth_bench_ros.data.bag import CLOUD_TOPIC, BagWriter, TrialInfo
+from cloth_bench_ros.data import CLOUD_TOPIC, BagWriter, TrialInfo
 from cloth_bench_ros.data.importer import CHANGE_OF_PHASE
 from cloth_bench_ros.engines import engine_class, make_engine
 from cloth_bench_ros.paths import share_dir

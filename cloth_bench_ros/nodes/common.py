@@ -7,7 +7,7 @@ import sys
 import threading
 from typing import Callable, Iterable, Sequence
 
-from cloth_bench_ros.data.bag import BagError
+from cloth_bench_ros.data import BagError
 from cloth_bench_ros.runtime.transport import transport_choice
 from cloth_bench_ros.runtime import EMBEDDED, SingleThreadedExecutor, is_user_error, rclpy
 

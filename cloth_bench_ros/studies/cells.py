@@ -110,7 +110,7 @@ def find_bags(bag_dir: Path | None, cloth: str, primitive: str) -> list[tuple[in
 
 
 def _bag_trial(path: Path) -> int:
-    from cloth_bench_ros.data.bag import BagReader
+    from cloth_bench_ros.data import BagReader
 
     try:
         trial = BagReader(path).trial

@@ -44,7 +44,7 @@ class Trial:
 def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
     """(change-of-phase frame, [(bag stamp ns, points, NaN points dropped)]) of a bag, decoded once per process."""
     from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
-    from cloth_bench_ros.data.bag import BagReader
+    from cloth_bench_ros.data import BagReader
     from cloth_bench_ros.data.messages import deserialize
 
     st = os.stat(bag) if os.path.isfile(bag) else os.stat(Path(bag) / "metadata.yaml")
