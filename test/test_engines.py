@@ -250,6 +250,32 @@ def test_mujoco_rejects_edge_damping_with_the_discrete_integrator():
     make_engine("mujoco", 100.0, {"integrator": "discrete", "damping": 0.0}, GRID).close()
 
 
+def test_mujoco_contact_dimension_and_solver_reach_the_model():
+    if "mujoco" not in ENGINES:
+        pytest.skip("MuJoCo is not available")
+    import mujoco
+
+    _rejects("mujoco", {"condim": 2}, "condim")
+    _rejects("mujoco", {"solver": "Jacobi"}, "solver", "Jacobi")
+    targets = full_targets("dynamic", 1000.0)
+    rows = {}
+    for condim in (3, 1):
+        engine = make_engine("mujoco", 1000.0, {"condim": condim, "solver": "CG", "solver_iterations": 5}, GRID)
+        assert engine.model.opt.solver == mujoco.mjtSolver.mjSOL_CG
+        assert engine.model.geom_condim[0] == condim and engine.model.flex_condim[0] == condim
+        # Grippers lowered so that the hanging cloth's lower edge meets the table.
+        left, right = targets.left[0].copy(), targets.right[0].copy()
+        left[2] = right[2] = scene.TABLE_TOP_Z + 0.6
+        engine.reset(0, left, right)
+        for _ in range(20):
+            engine.step(left, right)
+        assert not engine.diverged and engine.data.ncon > 0
+        # Constraint rows per contact: 1 frictionless, 4 with friction (a pyramidal cone).
+        rows[condim] = (engine.data.nefc - engine.data.ne) / engine.data.ncon
+        engine.close()
+    assert rows == {3: 4.0, 1: 1.0}
+
+
 # -- presets ------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("name", ENGINES)

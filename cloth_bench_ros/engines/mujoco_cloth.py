@@ -47,6 +47,7 @@ GRIPPER_MASS = 1000.0  # kg
 
 MODELS = ("shell", "edges")
 INTEGRATORS = ("Euler", "discrete")
+SOLVERS = ("Newton", "CG", "PGS")
 
 
 def spring_edges(grid: ClothGrid) -> np.ndarray:
@@ -91,6 +92,9 @@ class MujocoCloth(ClothEngine):
         Param("timestep", 0.002, "s", 1e-5, 0.1, "longest internal step; substeps = ceil(dt / timestep)"),
         Param("substeps", 1, "", 1, 10000, "least number of internal steps per engine step"),
         Param("solver_iterations", 50, "", 1, 10000, "constraint solver iterations per internal step"),
+        Param("solver", "Newton", "", doc="constraint solver: Newton (exact), CG (no factorisation; cheaper at a few "
+              "iterations) or PGS", choices=SOLVERS),
+        Param("condim", 3, "", 1, 3, "contact dimensionality: 3 (with friction) or 1 (frictionless, 4x fewer rows)"),
         Param("integrator", "Euler", "", doc="semi-implicit Euler (as in the paper) or discrete (implicit)",
               choices=INTEGRATORS),
         Param("self_collision", False, "", doc="cloth self-collision"),
@@ -103,6 +107,8 @@ class MujocoCloth(ClothEngine):
     @classmethod
     def validate_params(cls, params: Mapping[str, object]) -> dict[str, object]:
         config = super().validate_params(params)
+        if config["condim"] == 2:
+            raise EngineError("parameter condim must be 1 or 3 (MuJoCo has no 2-dimensional contact)")
         if config["integrator"] == "discrete":
             if config["model"] != "shell":
                 raise EngineError(
@@ -137,7 +143,7 @@ class MujocoCloth(ClothEngine):
         friction = f'{c["friction"]:.9g} 0.005 0.0001'
         contact = (
             f'<contact selfcollide="{"auto" if c["self_collision"] else "none"}" friction="{friction}" '
-            f'condim="3" solref="{max(2 * self.h, 0.005):.9g} 1" solimp="0.95 0.99 0.001"/>'
+            f'condim="{c["condim"]}" solref="{max(2 * self.h, 0.005):.9g} 1" solimp="0.95 0.99 0.001"/>'
         )
         points = " ".join(f"{v:.12g}" for v in self._rest.ravel())
         if c["model"] == "shell":
@@ -157,9 +163,9 @@ class MujocoCloth(ClothEngine):
         return f"""
 <mujoco model="cloth_bench_{c['model']}">
   <option timestep="{self.h:.12g}" gravity="0 0 {scene.GRAVITY}" integrator="{c['integrator']}"
-          solver="Newton" iterations="{c['solver_iterations']}"/>
+          solver="{c['solver']}" iterations="{c['solver_iterations']}"/>
   <worldbody>
-    <geom name="table" type="box" friction="{friction}" size="{(x1 - x0) / 2} {(y1 - y0) / 2} {half}"
+    <geom name="table" type="box" friction="{friction}" condim="{c['condim']}" size="{(x1 - x0) / 2} {(y1 - y0) / 2} {half}"
           pos="{(x0 + x1) / 2} {(y0 + y1) / 2} {scene.TABLE_TOP_Z - half}"/>
     <flexcomp name="cloth" type="direct" dim="{dim}" point="{points}" element="{element}"
               mass="{c['mass']:.9g}" radius="{c['radius']:.9g}">
