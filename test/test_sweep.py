@@ -71,6 +71,10 @@ def test_settings_cells_are_a_factorial_over_the_axes_the_engine_has(bag_dir):
     newton = sw.settings_cells(["newton"], 100.0, ["towel"], ["dynamic"], [0], bag_dir, axes)
     assert len(newton) == 2 * 2 * 2 * 2
     assert "grid=6x8,self_collision=on,timestep=0.005,solver_iterations=5" in {c.config for c in newton}
+    # Choice-valued settings (MuJoCo's solver) are named as they are.
+    solvers = sw.settings_cells(["mujoco"], 1000.0, ["towel"], ["dynamic"], [0], bag_dir,
+                                {"solver": ["Newton", "CG"], "condim": [3, 1]})
+    assert {c.config for c in solvers} == {f"grid=default,solver={s},condim={d}" for s in ("Newton", "CG") for d in (3, 1)}
 
 
 def test_bad_overrides_and_grids_are_refused_before_any_work(bag_dir):

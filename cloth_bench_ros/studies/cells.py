@@ -72,16 +72,20 @@ class Cell:
         return dict(self.overrides)
 
 
+def _shown(value: object) -> str:
+    """A setting's value in a configuration name: on/off, numbers as %g, text as it is."""
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
 def config_label(grid: tuple[int, int] | None, overrides: dict) -> str:
     """A canonical name of a configuration: "preset" or "grid=6x8,param=value,..."."""
     parts = []
     if grid is not None:
         parts.append(f"grid={grid[0]}x{grid[1]}")
     for name in sorted(overrides):
-        value = overrides[name]
-        if isinstance(value, bool):
-            value = "on" if value else "off"
-        parts.append(f"{name}={value:g}" if isinstance(value, float) else f"{name}={value}")
+        parts.append(f"{name}={_shown(overrides[name])}")
     return ",".join(parts) or PRESET
 
 
@@ -182,8 +186,7 @@ def settings_cells(engines: Sequence[str] = DEFAULT_ENGINES, rate: float = SETTI
                 engine_class(engine).validate_params(params)
                 parts = [f"grid={grid[0]}x{grid[1]}" if grid else "grid=default"]
                 for n, v in zip(names, values):
-                    shown = PRESET if v is None else ("on" if v is True else "off" if v is False else f"{v:g}")
-                    parts.append(f"{n}={shown}")
+                    parts.append(f"{n}={PRESET if v is None else _shown(v)}")
                 fixed = {k: v for k, v in overrides.get(engine, {}).items() if k not in names}
                 if fixed:  # --set values shared by every configuration are part of its name
                     parts.append(config_label(None, fixed))
@@ -197,11 +200,15 @@ def settings_cells(engines: Sequence[str] = DEFAULT_ENGINES, rate: float = SETTI
 
 
 def estimated_cost(cell: Cell) -> float:
-    """A rough cost of a cell in seconds of one core (for ordering; measured on 11 x 15 at 100 Hz)."""
+    """A rough cost of a cell in seconds of one core: internal steps x a per-step cost, plus the
+    nodes' work per target (fitted to the default sweep's cells on 2 idle cores, 11 x 15 mesh:
+    0.8 ms per MuJoCo internal step on the fling, 1.4x that with the cloth on the table).
+    """
     duration = 7.4 if cell.primitive == "dynamic" else 17.0  # settle phase + quintic part, s
     params = cell.params
     nx, nz = cell.grid or (11, 15)
     timestep = float(params.get("timestep", 0.002 if cell.engine == "mujoco" else 0.0025))
     internal_steps = duration * max(cell.rate_hz, 1.0 / timestep)
-    per_internal_step = 0.4e-3 * (nx * nz / 165.0) * {"bullet": 1.7, "newton": 5.0}.get(cell.engine, 1.0)
-    return internal_steps * per_internal_step + duration * cell.rate_hz * 0.25e-3 + 1.0
+    per_internal_step = (0.8e-3 * (nx * nz / 165.0) * {"bullet": 1.5, "newton": 5.0}.get(cell.engine, 1.0)
+                         * (1.4 if cell.primitive == "quasi_static" else 1.0))
+    return internal_steps * per_internal_step + duration * cell.rate_hz * 0.5e-3 + 1.0
