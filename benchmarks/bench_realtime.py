@@ -9,7 +9,13 @@ in lockstep; then the recommended configuration's CD against the preset's (the a
 for speed). The baseline of each row is the engine's own step time (step p99 against latency p99).
 
     .venv/bin/python benchmarks/bench_realtime.py [--engines mujoco bullet] [--rates 100 1000]
-        [--configs preset recommended] [--cpu 1] [--fifo 50] [--repeats 1] [--output results/bench_realtime]
+        [--configs preset recommended] [--cpu N] [--fifo 50] [--no-busy-wait] [--deadline-budget 0.5]
+        [--repeats 1] [--output results/bench_realtime]
+
+By default the real-time layout of the README: the simulator's step loop pinned to the last core
+and polling for targets (its DDS threads, the controller and the observer on the other cores, the
+observer at nice 19), SCHED_FIFO 50 asked for the controller and the simulator's DDS threads
+(a refusal is printed and the run goes on). `--cpu -1 --fifo 0 --no-busy-wait` runs unpinned.
 
 Goals on an otherwise idle machine (issue 10): no miss at 100 Hz for both engines; at 1000 Hz
 MuJoCo with the recommended configuration under 1 % misses and latency p99 under 1 ms. On a
@@ -37,8 +43,12 @@ def main() -> None:
     parser.add_argument("--configs", nargs="+", default=["preset", "recommended"], choices=("preset", "recommended"))
     parser.add_argument("--cloth", default="towel")
     parser.add_argument("--primitive", default="dynamic")
-    parser.add_argument("--cpu", type=int, default=-1, help="pin the simulator process to this core")
-    parser.add_argument("--fifo", type=int, default=0, help="SCHED_FIFO priority of the simulator (0: not asked)")
+    parser.add_argument("--cpu", type=int, default=max(os.sched_getaffinity(0)),
+                        help="the simulator's core (default: the last one; -1: not pinned)")
+    parser.add_argument("--fifo", type=int, default=50, help="SCHED_FIFO priority (0: not asked)")
+    parser.add_argument("--no-busy-wait", action="store_true", help="the simulator sleeps between targets")
+    parser.add_argument("--deadline-budget", type=float, default=hil.HIL_DEADLINE_BUDGET,
+                        help="recommendation: step p99 under this fraction of the period")
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--settings", type=Path, default=hil.DEFAULT_SETTINGS,
                         help="settings-sweep results for the recommendation (else config/hil_recommended.yaml)")
@@ -57,9 +67,10 @@ def main() -> None:
         for rate in args.rates:
             for label in args.configs:
                 config = hil.HilConfig(engine, rate, bag, args.cloth, args.primitive, cpu=args.cpu,
-                                       realtime_priority=args.fifo)
+                                       realtime_priority=args.fifo, busy_wait=not args.no_busy_wait)
                 if label == "recommended":
-                    rec, source = hil.recommended(engine, args.cloth, args.primitive, rate, args.settings)
+                    rec, source = hil.recommended(engine, args.cloth, args.primitive, rate, args.settings,
+                                                  budget=args.deadline_budget)
                     config = hil.with_config(config, rec.config, rec.grid, rec.params)
                     print(f"{engine} {rate:g} Hz recommended: {rec.config} ({source})", flush=True)
                 for _ in range(args.repeats):
@@ -70,7 +81,8 @@ def main() -> None:
                     print(f"  {engine} {rate:g} Hz {config.config}: latency p99 {f.latency_p99 * 1e3:.3f} ms, "
                           f"{f.deadline_misses} misses, {f.skipped} skipped of {f.sent}; step p99 {step_p99 * 1e3:.3f} "
                           f"ms (latency p99 / step p99 = {f.latency_p99 / step_p99:.2f}); CPU busy "
-                          f"{100 * result.load['cpu_busy']:.0f} %; {'; '.join(result.realtime)}", flush=True)
+                          f"{100 * result.load['cpu_busy']:.0f} %, steal {100 * result.load['cpu_steal']:.1f} %; "
+                          f"{'; '.join(result.realtime)}", flush=True)
     rows = [r.row() for r in results]
     hil.write_results(results, args.output)
     print()

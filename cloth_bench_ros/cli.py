@@ -381,6 +381,8 @@ def cmd_hil(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies import hil
     from cloth_bench_ros.studies.sweep import config_label
 
+    if args.budget is None:
+        args.budget = hil.HIL_DEADLINE_BUDGET
     if args.export_recommended:
         return _export_recommended(args)
     engines = args.engine or ["mujoco"]
@@ -405,7 +407,8 @@ def cmd_hil(args: argparse.Namespace) -> int:
             params = dict(overrides.get(engine, {}))
             config = hil.HilConfig(engine, float(rate), bag, args.cloth, args.primitive, args.seed, args.grid,
                                    tuple(sorted(params.items())), config_label(args.grid, params),
-                                   not args.in_process, args.cpu, args.fifo, not args.no_freeze_gc, args.duration)
+                                   not args.in_process, args.cpu, args.fifo, not args.no_freeze_gc, args.busy_wait,
+                                   args.duration)
             if args.config == "recommended":
                 rec, source = hil.recommended(engine, args.cloth, args.primitive, float(rate), settings,
                                               args.tolerance_rel, args.tolerance_abs, args.budget)
@@ -638,8 +641,9 @@ def build_parser() -> argparse.ArgumentParser:
     hil.add_argument("--tolerance-rel", type=float, default=0.05, help="recommendation: CD within this fraction "
                                                                        "of the best (default 0.05)")
     hil.add_argument("--tolerance-abs", type=float, default=0.002, help="... or this many metres (default 0.002)")
-    hil.add_argument("--deadline-budget", dest="budget", type=float, default=1.0,
-                     help="recommendation: step p99 under this fraction of the period (default 1)")
+    hil.add_argument("--deadline-budget", dest="budget", type=float, default=None,
+                     help="recommendation: step p99 under this fraction of the period (default 0.5: the rest is "
+                          "the round trip)")
     hil.add_argument("--cloth", default="towel", help="towel, chequered or linen (default towel)")
     hil.add_argument("--primitive", default="dynamic", choices=PRIMITIVES, help="default dynamic")
     hil.add_argument("--bag", help="rosbag2 MCAP bag (default: the bundled one)")
@@ -650,6 +654,8 @@ def build_parser() -> argparse.ArgumentParser:
     hil.add_argument("--fifo", type=int, default=0, metavar="PRIORITY",
                      help="ask SCHED_FIFO at this priority for the simulator and the controller (1-99; default 0: not)")
     hil.add_argument("--no-freeze-gc", action="store_true", help="keep automatic garbage collection in the simulator")
+    hil.add_argument("--busy-wait", action="store_true",
+                     help="the simulator polls for targets instead of sleeping (a core of its own: use with --cpu)")
     hil.add_argument("--in-process", action="store_true", help="all nodes in one process (intra-process transport)")
     hil.add_argument("--duration", type=float, default=0.0,
                      help="s of the trajectory to run (default 0: all; a shortened run is not scored)")

@@ -8,6 +8,10 @@ import gc
 import math
 import os
 import random
+import subprocess
+import sys
+import threading
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -21,7 +25,7 @@ from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
 from cloth_bench_ros.nodes.simulator import Simulator, StateMessages
 from cloth_bench_ros.core.pointcloud2 import read_xyz
 from cloth_bench_ros.report.hil import load_recommendations, recommend_for_rate, write_hil_report
-from cloth_bench_ros.runtime import Parameter, PoseArray, Pose, Time, embedded, realtime
+from cloth_bench_ros.runtime import Parameter, PointCloud2, PoseArray, Pose, Time, embedded, realtime, stamp_ns
 from cloth_bench_ros.runtime.dds import loopback_environment
 from cloth_bench_ros.studies import hil
 
@@ -37,9 +41,15 @@ def dds_loopback(monkeypatch) -> None:
     monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
 
 
-def test_short_realtime_run_in_three_processes_accounts_for_every_target(dds_loopback, hanging_bag, tmp_path):
+@pytest.mark.parametrize("layout", ["sleeping", "pinned_polling"])
+def test_short_realtime_run_in_three_processes_accounts_for_every_target(
+        dds_loopback, hanging_bag, tmp_path, layout):
     rate = 200.0
     config = hil.HilConfig("mujoco", rate, hanging_bag, grid=(6, 8), duration=0.4)  # 81 targets
+    if layout == "pinned_polling":  # the README's real-time layout: step loop alone on the last core, polling
+        if len(os.sched_getaffinity(0)) < 2:
+            pytest.skip("the pinned layout needs two cores")
+        config = replace(config, cpu=max(os.sched_getaffinity(0)), busy_wait=True)
     result = hil.run_hil(config, tmp_path, lockstep=False)
     timeline = TargetTimeline.from_csv((result.run_dir / "timeline_mujoco.csv").read_text())
     f = result.figures
@@ -53,7 +63,9 @@ def test_short_realtime_run_in_three_processes_accounts_for_every_target(dds_loo
     assert np.all(np.diff(timeline.due) == period)
     assert np.all(timeline.sent >= timeline.due - period // 2)
     got = timeline.received >= 0
-    assert got[-1] and np.all(timeline.received[got] > timeline.sent[got])  # keep-last: the last is stepped
+    assert got[-1] and np.all(timeline.received[got][1:] > timeline.sent[got][1:])  # keep-last: the last is stepped
+    # Target 0 is the start-up handshake's: answered before the schedule, which starts at its answer.
+    assert timeline.sent[0] == timeline.due[0] == timeline.received[0]
     # Latencies and misses are the timestamps' own: received - due, missed when over one period.
     latency = (timeline.received[got] - timeline.due[got]) / 1e9
     assert f.deadline_misses == int(np.sum(latency > 1 / rate))
@@ -63,6 +75,11 @@ def test_short_realtime_run_in_three_processes_accounts_for_every_target(dds_loo
     assert any("automatic collection off" in line for line in result.realtime)
     assert 0 < result.step_time["p50"] <= result.step_time["p99"]
     assert (result.run_dir / "simulator.log").is_file() and (result.run_dir / "controller.log").is_file()
+    if layout == "pinned_polling":
+        assert any(line.startswith(f"cpu: step loop pinned to core {config.cpu}, ") for line in result.realtime)
+        assert any(line.startswith("poll: step loop polls") for line in result.realtime)
+        others = (result.run_dir / "controller.log").read_text() + (result.run_dir / "observer.log").read_text()
+        assert others.count(f"kept off core {config.cpu}") == 2 and "observer: nice 19" in others
     report = write_hil_report([result.row()], tmp_path, tmp_path / "report")
     assert "lat p99.9 ms" in report.read_text() and (tmp_path / "report" / "hil.csv").is_file()
     assert (tmp_path / "report" / f"latency_{result.run_dir.name}.png").stat().st_size > 1000
@@ -118,9 +135,19 @@ def test_a_late_simulator_steps_to_the_newest_target_and_counts_the_skipped_ones
             Parameter("engine", value="mujoco"), Parameter("grid_nx", value=6), Parameter("grid_nz", value=8)])
         targets = full_targets("dynamic", 100.0)
         prepared = sim.prepared.copy()
-        for k in (0, 1, 4, 9):  # the transport kept only the newest: 2, 3, 5-8 never arrived
+        clouds = []
+        sim.create_subscription(PointCloud2, "mujoco/cloud", clouds.append, 10)
+        executor = embedded.SingleThreadedExecutor(context=context)
+        executor.add_node(sim)
+        # Target 0 twice (the controller's start-up handshake, then the schedule's first target):
+        # answered twice, stepped once; then the transport kept only the newest: 2, 3, 5-8 never arrived.
+        for k in (0, 0, 1, 4, 9):
             sim.on_target(_target(targets, k))
+            while context.queue:
+                executor.spin_once(0)
         assert (sim.step, sim.skipped, sim.last_k) == (3, 6, 9)
+        assert [stamp_ns(c.header.stamp) for c in clouds] == [targets.stamp_ns(k) for k in (0, 0, 1, 4, 9)]
+        assert clouds[0] is clouds[1]  # the same state again, no step
         assert np.isfinite(sim.step_times[1:4]).all() and np.isnan(sim.step_times[4:]).all()
         # Target 0 was answered with the state prepared at start-up, no reset on the deadline.
         assert np.array_equal(sim.engine.reset(0, targets.left[0], targets.right[0]), prepared)
@@ -158,14 +185,48 @@ def test_the_cheap_divergence_check_agrees_with_the_full_one():
     engine.close()
 
 
-def test_process_settings_report_what_the_system_granted():
+def test_pinning_gives_the_step_loop_its_core_and_moves_the_other_threads_off_it():
     before = os.sched_getaffinity(0)
-    core = min(before)
+    if len(before) < 2:
+        pytest.skip("needs two cores")
+    core = max(before)
+    stop = threading.Event()
+    helper = threading.Thread(target=stop.wait)  # stands in for a DDS receive thread
+    helper.start()
     try:
-        assert realtime.pin_to_cpu(core).startswith(f"pinned to core {core} (") and os.sched_getaffinity(0) == {core}
-        assert all(os.sched_getaffinity(tid) == {core} for tid in realtime.threads())
+        assert realtime.pin_to_cpu(core).startswith(f"step loop pinned to core {core}, ")
+        assert os.sched_getaffinity(0) == {core}  # the calling thread
+        assert os.sched_getaffinity(helper.native_id) == before - {core}
+        assert realtime.keep_off_cpu(core).startswith(f"kept off core {core}")
+        assert all(core not in os.sched_getaffinity(tid) for tid in realtime.threads())
     finally:
-        os.sched_setaffinity(0, before)
+        stop.set()
+        helper.join()
+        for tid in realtime.threads():
+            os.sched_setaffinity(tid, before)
+    assert realtime.keep_off_cpu(-1).startswith("not pinned")
+
+
+def test_a_polling_loop_leaves_sched_fifo_for_the_kernels_real_time_budget():
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))  # this thread only
+    except PermissionError:
+        assert realtime.poll_on_default_scheduler() == "step loop polls on the default scheduler"
+        return
+    line = realtime.poll_on_default_scheduler()
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER
+    assert "SCHED_OTHER" in line and "throttled" in line
+    assert realtime.poll_on_default_scheduler() == "step loop polls on the default scheduler"
+
+
+def test_the_observer_yields_the_cpu():
+    code = ("import os; from cloth_bench_ros.runtime import realtime; print(realtime.lower_priority()); "
+            "print(os.getpriority(os.PRIO_PROCESS, 0))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "nice 19 (off the critical path)" and out[1] == "19"
+
+
+def test_process_settings_report_what_the_system_granted():
     assert "refused" in realtime.pin_to_cpu(100_000)
     assert realtime.pin_to_cpu(-1).startswith("not pinned")
     assert realtime.request_fifo(0).startswith("default scheduler")
@@ -234,7 +295,7 @@ def test_cli_hil_in_process_with_the_recommended_configuration(hanging_bag, tmp_
                  str(settings), "--in-process", "--duration", "0.3", "--no-lockstep", "--output", str(tmp_path / "o")])
     out = capsys.readouterr().out
     assert code == 0, out
-    assert f"recommended `grid=6x8` from settings sweep {settings}" in out and "under 10 ms" in out
+    assert f"recommended `grid=6x8` from settings sweep {settings}" in out and "under 5 ms" in out
     assert "lat p99.9 ms" in out and "1 process" in out and (tmp_path / "o" / "hil.jsonl").is_file()
     assert gc.isenabled()  # the simulator froze the heap of this process and gave it back
     assert main(["hil", "--config", "recommended", "--grid", "6x8", "--bag", str(hanging_bag)]) == 2

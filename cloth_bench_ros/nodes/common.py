@@ -30,6 +30,13 @@ def replay_stamps(msg) -> list[int] | None:
 _stop_requested = threading.Event()
 
 
+def publish_serialises(node) -> bool:
+    """True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
+    the embedded intra-process transport hands subscribers the object itself.
+    """
+    return not EMBEDDED or node.context.transport.name != "intra"
+
+
 def _request_stop(signum, frame) -> None:
     # Only a flag: a callback is never cut in half, so what a node acknowledged it also finished.
     _stop_requested.set()

@@ -86,6 +86,7 @@ class Evaluator(Node):
         self.period_s = 1.0 / rate_hz
         self.target_sent: dict[int, int] = {}  # stamp -> monotonic ns when the target arrived
         self.first_target_ns: int | None = None
+        self.schedule_known = False  # real time: the schedule read off a target after the first
         self.first_target_stamp = 0
         self.trial: dict = {}
         self.published_scores = 0
@@ -126,11 +127,15 @@ class Evaluator(Node):
 
     def on_target(self, msg: PoseArray) -> None:
         now, stamp = time.monotonic_ns(), stamp_ns(msg.header.stamp)
-        if self.first_target_ns is None:
+        if self.first_target_ns is None or (self.realtime and stamp == self.first_target_stamp):
             self.first_target_ns, self.first_target_stamp = now, stamp
+        elif self.realtime and not self.schedule_known:
+            # The first target may be a start-up handshake, sent well before the schedule starts:
+            # the schedule is read off the second target.
+            self.first_target_ns, self.schedule_known = now - (stamp - self.first_target_stamp), True
         elif self.realtime:
-            # The schedule starts at the earliest arrival less its sim time: a first target that
-            # reached this node late must not shift every later deadline (negative latencies).
+            # The schedule starts at the earliest arrival less its sim time: a target that reached
+            # this node late must not shift every later deadline (negative latencies).
             self.first_target_ns = min(self.first_target_ns, now - (stamp - self.first_target_stamp))
         if not self.realtime:
             self.target_sent[stamp] = now

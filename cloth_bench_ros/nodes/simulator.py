@@ -17,22 +17,15 @@ import numpy as np
 from cloth_bench_ros import validation
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
-from cloth_bench_ros.nodes.common import NAMESPACE, run_node
+from cloth_bench_ros.nodes.common import NAMESPACE, publish_serialises, run_node
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.runtime import (
-    EMBEDDED, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, PoseArray,
+    DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, PoseArray,
     declare_float, make_qos, serialize_message, stamp_ns,
 )
 from cloth_bench_ros.runtime import realtime
 from cloth_bench_ros.core.scene import ClothGrid
-
-
-def publish_serialises(node: Node) -> bool:
-    """True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
-    the embedded intra-process transport hands subscribers the object itself.
-    """
-    return not EMBEDDED or node.context.transport.name != "intra"
 
 
 class StateMessages:
@@ -122,6 +115,7 @@ class Simulator(Node):
         self.targets = full_targets(primitive, rate_hz)
         self.stamps = np.array([self.targets.stamp_ns(k) for k in range(len(self.targets))], dtype=np.int64)
         self.last_k = -1
+        self.last_cloud: PointCloud2 | None = None  # the state of target last_k, sent again on a repeat
         self.step_times = np.full(len(self.stamps), np.nan)  # s per step, kept for a HIL report
         self.grippers = np.zeros((2, 3))
         self.left, self.right = self.grippers[0], self.grippers[1]
@@ -156,7 +150,12 @@ class Simulator(Node):
         g[1, 0], g[1, 1], g[1, 2] = p[1].position.x, p[1].position.y, p[1].position.z
         stamp = stamp_ns(msg.header.stamp)
         k = int(np.searchsorted(self.stamps, stamp))
-        if k < len(self.stamps) and self.stamps[k] == stamp and k > self.last_k:
+        known = k < len(self.stamps) and self.stamps[k] == stamp
+        if known and k == self.last_k and self.last_cloud is not None:
+            # The newest target again (a controller's start-up handshake): its state again, no step.
+            self.cloud_pub.publish(self.last_cloud)
+            return
+        if known and k > self.last_k:
             self.skipped += k - self.last_k - 1
             self.last_k = k
         self.step += 1
@@ -172,6 +171,7 @@ class Simulator(Node):
                                            self.skipped)
         self.cloud_pub.publish(cloud)
         self.status_pub.publish(status)
+        self.last_cloud = cloud
         if self.realtime.frozen:
             realtime.collect_young()  # after the state went out: off this step's deadline
         if self.engine.diverged and not self.reported_divergence:

@@ -11,14 +11,15 @@ import numpy as np
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.hil_timing import TargetTimeline
 from cloth_bench_ros.nodes.common import (
-    NAMESPACE, all_subscriptions_matched, node_keys, publishers_matched, run_node,
+    NAMESPACE, all_subscriptions_matched, node_keys, publish_serialises, publishers_matched, run_node,
 )
 from cloth_bench_ros.runtime import (
-    Clock, Node, Pose, PoseArray, PointCloud2, Time, declare_float, make_qos, stamp_ns,
+    Clock, Header, Node, Pose, PoseArray, PointCloud2, Time, declare_float, make_qos, stamp_ns, steady_clock,
 )
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
 
 PACINGS = ("lockstep", "realtime")
+PREROLL_RESEND_S = 0.5  # real time: the start-up handshake's target 0 is sent again after this long
 
 
 class TrajectoryPublisher(Node):
@@ -58,7 +59,12 @@ class TrajectoryPublisher(Node):
         stamps = np.array([self.targets.stamp_ns(k) for k in range(self.n_targets)], dtype=np.int64)
         self.timelines = {engine: TargetTimeline(stamps) for engine in self.engines}
         self.period_ns = round(1e9 / rate_hz)
+        # Real time: one target message filled in place before each send where publish serialises it
+        # (the embedded intra-process transport hands subscribers the object itself).
+        self.fill_in_place = self.pacing == "realtime" and publish_serialises(self)
+        self.target_msg = self._new_target_msg()
         self.wait_until_ns: int | None = None
+        self.preroll_sent_ns: int | None = None  # real time: when the start-up handshake's target 0 went out
         self.start_timer = self.create_timer(0.02, self.try_start)
 
     def graph_ready(self) -> bool:
@@ -89,46 +95,71 @@ class TrajectoryPublisher(Node):
         """Start once the graph is complete (graph_ready); polled on a timer until then."""
         if not self.graph_ready():
             return
-        self.destroy_timer(self.start_timer)
         if self.pacing == "realtime":
-            self.start_realtime()
-        else:
-            self.publish_next()
+            self.send_preroll()
+            return
+        self.destroy_timer(self.start_timer)
+        self.publish_next()
+
+    @staticmethod
+    def _new_target_msg() -> PoseArray:
+        return PoseArray(header=Header(frame_id="world"), poses=[Pose(), Pose()])
+
+    def _target(self, k: int) -> PoseArray:
+        """Target k as a message (the real-time one filled in place)."""
+        tg = self.targets
+        msg = self.target_msg if self.fill_in_place else self._new_target_msg()
+        msg.header.stamp = Time(nanoseconds=tg.stamp_ns(k)).to_msg()
+        qx, qy, qz, qw = quaternion_xyz(tg.roll[k], tg.pitch[k], tg.yaw[k])
+        for pose, position in zip(msg.poses, (tg.left[k], tg.right[k])):
+            pose.position.x, pose.position.y, pose.position.z = float(position[0]), float(position[1]), float(position[2])
+            pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = qx, qy, qz, qw
+        return msg
 
     def publish_next(self) -> None:
         if self.k + 1 >= self.n_targets:
             self.done = True
             return
         self.k += 1
-        k, tg = self.k, self.targets
-        stamp = Time(nanoseconds=tg.stamp_ns(k)).to_msg()
+        msg = self._target(self.k)
         if self.pacing != "realtime":
-            self.clock_pub.publish(Clock(clock=stamp))
-        msg = PoseArray()
-        msg.header.stamp = stamp
-        msg.header.frame_id = "world"
-        qx, qy, qz, qw = quaternion_xyz(tg.roll[k], tg.pitch[k], tg.yaw[k])
-        for position in (tg.left[k], tg.right[k]):
-            pose = Pose()
-            pose.position.x, pose.position.y, pose.position.z = (float(c) for c in position)
-            pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = qx, qy, qz, qw
-            msg.poses.append(pose)
-        if self.pacing == "realtime":
-            now = time.monotonic_ns()
-            for timeline in self.timelines.values():
-                timeline.sent[k] = now
+            self.clock_pub.publish(Clock(clock=msg.header.stamp))
+            self.target_pub.publish(msg)
+            return
+        now = time.monotonic_ns()
+        for timeline in self.timelines.values():
+            timeline.sent[self.k] = now
         self.target_pub.publish(msg)
-        if self.pacing == "realtime":  # the target first: /clock serves the observer, off the critical path
-            self.clock_pub.publish(Clock(clock=stamp))
+        self.clock_pub.publish(Clock(clock=msg.header.stamp))  # after the target: /clock serves the observer
 
     # --- realtime: targets on the wall-clock schedule, as a controller sends them --------------
 
+    def send_preroll(self) -> None:
+        """Start-up handshake before the first deadline: target 0, again every PREROLL_RESEND_S
+        until each simulator has answered it (first samples on new DDS readers and writers take
+        milliseconds; a simulator answers a repeated target with its state, without a step). The
+        answer starts the schedule (on_state -> start_realtime).
+        """
+        now = time.monotonic_ns()
+        if self.preroll_sent_ns is None or now - self.preroll_sent_ns > PREROLL_RESEND_S * 1e9:
+            self.preroll_sent_ns = now
+            msg = self._target(0)
+            self.target_pub.publish(msg)
+            self.clock_pub.publish(Clock(clock=msg.header.stamp))
+
     def start_realtime(self) -> None:
-        """Anchor the schedule now: target k is due k / rate from here; target 0 goes out at once."""
-        self.pace_timer = self.create_timer(1.0 / self.targets.rate_hz, self.publish_due)
+        """Anchor the schedule now, when target 0's state is in: target k is due k / rate from here.
+
+        Target 0 is the handshake's: sent, due and answered at the anchor (the initial state, not
+        a deadline); target 1 goes out one period later.
+        """
+        # On the steady clock, as the schedule: a step of the system clock must not move a deadline.
+        self.pace_timer = self.create_timer(1.0 / self.targets.rate_hz, self.publish_due, clock=steady_clock())
         now = time.monotonic_ns()
         for timeline in self.timelines.values():
             timeline.start(now)
+            timeline.sent[0] = timeline.received[0] = now
+        self.k = 0
         self.publish_due()
 
     def publish_due(self) -> None:
@@ -162,6 +193,11 @@ class TrajectoryPublisher(Node):
 
     def on_state(self, engine: str, msg: PointCloud2) -> None:
         self.reported[engine] = stamp_ns(msg.header.stamp)
+        if self.pacing == "realtime" and self.k < 0:
+            if all(self.reported.get(e) == self.targets.stamp_ns(0) for e in self.engines):
+                self.destroy_timer(self.start_timer)
+                self.start_realtime()  # every simulator answered the handshake: the schedule starts
+            return
         if self.pacing == "realtime":
             self.timelines[engine].mark_received(self.reported[engine], time.monotonic_ns())
             if self.k == self.n_targets - 1 and not self.done and self.all_states_back():

@@ -4,14 +4,16 @@ Each request reports what it got: Linux refuses SCHED_FIFO to a process without 
 (or an RLIMIT_RTPRIO above 0), and a core outside the process's allowed set cannot be pinned.
 A refusal is a result to print, never an exception. Linux schedules threads, not processes, and
 a DDS participant receives in threads of its own (Cyclone's recvUC, dq.builtins, tev, ...):
-affinity and scheduler are set for every thread the process has when asked (/proc/self/task),
-and threads started later inherit them from the thread that starts them.
+pinning gives the step loop's thread its core and moves the others off it, the scheduler is set
+for every thread the process has when asked (/proc/self/task), and threads started later inherit
+both from the thread that starts them.
 """
 
 from __future__ import annotations
 
 import gc
 import os
+import threading
 from dataclasses import dataclass
 
 
@@ -39,19 +41,63 @@ def threads() -> list[int]:
 
 
 def pin_to_cpu(cpu: int) -> str:
-    """Pin every thread of this process to one core (-1: leave it); the outcome as a sentence."""
+    """Give the calling thread core `cpu` and move every other thread of the process off it (-1:
+    leave all); the outcome as a sentence.
+
+    The calling thread is the step loop. The DDS threads (Cyclone's receive and event threads) go
+    to the other allowed cores: on the loop's core they would preempt a step, and a loop that
+    polls instead of sleeping (`busy_wait`) would starve them.
+    """
     if cpu < 0:
         return f"not pinned (allowed cores {_allowed()})"
     if not hasattr(os, "sched_setaffinity"):
         return f"pinning to core {cpu} refused: os.sched_setaffinity is not available on this system"
     try:
-        os.sched_setaffinity(0, {cpu})
-        tids = threads()
-        for tid in tids:
-            _ignore_gone(os.sched_setaffinity, tid, {cpu})
+        others = set(os.sched_getaffinity(0)) - {cpu}
+        os.sched_setaffinity(0, {cpu})  # Linux: 0 is the calling thread
+        moved = 0
+        for tid in threads():
+            if tid != threading.get_native_id() and others:
+                _ignore_gone(os.sched_setaffinity, tid, others)
+                moved += 1
     except (OSError, ValueError) as exc:
         return f"pinning to core {cpu} refused ({exc}); allowed cores {_allowed()}"
-    return f"pinned to core {cpu} ({len(tids)} threads)"
+    where = f"cores {','.join(str(c) for c in sorted(others))}" if others else "the same core (no other allowed)"
+    return f"step loop pinned to core {cpu}, {moved} other threads on {where}"
+
+
+def keep_off_cpu(cpu: int) -> str:
+    """Move every thread of this process off core `cpu` (-1: leave them), so that the simulator's
+    pinned step loop has its core to itself; the outcome as a sentence.
+    """
+    if cpu < 0 or not hasattr(os, "sched_setaffinity"):
+        return f"not pinned (allowed cores {_allowed()})"
+    allowed = set().union(*(_affinity(tid) for tid in threads()))
+    others = allowed - {cpu}
+    if not others:
+        return f"kept on core {cpu}: no other core allowed"
+    for tid in threads():
+        _ignore_gone(os.sched_setaffinity, tid, others)
+    return f"kept off core {cpu} (on cores {','.join(str(c) for c in sorted(others))})"
+
+
+def lower_priority(niceness: int = 19) -> str:
+    """Run this process's threads at `niceness` (work off the critical path yields the CPU to it)."""
+    if not hasattr(os, "setpriority"):
+        return "priority unchanged: os.setpriority is not available on this system"
+    for tid in threads():
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, niceness)  # Linux: per thread
+        except (ProcessLookupError, PermissionError):
+            pass
+    return f"nice {niceness} (off the critical path)"
+
+
+def _affinity(tid: int) -> set[int]:
+    try:
+        return set(os.sched_getaffinity(tid))
+    except ProcessLookupError:
+        return set()
 
 
 def _ignore_gone(call, tid: int, *args) -> None:
@@ -90,6 +136,30 @@ def request_fifo(priority: int) -> str:
     except OSError as exc:
         return f"SCHED_FIFO {priority} refused ({exc}); running on SCHED_OTHER"
     return f"SCHED_FIFO priority {priority} ({len(tids)} threads)"
+
+
+def poll_on_default_scheduler() -> str:
+    """Put the calling thread back on SCHED_OTHER for a loop that polls instead of sleeping.
+
+    A SCHED_FIFO thread that never sleeps uses up the kernel's real-time budget
+    (sched_rt_runtime_us of every sched_rt_period_us, 950 ms of 1 s by default) and is then
+    stopped for the rest of the period: a 50 ms stall every second. Pinned alone on its core
+    (pin_to_cpu), a polling thread needs no real-time priority; the other threads keep theirs.
+    """
+    if not hasattr(os, "sched_getscheduler") or os.sched_getscheduler(0) != os.SCHED_FIFO:
+        return "step loop polls on the default scheduler"
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))  # Linux: 0 is the calling thread
+    budget = _read_int("/proc/sys/kernel/sched_rt_runtime_us"), _read_int("/proc/sys/kernel/sched_rt_period_us")
+    return (f"step loop polls on SCHED_OTHER (SCHED_FIFO would be throttled by the kernel's real-time budget, "
+            f"{budget[0]} of every {budget[1]} us), the other threads keep SCHED_FIFO")
+
+
+def _read_int(path: str) -> int | None:
+    try:
+        with open(path) as f:
+            return int(f.read().strip())
+    except (OSError, ValueError):
+        return None
 
 
 def freeze_heap() -> str:
@@ -133,7 +203,7 @@ def release(outcome: RealtimeOutcome) -> None:
         gc.unfreeze()
         gc.enable()
     for tid in threads():
-        if outcome.previous_cpus is not None and outcome.cpu.startswith("pinned"):
+        if outcome.previous_cpus is not None and outcome.cpu.startswith("step loop pinned"):
             _ignore_gone(os.sched_setaffinity, tid, outcome.previous_cpus)
         if outcome.previous_policy is not None and outcome.scheduler.startswith("SCHED_FIFO"):
             _ignore_gone(os.sched_setscheduler, tid, outcome.previous_policy, os.sched_param(0))

@@ -35,8 +35,10 @@ import numpy as np
 import yaml
 
 from cloth_bench_ros.core.hil_timing import HilFigures, TargetTimeline, check_bookkeeping, hil_figures
+from cloth_bench_ros.report.hil import DEADLINE_BUDGET
 
 GROUPS = ("observer", "simulator", "controller")  # started in this order, so the controller starts last
+SINGLE_THREADED_MATH = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 TIMELINE = "timeline_{engine}.csv"
 SIMULATOR_FILE = "simulator.json"
 SUMMARY_FILE = "summary.json"
@@ -59,6 +61,7 @@ class HilConfig:
     cpu: int = -1  # core to pin the simulator to (-1: not pinned)
     realtime_priority: int = 0  # SCHED_FIFO priority of the simulator and the controller (0: not asked)
     freeze_gc: bool = True
+    busy_wait: bool = False  # the simulator polls for targets instead of sleeping (give it a core: cpu)
     duration: float = 0.0  # s of the trajectory to run (0: all of it, scored by the observer)
 
     def ident(self) -> str:
@@ -100,19 +103,21 @@ class HilResult:
 # ----------------------------------------------------------------------------------- load
 
 
-def _cpu_times() -> tuple[int, int] | None:
-    """(busy, total) jiffies of all cores from /proc/stat, or None where there is none."""
+def _cpu_times() -> tuple[int, int, int] | None:
+    """(busy, steal, total) jiffies of all cores from /proc/stat, or None where there is none."""
     try:
         with open("/proc/stat") as f:
             fields = [int(v) for v in f.readline().split()[1:9]]
     except (OSError, ValueError):
         return None
     idle = fields[3] + fields[4]  # idle + iowait
-    return sum(fields) - idle, sum(fields)
+    return sum(fields) - idle, fields[7], sum(fields)
 
 
 class LoadMeter:
-    """The machine's CPU load over a span: busy share of all cores (/proc/stat) and load averages."""
+    """The machine's CPU load over a span: busy share of all cores (/proc/stat), the share the
+    hypervisor took from a virtual machine (steal: the vCPU runnable but not running), load averages.
+    """
 
     def __enter__(self) -> "LoadMeter":
         self.start = _cpu_times()
@@ -121,13 +126,15 @@ class LoadMeter:
 
     def __exit__(self, *exc) -> None:
         end = _cpu_times()
-        self.busy = math.nan
-        if self.start and end and end[1] > self.start[1]:
-            self.busy = (end[0] - self.start[0]) / (end[1] - self.start[1])
+        self.busy = self.steal = math.nan
+        if self.start and end and end[2] > self.start[2]:
+            total = end[2] - self.start[2]
+            self.busy = (end[0] - self.start[0]) / total
+            self.steal = (end[1] - self.start[1]) / total
         self.loadavg_after = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
 
     def as_dict(self) -> dict:
-        return {"cpu_busy": self.busy, "loadavg_before": self.loadavg_before,
+        return {"cpu_busy": self.busy, "cpu_steal": self.steal, "loadavg_before": self.loadavg_before,
                 "loadavg_after": self.loadavg_after, "cpu_count": os.cpu_count()}
 
 
@@ -179,7 +186,7 @@ def _finished(group: str, nodes: list) -> bool:
     return all(getattr(n, "done", True) for n in nodes)
 
 
-def _write_simulator_file(run_dir: Path, nodes: list) -> None:
+def _write_simulator_file(run_dir: Path, nodes: list, notes: list[str] = ()) -> None:
     from cloth_bench_ros.nodes.simulator import Simulator
     from cloth_bench_ros.safe_io import atomic_write_text
 
@@ -189,7 +196,7 @@ def _write_simulator_file(run_dir: Path, nodes: list) -> None:
             times = times[np.isfinite(times)]
             step_time = ({"p50": float(np.percentile(times, 50)), "p99": float(np.percentile(times, 99)),
                           "max": float(times.max())} if times.size else {})
-            info = {"stepped": node.step + 1, "skipped": node.skipped, "realtime": node.realtime.lines(),
+            info = {"stepped": node.step + 1, "skipped": node.skipped, "realtime": node.realtime.lines() + list(notes),
                     "step_time": step_time}
             atomic_write_text(run_dir / SIMULATOR_FILE, json.dumps(info))
 
@@ -252,12 +259,22 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
             gc.freeze()  # start-up objects out of the collector's way (the simulator also stops it)
             # The controller is the robot's real-time loop: the same scheduling request as the simulator.
             print(f"controller: {realtime.request_fifo(config.realtime_priority)}", flush=True)
+        if group == "observer":
+            print(f"observer: {realtime.lower_priority()}", flush=True)
+        if group != "simulator":  # a pinned simulator's step loop has its core to itself
+            print(f"{group}: {realtime.keep_off_cpu(config.cpu)}", flush=True)
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)
+        # Polling keeps the simulator's core awake: a core that idles between targets (a VM's vCPU
+        # halts) wakes slowly and steps from cold caches, 1.5-3x slower at the p99 on this machine.
+        polling = group == "simulator" and config.busy_wait
+        notes = [f"poll: {realtime.poll_on_default_scheduler()}"] if polling else []
+        print(*[f"{group}: {n}" for n in notes], sep="\n", flush=True)
+        timeout = 0.0 if polling else 0.05
         while not stopped and not _finished(group, nodes):
-            executor.spin_once(timeout_sec=0.05)
-        _write_simulator_file(run_dir, nodes)
+            executor.spin_once(timeout_sec=timeout)
+        _write_simulator_file(run_dir, nodes, notes)
     finally:
         close_nodes(nodes)
         rclpy.shutdown(context=context)
@@ -287,7 +304,9 @@ def _run_processes(config: HilConfig, run_dir: Path) -> None:
 
     # As `cloth-bench run --processes`: DDS on loopback only, on ROS_DOMAIN_ID or a random domain.
     domain = int(os.environ["ROS_DOMAIN_ID"]) if os.environ.get("ROS_DOMAIN_ID") else random.randint(1, 200)
-    env = {**os.environ, **loopback_environment(domain)}
+    # One thread per BLAS / OpenMP library: their pools spin between calls, on a core that the
+    # controller (SCHED_FIFO) or the step loop needs.
+    env = {**os.environ, **loopback_environment(domain), **{k: "1" for k in SINGLE_THREADED_MATH}}
     procs: dict[str, subprocess.Popen] = {}
     deadline = time.monotonic() + _time_budget(config)
     try:
@@ -382,11 +401,12 @@ def with_config(config: HilConfig, label: str, grid: tuple[int, int] | None, par
 
 
 RECOMMENDED_FILE = "hil_recommended.yaml"
+HIL_DEADLINE_BUDGET = DEADLINE_BUDGET  # the step's share of the period (report/hil.py says why)
 DEFAULT_SETTINGS = Path("results") / "settings"  # where `cloth-bench sweep --mode settings` writes
 
 
 def recommended(engine: str, cloth: str, primitive: str, rate_hz: float, settings: Path | None = DEFAULT_SETTINGS,
-                tol_rel: float = 0.05, tol_abs: float = 0.002, budget: float = 1.0):
+                tol_rel: float = 0.05, tol_abs: float = 0.002, budget: float = HIL_DEADLINE_BUDGET):
     """The configuration `--config recommended` runs and where it comes from: the settings sweep's
     results if they hold this engine, task and rate, else the shipped config/hil_recommended.yaml.
     """
