@@ -270,7 +270,8 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
         # halts) wakes slowly and steps from cold caches, 1.5-3x slower at the p99 on this machine.
         polling = group == "simulator" and config.busy_wait
         notes = [f"poll: {realtime.poll_on_default_scheduler()}"] if polling else []
-        print(*[f"{group}: {n}" for n in notes], sep="\n", flush=True)
+        for note in notes:
+            print(f"{group}: {note}", flush=True)
         timeout = 0.0 if polling else 0.05
         while not stopped and not _finished(group, nodes):
             executor.spin_once(timeout_sec=timeout)
