@@ -2,58 +2,12 @@
 
 from __future__ import annotations
 
-import csv
 import html
-import io
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
-
-@dataclass
-class Table:
-    """A table: rendered to Markdown and HTML, and written as CSV (file stem `name`)."""
-
-    name: str  # file stem of its CSV
-    headers: list[str]
-    rows: list[list[str]]
-    align: str = ""  # per column: l or r
-
-    def markdown(self) -> str:
-        align = self.align or "l" * len(self.headers)
-        sep = ["---:" if a == "r" else "---" for a in align]
-        esc = lambda s: str(s).replace("|", "/")  # noqa: E731
-        lines = ["| " + " | ".join(esc(h) for h in self.headers) + " |", "| " + " | ".join(sep) + " |"]
-        lines += ["| " + " | ".join(esc(c) for c in row) + " |" for row in self.rows]
-        return "\n".join(lines)
-
-    def html(self) -> str:
-        align = self.align or "l" * len(self.headers)
-        head = "".join(f"<th>{_inline_html(h)}</th>" for h in self.headers)
-        body = "".join(
-            "<tr>" + "".join(f'<td class="{"num" if a == "r" else ""}">{_inline_html(c)}</td>'
-                             for c, a in zip(row, align)) + "</tr>\n" for row in self.rows)
-        return f"<table>\n<thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody>\n</table>"
-
-    def write_csv(self, path: Path) -> None:
-        from cloth_bench_ros.safe_io import atomic_write_text
-
-        buffer = io.StringIO()
-        w = csv.writer(buffer)
-        w.writerow([_plain(h) for h in self.headers])
-        w.writerows([[_plain(c) for c in row] for row in self.rows])
-        atomic_write_text(path, buffer.getvalue())
-
-
-def _plain(text) -> str:
-    return str(text).replace("**", "")
-
-
-def _inline_html(text) -> str:
-    out = html.escape(str(text))
-    out = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", out)
-    return re.sub(r"`(.+?)`", r"<code>\1</code>", out)
+from cloth_bench_ros.core.table import Table, inline_html
 
 
 Block = tuple  # ("h", level, text) | ("p", text) | ("table", Table) | ("figure", Figure) | ("img", file, caption)
@@ -116,12 +70,12 @@ class Document:
             if b[0] == "h":
                 body.append(f"<h{b[1]}>{html.escape(b[2])}</h{b[1]}>")
             elif b[0] == "p":
-                body.append(f"<p>{_inline_html(b[1])}</p>")
+                body.append(f"<p>{inline_html(b[1])}</p>")
             elif b[0] == "table":
                 body.append(b[1].html())
             elif b[0] == "img":
                 body.append(f'<figure><img src="{html.escape(b[1])}" alt="{html.escape(b[2])}">'
-                            f"<figcaption>{_inline_html(b[2])}</figcaption></figure>")
+                            f"<figcaption>{inline_html(b[2])}</figcaption></figure>")
         style = ("body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em}"
                  "table{border-collapse:collapse;margin:1em 0;font-size:0.9em}"
                  "th,td{border:1px solid #ccc;padding:3px 6px}td.num{text-align:right}"

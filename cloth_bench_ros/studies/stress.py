@@ -23,12 +23,11 @@ import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from cloth_bench_ros.report.blocks import Table
+from cloth_bench_ros.core.table import Table
 
 STRESS_FILE = "stress.jsonl"
 MAX_CASE_WALL_S = 120.0
@@ -292,8 +291,6 @@ def _f(value, fmt: str) -> str:
 
 def stress_table(rows: Sequence[dict]) -> Table:
     """One row per case and engine; stress.md and the report both render this table."""
-    from cloth_bench_ros.report.blocks import Table
-
     headers = ["engine", "case", "rate Hz", "status", "diverged at step", "L_s (m)", "max vertex speed (m/s)",
                "step mean (ms)", "step max (ms)", "steps", "why"]
     out = []
