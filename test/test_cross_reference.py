@@ -11,7 +11,7 @@ import pytest
 from cloth_bench_ros.data import synth
 from cloth_bench_ros.data import CLOUD_TOPIC, BagReader
 from cloth_bench_ros.report import cross_reference as xr
-from cloth_bench_ros.report.statistics import stat
+from cloth_bench_ros.studies.aggregate import stat
 from cloth_bench_ros.studies.sweep import Cell
 
 SMALL = synth.Camera(width=320, height=180)

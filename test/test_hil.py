@@ -24,7 +24,8 @@ from cloth_bench_ros.engines.base import check_divergence
 from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
 from cloth_bench_ros.nodes.simulator import Simulator, StateMessages
 from cloth_bench_ros.core.pointcloud2 import read_xyz
-from cloth_bench_ros.report.hil import load_recommendations, recommend_for_rate, write_hil_report
+from cloth_bench_ros.report.hil import write_hil_report
+from cloth_bench_ros.studies.recommend import load_recommendations, recommend_for_rate
 from cloth_bench_ros.runtime import Parameter, PointCloud2, PoseArray, Pose, Time, embedded, realtime, stamp_ns
 from cloth_bench_ros.runtime.dds import loopback_environment
 from cloth_bench_ros.studies import hil

@@ -16,7 +16,8 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from cloth_bench_ros.report import settings, statistics
+from cloth_bench_ros.report import statistics
+from cloth_bench_ros.studies import aggregate, recommend
 from cloth_bench_ros.studies import sweep as sw
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.studies.stress import default_cases, run_case
@@ -127,20 +128,20 @@ def test_fig5_timing_and_stability_tables_hold_one_row_per_engine_and_rate(rende
 def test_stat_pareto_and_recommendation():
     rows = [{"status": "ok", "CD": 1.0}, {"status": "ok", "CD": 3.0}, {"status": "diverged", "CD": math.nan},
             {"status": "error", "CD": math.nan}]
-    s = statistics.stat(rows, "CD")
+    s = aggregate.stat(rows, "CD")
     assert (s.n, s.used, s.diverged, s.errors, s.mean, s.std) == (4, 2, 1, 1, 2.0, 1.0)
     assert "1 diverged" in s.text()
     assert statistics.pareto_front([(1, 5), (2, 4), (3, 6), (0.5, 9), (2, 1), (math.nan, 0)]) == [3, 0, 4]
 
     def cr(config, cd, ms, stable=True):
-        st = statistics.Stat(2, 2, 0, 0, cd, 0.0)
-        return settings.ConfigResult("mujoco", "towel", "dynamic", 100.0, config, st, st, ms, ms / 10, stable)
+        st = aggregate.Stat(2, 2, 0, 0, cd, 0.0)
+        return recommend.ConfigResult("mujoco", "towel", "dynamic", 100.0, config, st, st, ms, ms / 10, stable)
 
     configs = [cr("fine", 0.100, 10.0), cr("medium", 0.1045, 3.0), cr("coarse", 0.110, 1.0),
                cr("broken", 0.050, 0.5, stable=False)]
-    best, cheap, tol = settings.recommend(configs, 0.05, 0.002)
+    best, cheap, tol = recommend.recommend(configs, 0.05, 0.002)
     assert best.config == "fine" and cheap.config == "medium" and tol == pytest.approx(0.005)
-    best, cheap, tol = settings.recommend(configs, 0.05, 0.02)  # 2 cm absolute tolerance: coarse is enough
+    best, cheap, tol = recommend.recommend(configs, 0.05, 0.02)  # 2 cm absolute tolerance: coarse is enough
     assert cheap.config == "coarse" and tol == pytest.approx(0.02)
 
 

@@ -23,9 +23,10 @@ from cloth_bench_ros.report.blocks import (
     Block, Document, Table, figure_block, heading, paragraph, table_block, write_document)
 from cloth_bench_ros.report.settings import settings_tables
 from cloth_bench_ros.report.statistics import (
-    cloths_of, engine_label, engines_of, finite, fmt_fixed, fmt_sig, paper_rows, table_rate)
+    cloths_of, engine_label, engines_of, fmt_fixed, fmt_sig, paper_rows, table_rate)
 from cloth_bench_ros.report.tables import (
     PAPER_FIG5, errors_table, fig5_table, stability_table, table2, timing_table)
+from cloth_bench_ros.studies.aggregate import finite
 
 
 @dataclass

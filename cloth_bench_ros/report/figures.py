@@ -16,8 +16,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from cloth_bench_ros.report.statistics import (  # noqa: E402
-    ENGINE_COLOR, FPS, compute_per_sim_second, engine_label, engines_of, finite, group, metric_name, pareto_front,
-    rates_of, stat)
+    ENGINE_COLOR, FPS, engine_label, engines_of, metric_name, pareto_front, rates_of)
+from cloth_bench_ros.studies.aggregate import compute_per_sim_second, finite, group, stat  # noqa: E402
 
 
 def _plain_log(ax, axis: str = "xy") -> None:

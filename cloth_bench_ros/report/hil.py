@@ -1,9 +1,6 @@
-"""Hardware in the loop: the configuration chosen for a rate, and the report of real-time runs.
+"""Hardware in the loop: the configuration chosen per rate and the report of real-time runs.
 
-- `recommend_for_rate`: from settings-sweep rows, the cheapest configuration that is both accurate
-  enough (CD within tolerance of the most accurate one, `document.recommend`'s rule) and fast
-  enough (the engine's step p99 under the period, times a budget fraction) at one rate.
-- `deadline_tables`: that criterion for every configuration of a settings sweep.
+- `deadline_tables`: studies/recommend.py's criterion for every configuration of a settings sweep.
 - the recommendation file (config/hil_recommended.yaml): what `cloth-bench hil --config
   recommended` falls back to without settings-sweep results, with its provenance.
 - `write_hil_report`: per engine, rate and configuration the latency p50 / p99 / p99.9 / max,
@@ -14,95 +11,16 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from cloth_bench_ros.report.blocks import Document, Table, figure_block, paragraph, table_block, write_document
-from cloth_bench_ros.report.settings import recommend, settings_results
-from cloth_bench_ros.report.statistics import engine_label, finite, fmt_fixed as _fmt, metric_name
-
-RECOMMENDATION_KEYS = ("engine", "cloth", "primitive", "rate_hz", "config", "grid", "params", "cd", "step_p99_ms",
-                       "best_config", "best_cd", "tolerance_m", "meets_deadline")
-
-
-# The step's share of the period: the rest is the round trip (two DDS hops, the messages in Python),
-# 0.4-0.5 ms on a 2-core machine, so at 1 kHz a configuration must step in half the period.
-DEADLINE_BUDGET = 0.5
-
-
-@dataclass(frozen=True)
-class Recommendation:
-    """The configuration to run an engine with at a rate, and why."""
-
-    engine: str
-    cloth: str
-    primitive: str
-    rate_hz: float
-    config: str  # the settings sweep's label of the configuration
-    grid: tuple[int, int] | None
-    params: dict = field(default_factory=dict)
-    cd: float = math.nan
-    step_p99_ms: float = math.nan  # measured in the settings sweep (lockstep) at this rate
-    best_config: str = ""
-    best_cd: float = math.nan
-    tolerance_m: float = math.nan
-    meets_deadline: bool = False  # step p99 under budget x period; False: the most accurate-enough cheapest
-
-    def as_dict(self) -> dict:
-        d = {k: getattr(self, k) for k in RECOMMENDATION_KEYS}
-        d["grid"] = list(self.grid) if self.grid else None
-        return d
-
-
-def _step_ms(rows: Sequence[dict], key: str) -> dict[str, float]:
-    """Median over seeds of a step-time statistic (step_time_p50, step_time_p99) per configuration, in ms."""
-    by: dict[str, list] = {}
-    for r in rows:
-        if r.get("status") == "ok":
-            by.setdefault(r["config"], []).append(r.get(key))
-    return {c: float(np.median(v)) * 1e3 if len(v := finite(vals)) else math.nan for c, vals in by.items()}
-
-
-def _grid_params(rows: Sequence[dict], config: str) -> tuple[tuple[int, int] | None, dict]:
-    row = next(r for r in rows if r["config"] == config)
-    grid = row.get("grid")
-    if isinstance(grid, str):
-        nx, _, nz = grid.partition("x")
-        grid = (int(nx), int(nz))
-    return (tuple(grid) if grid else None), dict(row.get("params") or {})
-
-
-def recommend_for_rate(rows: Sequence[dict], engine: str, cloth: str, primitive: str, rate_hz: float,
-                       tol_rel: float = 0.05, tol_abs: float = 0.002, budget: float = DEADLINE_BUDGET) -> Recommendation | None:
-    """The cheapest configuration within tolerance of the most accurate whose step p99 < budget / rate.
-
-    Cheapest: the lowest median step time (p50), which other work on a shared machine inflates far
-    less than the mean. If no accurate-enough configuration meets the deadline, the cheapest
-    accurate-enough one, with meets_deadline False. None without stable settings-sweep rows for
-    this engine, task and rate.
-    """
-    sel = [r for r in rows if r.get("mode") == "settings" and r["engine"] == engine and r["cloth"] == cloth
-           and r["primitive"] == primitive and float(r["rate_hz"]) == float(rate_hz)]
-    results = settings_results(sel)
-    best, _, tol = recommend(results, tol_rel, tol_abs)
-    if best is None:
-        return None
-    p50, p99 = _step_ms(sel, "step_time_p50"), _step_ms(sel, "step_time_p99")
-    period_ms = 1e3 / rate_hz
-    accurate = [r for r in results if r.stable and math.isfinite(r.cd.mean) and r.cd.mean <= best.cd.mean + tol]
-    fast = [r for r in accurate if p99.get(r.config, math.nan) < budget * period_ms]
-
-    def cost(r) -> tuple[float, float]:
-        value = p50.get(r.config, math.nan)
-        return (value if math.isfinite(value) else math.inf, r.cd.mean)
-
-    choice = min(fast or accurate, key=cost)
-    grid, params = _grid_params(sel, choice.config)
-    return Recommendation(engine, cloth, primitive, float(rate_hz), choice.config, grid, params, choice.cd.mean,
-                          p99.get(choice.config, math.nan), best.config, best.cd.mean, tol, bool(fast))
+from cloth_bench_ros.report.statistics import engine_label, fmt_fixed as _fmt, metric_name
+from cloth_bench_ros.studies.aggregate import finite
+from cloth_bench_ros.studies.recommend import (
+    DEADLINE_BUDGET, Recommendation, recommend_for_rate, settings_results, step_ms_by_config)
 
 
 def deadline_tables(rows: Sequence[dict], tol_rel: float = 0.05, tol_abs: float = 0.002,
@@ -115,7 +33,7 @@ def deadline_tables(rows: Sequence[dict], tol_rel: float = 0.05, tol_abs: float 
         sel = [r for r in settings if (r["engine"], r["cloth"], r["primitive"], float(r["rate_hz"]))
                == (engine, cloth, primitive, rate)]
         rec = recommend_for_rate(sel, engine, cloth, primitive, rate, tol_rel, tol_abs, budget)
-        p50, p99 = _step_ms(sel, "step_time_p50"), _step_ms(sel, "step_time_p99")
+        p50, p99 = step_ms_by_config(sel, "step_time_p50"), step_ms_by_config(sel, "step_time_p99")
         period_ms = 1e3 / rate
         out = []
         for r in sorted(settings_results(sel), key=lambda r: p99.get(r.config, math.inf)):
@@ -177,31 +95,6 @@ def provenance(rows: Sequence[dict], tol_rel: float, tol_abs: float, budget: flo
                     else "unknown"),
         "note": note,
     }
-
-
-def load_recommendations(path: Path) -> list[Recommendation]:
-    """The entries of a recommendation file; ValueError naming the file on a malformed one."""
-    from cloth_bench_ros.safe_io import load_yaml_file
-
-    data = load_yaml_file(path)
-    entries = data.get("recommendations") if isinstance(data, dict) else None
-    if not isinstance(entries, list):
-        raise ValueError(f"recommendation file {path}: no 'recommendations' list")
-    out = []
-    for i, e in enumerate(entries):
-        if not isinstance(e, dict) or not {"engine", "cloth", "primitive", "rate_hz", "config"} <= set(e):
-            raise ValueError(f"recommendation file {path}: entry {i} lacks engine, cloth, primitive, rate_hz or config")
-        grid = e.get("grid")
-        if grid is not None and not (isinstance(grid, list) and len(grid) == 2 and all(isinstance(g, int) for g in grid)):
-            raise ValueError(f"recommendation file {path}: entry {i} grid is not [nx, nz]")
-        params = e.get("params") or {}
-        if not isinstance(params, dict):
-            raise ValueError(f"recommendation file {path}: entry {i} params is not a mapping")
-        out.append(Recommendation(str(e["engine"]), str(e["cloth"]), str(e["primitive"]), float(e["rate_hz"]),
-                                  str(e["config"]), tuple(grid) if grid else None, params,
-                                  **{k: e[k] for k in ("cd", "step_p99_ms", "best_config", "best_cd", "tolerance_m",
-                                                       "meets_deadline") if k in e}))
-    return out
 
 
 # ---------------------------------------------------------------------------- the report

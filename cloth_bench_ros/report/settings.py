@@ -4,57 +4,11 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from dataclasses import dataclass
 from typing import Sequence
 
 from cloth_bench_ros.report.blocks import Table
-from cloth_bench_ros.report.statistics import (
-    Stat, compute_per_sim_second, engine_label, engines_of, finite, fmt_fixed, fmt_sig, group, metric_name,
-    pareto_front, stat)
-
-
-@dataclass
-class ConfigResult:
-    engine: str
-    cloth: str
-    primitive: str
-    rate: float
-    config: str
-    cd: Stat
-    hd: Stat
-    step_ms: float
-    cost: float  # compute per simulated second
-    stable: bool
-
-
-def settings_results(rows: Sequence[dict]) -> list[ConfigResult]:
-    sel = [r for r in rows if r.get("mode") == "settings"]
-    out = []
-    for (e, cloth, prim, rate, config), g in group(sel, "engine", "cloth", "primitive", "rate_hz", "config").items():
-        ok = [r for r in g if r.get("status") == "ok"]
-        st = finite(r.get("step_time_mean") for r in ok)
-        cost = finite(compute_per_sim_second(r) for r in ok)
-        out.append(ConfigResult(e, cloth, prim, float(rate), config, stat(g, "CD"), stat(g, "HD"),
-                                float(st.mean() * 1e3) if len(st) else math.nan,
-                                float(cost.mean()) if len(cost) else math.nan,
-                                len(ok) == len(g) and len(g) > 0))
-    return out
-
-
-def recommend(results: Sequence[ConfigResult], tol_rel: float, tol_abs: float
-              ) -> tuple[ConfigResult | None, ConfigResult | None, float]:
-    """(most accurate, cheapest within tolerance, tolerance in m) among stable configurations.
-
-    Within tolerance: mean CD <= best CD + max(tol_rel * best CD, tol_abs).
-    """
-    stable = [r for r in results if r.stable and math.isfinite(r.cd.mean)]
-    if not stable:
-        return None, None, math.nan
-    best = min(stable, key=lambda r: (r.cd.mean, r.step_ms))
-    tol = max(tol_rel * best.cd.mean, tol_abs)
-    within = [r for r in stable if r.cd.mean <= best.cd.mean + tol]
-    cheapest = min(within, key=lambda r: (r.step_ms, r.cd.mean))
-    return best, cheapest, tol
+from cloth_bench_ros.report.statistics import engine_label, engines_of, fmt_fixed, fmt_sig, metric_name, pareto_front
+from cloth_bench_ros.studies.recommend import recommend, settings_results
 
 
 def settings_tables(rows: Sequence[dict], tol_rel: float, tol_abs: float) -> tuple[list[Table], list[str], list[dict]]:

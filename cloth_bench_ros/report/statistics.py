@@ -1,13 +1,16 @@
-"""Statistics and selections over results rows: mean +- std per group, Pareto fronts, labels."""
+"""Selections over results rows for the report: Pareto fronts, labels, number formats.
+
+Mean +- std per group is studies/aggregate.py's (a study's choice of configuration uses it too).
+"""
 
 from __future__ import annotations
 
 import math
-from collections import Counter, defaultdict
-from dataclasses import dataclass
+from collections import Counter
 from typing import Iterable, Sequence
 
-import numpy as np
+# report/cross_reference.py imports these from here until its running moves into studies/.
+from cloth_bench_ros.studies.aggregate import group, stat  # noqa: F401
 
 ENGINE_LABEL = {"mujoco": "MuJoCo", "bullet": "Bullet", "flex": "Flex", "sofa": "SOFA", "newton": "Newton"}
 ENGINE_COLOR = {"mujoco": "tab:blue", "bullet": "tab:orange", "flex": "tab:green", "sofa": "tab:red",
@@ -15,55 +18,6 @@ ENGINE_COLOR = {"mujoco": "tab:blue", "bullet": "tab:orange", "flex": "tab:green
 METRICS = ("CD_d", "HD_d", "CD_q", "HD_q")
 PAPER_ENGINES = ("mujoco", "bullet", "flex", "sofa")
 FPS = 30.0
-
-
-def finite(values: Iterable) -> np.ndarray:
-    a = np.asarray([np.nan if v is None else v for v in values], dtype=float)
-    return a[np.isfinite(a)]
-
-
-@dataclass
-class Stat:
-    """mean +- std over the usable cells of a group, with how many there were and diverged."""
-
-    n: int  # cells in the group
-    used: int  # cells with a finite value
-    diverged: int
-    errors: int
-    mean: float
-    std: float
-
-    def text(self, digits: int = 3, show_n: bool = True) -> str:
-        if self.used == 0:
-            if self.diverged:
-                return f"diverged ({self.diverged}/{self.n})"
-            return "error" if self.errors else "-"
-        out = f"{self.mean:.{digits}f} ± {self.std:.{digits}f}"
-        notes = []
-        if show_n:
-            notes.append(f"n={self.used}")
-        if self.diverged:
-            notes.append(f"{self.diverged} diverged")
-        if self.errors:
-            notes.append(f"{self.errors} errors")
-        return out + (f" ({', '.join(notes)})" if notes else "")
-
-
-def stat(rows: Sequence[dict], key: str) -> Stat:
-    """Mean and (population) std of `key` over the rows that neither diverged nor failed."""
-    usable = [r for r in rows if r.get("status") == "ok"]
-    values = finite(r.get(key) for r in usable)
-    return Stat(len(rows), len(values), sum(r.get("status") == "diverged" for r in rows),
-                sum(r.get("status") == "error" for r in rows),
-                float(values.mean()) if len(values) else math.nan,
-                float(values.std()) if len(values) else math.nan)
-
-
-def group(rows: Iterable[dict], *keys: str) -> dict[tuple, list[dict]]:
-    out: dict[tuple, list[dict]] = defaultdict(list)
-    for r in rows:
-        out[tuple(r.get(k) for k in keys)].append(r)
-    return dict(out)
 
 
 def metric_name(primitive: str, kind: str) -> str:
@@ -80,14 +34,6 @@ def pareto_front(points: Sequence[tuple[float, float]]) -> list[int]:
             front.append(i)
             best = points[i][1]
     return front
-
-
-def compute_per_sim_second(row: dict) -> float:
-    """Engine compute time per simulated second (s/s): mean step time x rate; < 1 is faster than real time."""
-    st = row.get("step_time_mean")
-    if st is None or not math.isfinite(st):
-        return math.nan
-    return float(st) * float(row["rate_hz"])
 
 
 def engine_label(name: str) -> str:

@@ -11,7 +11,8 @@ import numpy as np
 
 from cloth_bench_ros.report.blocks import Table
 from cloth_bench_ros.report.statistics import (
-    METRICS, PAPER_ENGINES, cloths_of, engine_label, engines_of, finite, fmt_fixed, fmt_sig, group, rates_of, stat)
+    METRICS, PAPER_ENGINES, cloths_of, engine_label, engines_of, fmt_fixed, fmt_sig, rates_of)
+from cloth_bench_ros.studies.aggregate import finite, group, stat
 
 # REFERENCE.md section 5, Table II: (mean, std, bold in the paper) per cloth, metric and engine.
 PAPER_TABLE2: dict[tuple[str, str], dict[str, tuple[float, float, bool]]] = {

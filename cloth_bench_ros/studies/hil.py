@@ -35,7 +35,7 @@ import numpy as np
 import yaml
 
 from cloth_bench_ros.core.hil_timing import HilFigures, TargetTimeline, check_bookkeeping, hil_figures
-from cloth_bench_ros.report.hil import DEADLINE_BUDGET
+from cloth_bench_ros.studies.recommend import DEADLINE_BUDGET
 
 GROUPS = ("observer", "simulator", "controller")  # started in this order, so the controller starts last
 SINGLE_THREADED_MATH = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
@@ -402,7 +402,7 @@ def with_config(config: HilConfig, label: str, grid: tuple[int, int] | None, par
 
 
 RECOMMENDED_FILE = "hil_recommended.yaml"
-HIL_DEADLINE_BUDGET = DEADLINE_BUDGET  # the step's share of the period (report/hil.py says why)
+HIL_DEADLINE_BUDGET = DEADLINE_BUDGET  # the step's share of the period (studies/recommend.py says why)
 DEFAULT_SETTINGS = Path("results") / "settings"  # where `cloth-bench sweep --mode settings` writes
 
 
@@ -412,7 +412,7 @@ def recommended(engine: str, cloth: str, primitive: str, rate_hz: float, setting
     results if they hold this engine, task and rate, else the shipped config/hil_recommended.yaml.
     """
     from cloth_bench_ros.paths import share_dir
-    from cloth_bench_ros.report.hil import load_recommendations, recommend_for_rate
+    from cloth_bench_ros.studies.recommend import load_recommendations, recommend_for_rate
     from cloth_bench_ros.studies.sweep import load_rows
 
     if settings is not None and Path(settings).exists():
