@@ -10,10 +10,10 @@ from pathlib import Path
 from cloth_bench_ros import validation
 from cloth_bench_ros.data.trial import trial_from_message
 from cloth_bench_ros.core.evaluation import OnlineEvaluator, frame_accounting
+from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.nodes.common import NAMESPACE, publishers_matched, replay_stamps, run_node
+from cloth_bench_ros.nodes.comparison import write_comparison
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
-from cloth_bench_ros.report.comparison import write_comparison
-from cloth_bench_ros.report.run_report import write_run_report
 from cloth_bench_ros.safe_io import check_output_dir
 from cloth_bench_ros.runtime import (
     DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, declare_float, make_qos,
