@@ -11,6 +11,7 @@ import numpy as np
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.task import grasped_corners, initial_displacement
 
 
 class EngineError(ValueError):
@@ -77,8 +78,9 @@ def check_divergence(vertices: np.ndarray, previous: np.ndarray | None, dt: floa
 class ClothEngine(abc.ABC):
     """A cloth simulator for the benchmark scene: cloth, table, two point grasps.
 
-    Subclasses set `name` and `params`, build the scene in `_build` and advance it in `_step`.
-    The grasped corners are the first and last vertex of the grid's top row.
+    Subclasses set `name` and `params`, build the scene, put the cloth in the task's initial
+    state in `_reset` and advance it in `_step`. The task's set-up (grasped corners, the seeded
+    initial state) is core/task.py's: engines only apply it and step the physics.
     """
 
     name: ClassVar[str]
@@ -99,7 +101,7 @@ class ClothEngine(abc.ABC):
         self._scratch: np.ndarray | None = None
         self._row: np.ndarray | None = None
         self._rest = self.grid.vertices()
-        self._corners = [self.grid.left_corner, self.grid.right_corner]
+        self._corners = grasped_corners(self.grid)
         if "timestep" in self.config and "substeps" in self.config:  # the one substep rule of the engines
             self.substeps = self.internal_steps(float(self.config["timestep"]), int(self.config["substeps"]))
             self.h = self.dt / self.substeps
@@ -146,7 +148,8 @@ class ClothEngine(abc.ABC):
         """Build the scene with the grasped corners at the grippers; the seed perturbs the cloth."""
         self.divergence = None
         self.steps = 0
-        self._vertices = self._reset(int(seed), np.asarray(left_xyz, float), np.asarray(right_xyz, float))
+        left, right = np.asarray(left_xyz, float), np.asarray(right_xyz, float)
+        self._vertices = self._reset(initial_displacement(self.grid, int(seed), left, right), left, right)
         return self._vertices
 
     def step(self, left_xyz: np.ndarray, right_xyz: np.ndarray) -> np.ndarray:
@@ -188,7 +191,8 @@ class ClothEngine(abc.ABC):
         return check_divergence(vertices, self._vertices, self.dt, mid)
 
     @abc.abstractmethod
-    def _reset(self, seed: int, left: np.ndarray, right: np.ndarray) -> np.ndarray: ...
+    def _reset(self, displacement: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """Cloth at rest shape + `displacement` (n, 3), at rest, grippers at `left` and `right`; its vertices."""
 
     @abc.abstractmethod
     def _step(self, left: np.ndarray, right: np.ndarray) -> np.ndarray: ...

@@ -31,8 +31,6 @@ from cloth_bench_ros.core import scene
 from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
 from cloth_bench_ros.core.scene import ClothGrid
 
-# Noise of the seeded initial state: i.i.d. normal per coordinate of every free vertex.
-SEED_NOISE_STD = 0.0005  # m
 
 MODELS = ("mass_spring", "neo_hookean")
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -98,10 +96,8 @@ def match_nodes(loaded: np.ndarray, wanted: np.ndarray, tolerance: float = 1e-5)
 class BulletCloth(ClothEngine):
     """PyBullet deformable cloth: mass-spring with bending springs, or Neo-Hookean FEM slab.
 
-    reset(seed) rebuilds the world (so one seed always gives bit-identical runs), places the
-    cloth at rest in the grid shape with its corners at the grippers, then displaces every
-    vertex except the grasped corners by i.i.d. normal noise of SEED_NOISE_STD = 0.5 mm per
-    coordinate from numpy.random.default_rng(seed) (both layers of a FEM slab move together).
+    reset(seed) rebuilds the world (so one seed always gives bit-identical runs) and places the
+    cloth in the task's seeded initial state (core/task.py); both layers of a FEM slab move together.
     """
 
     name: ClassVar[str] = "bullet"
@@ -226,16 +222,10 @@ class BulletCloth(ClothEngine):
 
     # -- ClothEngine --------------------------------------------------------------------------
 
-    def _reset(self, seed: int, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    def _reset(self, displacement: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         self._build()
-        s = np.linspace(0.0, 1.0, self.grid.nx)[:, None]
-        rest_left, rest_right = self._rest[self._corners[0]], self._rest[self._corners[1]]
-        offset = np.tile((1 - s) * (left - rest_left) + s * (right - rest_right), (self.grid.nz, 1))
-        noise = np.random.default_rng(seed).normal(0.0, SEED_NOISE_STD, self._rest.shape)
-        noise[self._corners] = 0.0
-        displacement = np.tile(offset + noise, (self._layers, 1))
         nodes = np.empty_like(self._nodes_rest)
-        nodes[self._order] = self._nodes_rest + displacement
+        nodes[self._order] = self._nodes_rest + np.tile(displacement, (self._layers, 1))
         pb.resetMeshData(self._cloth, vertices=nodes.tolist(), physicsClientId=self._client)
         self._target[0], self._target[1] = left, right
         self._move_grippers(self._target)

@@ -40,8 +40,6 @@ _INSTABILITY_WARNINGS = (
     mujoco.mjtWarning.mjWARN_BADQACC,
 )
 
-# Noise of the seeded initial state: i.i.d. normal per coordinate of every free vertex.
-SEED_NOISE_STD = 0.0005  # m
 # Mass of each grasped corner, so that the cloth cannot move it within a substep.
 GRIPPER_MASS = 1000.0  # kg
 
@@ -68,11 +66,7 @@ def spring_edges(grid: ClothGrid) -> np.ndarray:
 class MujocoCloth(ClothEngine):
     """MuJoCo flex cloth: shell bending with inextensible edges, or a mass-spring net.
 
-    reset(seed) starts the cloth at rest in the grid shape with its corners at the grippers
-    (columns shifted linearly if the grippers are not at the grid corners), then displaces every
-    vertex except the grasped corners by i.i.d. normal noise of SEED_NOISE_STD = 0.5 mm per
-    coordinate from numpy.random.default_rng(seed): one seed always gives the same run,
-    different seeds give a spread.
+    reset(seed) starts the cloth in the task's seeded initial state (core/task.py) at rest.
     """
 
     name: ClassVar[str] = "mujoco"
@@ -208,15 +202,10 @@ class MujocoCloth(ClothEngine):
 
     # -- ClothEngine --------------------------------------------------------------------------
 
-    def _reset(self, seed: int, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    def _reset(self, displacement: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
-        s = np.linspace(0.0, 1.0, self.grid.nx)[:, None]
-        column_shift = (1 - s) * (left - self._corner_rest[0]) + s * (right - self._corner_rest[1])
-        offset = np.tile(column_shift, (self.grid.nz, 1))
-        noise = np.random.default_rng(seed).normal(0.0, SEED_NOISE_STD, self._rest.shape)
-        noise[self._corners] = 0.0
-        d.qpos[self._qadr] = offset + noise
+        d.qpos[self._qadr] = displacement
         d.qfrc_applied[:] = self._weight_cancel
         self._target[0], self._target[1] = left, right
         mujoco.mj_forward(m, d)

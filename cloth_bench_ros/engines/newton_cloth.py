@@ -40,8 +40,6 @@ from cloth_bench_ros.core import scene  # noqa: E402  (after Warp's quiet init)
 from cloth_bench_ros.core.scene import ClothGrid  # noqa: E402
 from cloth_bench_ros.engines.base import ClothEngine, Param  # noqa: E402
 
-# Noise of the seeded initial state: i.i.d. normal per coordinate of every free vertex.
-SEED_NOISE_STD = 0.0005  # m
 
 MODELS = ("xpbd", "vbd")
 DEVICE = "cpu"
@@ -60,10 +58,7 @@ def _move_grasps(start: wp.array(dtype=wp.vec3), velocity: wp.array(dtype=wp.vec
 class NewtonCloth(ClothEngine):
     """Newton cloth: XPBD springs and bending, or VBD triangle elements and bending, on the CPU.
 
-    reset(seed) starts the cloth at rest in the grid shape with its corners at the grippers
-    (columns shifted linearly if the grippers are not at the grid corners), then displaces every
-    vertex except the grasped corners by i.i.d. normal noise of SEED_NOISE_STD = 0.5 mm per
-    coordinate from numpy.random.default_rng(seed): one seed always gives the same run.
+    reset(seed) starts the cloth in the task's seeded initial state (core/task.py) at rest.
     """
 
     name: ClassVar[str] = "newton"
@@ -235,13 +230,8 @@ class NewtonCloth(ClothEngine):
 
     # -- ClothEngine --------------------------------------------------------------------------
 
-    def _reset(self, seed: int, left: np.ndarray, right: np.ndarray) -> np.ndarray:
-        rest_left, rest_right = self._rest[self._corners[0]], self._rest[self._corners[1]]
-        s = np.linspace(0.0, 1.0, self.grid.nx)[:, None]
-        offset = np.tile((1 - s) * (left - rest_left) + s * (right - rest_right), (self.grid.nz, 1))
-        noise = np.random.default_rng(seed).normal(0.0, SEED_NOISE_STD, self._rest.shape)
-        noise[self._corners] = 0.0
-        q = (self._rest + offset + noise).astype(np.float32)
+    def _reset(self, displacement: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        q = (self._rest + displacement).astype(np.float32)
         for state in self._states:
             state.particle_q.assign(q)
             state.particle_qd.zero_()
