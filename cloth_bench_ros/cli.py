@@ -12,9 +12,10 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.trajectory import PRIMITIVES
+from cloth_bench_ros.errors import ClothBenchError
 
 
-class UserError(Exception):
+class UserError(ClothBenchError):
     """Bad input from the user: printed as one line, exit status 2."""
 
 
@@ -728,14 +729,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
     warnings.formatwarning = lambda message, *_: f"cloth-bench: warning: {message}\n"
-    from cloth_bench_ros.data import BagError
-
     try:
         return args.func(args)
     except BrokenPipeError:  # `cloth-bench ... | head`: the reader left, nothing to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except (UserError, ValueError, OSError, BagError) as exc:
+    except (ClothBenchError, ValueError, OSError) as exc:  # ValueError, OSError: raised plain for bad input too
         print(f"cloth-bench: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

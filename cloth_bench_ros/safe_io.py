@@ -20,12 +20,14 @@ from typing import Any
 
 import yaml
 
+from cloth_bench_ros.errors import ClothBenchError
+
 MAX_TEXT_BYTES = 16 * 1024 * 1024
 MAX_YAML_ALIASES = 100
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,127}$")
 
 
-class UnsafeInputError(ValueError):
+class UnsafeInputError(ClothBenchError, ValueError):
     """A file or name that cannot be used safely; str() is one line naming it and the problem."""
 
 

@@ -18,6 +18,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.safe_io import UnsafeInputError, load_yaml_bounded
 
 MIN_RATE_HZ = 1.0  # below this a trajectory has too few steps to score
@@ -30,7 +31,7 @@ MAX_ENGINE_PARAMS_BYTES = 64 * 1024  # the engine_params YAML string of a node
 MAX_TIME_OFFSET_S = 1e6  # s; keeps stamps well inside int64 nanoseconds
 
 
-class InputError(ValueError):
+class InputError(ClothBenchError, ValueError):
     """A user-facing value that is refused; str() is one line naming the input and the problem."""
 
 

@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from cloth_bench_ros.errors import ClothBenchError
+
 # sensor_msgs/PointField datatypes
 INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
 _NUMPY_TYPES = {
@@ -26,7 +28,7 @@ _NUMPY_TYPES = {
 }
 
 
-class PointCloudError(ValueError):
+class PointCloudError(ClothBenchError, ValueError):
     """A PointCloud2 that cannot be decoded (missing fields, bad sizes)."""
 
 

@@ -16,12 +16,13 @@ import numpy as np
 
 from cloth_bench_ros.core.metrics import RealCloud
 from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.errors import ClothBenchError
 
 EPOCH_THRESHOLD_S = 1e9  # a --start-time this large is an absolute stamp, else seconds from the first message
 MOTION_THRESHOLD = 0.001  # m: a gripper target this far from its first position has moved
 
 
-class AlignmentError(ValueError):
+class AlignmentError(ClothBenchError, ValueError):
     """No start of the motion can be found; str() says why."""
 
 

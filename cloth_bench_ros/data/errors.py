@@ -1,7 +1,9 @@
 """Errors of the data layer: one class per failure domain, each with only a docstring."""
 
+from cloth_bench_ros.errors import ClothBenchError
 
-class BagError(Exception):
+
+class BagError(ClothBenchError):
     """A bag that cannot be read or written; str() is one line naming the bag and the problem."""
 
 

@@ -18,6 +18,7 @@ from cloth_bench_ros import validation
 from cloth_bench_ros.data import CLOUD_TOPIC, BagWriter, TrialInfo
 from cloth_bench_ros.core.cleaning import CleaningConfig, clean
 from cloth_bench_ros.core.scene import REAL_FPS
+from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.safe_io import check_output_dir, staged_directory
 
 CLOTH_NAMES = {"chequered": "chequered", "cotton": "towel", "linen": "linen"}  # folder -> ours
@@ -35,7 +36,7 @@ _TRIAL_DIR = re.compile(r"^(chequered|cotton|linen)_rag_(\d+)$")
 _FRAME_FILE = re.compile(r"^(\d{5})\.(ply|pcd)$")
 
 
-class CloudFileError(ValueError):
+class CloudFileError(ClothBenchError, ValueError):
     """A point-cloud file that cannot be read; str() is one line naming the file."""
 
 

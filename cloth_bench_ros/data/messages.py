@@ -11,6 +11,8 @@ from typing import Any
 
 from rosbags.typesys import Stores, get_typestore
 
+from cloth_bench_ros.errors import ClothBenchError
+
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
@@ -19,7 +21,7 @@ DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 HEADER = "std_msgs/msg/Header"
 
 
-class MessageTypeError(ValueError):
+class MessageTypeError(ClothBenchError, ValueError):
     """A message type name that the typestore does not know."""
 
 

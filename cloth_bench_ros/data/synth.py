@@ -28,11 +28,12 @@ from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.safe_io import staged_directory
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quintic_part
+from cloth_bench_ros.errors import ClothBenchError
 
 WALL_Y = -1.5  # m: a wall behind the scene, the background of the flying pixels
 
 
-class SynthError(ValueError):
+class SynthError(ClothBenchError, ValueError):
     """A synthetic reference that cannot be made (bad config/synth.yaml, diverged reference)."""
 
 

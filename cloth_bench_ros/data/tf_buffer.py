@@ -14,12 +14,13 @@ from typing import Any
 import numpy as np
 
 from cloth_bench_ros.data.messages import stamp_ns
+from cloth_bench_ros.errors import ClothBenchError
 
 TF_TOPICS = ("/tf_static", "/tf")
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 
 
-class TransformError(ValueError):
+class TransformError(ClothBenchError, ValueError):
     """A frame that cannot be resolved to the target frame; str() names the frame."""
 
 

@@ -12,9 +12,10 @@ import numpy as np
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.task import grasped_corners, initial_displacement
+from cloth_bench_ros.errors import ClothBenchError
 
 
-class EngineError(ValueError):
+class EngineError(ClothBenchError, ValueError):
     """A user error in choosing or configuring an engine (unknown name, bad parameter)."""
 
 

@@ -7,7 +7,7 @@ import sys
 import threading
 from typing import Callable, Iterable, Sequence
 
-from cloth_bench_ros.data import BagError
+from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.runtime.transport import transport_choice
 from cloth_bench_ros.runtime import EMBEDDED, SingleThreadedExecutor, is_user_error, rclpy
 
@@ -103,7 +103,7 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
         return 0
     except Exception as exc:
         # rclpy's parameter, name and argument errors are not ValueErrors: matched by class name
-        if not (isinstance(exc, (ValueError, BagError)) or is_user_error(exc)):
+        if not (isinstance(exc, (ClothBenchError, ValueError)) or is_user_error(exc)):
             raise
         print(f"error: {str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__}",
               file=sys.stderr)

@@ -28,6 +28,7 @@ from cloth_bench_ros.data.replay import ReplayOptions, plan_replay
 from cloth_bench_ros.data.trial import TRIAL_STATUS_NAME
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.nodes.common import NAMESPACE, REPLAY_STATUS_NAME, run_node
 from cloth_bench_ros.runtime import (
     Clock, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, Time,
@@ -44,7 +45,7 @@ RESERVE_NAME = ".cloth_bench_reserve"
 RESERVE_BYTES = 64 * 1024
 
 
-class RecordingStopped(ValueError):
+class RecordingStopped(ClothBenchError, ValueError):
     """A recording that cannot go on (disk full, write error); str() is one line naming the bag."""
 
 

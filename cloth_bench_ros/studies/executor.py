@@ -27,11 +27,13 @@ from typing import Any, Callable, Iterator, Sequence
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from cloth_bench_ros.errors import ClothBenchError
+
 WORKER_TREE_CACHE_POINTS = 20_000_000  # ~ 400 frames of 50,000 points per worker
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
-class ExecutorError(ValueError):
+class ExecutorError(ClothBenchError, ValueError):
     """A scheduler that cannot be reached or used; str() is one line."""
 
 

@@ -21,12 +21,13 @@ from pathlib import Path
 
 import yaml
 
+from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.nodes.common import NAMESPACE
 from cloth_bench_ros.runtime.dds import loopback_environment
 from cloth_bench_ros.studies.pipeline import RunConfig, node_parameters
 
 
-class ProcessRunError(RuntimeError):
+class ProcessRunError(ClothBenchError, RuntimeError):
     """A node process failed or the run did not end in time; str() names the node and its last line."""
 
 

@@ -19,6 +19,7 @@ import socket
 from pathlib import Path
 from typing import Any, Mapping, TypedDict
 
+from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.safe_io import UnsafeInputError, confined_path, read_text_bounded, safe_name
 
 RESULTS_FILE = "results.jsonl"
@@ -33,7 +34,7 @@ NUMERIC_FIELDS = ("CD", "HD", "L_s", "step_time_mean", "step_time_p50", "step_ti
                   "latency_mean", "latency_p50", "latency_p99", "latency_max", "real_time_factor", "cell_wall_s")
 
 
-class ResultsError(ValueError):
+class ResultsError(ClothBenchError, ValueError):
     """A results file or directory that cannot be used; str() is one line naming it and the problem."""
 
 
