@@ -60,10 +60,11 @@ def scene_clutter(rng) -> np.ndarray:
 
 
 def make_camera_recording(source: Path, out: Path, frames: int | None = None, seed: int = 0,
-                          pre_roll: int = 5) -> int:
+                          pre_roll: int = 5, noise: float = 0.0) -> int:
     """Write the camera-like bag; returns the true bag time (ns) of the start of the motion.
 
-    The camera runs `pre_roll` frames before the motion starts (the cloth hangs still: frame 0).
+    The camera runs `pre_roll` frames before the motion starts (the cloth hangs still: frame 0);
+    `noise` (m) is the standard deviation of the sensor noise added to the cloth's points.
     """
     rng = np.random.default_rng(seed)
     reader = BagReader(source)
@@ -80,7 +81,8 @@ def make_camera_recording(source: Path, out: Path, frames: int | None = None, se
         for k, (stamp, points) in enumerate(clouds):
             if frames is not None and k >= frames:
                 break
-            world = np.concatenate([points, scene_clutter(rng)])
+            cloth = points + rng.normal(0.0, noise, points.shape) if noise else points
+            world = np.concatenate([cloth, scene_clutter(rng)])
             optical = (world - position) @ R_WORLD_OPTICAL.T
             t = EPOCH_START_NS + stamp
             bag.write(CAMERA_TOPIC, POINTCLOUD2, t, serialize(organized_cloud(t, optical, 48, 64, rng)))

@@ -43,7 +43,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                  "metadata version 9, type hashes); messages and trial unchanged")
     rewrite.add_argument("src", help="bag to read")
     rewrite.add_argument("dst", help="new bag directory (must not exist or be empty)")
+    rewrite.add_argument("--change-of-phase-frame", metavar="N|detected", type=_frame_or_detected,
+                         help="store this change-of-phase frame in the trial (dynamic task), or the first "
+                              "table contact found in the clouds")
     rewrite.set_defaults(func=cmd_bag_rewrite)
+
+
+def _frame_or_detected(text: str) -> int | str:
+    return "detected" if text == "detected" else common.frame(text)
 
 
 def cmd_import(args: argparse.Namespace) -> int:
@@ -82,8 +89,11 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 def cmd_bag_rewrite(args: argparse.Namespace) -> int:
     """Copy a bag into the current writer's layout, checking the messages are unchanged."""
+    from cloth_bench_ros.data import BagReader
     from cloth_bench_ros.data.bag_rewrite import rewrite_bag
 
-    counts = rewrite_bag(Path(args.src), Path(args.dst))
-    print(f"rewrote {args.src} -> {args.dst}: {sum(counts.values())} messages, unchanged (checked)")
+    counts = rewrite_bag(Path(args.src), Path(args.dst), args.change_of_phase_frame)
+    changed = "" if args.change_of_phase_frame is None else (
+        f"; change of phase set to frame {BagReader(Path(args.dst)).trial.change_of_phase_frame}")
+    print(f"rewrote {args.src} -> {args.dst}: {sum(counts.values())} messages, unchanged (checked){changed}")
     return 0

@@ -84,12 +84,30 @@ def _print_real(summary: dict) -> None:
     if start:
         print(f"start of the motion: bag time {start['bag_ns'] / 1e9:.3f} s, {start['method']}, "
               f"precision +/- {start['precision_s'] * 1e3:.1f} ms")
+    window = window_line(summary)
+    if window:
+        print(window)
     print(f"real points: {real['nan_points_dropped']} NaN points dropped, "
           f"{real['irregular_intervals']} intervals not at 30 Hz" + (
               f", frames from {real['frames_from']}" if real.get("frames_from") else ""))
     if acc["scored"] == 0:
         raise UserError(f"bag: no frame was scored ({accounting_line(acc)[len('real frames: '):]}); "
                         "check --start-time/--topic/--primitive")
+
+
+def window_line(summary: dict) -> str:
+    """Which frames CD_d/HD_d cover and why: the change of phase and its source (dynamic task only)."""
+    if summary["run"].get("primitive") != "dynamic":
+        return ""
+    cop = summary["real"].get("change_of_phase") or {}
+    frame = cop.get("frame")
+    if frame is None:
+        return (f"CD_d/HD_d over every frame: no change of phase ({cop.get('reason', 'not given')}); "
+                "give --change-of-phase-frame N to score the dynamics only")
+    source = {"detected": f"detected ({cop.get('reason')}, t = {cop.get('t_s', 0.0):.2f} s)",
+              "metadata": "from the bag's metadata", "option": "given by --change-of-phase-frame"}
+    return (f"CD_d/HD_d over frames 0-{frame - 1}: change of phase at frame {frame}, "
+            f"{source.get(cop.get('source'), cop.get('reason', ''))}")
 
 
 def _checked_output(path: Path, option: str) -> Path:

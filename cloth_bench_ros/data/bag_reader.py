@@ -1,7 +1,10 @@
-"""The one bag reader of the project: rosbag2 bags with MCAP storage, in record order.
+"""The one bag reader of the project: any rosbag2 bag a user records, in record order.
 
-A bag is a directory holding `metadata.yaml` and its `.mcap` file(s) (a bare `.mcap` file also
-reads). Schemas are `ros2msg` text and payloads CDR.
+A bag is a directory holding `metadata.yaml` and its storage file(s); a bare `.mcap` or `.db3`
+file, or a directory whose metadata.yaml is missing, also reads. Uncompressed MCAP (the project's
+own bags and Jazzy's default) is read here, truncated files included; sqlite3 storage (Humble's
+default) and file- or message-compressed bags go through rosbags (data/bag_storage.py).
+Payloads are CDR.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk
 
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
+from cloth_bench_ros.data.bag_storage import RosbagsStorage, raw_storage_files
 from cloth_bench_ros.data.errors import BagError, BagWarning
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
 from cloth_bench_ros.data.metadata import read_metadata
@@ -97,9 +101,13 @@ class BagReader:
         self.warnings: list[str] = []
         self.stats = CloudStats()
         self._bag_meta: dict[str, Any] = {}
+        self._rosbags: RosbagsStorage | None = None
         self._files = [self._open_file(p) for p in self._locate()]
         self.topics: dict[str, str] = {}
         self.message_counts: dict[str, int] = {}
+        if self._rosbags is not None:
+            self.topics.update(self._rosbags.topics)
+            self.message_counts.update(self._rosbags.counts)
         for topic in self._bag_meta.get("topics", []):
             self.topics[topic["name"]] = topic["type"]
             self.message_counts[topic["name"]] = topic["message_count"]
@@ -123,22 +131,29 @@ class BagReader:
         if path.is_file() and path.name == "metadata.yaml":
             path = self.path = path.parent
         if not path.is_dir():
+            if path.suffix == ".db3":
+                self._rosbags = RosbagsStorage.open(path, "sqlite3", [_regular_file(path)])
+                return []
             return [_regular_file(path)]
         meta_path = path / "metadata.yaml"
         if not meta_path.exists():
             files = [_regular_file(f) for f in sorted(path.glob("*.mcap"))]
+            databases = raw_storage_files(path)
+            if not files and not databases:
+                raise BagError(f"{path} is not a rosbag2 bag (no metadata.yaml and no .mcap or .db3 file)")
+            self._warn(f"bag {path} has no metadata.yaml (recording interrupted?); reading its "
+                       f"{'.mcap' if files else '.db3'} files directly")
             if not files:
-                raise BagError(f"{path} is not a rosbag2 bag (no metadata.yaml and no .mcap file)")
-            self._warn(f"bag {path} has no metadata.yaml (recording interrupted?); reading its .mcap files")
+                self._rosbags = RosbagsStorage.open(path, "sqlite3", [_regular_file(f) for f in databases])
             return files
         info = read_metadata(meta_path)
-        if info["storage_identifier"] != "mcap":
-            raise BagError(f"bag {path} uses storage {info['storage_identifier']!r}; only mcap is supported")
-        if info["compression_mode"] not in ("", "none", "NONE"):
-            raise BagError(
-                f"bag {path} uses file/message compression {info['compression_mode']!r}; "
-                "only MCAP chunk compression is supported"
-            )
+        if info["storage_identifier"] not in ("mcap", "sqlite3"):
+            raise BagError(f"bag {path} uses storage {info['storage_identifier']!r} "
+                           "(readable: mcap, sqlite3)")
+        if info["storage_identifier"] != "mcap" or info["compression_mode"] not in ("", "none", "NONE"):
+            self._bag_meta = info
+            self._rosbags = RosbagsStorage.open(path, info["storage_identifier"], [path])
+            return []
         # Names from the file never leave the bag directory.
         files = [path / Path(n).name for n in info["relative_file_paths"]]
         missing = [str(f) for f in files if not f.exists()]
@@ -281,7 +296,16 @@ class BagReader:
 
     @property
     def files(self) -> list[Path]:
-        return [f.path for f in self._files]
+        """The bag's storage files."""
+        return self._rosbags.files if self._rosbags is not None else [f.path for f in self._files]
+
+    @property
+    def storage(self) -> str:
+        """The storage and its compression, e.g. `mcap, chunk compression zstd` or `sqlite3, file:zstd`."""
+        if self._rosbags is not None:
+            compression = self._rosbags.compression
+            return f"{self._rosbags.kind}, " + ("uncompressed" if compression == "none" else f"compression {compression}")
+        return f"mcap, chunk compression {self.compression}"
 
     @property
     def complete(self) -> bool:
@@ -301,16 +325,22 @@ class BagReader:
 
     @property
     def start_ns(self) -> int | None:
+        if self._rosbags is not None:
+            return self._rosbags.start_ns
         starts = [f.start_ns for f in self._files if f.start_ns is not None]
         return min(starts) if starts else None
 
     @property
     def end_ns(self) -> int | None:
+        if self._rosbags is not None:
+            return self._rosbags.end_ns
         ends = [f.end_ns for f in self._files if f.end_ns is not None]
         return max(ends) if ends else None
 
     @property
     def compression(self) -> str:
+        if self._rosbags is not None:
+            return self._rosbags.compression
         return ",".join(sorted({f.compression for f in self._files}))
 
     @property
@@ -363,23 +393,19 @@ class BagReader:
         self, topics: Iterable[str] | str | None = None
     ) -> Iterator[tuple[str, str, int, bytes]]:
         """(topic, msgtype, stamp_ns, cdr) in record order; stamp = header stamp, else log time."""
-        wanted = {topics} if isinstance(topics, str) else (set(topics) if topics is not None else None)
-        for mf in self._files:
-            for rec, topic in self._records(mf, wanted):
-                if not isinstance(rec, Message):
-                    continue
-                msgtype = mf.topics.get(topic) or self.topics.get(topic, "")
-                stamp = rec.log_time
-                try:
-                    if messages.has_header(msgtype) and len(rec.data) >= 12:
-                        stamp = _stamp_from_cdr(rec.data)
-                except messages.MessageTypeError:
-                    pass
-                yield topic, msgtype, stamp, rec.data
+        for topic, msgtype, stamp, data in self.logged_messages(topics):
+            try:
+                if messages.has_header(msgtype) and len(data) >= 12:
+                    stamp = _stamp_from_cdr(data)
+            except messages.MessageTypeError:
+                pass
+            yield topic, msgtype, stamp, data
 
     def logged_messages(self, topics: Iterable[str] | str | None = None) -> Iterator[tuple[str, str, int, bytes]]:
         """(topic, msgtype, log_time_ns, cdr) in record order: the MCAP log time, not the header stamp."""
         wanted = {topics} if isinstance(topics, str) else (set(topics) if topics is not None else None)
+        if self._rosbags is not None:
+            yield from self._rosbags.messages(wanted)
         for mf in self._files:
             for rec, topic in self._records(mf, wanted):
                 if isinstance(rec, Message):

@@ -182,6 +182,15 @@ class Evaluator(Node):
             )
             self.metrics_pub.publish(DiagnosticArray(status=[status]))
 
+    def _change_of_phase(self) -> dict:
+        """The scored window's end as used (frame, source: option, metadata, detected or none)."""
+        used = self.core.change_of_phase_frame
+        told = dict(self.replay.get("change_of_phase") or {})
+        if told.get("frame") != used:  # the evaluator's own parameter overrides the recorder's choice
+            told = {"frame": used, "source": "option" if used is not None else "none",
+                    "reason": "evaluator parameter change_of_phase_frame" if used is not None else "not given"}
+        return told
+
     def finish(self) -> None:
         """Close the run: summary on `metrics`, report files, done."""
         if self.done:
@@ -201,7 +210,8 @@ class Evaluator(Node):
         self.summary = {"run": {**self.run_info, "trial": self.trial, "wall_time": wall_s},
                         "real": {**real, "accounting": accounting,
                                  "alignment": self.replay.get("start"), "frames_from": self.replay.get("frames"),
-                                 "cleaning": self.replay.get("cleaning"), "topic": self.replay.get("topic")},
+                                 "cleaning": self.replay.get("cleaning"), "topic": self.replay.get("topic"),
+                                 "change_of_phase": self._change_of_phase()},
                         "engines": engines}
         statuses = []
         for engine, m in self.summary["engines"].items():
