@@ -10,6 +10,7 @@ import warnings
 
 from cloth_bench_ros.cli import data, hil, identify, run, studies
 from cloth_bench_ros.cli.common import Parser, UserError
+from cloth_bench_ros.studies.errors import StudyInterrupted
 
 __all__ = ["UserError", "build_parser", "main"]
 
@@ -40,7 +41,11 @@ def main(argv: list[str] | None = None) -> int:
     except (UserError, ValueError, OSError, BagError) as exc:
         print(f"cloth-bench: error: {_one_line(exc)}", file=sys.stderr)
         return 2
+    except StudyInterrupted as exc:
+        print(f"cloth-bench: {exc}", file=sys.stderr)
+        return 130
     except KeyboardInterrupt:
+        print("cloth-bench: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - a bug: one line (the traceback with --verbose), status 1
         if args.verbose:

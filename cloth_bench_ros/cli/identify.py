@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from cloth_bench_ros.cli import common
+from cloth_bench_ros.studies.errors import StudyInterrupted
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -41,7 +42,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, validate on held-out seeds, write the preset and print the outcome."""
     from cloth_bench_ros.paths import bundled_bag
-    from cloth_bench_ros.studies.identify import IdentifySpec, identify
+    from cloth_bench_ros.studies.identify import JOURNAL_FILE, TRIALS_FILE, IdentifySpec, identify
 
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag)
@@ -54,7 +55,13 @@ def cmd_identify(args: argparse.Namespace) -> int:
                         Path(args.bag_dir) if args.bag_dir else None)
     print(f"cloth-bench identify: {args.engine}, {args.cloth} {args.primitive}, {args.objective.upper()}, "
           f"sampler {args.sampler}, {args.trials} trials each; bag {bag}; output {out}", flush=True)
-    outcome = identify(spec, args.scheduler, args.workers, progress=not args.no_progress)
+    try:
+        outcome = identify(spec, args.scheduler, args.workers, progress=not args.no_progress)
+    except KeyboardInterrupt:
+        trials = out / TRIALS_FILE
+        kept = sum(1 for line in trials.read_text().splitlines() if line.strip()) if trials.exists() else 0
+        raise StudyInterrupted(f"identify interrupted: {kept} finished trials are in {out / TRIALS_FILE} "
+                               f"(study: {out / JOURNAL_FILE}); run the same command again to resume") from None
     s = outcome.summary
     for name, result in s["per_sampler"].items():
         print(f"{name:<6} best {args.objective.upper()} {result['value']:.5f} m after {result['trials']} trials")

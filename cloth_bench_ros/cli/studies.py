@@ -8,6 +8,7 @@ from pathlib import Path
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.core.trajectory import PRIMITIVES
+from cloth_bench_ros.studies.errors import StudyInterrupted
 
 TOLERANCE_REL = 0.05  # settings recommendation: CD within this fraction of the best ...
 TOLERANCE_ABS = 0.002  # ... or within this many metres of it, whichever is larger
@@ -112,8 +113,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
           f"{len({c.cloth for c in cells})} cloths x {len({c.primitive for c in cells})} tasks x "
           f"{len(plan.seeds())} seeds" + (f" x {len({c.config for c in cells})} configurations" if settings else "")
           + f" = {len(cells)} cells -> {out / sw.RESULTS_FILE} on {where}", flush=True)
-    outcome = sw.run_sweep(cells, out, args.workers, progress=not args.no_progress, retry_errors=args.retry_errors,
-                           scheduler=args.scheduler)
+    try:
+        outcome = sw.run_sweep(cells, out, args.workers, progress=not args.no_progress,
+                               retry_errors=args.retry_errors, scheduler=args.scheduler)
+    except KeyboardInterrupt:
+        kept = len({c.key() for c in cells} & {sw.row_key(r) for r in sw.load_rows(out / sw.RESULTS_FILE)})
+        raise StudyInterrupted(f"sweep interrupted: {kept} of {len(cells)} cells are in {out / sw.RESULTS_FILE}; "
+                               "run the same command again to resume") from None
     print(f"sweep: {outcome.ran} cells run in {outcome.wall_s:.1f} s ({outcome.skipped} already done), "
           f"{outcome.diverged} diverged, {outcome.errors} errors; results: {outcome.results}")
     if args.report:

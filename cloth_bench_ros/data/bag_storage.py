@@ -18,6 +18,7 @@ from rosbags.rosbag2 import Reader, ReaderError
 
 from cloth_bench_ros.data.errors import BagError
 
+
 @dataclass
 class RosbagsStorage:
     """One bag (a directory with metadata.yaml, or raw storage files) opened with rosbags."""
