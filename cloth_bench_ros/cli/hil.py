@@ -28,12 +28,18 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     hil.add_argument("--seed", type=common.seed, default=0)
     hil.add_argument("--grid", type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
     common.engine_override_option(hil, "engine parameter override")
-    hil.add_argument("--cpu", type=int, default=-1, help="pin the simulator process to this core (default: not)")
-    hil.add_argument("--fifo", type=int, default=0, metavar="PRIORITY",
-                     help="ask SCHED_FIFO at this priority for the simulator and the controller (1-99; default 0: not)")
+    hil.add_argument("--layout", default="auto", choices=("auto", "none"),
+                     help="real-time layout: auto (default: the measured best this machine allows: the step "
+                          "loop polling on a core of its own, the controller on SCHED_FIFO) or none")
+    hil.add_argument("--cpu", type=common.integer("--cpu", -1), default=None,
+                     help="pin the simulator's step loop to this core (-1: not; default: from --layout)")
+    hil.add_argument("--fifo", type=common.integer("--fifo", 0, 99), default=None, metavar="PRIORITY",
+                     help="SCHED_FIFO priority for the simulator and the controller (1-99, 0: not; default: "
+                          "from --layout)")
     hil.add_argument("--no-freeze-gc", action="store_true", help="keep automatic garbage collection in the simulator")
-    hil.add_argument("--busy-wait", action="store_true",
-                     help="the simulator polls for targets instead of sleeping (a core of its own: use with --cpu)")
+    hil.add_argument("--busy-wait", action=argparse.BooleanOptionalAction, default=None,
+                     help="the simulator polls for targets instead of sleeping (needs a core of its own: "
+                          "--cpu; default: from --layout)")
     hil.add_argument("--in-process", action="store_true", help="all nodes in one process (intra-process transport)")
     hil.add_argument("--duration", type=common.number(validation.non_negative, "--duration"), default=0.0,
                      help="s of the trajectory to run (default 0: all; a shortened run is not scored)")
@@ -51,6 +57,7 @@ def cmd_hil(args: argparse.Namespace) -> int:
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.hil import hil_table, text_table, write_hil_report
     from cloth_bench_ros.studies import hil
+    from cloth_bench_ros.studies.hil_layout import resolve_layout
     from cloth_bench_ros.studies.sweep import config_label
 
     if args.budget is None:
@@ -67,15 +74,21 @@ def cmd_hil(args: argparse.Namespace) -> int:
     overrides = common.engine_overrides(args.set, engines)
     out = Path(args.output) if args.output else Path("results") / "hil"
     settings = Path(args.settings) if args.settings else hil.DEFAULT_SETTINGS
-    layout = "one process" if args.in_process else "3 processes over DDS (controller, simulator, recorder+evaluator)"
-    print(f"cloth-bench hil: {args.cloth} {args.primitive}, targets on the wall clock, {layout}; bag {bag}")
+    processes = "one process" if args.in_process else "3 processes over DDS (controller, simulator, recorder+evaluator)"
+    print(f"cloth-bench hil: {args.cloth} {args.primitive}, targets on the wall clock, {processes}; bag {bag}")
+    try:
+        layout = resolve_layout(args.layout, args.cpu, args.fifo, args.busy_wait)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    print(layout.line())
     results = []
     for engine in engines:
         for rate in args.rate or [100.0]:
             params = dict(overrides.get(engine, {}))
             config = hil.HilConfig(engine, float(rate), bag, args.cloth, args.primitive, args.seed, args.grid,
                                    tuple(sorted(params.items())), config_label(args.grid, params),
-                                   not args.in_process, args.cpu, args.fifo, not args.no_freeze_gc, args.busy_wait,
+                                   not args.in_process, layout.cpu, layout.fifo, not args.no_freeze_gc,
+                                   layout.busy_wait,
                                    args.duration)
             if args.config == "recommended":
                 rec, source = hil.recommended(engine, args.cloth, args.primitive, float(rate), settings,
