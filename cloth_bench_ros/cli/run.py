@@ -167,6 +167,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     for key in ("bag", "figure", "animation"):
         if key in summary.get("comparison", {}):
             print(f"comparison {key}: {summary['comparison'][key]}")
+    if not summary["real"]["accounting"]["adds_up"]:
+        print("cloth-bench: error: the frame accounting does not add up: frames were lost, or another graph "
+              "on the same ROS domain published into this run; the metrics are not valid", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.data.trial import trial_from_message
-from cloth_bench_ros.core.evaluation import OnlineEvaluator, frame_accounting
+from cloth_bench_ros.core.evaluation import OnlineEvaluator, accounting_line, frame_accounting
 from cloth_bench_ros.nodes.common import NAMESPACE, publishers_matched, replay_stamps, run_node
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.report.comparison import write_comparison
@@ -92,6 +92,7 @@ class Evaluator(Node):
         self.published_scores = 0
         self.summary: dict | None = None
         self.done = False
+        self.exit_status = 0  # 1: the frame accounting does not add up (main() returns it)
 
     def check_ready(self) -> None:
         if self.trial_received and all(publishers_matched(self, sub) for sub in self.inputs):
@@ -207,6 +208,9 @@ class Evaluator(Node):
         real["nan_points_dropped"] += int(self.replay.get("nan_points_dropped", 0))
         real["irregular_intervals"] = int(self.replay.get("irregular_intervals", real["irregular_intervals"]))
         accounting = frame_accounting(self.replay, real)
+        if not accounting["adds_up"]:  # frames from another graph, or lost ones: the run is not valid
+            self.exit_status = 1
+            self.get_logger().error(accounting_line(accounting))
         self.summary = {"run": {**self.run_info, "trial": self.trial, "wall_time": wall_s},
                         "real": {**real, "accounting": accounting,
                                  "alignment": self.replay.get("start"), "frames_from": self.replay.get("frames"),
