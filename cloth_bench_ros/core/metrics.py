@@ -1,4 +1,4 @@
-"""Sim-to-real metrics (REFERENCE.md section 3).
+"""Sim-to-real metrics (docs/benchmark.md, section 3).
 
 One-sided L1 Chamfer and Hausdorff distances from the simulated vertices V to the real cloud P
 (the nearest neighbour is taken under the L1 norm too), the stability L_s of a sequence of

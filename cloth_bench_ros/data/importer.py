@@ -1,6 +1,6 @@
 """Import the published dataset (PLY/PCD folders) into one rosbag2 MCAP bag per trial.
 
-Layout (REFERENCE.md section 4): `<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`.
+Layout (docs/benchmark.md, section 5): `<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`.
 Frame NNNNN is stamped NNNNN / 30 s; points are kept exactly (NaN included; the reader drops
 and counts them), optionally moved by a 4x4 transform, and stored as float32 x/y/z; `--clean` runs them through core.cleaning first.
 """
@@ -25,7 +25,7 @@ from cloth_bench_ros.safe_io import check_output_dir, staged_directory
 CLOTH_NAMES = {"chequered": "chequered", "cotton": "towel", "linen": "linen"}  # folder -> ours
 PRIMITIVES = ("dynamic", "quasi_static")
 
-# Change of phase (first contact) of the dynamic trials, real frame index (REFERENCE.md 3).
+# Change of phase (first contact) of the dynamic trials, real frame index (docs/benchmark.md, section 4).
 CHANGE_OF_PHASE = {
     ("chequered", 0): 95, ("chequered", 1): 95, ("chequered", 2): 99,
     ("towel", 0): 99, ("towel", 1): 98, ("towel", 2): 99,

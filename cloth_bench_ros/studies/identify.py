@@ -31,7 +31,7 @@ DEFAULT_SPAN = 10.0
 JOURNAL_FILE = "study.journal"
 TRIALS_FILE = "trials.jsonl"
 SUMMARY_FILE = "identification.json"
-# What the reference identified per engine (REFERENCE.md section 6); others: every ranged number.
+# What the reference identified per engine (docs/benchmark.md, section 7); others: every ranged number.
 DEFAULT_PARAMS = {"mujoco": ("mass", "young", "poisson", "thickness", "damping"),
                   "bullet": ("mass", "elastic", "damping", "bending")}
 NOT_FITTED = ("timestep", "substeps", "solver_iterations")

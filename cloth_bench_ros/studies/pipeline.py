@@ -1,4 +1,4 @@
-"""The node graph of DESIGN.md composed in one process: what `cloth-bench run` executes."""
+"""The node graph (README, "The node graph") composed in one process: what `cloth-bench run` executes."""
 
 from __future__ import annotations
 
