@@ -26,7 +26,7 @@ ROSDEP_KEYS = {"python3-numpy", "python3-scipy", "python3-yaml", "python3-tqdm",
                "python3-mujoco-pip", "python3-pybullet-pip", "python3-rosbags-pip", "python3-open3d-pip",
                "python3-pytest", "mcap-ros2-support", "python3-flake8", "pydocstyle"}
 # No rosdep key checked: documented in package.xml and the README.
-PIP_ONLY = {"mcap", "cyclonedds", "optuna", "cmaes", "dask", "distributed", "newton", "warp"}
+PIP_ONLY = {"mcap", "numba", "cyclonedds", "optuna", "cmaes", "dask", "distributed", "newton", "warp"}
 OPTIONAL_IMPORTS = {"torch"}  # imported only where installed (identify --sampler gp); never a dependency
 IMPORT_TO_KEY = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml", "tqdm": "python3-tqdm",
                  "matplotlib": "python3-matplotlib", "mujoco": "python3-mujoco-pip",
