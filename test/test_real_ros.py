@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from test.real_ros import ROS_PYTHON, in_namespace, require_real_ros, ros_env, ros_script
+from test.real_ros import ROOT, ROS_PYTHON, in_namespace, require_real_ros, ros_env, ros_script
 
 pytestmark = pytest.mark.real_ros
 
@@ -86,3 +86,34 @@ def _embedded_python() -> list[str]:
     import sys
 
     return [sys.executable]
+
+
+def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(tmp_path):
+    """The docs' node-by-node `ros2 run` commands (as the installed console scripts run them), one
+    real-rclpy process per node over Fast DDS, in any start order: the embedded in-process run's numbers."""
+    bag = ROOT / "bags" / "towel_dynamic"
+    grid = "-p grid_nx:=6 -p grid_nz:=8"
+    nodes = {
+        "evaluator": f"-p use_sim_time:=true -p output_dir:={tmp_path / 'ros'}",
+        "simulator": f"-p use_sim_time:=true -p engine:=mujoco {grid}",
+        "recorder": f"-p use_sim_time:=true -p bag:={bag} {grid}",
+        "trajectory_publisher": "",
+    }
+    launches = [f"(timeout 300 {ROS_PYTHON} -m cloth_bench_ros.nodes.{node} --ros-args -r __ns:=/cloth_bench {args} "
+                f"> {tmp_path / node}.log 2>&1; echo $? > {tmp_path / node}.status)" for node, args in nodes.items()]
+    # the evaluator ends the run; the simulator and the recorder are stopped as a user would, with SIGINT
+    script = (" & ".join(launches) + f" & while [ ! -f {tmp_path / 'evaluator.status'} ]; do sleep 0.2; done; "
+              + " ".join(f"pkill -INT -f '^{ROS_PYTHON} -m cloth_bench_ros.nodes.{node} ';"  # the node, not this shell
+                         for node in ("simulator", "recorder")) + " wait")
+    subprocess.run(ros_script(script), env=ros_env(), timeout=600)
+    for node in nodes:
+        assert (tmp_path / f"{node}.status").read_text().strip() == "0", (tmp_path / f"{node}.log").read_text()
+    embedded = subprocess.run([*_embedded_python(), "-m", "cloth_bench_ros.cli", "run", "--grid", "6x8",
+                               "--output", str(tmp_path / "embedded")], capture_output=True, text=True,
+                              timeout=300, env={**ros_env(), "CLOTH_BENCH_EMBEDDED": "1"})
+    assert embedded.returncode == 0, embedded.stderr
+    ros = json.loads((tmp_path / "ros" / "summary.json").read_text())
+    reference = json.loads((tmp_path / "embedded" / "summary.json").read_text())
+    assert ros["real"]["accounting"]["adds_up"] and ros["real"]["accounting"]["scored"] == 132
+    for key in ("CD_d", "HD_d", "L_s", "frames_in_window"):
+        assert ros["engines"]["mujoco"][key] == reference["engines"]["mujoco"][key], key
