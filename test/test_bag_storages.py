@@ -64,24 +64,33 @@ def downgrade_metadata(bag: Path, version: int) -> None:
     path.write_text(yaml.safe_dump(doc))
 
 
-def write_split_sqlite3(out: Path) -> Path:
-    """The source's messages in two sqlite3 files of one bag, as `ros2 bag record --max-bag-size` splits."""
+def write_split(out: Path, storage: str, parts: int = 2) -> Path:
+    """The source's messages in `parts` storage files of one bag, named and listed as
+    `ros2 bag record --max-bag-size` splits them (`<bag>_0`, `<bag>_1`, ...)."""
     messages = list(BagReader(SOURCE).logged_messages())
-    half = len(messages) // 2
-    write_with_rosbags(out, "sqlite3", messages=messages[:half])
-    second = write_with_rosbags(out.parent / (out.name + "_part"), "sqlite3", messages=messages[half:])
-    (second / f"{second.name}.db3").rename(out / f"{out.name}_1.db3")
-    meta_path = out / "metadata.yaml"
-    doc = yaml.safe_load(meta_path.read_text())
-    info = doc["rosbag2_bagfile_information"]
-    extra = yaml.safe_load((second / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
-    info["relative_file_paths"].append(f"{out.name}_1.db3")
-    info["files"].append({**extra["files"][0], "path": f"{out.name}_1.db3"})
-    info["message_count"] += extra["message_count"]
-    counts = {t["topic_metadata"]["name"]: t["message_count"] for t in extra["topics_with_message_count"]}
-    for topic in info["topics_with_message_count"]:
-        topic["message_count"] += counts.get(topic["topic_metadata"]["name"], 0)
-    meta_path.write_text(yaml.safe_dump(doc))
+    suffix = ".db3" if storage == "sqlite3" else ".mcap"
+    bounds = [round(i * len(messages) / parts) for i in range(parts + 1)]
+    info: dict = {}
+    for i in range(parts):
+        part = write_with_rosbags(out.parent / f"{out.name}_part{i}", storage, messages=messages[bounds[i]:bounds[i + 1]])
+        name = f"{out.name}_{i}{suffix}"
+        out.mkdir(exist_ok=True)
+        (part / f"{part.name}{suffix}").rename(out / name)
+        part_info = yaml.safe_load((part / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        part_info["files"][0]["path"] = name
+        if not info:
+            info = {**part_info, "relative_file_paths": [name]}
+            continue
+        info["relative_file_paths"].append(name)
+        info["files"].append(part_info["files"][0])
+        info["message_count"] += part_info["message_count"]
+        counts = {t["topic_metadata"]["name"]: t["message_count"] for t in part_info["topics_with_message_count"]}
+        known = {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]}
+        for topic in info["topics_with_message_count"]:
+            topic["message_count"] += counts.get(topic["topic_metadata"]["name"], 0)
+        info["topics_with_message_count"] += [t for t in part_info["topics_with_message_count"]
+                                              if t["topic_metadata"]["name"] not in known]
+    (out / "metadata.yaml").write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}))
     return out
 
 
@@ -116,7 +125,8 @@ VARIANTS = {
     "mcap, message compression zstd": lambda out: write_with_rosbags(out, "mcap", "message"),
     "sqlite3, file compression zstd": lambda out: write_with_rosbags(out, "sqlite3", "file"),
     "sqlite3, message compression zstd": lambda out: write_with_rosbags(out, "sqlite3", "message"),
-    "sqlite3 split in two files": write_split_sqlite3,
+    "sqlite3 split in two files": lambda out: write_split(out, "sqlite3"),
+    "mcap split in three files": lambda out: write_split(out, "mcap", 3),
 }
 
 
@@ -166,6 +176,43 @@ def test_a_killed_recording_without_metadata_reads_its_files(storage, original, 
         reader = BagReader(bag)
     assert reader.message_counts == BagReader(SOURCE).message_counts
     assert scores(_score(bag, tmp_path)) == scores(original)
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_a_killed_split_recording_is_read_in_file_number_order(storage, original, tmp_path):
+    bag = write_split(tmp_path / "killed", storage, parts=12)
+    (bag / "metadata.yaml").unlink()
+    with pytest.warns(UserWarning, match="has no metadata.yaml"):
+        reader = BagReader(bag)
+    suffix = ".db3" if storage == "sqlite3" else ".mcap"
+    assert [f.name for f in reader.files] == [f"killed_{i}{suffix}" for i in range(12)]  # _10 after _9
+    assert [s for s, _ in reader.clouds()] == [s for s, _ in BagReader(SOURCE).clouds()]
+    assert scores(_score(bag, tmp_path)) == scores(original)
+
+
+def test_a_killed_file_compressed_recording_says_what_to_do(tmp_path, capsys):
+    # --compression-mode file compresses each file when it is closed: a killed recording leaves
+    # the earlier files compressed, the last one not, and no metadata.yaml.
+    bag = write_split(tmp_path / "killed", "mcap", parts=2)
+    (bag / "metadata.yaml").unlink()
+    compressed = write_with_rosbags(tmp_path / "compressed", "mcap", "file")
+    (bag / "killed_0.mcap").unlink()
+    next(compressed.glob("*.mcap.zstd")).rename(bag / "killed_0.mcap.zstd")
+    with pytest.raises(BagError, match=r"compressed storage files \(killed_0.mcap.zstd\).*zstd -d --rm"):
+        BagReader(bag)
+    assert cli.main(["run", "--bag", str(bag), "--output", str(tmp_path / "o"), *RUN]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("compression", ["file", "message"])
+def test_a_damaged_compressed_bag_is_one_line(compression, tmp_path, capsys):
+    bag = write_with_rosbags(tmp_path / "torn", "sqlite3" if compression == "message" else "mcap", compression)
+    storage = next(f for f in bag.iterdir() if f.name != "metadata.yaml")
+    data = storage.read_bytes()
+    storage.write_bytes(data[: len(data) // 2])
+    assert cli.main(["run", "--bag", str(bag), "--output", str(tmp_path / "o"), *RUN]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(bag) in err and "internal error" not in err
 
 
 def test_a_bare_mcap_from_the_mcap_writer_scores_like_the_original(original, tmp_path):

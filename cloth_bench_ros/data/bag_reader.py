@@ -84,6 +84,13 @@ def _regular_file(path: Path) -> Path:
     return path
 
 
+def _compressed_without_metadata(path: Path, compressed: list[Path]) -> str:
+    """Why a file-compressed recording without metadata.yaml is not read, and what to do."""
+    names = ", ".join(f.name for f in compressed[:3]) + (", ..." if len(compressed) > 3 else "")
+    return (f"bag {path} has no metadata.yaml and compressed storage files ({names}), which are not read "
+            "without it: decompress them (zstd -d --rm FILE) and read the directory again")
+
+
 def _schema_name(schemas: dict[int, Schema], channel: Channel) -> str:
     schema = schemas.get(channel.schema_id)
     return schema.name if schema is not None else ""
@@ -131,14 +138,19 @@ class BagReader:
         if path.is_file() and path.name == "metadata.yaml":
             path = self.path = path.parent
         if not path.is_dir():
+            if path.suffix == ".zstd":
+                raise BagError(_compressed_without_metadata(path, [path]))
             if path.suffix == ".db3":
                 self._rosbags = RosbagsStorage.open(path, "sqlite3", [_regular_file(path)])
                 return []
             return [_regular_file(path)]
         meta_path = path / "metadata.yaml"
         if not meta_path.exists():
-            files = [_regular_file(f) for f in sorted(path.glob("*.mcap"))]
-            databases = raw_storage_files(path)
+            compressed = raw_storage_files(path, ".mcap.zstd") + raw_storage_files(path, ".db3.zstd")
+            if compressed:  # reading only the uncompressed last file would silently lose the rest
+                raise BagError(_compressed_without_metadata(path, compressed))
+            files = [_regular_file(f) for f in raw_storage_files(path, ".mcap")]
+            databases = raw_storage_files(path, ".db3")
             if not files and not databases:
                 raise BagError(f"{path} is not a rosbag2 bag (no metadata.yaml and no .mcap or .db3 file)")
             self._warn(f"bag {path} has no metadata.yaml (recording interrupted?); reading its "

@@ -14,7 +14,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rosbags.rosbag2 import Reader, ReaderError
+from rosbags.rosbag2 import Reader
 
 from cloth_bench_ros.data.errors import BagError
 
@@ -54,7 +54,7 @@ class RosbagsStorage:
         try:
             reader = Reader(source)
             reader.open()
-        except (ReaderError, OSError, ValueError, KeyError) as exc:
+        except Exception as exc:  # noqa: BLE001 - rosbags, sqlite3 and zstd raise many types on bad files
             raise BagError(f'bag {self.path} cannot be read ({_one_line(exc)})') from None
         try:
             yield reader
@@ -79,13 +79,21 @@ class RosbagsStorage:
                 try:
                     for conn, log_time, data in reader.messages(wanted):
                         yield conn.topic, conn.msgtype, log_time, bytes(data)
-                except (ReaderError, OSError, ValueError) as exc:
+                except Exception as exc:  # noqa: BLE001 - as in _reader
                     raise BagError(f'bag {self.path} is corrupt ({_one_line(exc)})') from None
 
 
-def raw_storage_files(directory: Path) -> list[Path]:
-    """The .db3 files of a directory without metadata.yaml (a killed sqlite3 recording)."""
-    return sorted(p for p in directory.glob('*.db3') if p.is_file())
+def raw_storage_files(directory: Path, suffix: str) -> list[Path]:
+    """The `suffix` (.mcap, .db3) files of a directory without metadata.yaml, in recording order.
+
+    rosbag2 names split files `<bag>_<n><suffix>`; they are ordered by n, as `ros2 bag reindex`
+    orders them (by name, `bag_10` would come before `bag_2`).
+    """
+    def order(path: Path) -> tuple[str, int, str]:
+        stem, _, index = path.stem.rpartition('_')
+        return (stem, int(index), '') if stem and index.isdigit() else (path.stem, -1, path.name)
+
+    return sorted((p for p in directory.glob(f'*{suffix}') if p.is_file()), key=order)
 
 
 def _one_line(exc: BaseException) -> str:
