@@ -224,6 +224,7 @@ def test_bag_info_names_the_storage(tmp_path, capsys):
     bag = write_with_rosbags(tmp_path / "humble", "sqlite3", "file")
     assert cli.main(["bag", "info", str(bag)]) == 0
     assert "storage:      sqlite3, compression file:zstd" in capsys.readouterr().out
+    assert BagReader(next(bag.glob("*.db3.zstd"))).path == bag  # a compressed file names its bag
 
 
 def test_an_unreadable_database_is_one_line(tmp_path, capsys):

@@ -135,7 +135,8 @@ class BagReader:
         path = self.path
         if not path.exists():
             raise BagError(f"bag {path} does not exist")
-        if path.is_file() and path.name == "metadata.yaml":
+        compressed_file = path.suffix == ".zstd" and (path.parent / "metadata.yaml").exists()
+        if path.is_file() and (path.name == "metadata.yaml" or compressed_file):  # the bag it belongs to
             path = self.path = path.parent
         if not path.is_dir():
             if path.suffix == ".zstd":
