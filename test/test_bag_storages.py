@@ -236,3 +236,18 @@ def test_an_unreadable_database_is_one_line(tmp_path, capsys):
     assert cli.main(["run", "--bag", str(bag), "--output", str(tmp_path / "o"), *RUN]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and str(bag) in err
+
+
+def test_a_file_compressed_bag_is_decompressed_once_per_reader(tmp_path, monkeypatch):
+    from rosbags.rosbag2 import Reader
+
+    bag = write_with_rosbags(tmp_path / "file", "mcap", "file")
+    opened = []
+    real_open = Reader.open
+    monkeypatch.setattr(Reader, "open", lambda self: (opened.append(self), real_open(self))[1])
+    reader = BagReader(bag)
+    assert reader.trial is not None
+    passes = [[s for s, _ in reader.clouds()] for _ in range(3)]
+    assert len(opened) == 1 and passes[0] == passes[2] == [s for s, _ in BagReader(SOURCE).clouds()]
+    reader.close()
+    assert [s for s, _ in reader.clouds()] == passes[0] and len(opened) == 2  # reopened after close

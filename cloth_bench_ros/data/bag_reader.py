@@ -305,7 +305,9 @@ class BagReader:
         self.close()
 
     def close(self) -> None:
-        """Nothing stays open between reads; kept for symmetry with BagWriter."""
+        """Remove what a file-compressed bag was decompressed into (other bags keep nothing open)."""
+        if self._rosbags is not None:
+            self._rosbags.close()
 
     @property
     def files(self) -> list[Path]:
