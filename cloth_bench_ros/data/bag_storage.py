@@ -100,18 +100,5 @@ class RosbagsStorage:
                     raise BagError(f'bag {self.path} is corrupt ({_one_line(exc)})') from None
 
 
-def raw_storage_files(directory: Path, suffix: str) -> list[Path]:
-    """The `suffix` (.mcap, .db3) files of a directory without metadata.yaml, in recording order.
-
-    rosbag2 names split files `<bag>_<n><suffix>`; they are ordered by n, as `ros2 bag reindex`
-    orders them (by name, `bag_10` would come before `bag_2`).
-    """
-    def order(path: Path) -> tuple[str, int, str]:
-        stem, _, index = path.stem.rpartition('_')
-        return (stem, int(index), '') if stem and index.isdigit() else (path.stem, -1, path.name)
-
-    return sorted((p for p in directory.glob(f'*{suffix}') if p.is_file()), key=order)
-
-
 def _one_line(exc: BaseException) -> str:
     return ' '.join(str(exc).split()) or type(exc).__name__
