@@ -64,6 +64,28 @@ def downgrade_metadata(bag: Path, version: int) -> None:
     path.write_text(yaml.safe_dump(doc))
 
 
+# The sqlite3 schema each metadata version's rosbag2 wrote: 2 (Foxy: no schema table), 3 (Humble:
+# schema and metadata tables), 4 (Iron on: message definitions, type description hashes).
+DATABASE_SCHEMA = {4: 2, 5: 3, 6: 3, 7: 4, 8: 4, 9: 4}
+
+
+def downgrade_database(database: Path, schema: int) -> None:
+    """A schema-4 .db3 rewritten in an older rosbag2 sqlite3 schema (its messages untouched)."""
+    import sqlite3
+
+    with sqlite3.connect(database) as db:
+        if schema < 4:
+            db.execute("DROP TABLE message_definitions")
+            db.execute("ALTER TABLE topics DROP COLUMN type_description_hash")
+            db.execute("UPDATE schema SET schema_version = ?", (schema,))
+        if schema < 3:
+            db.execute("DROP TABLE schema")
+            db.execute("DROP TABLE metadata")
+        tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    db.close()
+    assert ("message_definitions" in tables) == (schema >= 4) and ("schema" in tables) == (schema >= 3)
+
+
 def write_split(out: Path, storage: str, parts: int = 2) -> Path:
     """The source's messages in `parts` storage files of one bag, named and listed as
     `ros2 bag record --max-bag-size` splits them (`<bag>_0`, `<bag>_1`, ...)."""
@@ -161,6 +183,7 @@ def test_a_lossless_variant_scores_exactly_like_the_original(variant, original, 
 def test_older_metadata_versions_read(version, tmp_path):
     bag = write_with_rosbags(tmp_path / "old", "sqlite3", version=8)
     downgrade_metadata(bag, version)
+    downgrade_database(next(bag.glob("*.db3")), DATABASE_SCHEMA[version])
     reader = BagReader(bag)
     assert reader.metadata_summary.startswith(f"version {version}")
     original = [(s, p.tobytes()) for s, p in BagReader(SOURCE).clouds()]
