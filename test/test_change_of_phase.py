@@ -15,7 +15,7 @@ from cloth_bench_ros.core.scene import TABLE_TOP_Z
 from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.data.replay import ReplayOptions, plan_replay
 from cloth_bench_ros.paths import bundled_bag, share_dir
-from test.camera_recording import CAMERA_TOPIC, EPOCH_START_NS, make_camera_recording
+from camera_recording import CAMERA_TOPIC, EPOCH_START_NS, make_camera_recording
 
 FAST = ["--grid", "6x8"]
 

@@ -23,7 +23,7 @@ from cloth_bench_ros import cli, validation
 from cloth_bench_ros.data import synth
 from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.nodes import evaluator, recorder, simulator, trajectory_publisher
-from test.test_importer import write_pcd, write_ply
+from test_importer import write_pcd, write_ply
 
 REPO = Path(__file__).resolve().parents[1]
 BUNDLED = REPO / "bags" / "towel_dynamic"

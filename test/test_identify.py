@@ -12,7 +12,7 @@ from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.studies.identify import IdentifySpec, identify, search_space
 from cloth_bench_ros.studies.objective import Trial, evaluate
-from test.identify_target import write_engine_target_bag
+from identify_target import write_engine_target_bag
 
 GRID = (5, 6)
 TRUTH = {"damping": 3.0, "young": 1.0e5}  # the preset has 0.939 and 32955: about 3x off each

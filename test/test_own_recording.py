@@ -9,7 +9,7 @@ import pytest
 
 from cloth_bench_ros import cli
 from cloth_bench_ros.paths import bundled_bag
-from test.camera_recording import CAMERA_TOPIC, IR_TOPIC, make_camera_recording
+from camera_recording import CAMERA_TOPIC, IR_TOPIC, make_camera_recording
 
 FAST = ["--grid", "6x8", "--align-step", "0.1"]  # coarse mesh, reduced alignment search
 

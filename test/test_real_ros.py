@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from test.real_ros import ROOT, ROS_PYTHON, in_namespace, require_real_ros, ros_env, ros_script
+from real_ros import ROOT, ROS_PYTHON, in_namespace, require_real_ros, ros_env, ros_script
 
 pytestmark = pytest.mark.real_ros
 

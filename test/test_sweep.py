@@ -11,7 +11,7 @@ import pytest
 
 from cloth_bench_ros.studies import sweep as sw
 from cloth_bench_ros.cli import main
-from test.conftest import write_hanging_cloth_bag
+from bag_fixtures import write_hanging_cloth_bag
 
 GRID = (6, 8)
 
