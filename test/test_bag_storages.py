@@ -64,24 +64,55 @@ def downgrade_metadata(bag: Path, version: int) -> None:
     path.write_text(yaml.safe_dump(doc))
 
 
-def write_split_sqlite3(out: Path) -> Path:
-    """The source's messages in two sqlite3 files of one bag, as `ros2 bag record --max-bag-size` splits."""
+# The sqlite3 schema each metadata version's rosbag2 wrote: 2 (Foxy: no schema table), 3 (Humble:
+# schema and metadata tables), 4 (Iron on: message definitions, type description hashes).
+DATABASE_SCHEMA = {4: 2, 5: 3, 6: 3, 7: 4, 8: 4, 9: 4}
+
+
+def downgrade_database(database: Path, schema: int) -> None:
+    """A schema-4 .db3 rewritten in an older rosbag2 sqlite3 schema (its messages untouched)."""
+    import sqlite3
+
+    with sqlite3.connect(database) as db:
+        if schema < 4:
+            db.execute("DROP TABLE message_definitions")
+            db.execute("ALTER TABLE topics DROP COLUMN type_description_hash")
+            db.execute("UPDATE schema SET schema_version = ?", (schema,))
+        if schema < 3:
+            db.execute("DROP TABLE schema")
+            db.execute("DROP TABLE metadata")
+        tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    db.close()
+    assert ("message_definitions" in tables) == (schema >= 4) and ("schema" in tables) == (schema >= 3)
+
+
+def write_split(out: Path, storage: str, parts: int = 2) -> Path:
+    """The source's messages in `parts` storage files of one bag, named and listed as
+    `ros2 bag record --max-bag-size` splits them (`<bag>_0`, `<bag>_1`, ...)."""
     messages = list(BagReader(SOURCE).logged_messages())
-    half = len(messages) // 2
-    write_with_rosbags(out, "sqlite3", messages=messages[:half])
-    second = write_with_rosbags(out.parent / (out.name + "_part"), "sqlite3", messages=messages[half:])
-    (second / f"{second.name}.db3").rename(out / f"{out.name}_1.db3")
-    meta_path = out / "metadata.yaml"
-    doc = yaml.safe_load(meta_path.read_text())
-    info = doc["rosbag2_bagfile_information"]
-    extra = yaml.safe_load((second / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
-    info["relative_file_paths"].append(f"{out.name}_1.db3")
-    info["files"].append({**extra["files"][0], "path": f"{out.name}_1.db3"})
-    info["message_count"] += extra["message_count"]
-    counts = {t["topic_metadata"]["name"]: t["message_count"] for t in extra["topics_with_message_count"]}
-    for topic in info["topics_with_message_count"]:
-        topic["message_count"] += counts.get(topic["topic_metadata"]["name"], 0)
-    meta_path.write_text(yaml.safe_dump(doc))
+    suffix = ".db3" if storage == "sqlite3" else ".mcap"
+    bounds = [round(i * len(messages) / parts) for i in range(parts + 1)]
+    info: dict = {}
+    for i in range(parts):
+        part = write_with_rosbags(out.parent / f"{out.name}_part{i}", storage, messages=messages[bounds[i]:bounds[i + 1]])
+        name = f"{out.name}_{i}{suffix}"
+        out.mkdir(exist_ok=True)
+        (part / f"{part.name}{suffix}").rename(out / name)
+        part_info = yaml.safe_load((part / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        part_info["files"][0]["path"] = name
+        if not info:
+            info = {**part_info, "relative_file_paths": [name]}
+            continue
+        info["relative_file_paths"].append(name)
+        info["files"].append(part_info["files"][0])
+        info["message_count"] += part_info["message_count"]
+        counts = {t["topic_metadata"]["name"]: t["message_count"] for t in part_info["topics_with_message_count"]}
+        known = {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]}
+        for topic in info["topics_with_message_count"]:
+            topic["message_count"] += counts.get(topic["topic_metadata"]["name"], 0)
+        info["topics_with_message_count"] += [t for t in part_info["topics_with_message_count"]
+                                              if t["topic_metadata"]["name"] not in known]
+    (out / "metadata.yaml").write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}))
     return out
 
 
@@ -116,7 +147,8 @@ VARIANTS = {
     "mcap, message compression zstd": lambda out: write_with_rosbags(out, "mcap", "message"),
     "sqlite3, file compression zstd": lambda out: write_with_rosbags(out, "sqlite3", "file"),
     "sqlite3, message compression zstd": lambda out: write_with_rosbags(out, "sqlite3", "message"),
-    "sqlite3 split in two files": write_split_sqlite3,
+    "sqlite3 split in two files": lambda out: write_split(out, "sqlite3"),
+    "mcap split in three files": lambda out: write_split(out, "mcap", 3),
 }
 
 
@@ -151,6 +183,7 @@ def test_a_lossless_variant_scores_exactly_like_the_original(variant, original, 
 def test_older_metadata_versions_read(version, tmp_path):
     bag = write_with_rosbags(tmp_path / "old", "sqlite3", version=8)
     downgrade_metadata(bag, version)
+    downgrade_database(next(bag.glob("*.db3")), DATABASE_SCHEMA[version])
     reader = BagReader(bag)
     assert reader.metadata_summary.startswith(f"version {version}")
     original = [(s, p.tobytes()) for s, p in BagReader(SOURCE).clouds()]
@@ -168,9 +201,55 @@ def test_a_killed_recording_without_metadata_reads_its_files(storage, original, 
     assert scores(_score(bag, tmp_path)) == scores(original)
 
 
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_a_killed_split_recording_is_read_in_file_number_order(storage, original, tmp_path):
+    bag = write_split(tmp_path / "killed", storage, parts=12)
+    (bag / "metadata.yaml").unlink()
+    with pytest.warns(UserWarning, match="has no metadata.yaml"):
+        reader = BagReader(bag)
+    suffix = ".db3" if storage == "sqlite3" else ".mcap"
+    assert [f.name for f in reader.files] == [f"killed_{i}{suffix}" for i in range(12)]  # _10 after _9
+    assert [s for s, _ in reader.clouds()] == [s for s, _ in BagReader(SOURCE).clouds()]
+    assert scores(_score(bag, tmp_path)) == scores(original)
+
+
+def test_a_killed_file_compressed_recording_says_what_to_do(tmp_path, capsys):
+    # --compression-mode file compresses each file when it is closed: a killed recording leaves
+    # the earlier files compressed, the last one not, and no metadata.yaml.
+    bag = write_split(tmp_path / "killed", "mcap", parts=2)
+    (bag / "metadata.yaml").unlink()
+    compressed = write_with_rosbags(tmp_path / "compressed", "mcap", "file")
+    (bag / "killed_0.mcap").unlink()
+    next(compressed.glob("*.mcap.zstd")).rename(bag / "killed_0.mcap.zstd")
+    with pytest.raises(BagError, match=r"compressed storage files \(killed_0.mcap.zstd\).*zstd -d --rm"):
+        BagReader(bag)
+    assert cli.main(["run", "--bag", str(bag), "--output", str(tmp_path / "o"), *RUN]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("compression", ["file", "message"])
+def test_a_damaged_compressed_bag_is_one_line(compression, tmp_path, capsys):
+    bag = write_with_rosbags(tmp_path / "torn", "sqlite3" if compression == "message" else "mcap", compression)
+    storage = next(f for f in bag.iterdir() if f.name != "metadata.yaml")
+    data = storage.read_bytes()
+    storage.write_bytes(data[: len(data) // 2])
+    assert cli.main(["run", "--bag", str(bag), "--output", str(tmp_path / "o"), *RUN]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(bag) in err and "internal error" not in err
+
+
 def test_a_bare_mcap_from_the_mcap_writer_scores_like_the_original(original, tmp_path):
     path = write_bare_mcap(tmp_path / "bare")
     assert scores(_score(path, tmp_path)) == scores(original)
+
+
+@pytest.mark.parametrize("compression", ["file", "message"])
+def test_a_storage_file_of_a_compressed_bag_reads_as_its_bag(compression, tmp_path):
+    # Only metadata.yaml says a file is compressed, or that its messages are.
+    bag = write_with_rosbags(tmp_path / compression, "mcap", compression)
+    reader = BagReader(next(f for f in bag.iterdir() if f.name != "metadata.yaml"))
+    assert reader.path == bag and reader.storage == f"mcap, compression {compression}:zstd"
+    assert [(s, p.tobytes()) for s, p in reader.clouds()] == [(s, p.tobytes()) for s, p in BagReader(SOURCE).clouds()]
 
 
 def test_bag_info_names_the_storage(tmp_path, capsys):
@@ -188,3 +267,18 @@ def test_an_unreadable_database_is_one_line(tmp_path, capsys):
     assert cli.main(["run", "--bag", str(bag), "--output", str(tmp_path / "o"), *RUN]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and str(bag) in err
+
+
+def test_a_file_compressed_bag_is_decompressed_once_per_reader(tmp_path, monkeypatch):
+    from rosbags.rosbag2 import Reader
+
+    bag = write_with_rosbags(tmp_path / "file", "mcap", "file")
+    opened = []
+    real_open = Reader.open
+    monkeypatch.setattr(Reader, "open", lambda self: (opened.append(self), real_open(self))[1])
+    reader = BagReader(bag)
+    assert reader.trial is not None
+    passes = [[s for s, _ in reader.clouds()] for _ in range(3)]
+    assert len(opened) == 1 and passes[0] == passes[2] == [s for s, _ in BagReader(SOURCE).clouds()]
+    reader.close()
+    assert [s for s, _ in reader.clouds()] == passes[0] and len(opened) == 2  # reopened after close

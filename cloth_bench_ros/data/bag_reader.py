@@ -1,16 +1,15 @@
 """The one bag reader of the project: any rosbag2 bag a user records, in record order.
 
 A bag is a directory holding `metadata.yaml` and its storage file(s); a bare `.mcap` or `.db3`
-file, or a directory whose metadata.yaml is missing, also reads. Uncompressed MCAP (the project's
-own bags and Jazzy's default) is read here, truncated files included; sqlite3 storage (Humble's
-default) and file- or message-compressed bags go through rosbags (data/bag_storage.py).
-Payloads are CDR.
+file, or a directory whose metadata.yaml is missing, also reads (data/bag_layout.py finds the
+files). Uncompressed MCAP (the project's own bags and Jazzy's default) is read here, truncated
+files included; sqlite3 storage (Humble's default) and file- or message-compressed bags go
+through rosbags (data/bag_storage.py). Payloads are CDR.
 """
 
 from __future__ import annotations
 
 import os
-import stat
 import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -24,10 +23,10 @@ from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk
 
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
-from cloth_bench_ros.data.bag_storage import RosbagsStorage, raw_storage_files
+from cloth_bench_ros.data.bag_layout import locate
+from cloth_bench_ros.data.bag_storage import RosbagsStorage
 from cloth_bench_ros.data.errors import BagError, BagWarning
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
-from cloth_bench_ros.data.metadata import read_metadata
 from cloth_bench_ros.data.trial import (
     CLOUD_TOPIC, CUSTOM_DATA_PREFIX, MCAP_TRIAL_RECORD, TRIAL_TOPIC, TrialInfo, trial_from_message,
 )
@@ -73,17 +72,6 @@ def _stamp_from_cdr(cdr: bytes) -> int:
     return sec * 1_000_000_000 + nsec
 
 
-def _regular_file(path: Path) -> Path:
-    """path, if it is a regular file (a FIFO or device would block or never end)."""
-    try:
-        mode = path.stat().st_mode
-    except OSError as exc:
-        raise BagError(f"bag {path} cannot be read ({exc.strerror or exc})") from None
-    if not stat.S_ISREG(mode):
-        raise BagError(f"bag {path} is not a regular file")
-    return path
-
-
 def _schema_name(schemas: dict[int, Schema], channel: Channel) -> str:
     schema = schemas.get(channel.schema_id)
     return schema.name if schema is not None else ""
@@ -100,9 +88,15 @@ class BagReader:
         self.path = Path(path)
         self.warnings: list[str] = []
         self.stats = CloudStats()
-        self._bag_meta: dict[str, Any] = {}
+        layout = locate(self.path)
+        self.path = layout.path
+        if layout.warning:
+            self._warn(layout.warning)
+        self._bag_meta: dict[str, Any] = dict(layout.metadata or {})
         self._rosbags: RosbagsStorage | None = None
-        self._files = [self._open_file(p) for p in self._locate()]
+        if layout.rosbags_sources:
+            self._rosbags = RosbagsStorage.open(self.path, layout.rosbags_storage, layout.rosbags_sources)
+        self._files = [self._open_file(p) for p in layout.mcap_files]
         self.topics: dict[str, str] = {}
         self.message_counts: dict[str, int] = {}
         if self._rosbags is not None:
@@ -123,46 +117,6 @@ class BagReader:
     def _warn(self, text: str) -> None:
         self.warnings.append(text)
         warnings.warn(text, BagWarning, stacklevel=3)
-
-    def _locate(self) -> list[Path]:
-        path = self.path
-        if not path.exists():
-            raise BagError(f"bag {path} does not exist")
-        if path.is_file() and path.name == "metadata.yaml":
-            path = self.path = path.parent
-        if not path.is_dir():
-            if path.suffix == ".db3":
-                self._rosbags = RosbagsStorage.open(path, "sqlite3", [_regular_file(path)])
-                return []
-            return [_regular_file(path)]
-        meta_path = path / "metadata.yaml"
-        if not meta_path.exists():
-            files = [_regular_file(f) for f in sorted(path.glob("*.mcap"))]
-            databases = raw_storage_files(path)
-            if not files and not databases:
-                raise BagError(f"{path} is not a rosbag2 bag (no metadata.yaml and no .mcap or .db3 file)")
-            self._warn(f"bag {path} has no metadata.yaml (recording interrupted?); reading its "
-                       f"{'.mcap' if files else '.db3'} files directly")
-            if not files:
-                self._rosbags = RosbagsStorage.open(path, "sqlite3", [_regular_file(f) for f in databases])
-            return files
-        info = read_metadata(meta_path)
-        if info["storage_identifier"] not in ("mcap", "sqlite3"):
-            raise BagError(f"bag {path} uses storage {info['storage_identifier']!r} "
-                           "(readable: mcap, sqlite3)")
-        if info["storage_identifier"] != "mcap" or info["compression_mode"] not in ("", "none", "NONE"):
-            self._bag_meta = info
-            self._rosbags = RosbagsStorage.open(path, info["storage_identifier"], [path])
-            return []
-        # Names from the file never leave the bag directory.
-        files = [path / Path(n).name for n in info["relative_file_paths"]]
-        missing = [str(f) for f in files if not f.exists()]
-        if missing:
-            raise BagError(f"bag {path} lists missing file(s): {', '.join(missing)}")
-        if not files:
-            raise BagError(f"bag {path} lists no storage file in metadata.yaml")
-        self._bag_meta = info
-        return [_regular_file(f) for f in files]
 
     def _open_file(self, path: Path) -> _McapFile:
         try:
@@ -292,7 +246,9 @@ class BagReader:
         self.close()
 
     def close(self) -> None:
-        """Nothing stays open between reads; kept for symmetry with BagWriter."""
+        """Remove what a file-compressed bag was decompressed into (other bags keep nothing open)."""
+        if self._rosbags is not None:
+            self._rosbags.close()
 
     @property
     def files(self) -> list[Path]:

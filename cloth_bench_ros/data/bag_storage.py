@@ -9,12 +9,13 @@ BagError line naming the bag.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rosbags.rosbag2 import Reader, ReaderError
+from rosbags.rosbag2 import Reader
 
 from cloth_bench_ros.data.errors import BagError
 
@@ -31,6 +32,7 @@ class RosbagsStorage:
     start_ns: int | None = None
     end_ns: int | None = None
     compression: str = 'none'
+    _decompressed: dict[tuple[Path, int], Reader] = field(default_factory=dict, repr=False)
 
     @classmethod
     def open(cls, path: Path, kind: str, sources: list[Path]) -> RosbagsStorage:
@@ -51,15 +53,30 @@ class RosbagsStorage:
 
     @contextmanager
     def _reader(self, source: Path) -> Iterator[Reader]:
+        # rosbags decompresses a file-compressed bag into a temporary copy at each open: that copy
+        # is kept until `close` (per thread: sqlite3 connections stay in theirs), other bags reopen.
+        key = (source, threading.get_ident())
+        if key in self._decompressed:
+            yield self._decompressed[key]
+            return
         try:
             reader = Reader(source)
             reader.open()
-        except (ReaderError, OSError, ValueError, KeyError) as exc:
+        except Exception as exc:  # noqa: BLE001 - rosbags, sqlite3 and zstd raise many types on bad files
             raise BagError(f'bag {self.path} cannot be read ({_one_line(exc)})') from None
+        keep = reader.compression_mode == 'file'
+        if keep:
+            self._decompressed[key] = reader
         try:
             yield reader
         finally:
-            reader.close()
+            if not keep:
+                reader.close()
+
+    def close(self) -> None:
+        """Remove the decompressed copies of a file-compressed bag."""
+        while self._decompressed:
+            self._decompressed.popitem()[1].close()
 
     @property
     def files(self) -> list[Path]:
@@ -79,13 +96,8 @@ class RosbagsStorage:
                 try:
                     for conn, log_time, data in reader.messages(wanted):
                         yield conn.topic, conn.msgtype, log_time, bytes(data)
-                except (ReaderError, OSError, ValueError) as exc:
+                except Exception as exc:  # noqa: BLE001 - as in _reader
                     raise BagError(f'bag {self.path} is corrupt ({_one_line(exc)})') from None
-
-
-def raw_storage_files(directory: Path) -> list[Path]:
-    """The .db3 files of a directory without metadata.yaml (a killed sqlite3 recording)."""
-    return sorted(p for p in directory.glob('*.db3') if p.is_file())
 
 
 def _one_line(exc: BaseException) -> str:
