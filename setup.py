@@ -10,6 +10,7 @@ package_name = "cloth_bench_ros"
 INSTALL_REQUIRES = [
     "numpy>=1.24",
     "scipy>=1.10",
+    "numba>=0.60",
     "PyYAML>=6.0",
     "mujoco>=3.3",
     "pybullet>=3.2.6",

@@ -55,7 +55,7 @@ def main() -> None:
     parser.add_argument("--output", type=Path, default=Path("results") / "bench_realtime")
     args = parser.parse_args()
 
-    # DDS on loopback only, on a domain of its own (DESIGN.md's network rule); the children inherit it.
+    # DDS on loopback only, on a domain of its own (the project's network rule: docs/development.md); the children inherit it.
     os.environ.update(loopback_environment(random.randint(1, 200)))
     bag = bundled_bag(args.cloth, args.primitive)
     load = os.getloadavg()

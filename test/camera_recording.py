@@ -3,7 +3,8 @@
 Organized PointCloud2 (x, y, z, rgb; NaN where a pixel has no return) in the camera's optical
 frame, /tf_static world -> camera_link -> camera_depth_optical_frame, epoch stamps from an
 arbitrary start, table and background points in view, no project metadata, and a second
-PointCloud2 topic.
+PointCloud2 topic. Written by rosbags' Writer (MCAP or sqlite3 storage, optionally compressed),
+not by the project's own writer, so the reader is tested on what an independent writer makes.
 """
 
 from __future__ import annotations
@@ -11,10 +12,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
 from cloth_bench_ros.core import scene
-from cloth_bench_ros.data import BagReader, BagWriter
+from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.data.messages import POINTCLOUD2, header, msg_class, serialize
 
 CAMERA_TOPIC = "/camera/depth/color/points"
@@ -59,11 +63,39 @@ def scene_clutter(rng) -> np.ndarray:
     return np.concatenate([table, wall, floor])
 
 
+class _RosbagsBag:
+    """rosbags' Writer behind a `write(topic, msgtype, stamp_ns, cdr)` call."""
+
+    def __init__(self, out: Path, storage: str, compression: str) -> None:
+        plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
+        self.writer = Writer(out, version=9, storage_plugin=plugin)
+        if compression != "none":
+            mode = CompressionMode.FILE if compression == "file" else CompressionMode.MESSAGE
+            self.writer.set_compression(mode, CompressionFormat.ZSTD)
+        self.typestore = get_typestore(Stores.ROS2_JAZZY)
+        self.connections: dict[str, object] = {}
+
+    def __enter__(self) -> _RosbagsBag:
+        self.writer.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.writer.close()
+
+    def write(self, topic: str, msgtype: str, stamp_ns: int, cdr: bytes) -> None:
+        if topic not in self.connections:
+            self.connections[topic] = self.writer.add_connection(topic, msgtype, typestore=self.typestore)
+        self.writer.write(self.connections[topic], stamp_ns, bytes(cdr))
+
+
 def make_camera_recording(source: Path, out: Path, frames: int | None = None, seed: int = 0,
-                          pre_roll: int = 5) -> int:
+                          pre_roll: int = 5, noise: float = 0.0, storage: str = "mcap",
+                          compression: str = "none") -> int:
     """Write the camera-like bag; returns the true bag time (ns) of the start of the motion.
 
-    The camera runs `pre_roll` frames before the motion starts (the cloth hangs still: frame 0).
+    The camera runs `pre_roll` frames before the motion starts (the cloth hangs still: frame 0);
+    `noise` (m) is the standard deviation of the sensor noise added to the cloth's points;
+    `storage` is mcap or sqlite3, `compression` none, file or message (zstd).
     """
     rng = np.random.default_rng(seed)
     reader = BagReader(source)
@@ -72,7 +104,7 @@ def make_camera_recording(source: Path, out: Path, frames: int | None = None, se
     tf = msg_class("tf2_msgs/msg/TFMessage")(transforms=[
         _transform("world", "camera_link", position, LINK_ROTATION),
         _transform("camera_link", OPTICAL, (0.0, 0.0, 0.0), optical_in_link)])
-    with BagWriter(out) as bag:
+    with _RosbagsBag(out, storage, compression) as bag:
         bag.write("/tf_static", "tf2_msgs/msg/TFMessage", EPOCH_START_NS - 10**8, serialize(tf))
         clouds = list(reader.clouds())
         period = clouds[1][0] - clouds[0][0]
@@ -80,7 +112,8 @@ def make_camera_recording(source: Path, out: Path, frames: int | None = None, se
         for k, (stamp, points) in enumerate(clouds):
             if frames is not None and k >= frames:
                 break
-            world = np.concatenate([points, scene_clutter(rng)])
+            cloth = points + rng.normal(0.0, noise, points.shape) if noise else points
+            world = np.concatenate([cloth, scene_clutter(rng)])
             optical = (world - position) @ R_WORLD_OPTICAL.T
             t = EPOCH_START_NS + stamp
             bag.write(CAMERA_TOPIC, POINTCLOUD2, t, serialize(organized_cloud(t, optical, 48, 64, rng)))

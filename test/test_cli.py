@@ -77,7 +77,7 @@ def test_trajectory_prints_csv():
 
 def test_import_command_with_a_transform_file(tmp_path):
     from cloth_bench_ros.data import BagReader
-    from test.test_importer import make_tree
+    from test_importer import make_tree
 
     make_tree(tmp_path / "data")
     shift = tmp_path / "shift.txt"

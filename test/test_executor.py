@@ -15,8 +15,8 @@ import psutil
 import pytest
 
 from cloth_bench_ros.studies import sweep as sw
-from test.conftest import write_hanging_cloth_bag
-from test.identify_target import write_engine_target_bag
+from bag_fixtures import write_hanging_cloth_bag
+from identify_target import write_engine_target_bag
 
 BIN = Path(sys.executable).parent
 ENV = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}

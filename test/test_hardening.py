@@ -23,7 +23,7 @@ from cloth_bench_ros import cli, validation
 from cloth_bench_ros.data import synth
 from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.nodes import evaluator, recorder, simulator, trajectory_publisher
-from test.test_importer import write_pcd, write_ply
+from test_importer import write_pcd, write_ply
 
 REPO = Path(__file__).resolve().parents[1]
 BUNDLED = REPO / "bags" / "towel_dynamic"
@@ -175,7 +175,7 @@ def _bag_with_metadata_edit(tmp_path: Path, old: str, new: str) -> Path:
 
 
 def test_negative_change_of_phase_frame_in_a_bag_is_refused(capsys, tmp_path):
-    bag = _bag_with_metadata_edit(tmp_path, "cloth_bench.change_of_phase_frame: '99'",
+    bag = _bag_with_metadata_edit(tmp_path, "cloth_bench.change_of_phase_frame: '104'",
                                   "cloth_bench.change_of_phase_frame: '-5'")
     run = ["run", "--grid", "4x4", "--bag", str(bag), "--output", str(tmp_path / "o")]
     for argv in (["bag", "info", str(bag)], run):

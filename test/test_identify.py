@@ -12,7 +12,7 @@ from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.studies.identify import IdentifySpec, identify, search_space
 from cloth_bench_ros.studies.objective import Trial, evaluate
-from test.identify_target import write_engine_target_bag
+from identify_target import write_engine_target_bag
 
 GRID = (5, 6)
 TRUTH = {"damping": 3.0, "young": 1.0e5}  # the preset has 0.939 and 32955: about 3x off each
@@ -83,13 +83,16 @@ def test_search_space_is_the_schema_range_log_scaled_around_the_preset_where_it_
 
 @pytest.mark.parametrize("argv, message", [
     (["--params", "nope"], "unknown mujoco parameter nope"),
-    (["--trials", "0"], "--trials must be at least 1"),
-    (["--span", "1"], "--span must be"),
-    (["--span", "nan"], "--span must be"),
-    (["--cloth", "silk"], "unknown cloth"),
+    (["--trials", "0"], "--trials: 0 is outside [1, inf]"),
+    (["--span", "1"], "--span: 1.0 is outside (1, inf]"),
+    (["--span", "nan"], "--span: nan is not a finite number"),
+    (["--cloth", "silk"], "--cloth: invalid choice: 'silk'"),
 ])
 def test_cli_identify_user_errors_are_one_line(target, tmp_path, capsys, argv, message):
-    code = main(["identify", "--bag", str(target), "--output", str(tmp_path), "--no-progress", *argv])
+    try:
+        code = main(["identify", "--bag", str(target), "--output", str(tmp_path), "--no-progress", *argv])
+    except SystemExit as exc:  # argparse's own usage errors
+        code = exc.code
     err = capsys.readouterr().err
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1
 

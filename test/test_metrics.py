@@ -1,4 +1,4 @@
-"""The metrics equal a brute-force computation of REFERENCE.md section 3."""
+"""The metrics equal a brute-force computation of docs/benchmark.md section 3."""
 
 import numpy as np
 import pytest

@@ -6,6 +6,7 @@ in setup.cfg with the deviations from ament's defaults written there.
 """
 
 import ast
+import re
 import runpy
 import subprocess
 import sys
@@ -25,7 +26,7 @@ ROSDEP_KEYS = {"python3-numpy", "python3-scipy", "python3-yaml", "python3-tqdm",
                "python3-mujoco-pip", "python3-pybullet-pip", "python3-rosbags-pip", "python3-open3d-pip",
                "python3-pytest", "mcap-ros2-support", "python3-flake8", "pydocstyle"}
 # No rosdep key checked: documented in package.xml and the README.
-PIP_ONLY = {"mcap", "cyclonedds", "optuna", "cmaes", "dask", "distributed", "newton", "warp"}
+PIP_ONLY = {"mcap", "numba", "cyclonedds", "optuna", "cmaes", "dask", "distributed", "newton", "warp"}
 OPTIONAL_IMPORTS = {"torch"}  # imported only where installed (identify --sampler gp); never a dependency
 IMPORT_TO_KEY = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml", "tqdm": "python3-tqdm",
                  "matplotlib": "python3-matplotlib", "mujoco": "python3-mujoco-pip",
@@ -118,5 +119,24 @@ def test_package_xml_keys_exist_and_cover_every_import():
 
 @pytest.mark.parametrize("key", sorted(PIP_ONLY))
 def test_pip_only_requirements_are_documented_in_the_readme(key):
+    docs = (ROOT / "README.md").read_text() + "".join(p.read_text() for p in sorted((ROOT / "docs").glob("*.md")))
+    assert f"`{key}`" in docs
+
+
+def test_every_docs_page_is_reachable_from_the_readme_and_links_resolve():
     readme = (ROOT / "README.md").read_text()
-    assert f"`{key}`" in readme
+    pages = sorted((ROOT / "docs").glob("*.md"))
+    assert pages and all(f"(docs/{p.name})" in readme for p in pages)
+    for doc in [ROOT / "README.md", *pages]:
+        for target in re.findall(r"\]\(([^)#:]+)(?:#[^)]*)?\)", doc.read_text()):
+            assert (doc.parent / target).exists(), f"{doc.relative_to(ROOT)} links to missing {target}"
+
+
+def test_nothing_points_outside_the_repository():
+    pattern = re.compile(r"REFERENCE\.md|DESIGN\.md|STYLE\.md|\.\./shared")
+    for path in [*ROOT.glob("*.md"), *ROOT.glob("docs/*.md"), *ROOT.glob("bags/*.md"), *ROOT.glob("config/**/*.yaml"),
+                 *ROOT.glob("cloth_bench_ros/**/*.py"), *ROOT.glob("test/*.py"), *ROOT.glob("benchmarks/*.py"),
+                 *ROOT.glob("launch/*.py"), ROOT / "setup.cfg"]:
+        if path.name == "test_package.py":
+            continue
+        assert not pattern.search(path.read_text()), f"{path.relative_to(ROOT)} points outside the repository"

@@ -21,7 +21,7 @@ from cloth_bench_ros.studies import aggregate, recommend
 from cloth_bench_ros.studies import sweep as sw
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.studies.stress import default_cases, run_case
-from test.conftest import write_hanging_cloth_bag
+from bag_fixtures import write_hanging_cloth_bag
 
 ENGINES = ["mujoco", "bullet"]
 RATES = [10.0, 100.0]

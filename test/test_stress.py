@@ -85,6 +85,7 @@ def test_cli_stress_lists_cases_and_refuses_unknown_ones(capsys):
 
 @pytest.mark.parametrize("value", ["-1", "nan", "0", "inf"])
 def test_cli_stress_refuses_a_bad_wall_time_budget(capsys, value):
-    assert main(["stress", "--max-wall-s", value, "--list"]) == 2
+    with pytest.raises(SystemExit) as exit_:  # argparse's one-line usage error
+        main(["stress", "--max-wall-s", value, "--list"])
     err = capsys.readouterr().err
-    assert "--max-wall-s must be" in err and len(err.strip().splitlines()) == 1
+    assert exit_.value.code == 2 and "argument --max-wall-s" in err and len(err.strip().splitlines()) == 1

@@ -11,7 +11,7 @@ import pytest
 
 from cloth_bench_ros.studies import sweep as sw
 from cloth_bench_ros.cli import main
-from test.conftest import write_hanging_cloth_bag
+from bag_fixtures import write_hanging_cloth_bag
 
 GRID = (6, 8)
 
@@ -167,10 +167,10 @@ def test_cli_sweep_dry_run_counts_cells(bag_dir, tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["--set", "mujoco.nope=1"], "unknown mujoco parameter nope"),
     (["--grid", "1x5"], "grid"),
-    (["--cloth", "silk"], "unknown cloth 'silk'"),
+    (["--cloth", "silk"], "invalid choice: 'silk'"),
     (["--engine", "sofa"], "engine sofa is not available"),
     (["--mode", "settings", "--rate", "10", "--rate", "100"], "one rate"),
-    (["--seed-start", "-3"], "--seed-start must be >= 0"),
+    (["--seed-start", "-3"], "--seed-start: -3 is outside [0,"),
     (["--scheduler", "localhost"], "is not tcp://HOST:PORT"),
 ])
 def test_cli_sweep_user_errors_are_one_line(bag_dir, tmp_path, capsys, argv, message):

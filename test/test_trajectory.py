@@ -1,4 +1,4 @@
-"""The quintic trajectories meet REFERENCE.md's boundary conditions at every rate."""
+"""The quintic trajectories meet docs/benchmark.md's boundary conditions at every rate."""
 
 import math
 
@@ -15,7 +15,7 @@ RATES = (10.0, 100.0, 1000.0)
 Y0, Z0 = 0.0, 1.0
 DEG = math.pi / 180
 
-# (axis, [(t_end of segment, (p, v, a) at that end)]) straight from REFERENCE.md section 2.
+# (axis, [(t_end of segment, (p, v, a) at that end)]) straight from docs/benchmark.md section 2.
 DYNAMIC_ENDS = {
     "y": [(0.0, (Y0, 0, 0)), (1.1, (Y0 - 0.25, -0.7, 3.0)), (2.6, (Y0 + 0.30, 0.0, -1.0)),
           (3.9, (Y0 + 0.15, -0.3, -0.5)), (4.4, (Y0 - 0.10, 0.0, 0.0))],

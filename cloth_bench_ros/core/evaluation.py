@@ -72,6 +72,8 @@ class OnlineEvaluator:
     def add_state(self, engine: str, stamp_ns: int, vertices: np.ndarray) -> None:
         """A simulated state; states before the quintic part only advance the stamp."""
         e = self.engines[engine]
+        if stamp_ns <= e.last_stamp:  # the same state again (a resent target answered): counted once
+            return
         e.last_stamp = stamp_ns
         if stamp_ns < self.quintic_start_ns:
             return

@@ -1,4 +1,4 @@
-"""Sim-to-real metrics (REFERENCE.md section 3).
+"""Sim-to-real metrics (docs/benchmark.md, section 3).
 
 One-sided L1 Chamfer and Hausdorff distances from the simulated vertices V to the real cloud P
 (the nearest neighbour is taken under the L1 norm too), the stability L_s of a sequence of
@@ -11,7 +11,8 @@ import hashlib
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+from cloth_bench_ros.core.nearest import PointGrid
 
 
 def _points(name: str, a: np.ndarray) -> np.ndarray:
@@ -26,11 +27,11 @@ def _points(name: str, a: np.ndarray) -> np.ndarray:
 
 
 class RealCloud:
-    """A real point cloud P indexed once (k-d tree) so that several meshes can be scored on it."""
+    """A real point cloud P indexed once (a uniform grid, core/nearest.py) so that several meshes can be scored on it."""
 
     def __init__(self, points: np.ndarray) -> None:
         self.points = _points("P", points)
-        self._tree = cKDTree(self.points, leafsize=64, balanced_tree=False, compact_nodes=False)
+        self._grid = PointGrid(self.points)
 
     @classmethod
     def of(cls, points: np.ndarray) -> "RealCloud":
@@ -50,9 +51,8 @@ class RealCloud:
         return cloud
 
     def nearest_l1(self, vertices: np.ndarray) -> np.ndarray:
-        """For each vertex v, min over p of ||v - p||_1 (exact: the tree is searched in L1)."""
-        dist, _ = self._tree.query(_points("V", vertices), k=1, p=1)
-        return dist
+        """For each vertex v, min over p of ||v - p||_1 (exact: the grid is searched in L1)."""
+        return self._grid.nearest_l1(_points("V", vertices))
 
     def chamfer_hausdorff(self, vertices: np.ndarray) -> tuple[float, float]:
         """(CD, HD) of the vertices against this cloud."""

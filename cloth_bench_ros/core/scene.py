@@ -1,4 +1,4 @@
-"""The benchmark scene (REFERENCE.md section 1): cloth, grippers, table, gravity, camera."""
+"""The benchmark scene (docs/benchmark.md, section 1): cloth, grippers, table, gravity, camera."""
 
 from __future__ import annotations
 
@@ -24,8 +24,8 @@ SETTLE_HOLD_END = 1.0  # s
 SETTLE_DURATION = SETTLE_HOLD_START + SETTLE_MOVE + SETTLE_HOLD_END
 
 TABLE_TOP_Z = 0.195  # m
-TABLE_X = (-0.30, 0.80)  # m; REFERENCE asks for at least [-0.1, 0.7]
-TABLE_Y = (-0.90, 0.90)  # m; REFERENCE asks for at least [-0.8, 0.8]
+TABLE_X = (-0.30, 0.80)  # m; the benchmark asks for at least [-0.1, 0.7]
+TABLE_Y = (-0.90, 0.90)  # m; the benchmark asks for at least [-0.8, 0.8]
 TABLE_THICKNESS = 0.05  # m
 
 REAL_FPS = 30.0  # real point clouds per second

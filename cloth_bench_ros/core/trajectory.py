@@ -1,8 +1,8 @@
-"""Quintic Cartesian gripper trajectories of the two primitives (REFERENCE.md section 2).
+"""Quintic Cartesian gripper trajectories of the two primitives (docs/benchmark.md, section 2).
 
 Every axis is a chain of quintic segments; the trajectory is an analytic function of time and
 is sampled at t = k * dt, so it is the same at every rate. The full run starts with the settle
-phase of REFERENCE.md section 1; `GripperTargets.quintic_start` marks where the quintic part
+phase of docs/benchmark.md section 1; `GripperTargets.quintic_start` marks where the quintic part
 begins.
 """
 
@@ -134,7 +134,7 @@ def _deg(seg: QuinticSegment) -> QuinticSegment:
 
 
 def quintic_part(primitive: Primitive | str) -> PrimitiveTrajectory:
-    """The quintic part of a primitive, exactly as REFERENCE.md section 2 tabulates it."""
+    """The quintic part of a primitive, exactly as docs/benchmark.md section 2 tabulates it."""
     primitive = parse_primitive(primitive) if isinstance(primitive, str) else primitive
     y0 = float(scene.PREGRASP_LEFT[1])
     z0 = float(scene.PREGRASP_LEFT[2])

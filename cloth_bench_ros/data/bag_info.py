@@ -25,7 +25,7 @@ def describe(path: str | os.PathLike[str], validate: bool = True) -> str:
     lines = [
         f"bag:          {reader.path}",
         f"files:        {', '.join(f.name for f in reader.files)} ({size / 1e6:.1f} MB)",
-        f"storage:      mcap, chunk compression {reader.compression}",
+        f"storage:      {reader.storage}",
         f"metadata:     {reader.metadata_summary}",
         f"complete:     {'yes' if reader.complete else 'no (truncated)'}",
     ]

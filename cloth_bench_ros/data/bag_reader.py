@@ -1,13 +1,15 @@
-"""The one bag reader of the project: rosbag2 bags with MCAP storage, in record order.
+"""The one bag reader of the project: any rosbag2 bag a user records, in record order.
 
-A bag is a directory holding `metadata.yaml` and its `.mcap` file(s) (a bare `.mcap` file also
-reads). Schemas are `ros2msg` text and payloads CDR.
+A bag is a directory holding `metadata.yaml` and its storage file(s); a bare `.mcap` or `.db3`
+file, or a directory whose metadata.yaml is missing, also reads (data/bag_layout.py finds the
+files). Uncompressed MCAP (the project's own bags and Jazzy's default) is read here, truncated
+files included; sqlite3 storage (Humble's default) and file- or message-compressed bags go
+through rosbags (data/bag_storage.py). Payloads are CDR.
 """
 
 from __future__ import annotations
 
 import os
-import stat
 import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -21,9 +23,10 @@ from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk
 
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
+from cloth_bench_ros.data.bag_layout import locate
+from cloth_bench_ros.data.bag_storage import RosbagsStorage
 from cloth_bench_ros.data.errors import BagError, BagWarning
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
-from cloth_bench_ros.data.metadata import read_metadata
 from cloth_bench_ros.data.trial import (
     CLOUD_TOPIC, CUSTOM_DATA_PREFIX, MCAP_TRIAL_RECORD, TRIAL_TOPIC, TrialInfo, trial_from_message,
 )
@@ -69,17 +72,6 @@ def _stamp_from_cdr(cdr: bytes) -> int:
     return sec * 1_000_000_000 + nsec
 
 
-def _regular_file(path: Path) -> Path:
-    """path, if it is a regular file (a FIFO or device would block or never end)."""
-    try:
-        mode = path.stat().st_mode
-    except OSError as exc:
-        raise BagError(f"bag {path} cannot be read ({exc.strerror or exc})") from None
-    if not stat.S_ISREG(mode):
-        raise BagError(f"bag {path} is not a regular file")
-    return path
-
-
 def _schema_name(schemas: dict[int, Schema], channel: Channel) -> str:
     schema = schemas.get(channel.schema_id)
     return schema.name if schema is not None else ""
@@ -96,10 +88,20 @@ class BagReader:
         self.path = Path(path)
         self.warnings: list[str] = []
         self.stats = CloudStats()
-        self._bag_meta: dict[str, Any] = {}
-        self._files = [self._open_file(p) for p in self._locate()]
+        layout = locate(self.path)
+        self.path = layout.path
+        if layout.warning:
+            self._warn(layout.warning)
+        self._bag_meta: dict[str, Any] = dict(layout.metadata or {})
+        self._rosbags: RosbagsStorage | None = None
+        if layout.rosbags_sources:
+            self._rosbags = RosbagsStorage.open(self.path, layout.rosbags_storage, layout.rosbags_sources)
+        self._files = [self._open_file(p) for p in layout.mcap_files]
         self.topics: dict[str, str] = {}
         self.message_counts: dict[str, int] = {}
+        if self._rosbags is not None:
+            self.topics.update(self._rosbags.topics)
+            self.message_counts.update(self._rosbags.counts)
         for topic in self._bag_meta.get("topics", []):
             self.topics[topic["name"]] = topic["type"]
             self.message_counts[topic["name"]] = topic["message_count"]
@@ -115,39 +117,6 @@ class BagReader:
     def _warn(self, text: str) -> None:
         self.warnings.append(text)
         warnings.warn(text, BagWarning, stacklevel=3)
-
-    def _locate(self) -> list[Path]:
-        path = self.path
-        if not path.exists():
-            raise BagError(f"bag {path} does not exist")
-        if path.is_file() and path.name == "metadata.yaml":
-            path = self.path = path.parent
-        if not path.is_dir():
-            return [_regular_file(path)]
-        meta_path = path / "metadata.yaml"
-        if not meta_path.exists():
-            files = [_regular_file(f) for f in sorted(path.glob("*.mcap"))]
-            if not files:
-                raise BagError(f"{path} is not a rosbag2 bag (no metadata.yaml and no .mcap file)")
-            self._warn(f"bag {path} has no metadata.yaml (recording interrupted?); reading its .mcap files")
-            return files
-        info = read_metadata(meta_path)
-        if info["storage_identifier"] != "mcap":
-            raise BagError(f"bag {path} uses storage {info['storage_identifier']!r}; only mcap is supported")
-        if info["compression_mode"] not in ("", "none", "NONE"):
-            raise BagError(
-                f"bag {path} uses file/message compression {info['compression_mode']!r}; "
-                "only MCAP chunk compression is supported"
-            )
-        # Names from the file never leave the bag directory.
-        files = [path / Path(n).name for n in info["relative_file_paths"]]
-        missing = [str(f) for f in files if not f.exists()]
-        if missing:
-            raise BagError(f"bag {path} lists missing file(s): {', '.join(missing)}")
-        if not files:
-            raise BagError(f"bag {path} lists no storage file in metadata.yaml")
-        self._bag_meta = info
-        return [_regular_file(f) for f in files]
 
     def _open_file(self, path: Path) -> _McapFile:
         try:
@@ -277,11 +246,22 @@ class BagReader:
         self.close()
 
     def close(self) -> None:
-        """Nothing stays open between reads; kept for symmetry with BagWriter."""
+        """Remove what a file-compressed bag was decompressed into (other bags keep nothing open)."""
+        if self._rosbags is not None:
+            self._rosbags.close()
 
     @property
     def files(self) -> list[Path]:
-        return [f.path for f in self._files]
+        """The bag's storage files."""
+        return self._rosbags.files if self._rosbags is not None else [f.path for f in self._files]
+
+    @property
+    def storage(self) -> str:
+        """The storage and its compression, e.g. `mcap, chunk compression zstd` or `sqlite3, file:zstd`."""
+        if self._rosbags is not None:
+            compression = self._rosbags.compression
+            return f"{self._rosbags.kind}, " + ("uncompressed" if compression == "none" else f"compression {compression}")
+        return f"mcap, chunk compression {self.compression}"
 
     @property
     def complete(self) -> bool:
@@ -301,16 +281,22 @@ class BagReader:
 
     @property
     def start_ns(self) -> int | None:
+        if self._rosbags is not None:
+            return self._rosbags.start_ns
         starts = [f.start_ns for f in self._files if f.start_ns is not None]
         return min(starts) if starts else None
 
     @property
     def end_ns(self) -> int | None:
+        if self._rosbags is not None:
+            return self._rosbags.end_ns
         ends = [f.end_ns for f in self._files if f.end_ns is not None]
         return max(ends) if ends else None
 
     @property
     def compression(self) -> str:
+        if self._rosbags is not None:
+            return self._rosbags.compression
         return ",".join(sorted({f.compression for f in self._files}))
 
     @property
@@ -363,23 +349,19 @@ class BagReader:
         self, topics: Iterable[str] | str | None = None
     ) -> Iterator[tuple[str, str, int, bytes]]:
         """(topic, msgtype, stamp_ns, cdr) in record order; stamp = header stamp, else log time."""
-        wanted = {topics} if isinstance(topics, str) else (set(topics) if topics is not None else None)
-        for mf in self._files:
-            for rec, topic in self._records(mf, wanted):
-                if not isinstance(rec, Message):
-                    continue
-                msgtype = mf.topics.get(topic) or self.topics.get(topic, "")
-                stamp = rec.log_time
-                try:
-                    if messages.has_header(msgtype) and len(rec.data) >= 12:
-                        stamp = _stamp_from_cdr(rec.data)
-                except messages.MessageTypeError:
-                    pass
-                yield topic, msgtype, stamp, rec.data
+        for topic, msgtype, stamp, data in self.logged_messages(topics):
+            try:
+                if messages.has_header(msgtype) and len(data) >= 12:
+                    stamp = _stamp_from_cdr(data)
+            except messages.MessageTypeError:
+                pass
+            yield topic, msgtype, stamp, data
 
     def logged_messages(self, topics: Iterable[str] | str | None = None) -> Iterator[tuple[str, str, int, bytes]]:
         """(topic, msgtype, log_time_ns, cdr) in record order: the MCAP log time, not the header stamp."""
         wanted = {topics} if isinstance(topics, str) else (set(topics) if topics is not None else None)
+        if self._rosbags is not None:
+            yield from self._rosbags.messages(wanted)
         for mf in self._files:
             for rec, topic in self._records(mf, wanted):
                 if isinstance(rec, Message):

@@ -8,36 +8,54 @@ from __future__ import annotations
 
 import os
 import shutil
+from dataclasses import replace
 from pathlib import Path
+
+from cloth_bench_ros.core.phase import first_table_contact
 
 from cloth_bench_ros.data.bag_reader import BagReader
 from cloth_bench_ros.data.bag_writer import BagWriter
 from cloth_bench_ros.data.errors import BagError
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, serialize
-from cloth_bench_ros.data.trial import CUSTOM_DATA_PREFIX, TRIAL_TOPIC, trial_message
+from cloth_bench_ros.data.trial import CUSTOM_DATA_PREFIX, TRIAL_TOPIC, TrialInfo, trial_message
 
 
 def _custom_data(trial_strings: dict[str, str] | None) -> dict[str, str]:
     return {CUSTOM_DATA_PREFIX + k: v for k, v in (trial_strings or {}).items()}
 
 
-def _check_same(src: BagReader, dst: BagReader) -> None:
-    """BagError unless dst holds src's messages (topic, type, log time, bytes, order) and trial."""
-    if src.trial != dst.trial or src.custom_data != dst.custom_data:
+def _check_same(src: BagReader, dst: BagReader, trial: TrialInfo | None) -> None:
+    """BagError unless dst holds src's messages (topic, type, log time, bytes, order) and `trial`."""
+    if dst.trial != trial or dst.custom_data != _custom_data(trial.to_strings() if trial else None):
         raise BagError(f"bag {dst.path}: trial metadata differs from {src.path} after the rewrite")
     old, new = list(src.logged_messages()), list(dst.logged_messages())
     if len(old) != len(new):
         raise BagError(f"bag {dst.path}: {len(new)} messages after the rewrite, {src.path} has {len(old)}")
+    if trial != src.trial:  # the trial message was written anew
+        old, new = old[1:], new[1:]
     for i, (a, b) in enumerate(zip(old, new)):
         if a[:3] != b[:3] or bytes(a[3]) != bytes(b[3]):
             raise BagError(f"bag {dst.path}: message {i} ({a[0]}) differs from {src.path} after the rewrite")
 
 
-def rewrite_bag(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> dict[str, int]:
+def detected_change_of_phase(reader: BagReader) -> int | None:
+    """The first table contact in a project bag's clouds (stamped from the start of the motion)."""
+    frames = list(reader.clouds())
+    found = first_table_contact(points for _, points in frames)
+    if found.index is None:
+        return None
+    fps = reader.trial.fps if reader.trial else 30.0
+    return int(round(frames[found.index][0] * fps / 1e9))
+
+
+def rewrite_bag(src: str | os.PathLike[str], dst: str | os.PathLike[str],
+                change_of_phase_frame: int | str | None = None) -> dict[str, int]:
     """Write the bag src anew at dst with BagWriter (current layout); messages per topic.
 
     Payloads, topics, types, log times and trial metadata stay the same, which is checked by
-    reading dst back; BagError (and no dst) if src cannot be carried over unchanged.
+    reading dst back; BagError (and no dst) if src cannot be carried over unchanged. A
+    `change_of_phase_frame` (a frame, or "detected" for the first table contact in the clouds)
+    replaces the trial's, the one change a rewrite may make.
     """
     src_path, dst_path = Path(src), Path(dst)
     if dst_path.exists() and src_path.exists() and dst_path.resolve() == src_path.resolve():
@@ -45,14 +63,22 @@ def rewrite_bag(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> dic
     reader = BagReader(src_path)
     if not reader.complete:
         raise BagError(f"bag {src_path} is truncated; rewriting would keep only part of it")
-    trial = reader.trial
+    trial = source_trial = reader.trial
     if reader.custom_data != _custom_data(trial.to_strings() if trial else None):
         raise BagError(f"bag {src_path}: custom_data holds more than the trial; the writer would drop it")
+    if change_of_phase_frame is not None:
+        if trial is None or trial.primitive != "dynamic":
+            raise BagError(f"bag {src_path}: only a dynamic trial of the project has a change of phase")
+        frame = detected_change_of_phase(reader) if change_of_phase_frame == "detected" else change_of_phase_frame
+        if frame is None:
+            raise BagError(f"bag {src_path}: no table contact found in its clouds")
+        trial = replace(trial, change_of_phase_frame=frame)
     created = not dst_path.exists()
     writer = BagWriter(dst_path, trial)
     try:
         # BagWriter writes the trial message itself, first; the source's must be that very message.
-        expected_first = None if trial is None else (TRIAL_TOPIC, DIAGNOSTIC_ARRAY, 0, serialize(trial_message(trial)))
+        expected_first = None if trial is None else (
+            TRIAL_TOPIC, DIAGNOSTIC_ARRAY, 0, serialize(trial_message(source_trial)))
         for topic, msgtype, log_ns, cdr in reader.logged_messages():
             if expected_first is not None:
                 if (topic, msgtype, log_ns, bytes(cdr)) != expected_first:
@@ -64,7 +90,7 @@ def rewrite_bag(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> dic
         if expected_first is not None:
             raise BagError(f"bag {src_path} has trial metadata but no trial message; rewriting would add one")
         counts = writer.close()
-        _check_same(reader, BagReader(dst_path))
+        _check_same(reader, BagReader(dst_path), trial)
     except BaseException:
         writer.close()
         if created:

@@ -1,6 +1,6 @@
 """Import the published dataset (PLY/PCD folders) into one rosbag2 MCAP bag per trial.
 
-Layout (REFERENCE.md section 4): `<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`.
+Layout (docs/benchmark.md, section 5): `<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`.
 Frame NNNNN is stamped NNNNN / 30 s; points are kept exactly (NaN included; the reader drops
 and counts them), optionally moved by a 4x4 transform, and stored as float32 x/y/z; `--clean` runs them through core.cleaning first.
 """
@@ -8,6 +8,7 @@ and counts them), optionally moved by a 4x4 transform, and stored as float32 x/y
 from __future__ import annotations
 
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from tqdm import tqdm
 from cloth_bench_ros import validation
 from cloth_bench_ros.data import CLOUD_TOPIC, BagWriter, TrialInfo
 from cloth_bench_ros.core.cleaning import CleaningConfig, clean
+from cloth_bench_ros.core.phase import ContactSearch, first_contact, in_contact
 from cloth_bench_ros.core.scene import REAL_FPS
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.safe_io import check_output_dir, staged_directory
@@ -24,7 +26,7 @@ from cloth_bench_ros.safe_io import check_output_dir, staged_directory
 CLOTH_NAMES = {"chequered": "chequered", "cotton": "towel", "linen": "linen"}  # folder -> ours
 PRIMITIVES = ("dynamic", "quasi_static")
 
-# Change of phase (first contact) of the dynamic trials, real frame index (REFERENCE.md 3).
+# Change of phase (first contact) of the dynamic trials, real frame index (docs/benchmark.md, section 4).
 CHANGE_OF_PHASE = {
     ("chequered", 0): 95, ("chequered", 1): 95, ("chequered", 2): 99,
     ("towel", 0): 99, ("towel", 1): 98, ("towel", 2): 99,
@@ -315,9 +317,6 @@ def import_dataset(
     root, out = Path(root), Path(out)
     t = _check_transform(transform)
     trials = find_trials(root)
-    for tr in trials:
-        if tr.primitive == "dynamic" and (tr.cloth, tr.trial) not in CHANGE_OF_PHASE:
-            raise ValueError(f"{tr.folder}: no change-of-phase frame is known for {tr.cloth} trial {tr.trial}")
     check_output_dir(out)
     for tr in trials:  # every existing bag is found before the first one is written
         if (out / tr.bag_name).exists() and not overwrite:
@@ -327,24 +326,44 @@ def import_dataset(
     with tqdm(total=total, unit="frame", disable=not progress, desc="import") as bar:
         for tr in trials:
             final = out / tr.bag_name
+            known = CHANGE_OF_PHASE.get((tr.cloth, tr.trial)) if tr.primitive == "dynamic" else None
+            if tr.primitive == "dynamic" and known is None:  # found in the clouds, as a run would
+                known = first_contact(in_contact(_frame_points(f, t, cleaning)) for _, f in tr.frames).index
             info = TrialInfo(
                 cloth=tr.cloth,
                 trial=tr.trial,
                 primitive=tr.primitive,
-                change_of_phase_frame=CHANGE_OF_PHASE.get((tr.cloth, tr.trial)) if tr.primitive == "dynamic" else None,
+                change_of_phase_frame=known,
                 source=f"imported from {tr.folder.relative_to(root).as_posix()}",
                 fps=REAL_FPS,
                 transform=(t if t is not None else np.eye(4)).tolist(),
             )
             bar.set_description(tr.bag_name)
+            contact = []
             with staged_directory(final, overwrite) as staged, BagWriter(staged, info) as writer:
                 for k, f in tr.frames:
-                    pts = read_cloud_file(f)
-                    if t is not None:
-                        pts = pts @ t[:3, :3].T + t[:3, 3]
-                    if cleaning is not None:
-                        pts = clean(pts, cleaning)
+                    pts = _frame_points(f, t, cleaning)
+                    contact.append(in_contact(pts))
                     writer.write_cloud(CLOUD_TOPIC, round(k * 1_000_000_000 / REAL_FPS), pts)
                     bar.update(1)
+            _check_change_of_phase(final, info, first_contact(contact), cleaning is not None and cleaning.table_plane)
             bags.append(final)
     return bags
+
+
+def _frame_points(path: Path, t: np.ndarray | None, cleaning: CleaningConfig | None) -> np.ndarray:
+    """One frame's points, moved into the simulation frame and cleaned as the bag stores them."""
+    pts = read_cloud_file(path)
+    if t is not None:
+        pts = pts @ t[:3, :3].T + t[:3, 3]
+    return clean(pts, cleaning) if cleaning is not None else pts
+
+
+def _check_change_of_phase(bag: Path, info: TrialInfo, found: ContactSearch, table_removed: bool) -> None:
+    """Warn when the recorded change of phase and the first table contact in the clouds disagree."""
+    if info.primitive != "dynamic" or not table_removed:  # else the table is in every frame
+        return
+    if found.index is None or info.change_of_phase_frame is None or abs(found.index - info.change_of_phase_frame) > 1:
+        warnings.warn(f"bag {bag}: change of phase at frame {info.change_of_phase_frame}, but the clouds "
+                      f"show {'first table contact at frame ' + str(found.index) if found.index is not None else found.reason}",
+                      stacklevel=3)

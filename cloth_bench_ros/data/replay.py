@@ -16,6 +16,7 @@ import numpy as np
 
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.core.cleaning import CleaningConfig, CleaningStats, clean, scene_cleaning
+from cloth_bench_ros.core.phase import first_table_contact
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.data import alignment, messages
 from cloth_bench_ros.data.bag_reader import IRREGULAR_TOLERANCE, BagReader
@@ -63,11 +64,13 @@ class ReplayPlan:
     frames_source: str = ""
     nan_points_dropped: int = 0
     irregular_intervals: int = 0  # stamp steps off 1/fps by more than IRREGULAR_TOLERANCE
+    change_of_phase: dict[str, Any] = field(default_factory=dict)  # see `change_of_phase`
 
     def accounting(self) -> dict[str, Any]:
         """The recorder's share of the frame accounting, for the summary."""
         return {"topic": self.topic, "frames_in_bag": self.frames_in_bag, **self.counts,
                 "start": self.start.as_dict(), "frames": self.frames_source,
+                "change_of_phase": self.change_of_phase,
                 "nan_points_dropped": self.nan_points_dropped, "irregular_intervals": self.irregular_intervals,
                 "cleaning": None if self.cleaning is None else {
                     **self.cleaning.as_dict(), "settings": asdict(self.cleaning_config)}}
@@ -178,10 +181,34 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
             counts["to_send"] += 1
             plan.frames.append((t_ns, points))
     plan.counts = counts
+    plan.change_of_phase = change_of_phase(trial, options, project_bag, plan.frames)
+    trial.change_of_phase_frame = plan.change_of_phase["frame"]
     period = 1e9 / trial.fps
     steps = np.diff(np.asarray(stamps, dtype=np.int64))
     plan.irregular_intervals = int(np.sum(np.abs(steps - period) > IRREGULAR_TOLERANCE * period))
     return plan
+
+
+def change_of_phase(trial: TrialInfo, options: ReplayOptions, project_bag: bool,
+                    frames: list[tuple[int, np.ndarray]]) -> dict[str, Any]:
+    """The frame that ends a dynamic trial's scored window, and where it comes from.
+
+    In order: the option (`--change-of-phase-frame`), the bag's trial metadata, else the first
+    table contact found in `frames` ((t_ns from the start, world points) in time order). The
+    quasi-static task has none: it is scored over its whole length.
+    """
+    if options.primitive != "dynamic":
+        return {"frame": None, "source": "none", "reason": "the quasi-static task is scored over its whole length"}
+    if options.change_of_phase_frame is not None:
+        return {"frame": options.change_of_phase_frame, "source": "option", "reason": "--change-of-phase-frame"}
+    if project_bag and trial.change_of_phase_frame is not None:
+        return {"frame": trial.change_of_phase_frame, "source": "metadata", "reason": "the bag's trial metadata"}
+    found = first_table_contact(points for _, points in frames)
+    if found.index is None:
+        return {"frame": None, "source": "none", "reason": found.reason}
+    t_ns = frames[found.index][0]
+    return {"frame": int(round(t_ns * trial.fps / 1e9)), "source": "detected", "reason": found.reason,
+            "t_s": t_ns / 1e9}
 
 
 def _start(reader: BagReader, options: ReplayOptions, project_bag: bool, stamps: list[int],

@@ -2,7 +2,7 @@
 
 A reference simulation (config/synth.yaml: finer grid and another integrator than the models
 under test) runs along the full trajectory; at every 30 fps frame its mesh is rasterised into a
-z-buffer by a pinhole camera placed as REFERENCE.md section 1 says, so that only the surfaces the
+z-buffer by a pinhole camera placed as docs/benchmark.md section 1 says, so that only the surfaces the
 camera sees survive. The depth image gets Azure-Kinect-like noise and flying pixels at the
 silhouette, is back-projected to the world frame, cropped to the cloth above the table, cleaned
 by statistical outlier removal (open3d) and randomly subsampled to a point budget: partial,
@@ -21,8 +21,8 @@ import numpy as np
 import yaml
 
 from cloth_bench_ros.core import cleaning, scene
+from cloth_bench_ros.core.phase import first_table_contact
 from cloth_bench_ros.data import CLOUD_TOPIC, BagWriter, TrialInfo
-from cloth_bench_ros.data.importer import CHANGE_OF_PHASE
 from cloth_bench_ros.engines import engine_class, make_engine
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.safe_io import staged_directory
@@ -386,9 +386,14 @@ def render_frames(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
         yield frame_stamp_ns(k, config.fps), points
 
 
-def trial_info(config: SynthConfig) -> TrialInfo:
-    """Trial 0 of the cloth; the change of phase of the dynamic trial is the real one (REFERENCE 3)."""
-    cop = CHANGE_OF_PHASE[(config.cloth, 0)] if config.primitive == "dynamic" else None
+def trial_info(config: SynthConfig, clouds: list[np.ndarray] | None = None) -> TrialInfo:
+    """Trial 0 of the cloth; a dynamic trial's change of phase is the first table contact in its clouds.
+
+    None if the clouds never touch the table (a shortened trial): its runs then say so and score every frame.
+    """
+    cop = None
+    if config.primitive == "dynamic":
+        cop = first_table_contact(clouds or []).index  # frame k is stamped k / fps from the start
     return TrialInfo(config.cloth, 0, config.primitive, cop, config.describe(), fps=config.fps)
 
 
@@ -402,13 +407,14 @@ def write_synthetic_bag(config: SynthConfig, out_dir: Path, overwrite: bool = Fa
     """
     out_dir = Path(out_dir)
     with staged_directory(out_dir, overwrite) as staged:  # output checks fail before simulating
-        with BagWriter(staged, trial_info(config)) as writer:
-            frames = synthetic_frames(config)
-            if progress:
-                from tqdm import tqdm
+        frames = synthetic_frames(config)
+        if progress:
+            from tqdm import tqdm
 
-                frames = tqdm(frames, total=config.frame_count, unit="frame", desc=out_dir.name)
-            for k, vertices, points in frames:
+            frames = tqdm(frames, total=config.frame_count, unit="frame", desc=out_dir.name)
+        rendered = list(frames)  # the trial (its change of phase) is written first, found from the clouds
+        with BagWriter(staged, trial_info(config, [points for _, _, points in rendered])) as writer:
+            for k, vertices, points in rendered:
                 writer.write_cloud(CLOUD_TOPIC, frame_stamp_ns(k, config.fps), points)
                 if on_frame is not None:
                     on_frame(k, vertices, points)

@@ -86,32 +86,51 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
     (bad parameter, bag or engine) is one line on stderr and exit status 2, no traceback.
     """
     _stop_requested.clear()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, _request_stop)
     nodes: list = []
+    executor = None
+    starting = True
     try:
-        # a bad --ros-args (or CLOTH_BENCH_TRANSPORT) fails here
-        init_options = {"transport": transport or transport_choice("intra")} if EMBEDDED else {}
+        # a bad --ros-args (or CLOTH_BENCH_TRANSPORT) fails here; real rclpy installs no signal
+        # handler of its own (it would end spin_once in ExternalShutdownException), ours stops the loop
+        init_options = ({"transport": transport or transport_choice("intra")} if EMBEDDED
+                        else {"signal_handler_options": _no_rclpy_signal_handlers()})
         rclpy.init(args=args if args is not None else sys.argv, **init_options)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, _request_stop)
         for factory in factories:
             nodes.append(factory())
         executor = SingleThreadedExecutor()
         for node in nodes:
             executor.add_node(node)
+        starting = False
         while rclpy.ok() and not _stop_requested.is_set() and not all(getattr(n, "done", False) for n in nodes):
             executor.spin_once(timeout_sec=0.1)
-        return 0
+        return max((getattr(n, "exit_status", 0) for n in nodes), default=0)
     except Exception as exc:
-        # rclpy's parameter, name and argument errors are not ValueErrors: matched by class name
-        if not (isinstance(exc, (ClothBenchError, ValueError)) or is_user_error(exc)):
+        if type(exc).__name__ == "ExternalShutdownException":  # rclpy shut down from outside: a stop
+            return 0
+        # rclpy's parameter, name and argument errors are not ValueErrors: matched by class name;
+        # rcl's own RCLError while starting is a bad argument, parameter or params file too
+        user = isinstance(exc, (ClothBenchError, ValueError)) or is_user_error(exc) or (
+            starting and type(exc).__name__ == "RCLError")
+        if not user:
             raise
         print(f"error: {str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__}",
               file=sys.stderr)
         return 2
     finally:
+        if executor is not None:
+            executor.shutdown()
         close_nodes(nodes)
         if rclpy.ok():
             rclpy.shutdown()
+
+
+def _no_rclpy_signal_handlers():
+    """rclpy's SignalHandlerOptions.NO (real rclpy only)."""
+    from rclpy.signals import SignalHandlerOptions
+
+    return SignalHandlerOptions.NO
 
 
 def run_node(factory: Callable[[], object], args: list[str] | None = None) -> int:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.data.trial import trial_from_message
-from cloth_bench_ros.core.evaluation import OnlineEvaluator, frame_accounting
+from cloth_bench_ros.core.evaluation import OnlineEvaluator, accounting_line, frame_accounting
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.nodes.common import NAMESPACE, publishers_matched, replay_stamps, run_node
 from cloth_bench_ros.nodes.comparison import write_comparison
@@ -92,6 +92,7 @@ class Evaluator(Node):
         self.published_scores = 0
         self.summary: dict | None = None
         self.done = False
+        self.exit_status = 0  # 1: the frame accounting does not add up (main() returns it)
 
     def check_ready(self) -> None:
         if self.trial_received and all(publishers_matched(self, sub) for sub in self.inputs):
@@ -182,6 +183,15 @@ class Evaluator(Node):
             )
             self.metrics_pub.publish(DiagnosticArray(status=[status]))
 
+    def _change_of_phase(self) -> dict:
+        """The scored window's end as used (frame, source: option, metadata, detected or none)."""
+        used = self.core.change_of_phase_frame
+        told = dict(self.replay.get("change_of_phase") or {})
+        if told.get("frame") != used:  # the evaluator's own parameter overrides the recorder's choice
+            told = {"frame": used, "source": "option" if used is not None else "none",
+                    "reason": "evaluator parameter change_of_phase_frame" if used is not None else "not given"}
+        return told
+
     def finish(self) -> None:
         """Close the run: summary on `metrics`, report files, done."""
         if self.done:
@@ -198,10 +208,14 @@ class Evaluator(Node):
         real["nan_points_dropped"] += int(self.replay.get("nan_points_dropped", 0))
         real["irregular_intervals"] = int(self.replay.get("irregular_intervals", real["irregular_intervals"]))
         accounting = frame_accounting(self.replay, real)
+        if not accounting["adds_up"]:  # frames from another graph, or lost ones: the run is not valid
+            self.exit_status = 1
+            self.get_logger().error(accounting_line(accounting))
         self.summary = {"run": {**self.run_info, "trial": self.trial, "wall_time": wall_s},
                         "real": {**real, "accounting": accounting,
                                  "alignment": self.replay.get("start"), "frames_from": self.replay.get("frames"),
-                                 "cleaning": self.replay.get("cleaning"), "topic": self.replay.get("topic")},
+                                 "cleaning": self.replay.get("cleaning"), "topic": self.replay.get("topic"),
+                                 "change_of_phase": self._change_of_phase()},
                         "engines": engines}
         statuses = []
         for engine, m in self.summary["engines"].items():

@@ -20,6 +20,7 @@ from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quate
 
 PACINGS = ("lockstep", "realtime")
 PREROLL_RESEND_S = 0.5  # real time: the start-up handshake's target 0 is sent again after this long
+LOCKSTEP_RESEND_S = 1.0  # lockstep: a target whose states have not all come back is sent again after this long
 
 
 class TrajectoryPublisher(Node):
@@ -65,6 +66,8 @@ class TrajectoryPublisher(Node):
         self.target_msg = self._new_target_msg()
         self.wait_until_ns: int | None = None
         self.preroll_sent_ns: int | None = None  # real time: when the start-up handshake's target 0 went out
+        self.sent_ns = 0  # lockstep: when the newest target went out (steady clock)
+        self.resend_timer = None
         self.start_timer = self.create_timer(0.02, self.try_start)
 
     def graph_ready(self) -> bool:
@@ -100,6 +103,21 @@ class TrajectoryPublisher(Node):
             return
         self.destroy_timer(self.start_timer)
         self.publish_next()
+        # Under DDS a first sample can be lost before a reader has matched; a lockstep graph would
+        # then wait for ever. The newest target goes out again until its states are back (a
+        # simulator answers a repeated target with its state, without a step).
+        self.resend_timer = self.create_timer(LOCKSTEP_RESEND_S / 4, self.resend_if_stalled, clock=steady_clock())
+
+    def resend_if_stalled(self) -> None:
+        """Lockstep: send target k (and /clock) again when no progress was made for LOCKSTEP_RESEND_S."""
+        if self.done:
+            self.destroy_timer(self.resend_timer)
+            return
+        if time.monotonic_ns() - self.sent_ns > LOCKSTEP_RESEND_S * 1e9:
+            self.sent_ns = time.monotonic_ns()
+            msg = self._target(self.k)
+            self.clock_pub.publish(Clock(clock=msg.header.stamp))
+            self.target_pub.publish(msg)
 
     @staticmethod
     def _new_target_msg() -> PoseArray:
@@ -123,6 +141,7 @@ class TrajectoryPublisher(Node):
         self.k += 1
         msg = self._target(self.k)
         if self.pacing != "realtime":
+            self.sent_ns = time.monotonic_ns()
             self.clock_pub.publish(Clock(clock=msg.header.stamp))
             self.target_pub.publish(msg)
             return

@@ -67,7 +67,7 @@ def overview_section(rows: Sequence[dict]) -> list[Block]:
         f"Rendered {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')} from {len(rows)} cells "
         f"({status.get('ok', 0)} ok, {status.get('diverged', 0)} diverged, {status.get('error', 0)} errors); "
         f"engines {', '.join(versions) or '-'}; {compute / 3600:.2f} h of cell compute in total. "
-        f"CD and HD are one-sided L1 distances in metres (REFERENCE.md section 3); mean ± std over seeds and trial "
+        f"CD and HD are one-sided L1 distances in metres (docs/benchmark.md, section 3); mean ± std over seeds and trial "
         f"bags (population std); a diverged run is counted, not averaged. All results here are ours unless a "
         f"column or paragraph is marked **paper**." + load_text)]
 
@@ -90,7 +90,7 @@ def table2_section(paper: Sequence[dict], config: str, wanted_rate: float) -> li
     return [heading(2, f"Table II layout: accuracy per cloth and engine at {rate:g} Hz"), paragraph(
         f"Columns marked (ours): this system, {what}, lockstep pacing, {rate:g} Hz, over {combos} seed x trial "
         f"combinations per cell; bold = best of ours. Columns marked (paper) are the paper's Table II "
-        f"(REFERENCE.md section 5: real rags, 3 trials x 20 seeds, MuJoCo 3.1.1, Bullet 3.26, Flex 1.2, "
+        f"(docs/benchmark.md, section 6: real rags, 3 trials x 20 seeds, MuJoCo 3.1.1, Bullet 3.26, Flex 1.2, "
         f"SOFA 23.06; bold = best in the paper). The paper scores real clouds; ours are scored against the "
         f"bags given to the sweep, so the columns compare layouts and magnitudes, not the same data."),
         table_block(table2(paper, rate))]

@@ -14,7 +14,7 @@ from cloth_bench_ros.report.statistics import (
     METRICS, PAPER_ENGINES, cloths_of, engine_label, engines_of, fmt_fixed, fmt_sig, rates_of)
 from cloth_bench_ros.studies.aggregate import finite, group, stat
 
-# REFERENCE.md section 5, Table II: (mean, std, bold in the paper) per cloth, metric and engine.
+# docs/benchmark.md section 6, Table II: (mean, std, bold in the paper) per cloth, metric and engine.
 PAPER_TABLE2: dict[tuple[str, str], dict[str, tuple[float, float, bool]]] = {
     ("towel", "CD_d"): {"mujoco": (0.079, 0.031, False), "bullet": (0.155, 0.093, False),
                         "flex": (0.168, 0.129, False), "sofa": (0.078, 0.029, True)},
@@ -42,7 +42,7 @@ PAPER_TABLE2: dict[tuple[str, str], dict[str, tuple[float, float, bool]]] = {
                         "flex": (0.148, 0.045, False), "sofa": (0.137, 0.038, True)},
 }
 PAPER_FIG5 = (
-    "Paper, Fig. 5 (towel, 10 seeds, 10 / 100 / 1000 Hz; no numbers are given in REFERENCE.md): "
+    "Paper, Fig. 5 (towel, 10 seeds, 10 / 100 / 1000 Hz; the paper gives no numbers): "
     "Bullet and MuJoCo become unstable at low frequency, Flex and SOFA stay consistent; MuJoCo's "
     "error drops sharply as the frequency rises; an unstable simulator also takes much longer per "
     "step; at 100 Hz every engine needs on the order of milliseconds per step (Intel i7-10875H), "

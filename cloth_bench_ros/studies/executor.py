@@ -21,7 +21,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import signal
 import socket
+import warnings
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
@@ -31,6 +33,19 @@ from cloth_bench_ros.errors import ClothBenchError
 
 WORKER_TREE_CACHE_POINTS = 20_000_000  # ~ 400 frames of 50,000 points per worker
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+@contextlib.contextmanager
+def quiet_shutdown() -> Iterator[None]:
+    """On an interrupt, take the cluster down without Dask's noise and without a second interrupt."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the clean-up short
+        logging.getLogger("distributed").setLevel(logging.CRITICAL)
+        logging.getLogger("asyncio").setLevel(logging.CRITICAL)
+        warnings.filterwarnings("ignore", message="coroutine .* was never awaited")
+        raise
 
 
 class ExecutorError(ClothBenchError, ValueError):
@@ -84,12 +99,18 @@ def check_scheduler_address(address: str) -> str:
 def open_client(scheduler: str | None = None, workers: int | None = None,
                 log_path: Path | None = None) -> Iterator[Any]:
     """A Dask client: of a new LocalCluster on 127.0.0.1 (`workers` processes), or of `scheduler`."""
-    from distributed import Client, LocalCluster
-
     for var in _THREAD_VARS:
         os.environ.setdefault(var, "1")
     logging.getLogger("distributed").setLevel(logging.ERROR)
     plugin = _WorkerSetup(str(log_path) if log_path else None, scheduler is None)
+    with _cluster_client(scheduler, workers, plugin) as client, quiet_shutdown():  # quiet before closing
+        yield client
+
+
+@contextlib.contextmanager
+def _cluster_client(scheduler: str | None, workers: int | None, plugin: _WorkerSetup) -> Iterator[Any]:
+    from distributed import Client, LocalCluster
+
     if scheduler is not None:
         address = check_scheduler_address(scheduler)
         try:

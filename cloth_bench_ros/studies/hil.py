@@ -84,6 +84,7 @@ class HilResult:
     step_time: dict = field(default_factory=dict)  # the engine's own step time (s): p50, p99, max
     cd_realtime: float = math.nan  # CD of the states this run produced (skips change the physics)
     cd_lockstep: float = math.nan  # CD of the same configuration in lockstep
+    observer_states: int | None = None  # steps whose state the observer scored (all of them, or a problem)
     diverged: bool = False
     run_dir: Path | None = None
 
@@ -96,7 +97,7 @@ class HilResult:
                 "stepped": self.stepped, "problems": self.problems, "realtime": self.realtime, **self.load,
                 "step_time_p50": self.step_time.get("p50"), "step_time_p99": self.step_time.get("p99"),
                 "step_time_max": self.step_time.get("max"), "cd_realtime": self.cd_realtime,
-                "cd_lockstep": self.cd_lockstep, "diverged": self.diverged,
+                "cd_lockstep": self.cd_lockstep, "observer_states": self.observer_states, "diverged": self.diverged,
                 "run_dir": self.run_dir.name if self.run_dir else None}
 
 
@@ -368,6 +369,10 @@ def collect(config: HilConfig, run_dir: Path, load: dict) -> HilResult:
         m = json.loads((run_dir / SUMMARY_FILE).read_text())["engines"][config.engine]
         result.cd_realtime = _cd(m, config.primitive)
         result.diverged = bool(m["diverged"])
+        heard, stepped = m["step_time"]["count"], sim["stepped"] - 1  # step 0 is the reset
+        result.observer_states = heard
+        if heard != stepped:  # states the observer missed make its CD realtime a CD of fewer states
+            result.problems.append(f"observer received {heard} of the {stepped} steps' states")
     return result
 
 

@@ -14,6 +14,7 @@ seeds (and the other trials' bags) against the engine's preset through the full 
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 import warnings
@@ -30,7 +31,7 @@ DEFAULT_SPAN = 10.0
 JOURNAL_FILE = "study.journal"
 TRIALS_FILE = "trials.jsonl"
 SUMMARY_FILE = "identification.json"
-# What the reference identified per engine (REFERENCE.md section 6); others: every ranged number.
+# What the reference identified per engine (docs/benchmark.md, section 7); others: every ranged number.
 DEFAULT_PARAMS = {"mujoco": ("mass", "young", "poisson", "thickness", "damping"),
                   "bullet": ("mass", "elastic", "damping", "bending")}
 NOT_FITTED = ("timestep", "substeps", "solver_iterations")
@@ -124,6 +125,38 @@ def samplers_of(choice: str) -> list[str]:
     return ["cmaes", "tpe"] if choice == "both" else [choice]
 
 
+def repair_journal(path: Path) -> int:
+    """Drop a torn last line (a crash mid-write) from an Optuna journal, with a warning; bytes dropped.
+
+    Every complete operation is kept. A bad line followed by good ones is damage, not a torn tail:
+    ValueError naming the file and line.
+    """
+    if not path.exists():
+        return 0
+    data = path.read_bytes()
+    lines = data.split(b"\n")
+    kept = []
+    for number, line in enumerate(lines, 1):
+        if line.strip():
+            try:
+                json.loads(line)
+            except ValueError:
+                if any(rest.strip() for rest in lines[number:]):
+                    raise ValueError(f"identify: journal {path} is damaged at line {number} (not a torn last "
+                                     "line); move it aside to start the identification again") from None
+                break
+        kept.append(line)
+    repaired = b"\n".join(line for line in kept if line.strip())
+    repaired += b"\n" if repaired else b""
+    dropped = len(data) - len(repaired)
+    if repaired != data:
+        path.write_bytes(repaired)  # before Optuna appends to it
+    if dropped > 0:
+        warnings.warn(f"journal {path} ended in a torn line ({dropped} bytes, a crash while writing?); "
+                      "dropped it and kept every complete trial", stacklevel=2)
+    return dropped
+
+
 def open_study(spec: IdentifySpec, sampler: str) -> Any:
     """The sampler's study in the journal beside the results (created, or loaded to resume); trials
     left running by an interrupted identification are marked failed.
@@ -138,6 +171,7 @@ def open_study(spec: IdentifySpec, sampler: str) -> Any:
         from optuna.storages import JournalFileStorage as Backend
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
+    repair_journal(spec.output / JOURNAL_FILE)
     storage = JournalStorage(Backend(str(spec.output / JOURNAL_FILE)))
     study = optuna.create_study(study_name=f"{spec.engine}-{spec.cloth}-{spec.primitive}-{sampler}",
                                 storage=storage, sampler=make_sampler(sampler, spec.seed),

@@ -43,6 +43,7 @@ class Trial:
 
 def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
     """(change-of-phase frame, [(bag stamp ns, points, NaN points dropped)]) of a bag, decoded once per process."""
+    from cloth_bench_ros.core.phase import first_table_contact
     from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
     from cloth_bench_ros.data import BagReader
     from cloth_bench_ros.data.messages import deserialize
@@ -56,9 +57,12 @@ def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]
             points, dropped = drop_nan(read_xyz(deserialize(cdr, msgtype)))
             frames.append((stamp, points, dropped))
         trial = reader.trial
+        cop = trial.change_of_phase_frame if trial is not None else None
+        if cop is None and (trial is None or trial.primitive == "dynamic"):  # found in the data, as a run does
+            cop = first_table_contact(points for _, points, _ in frames).index
         while len(_BAG_CACHE) >= _BAG_CACHE_SIZE:
             _BAG_CACHE.pop(next(iter(_BAG_CACHE)))
-        _BAG_CACHE[key] = (trial.change_of_phase_frame if trial is not None else None, frames)
+        _BAG_CACHE[key] = (cop, frames)
     return _BAG_CACHE[key]
 
 

@@ -1,7 +1,9 @@
-"""The node graph of DESIGN.md composed in one process: what `cloth-bench run` executes."""
+"""The node graph (README, "The node graph") composed in one process: what `cloth-bench run` executes."""
 
 from __future__ import annotations
 
+import os
+import random
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -66,12 +68,21 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
     return nodes
 
 
+def isolated_domain() -> int:
+    """A ROS domain for one in-process run under real rclpy: random in 1-101, not ROS_DOMAIN_ID's."""
+    taken = os.environ.get("ROS_DOMAIN_ID", "0")
+    choices = [d for d in range(1, 102) if str(d) != taken]
+    return random.SystemRandom().choice(choices)
+
+
 def run_pipeline(config: RunConfig) -> dict:
     """Run trajectory publisher, one simulator per engine, recorder and evaluator to the end."""
     context = rclpy.Context()
     # Composed in one process on the intra-process transport, whatever CLOTH_BENCH_TRANSPORT says
     # (that switch is for the node console scripts): deterministic, and parallel sweeps stay apart.
-    rclpy.init(args=[], context=context, **({"transport": "intra"} if EMBEDDED else {}))
+    # Under real rclpy the nodes talk DDS even in one process: a domain of its own keeps two runs
+    # (or a sweep's workers) from hearing each other.
+    rclpy.init(args=[], context=context, **({"transport": "intra"} if EMBEDDED else {"domain_id": isolated_domain()}))
     params = node_parameters(config)
     nodes = []
     try:
