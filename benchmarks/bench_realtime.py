@@ -12,7 +12,7 @@ for speed). The baseline of each row is the engine's own step time (step p99 aga
         [--configs preset recommended] [--cpu N] [--fifo 50] [--no-busy-wait] [--deadline-budget 0.5]
         [--repeats 1] [--output results/bench_realtime]
 
-By default the real-time layout of the README: the simulator's step loop pinned to the last core
+By default the real-time layout of docs/hil.md: the simulator's step loop pinned to the last core
 and polling for targets (its DDS threads, the controller and the observer on the other cores, the
 observer at nice 19), SCHED_FIFO 50 asked for the controller and the simulator's DDS threads
 (a refusal is printed and the run goes on). `--cpu -1 --fifo 0 --no-busy-wait` runs unpinned.

@@ -121,13 +121,24 @@ def test_two_sweeps_on_one_directory_run_every_cell_once(bag_dir, tmp_path):
     assert again.returncode == 0 and "0 cells run" in again.stdout and len(_rows(out)) == 4
 
 
+def _python_children(parent: psutil.Process) -> list:
+    """The Python processes below parent; one that exits while being listed is not one of them."""
+    out = []
+    for child in parent.children(recursive=True):
+        try:
+            if "python" in child.name():
+                out.append(child)
+        except psutil.NoSuchProcess:
+            pass
+    return out
+
+
 def test_killing_the_client_leaves_no_worker_process(bag_dir, tmp_path):
     client = subprocess.Popen(_sweep_argv(bag_dir, tmp_path / "killed", 8, "--workers", "2"), env=ENV,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     parent = psutil.Process(client.pid)
     try:
-        _wait(lambda: len([c for c in parent.children(recursive=True) if "python" in c.name()]) >= 2, 120,
-              "two worker processes")
+        _wait(lambda: len(_python_children(parent)) >= 2, 120, "two worker processes")
         _wait(lambda: (tmp_path / "killed" / "workers.log").exists(), 60, "the workers to start")
         children = parent.children(recursive=True)
     finally:

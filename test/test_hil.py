@@ -47,7 +47,7 @@ def test_short_realtime_run_in_three_processes_accounts_for_every_target(
         dds_loopback, hanging_bag, tmp_path, layout):
     rate = 200.0
     config = hil.HilConfig("mujoco", rate, hanging_bag, grid=(6, 8), duration=0.4)  # 81 targets
-    if layout == "pinned_polling":  # the README's real-time layout: step loop alone on the last core, polling
+    if layout == "pinned_polling":  # the real-time layout of docs/hil.md: step loop alone on the last core, polling
         if len(os.sched_getaffinity(0)) < 2:
             pytest.skip("the pinned layout needs two cores")
         config = replace(config, cpu=max(os.sched_getaffinity(0)), busy_wait=True)

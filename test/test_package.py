@@ -25,7 +25,7 @@ ROS_PACKAGES = {"ament_index_python", "rclpy", "rcl_interfaces", "builtin_interf
 ROSDEP_KEYS = {"python3-numpy", "python3-scipy", "python3-yaml", "python3-tqdm", "python3-matplotlib",
                "python3-mujoco-pip", "python3-pybullet-pip", "python3-rosbags-pip", "python3-open3d-pip",
                "python3-pytest", "mcap-ros2-support", "python3-flake8", "pydocstyle"}
-# No rosdep key checked: documented in package.xml and the README.
+# No rosdep key checked: documented in package.xml and docs/ros2.md.
 PIP_ONLY = {"mcap", "numba", "cyclonedds", "optuna", "cmaes", "dask", "distributed", "newton", "warp"}
 OPTIONAL_IMPORTS = {"torch"}  # imported only where installed (identify --sampler gp); never a dependency
 IMPORT_TO_KEY = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml", "tqdm": "python3-tqdm",

@@ -5,8 +5,8 @@ or DDS (runtime/dds/: Cyclone DDS speaking ROS 2's wire protocol) between proces
 composes nodes as a component container with intra-process communication would, and runs their
 callbacks deterministically: messages are delivered in the order they were
 published (one FIFO for the whole context), timers fire on the node's clock (runtime/clock.py),
-and a node with use_sim_time follows /clock. What it provides (and nothing more; README
-"Without ROS 2" lists it in full):
+and a node with use_sim_time follows /clock. What it provides (and nothing more; docs/runtimes.md,
+"Without ROS 2", lists it in full):
 
 - rclpy.init(args, domain_id=, transport=), ok(), shutdown(), spin(node), spin_once(node, timeout_sec)
 - graph queries: Node.get_publishers_info_by_topic, get_subscriptions_info_by_topic,

@@ -1,6 +1,6 @@
 """The real-time layout of a hardware-in-the-loop run, chosen from what the machine allows.
 
-Measured on 2 cores (docs in the README's "Hardware in the loop"): MuJoCo at 1 kHz missed 13.5 %
+Measured on 2 cores (docs/hil.md): MuJoCo at 1 kHz missed 13.5 %
 of its deadlines with no layout, 1.9 % with the step loop polling on a core of its own and the
 controller on SCHED_FIFO. That layout is the default wherever the machine allows it: a core for
 the polling step loop needs at least two usable cores, SCHED_FIFO needs the permission to ask for
