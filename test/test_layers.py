@@ -21,9 +21,6 @@ LAYERS = ("core", "engines", "data", "runtime", "nodes", "studies", "report", "c
 # Imports that break a rule until the work that removes them lands: (importer, imported) module names.
 # report/cross_reference.py runs sweep cells itself; its running is moving into studies (a sweep mode).
 ALLOWED_RUNNING = {("cloth_bench_ros.report.cross_reference", "cloth_bench_ros.studies.sweep")}
-# runtime/ has circles of its own (runtime/__init__ and the modules it re-exports) that are being
-# taken apart separately; circles wholly inside runtime/ are allowed until then.
-CIRCLES_ALLOWED_IN = ("runtime",)
 
 
 def module_name(path: Path) -> str:
@@ -136,7 +133,7 @@ def circles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
 
 
 def test_no_circles(graph):
-    found = [c for c in circles(graph) if not all(layer(m) in CIRCLES_ALLOWED_IN for m in c)]
+    found = circles(graph)
     assert not found, "\n".join(" <-> ".join(c) for c in found)
 
 

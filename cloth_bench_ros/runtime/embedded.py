@@ -31,10 +31,8 @@ transient-local history.
 from __future__ import annotations
 
 import dataclasses
-import enum
 import logging
 from collections import deque
-from dataclasses import dataclass
 from typing import Any, Callable
 
 from cloth_bench_ros.data import messages as cdr
@@ -44,9 +42,11 @@ from cloth_bench_ros.runtime.arguments import (
     RosArguments, expand_topic_name, parse_ros_args, remap_namespace, remap_node_name, remap_topic_name,
     validate_namespace, validate_node_name,
 )
-from cloth_bench_ros.runtime.transport import (  # noqa: F401 (re-exported as rclpy's names)
-    IntraProcessTransport, TopicEndpointInfo, TopicEndpointTypeEnum, make_transport, transport_choice,
+from cloth_bench_ros.runtime.qos import (  # noqa: F401 (re-exported as rclpy's names)
+    DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, as_profile, time_source_qos,
 )
+from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum  # noqa: F401
+from cloth_bench_ros.runtime.transport import TRANSPORTS, IntraProcessTransport, transport_choice
 from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
     InvalidParameterException, InvalidParameterTypeException, Parameter, ParameterAlreadyDeclaredException,
     ParameterDescriptor, ParameterException, ParameterNotDeclaredException, ParameterType,
@@ -55,48 +55,18 @@ from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as r
 )
 
 
-# --- qos -------------------------------------------------------------------------------------
-
-
-class ReliabilityPolicy(enum.IntEnum):
-    SYSTEM_DEFAULT = 0
-    RELIABLE = 1
-    BEST_EFFORT = 2
-
-
-class DurabilityPolicy(enum.IntEnum):
-    SYSTEM_DEFAULT = 0
-    TRANSIENT_LOCAL = 1
-    VOLATILE = 2
-
-
-class HistoryPolicy(enum.IntEnum):
-    SYSTEM_DEFAULT = 0
-    KEEP_LAST = 1
-    KEEP_ALL = 2
-
-
-@dataclass
-class QoSProfile:
-    depth: int = 10
-    reliability: ReliabilityPolicy = ReliabilityPolicy.RELIABLE
-    durability: DurabilityPolicy = DurabilityPolicy.VOLATILE
-    history: HistoryPolicy = HistoryPolicy.KEEP_LAST
-
-
-def _qos(qos: QoSProfile | int) -> QoSProfile:
-    return QoSProfile(depth=qos) if isinstance(qos, int) else qos
-
-
-# --- time: runtime/clock.py ---------------------------------------------------------------
-
-
-def _time_source_qos() -> "QoSProfile":
-    """The /clock subscription of rclpy's TimeSource: depth 1, best effort (time_source.py)."""
-    return QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-
-
 # --- parameters and arguments: runtime/parameters.py, runtime/arguments.py ---------------------
+
+
+def make_transport(context: "Context", name: str, domain_id: int | None = None) -> Any:
+    """The transport `name` ('intra' or 'dds') for a context; DDS loads Cyclone only when chosen."""
+    if name == "dds":
+        from cloth_bench_ros.runtime.dds.transport import DdsTransport
+
+        return DdsTransport(context, domain_id)
+    if name not in TRANSPORTS:
+        raise ValueError(f"unknown transport {name!r} (valid: intra, dds)")
+    return IntraProcessTransport(context)
 
 
 class Context:
@@ -229,7 +199,7 @@ class Node:
         # rclpy's TimeSource: use_sim_time declared as a bool; when true, /clock drives the clock.
         if self.declare_parameter("use_sim_time", False).value:
             self._clock.ros_time_is_active = True
-            self.create_subscription(messages.Clock, "/clock", self._on_clock, _time_source_qos())
+            self.create_subscription(messages.Clock, "/clock", self._on_clock, time_source_qos())
 
     def _on_clock(self, msg: Any) -> None:
         self._clock.sim_time_ns = Time.from_msg(msg.clock).nanoseconds
@@ -298,14 +268,14 @@ class Node:
 
     # graph
     def create_publisher(self, msg_type: type, topic: str, qos_profile: QoSProfile | int) -> Publisher:
-        pub = Publisher(self, msg_type, self.resolve_topic_name(topic), _qos(qos_profile))
+        pub = Publisher(self, msg_type, self.resolve_topic_name(topic), as_profile(qos_profile))
         self._publishers.append(pub)
         self.context.transport.add_publisher(pub)
         return pub
 
     def create_subscription(self, msg_type: type, topic: str, callback: Callable,
                             qos_profile: QoSProfile | int) -> Subscription:
-        sub = Subscription(self, msg_type, self.resolve_topic_name(topic), callback, _qos(qos_profile))
+        sub = Subscription(self, msg_type, self.resolve_topic_name(topic), callback, as_profile(qos_profile))
         self._subscriptions.append(sub)
         self.context.transport.add_subscription(sub)
         return sub

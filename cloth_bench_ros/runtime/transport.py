@@ -12,36 +12,23 @@ default to dds (one process per node), `cloth-bench run` and sweeps to intra.
 
 from __future__ import annotations
 
-import enum
 import os
 import time
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
-if TYPE_CHECKING:
-    from cloth_bench_ros.runtime.embedded import Context, Node, Publisher, Subscription
+from cloth_bench_ros.runtime.qos import DurabilityPolicy, QoSProfile
+from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 
 TRANSPORTS = ("intra", "dds")
 
 
-class TopicEndpointTypeEnum(enum.IntEnum):
-    """rclpy.topic_endpoint_info.TopicEndpointTypeEnum."""
+class Endpoint(Protocol):
+    """What a transport uses of a publisher or subscription of runtime/embedded.py."""
 
-    INVALID = 0
-    PUBLISHER = 1
-    SUBSCRIPTION = 2
-
-
-@dataclass(frozen=True)
-class TopicEndpointInfo:
-    """rclpy.topic_endpoint_info.TopicEndpointInfo: who publishes or subscribes a topic, and how."""
-
-    node_name: str
-    node_namespace: str
-    topic_type: str
-    endpoint_type: TopicEndpointTypeEnum
-    endpoint_gid: list[int] = field(default_factory=list)
-    qos_profile: Any = None
+    node: Any
+    msg_type: type
+    topic_name: str
+    qos: QoSProfile
 
 
 def transport_choice(default: str) -> str:
@@ -52,55 +39,44 @@ def transport_choice(default: str) -> str:
     return choice
 
 
-def make_transport(context: "Context", name: str, domain_id: int | None = None) -> Any:
-    """The transport `name` ('intra' or 'dds') for a context."""
-    if name == "dds":
-        from cloth_bench_ros.runtime.dds.transport import DdsTransport
-
-        return DdsTransport(context, domain_id)
-    if name != "intra":
-        raise ValueError(f"unknown transport {name!r} (valid: intra, dds)")
-    return IntraProcessTransport(context)
-
-
 class IntraProcessTransport:
     """Nodes of one context in one process: one FIFO, callbacks in publish order, nothing lost."""
 
     name = "intra"
 
-    def __init__(self, context: "Context") -> None:
+    def __init__(self, context: Any) -> None:
         self.context = context
 
-    def add_publisher(self, pub: "Publisher") -> None:
+    def add_publisher(self, pub: Endpoint) -> None:
         self.context.publishers.setdefault(pub.topic_name, []).append(pub)
 
-    def remove_publisher(self, pub: "Publisher") -> None:
+    def remove_publisher(self, pub: Endpoint) -> None:
         pubs = self.context.publishers.get(pub.topic_name, [])
         if pub in pubs:
             pubs.remove(pub)
 
-    def add_subscription(self, sub: "Subscription") -> None:
+    def add_subscription(self, sub: Endpoint) -> None:
         self.context.subscriptions.setdefault(sub.topic_name, []).append(sub)
-        if sub.qos.durability == 1:  # TRANSIENT_LOCAL: late joiners get the publishers' history
+        if sub.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:  # late joiners get the history
             for pub in self.context.publishers.get(sub.topic_name, ()):
                 for msg in pub._history:
                     self.context.queue.append((sub, msg))
 
-    def remove_subscription(self, sub: "Subscription") -> None:
+    def remove_subscription(self, sub: Endpoint) -> None:
         subs = self.context.subscriptions.get(sub.topic_name, [])
         if sub in subs:
             subs.remove(sub)
 
-    def publish(self, pub: "Publisher", msg: Any) -> None:
-        if pub.qos.durability == 1:
+    def publish(self, pub: Any, msg: Any) -> None:
+        if pub.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:
             pub._history.append(msg)
         for sub in self.context.subscriptions.get(pub.topic_name, ()):
             self.context.queue.append((sub, msg))
 
-    def matched_subscriptions(self, pub: "Publisher") -> int:
+    def matched_subscriptions(self, pub: Endpoint) -> int:
         return len(self.context.subscriptions.get(pub.topic_name, ()))
 
-    def matched_publications(self, sub: "Subscription") -> int:
+    def matched_publications(self, sub: Endpoint) -> int:
         return len(self.context.publishers.get(sub.topic_name, ()))
 
     def endpoints(self, topic: str, kind: TopicEndpointTypeEnum) -> list[TopicEndpointInfo]:
@@ -111,7 +87,7 @@ class IntraProcessTransport:
     def node_names(self) -> list[tuple[str, str]]:
         return [(n.get_name(), n.get_namespace()) for n in self.context.nodes]
 
-    def graph_changed(self, node: "Node") -> None:
+    def graph_changed(self, node: Any) -> None:
         """Nothing to announce: every node of the graph is in this context."""
 
     def receive(self) -> None:

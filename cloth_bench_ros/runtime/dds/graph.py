@@ -25,17 +25,17 @@ from cyclonedds.topic import Topic
 
 from cloth_bench_ros.runtime.dds.idl import Gid_, NodeEntitiesInfo_, ParticipantEntitiesInfo_, ros_type_name
 from cloth_bench_ros.runtime.dds.qos import endpoint_qos
-from cloth_bench_ros.runtime.transport import TopicEndpointInfo, TopicEndpointTypeEnum
+from cloth_bench_ros.runtime.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 
 DISCOVERY_TOPIC = "ros_discovery_info"
 UNKNOWN_NODE = ("_NODE_NAME_UNKNOWN_", "_NODE_NAMESPACE_UNKNOWN_")  # rmw_dds_common's placeholders
 
 
-class _Profile:
+def _discovery_profile(history: HistoryPolicy) -> QoSProfile:
     """The QoS of rmw_cyclonedds' discovery endpoints (rmw_node.cpp, rmw_context_impl_s::init)."""
-
-    def __init__(self, history: int) -> None:
-        self.depth, self.history, self.reliability, self.durability = 1, history, 1, 1
+    return QoSProfile(depth=1, history=history, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def _gid(guid: uuid.UUID) -> Gid_:
@@ -53,8 +53,9 @@ class Graph:
         self.participant = participant
         self.gid = _gid(participant.get_guid())
         topic = Topic(participant, DISCOVERY_TOPIC, ParticipantEntitiesInfo_)
-        self.writer = DataWriter(participant, topic, qos=endpoint_qos(_Profile(history=1)))
-        self.reader = DataReader(participant, topic, qos=endpoint_qos(_Profile(history=2), ignore_local=True))
+        self.writer = DataWriter(participant, topic, qos=endpoint_qos(_discovery_profile(HistoryPolicy.KEEP_LAST)))
+        self.reader = DataReader(participant, topic,
+                                 qos=endpoint_qos(_discovery_profile(HistoryPolicy.KEEP_ALL), ignore_local=True))
         self.builtin = {
             TopicEndpointTypeEnum.PUBLISHER: BuiltinDataReader(participant, BuiltinTopicDcpsPublication),
             TopicEndpointTypeEnum.SUBSCRIPTION: BuiltinDataReader(participant, BuiltinTopicDcpsSubscription),
@@ -122,10 +123,8 @@ class Graph:
         return [(e.node_name, e.node_namespace) for e in entries]
 
 
-def _profile(qos: Any) -> Any:
+def _profile(qos: Any) -> QoSProfile:
     """A QoSProfile of the embedded runtime from a discovered endpoint's Cyclone QoS."""
-    from cloth_bench_ros.runtime.embedded import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
     def policy(kind: Any) -> Any:
         return qos[kind] if qos is not None and kind in qos else None
 

@@ -12,25 +12,24 @@ the machine.
 from __future__ import annotations
 
 import os
-from typing import Any, Mapping
+from typing import Mapping
 
 from cyclonedds.qos import Policy, Qos
 
 from cloth_bench_ros.data.messages import type_hash
+from cloth_bench_ros.runtime.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 _INFINITY = 0x7FFFFFFFFFFFFFFF  # DDS_INFINITY, ns
 
 
-def endpoint_qos(profile: Any, ros_type: str | None = None, *, ignore_local: bool = False) -> Qos:
+def endpoint_qos(profile: QoSProfile, ros_type: str | None = None, *, ignore_local: bool = False) -> Qos:
     """The Cyclone QoS of a writer or reader created from a rclpy-style QoSProfile."""
-    history_kind = int(getattr(profile.history, "value", profile.history))
     depth = int(profile.depth)
-    if history_kind == 2:  # KEEP_ALL
+    if int(profile.history) == HistoryPolicy.KEEP_ALL:
         history = Policy.History.KeepAll
     else:  # KEEP_LAST, SYSTEM_DEFAULT (depth 0 is rmw's "system default": 1)
         history = Policy.History.KeepLast(depth if depth > 0 else 1)
-    reliability_kind = int(getattr(profile.reliability, "value", profile.reliability))
-    reliability = (Policy.Reliability.BestEffort if reliability_kind == 2
+    reliability = (Policy.Reliability.BestEffort if int(profile.reliability) == ReliabilityPolicy.BEST_EFFORT
                    else Policy.Reliability.Reliable(max_blocking_time=_INFINITY))
     policies = [
         Policy.WriterDataLifecycle(autodispose=False),
@@ -39,7 +38,7 @@ def endpoint_qos(profile: Any, ros_type: str | None = None, *, ignore_local: boo
         Policy.Liveliness.Automatic(lease_duration=_INFINITY),
         Policy.DataRepresentation(use_cdrv0_representation=True),
     ]
-    if int(getattr(profile.durability, "value", profile.durability)) == 1:  # TRANSIENT_LOCAL
+    if int(profile.durability) == DurabilityPolicy.TRANSIENT_LOCAL:
         policies += [Policy.Durability.TransientLocal,
                      Policy.DurabilityService(cleanup_delay=0, history=history, max_samples=-1,
                                               max_instances=-1, max_samples_per_instance=-1)]

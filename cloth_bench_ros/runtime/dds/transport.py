@@ -12,7 +12,7 @@ readers declared from ROS 2's IDL match.
 from __future__ import annotations
 
 import uuid
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cyclonedds._clayer import ddspy_take, ddspy_write
 from cyclonedds.core import DDSException, GuardCondition, InstanceState, ReadCondition, SampleState, ViewState, WaitSet
@@ -26,10 +26,8 @@ from cloth_bench_ros.data import messages as cdr
 from cloth_bench_ros.runtime.dds.graph import Graph
 from cloth_bench_ros.runtime.dds.idl import dds_type
 from cloth_bench_ros.runtime.dds.qos import domain_config, domain_id, endpoint_qos
-from cloth_bench_ros.runtime.transport import TopicEndpointInfo, TopicEndpointTypeEnum
-
-if TYPE_CHECKING:
-    from cloth_bench_ros.runtime.embedded import Context, Node, Publisher, Subscription
+from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
+from cloth_bench_ros.runtime.transport import Endpoint
 
 ROS_TOPIC_PREFIX = "rt"  # rmw_cyclonedds namespace_prefix.hpp
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -70,7 +68,7 @@ class DdsTransport:
 
     name = "dds"
 
-    def __init__(self, context: "Context", domain: int | None = None) -> None:
+    def __init__(self, context: Any, domain: int | None = None) -> None:
         self.context = context
         self.domain_id = domain_id() if domain is None else domain
         self.participant = _participant(self.domain_id)
@@ -78,8 +76,8 @@ class DdsTransport:
         self.wakeup = GuardCondition(self.participant)
         self.waitset.attach(self.wakeup)
         self.topics: dict[str, Topic] = {}
-        self.writers: dict["Publisher", DataWriter] = {}
-        self.readers: dict["Subscription", tuple[DataReader, ReadCondition]] = {}
+        self.writers: dict[Endpoint, DataWriter] = {}
+        self.readers: dict[Endpoint, tuple[DataReader, ReadCondition]] = {}
         self.graph = Graph(self.participant)
 
     def _topic(self, ros_topic: str, ros_type: str) -> Topic:
@@ -89,19 +87,19 @@ class DdsTransport:
         return self.topics[name]
 
     # endpoints
-    def add_publisher(self, pub: "Publisher") -> None:
+    def add_publisher(self, pub: Endpoint) -> None:
         ros_type = pub.msg_type.__msgtype__
         self.writers[pub] = DataWriter(self.participant, self._topic(pub.topic_name, ros_type),
                                        qos=endpoint_qos(pub.qos, ros_type))
         self.graph_changed(pub.node)
 
-    def remove_publisher(self, pub: "Publisher") -> None:
+    def remove_publisher(self, pub: Endpoint) -> None:
         writer = self.writers.pop(pub, None)
         if writer is not None:
             _dispose(writer)
             self.graph_changed(pub.node)
 
-    def add_subscription(self, sub: "Subscription") -> None:
+    def add_subscription(self, sub: Endpoint) -> None:
         ros_type = sub.msg_type.__msgtype__
         reader = DataReader(self.participant, self._topic(sub.topic_name, ros_type),
                             qos=endpoint_qos(sub.qos, ros_type))
@@ -110,7 +108,7 @@ class DdsTransport:
         self.readers[sub] = (reader, condition)
         self.graph_changed(sub.node)
 
-    def remove_subscription(self, sub: "Subscription") -> None:
+    def remove_subscription(self, sub: Endpoint) -> None:
         entry = self.readers.pop(sub, None)
         if entry is not None:
             reader, condition = entry
@@ -119,7 +117,7 @@ class DdsTransport:
             _dispose(reader)
             self.graph_changed(sub.node)
 
-    def graph_changed(self, node: "Node") -> None:
+    def graph_changed(self, node: Any) -> None:
         """Announce the node's current readers and writers on ros_discovery_info."""
         if node not in self.context.nodes:
             self.graph.remove_node(node)
@@ -129,7 +127,7 @@ class DdsTransport:
         self.graph.update_node(node, readers, writers)
 
     # data
-    def publish(self, pub: "Publisher", msg: Any) -> None:
+    def publish(self, pub: Endpoint, msg: Any) -> None:
         writer = self.writers.get(pub)
         if writer is None:
             return
@@ -167,11 +165,11 @@ class DdsTransport:
         self.wakeup.set(True)
 
     # graph
-    def matched_subscriptions(self, pub: "Publisher") -> int:
+    def matched_subscriptions(self, pub: Endpoint) -> int:
         writer = self.writers.get(pub)
         return writer.get_publication_matched_status().current_count if writer is not None else 0
 
-    def matched_publications(self, sub: "Subscription") -> int:
+    def matched_publications(self, sub: Endpoint) -> int:
         entry = self.readers.get(sub)
         return entry[0].get_subscription_matched_status().current_count if entry is not None else 0
 

@@ -1,0 +1,28 @@
+"""rclpy.topic_endpoint_info for the embedded runtime: who publishes or subscribes a topic (a leaf module)."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+from cloth_bench_ros.runtime.qos import QoSProfile
+
+
+class TopicEndpointTypeEnum(enum.IntEnum):
+    """rclpy.topic_endpoint_info.TopicEndpointTypeEnum."""
+
+    INVALID = 0
+    PUBLISHER = 1
+    SUBSCRIPTION = 2
+
+
+@dataclass(frozen=True)
+class TopicEndpointInfo:
+    """rclpy.topic_endpoint_info.TopicEndpointInfo: who publishes or subscribes a topic, and how."""
+
+    node_name: str
+    node_namespace: str
+    topic_type: str
+    endpoint_type: TopicEndpointTypeEnum
+    endpoint_gid: list[int] = field(default_factory=list)
+    qos_profile: QoSProfile | None = None
