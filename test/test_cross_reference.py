@@ -10,7 +10,9 @@ import pytest
 
 from cloth_bench_ros.data import synth
 from cloth_bench_ros.data import CLOUD_TOPIC, BagReader
-from cloth_bench_ros.report import cross_reference as xr
+from cloth_bench_ros.report import cross_reference as report_xr
+from cloth_bench_ros.studies import cross_reference as xr
+from cloth_bench_ros.studies import sweep as sw
 from cloth_bench_ros.studies.aggregate import stat
 from cloth_bench_ros.studies.sweep import Cell
 
@@ -69,12 +71,15 @@ def test_cross_reference_table_scores_every_engine_on_every_reference(short_bags
                   f"reference={reference}," + ("model=vbd" if overrides else "preset"), (6, 8),
                   tuple(sorted(overrides.items())))
              for reference, bag in short_bags.items() for engine, overrides in entrants]
-    seen = []
-    rows = xr.run_cross_reference(cells, tmp_path, on_row=seen.append)
-    assert seen == rows and all(r["status"] == "ok" for r in rows), [r.get("error") for r in rows]
-    assert {r["reference"] for r in rows} == set(xr.REFERENCES)
+    outcome = sw.run_sweep(cells, tmp_path, workers=2, progress=False)  # the executor, as any sweep
+    rows = sw.load_rows(tmp_path / sw.RESULTS_FILE)
+    assert outcome.ran == len(cells) == len(rows)
+    assert all(r["status"] == "ok" for r in rows), [r.get("error") for r in rows]
+    assert sorted((r["engine"], r["reference"]) for r in rows) == sorted(
+        (c.engine, c.reference) for c in cells)
+    assert sw.run_sweep(cells, tmp_path, workers=2, progress=False).ran == 0  # resumed: nothing runs twice
 
-    table = xr.cross_reference_table(rows)
+    table = report_xr.cross_reference_table(rows)
     assert table.headers == ["engine", "MuJoCo shell ref. CD_d", "Newton VBD ref. CD_d"]
     assert [line[0] for line in table.rows] == ["MuJoCo", "Newton (vbd)"]
     for line, (engine, _) in zip(table.rows, entrants):
@@ -86,9 +91,9 @@ def test_cross_reference_table_scores_every_engine_on_every_reference(short_bags
     cds = np.array([r["CD"] for r in rows])
     assert np.isfinite(cds).all() and (cds > 0).all() and (cds < 0.2).all()
 
-    heading, note, section_table = xr.cross_reference_section(rows)
+    heading, note, section_table = report_xr.cross_reference_section(rows)
     assert "towel" in heading and "100 Hz" in note and section_table.rows == table.rows
-    assert xr.cross_reference_table([{**r, "mode": "paper"} for r in rows]) is None
+    assert report_xr.cross_reference_table([{**r, "mode": "paper"} for r in rows]) is None
 
 
 @pytest.mark.parametrize("argv,words", [

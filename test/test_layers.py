@@ -18,10 +18,6 @@ import cloth_bench_ros
 PACKAGE = Path(cloth_bench_ros.__file__).parent
 LAYERS = ("core", "engines", "data", "runtime", "nodes", "studies", "report", "cli")
 
-# Imports that break a rule until the work that removes them lands: (importer, imported) module names.
-# report/cross_reference.py runs sweep cells itself; its running is moving into studies (a sweep mode).
-ALLOWED_RUNNING = {("cloth_bench_ros.report.cross_reference", "cloth_bench_ros.studies.sweep")}
-
 
 def module_name(path: Path) -> str:
     parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
@@ -92,7 +88,7 @@ def test_the_report_runs_nothing(graph):
     for m in (m for m in graph if layer(m) == "report"):
         for node in ast.walk(ast.parse(modules[m].read_text())):
             if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("cloth_bench_ros.studies"):
-                if any(a.name.startswith("run") for a in node.names) and (m, node.module) not in ALLOWED_RUNNING:
+                if any(a.name.startswith("run") for a in node.names):
                     running.append(f"{m} (line {node.lineno}) imports {[a.name for a in node.names]} from {node.module}")
     assert not running, "\n".join(running)
 

@@ -247,7 +247,7 @@ def test_bundled_bags_are_complete_and_within_budget():
 
 
 def test_bundled_newton_reference_bags_for_the_towel():
-    from cloth_bench_ros.report.cross_reference import reference_bag
+    from cloth_bench_ros.studies.cross_reference import reference_bag
 
     for primitive, frames in (("dynamic", 132), ("quasi_static", 420)):
         path = reference_bag("towel", primitive, "newton-vbd")

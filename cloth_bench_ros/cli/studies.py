@@ -80,7 +80,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     stress.add_argument("--output", help="results directory (default results/stress)")
     stress.set_defaults(func=cmd_stress)
 
-    xref = sub.add_parser("cross-reference", help="score every engine against both synthetic references")
+    xref = sub.add_parser("cross-reference", parents=[executor],
+                          help="score every engine against both synthetic references")
     xref.add_argument("--cloth", default="towel", choices=common.CLOTH_CHOICES,
                       help="default towel; needs its <cloth>_<task>_newton_vbd bags")
     xref.add_argument("--primitive", action="append", choices=PRIMITIVES, help="task (repeatable; default both)")
@@ -176,24 +177,31 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
 
 def cmd_cross_reference(args: argparse.Namespace) -> int:
-    """Score every engine against both synthetic references (resumable) and print the table."""
-    from cloth_bench_ros.report import cross_reference as xr
+    """Score every engine against both synthetic references on the executor (resumable); print the table."""
+    from cloth_bench_ros.report.cross_reference import cross_reference_table
     from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
     from cloth_bench_ros.studies import sweep as sw
+    from cloth_bench_ros.studies.cross_reference import DEFAULT_ENTRANTS, cross_reference_cells
 
     available = common.available_engines()
-    entrants = [(e, o) for e, o in xr.DEFAULT_ENTRANTS if e in available]
-    cells = xr.cross_reference_cells(args.cloth, args.primitive or ["dynamic", "quasi_static"],
-                                     range(args.seeds), args.rate, entrants)
+    entrants = [(e, o) for e, o in DEFAULT_ENTRANTS if e in available]
+    cells = cross_reference_cells(args.cloth, args.primitive or ["dynamic", "quasi_static"],
+                                  range(args.seeds), args.rate, entrants)
     for bag in sorted({c.bag for c in cells}):
         common.check_bag(Path(bag))
     out = check_output_dir(args.output)
     results = out / sw.RESULTS_FILE
-    done = {sw.row_key(r) for r in sw.load_rows(results)}
-    todo = [c for c in cells if c.key() not in done]
-    print(f"cloth-bench cross-reference: {len(cells)} runs, {len(cells) - len(todo)} already in {results}")
-    xr.run_cross_reference(todo, out, on_row=lambda row: sw.append_row(results, row))
-    table = xr.cross_reference_table(sw.load_rows(results))
+    print(f"cloth-bench cross-reference: {len(cells)} cells -> {results}", flush=True)
+    try:
+        outcome = sw.run_sweep(cells, out, args.workers, progress=not args.no_progress, desc="cross-reference",
+                               scheduler=args.scheduler)
+    except KeyboardInterrupt:
+        kept = len({c.key() for c in cells} & {sw.row_key(r) for r in sw.load_rows(results)})
+        raise StudyInterrupted(f"cross-reference interrupted: {kept} of {len(cells)} cells are in {results}; "
+                               "run the same command again to resume") from None
+    print(f"cross-reference: {outcome.ran} cells run in {outcome.wall_s:.1f} s ({outcome.skipped} already done), "
+          f"{outcome.diverged} diverged, {outcome.errors} errors")
+    table = cross_reference_table(sw.load_rows(results))
     text = table.markdown() if table is not None else "(no rows)"
     atomic_write_text(out / "cross_reference.md", text + "\n")
     print(text)

@@ -1,29 +1,20 @@
 """Cross-reference table: every engine's CD_d / CD_q against every synthetic reference.
 
-The bundled bags are simulations, so a score on them says how much an engine behaves like the
-reference model. Scoring every engine against two references of different model families
-(MuJoCo's shell, Newton's VBD) turns that bias into numbers: an engine of the reference's own
-family should win on its own reference, and by how much is the point.
+An engine of the reference's own family should win on its own reference, and by how much is the
+point (the cells are studies/cross_reference.py's).
 """
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
-from typing import Callable, Sequence
+from typing import Sequence
 
-from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.report.blocks import Table
-from cloth_bench_ros.report.statistics import engine_label, group, stat
-from cloth_bench_ros.studies.sweep import Cell, config_label
+from cloth_bench_ros.report.statistics import engine_label
+from cloth_bench_ros.studies.aggregate import group, stat
+from cloth_bench_ros.studies.cross_reference import DEFAULT_ENTRANTS, MODE, REFERENCES
 
-MODE = "cross_reference"
-REFERENCES = ("mujoco", "newton-vbd")
 REFERENCE_LABEL = {"mujoco": "MuJoCo shell ref.", "newton-vbd": "Newton VBD ref."}
-# (engine, parameter overrides of its preset): the entrants of the table.
-DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
-    ("mujoco", {}), ("bullet", {}), ("newton", {"model": "vbd"}), ("newton", {"model": "xpbd"}),
-)
 NOTE = (
     "Every engine with its preset (lockstep, the rate given) scored against both synthetic references "
     "of the bundled bags: MuJoCo's flex shell (`bags/<cloth>_<task>`) and Newton's VBD "
@@ -34,49 +25,10 @@ NOTE = (
 )
 
 
-def reference_bag(cloth: str, primitive: str, reference: str) -> Path:
-    """The bundled bag of a cloth and task made by `reference`."""
-    if reference not in REFERENCES:
-        raise ValueError(f"unknown synthetic reference {reference!r} (valid: {', '.join(REFERENCES)})")
-    suffix = "" if reference == "mujoco" else "_" + reference.replace("-", "_")
-    return share_dir("bags") / f"{cloth}_{primitive}{suffix}"
-
-
 def entrant_name(engine: str, overrides: dict) -> str:
     """An entrant's name: "newton (vbd)" for an engine with a model override, else the engine's label."""
     model = overrides.get("model")
     return f"{engine_label(engine)} ({model})" if model else engine_label(engine)
-
-
-def cross_reference_cells(cloth: str = "towel", primitives: Sequence[str] = ("dynamic", "quasi_static"),
-                          seeds: Sequence[int] = (0, 1, 2), rate_hz: float = 100.0,
-                          entrants: Sequence[tuple[str, dict]] = DEFAULT_ENTRANTS,
-                          references: Sequence[str] = REFERENCES) -> list[Cell]:
-    """One sweep cell per entrant x reference x task x seed (mode "cross_reference")."""
-    cells = []
-    for reference in references:
-        for primitive in primitives:
-            bag = reference_bag(cloth, primitive, reference)
-            for (engine, overrides), seed in ((e, s) for e in entrants for s in seeds):
-                label = f"reference={reference}," + config_label(None, overrides)
-                cells.append(Cell(engine, float(rate_hz), cloth, primitive, int(seed), str(bag), 0, MODE,
-                                  label, None, tuple(sorted(overrides.items()))))
-    return cells
-
-
-def run_cross_reference(cells: Sequence[Cell], out_dir: Path,
-                        on_row: Callable[[dict], None] | None = None) -> list[dict]:
-    """Run the cells one after the other in this process; the results rows (with `reference`)."""
-    from cloth_bench_ros.studies.sweep import run_cell
-
-    rows = []
-    for cell in cells:
-        row = run_cell(cell, str(out_dir))
-        row["reference"] = cell.config.split(",")[0].removeprefix("reference=")
-        rows.append(row)
-        if on_row is not None:
-            on_row(row)
-    return rows
 
 
 def cross_reference_table(rows: Sequence[dict], digits: int = 3) -> Table | None:
@@ -87,11 +39,10 @@ def cross_reference_table(rows: Sequence[dict], digits: int = 3) -> Table | None
     primitives = [p for p in ("dynamic", "quasi_static") if any(r["primitive"] == p for r in sel)]
     references = [ref for ref in REFERENCES if any(r["reference"] == ref for r in sel)]
     columns = [(ref, p) for ref in references for p in primitives]
-    entrants: list[tuple[str, str]] = []
-    for r in sel:
-        key = (r["engine"], (r.get("params") or {}).get("model", ""))
-        if key not in entrants:
-            entrants.append(key)
+    # The default entrants' order, then any other; rows come in the order their cells finished.
+    order = [(engine, overrides.get("model", "")) for engine, overrides in DEFAULT_ENTRANTS]
+    found = {(r["engine"], (r.get("params") or {}).get("model", "")) for r in sel}
+    entrants = sorted(found, key=lambda e: (order.index(e) if e in order else len(order), e))
     by = group(sel, "engine", "reference", "primitive")
     stats = {}
     for engine, model in entrants:

@@ -9,9 +9,6 @@ import math
 from collections import Counter
 from typing import Iterable, Sequence
 
-# report/cross_reference.py imports these from here until its running moves into studies/.
-from cloth_bench_ros.studies.aggregate import group, stat  # noqa: F401
-
 ENGINE_LABEL = {"mujoco": "MuJoCo", "bullet": "Bullet", "flex": "Flex", "sofa": "SOFA", "newton": "Newton"}
 ENGINE_COLOR = {"mujoco": "tab:blue", "bullet": "tab:orange", "flex": "tab:green", "sofa": "tab:red",
                 "newton": "tab:purple"}

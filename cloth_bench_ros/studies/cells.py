@@ -38,6 +38,9 @@ SETTINGS_RATE = 100.0
 SETTINGS_SEEDS = 2
 
 
+CROSS_REFERENCE = "cross_reference"  # the mode of cells scored against a named synthetic reference
+
+
 @dataclass(frozen=True)
 class Cell:
     """One pipeline run of a sweep."""
@@ -70,6 +73,13 @@ class Cell:
     def params(self) -> dict:
         """The parameter overrides on top of the preset."""
         return dict(self.overrides)
+
+    @property
+    def reference(self) -> str | None:
+        """The synthetic reference a cross-reference cell is scored against (its config's first entry)."""
+        if self.mode != CROSS_REFERENCE:
+            return None
+        return self.config.split(",")[0].removeprefix("reference=")
 
 
 def _shown(value: object) -> str:

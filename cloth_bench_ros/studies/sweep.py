@@ -60,12 +60,15 @@ def summary_row(cell: Cell, summary: dict) -> dict:
 
 
 def _cell_fields(cell: Cell) -> dict:
-    return {
+    fields = {
         "mode": cell.mode, "config": cell.config, "engine": cell.engine, "rate_hz": float(cell.rate_hz),
         "cloth": cell.cloth, "primitive": cell.primitive, "trial": int(cell.trial), "seed": int(cell.seed),
         "pacing": cell.pacing, "bag": cell.bag, "grid": f"{cell.grid[0]}x{cell.grid[1]}" if cell.grid else None,
         "params": cell.params,
     }
+    if cell.reference:  # a cross-reference cell names the synthetic reference it is scored against
+        fields["reference"] = cell.reference
+    return fields
 
 
 def _substeps(cell: Cell) -> int | None:
