@@ -19,19 +19,19 @@ from __future__ import annotations
 import argparse
 import time
 
-import numpy as np
-
+from cloth_bench_ros.core.trajectory import full_targets, PRIMITIVES
 from cloth_bench_ros.engines import known_engines, make_engine
 from cloth_bench_ros.engines.presets import CLOTHS, load_preset
-from cloth_bench_ros.core.trajectory import PRIMITIVES, full_targets
+import numpy as np
 
 # Cloth models timed per engine (overrides of the preset); engines not listed run their preset.
-VARIANTS = {"newton": [{"model": "vbd"}, {"model": "xpbd"}]}
-BASELINE = "mujoco"
+VARIANTS = {'newton': [{'model': 'vbd'}, {'model': 'xpbd'}]}
+BASELINE = 'mujoco'
 
 
-def time_steps(engine_name: str, rate_hz: float, params: dict, primitive: str,
-               seconds: float | None) -> tuple[np.ndarray, object]:
+def time_steps(
+    engine_name: str, rate_hz: float, params: dict, primitive: str, seconds: float | None
+) -> tuple[np.ndarray, object]:
     """Wall time of every step of one run up to a divergence, and the engine after it."""
     targets = full_targets(primitive, rate_hz)
     n = len(targets) if seconds is None else min(len(targets), int(round(seconds * rate_hz)) + 1)
@@ -51,36 +51,54 @@ def time_steps(engine_name: str, rate_hz: float, params: dict, primitive: str,
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--primitive", default="dynamic", choices=PRIMITIVES)
-    parser.add_argument("--cloth", default="towel", choices=CLOTHS)
-    parser.add_argument("--rates", type=float, nargs="+", default=[10.0, 100.0, 1000.0])
-    parser.add_argument("--engines", nargs="+", default=None, help="default: every available engine")
-    parser.add_argument("--seconds", type=float, default=None, help="only the first seconds of the run")
-    parser.add_argument("--one-step-per-target", action="store_true", help="internal timestep = 1 / rate")
+    parser.add_argument('--primitive', default='dynamic', choices=PRIMITIVES)
+    parser.add_argument('--cloth', default='towel', choices=CLOTHS)
+    parser.add_argument('--rates', type=float, nargs='+', default=[10.0, 100.0, 1000.0])
+    parser.add_argument(
+        '--engines', nargs='+', default=None, help='default: every available engine'
+    )
+    parser.add_argument(
+        '--seconds', type=float, default=None, help='only the first seconds of the run'
+    )
+    parser.add_argument(
+        '--one-step-per-target', action='store_true', help='internal timestep = 1 / rate'
+    )
     args = parser.parse_args()
 
     available = {i.name: i.version for i in known_engines() if i.available}
     engines = args.engines or sorted(available, key=lambda n: (n != BASELINE, n))
-    print(f"{args.cloth} {args.primitive} preset, 11 x 15 grid; step time per engine.step()")
-    print(f"{'engine':<28} {'rate Hz':>8} {'substeps':>8} {'median ms':>10} {'p95 ms':>8} "
-          f"{'real-time x':>11} {'x ' + BASELINE:>9}  diverged")
+    print(f'{args.cloth} {args.primitive} preset, 11 x 15 grid; step time per engine.step()')
+    print(
+        f'{"engine":<28} {"rate Hz":>8} {"substeps":>8} {"median ms":>10} {"p95 ms":>8} '
+        f'{"real-time x":>11} {"x " + BASELINE:>9}  diverged'
+    )
     baseline: dict[float, float] = {}
     for name in engines:
         for variant in VARIANTS.get(name, [{}]):
             params = {**load_preset(name, args.cloth, args.primitive), **variant}
-            label = f"{name} {available.get(name, '?')}" + (f" {variant['model']}" if variant else "")
+            label = f'{name} {available.get(name, "?")}' + (
+                f' {variant["model"]}' if variant else ''
+            )
             for rate in args.rates:
-                run_params = {**params, "timestep": 1.0 / rate, "substeps": 1} if args.one_step_per_target else params
+                run_params = (
+                    {**params, 'timestep': 1.0 / rate, 'substeps': 1}
+                    if args.one_step_per_target
+                    else params
+                )
                 times, engine = time_steps(name, rate, run_params, args.primitive, args.seconds)
                 d = engine.divergence
                 realtime = (1.0 / rate) / times.mean()
                 if name == BASELINE:
                     baseline[rate] = float(times.mean())
-                ratio = f"{times.mean() / baseline[rate]:.2f}" if rate in baseline else "-"
-                print(f"{label:<28} {rate:>8g} {getattr(engine, 'substeps', 1):>8} {1e3 * np.median(times):>10.3f} "
-                      f"{1e3 * np.percentile(times, 95):>8.3f} {realtime:>11.2f} {ratio:>9}  "
-                      f"{f'at step {d.step}: {d.reason}' if d else 'no'}", flush=True)
+                ratio = f'{times.mean() / baseline[rate]:.2f}' if rate in baseline else '-'
+                print(
+                    f'{label:<28} {rate:>8g} {getattr(engine, "substeps", 1):>8}'
+                    f' {1e3 * np.median(times):>10.3f} {1e3 * np.percentile(times, 95):>8.3f}'
+                    f' {realtime:>11.2f} {ratio:>9} '
+                    f' {f"at step {d.step}: {d.reason}" if d else "no"}',
+                    flush=True,
+                )
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

@@ -14,11 +14,11 @@ import argparse
 import statistics
 import time
 
+from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
-from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
 
 
 def bare_loop(engine_name: str, rate: float, cloth: str, primitive: str) -> float:
@@ -39,8 +39,13 @@ def bare_loop(engine_name: str, rate: float, cloth: str, primitive: str) -> floa
 
 
 def pipeline(engine_name: str, rate: float, cloth: str, primitive: str) -> tuple[float, dict]:
-    config = RunConfig(bag=bundled_bag(cloth, primitive), engines=[engine_name], rate_hz=rate, cloth=cloth,
-                       primitive=primitive)
+    config = RunConfig(
+        bag=bundled_bag(cloth, primitive),
+        engines=[engine_name],
+        rate_hz=rate,
+        cloth=cloth,
+        primitive=primitive,
+    )
     start = time.perf_counter()
     summary = run_pipeline(config)
     return time.perf_counter() - start, summary
@@ -48,11 +53,11 @@ def pipeline(engine_name: str, rate: float, cloth: str, primitive: str) -> tuple
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--engine", default="mujoco")
-    parser.add_argument("--rate", type=float, default=100.0)
-    parser.add_argument("--cloth", default="towel")
-    parser.add_argument("--primitive", default="dynamic")
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument('--engine', default='mujoco')
+    parser.add_argument('--rate', type=float, default=100.0)
+    parser.add_argument('--cloth', default='towel')
+    parser.add_argument('--primitive', default='dynamic')
+    parser.add_argument('--repeats', type=int, default=3)
     args = parser.parse_args()
     bare_times, pipe_times = [], []
     for _ in range(args.repeats):
@@ -60,13 +65,21 @@ def main() -> None:
         elapsed, summary = pipeline(args.engine, args.rate, args.cloth, args.primitive)
         pipe_times.append(elapsed)
     bare, pipe = statistics.median(bare_times), statistics.median(pipe_times)
-    frames = summary["real"]["frames"]
-    print(f"{args.engine} {args.cloth} {args.primitive} at {args.rate:g} Hz, {len(full_targets(args.primitive, args.rate))} steps, "
-          f"{frames} real frames scored")
-    print(f"bare engine loop : {bare:.3f} s (median of {args.repeats}: {', '.join(f'{t:.3f}' for t in bare_times)})")
-    print(f"full pipeline    : {pipe:.3f} s (median of {args.repeats}: {', '.join(f'{t:.3f}' for t in pipe_times)})")
-    print(f"ratio pipeline / bare = {pipe / bare:.3f} (goal <= 1.15)")
+    frames = summary['real']['frames']
+    print(
+        f'{args.engine} {args.cloth} {args.primitive} at {args.rate:g} Hz,'
+        f' {len(full_targets(args.primitive, args.rate))} steps, {frames} real frames scored'
+    )
+    print(
+        f'bare engine loop : {bare:.3f} s (median of {args.repeats}:'
+        f' {", ".join(f"{t:.3f}" for t in bare_times)})'
+    )
+    print(
+        f'full pipeline    : {pipe:.3f} s (median of {args.repeats}:'
+        f' {", ".join(f"{t:.3f}" for t in pipe_times)})'
+    )
+    print(f'ratio pipeline / bare = {pipe / bare:.3f} (goal <= 1.15)')
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

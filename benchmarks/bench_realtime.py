@@ -27,8 +27,8 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import random
 from pathlib import Path
+import random
 
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.report.hil import hil_table, text_table, write_hil_report
@@ -38,51 +38,91 @@ from cloth_bench_ros.studies import hil
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--engines", nargs="+", default=["mujoco", "bullet"])
-    parser.add_argument("--rates", type=float, nargs="+", default=[100.0, 1000.0])
-    parser.add_argument("--configs", nargs="+", default=["preset", "recommended"], choices=("preset", "recommended"))
-    parser.add_argument("--cloth", default="towel")
-    parser.add_argument("--primitive", default="dynamic")
-    parser.add_argument("--cpu", type=int, default=max(os.sched_getaffinity(0)),
-                        help="the simulator's core (default: the last one; -1: not pinned)")
-    parser.add_argument("--fifo", type=int, default=50, help="SCHED_FIFO priority (0: not asked)")
-    parser.add_argument("--no-busy-wait", action="store_true", help="the simulator sleeps between targets")
-    parser.add_argument("--deadline-budget", type=float, default=hil.HIL_DEADLINE_BUDGET,
-                        help="recommendation: step p99 under this fraction of the period")
-    parser.add_argument("--repeats", type=int, default=1)
-    parser.add_argument("--settings", type=Path, default=hil.DEFAULT_SETTINGS,
-                        help="settings-sweep results for the recommendation (else config/hil_recommended.yaml)")
-    parser.add_argument("--output", type=Path, default=Path("results") / "bench_realtime")
+    parser.add_argument('--engines', nargs='+', default=['mujoco', 'bullet'])
+    parser.add_argument('--rates', type=float, nargs='+', default=[100.0, 1000.0])
+    parser.add_argument(
+        '--configs',
+        nargs='+',
+        default=['preset', 'recommended'],
+        choices=('preset', 'recommended'),
+    )
+    parser.add_argument('--cloth', default='towel')
+    parser.add_argument('--primitive', default='dynamic')
+    parser.add_argument(
+        '--cpu',
+        type=int,
+        default=max(os.sched_getaffinity(0)),
+        help="the simulator's core (default: the last one; -1: not pinned)",
+    )
+    parser.add_argument('--fifo', type=int, default=50, help='SCHED_FIFO priority (0: not asked)')
+    parser.add_argument(
+        '--no-busy-wait', action='store_true', help='the simulator sleeps between targets'
+    )
+    parser.add_argument(
+        '--deadline-budget',
+        type=float,
+        default=hil.HIL_DEADLINE_BUDGET,
+        help='recommendation: step p99 under this fraction of the period',
+    )
+    parser.add_argument('--repeats', type=int, default=1)
+    parser.add_argument(
+        '--settings',
+        type=Path,
+        default=hil.DEFAULT_SETTINGS,
+        help='settings-sweep results for the recommendation (else config/hil_recommended.yaml)',
+    )
+    parser.add_argument('--output', type=Path, default=Path('results') / 'bench_realtime')
     args = parser.parse_args()
 
     # DDS on loopback only, on a domain of its own (the project's network rule: docs/development.md); the children inherit it.
     os.environ.update(loopback_environment(random.randint(1, 200)))
     bag = bundled_bag(args.cloth, args.primitive)
     load = os.getloadavg()
-    print(f"bench_realtime: {args.cloth} {args.primitive}, 3 processes over DDS (loopback, domain "
-          f"{os.environ['ROS_DOMAIN_ID']}); load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on "
-          f"{os.cpu_count()} cores at the start", flush=True)
+    print(
+        f'bench_realtime: {args.cloth} {args.primitive}, 3 processes over DDS (loopback, domain'
+        f' {os.environ["ROS_DOMAIN_ID"]}); load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}'
+        f' on {os.cpu_count()} cores at the start',
+        flush=True,
+    )
     results = []
     for engine in args.engines:
         for rate in args.rates:
             for label in args.configs:
-                config = hil.HilConfig(engine, rate, bag, args.cloth, args.primitive, cpu=args.cpu,
-                                       realtime_priority=args.fifo, busy_wait=not args.no_busy_wait)
-                if label == "recommended":
-                    rec, source = hil.recommended(engine, args.cloth, args.primitive, rate, args.settings,
-                                                  budget=args.deadline_budget)
+                config = hil.HilConfig(
+                    engine,
+                    rate,
+                    bag,
+                    args.cloth,
+                    args.primitive,
+                    cpu=args.cpu,
+                    realtime_priority=args.fifo,
+                    busy_wait=not args.no_busy_wait,
+                )
+                if label == 'recommended':
+                    rec, source = hil.recommended(
+                        engine,
+                        args.cloth,
+                        args.primitive,
+                        rate,
+                        args.settings,
+                        budget=args.deadline_budget,
+                    )
                     config = hil.with_config(config, rec.config, rec.grid, rec.params)
-                    print(f"{engine} {rate:g} Hz recommended: {rec.config} ({source})", flush=True)
+                    print(f'{engine} {rate:g} Hz recommended: {rec.config} ({source})', flush=True)
                 for _ in range(args.repeats):
                     result = hil.run_hil(config, args.output)
                     results.append(result)
                     f = result.figures
-                    step_p99 = result.step_time.get("p99", math.nan)
-                    print(f"  {engine} {rate:g} Hz {config.config}: latency p99 {f.latency_p99 * 1e3:.3f} ms, "
-                          f"{f.deadline_misses} misses, {f.skipped} skipped of {f.sent}; step p99 {step_p99 * 1e3:.3f} "
-                          f"ms (latency p99 / step p99 = {f.latency_p99 / step_p99:.2f}); CPU busy "
-                          f"{100 * result.load['cpu_busy']:.0f} %, steal {100 * result.load['cpu_steal']:.1f} %; "
-                          f"{'; '.join(result.realtime)}", flush=True)
+                    step_p99 = result.step_time.get('p99', math.nan)
+                    print(
+                        f'  {engine} {rate:g} Hz {config.config}: latency p99'
+                        f' {f.latency_p99 * 1e3:.3f} ms, {f.deadline_misses} misses, {f.skipped}'
+                        f' skipped of {f.sent}; step p99 {step_p99 * 1e3:.3f} ms (latency p99 /'
+                        f' step p99 = {f.latency_p99 / step_p99:.2f}); CPU busy'
+                        f' {100 * result.load["cpu_busy"]:.0f} %, steal'
+                        f' {100 * result.load["cpu_steal"]:.1f} %; {"; ".join(result.realtime)}',
+                        flush=True,
+                    )
     rows = [r.row() for r in results]
     hil.write_results(results, args.output)
     print()
@@ -91,19 +131,27 @@ def main() -> None:
     print("CD of the recommended configuration against the preset's (lockstep, same rate):")
     for engine in args.engines:
         for rate in args.rates:
-            cd = {r.config.config if r.config.config == "preset" else "recommended": r.cd_lockstep
-                  for r in results if r.config.engine == engine and r.config.rate_hz == rate}
-            if "preset" in cd and "recommended" in cd:
-                print(f"  {engine} {rate:g} Hz: recommended {cd['recommended']:.4f} m, preset {cd['preset']:.4f} m "
-                      f"({100 * (cd['recommended'] / cd['preset'] - 1):+.1f} %)")
+            cd = {
+                r.config.config if r.config.config == 'preset' else 'recommended': r.cd_lockstep
+                for r in results
+                if r.config.engine == engine and r.config.rate_hz == rate
+            }
+            if 'preset' in cd and 'recommended' in cd:
+                print(
+                    f'  {engine} {rate:g} Hz: recommended {cd["recommended"]:.4f} m, preset'
+                    f' {cd["preset"]:.4f} m'
+                    f' ({100 * (cd["recommended"] / cd["preset"] - 1):+.1f} %)'
+                )
     load = os.getloadavg()
-    print(f"load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores; "
-          f"report: {write_hil_report(rows, args.output, args.output / 'report')}")
+    print(
+        f'load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()}'
+        f' cores; report: {write_hil_report(rows, args.output, args.output / "report")}'
+    )
     bad = [r for r in results if r.problems]
     for r in bad:
-        print(f"BOOKKEEPING {r.config.ident()}: {'; '.join(r.problems)}")
+        print(f'BOOKKEEPING {r.config.ident()}: {"; ".join(r.problems)}')
     raise SystemExit(1 if bad else 0)
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

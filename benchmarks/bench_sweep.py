@@ -13,35 +13,46 @@ from __future__ import annotations
 
 import argparse
 import os
+from pathlib import Path
 import tempfile
 import time
-from pathlib import Path
 
 from cloth_bench_ros.studies import sweep as sw
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument('--workers', type=int, default=2)
+    parser.add_argument('--seeds', type=int, default=2)
     args = parser.parse_args()
-    cells = sw.paper_cells(["mujoco", "bullet"], [100.0], ["towel"], ["dynamic", "quasi_static"],
-                           range(args.seeds), keep_frames_seeds=[])
+    cells = sw.paper_cells(
+        ['mujoco', 'bullet'],
+        [100.0],
+        ['towel'],
+        ['dynamic', 'quasi_static'],
+        range(args.seeds),
+        keep_frames_seeds=[],
+    )
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
         for cell in cells:
             sw.run_cell(cell, tmp)
         serial = time.perf_counter() - start
-        outcome = sw.run_sweep(cells, Path(tmp) / "dask", args.workers, progress=False)
-    assert outcome.errors == 0, [r.get("error") for r in outcome.rows]
-    full = sw.SweepPlan(engines=["mujoco", "bullet"]).cells()
+        outcome = sw.run_sweep(cells, Path(tmp) / 'dask', args.workers, progress=False)
+    assert outcome.errors == 0, [r.get('error') for r in outcome.rows]
+    full = sw.SweepPlan(engines=['mujoco', 'bullet']).cells()
     scale = sum(sw.estimated_cost(c) for c in full) / sum(sw.estimated_cost(c) for c in cells)
-    print(f"{len(cells)} cells: serial in-process {serial:.1f} s, Dask on {args.workers} workers "
-          f"{outcome.wall_s:.1f} s (ratio {serial / outcome.wall_s:.2f}); load average {os.getloadavg()[0]:.1f} "
-          f"on {os.cpu_count()} cores")
-    print(f"full default sweep ({len(full)} cells), extrapolated: {serial * scale / 60:.0f} core-minutes, "
-          f"{outcome.wall_s * scale / 60:.0f} min on {args.workers} workers (goal: < 30 min on 2 idle cores)")
+    print(
+        f'{len(cells)} cells: serial in-process {serial:.1f} s, Dask on {args.workers} workers'
+        f' {outcome.wall_s:.1f} s (ratio {serial / outcome.wall_s:.2f}); load average'
+        f' {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores'
+    )
+    print(
+        f'full default sweep ({len(full)} cells), extrapolated: {serial * scale / 60:.0f}'
+        f' core-minutes, {outcome.wall_s * scale / 60:.0f} min on {args.workers} workers (goal: <'
+        ' 30 min on 2 idle cores)'
+    )
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

@@ -2,26 +2,26 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
+import sys
 
-PACKAGE = "cloth_bench_ros"
+PACKAGE = 'cloth_bench_ros'
 
 
 def share_dir(name: str) -> Path:
     """<repo>/<name> in a source checkout, else <prefix>/share/cloth_bench_ros/<name>."""
     here = Path(__file__).resolve()
     source = here.parent.parent / name
-    if (here.parent.parent / "package.xml").is_file() and source.is_dir():
+    if (here.parent.parent / 'package.xml').is_file() and source.is_dir():
         return source
     # Installed: <prefix>/lib/pythonX.Y/site-packages/cloth_bench_ros/paths.py (colcon or pip).
     for prefix in (here.parents[4], Path(sys.prefix)):
-        candidate = prefix / "share" / PACKAGE / name
+        candidate = prefix / 'share' / PACKAGE / name
         if candidate.is_dir():
             return candidate
     return source
 
 
 def bundled_bag(cloth: str, primitive: str) -> Path:
-    """The bag shipped in bags/ for a cloth and primitive."""
-    return share_dir("bags") / f"{cloth}_{primitive}"
+    """Return the bag shipped in bags/ for a cloth and primitive."""
+    return share_dir('bags') / f'{cloth}_{primitive}'

@@ -8,23 +8,22 @@ file is written with `atomic_write_*`; names taken from files become path parts 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 import os
+from pathlib import Path
 import re
 import shutil
 import stat
 import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
-from pathlib import Path
 from typing import Any
 
-import yaml
-
 from cloth_bench_ros.errors import ClothBenchError
+import yaml
 
 MAX_TEXT_BYTES = 16 * 1024 * 1024
 MAX_YAML_ALIASES = 100
-_SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,127}$")
+_SAFE_NAME = re.compile(r'^[A-Za-z0-9][A-Za-z0-9_.+-]{0,127}$')
 
 
 class UnsafeInputError(ClothBenchError, ValueError):
@@ -32,22 +31,22 @@ class UnsafeInputError(ClothBenchError, ValueError):
 
 
 def read_text_bounded(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> str:
-    """The text of a regular file of at most `max_bytes` (no FIFO, device or directory)."""
+    """Return the text of a regular file of at most `max_bytes` (no FIFO, device or directory)."""
     path = Path(path)
     try:
         st = os.stat(path)
     except OSError as exc:
-        raise UnsafeInputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+        raise UnsafeInputError(f'{path}: cannot read ({exc.strerror or exc})') from None
     if not stat.S_ISREG(st.st_mode):
-        raise UnsafeInputError(f"{path}: not a regular file")
+        raise UnsafeInputError(f'{path}: not a regular file')
     if st.st_size > max_bytes:
-        raise UnsafeInputError(f"{path}: {st.st_size} bytes, more than the {max_bytes} allowed")
+        raise UnsafeInputError(f'{path}: {st.st_size} bytes, more than the {max_bytes} allowed')
     try:
-        with open(path, "rb") as f:
+        with open(path, 'rb') as f:
             data = f.read(max_bytes + 1)
-        return data.decode("utf-8")
+        return data.decode('utf-8')
     except (OSError, UnicodeDecodeError) as exc:
-        raise UnsafeInputError(f"{path}: cannot read as UTF-8 text ({exc})") from None
+        raise UnsafeInputError(f'{path}: cannot read as UTF-8 text ({exc})') from None
 
 
 class _BoundedLoader(yaml.SafeLoader):
@@ -59,7 +58,7 @@ class _BoundedLoader(yaml.SafeLoader):
         if self.check_event(yaml.AliasEvent):
             self.aliases_seen += 1
             if self.aliases_seen > MAX_YAML_ALIASES:
-                raise yaml.YAMLError(f"more than {MAX_YAML_ALIASES} aliases")
+                raise yaml.YAMLError(f'more than {MAX_YAML_ALIASES} aliases')
         return super().compose_node(parent, index)
 
 
@@ -70,15 +69,15 @@ def load_yaml_bounded(text: str, source: str) -> Any:
         loader = _BoundedLoader(text)  # the reader refuses non-printable characters here already
         return loader.get_single_data()
     except yaml.YAMLError as exc:
-        reason = " ".join(str(exc).split())
-        raise UnsafeInputError(f"{source}: not valid YAML ({reason})") from None
+        reason = ' '.join(str(exc).split())
+        raise UnsafeInputError(f'{source}: not valid YAML ({reason})') from None
     finally:
         if loader is not None:
             loader.dispose()
 
 
 def load_yaml_file(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> Any:
-    """A YAML file read with `read_text_bounded` and `load_yaml_bounded`."""
+    """Return a YAML file read with `read_text_bounded` and `load_yaml_bounded`."""
     return load_yaml_bounded(read_text_bounded(path, max_bytes), str(path))
 
 
@@ -89,10 +88,10 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
         mode = stat.S_IMODE(os.stat(path).st_mode)
     except OSError:
         mode = 0o644  # mkstemp's 0600 would hide results and bags from other users
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
     try:
         os.fchmod(fd, mode)
-        with os.fdopen(fd, "wb") as f:
+        with os.fdopen(fd, 'wb') as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
@@ -104,26 +103,26 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
 
 def atomic_write_text(path: str | Path, text: str) -> None:
     """`atomic_write_bytes` of UTF-8 text."""
-    atomic_write_bytes(path, text.encode("utf-8"))
+    atomic_write_bytes(path, text.encode('utf-8'))
 
 
 def check_output_dir(path: str | Path) -> Path:
     """Create `path` if needed and check that files can be written there, before any work starts."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise UnsafeInputError(f"{path}: exists and is not a directory")
+        raise UnsafeInputError(f'{path}: exists and is not a directory')
     try:
         path.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".write-check-"):
+        with tempfile.NamedTemporaryFile(dir=path, prefix='.write-check-'):
             pass
     except OSError as exc:
-        raise UnsafeInputError(f"{path}: cannot write there ({exc.strerror or exc})") from None
+        raise UnsafeInputError(f'{path}: cannot write there ({exc.strerror or exc})') from None
     return path
 
 
 @contextmanager
 def staged_directory(final: str | Path, overwrite: bool = False) -> Iterator[Path]:
-    """A directory to fill beside `final`, renamed to `final` only when the block completes.
+    """Return a directory to fill beside `final`, renamed to `final` only when the block completes.
 
     On any error (or a signal) nothing is left at `final`, and an old `final` stays as it was:
     readers see the old directory or the complete new one. The checks (exists, writable) run
@@ -131,14 +130,14 @@ def staged_directory(final: str | Path, overwrite: bool = False) -> Iterator[Pat
     """
     final = Path(final)
     if final.exists() and not final.is_dir():
-        raise UnsafeInputError(f"{final}: exists and is not a directory")
+        raise UnsafeInputError(f'{final}: exists and is not a directory')
     if final.is_dir() and any(final.iterdir()) and not overwrite:
-        raise UnsafeInputError(f"{final}: already exists (not empty; overwrite to replace it)")
+        raise UnsafeInputError(f'{final}: already exists (not empty; overwrite to replace it)')
     check_output_dir(final.parent)
-    stage = Path(tempfile.mkdtemp(prefix=f".{final.name}.partial-", dir=final.parent))
+    stage = Path(tempfile.mkdtemp(prefix=f'.{final.name}.partial-', dir=final.parent))
     try:
         yield stage / final.name
-        old = stage / ".replaced"
+        old = stage / '.replaced'
         if final.exists():
             final.rename(old)
         try:
@@ -151,11 +150,11 @@ def staged_directory(final: str | Path, overwrite: bool = False) -> Iterator[Pat
         shutil.rmtree(stage, ignore_errors=True)
 
 
-def safe_name(text: Any, what: str = "name") -> str:
+def safe_name(text: Any, what: str = 'name') -> str:
     """`text` if it is usable as one file-name part (letters, digits, _ . + -), else one-line error."""
     name = str(text)
-    if not _SAFE_NAME.match(name) or name in (".", ".."):
-        raise UnsafeInputError(f"{what} {name!r} is not a safe file name part")
+    if not _SAFE_NAME.match(name) or name in ('.', '..'):
+        raise UnsafeInputError(f'{what} {name!r} is not a safe file name part')
     return name
 
 
@@ -164,5 +163,5 @@ def confined_path(base: str | Path, *parts: str) -> Path:
     root = Path(base).resolve()
     target = root.joinpath(*parts).resolve()
     if target != root and root not in target.parents:
-        raise UnsafeInputError(f"{Path(*parts)} points outside {base}")
+        raise UnsafeInputError(f'{Path(*parts)} points outside {base}')
     return target

@@ -11,15 +11,15 @@ is wrong with it.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping, Sequence
 import math
 import numbers
-import re
-from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+import re
 from typing import Any
 
 from cloth_bench_ros.errors import ClothBenchError
-from cloth_bench_ros.safe_io import UnsafeInputError, load_yaml_bounded
+from cloth_bench_ros.safe_io import load_yaml_bounded, UnsafeInputError
 
 MIN_RATE_HZ = 1.0  # below this a trajectory has too few steps to score
 MAX_RATE_HZ = 10_000.0  # 10x the paper's highest rate; 1e9 would allocate 55 GiB of targets
@@ -39,94 +39,102 @@ def _is_number(value: object) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
-def number(value: object, name: str, low: float | None = None, high: float | None = None,
-           low_open: bool = False, unit: str = "") -> float:
-    """A finite real number in [low, high] (or (low, high] with low_open); bools and text refused."""
+def number(
+    value: object,
+    name: str,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    unit: str = '',
+) -> float:
+    """Return a finite real number in [low, high] (or (low, high] with low_open); bools and text refused."""
     if not _is_number(value):
-        raise InputError(f"{name}: {value!r} is not a number")
+        raise InputError(f'{name}: {value!r} is not a number')
     x = float(value)  # type: ignore[arg-type]
     if not math.isfinite(x):
-        raise InputError(f"{name}: {value!r} is not a finite number")
+        raise InputError(f'{name}: {value!r} is not a finite number')
     below = low is not None and (x <= low if low_open else x < low)
     if below or (high is not None and x > high):
-        left = "(" if low_open else "["
-        suffix = f" {unit}" if unit else ""
-        raise InputError(f"{name}: {value!r}{suffix} is outside {left}{_g(low)}, {_g(high)}]")
+        left = '(' if low_open else '['
+        suffix = f' {unit}' if unit else ''
+        raise InputError(f'{name}: {value!r}{suffix} is outside {left}{_g(low)}, {_g(high)}]')
     return x
 
 
 def integer(value: object, name: str, low: int | None = None, high: int | None = None) -> int:
-    """An integer in [low, high]; an integral float (3.0) is accepted, 2.7 and bools are refused."""
+    """Return an integer in [low, high]; an integral float (3.0) is accepted, 2.7 and bools are refused."""
     if isinstance(value, bool) or not (isinstance(value, numbers.Integral) or _is_number(value)):
-        raise InputError(f"{name}: {value!r} is not an integer")
+        raise InputError(f'{name}: {value!r} is not an integer')
     if not isinstance(value, numbers.Integral):
         x = float(value)  # type: ignore[arg-type]
         if not math.isfinite(x) or not x.is_integer():
-            raise InputError(f"{name}: {value!r} is not an integer")
+            raise InputError(f'{name}: {value!r} is not an integer')
     n = int(value)  # type: ignore[call-overload]
     if (low is not None and n < low) or (high is not None and n > high):
-        raise InputError(f"{name}: {n} is outside [{_g(low)}, {_g(high)}]")
+        raise InputError(f'{name}: {n} is outside [{_g(low)}, {_g(high)}]')
     return n
 
 
 def _g(bound: float | None) -> str:
     if bound is None:
-        return "inf"
-    return f"{bound:g}" if isinstance(bound, float) else str(bound)
+        return 'inf'
+    return f'{bound:g}' if isinstance(bound, float) else str(bound)
 
 
 def boolean(value: object, name: str) -> bool:
-    """true or false, nothing else (no 0/1, no strings)."""
+    """Return true or false, nothing else (no 0/1, no strings)."""
     if not isinstance(value, bool):
-        raise InputError(f"{name}: {value!r} is not true or false")
+        raise InputError(f'{name}: {value!r} is not true or false')
     return value
 
 
 def choice(value: object, name: str, choices: Sequence[str]) -> str:
     """One of `choices`."""
     if not isinstance(value, str) or value not in choices:
-        raise InputError(f"{name}: {value!r} is not one of {', '.join(choices)}")
+        raise InputError(f'{name}: {value!r} is not one of {", ".join(choices)}')
     return value
 
 
-def rate_hz(value: object, name: str = "rate") -> float:
-    """A simulator rate in [MIN_RATE_HZ, MAX_RATE_HZ] Hz."""
-    return number(value, name, MIN_RATE_HZ, MAX_RATE_HZ, unit="Hz")
+def rate_hz(value: object, name: str = 'rate') -> float:
+    """Return a simulator rate in [MIN_RATE_HZ, MAX_RATE_HZ] Hz."""
+    return number(value, name, MIN_RATE_HZ, MAX_RATE_HZ, unit='Hz')
 
 
 def positive(value: object, name: str, high: float | None = None) -> float:
-    """A finite number > 0 (and <= high)."""
+    """Return a finite number > 0 (and <= high)."""
     return number(value, name, 0.0, high, low_open=True)
 
 
 def non_negative(value: object, name: str, high: float | None = None) -> float:
-    """A finite number >= 0 (and <= high)."""
+    """Return a finite number >= 0 (and <= high)."""
     return number(value, name, 0.0, high)
 
 
 def time_offset(value: object, name: str) -> float:
-    """A duration in seconds added to or skipped from stamps: finite, in [0, MAX_TIME_OFFSET_S]."""
-    return number(value, name, 0.0, MAX_TIME_OFFSET_S, unit="s")
+    """Return a duration in seconds added to or skipped from stamps: finite, in [0, MAX_TIME_OFFSET_S]."""
+    return number(value, name, 0.0, MAX_TIME_OFFSET_S, unit='s')
 
 
-def seed(value: object, name: str = "seed") -> int:
-    """A random seed: an integer in [0, 2^63 - 1]."""
+def seed(value: object, name: str = 'seed') -> int:
+    """Return a random seed: an integer in [0, 2^63 - 1]."""
     return integer(value, name, 0, MAX_SEED)
 
 
 def frame_index(value: object, name: str, unset: int | None = None) -> int | None:
-    """A frame index >= 0; `unset` (e.g. -1 for "from the bag") and None mean none given."""
+    """Return a frame index >= 0; `unset` (e.g. -1 for "from the bag") and None mean none given."""
     if value is None or (unset is not None and not isinstance(value, bool) and value == unset):
         return None
     return integer(value, name, 0, MAX_FRAME)
 
 
-def grid(nx: object, nz: object, name: str = "grid") -> tuple[int, int]:
-    """A cloth mesh size: 2..MAX_GRID_SIDE vertices per side and at most MAX_GRID_VERTICES in all."""
-    x = integer(nx, f"{name} nx", 2, MAX_GRID_SIDE)
-    z = integer(nz, f"{name} nz", 2, MAX_GRID_SIDE)
+def grid(nx: object, nz: object, name: str = 'grid') -> tuple[int, int]:
+    """Return a cloth mesh size: 2..MAX_GRID_SIDE vertices per side and at most MAX_GRID_VERTICES in all."""
+    x = integer(nx, f'{name} nx', 2, MAX_GRID_SIDE)
+    z = integer(nz, f'{name} nz', 2, MAX_GRID_SIDE)
     if x * z > MAX_GRID_VERTICES:
-        raise InputError(f"{name}: {x}x{z} = {x * z} vertices, more than the {MAX_GRID_VERTICES} allowed")
+        raise InputError(
+            f'{name}: {x}x{z} = {x * z} vertices, more than the {MAX_GRID_VERTICES} allowed'
+        )
     return x, z
 
 
@@ -135,54 +143,56 @@ def unique(values: Iterable[str], name: str) -> list[str]:
     seen: list[str] = []
     for v in values:
         if v in seen:
-            raise InputError(f"{name}: {v!r} is given twice")
+            raise InputError(f'{name}: {v!r} is given twice')
         seen.append(v)
     return seen
 
 
 def existing_dir(path: str | Path, name: str) -> Path:
-    """A directory that exists."""
+    """Return a directory that exists."""
     p = Path(path)
     if not p.is_dir():
-        raise InputError(f"{name} {p}: " + ("not a directory" if p.exists() else "no such directory"))
+        raise InputError(
+            f'{name} {p}: ' + ('not a directory' if p.exists() else 'no such directory')
+        )
     return p
 
 
 # ------------------------------------------------------------------------------ text from users
 
-_GRID = re.compile(r"\s*(\d{1,9})\s*[xX]\s*(\d{1,9})\s*")
+_GRID = re.compile(r'\s*(\d{1,9})\s*[xX]\s*(\d{1,9})\s*')
 
 
 def parse_number(text: str, name: str) -> float:
-    """A finite number from command-line text."""
+    """Return a finite number from command-line text."""
     try:
         x = float(text)
     except ValueError:
-        raise InputError(f"{name}: {text!r} is not a number") from None
+        raise InputError(f'{name}: {text!r} is not a number') from None
     return number(x, name)
 
 
 def parse_integer(text: str, name: str) -> int:
-    """An integer from command-line text ("3", not "3.0" nor "three")."""
+    """Return an integer from command-line text ("3", not "3.0" nor "three")."""
     try:
         return int(text.strip(), 10)
     except ValueError:
-        raise InputError(f"{name}: {text!r} is not an integer") from None
+        raise InputError(f'{name}: {text!r} is not an integer') from None
 
 
-def parse_grid(text: str, name: str = "grid") -> tuple[int, int]:
+def parse_grid(text: str, name: str = 'grid') -> tuple[int, int]:
     """Parse "11x15" -> (11, 15), bounded by `grid`; nothing is allocated before the check."""
     m = _GRID.fullmatch(text)
     if not m:
-        raise InputError(f"{name} {text!r} is not NXxNZ (e.g. 11x15)")
-    return grid(int(m.group(1)), int(m.group(2)), f"{name} {text.strip()}")
+        raise InputError(f'{name} {text!r} is not NXxNZ (e.g. 11x15)')
+    return grid(int(m.group(1)), int(m.group(2)), f'{name} {text.strip()}')
 
 
 def parse_value(text: str) -> bool | int | float | str:
-    """A parameter value from the command line: bool (true/on/yes, false/off/no), int, float or string."""
+    """Return a parameter value from the command line: bool (true/on/yes, false/off/no), int, float or string."""
     low = text.strip().lower()
-    if low in ("true", "on", "yes", "false", "off", "no"):
-        return low in ("true", "on", "yes")
+    if low in ('true', 'on', 'yes', 'false', 'off', 'no'):
+        return low in ('true', 'on', 'yes')
     try:
         return int(text, 10)
     except ValueError:
@@ -197,24 +207,26 @@ def parse_overrides(specs: Sequence[str] | None) -> dict[str, dict[str, Any]]:
     """{"engine": {"param": value}} from "engine.param=value" strings; a parameter set twice is refused."""
     out: dict[str, dict[str, Any]] = {}
     for spec in specs or ():
-        lhs, sep, value = spec.partition("=")
-        engine, dot, param = lhs.partition(".")
+        lhs, sep, value = spec.partition('=')
+        engine, dot, param = lhs.partition('.')
         engine, param = engine.strip(), param.strip()
         if not sep or not dot or not engine or not param:
-            raise InputError(f"--set {spec!r} is not engine.param=value (e.g. mujoco.self_collision=true)")
+            raise InputError(
+                f'--set {spec!r} is not engine.param=value (e.g. mujoco.self_collision=true)'
+            )
         params = out.setdefault(engine, {})
         if param in params:
-            raise InputError(f"--set {engine}.{param}: given twice")
+            raise InputError(f'--set {engine}.{param}: given twice')
         params[param] = parse_value(value)
     return out
 
 
 def parameter_mapping(text: object, name: str) -> dict[str, Any]:
-    """A YAML mapping of parameter name -> scalar (a node's `engine_params`), read bounded."""
+    """Return a YAML mapping of parameter name -> scalar (a node's `engine_params`), read bounded."""
     if not isinstance(text, str):
-        raise InputError(f"{name}: {text!r} is not a YAML string")
-    if len(text.encode("utf-8")) > MAX_ENGINE_PARAMS_BYTES:
-        raise InputError(f"{name}: longer than {MAX_ENGINE_PARAMS_BYTES} bytes")
+        raise InputError(f'{name}: {text!r} is not a YAML string')
+    if len(text.encode('utf-8')) > MAX_ENGINE_PARAMS_BYTES:
+        raise InputError(f'{name}: longer than {MAX_ENGINE_PARAMS_BYTES} bytes')
     try:
         data = load_yaml_bounded(text, name) if text.strip() else {}
     except UnsafeInputError as exc:
@@ -222,12 +234,12 @@ def parameter_mapping(text: object, name: str) -> dict[str, Any]:
     if data is None:
         data = {}
     if not isinstance(data, Mapping):
-        raise InputError(f"{name}: {text!r} is not a mapping of parameter: value")
+        raise InputError(f'{name}: {text!r} is not a mapping of parameter: value')
     for key, value in data.items():
         if not isinstance(key, str):
-            raise InputError(f"{name}: key {key!r} is not a parameter name")
+            raise InputError(f'{name}: key {key!r} is not a parameter name')
         if not isinstance(value, (bool, int, float, str)):
-            raise InputError(f"{name}: {key} is {type(value).__name__}, not a single value")
+            raise InputError(f'{name}: {key} is {type(value).__name__}, not a single value')
     return dict(data)
 
 
@@ -241,7 +253,7 @@ def node_parameters(node: Any, checks: Mapping[str, Any]) -> dict[str, Any]:
     for pname, check in checks.items():
         value = node.get_parameter(pname).value
         try:
-            out[pname] = check(value, f"parameter {pname}")
+            out[pname] = check(value, f'parameter {pname}')
         except InputError as exc:
-            raise InputError(f"{node.get_name()}: {exc}") from None
+            raise InputError(f'{node.get_name()}: {exc}') from None
     return out

@@ -16,43 +16,83 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-NAMESPACE = "cloth_bench"
+NAMESPACE = 'cloth_bench'
 
 
 def _node(executable, name, params_file, *overrides):
-    return Node(package="cloth_bench_ros", executable=executable, name=name, namespace=NAMESPACE,
-                output="screen", parameters=[params_file, *overrides])
+    return Node(
+        package='cloth_bench_ros',
+        executable=executable,
+        name=name,
+        namespace=NAMESPACE,
+        output='screen',
+        parameters=[params_file, *overrides],
+    )
 
 
 def _nodes(context):
-    share = get_package_share_directory("cloth_bench_ros")
-    params_file = os.path.join(share, "config", "benchmark.yaml")
+    share = get_package_share_directory('cloth_bench_ros')
+    params_file = os.path.join(share, 'config', 'benchmark.yaml')
 
     def arg(name):
         return LaunchConfiguration(name).perform(context)
 
-    engines = [e.strip() for e in arg("engines").split(",") if e.strip()]
-    primitive, cloth, pacing, seed = arg("primitive"), arg("cloth"), arg("pacing"), int(arg("seed"))
-    bag = arg("bag") or os.path.join(share, "bags", f"{cloth}_{primitive}")
-    common = {"primitive": primitive, "rate_hz": float(arg("rate_hz")), "cloth": cloth, "engines": engines}
+    engines = [e.strip() for e in arg('engines').split(',') if e.strip()]
+    primitive, cloth, pacing, seed = (
+        arg('primitive'),
+        arg('cloth'),
+        arg('pacing'),
+        int(arg('seed')),
+    )
+    bag = arg('bag') or os.path.join(share, 'bags', f'{cloth}_{primitive}')
+    common = {
+        'primitive': primitive,
+        'rate_hz': float(arg('rate_hz')),
+        'cloth': cloth,
+        'engines': engines,
+    }
     nodes = [
-        _node("trajectory_publisher", "trajectory_publisher", params_file, common,
-              {"pacing": pacing}),
-        _node("recorder", "recorder", params_file, {"bag": bag}),
+        _node(
+            'trajectory_publisher', 'trajectory_publisher', params_file, common, {'pacing': pacing}
+        ),
+        _node('recorder', 'recorder', params_file, {'bag': bag}),
     ]
-    evaluator = _node("evaluator", "evaluator", params_file, common,
-                      {"output_dir": arg("output_dir"), "pacing": pacing, "seed": seed})
+    evaluator = _node(
+        'evaluator',
+        'evaluator',
+        params_file,
+        common,
+        {'output_dir': arg('output_dir'), 'pacing': pacing, 'seed': seed},
+    )
     for engine in engines:
-        nodes.append(_node("simulator", f"simulator_{engine}", params_file, common,
-                           {"engine": engine, "seed": seed}))
-    shutdown = RegisterEventHandler(OnProcessExit(target_action=evaluator,
-                                                  on_exit=[EmitEvent(event=Shutdown(reason="report written"))]))
+        nodes.append(
+            _node(
+                'simulator',
+                f'simulator_{engine}',
+                params_file,
+                common,
+                {'engine': engine, 'seed': seed},
+            )
+        )
+    shutdown = RegisterEventHandler(
+        OnProcessExit(
+            target_action=evaluator, on_exit=[EmitEvent(event=Shutdown(reason='report written'))]
+        )
+    )
     return nodes + [evaluator, shutdown]
 
 
 def generate_launch_description():
-    defaults = {"engines": "mujoco", "rate_hz": "100.0", "primitive": "dynamic", "cloth": "towel",
-                "bag": "", "seed": "0", "pacing": "lockstep", "output_dir": "cloth_bench_results"}
+    defaults = {
+        'engines': 'mujoco',
+        'rate_hz': '100.0',
+        'primitive': 'dynamic',
+        'cloth': 'towel',
+        'bag': '',
+        'seed': '0',
+        'pacing': 'lockstep',
+        'output_dir': 'cloth_bench_results',
+    }
     return LaunchDescription(
         [DeclareLaunchArgument(name, default_value=value) for name, value in defaults.items()]
         + [OpaqueFunction(function=_nodes)]

@@ -11,19 +11,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cloth_bench_ros.core import scene
+from cloth_bench_ros.data import BagReader
+from cloth_bench_ros.data.messages import header, msg_class, POINTCLOUD2, serialize
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import get_typestore, Stores
 from scipy.spatial.transform import Rotation
 
-from cloth_bench_ros.core import scene
-from cloth_bench_ros.data import BagReader
-from cloth_bench_ros.data.messages import POINTCLOUD2, header, msg_class, serialize
-
-CAMERA_TOPIC = "/camera/depth/color/points"
-IR_TOPIC = "/camera/ir/points"
-OPTICAL = "camera_depth_optical_frame"
+CAMERA_TOPIC = '/camera/depth/color/points'
+IR_TOPIC = '/camera/ir/points'
+OPTICAL = 'camera_depth_optical_frame'
 EPOCH_START_NS = 1_700_000_123_456_789_012
 # world -> optical rotation of the synthetic camera (x right, y down, z along world -y)
 R_WORLD_OPTICAL = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, -1.0, 0.0]])
@@ -32,14 +31,20 @@ LINK_ROTATION = np.diag([-1.0, -1.0, 1.0])  # camera_link: yawed 180 deg, lookin
 
 def _transform(parent: str, child: str, translation, rotation: np.ndarray):
     x, y, z, w = Rotation.from_matrix(rotation).as_quat()
-    vec = msg_class("geometry_msgs/msg/Vector3")(x=float(translation[0]), y=float(translation[1]), z=float(translation[2]))
-    quat = msg_class("geometry_msgs/msg/Quaternion")(x=x, y=y, z=z, w=w)
-    return msg_class("geometry_msgs/msg/TransformStamped")(
-        header=header(EPOCH_START_NS, parent), child_frame_id=child,
-        transform=msg_class("geometry_msgs/msg/Transform")(translation=vec, rotation=quat))
+    vec = msg_class('geometry_msgs/msg/Vector3')(
+        x=float(translation[0]), y=float(translation[1]), z=float(translation[2])
+    )
+    quat = msg_class('geometry_msgs/msg/Quaternion')(x=x, y=y, z=z, w=w)
+    return msg_class('geometry_msgs/msg/TransformStamped')(
+        header=header(EPOCH_START_NS, parent),
+        child_frame_id=child,
+        transform=msg_class('geometry_msgs/msg/Transform')(translation=vec, rotation=quat),
+    )
 
 
-def organized_cloud(stamp: int, points_optical: np.ndarray, height: int, width: int, rng) -> object:
+def organized_cloud(
+    stamp: int, points_optical: np.ndarray, height: int, width: int, rng
+) -> object:
     """x, y, z, rgb (point_step 20, padding after z) in a height x width grid, NaN where empty."""
     grid = np.full((height * width, 5), np.nan, dtype=np.float32)
     slots = np.sort(rng.choice(height * width, len(points_optical), replace=False))
@@ -47,17 +52,33 @@ def organized_cloud(stamp: int, points_optical: np.ndarray, height: int, width: 
     rgb = (rng.integers(0, 256, len(points_optical)) * 0x010101).astype(np.uint32)
     grid[:, 4] = 0.0
     grid[slots, 4] = rgb.view(np.float32)
-    field = msg_class("sensor_msgs/msg/PointField")
-    fields = [field(name=n, offset=o, datatype=7, count=1) for n, o in (("x", 0), ("y", 4), ("z", 8), ("rgb", 16))]
+    field = msg_class('sensor_msgs/msg/PointField')
+    fields = [
+        field(name=n, offset=o, datatype=7, count=1)
+        for n, o in (('x', 0), ('y', 4), ('z', 8), ('rgb', 16))
+    ]
     return msg_class(POINTCLOUD2)(
-        header=header(stamp, OPTICAL), height=height, width=width, fields=fields, is_bigendian=False,
-        point_step=20, row_step=20 * width, data=np.frombuffer(grid.tobytes(), dtype=np.uint8), is_dense=False)
+        header=header(stamp, OPTICAL),
+        height=height,
+        width=width,
+        fields=fields,
+        is_bigendian=False,
+        point_step=20,
+        row_step=20 * width,
+        data=np.frombuffer(grid.tobytes(), dtype=np.uint8),
+        is_dense=False,
+    )
 
 
 def scene_clutter(rng) -> np.ndarray:
     """Table top and background points the camera sees besides the cloth (world frame)."""
-    table = np.column_stack([rng.uniform(-0.25, 0.75, 500), rng.uniform(-0.85, 0.85, 500),
-                             scene.TABLE_TOP_Z + rng.normal(0, 0.001, 500)])
+    table = np.column_stack(
+        [
+            rng.uniform(-0.25, 0.75, 500),
+            rng.uniform(-0.85, 0.85, 500),
+            scene.TABLE_TOP_Z + rng.normal(0, 0.001, 500),
+        ]
+    )
     wall = np.column_stack([rng.uniform(-1, 1.5, 200), np.full(200, -2.5), rng.uniform(0, 2, 200)])
     floor = np.column_stack([rng.uniform(-1, 1.5, 100), rng.uniform(-1, 1, 100), np.zeros(100)])
     return np.concatenate([table, wall, floor])
@@ -67,10 +88,10 @@ class _RosbagsBag:
     """rosbags' Writer behind a `write(topic, msgtype, stamp_ns, cdr)` call."""
 
     def __init__(self, out: Path, storage: str, compression: str) -> None:
-        plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
+        plugin = StoragePlugin.SQLITE3 if storage == 'sqlite3' else StoragePlugin.MCAP
         self.writer = Writer(out, version=9, storage_plugin=plugin)
-        if compression != "none":
-            mode = CompressionMode.FILE if compression == "file" else CompressionMode.MESSAGE
+        if compression != 'none':
+            mode = CompressionMode.FILE if compression == 'file' else CompressionMode.MESSAGE
             self.writer.set_compression(mode, CompressionFormat.ZSTD)
         self.typestore = get_typestore(Stores.ROS2_JAZZY)
         self.connections: dict[str, object] = {}
@@ -84,13 +105,22 @@ class _RosbagsBag:
 
     def write(self, topic: str, msgtype: str, stamp_ns: int, cdr: bytes) -> None:
         if topic not in self.connections:
-            self.connections[topic] = self.writer.add_connection(topic, msgtype, typestore=self.typestore)
+            self.connections[topic] = self.writer.add_connection(
+                topic, msgtype, typestore=self.typestore
+            )
         self.writer.write(self.connections[topic], stamp_ns, bytes(cdr))
 
 
-def make_camera_recording(source: Path, out: Path, frames: int | None = None, seed: int = 0,
-                          pre_roll: int = 5, noise: float = 0.0, storage: str = "mcap",
-                          compression: str = "none") -> int:
+def make_camera_recording(
+    source: Path,
+    out: Path,
+    frames: int | None = None,
+    seed: int = 0,
+    pre_roll: int = 5,
+    noise: float = 0.0,
+    storage: str = 'mcap',
+    compression: str = 'none',
+) -> int:
     """Write the camera-like bag; returns the true bag time (ns) of the start of the motion.
 
     The camera runs `pre_roll` frames before the motion starts (the cloth hangs still: frame 0);
@@ -101,11 +131,14 @@ def make_camera_recording(source: Path, out: Path, frames: int | None = None, se
     reader = BagReader(source)
     position = scene.CAMERA_POSITION
     optical_in_link = LINK_ROTATION.T @ R_WORLD_OPTICAL.T
-    tf = msg_class("tf2_msgs/msg/TFMessage")(transforms=[
-        _transform("world", "camera_link", position, LINK_ROTATION),
-        _transform("camera_link", OPTICAL, (0.0, 0.0, 0.0), optical_in_link)])
+    tf = msg_class('tf2_msgs/msg/TFMessage')(
+        transforms=[
+            _transform('world', 'camera_link', position, LINK_ROTATION),
+            _transform('camera_link', OPTICAL, (0.0, 0.0, 0.0), optical_in_link),
+        ]
+    )
     with _RosbagsBag(out, storage, compression) as bag:
-        bag.write("/tf_static", "tf2_msgs/msg/TFMessage", EPOCH_START_NS - 10**8, serialize(tf))
+        bag.write('/tf_static', 'tf2_msgs/msg/TFMessage', EPOCH_START_NS - 10**8, serialize(tf))
         clouds = list(reader.clouds())
         period = clouds[1][0] - clouds[0][0]
         clouds = [(-(pre_roll - i) * period, clouds[0][1]) for i in range(pre_roll)] + clouds
@@ -116,7 +149,14 @@ def make_camera_recording(source: Path, out: Path, frames: int | None = None, se
             world = np.concatenate([cloth, scene_clutter(rng)])
             optical = (world - position) @ R_WORLD_OPTICAL.T
             t = EPOCH_START_NS + stamp
-            bag.write(CAMERA_TOPIC, POINTCLOUD2, t, serialize(organized_cloud(t, optical, 48, 64, rng)))
+            bag.write(
+                CAMERA_TOPIC, POINTCLOUD2, t, serialize(organized_cloud(t, optical, 48, 64, rng))
+            )
             if k % 30 == 0:
-                bag.write(IR_TOPIC, POINTCLOUD2, t, serialize(organized_cloud(t, optical[:50], 5, 10, rng)))
+                bag.write(
+                    IR_TOPIC,
+                    POINTCLOUD2,
+                    t,
+                    serialize(organized_cloud(t, optical[:50], 5, 10, rng)),
+                )
     return EPOCH_START_NS

@@ -9,23 +9,33 @@ namespaces cannot be made, the tier is skipped with the reason, except under CI,
 from __future__ import annotations
 
 import os
-import subprocess
 from pathlib import Path
+import subprocess
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-ROS_VENV = Path(os.environ.get("CLOTH_BENCH_ROS_VENV", ROOT / ".venv-ros"))
-ROS_PYTHON = ROS_VENV / "bin" / "python"
-NAMESPACE_PREFIX = ["unshare", "-n", "sh", "-c", 'ip link set lo up && ip link set lo multicast on && exec "$@"', "sh"]
+ROS_VENV = Path(os.environ.get('CLOTH_BENCH_ROS_VENV', ROOT / '.venv-ros'))
+ROS_PYTHON = ROS_VENV / 'bin' / 'python'
+NAMESPACE_PREFIX = [
+    'unshare',
+    '-n',
+    'sh',
+    '-c',
+    'ip link set lo up && ip link set lo multicast on && exec "$@"',
+    'sh',
+]
 
 
 def _unavailable() -> str | None:
     if not ROS_PYTHON.exists():
-        return f"no real-ROS 2 venv at {ROS_VENV} (./quickstart.sh test makes it)"
-    probe = subprocess.run([*NAMESPACE_PREFIX, "true"], capture_output=True, text=True)
+        return f'no real-ROS 2 venv at {ROS_VENV} (./quickstart.sh test makes it)'
+    probe = subprocess.run([*NAMESPACE_PREFIX, 'true'], capture_output=True, text=True)
     if probe.returncode != 0:
-        return f"cannot make a loopback-only network namespace (unshare -n): {probe.stderr.strip()[:200]}"
+        return (
+            'cannot make a loopback-only network namespace (unshare -n):'
+            f' {probe.stderr.strip()[:200]}'
+        )
     return None
 
 
@@ -34,16 +44,21 @@ def require_real_ros() -> None:
     reason = _unavailable()
     if reason is None:
         return
-    if os.environ.get("CI"):
-        pytest.fail(f"real-ROS 2 tier cannot run under CI: {reason}")
+    if os.environ.get('CI'):
+        pytest.fail(f'real-ROS 2 tier cannot run under CI: {reason}')
     pytest.skip(reason)
 
 
 def ros_env(**extra: str) -> dict[str, str]:
-    """The environment of a real-rclpy process: this checkout first on the path, no embedded switch."""
-    dropped = ("CLOTH_BENCH_EMBEDDED", "CLOTH_BENCH_TRANSPORT", "CYCLONEDDS_URI", "ROS_STATIC_PEERS")
+    """Return the environment of a real-rclpy process: this checkout first on the path, no embedded switch."""
+    dropped = (
+        'CLOTH_BENCH_EMBEDDED',
+        'CLOTH_BENCH_TRANSPORT',
+        'CYCLONEDDS_URI',
+        'ROS_STATIC_PEERS',
+    )
     env = {k: v for k, v in os.environ.items() if k not in dropped}
-    env["PYTHONPATH"] = str(ROOT)
+    env['PYTHONPATH'] = str(ROOT)
     env.update(extra)
     return env
 
@@ -54,5 +69,11 @@ def in_namespace(*argv: str) -> list[str]:
 
 
 def ros_script(script: str) -> list[str]:
-    """A shell script (several processes of one graph) inside one loopback-only network namespace."""
-    return ["unshare", "-n", "sh", "-c", f"ip link set lo up && ip link set lo multicast on && {script}"]
+    """Return a shell script (several processes of one graph) inside one loopback-only network namespace."""
+    return [
+        'unshare',
+        '-n',
+        'sh',
+        '-c',
+        f'ip link set lo up && ip link set lo multicast on && {script}',
+    ]

@@ -12,35 +12,41 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
-import yaml
-from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-from rosbags.typesys import Stores, get_typestore
-
 from cloth_bench_ros import cli
 from cloth_bench_ros.data import BagError, BagReader
 from cloth_bench_ros.paths import bundled_bag
+import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+from rosbags.typesys import get_typestore, Stores
+import yaml
 
-SOURCE = bundled_bag("towel", "dynamic")
-RUN = ["--grid", "6x8", "--rate", "100"]
+SOURCE = bundled_bag('towel', 'dynamic')
+RUN = ['--grid', '6x8', '--rate', '100']
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 
-def write_with_rosbags(out: Path, storage: str, compression: str | None = None, version: int = 9,
-                       messages: list | None = None) -> Path:
-    """The source bag's messages written by rosbags' Writer, custom_data (the trial) included."""
+def write_with_rosbags(
+    out: Path,
+    storage: str,
+    compression: str | None = None,
+    version: int = 9,
+    messages: list | None = None,
+) -> Path:
+    """Return the source bag's messages written by rosbags' Writer, custom_data (the trial) included."""
     reader = BagReader(SOURCE)
-    plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
+    plugin = StoragePlugin.SQLITE3 if storage == 'sqlite3' else StoragePlugin.MCAP
     writer = Writer(out, version=version, storage_plugin=plugin)
     if compression:
-        mode = CompressionMode.FILE if compression == "file" else CompressionMode.MESSAGE
+        mode = CompressionMode.FILE if compression == 'file' else CompressionMode.MESSAGE
         writer.set_compression(mode, CompressionFormat.ZSTD)
     for key, value in reader.custom_data.items():
         writer.set_custom_data(key, value)
     with writer:
         connections = {}
-        for topic, msgtype, log_ns, cdr in messages if messages is not None else reader.logged_messages():
+        for topic, msgtype, log_ns, cdr in (
+            messages if messages is not None else reader.logged_messages()
+        ):
             if topic not in connections:
                 connections[topic] = writer.add_connection(topic, msgtype, typestore=TYPESTORE)
             writer.write(connections[topic], log_ns, cdr)
@@ -49,18 +55,18 @@ def write_with_rosbags(out: Path, storage: str, compression: str | None = None, 
 
 def downgrade_metadata(bag: Path, version: int) -> None:
     """metadata.yaml of a version-8 bag rewritten as rosbag2 `version` (4-7) wrote it."""
-    path = bag / "metadata.yaml"
+    path = bag / 'metadata.yaml'
     doc = yaml.safe_load(path.read_text())
-    info = doc["rosbag2_bagfile_information"]
-    info["version"] = version
-    info.pop("ros_distro", None)  # 8
+    info = doc['rosbag2_bagfile_information']
+    info['version'] = version
+    info.pop('ros_distro', None)  # 8
     if version < 7:
-        for topic in info["topics_with_message_count"]:
-            topic["topic_metadata"].pop("type_description_hash", None)
+        for topic in info['topics_with_message_count']:
+            topic['topic_metadata'].pop('type_description_hash', None)
     if version < 6:
-        info.pop("custom_data", None)
+        info.pop('custom_data', None)
     if version < 5:
-        info.pop("files", None)
+        info.pop('files', None)
     path.write_text(yaml.safe_dump(doc))
 
 
@@ -70,145 +76,177 @@ DATABASE_SCHEMA = {4: 2, 5: 3, 6: 3, 7: 4, 8: 4, 9: 4}
 
 
 def downgrade_database(database: Path, schema: int) -> None:
-    """A schema-4 .db3 rewritten in an older rosbag2 sqlite3 schema (its messages untouched)."""
+    """Return a schema-4 .db3 rewritten in an older rosbag2 sqlite3 schema (its messages untouched)."""
     import sqlite3
 
     with sqlite3.connect(database) as db:
         if schema < 4:
-            db.execute("DROP TABLE message_definitions")
-            db.execute("ALTER TABLE topics DROP COLUMN type_description_hash")
-            db.execute("UPDATE schema SET schema_version = ?", (schema,))
+            db.execute('DROP TABLE message_definitions')
+            db.execute('ALTER TABLE topics DROP COLUMN type_description_hash')
+            db.execute('UPDATE schema SET schema_version = ?', (schema,))
         if schema < 3:
-            db.execute("DROP TABLE schema")
-            db.execute("DROP TABLE metadata")
-        tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            db.execute('DROP TABLE schema')
+            db.execute('DROP TABLE metadata')
+        tables = {
+            row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")
+        }
     db.close()
-    assert ("message_definitions" in tables) == (schema >= 4) and ("schema" in tables) == (schema >= 3)
+    assert ('message_definitions' in tables) == (schema >= 4) and ('schema' in tables) == (
+        schema >= 3
+    )
 
 
 def write_split(out: Path, storage: str, parts: int = 2) -> Path:
-    """The source's messages in `parts` storage files of one bag, named and listed as
+    """Return the source's messages in `parts` storage files of one bag, named and listed as
     `ros2 bag record --max-bag-size` splits them (`<bag>_0`, `<bag>_1`, ...)."""
     messages = list(BagReader(SOURCE).logged_messages())
-    suffix = ".db3" if storage == "sqlite3" else ".mcap"
+    suffix = '.db3' if storage == 'sqlite3' else '.mcap'
     bounds = [round(i * len(messages) / parts) for i in range(parts + 1)]
     info: dict = {}
     for i in range(parts):
-        part = write_with_rosbags(out.parent / f"{out.name}_part{i}", storage, messages=messages[bounds[i]:bounds[i + 1]])
-        name = f"{out.name}_{i}{suffix}"
+        part = write_with_rosbags(
+            out.parent / f'{out.name}_part{i}',
+            storage,
+            messages=messages[bounds[i] : bounds[i + 1]],
+        )
+        name = f'{out.name}_{i}{suffix}'
         out.mkdir(exist_ok=True)
-        (part / f"{part.name}{suffix}").rename(out / name)
-        part_info = yaml.safe_load((part / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
-        part_info["files"][0]["path"] = name
+        (part / f'{part.name}{suffix}').rename(out / name)
+        part_info = yaml.safe_load((part / 'metadata.yaml').read_text())[
+            'rosbag2_bagfile_information'
+        ]
+        part_info['files'][0]['path'] = name
         if not info:
-            info = {**part_info, "relative_file_paths": [name]}
+            info = {**part_info, 'relative_file_paths': [name]}
             continue
-        info["relative_file_paths"].append(name)
-        info["files"].append(part_info["files"][0])
-        info["message_count"] += part_info["message_count"]
-        counts = {t["topic_metadata"]["name"]: t["message_count"] for t in part_info["topics_with_message_count"]}
-        known = {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]}
-        for topic in info["topics_with_message_count"]:
-            topic["message_count"] += counts.get(topic["topic_metadata"]["name"], 0)
-        info["topics_with_message_count"] += [t for t in part_info["topics_with_message_count"]
-                                              if t["topic_metadata"]["name"] not in known]
-    (out / "metadata.yaml").write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}))
+        info['relative_file_paths'].append(name)
+        info['files'].append(part_info['files'][0])
+        info['message_count'] += part_info['message_count']
+        counts = {
+            t['topic_metadata']['name']: t['message_count']
+            for t in part_info['topics_with_message_count']
+        }
+        known = {t['topic_metadata']['name'] for t in info['topics_with_message_count']}
+        for topic in info['topics_with_message_count']:
+            topic['message_count'] += counts.get(topic['topic_metadata']['name'], 0)
+        info['topics_with_message_count'] += [
+            t
+            for t in part_info['topics_with_message_count']
+            if t['topic_metadata']['name'] not in known
+        ]
+    (out / 'metadata.yaml').write_text(yaml.safe_dump({'rosbag2_bagfile_information': info}))
     return out
 
 
 def write_bare_mcap(out: Path) -> Path:
-    """A single .mcap written by the mcap library's own writer (lz4 chunks), no metadata.yaml."""
+    """Return a single .mcap written by the mcap library's own writer (lz4 chunks), no metadata.yaml."""
+    from cloth_bench_ros.data.messages import msgdef
     from mcap.writer import CompressionType
     from mcap.writer import Writer as McapWriter
 
-    from cloth_bench_ros.data.messages import msgdef
-
     out.mkdir()
-    path = out / "recording.mcap"
-    with path.open("wb") as f:
+    path = out / 'recording.mcap'
+    with path.open('wb') as f:
         writer = McapWriter(f, compression=CompressionType.LZ4)
-        writer.start(profile="ros2", library="test")
+        writer.start(profile='ros2', library='test')
         schemas: dict[str, int] = {}
         channels: dict[str, int] = {}
         for topic, msgtype, log_ns, cdr in BagReader(SOURCE).logged_messages():
             if msgtype not in schemas:
-                schemas[msgtype] = writer.register_schema(msgtype, "ros2msg", msgdef(msgtype).encode())
+                schemas[msgtype] = writer.register_schema(
+                    msgtype, 'ros2msg', msgdef(msgtype).encode()
+                )
             if topic not in channels:
-                channels[topic] = writer.register_channel(topic, "cdr", schemas[msgtype])
-            writer.add_message(channels[topic], log_time=log_ns, data=bytes(cdr), publish_time=log_ns)
+                channels[topic] = writer.register_channel(topic, 'cdr', schemas[msgtype])
+            writer.add_message(
+                channels[topic], log_time=log_ns, data=bytes(cdr), publish_time=log_ns
+            )
         writer.finish()
     return path
 
 
 VARIANTS = {
-    "sqlite3 (Humble's default)": lambda out: write_with_rosbags(out, "sqlite3"),
-    "sqlite3, metadata version 8": lambda out: write_with_rosbags(out, "sqlite3", version=8),
-    "mcap, file compression zstd": lambda out: write_with_rosbags(out, "mcap", "file"),
-    "mcap, message compression zstd": lambda out: write_with_rosbags(out, "mcap", "message"),
-    "sqlite3, file compression zstd": lambda out: write_with_rosbags(out, "sqlite3", "file"),
-    "sqlite3, message compression zstd": lambda out: write_with_rosbags(out, "sqlite3", "message"),
-    "sqlite3 split in two files": lambda out: write_split(out, "sqlite3"),
-    "mcap split in three files": lambda out: write_split(out, "mcap", 3),
+    "sqlite3 (Humble's default)": lambda out: write_with_rosbags(out, 'sqlite3'),
+    'sqlite3, metadata version 8': lambda out: write_with_rosbags(out, 'sqlite3', version=8),
+    'mcap, file compression zstd': lambda out: write_with_rosbags(out, 'mcap', 'file'),
+    'mcap, message compression zstd': lambda out: write_with_rosbags(out, 'mcap', 'message'),
+    'sqlite3, file compression zstd': lambda out: write_with_rosbags(out, 'sqlite3', 'file'),
+    'sqlite3, message compression zstd': lambda out: write_with_rosbags(out, 'sqlite3', 'message'),
+    'sqlite3 split in two files': lambda out: write_split(out, 'sqlite3'),
+    'mcap split in three files': lambda out: write_split(out, 'mcap', 3),
 }
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def original(tmp_path_factory) -> dict:
-    out = tmp_path_factory.mktemp("original") / "run"
-    assert cli.main(["run", "--bag", str(SOURCE), "--output", str(out), *RUN]) == 0
-    return json.loads((out / "summary.json").read_text())
+    out = tmp_path_factory.mktemp('original') / 'run'
+    assert cli.main(['run', '--bag', str(SOURCE), '--output', str(out), *RUN]) == 0
+    return json.loads((out / 'summary.json').read_text())
 
 
 def scores(summary: dict) -> tuple:
-    m = summary["engines"]["mujoco"]
-    return (m["CD_d"], m["HD_d"], m["frames_scored"], m["frames_in_window"], summary["real"]["accounting"],
-            summary["real"]["change_of_phase"])
+    m = summary['engines']['mujoco']
+    return (
+        m['CD_d'],
+        m['HD_d'],
+        m['frames_scored'],
+        m['frames_in_window'],
+        summary['real']['accounting'],
+        summary['real']['change_of_phase'],
+    )
 
 
 def _score(bag: Path, tmp_path: Path) -> dict:
-    out = tmp_path / "run"
-    assert cli.main(["run", "--bag", str(bag), "--output", str(out), *RUN]) == 0
-    return json.loads((out / "summary.json").read_text())
+    out = tmp_path / 'run'
+    assert cli.main(['run', '--bag', str(bag), '--output', str(out), *RUN]) == 0
+    return json.loads((out / 'summary.json').read_text())
 
 
-@pytest.mark.parametrize("variant", list(VARIANTS))
+@pytest.mark.parametrize('variant', list(VARIANTS))
 def test_a_lossless_variant_scores_exactly_like_the_original(variant, original, tmp_path):
-    bag = VARIANTS[variant](tmp_path / "variant")
+    bag = VARIANTS[variant](tmp_path / 'variant')
     reader = BagReader(bag)
-    assert reader.trial == BagReader(SOURCE).trial and reader.message_counts == BagReader(SOURCE).message_counts
+    assert (
+        reader.trial == BagReader(SOURCE).trial
+        and reader.message_counts == BagReader(SOURCE).message_counts
+    )
     assert scores(_score(bag, tmp_path)) == scores(original)
 
 
-@pytest.mark.parametrize("version", [4, 5, 6, 7])
+@pytest.mark.parametrize('version', [4, 5, 6, 7])
 def test_older_metadata_versions_read(version, tmp_path):
-    bag = write_with_rosbags(tmp_path / "old", "sqlite3", version=8)
+    bag = write_with_rosbags(tmp_path / 'old', 'sqlite3', version=8)
     downgrade_metadata(bag, version)
-    downgrade_database(next(bag.glob("*.db3")), DATABASE_SCHEMA[version])
+    downgrade_database(next(bag.glob('*.db3')), DATABASE_SCHEMA[version])
     reader = BagReader(bag)
-    assert reader.metadata_summary.startswith(f"version {version}")
+    assert reader.metadata_summary.startswith(f'version {version}')
     original = [(s, p.tobytes()) for s, p in BagReader(SOURCE).clouds()]
     assert [(s, p.tobytes()) for s, p in reader.clouds()] == original
-    assert reader.trial == BagReader(SOURCE).trial  # from the trial topic when custom_data is older than v6
+    assert (
+        reader.trial == BagReader(SOURCE).trial
+    )  # from the trial topic when custom_data is older than v6
 
 
-@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+@pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
 def test_a_killed_recording_without_metadata_reads_its_files(storage, original, tmp_path):
-    bag = write_with_rosbags(tmp_path / "killed", storage)
-    (bag / "metadata.yaml").unlink()
-    with pytest.warns(UserWarning, match="has no metadata.yaml"):
+    bag = write_with_rosbags(tmp_path / 'killed', storage)
+    (bag / 'metadata.yaml').unlink()
+    with pytest.warns(UserWarning, match='has no metadata.yaml'):
         reader = BagReader(bag)
     assert reader.message_counts == BagReader(SOURCE).message_counts
     assert scores(_score(bag, tmp_path)) == scores(original)
 
 
-@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+@pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
 def test_a_killed_split_recording_is_read_in_file_number_order(storage, original, tmp_path):
-    bag = write_split(tmp_path / "killed", storage, parts=12)
-    (bag / "metadata.yaml").unlink()
-    with pytest.warns(UserWarning, match="has no metadata.yaml"):
+    bag = write_split(tmp_path / 'killed', storage, parts=12)
+    (bag / 'metadata.yaml').unlink()
+    with pytest.warns(UserWarning, match='has no metadata.yaml'):
         reader = BagReader(bag)
-    suffix = ".db3" if storage == "sqlite3" else ".mcap"
-    assert [f.name for f in reader.files] == [f"killed_{i}{suffix}" for i in range(12)]  # _10 after _9
+    suffix = '.db3' if storage == 'sqlite3' else '.mcap'
+    assert [f.name for f in reader.files] == [
+        f'killed_{i}{suffix}' for i in range(12)
+    ]  # _10 after _9
     assert [s for s, _ in reader.clouds()] == [s for s, _ in BagReader(SOURCE).clouds()]
     assert scores(_score(bag, tmp_path)) == scores(original)
 
@@ -216,55 +254,61 @@ def test_a_killed_split_recording_is_read_in_file_number_order(storage, original
 def test_a_killed_file_compressed_recording_says_what_to_do(tmp_path, capsys):
     # --compression-mode file compresses each file when it is closed: a killed recording leaves
     # the earlier files compressed, the last one not, and no metadata.yaml.
-    bag = write_split(tmp_path / "killed", "mcap", parts=2)
-    (bag / "metadata.yaml").unlink()
-    compressed = write_with_rosbags(tmp_path / "compressed", "mcap", "file")
-    (bag / "killed_0.mcap").unlink()
-    next(compressed.glob("*.mcap.zstd")).rename(bag / "killed_0.mcap.zstd")
-    with pytest.raises(BagError, match=r"compressed storage files \(killed_0.mcap.zstd\).*zstd -d --rm"):
+    bag = write_split(tmp_path / 'killed', 'mcap', parts=2)
+    (bag / 'metadata.yaml').unlink()
+    compressed = write_with_rosbags(tmp_path / 'compressed', 'mcap', 'file')
+    (bag / 'killed_0.mcap').unlink()
+    next(compressed.glob('*.mcap.zstd')).rename(bag / 'killed_0.mcap.zstd')
+    with pytest.raises(
+        BagError, match=r'compressed storage files \(killed_0.mcap.zstd\).*zstd -d --rm'
+    ):
         BagReader(bag)
-    assert cli.main(["run", "--bag", str(bag), "--output", str(tmp_path / "o"), *RUN]) == 2
+    assert cli.main(['run', '--bag', str(bag), '--output', str(tmp_path / 'o'), *RUN]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
-@pytest.mark.parametrize("compression", ["file", "message"])
+@pytest.mark.parametrize('compression', ['file', 'message'])
 def test_a_damaged_compressed_bag_is_one_line(compression, tmp_path, capsys):
-    bag = write_with_rosbags(tmp_path / "torn", "sqlite3" if compression == "message" else "mcap", compression)
-    storage = next(f for f in bag.iterdir() if f.name != "metadata.yaml")
+    bag = write_with_rosbags(
+        tmp_path / 'torn', 'sqlite3' if compression == 'message' else 'mcap', compression
+    )
+    storage = next(f for f in bag.iterdir() if f.name != 'metadata.yaml')
     data = storage.read_bytes()
     storage.write_bytes(data[: len(data) // 2])
-    assert cli.main(["run", "--bag", str(bag), "--output", str(tmp_path / "o"), *RUN]) == 2
+    assert cli.main(['run', '--bag', str(bag), '--output', str(tmp_path / 'o'), *RUN]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and str(bag) in err and "internal error" not in err
+    assert len(err.splitlines()) == 1 and str(bag) in err and 'internal error' not in err
 
 
 def test_a_bare_mcap_from_the_mcap_writer_scores_like_the_original(original, tmp_path):
-    path = write_bare_mcap(tmp_path / "bare")
+    path = write_bare_mcap(tmp_path / 'bare')
     assert scores(_score(path, tmp_path)) == scores(original)
 
 
-@pytest.mark.parametrize("compression", ["file", "message"])
+@pytest.mark.parametrize('compression', ['file', 'message'])
 def test_a_storage_file_of_a_compressed_bag_reads_as_its_bag(compression, tmp_path):
     # Only metadata.yaml says a file is compressed, or that its messages are.
-    bag = write_with_rosbags(tmp_path / compression, "mcap", compression)
-    reader = BagReader(next(f for f in bag.iterdir() if f.name != "metadata.yaml"))
-    assert reader.path == bag and reader.storage == f"mcap, compression {compression}:zstd"
-    assert [(s, p.tobytes()) for s, p in reader.clouds()] == [(s, p.tobytes()) for s, p in BagReader(SOURCE).clouds()]
+    bag = write_with_rosbags(tmp_path / compression, 'mcap', compression)
+    reader = BagReader(next(f for f in bag.iterdir() if f.name != 'metadata.yaml'))
+    assert reader.path == bag and reader.storage == f'mcap, compression {compression}:zstd'
+    assert [(s, p.tobytes()) for s, p in reader.clouds()] == [
+        (s, p.tobytes()) for s, p in BagReader(SOURCE).clouds()
+    ]
 
 
 def test_bag_info_names_the_storage(tmp_path, capsys):
-    bag = write_with_rosbags(tmp_path / "humble", "sqlite3", "file")
-    assert cli.main(["bag", "info", str(bag)]) == 0
-    assert "storage:      sqlite3, compression file:zstd" in capsys.readouterr().out
+    bag = write_with_rosbags(tmp_path / 'humble', 'sqlite3', 'file')
+    assert cli.main(['bag', 'info', str(bag)]) == 0
+    assert 'storage:      sqlite3, compression file:zstd' in capsys.readouterr().out
 
 
 def test_an_unreadable_database_is_one_line(tmp_path, capsys):
-    bag = write_with_rosbags(tmp_path / "broken", "sqlite3")
-    database = next(bag.glob("*.db3"))
-    database.write_bytes(b"not a database" * 100)
-    with pytest.raises(BagError, match=f"bag {bag}"):
+    bag = write_with_rosbags(tmp_path / 'broken', 'sqlite3')
+    database = next(bag.glob('*.db3'))
+    database.write_bytes(b'not a database' * 100)
+    with pytest.raises(BagError, match=f'bag {bag}'):
         BagReader(bag)
-    assert cli.main(["run", "--bag", str(bag), "--output", str(tmp_path / "o"), *RUN]) == 2
+    assert cli.main(['run', '--bag', str(bag), '--output', str(tmp_path / 'o'), *RUN]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and str(bag) in err
 
@@ -272,13 +316,17 @@ def test_an_unreadable_database_is_one_line(tmp_path, capsys):
 def test_a_file_compressed_bag_is_decompressed_once_per_reader(tmp_path, monkeypatch):
     from rosbags.rosbag2 import Reader
 
-    bag = write_with_rosbags(tmp_path / "file", "mcap", "file")
+    bag = write_with_rosbags(tmp_path / 'file', 'mcap', 'file')
     opened = []
     real_open = Reader.open
-    monkeypatch.setattr(Reader, "open", lambda self: (opened.append(self), real_open(self))[1])
+    monkeypatch.setattr(Reader, 'open', lambda self: (opened.append(self), real_open(self))[1])
     reader = BagReader(bag)
     assert reader.trial is not None
     passes = [[s for s, _ in reader.clouds()] for _ in range(3)]
-    assert len(opened) == 1 and passes[0] == passes[2] == [s for s, _ in BagReader(SOURCE).clouds()]
+    assert len(opened) == 1 and passes[0] == passes[2] == [
+        s for s, _ in BagReader(SOURCE).clouds()
+    ]
     reader.close()
-    assert [s for s, _ in reader.clouds()] == passes[0] and len(opened) == 2  # reopened after close
+    assert [s for s, _ in reader.clouds()] == passes[0] and len(
+        opened
+    ) == 2  # reopened after close

@@ -5,107 +5,134 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
-import pytest
-
-from cloth_bench_ros.data import synth
-from cloth_bench_ros.data import CLOUD_TOPIC, BagReader
+from cloth_bench_ros.data import BagReader, CLOUD_TOPIC, synth
 from cloth_bench_ros.report import cross_reference as report_xr
 from cloth_bench_ros.studies import cross_reference as xr
 from cloth_bench_ros.studies import sweep as sw
 from cloth_bench_ros.studies.aggregate import stat
 from cloth_bench_ros.studies.sweep import Cell
+import numpy as np
+import pytest
 
 SMALL = synth.Camera(width=320, height=180)
 
 
 def test_newton_reference_is_another_family_with_the_same_cloths():
-    for cloth in ("towel", "chequered", "linen"):
-        for primitive in ("dynamic", "quasi_static"):
+    for cloth in ('towel', 'chequered', 'linen'):
+        for primitive in ('dynamic', 'quasi_static'):
             mujoco = synth.reference_config(cloth, primitive)
-            newton = synth.reference_config(cloth, primitive, reference="newton-vbd")
-            assert (mujoco.engine, newton.engine) == ("mujoco", "newton")
-            assert newton.params["model"] == "vbd" and newton.params["self_collision"]
+            newton = synth.reference_config(cloth, primitive, reference='newton-vbd')
+            assert (mujoco.engine, newton.engine) == ('mujoco', 'newton')
+            assert newton.params['model'] == 'vbd' and newton.params['self_collision']
             assert newton.grid == mujoco.grid and newton.frame_count == mujoco.frame_count
             assert newton.steps_per_frame == 10 and newton.provenance
-            for key in ("mass", "friction"):
+            for key in ('mass', 'friction'):
                 assert newton.params[key] == mujoco.params[key]
     with pytest.raises(synth.SynthError, match="unknown synthetic reference 'bullet'"):
-        synth.reference_config("towel", "dynamic", reference="bullet")
+        synth.reference_config('towel', 'dynamic', reference='bullet')
 
 
 def test_reference_bags_are_named_after_their_reference():
-    assert xr.reference_bag("towel", "dynamic", "mujoco").name == "towel_dynamic"
-    assert xr.reference_bag("towel", "quasi_static", "newton-vbd").name == "towel_quasi_static_newton_vbd"
-    with pytest.raises(ValueError, match="unknown synthetic reference"):
-        xr.reference_bag("towel", "dynamic", "sofa")
-    cells = xr.cross_reference_cells("towel", ["dynamic"], [0, 1], 100.0, xr.DEFAULT_ENTRANTS)
+    assert xr.reference_bag('towel', 'dynamic', 'mujoco').name == 'towel_dynamic'
+    assert (
+        xr.reference_bag('towel', 'quasi_static', 'newton-vbd').name
+        == 'towel_quasi_static_newton_vbd'
+    )
+    with pytest.raises(ValueError, match='unknown synthetic reference'):
+        xr.reference_bag('towel', 'dynamic', 'sofa')
+    cells = xr.cross_reference_cells('towel', ['dynamic'], [0, 1], 100.0, xr.DEFAULT_ENTRANTS)
     assert len(cells) == len(xr.DEFAULT_ENTRANTS) * 2 * 2
-    assert {c.config.split(",")[0] for c in cells} == {"reference=mujoco", "reference=newton-vbd"}
+    assert {c.config.split(',')[0] for c in cells} == {'reference=mujoco', 'reference=newton-vbd'}
     assert len({c.key() for c in cells}) == len(cells)  # resumable: every cell has its own key
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def short_bags(tmp_path_factory) -> dict[str, str]:
     """0.2 s of the towel's fling from each reference, on a coarse 6 x 8 reference grid at 150 Hz."""
-    out = tmp_path_factory.mktemp("xref")
+    out = tmp_path_factory.mktemp('xref')
     bags = {}
     for reference in xr.REFERENCES:
-        cfg = synth.reference_config("towel", "dynamic", reference=reference, grid=(6, 8), rate_hz=150.0,
-                                     duration=0.2)
+        cfg = synth.reference_config(
+            'towel', 'dynamic', reference=reference, grid=(6, 8), rate_hz=150.0, duration=0.2
+        )
         cfg = replace(cfg, sensor=replace(cfg.sensor, camera=SMALL))
-        bags[reference] = str(synth.write_synthetic_bag(cfg, out / f"towel_dynamic_{reference}"))
+        bags[reference] = str(synth.write_synthetic_bag(cfg, out / f'towel_dynamic_{reference}'))
     return bags
 
 
 def test_newton_reference_bag_names_its_model(short_bags):
-    reader = BagReader(short_bags["newton-vbd"])
-    assert reader.trial.source.startswith("synthetic: reference newton vbd cloth 6x8, 150 Hz, self-collision on")
+    reader = BagReader(short_bags['newton-vbd'])
+    assert reader.trial.source.startswith(
+        'synthetic: reference newton vbd cloth 6x8, 150 Hz, self-collision on'
+    )
     clouds = list(reader.clouds(CLOUD_TOPIC))
     assert len(clouds) == 6 and all(len(p) > 200 for _, p in clouds)
 
 
 def test_cross_reference_table_scores_every_engine_on_every_reference(short_bags, tmp_path):
-    entrants = [("mujoco", {}), ("newton", {"model": "vbd"})]
-    cells = [Cell(engine, 100.0, "towel", "dynamic", 0, bag, 0, xr.MODE,
-                  f"reference={reference}," + ("model=vbd" if overrides else "preset"), (6, 8),
-                  tuple(sorted(overrides.items())))
-             for reference, bag in short_bags.items() for engine, overrides in entrants]
-    outcome = sw.run_sweep(cells, tmp_path, workers=2, progress=False)  # the executor, as any sweep
+    entrants = [('mujoco', {}), ('newton', {'model': 'vbd'})]
+    cells = [
+        Cell(
+            engine,
+            100.0,
+            'towel',
+            'dynamic',
+            0,
+            bag,
+            0,
+            xr.MODE,
+            f'reference={reference},' + ('model=vbd' if overrides else 'preset'),
+            (6, 8),
+            tuple(sorted(overrides.items())),
+        )
+        for reference, bag in short_bags.items()
+        for engine, overrides in entrants
+    ]
+    outcome = sw.run_sweep(
+        cells, tmp_path, workers=2, progress=False
+    )  # the executor, as any sweep
     rows = sw.load_rows(tmp_path / sw.RESULTS_FILE)
     assert outcome.ran == len(cells) == len(rows)
-    assert all(r["status"] == "ok" for r in rows), [r.get("error") for r in rows]
-    assert sorted((r["engine"], r["reference"]) for r in rows) == sorted(
-        (c.engine, c.reference) for c in cells)
-    assert sw.run_sweep(cells, tmp_path, workers=2, progress=False).ran == 0  # resumed: nothing runs twice
+    assert all(r['status'] == 'ok' for r in rows), [r.get('error') for r in rows]
+    assert sorted((r['engine'], r['reference']) for r in rows) == sorted(
+        (c.engine, c.reference) for c in cells
+    )
+    assert (
+        sw.run_sweep(cells, tmp_path, workers=2, progress=False).ran == 0
+    )  # resumed: nothing runs twice
 
     table = report_xr.cross_reference_table(rows)
-    assert table.headers == ["engine", "MuJoCo shell ref. CD_d", "Newton VBD ref. CD_d"]
-    assert [line[0] for line in table.rows] == ["MuJoCo", "Newton (vbd)"]
+    assert table.headers == ['engine', 'MuJoCo shell ref. CD_d', 'Newton VBD ref. CD_d']
+    assert [line[0] for line in table.rows] == ['MuJoCo', 'Newton (vbd)']
     for line, (engine, _) in zip(table.rows, entrants):
         for text, reference in zip(line[1:], xr.REFERENCES):
-            mine = [r for r in rows if r["engine"] == engine and r["reference"] == reference]
-            assert float(text.strip("*").split(" ")[0]) == pytest.approx(stat(mine, "CD").mean, abs=6e-4)
+            mine = [r for r in rows if r['engine'] == engine and r['reference'] == reference]
+            assert float(text.strip('*').split(' ')[0]) == pytest.approx(
+                stat(mine, 'CD').mean, abs=6e-4
+            )
     for column in (1, 2):  # one winner per column, in bold
-        assert sum(line[column].startswith("**") for line in table.rows) == 1
-    cds = np.array([r["CD"] for r in rows])
+        assert sum(line[column].startswith('**') for line in table.rows) == 1
+    cds = np.array([r['CD'] for r in rows])
     assert np.isfinite(cds).all() and (cds > 0).all() and (cds < 0.2).all()
 
     heading, note, section_table = report_xr.cross_reference_section(rows)
-    assert "towel" in heading and "100 Hz" in note and section_table.rows == table.rows
-    assert report_xr.cross_reference_table([{**r, "mode": "paper"} for r in rows]) is None
+    assert 'towel' in heading and '100 Hz' in note and section_table.rows == table.rows
+    assert report_xr.cross_reference_table([{**r, 'mode': 'paper'} for r in rows]) is None
 
 
-@pytest.mark.parametrize("argv,words", [
-    (["--cloth", "silk"], ["--cloth", "invalid choice: 'silk'"]),
-    (["--seeds", "0"], ["--seeds", "0 is outside [1, inf]"]),
-    (["--rate", "-5"], ["--rate", "-5.0 Hz is outside"]),
-])
+@pytest.mark.parametrize(
+    'argv,words',
+    [
+        (['--cloth', 'silk'], ['--cloth', "invalid choice: 'silk'"]),
+        (['--seeds', '0'], ['--seeds', '0 is outside [1, inf]']),
+        (['--rate', '-5'], ['--rate', '-5.0 Hz is outside']),
+    ],
+)
 def test_cross_reference_command_refuses_bad_input_in_one_line(argv, words, capsys, tmp_path):
     from cloth_bench_ros.cli import main
 
     with pytest.raises(SystemExit) as exit_:  # argparse's one-line usage error
-        main(["cross-reference", "--output", str(tmp_path / "x"), *argv])
+        main(['cross-reference', '--output', str(tmp_path / 'x'), *argv])
     assert exit_.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and all(w in err for w in words)

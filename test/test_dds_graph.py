@@ -8,11 +8,11 @@ rosidl's IDL maps them (byte -> octet, uint8[] -> sequence<uint8>, ...), and ros
 project) gives the reference CDR.
 """
 
-import os
 from dataclasses import dataclass, field
+import os
 
-import numpy as np
-import pytest
+from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
+from cloth_bench_ros.studies.processes import run_processes
 from cyclonedds._clayer import ddspy_take
 from cyclonedds.core import InstanceState, SampleState, ViewState
 from cyclonedds.domain import DomainParticipant
@@ -21,40 +21,45 @@ from cyclonedds.idl import types as t
 from cyclonedds.qos import Policy, Qos
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
-from rosbags.typesys import Stores, get_typestore
-
-from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
-from cloth_bench_ros.studies.processes import run_processes
+import numpy as np
+import pytest
+from rosbags.typesys import get_typestore, Stores
 
 # --- the .msg definitions, as rosidl's IDL and rmw_cyclonedds name them -----------------------
 
 
 @dataclass
-class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):  # int32 sec, uint32 nanosec
+class Time(
+    IdlStruct, typename='builtin_interfaces::msg::dds_::Time_'
+):  # int32 sec, uint32 nanosec
     sec: t.int32 = 0
     nanosec: t.uint32 = 0
 
 
 @dataclass
-class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):  # Time stamp, string frame_id
+class Header(IdlStruct, typename='std_msgs::msg::dds_::Header_'):  # Time stamp, string frame_id
     stamp: Time = field(default_factory=Time)
-    frame_id: str = ""
+    frame_id: str = ''
 
 
 @dataclass
-class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):  # builtin_interfaces/Time clock
+class Clock(
+    IdlStruct, typename='rosgraph_msgs::msg::dds_::Clock_'
+):  # builtin_interfaces/Time clock
     clock: Time = field(default_factory=Time)
 
 
 @dataclass
-class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):  # float64 x, y, z
+class Point(IdlStruct, typename='geometry_msgs::msg::dds_::Point_'):  # float64 x, y, z
     x: t.float64 = 0.0
     y: t.float64 = 0.0
     z: t.float64 = 0.0
 
 
 @dataclass
-class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):  # float64 x, y, z, w
+class Quaternion(
+    IdlStruct, typename='geometry_msgs::msg::dds_::Quaternion_'
+):  # float64 x, y, z, w
     x: t.float64 = 0.0
     y: t.float64 = 0.0
     z: t.float64 = 0.0
@@ -62,27 +67,31 @@ class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):  
 
 
 @dataclass
-class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):  # Point position, Quaternion orientation
+class Pose(
+    IdlStruct, typename='geometry_msgs::msg::dds_::Pose_'
+):  # Point position, Quaternion orientation
     position: Point = field(default_factory=Point)
     orientation: Quaternion = field(default_factory=Quaternion)
 
 
 @dataclass
-class PoseArray(IdlStruct, typename="geometry_msgs::msg::dds_::PoseArray_"):  # Header header, Pose[] poses
+class PoseArray(
+    IdlStruct, typename='geometry_msgs::msg::dds_::PoseArray_'
+):  # Header header, Pose[] poses
     header: Header = field(default_factory=Header)
     poses: t.sequence[Pose] = field(default_factory=list)
 
 
 @dataclass
-class PointField(IdlStruct, typename="sensor_msgs::msg::dds_::PointField_"):
-    name: str = ""  # string name, uint32 offset, uint8 datatype, uint32 count
+class PointField(IdlStruct, typename='sensor_msgs::msg::dds_::PointField_'):
+    name: str = ''  # string name, uint32 offset, uint8 datatype, uint32 count
     offset: t.uint32 = 0
     datatype: t.uint8 = 0
     count: t.uint32 = 0
 
 
 @dataclass
-class PointCloud2(IdlStruct, typename="sensor_msgs::msg::dds_::PointCloud2_"):
+class PointCloud2(IdlStruct, typename='sensor_msgs::msg::dds_::PointCloud2_'):
     header: Header = field(default_factory=Header)
     height: t.uint32 = 0
     width: t.uint32 = 0
@@ -95,38 +104,40 @@ class PointCloud2(IdlStruct, typename="sensor_msgs::msg::dds_::PointCloud2_"):
 
 
 @dataclass
-class KeyValue(IdlStruct, typename="diagnostic_msgs::msg::dds_::KeyValue_"):  # string key, string value
-    key: str = ""
-    value: str = ""
+class KeyValue(
+    IdlStruct, typename='diagnostic_msgs::msg::dds_::KeyValue_'
+):  # string key, string value
+    key: str = ''
+    value: str = ''
 
 
 @dataclass
-class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticStatus_"):
+class DiagnosticStatus(IdlStruct, typename='diagnostic_msgs::msg::dds_::DiagnosticStatus_'):
     level: t.byte = 0  # `byte level` in the .msg: octet
-    name: str = ""
-    message: str = ""
-    hardware_id: str = ""
+    name: str = ''
+    message: str = ''
+    hardware_id: str = ''
     values: t.sequence[KeyValue] = field(default_factory=list)
 
 
 @dataclass
-class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticArray_"):
+class DiagnosticArray(IdlStruct, typename='diagnostic_msgs::msg::dds_::DiagnosticArray_'):
     header: Header = field(default_factory=Header)
     status: t.sequence[DiagnosticStatus] = field(default_factory=list)
 
 
 @dataclass
-class PointFieldOctet(IdlStruct, typename="sensor_msgs::msg::dds_::PointField_"):
+class PointFieldOctet(IdlStruct, typename='sensor_msgs::msg::dds_::PointField_'):
     """A wrong declaration: `datatype` as octet where rosidl says uint8."""
 
-    name: str = ""
+    name: str = ''
     offset: t.uint32 = 0
     datatype: t.byte = 0
     count: t.uint32 = 0
 
 
 @dataclass
-class PointCloud2Octet(IdlStruct, typename="sensor_msgs::msg::dds_::PointCloud2_"):
+class PointCloud2Octet(IdlStruct, typename='sensor_msgs::msg::dds_::PointCloud2_'):
     header: Header = field(default_factory=Header)
     height: t.uint32 = 0
     width: t.uint32 = 0
@@ -140,12 +151,12 @@ class PointCloud2Octet(IdlStruct, typename="sensor_msgs::msg::dds_::PointCloud2_
 
 # --- the run ---------------------------------------------------------------------------------
 
-ENGINES = ["mujoco", "bullet"]
+ENGINES = ['mujoco', 'bullet']
 TOPICS = {  # DDS topic: (type, ROS type)
-    "rt/cloth_bench/metrics": (DiagnosticArray, "diagnostic_msgs/msg/DiagnosticArray"),
-    "rt/cloth_bench/mujoco/cloud": (PointCloud2, "sensor_msgs/msg/PointCloud2"),
-    "rt/cloth_bench/targets": (PoseArray, "geometry_msgs/msg/PoseArray"),
-    "rt/clock": (Clock, "rosgraph_msgs/msg/Clock"),
+    'rt/cloth_bench/metrics': (DiagnosticArray, 'diagnostic_msgs/msg/DiagnosticArray'),
+    'rt/cloth_bench/mujoco/cloud': (PointCloud2, 'sensor_msgs/msg/PointCloud2'),
+    'rt/cloth_bench/targets': (PoseArray, 'geometry_msgs/msg/PoseArray'),
+    'rt/clock': (Clock, 'rosgraph_msgs/msg/Clock'),
 }
 ROSBAGS = get_typestore(Stores.ROS2_HUMBLE)
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -155,38 +166,50 @@ def _config(bag, out) -> RunConfig:
     return RunConfig(bag=bag, engines=ENGINES, rate_hz=50.0, grid=(6, 8), output_dir=out)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def graph_run(hanging_bag, tmp_path_factory):
     """One four-kinds-of-process run with plain readers on its topics; their raw payloads."""
-    participant = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))
+    participant = DomainParticipant(int(os.environ['ROS_DOMAIN_ID']))
     qos = Qos(Policy.Reliability.Reliable(max_blocking_time=10**9), Policy.History.KeepAll)
-    readers = {name: DataReader(participant, Topic(participant, name, cls), qos=qos)
-               for name, (cls, _) in TOPICS.items()}
-    wrong = DataReader(participant, Topic(participant, "rt/cloth_bench/bullet/cloud", PointCloud2Octet), qos=qos)
-    right = DataReader(participant, Topic(participant, "rt/cloth_bench/bullet/cloud", PointCloud2), qos=qos)
-    summary = run_processes(_config(hanging_bag, tmp_path_factory.mktemp("processes")))
+    readers = {
+        name: DataReader(participant, Topic(participant, name, cls), qos=qos)
+        for name, (cls, _) in TOPICS.items()
+    }
+    wrong = DataReader(
+        participant, Topic(participant, 'rt/cloth_bench/bullet/cloud', PointCloud2Octet), qos=qos
+    )
+    right = DataReader(
+        participant, Topic(participant, 'rt/cloth_bench/bullet/cloud', PointCloud2), qos=qos
+    )
+    summary = run_processes(_config(hanging_bag, tmp_path_factory.mktemp('processes')))
     payloads = {}
     for name, reader in readers.items():
         samples = ddspy_take(reader._ref, _ANY, 100_000)
         payloads[name] = [data for data, info in samples if info.valid_data]
-    matched = {"wrong": wrong.get_subscription_matched_status().total_count,
-               "right": right.get_subscription_matched_status().total_count}
+    matched = {
+        'wrong': wrong.get_subscription_matched_status().total_count,
+        'right': right.get_subscription_matched_status().total_count,
+    }
     return summary, payloads, matched
 
 
 def test_four_kinds_of_process_give_the_in_process_metrics(graph_run, hanging_bag, tmp_path):
     summary, _, _ = graph_run
-    reference = run_pipeline(_config(hanging_bag, tmp_path / "in_process"))
+    reference = run_pipeline(_config(hanging_bag, tmp_path / 'in_process'))
     for engine in ENGINES:
-        ours, theirs = summary["engines"][engine], reference["engines"][engine]
-        assert (ours["CD_d"], ours["HD_d"], ours["L_s"]) == (theirs["CD_d"], theirs["HD_d"], theirs["L_s"])
-        assert ours["frames_scored"] == theirs["frames_scored"] == 132
-        assert ours["step_time"]["count"] == theirs["step_time"]["count"] == 370  # 7.4 s at 50 Hz
-    assert summary["real"] == reference["real"]
+        ours, theirs = summary['engines'][engine], reference['engines'][engine]
+        assert (ours['CD_d'], ours['HD_d'], ours['L_s']) == (
+            theirs['CD_d'],
+            theirs['HD_d'],
+            theirs['L_s'],
+        )
+        assert ours['frames_scored'] == theirs['frames_scored'] == 132
+        assert ours['step_time']['count'] == theirs['step_time']['count'] == 370  # 7.4 s at 50 Hz
+    assert summary['real'] == reference['real']
 
 
 def _to_rosbags(sample, msgtype: str):
-    """The rosbags message with the field values a plain Cyclone reader decoded."""
+    """Return the rosbags message with the field values a plain Cyclone reader decoded."""
     values = {}
     for name, (kind, detail) in ROSBAGS.fielddefs[msgtype][1]:
         value = getattr(sample, name)
@@ -196,7 +219,7 @@ def _to_rosbags(sample, msgtype: str):
             (inner_kind, inner), _ = detail
             if inner_kind == 2:
                 value = [_to_rosbags(v, inner) for v in value]
-            elif inner[0] == "uint8":
+            elif inner[0] == 'uint8':
                 value = np.array(value, dtype=np.uint8)
         values[name] = value
     return ROSBAGS.types[msgtype](**values)
@@ -204,13 +227,19 @@ def _to_rosbags(sample, msgtype: str):
 
 def test_a_plain_dds_reader_receives_the_graph_and_its_bytes_are_rosbags_cdr(graph_run):
     summary, payloads, matched = graph_run
-    metrics = [DiagnosticArray.deserialize(p) for p in payloads["rt/cloth_bench/metrics"]]
-    final = {s.hardware_id: {kv.key: kv.value for kv in s.values}
-             for m in metrics for s in m.status if s.name.endswith("/summary")}
+    metrics = [DiagnosticArray.deserialize(p) for p in payloads['rt/cloth_bench/metrics']]
+    final = {
+        s.hardware_id: {kv.key: kv.value for kv in s.values}
+        for m in metrics
+        for s in m.status
+        if s.name.endswith('/summary')
+    }
     assert set(final) == set(ENGINES)
-    assert float(final["mujoco"]["CD_d"]) == pytest.approx(summary["engines"]["mujoco"]["CD_d"], rel=1e-12)
-    clouds = [PointCloud2.deserialize(p) for p in payloads["rt/cloth_bench/mujoco/cloud"]]
-    assert len(clouds) == 371 and clouds[-1].width == 48 and clouds[-1].header.frame_id == "world"
+    assert float(final['mujoco']['CD_d']) == pytest.approx(
+        summary['engines']['mujoco']['CD_d'], rel=1e-12
+    )
+    clouds = [PointCloud2.deserialize(p) for p in payloads['rt/cloth_bench/mujoco/cloud']]
+    assert len(clouds) == 371 and clouds[-1].width == 48 and clouds[-1].header.frame_id == 'world'
     xyz = np.frombuffer(bytes(clouds[-1].data), np.float32).reshape(48, 3)
     assert np.isfinite(xyz).all() and 0.0 < xyz[:, 2].max() < 2.0
     for topic, (cls, msgtype) in TOPICS.items():
@@ -218,9 +247,11 @@ def test_a_plain_dds_reader_receives_the_graph_and_its_bytes_are_rosbags_cdr(gra
         for payload in payloads[topic][:3] + payloads[topic][-3:]:
             sample = cls.deserialize(payload)
             reference = bytes(ROSBAGS.serialize_cdr(_to_rosbags(sample, msgtype), msgtype))
-            padding = payload[len(reference):]
+            padding = payload[len(reference) :]
             assert payload[: len(reference)] == reference and padding == bytes(len(padding)), topic
             assert len(payload) % 4 == 0 and len(padding) < 4
-            assert payload == sample.serialize().ljust(len(payload), b"\0")  # Cyclone's typed writer, too
+            assert payload == sample.serialize().ljust(
+                len(payload), b'\0'
+            )  # Cyclone's typed writer, too
     # XTypes type information travels: declared with octet where rosidl says uint8, no match
-    assert matched == {"wrong": 0, "right": 1}
+    assert matched == {'wrong': 0, 'right': 1}

@@ -1,96 +1,161 @@
 """Parameter identification: recovery of known parameters (both samplers), resume, failed trials, the preset
-file, the report section and user errors; real MuJoCo and PyBullet, real Optuna, a real Dask LocalCluster."""
+file, the report section and user errors; real MuJoCo and PyBullet, real Optuna, a real Dask LocalCluster.
+"""
 
 from __future__ import annotations
 
 import json
 import math
 
-import pytest
-
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines.presets import load_preset
-from cloth_bench_ros.studies.identify import IdentifySpec, identify, search_space
-from cloth_bench_ros.studies.objective import Trial, evaluate
+from cloth_bench_ros.studies.identify import identify, IdentifySpec, search_space
+from cloth_bench_ros.studies.objective import evaluate, Trial
 from identify_target import write_engine_target_bag
+import pytest
 
 GRID = (5, 6)
-TRUTH = {"damping": 3.0, "young": 1.0e5}  # the preset has 0.939 and 32955: about 3x off each
-FIXED = {"timestep": 0.01}  # coarse internal step: a short, cheap trajectory (45 frames, 1.5 s of the fling)
+TRUTH = {'damping': 3.0, 'young': 1.0e5}  # the preset has 0.939 and 32955: about 3x off each
+FIXED = {
+    'timestep': 0.01
+}  # coarse internal step: a short, cheap trajectory (45 frames, 1.5 s of the fling)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def target(tmp_path_factory):
-    return write_engine_target_bag(tmp_path_factory.mktemp("ident") / "target", "mujoco", {**TRUTH, **FIXED},
-                                   GRID, 45)
+    return write_engine_target_bag(
+        tmp_path_factory.mktemp('ident') / 'target', 'mujoco', {**TRUTH, **FIXED}, GRID, 45
+    )
 
 
 def test_the_objective_is_zero_at_the_truth_and_grows_away_from_it(target):
-    at = evaluate(Trial("mujoco", "towel", "dynamic", str(target), tuple(sorted({**TRUTH, **FIXED}.items())),
-                        grid=GRID))
-    off = evaluate(Trial("mujoco", "towel", "dynamic", str(target), tuple(sorted({**FIXED, "damping": 1.0}.items())),
-                         grid=GRID))
-    assert at["status"] == off["status"] == "ok" and at["frames"] == 45
-    assert at["value"] < 1e-7 < 1e-6 < off["value"]  # float32 clouds: the noise floor is ~2e-8 m
+    at = evaluate(
+        Trial(
+            'mujoco',
+            'towel',
+            'dynamic',
+            str(target),
+            tuple(sorted({**TRUTH, **FIXED}.items())),
+            grid=GRID,
+        )
+    )
+    off = evaluate(
+        Trial(
+            'mujoco',
+            'towel',
+            'dynamic',
+            str(target),
+            tuple(sorted({**FIXED, 'damping': 1.0}.items())),
+            grid=GRID,
+        )
+    )
+    assert at['status'] == off['status'] == 'ok' and at['frames'] == 45
+    assert at['value'] < 1e-7 < 1e-6 < off['value']  # float32 clouds: the noise floor is ~2e-8 m
 
 
 def test_identification_recovers_known_parameters_with_both_samplers_and_resumes(target, tmp_path):
-    spec = IdentifySpec("mujoco", "towel", "dynamic", target, tmp_path, "both", 50, "cd", ["damping", "young"],
-                        grid=GRID, fixed=dict(FIXED), span=5.0, batch=2, validate_seeds=0)
+    spec = IdentifySpec(
+        'mujoco',
+        'towel',
+        'dynamic',
+        target,
+        tmp_path,
+        'both',
+        50,
+        'cd',
+        ['damping', 'young'],
+        grid=GRID,
+        fixed=dict(FIXED),
+        span=5.0,
+        batch=2,
+        validate_seeds=0,
+    )
     outcome = identify(spec, workers=2, progress=False)
     s = outcome.summary
-    assert s["preset_value"] > 1e-5
-    for sampler in ("cmaes", "tpe"):
-        result = s["per_sampler"][sampler]
+    assert s['preset_value'] > 1e-5
+    for sampler in ('cmaes', 'tpe'):
+        result = s['per_sampler'][sampler]
         # Tolerances: within 50 trials (batches of 2 in flight, so the order of results varies), each
         # sampler brings CD below 40 % of the preset's and within 40 % of each true parameter (the
         # preset is 200 % off); the kept result is the better of the two and within 20 %.
-        assert result["value"] < 0.4 * s["preset_value"], (sampler, result)
+        assert result['value'] < 0.4 * s['preset_value'], (sampler, result)
         for name, truth in TRUTH.items():
-            assert abs(result["params"][name] / truth - 1) < 0.4, (sampler, name, result["params"])
-        assert len(result["convergence"]) == 50 and set(result["importance"]) == set(TRUTH)
-    assert s["value"] == min(s["per_sampler"][x]["value"] for x in ("cmaes", "tpe"))
-    assert all(abs(s["params"][name] / truth - 1) < 0.2 for name, truth in TRUTH.items()), s["params"]
+            assert abs(result['params'][name] / truth - 1) < 0.4, (sampler, name, result['params'])
+        assert len(result['convergence']) == 50 and set(result['importance']) == set(TRUTH)
+    assert s['value'] == min(s['per_sampler'][x]['value'] for x in ('cmaes', 'tpe'))
+    assert all(abs(s['params'][name] / truth - 1) < 0.2 for name, truth in TRUTH.items()), s[
+        'params'
+    ]
     # The preset file is in config/presets format, with provenance, and loads as `run --presets` loads it.
-    preset = load_preset("mujoco", "towel", "dynamic", tmp_path)
-    assert preset["damping"] == pytest.approx(s["params"]["damping"]) and preset["timestep"] == 0.01
+    preset = load_preset('mujoco', 'towel', 'dynamic', tmp_path)
+    assert (
+        preset['damping'] == pytest.approx(s['params']['damping']) and preset['timestep'] == 0.01
+    )
     text = outcome.preset_file.read_text()
-    assert "provenance:" in text and "cd" in text.lower() and "trials" in text
+    assert 'provenance:' in text and 'cd' in text.lower() and 'trials' in text
     # Resume: more trials run only the missing ones, from the journal.
-    before = len((tmp_path / "trials.jsonl").read_text().splitlines())
-    identify(IdentifySpec(**{**spec.__dict__, "trials": 53, "sampler": "tpe"}), workers=1, progress=False)
-    assert len((tmp_path / "trials.jsonl").read_text().splitlines()) == before + 3
+    before = len((tmp_path / 'trials.jsonl').read_text().splitlines())
+    identify(
+        IdentifySpec(**{**spec.__dict__, 'trials': 53, 'sampler': 'tpe'}),
+        workers=1,
+        progress=False,
+    )
+    assert len((tmp_path / 'trials.jsonl').read_text().splitlines()) == before + 3
     # The report includes the identification.
-    assert main(["report", str(tmp_path)]) == 0
-    md = (tmp_path / "report" / "report.md").read_text()
-    assert "Parameter identification" in md and (tmp_path / "report" / "convergence_mujoco_towel_dynamic.png").is_file()
+    assert main(['report', str(tmp_path)]) == 0
+    md = (tmp_path / 'report' / 'report.md').read_text()
+    assert (
+        'Parameter identification' in md
+        and (tmp_path / 'report' / 'convergence_mujoco_towel_dynamic.png').is_file()
+    )
 
 
 def test_a_diverging_trial_is_a_failed_trial_with_its_reason_and_step(target):
     # PyBullet with one 0.1 s step per target explodes during the fling.
-    r = evaluate(Trial("bullet", "towel", "dynamic", str(target), (("substeps", 1), ("timestep", 0.1)),
-                       rate_hz=10.0))
-    assert r["status"] == "diverged" and r["reason"] and r["step"] > 0 and math.isnan(r["value"])
+    r = evaluate(
+        Trial(
+            'bullet',
+            'towel',
+            'dynamic',
+            str(target),
+            (('substeps', 1), ('timestep', 0.1)),
+            rate_hz=10.0,
+        )
+    )
+    assert r['status'] == 'diverged' and r['reason'] and r['step'] > 0 and math.isnan(r['value'])
 
 
 def test_search_space_is_the_schema_range_log_scaled_around_the_preset_where_it_spans_decades():
-    space = search_space("mujoco", ["young", "poisson"], {"young": 30000.0, "poisson": 0.45}, 10.0)
-    assert (space["young"].low, space["young"].high, space["young"].log) == (3000.0, 300000.0, True)
-    assert (space["poisson"].low, space["poisson"].high, space["poisson"].log) == (0.0, 0.499, False)
-    with pytest.raises(ValueError, match="not a number with a range"):
-        search_space("mujoco", ["self_collision"], {}, 10.0)
+    space = search_space('mujoco', ['young', 'poisson'], {'young': 30000.0, 'poisson': 0.45}, 10.0)
+    assert (space['young'].low, space['young'].high, space['young'].log) == (
+        3000.0,
+        300000.0,
+        True,
+    )
+    assert (space['poisson'].low, space['poisson'].high, space['poisson'].log) == (
+        0.0,
+        0.499,
+        False,
+    )
+    with pytest.raises(ValueError, match='not a number with a range'):
+        search_space('mujoco', ['self_collision'], {}, 10.0)
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--params", "nope"], "unknown mujoco parameter nope"),
-    (["--trials", "0"], "--trials: 0 is outside [1, inf]"),
-    (["--span", "1"], "--span: 1.0 is outside (1, inf]"),
-    (["--span", "nan"], "--span: nan is not a finite number"),
-    (["--cloth", "silk"], "--cloth: invalid choice: 'silk'"),
-])
+@pytest.mark.parametrize(
+    'argv, message',
+    [
+        (['--params', 'nope'], 'unknown mujoco parameter nope'),
+        (['--trials', '0'], '--trials: 0 is outside [1, inf]'),
+        (['--span', '1'], '--span: 1.0 is outside (1, inf]'),
+        (['--span', 'nan'], '--span: nan is not a finite number'),
+        (['--cloth', 'silk'], "--cloth: invalid choice: 'silk'"),
+    ],
+)
 def test_cli_identify_user_errors_are_one_line(target, tmp_path, capsys, argv, message):
     try:
-        code = main(["identify", "--bag", str(target), "--output", str(tmp_path), "--no-progress", *argv])
+        code = main(
+            ['identify', '--bag', str(target), '--output', str(tmp_path), '--no-progress', *argv]
+        )
     except SystemExit as exc:  # argparse's own usage errors
         code = exc.code
     err = capsys.readouterr().err
@@ -98,25 +163,54 @@ def test_cli_identify_user_errors_are_one_line(target, tmp_path, capsys, argv, m
 
 
 def test_cli_identify_gp_without_pytorch_is_one_line(target, tmp_path, capsys):
-    pytest.importorskip("optuna")
+    pytest.importorskip('optuna')
     try:
         import torch  # noqa: F401
-        pytest.skip("PyTorch is installed here: GPSampler works")
+
+        pytest.skip('PyTorch is installed here: GPSampler works')
     except ImportError:
         pass
-    code = main(["identify", "--bag", str(target), "--output", str(tmp_path), "--sampler", "gp", "--no-progress"])
+    code = main(
+        [
+            'identify',
+            '--bag',
+            str(target),
+            '--output',
+            str(tmp_path),
+            '--sampler',
+            'gp',
+            '--no-progress',
+        ]
+    )
     err = capsys.readouterr().err
-    assert code == 2 and "needs PyTorch" in err and len(err.strip().splitlines()) == 1
+    assert code == 2 and 'needs PyTorch' in err and len(err.strip().splitlines()) == 1
 
 
-@pytest.mark.parametrize("content, message", [
-    ("[1, 2]", "must be a JSON object"),
-    ('{"engine": "mujoco"}', "missing or not"),
-    (json.dumps({"engine": "../x", "cloth": "towel", "primitive": "dynamic", "objective": "cd", "params": {},
-                 "per_sampler": {}, "preset_params": {}, "validation": [], "samplers": []}), "not a safe file name"),
-])
+@pytest.mark.parametrize(
+    'content, message',
+    [
+        ('[1, 2]', 'must be a JSON object'),
+        ('{"engine": "mujoco"}', 'missing or not'),
+        (
+            json.dumps(
+                {
+                    'engine': '../x',
+                    'cloth': 'towel',
+                    'primitive': 'dynamic',
+                    'objective': 'cd',
+                    'params': {},
+                    'per_sampler': {},
+                    'preset_params': {},
+                    'validation': [],
+                    'samplers': [],
+                }
+            ),
+            'not a safe file name',
+        ),
+    ],
+)
 def test_report_refuses_a_malformed_identification_in_one_line(tmp_path, capsys, content, message):
-    (tmp_path / "identification.json").write_text(content)
-    assert main(["report", str(tmp_path)]) == 2
+    (tmp_path / 'identification.json').write_text(content)
+    assert main(['report', str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1

@@ -11,60 +11,62 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import cloth_bench_ros
 import pytest
 
-import cloth_bench_ros
-
 PACKAGE = Path(cloth_bench_ros.__file__).parent
-LAYERS = ("core", "engines", "data", "runtime", "nodes", "studies", "report", "cli")
+LAYERS = ('core', 'engines', 'data', 'runtime', 'nodes', 'studies', 'report', 'cli')
 
 
 def module_name(path: Path) -> str:
-    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+    parts = path.relative_to(PACKAGE.parent).with_suffix('').parts
+    return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
 
 
 def all_modules() -> dict[str, Path]:
-    return {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+    return {module_name(p): p for p in sorted(PACKAGE.rglob('*.py'))}
 
 
 def layer(module: str) -> str:
-    """The layer of a module of the package: its subpackage, cli, or core for the top-level modules."""
-    parts = module.split(".")
+    """Return the layer of a module of the package: its subpackage, cli, or core for the top-level modules."""
+    parts = module.split('.')
     if len(parts) > 1 and parts[1] in LAYERS:
         return parts[1]
-    return "core"
+    return 'core'
 
 
 def imports_of(module: str, path: Path, modules: dict[str, Path]) -> dict[str, int]:
-    """The package's modules `module` imports (most specific name that is a module) -> line."""
-    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    """Return the package's modules `module` imports (most specific name that is a module) -> line."""
+    package = module if path.name == '__init__.py' else module.rpartition('.')[0]
     found: dict[str, int] = {}
 
     def add(name: str, line: int) -> None:
         while name and name not in modules:
-            name = name.rpartition(".")[0]
+            name = name.rpartition('.')[0]
         if name and name != module:
             found.setdefault(name, line)
 
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.Import):
             for alias in node.names:
-                if alias.name.split(".")[0] == "cloth_bench_ros":
+                if alias.name.split('.')[0] == 'cloth_bench_ros':
                     add(alias.name, node.lineno)
         elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
+            base = node.module or ''
             if node.level:
-                anchor = package.split(".")[: len(package.split(".")) - (node.level - 1)]
-                base = ".".join(anchor + ([base] if base else []))
-            if base.split(".")[0] != "cloth_bench_ros":
+                anchor = package.split('.')[: len(package.split('.')) - (node.level - 1)]
+                base = '.'.join(anchor + ([base] if base else []))
+            if base.split('.')[0] != 'cloth_bench_ros':
                 continue
             for alias in node.names:  # `from package import module` imports the module
-                add(f"{base}.{alias.name}" if f"{base}.{alias.name}" in modules else base, node.lineno)
+                add(
+                    f'{base}.{alias.name}' if f'{base}.{alias.name}' in modules else base,
+                    node.lineno,
+                )
     return found
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def graph() -> dict[str, dict[str, int]]:
     modules = all_modules()
     return {m: imports_of(m, p, modules) for m, p in modules.items()}
@@ -75,26 +77,34 @@ def test_the_package_has_every_layer(graph):
 
 
 def test_imports_only_go_downwards(graph):
-    upward = [f"{m} (line {line}) imports {target}: {layer(m)} may not import {layer(target)}"
-              for m, targets in sorted(graph.items()) for target, line in sorted(targets.items())
-              if LAYERS.index(layer(target)) > LAYERS.index(layer(m))]
-    assert not upward, "\n".join(upward)
+    upward = [
+        f'{m} (line {line}) imports {target}: {layer(m)} may not import {layer(target)}'
+        for m, targets in sorted(graph.items())
+        for target, line in sorted(targets.items())
+        if LAYERS.index(layer(target)) > LAYERS.index(layer(m))
+    ]
+    assert not upward, '\n'.join(upward)
 
 
 def test_the_report_runs_nothing(graph):
     """A report module imports no study's run_* function: it renders results others produced."""
     modules = all_modules()
     running = []
-    for m in (m for m in graph if layer(m) == "report"):
+    for m in (m for m in graph if layer(m) == 'report'):
         for node in ast.walk(ast.parse(modules[m].read_text())):
-            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("cloth_bench_ros.studies"):
-                if any(a.name.startswith("run") for a in node.names):
-                    running.append(f"{m} (line {node.lineno}) imports {[a.name for a in node.names]} from {node.module}")
-    assert not running, "\n".join(running)
+            if isinstance(node, ast.ImportFrom) and (node.module or '').startswith(
+                'cloth_bench_ros.studies'
+            ):
+                if any(a.name.startswith('run') for a in node.names):
+                    running.append(
+                        f'{m} (line {node.lineno}) imports {[a.name for a in node.names]} from'
+                        f' {node.module}'
+                    )
+    assert not running, '\n'.join(running)
 
 
 def circles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
-    """The strongly connected components of more than one module (Tarjan's algorithm)."""
+    """Return the strongly connected components of more than one module (Tarjan's algorithm)."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -130,16 +140,19 @@ def circles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
 
 def test_no_circles(graph):
     found = circles(graph)
-    assert not found, "\n".join(" <-> ".join(c) for c in found)
+    assert not found, '\n'.join(' <-> '.join(c) for c in found)
 
 
 def test_the_checks_find_what_they_look_for():
     """The checks themselves: an upward import, a circle and a report that runs are caught."""
-    graph = {"cloth_bench_ros.core.a": {"cloth_bench_ros.report.b": 1},
-             "cloth_bench_ros.report.b": {"cloth_bench_ros.core.a": 1}, "cloth_bench_ros.cli": {}}
-    assert circles(graph) == [["cloth_bench_ros.core.a", "cloth_bench_ros.report.b"]]
-    assert layer("cloth_bench_ros.safe_io") == "core" and layer("cloth_bench_ros.cli") == "cli"
-    with pytest.raises(AssertionError, match="core may not import report"):
+    graph = {
+        'cloth_bench_ros.core.a': {'cloth_bench_ros.report.b': 1},
+        'cloth_bench_ros.report.b': {'cloth_bench_ros.core.a': 1},
+        'cloth_bench_ros.cli': {},
+    }
+    assert circles(graph) == [['cloth_bench_ros.core.a', 'cloth_bench_ros.report.b']]
+    assert layer('cloth_bench_ros.safe_io') == 'core' and layer('cloth_bench_ros.cli') == 'cli'
+    with pytest.raises(AssertionError, match='core may not import report'):
         test_imports_only_go_downwards(graph)
-    with pytest.raises(AssertionError, match="<->"):
+    with pytest.raises(AssertionError, match='<->'):
         test_no_circles(graph)

@@ -1,11 +1,15 @@
 """The metrics equal a brute-force computation of docs/benchmark.md section 3."""
 
+from cloth_bench_ros.core.metrics import (
+    chamfer_l1,
+    hausdorff_l1,
+    latency_stats,
+    RealCloud,
+    stability,
+    StabilityAccumulator,
+)
 import numpy as np
 import pytest
-
-from cloth_bench_ros.core.metrics import (
-    RealCloud, StabilityAccumulator, chamfer_l1, hausdorff_l1, latency_stats, stability,
-)
 
 
 def brute_force(V, P):
@@ -13,7 +17,7 @@ def brute_force(V, P):
     return d.mean(), d.max()
 
 
-@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize('seed', range(5))
 def test_chamfer_and_hausdorff_equal_brute_force_on_random_clouds(seed):
     rng = np.random.default_rng(seed)
     V = rng.normal(size=(rng.integers(1, 200), 3))
@@ -58,7 +62,7 @@ def test_real_cloud_scores_several_meshes_on_one_index():
         assert (cd, hd) == pytest.approx(brute_force(V, P), rel=1e-12)
 
 
-@pytest.mark.parametrize("bad", [np.zeros((0, 3)), np.zeros((4, 2)), np.array([[0, 0, np.nan]])])
+@pytest.mark.parametrize('bad', [np.zeros((0, 3)), np.zeros((4, 2)), np.array([[0, 0, np.nan]])])
 def test_bad_clouds_are_refused(bad):
     with pytest.raises(ValueError):
         chamfer_l1(bad, np.zeros((3, 3)))
@@ -96,5 +100,7 @@ def test_online_stability_equals_batch():
 def test_latency_stats():
     s = latency_stats(np.arange(1, 101) / 1000)
     assert s.count == 100 and s.max == pytest.approx(0.1) and s.mean == pytest.approx(0.0505)
-    assert s.p50 == pytest.approx(0.0505) and s.p99 == pytest.approx(np.percentile(np.arange(1, 101) / 1000, 99))
+    assert s.p50 == pytest.approx(0.0505) and s.p99 == pytest.approx(
+        np.percentile(np.arange(1, 101) / 1000, 99)
+    )
     assert np.isnan(latency_stats(np.array([])).mean)

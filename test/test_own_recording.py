@@ -5,51 +5,71 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
-
+from camera_recording import CAMERA_TOPIC, IR_TOPIC, make_camera_recording
 from cloth_bench_ros import cli
 from cloth_bench_ros.paths import bundled_bag
-from camera_recording import CAMERA_TOPIC, IR_TOPIC, make_camera_recording
+import pytest
 
-FAST = ["--grid", "6x8", "--align-step", "0.1"]  # coarse mesh, reduced alignment search
+FAST = ['--grid', '6x8', '--align-step', '0.1']  # coarse mesh, reduced alignment search
 
 
 def _run(tmp_path: Path, name: str, *args: str) -> dict:
     out = tmp_path / name
-    assert cli.main(["run", "--output", str(out), *FAST, *args]) == 0
-    return json.loads((out / "summary.json").read_text())
+    assert cli.main(['run', '--output', str(out), *FAST, *args]) == 0
+    return json.loads((out / 'summary.json').read_text())
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def camera_bag(tmp_path_factory) -> tuple[Path, int]:
-    path = tmp_path_factory.mktemp("camera") / "kinect"
-    return path, make_camera_recording(bundled_bag("towel", "dynamic"), path)
+    path = tmp_path_factory.mktemp('camera') / 'kinect'
+    return path, make_camera_recording(bundled_bag('towel', 'dynamic'), path)
 
 
 def test_camera_recording_is_scored_with_automatic_alignment(camera_bag, tmp_path, capsys):
     path, true_start = camera_bag
-    original = _run(tmp_path, "original", "--bag", str(bundled_bag("towel", "dynamic")))
-    cmp_bag = tmp_path / "comparison"
-    summary = _run(tmp_path, "camera", "--bag", str(path), "--cloth", "towel", "--primitive", "dynamic",
-                   "--topic", CAMERA_TOPIC, "--change-of-phase-frame", "99",
-                   "--record-comparison", str(cmp_bag), "--figures")
+    original = _run(tmp_path, 'original', '--bag', str(bundled_bag('towel', 'dynamic')))
+    cmp_bag = tmp_path / 'comparison'
+    summary = _run(
+        tmp_path,
+        'camera',
+        '--bag',
+        str(path),
+        '--cloth',
+        'towel',
+        '--primitive',
+        'dynamic',
+        '--topic',
+        CAMERA_TOPIC,
+        '--change-of-phase-frame',
+        '99',
+        '--record-comparison',
+        str(cmp_bag),
+        '--figures',
+    )
     printed = capsys.readouterr().out
-    acc = summary["real"]["accounting"]
-    assert acc["adds_up"] and acc["frames_in_bag"] == 137  # 5 frames of rest + the 132 of the trial
-    assert acc["scored"] >= 0.95 * acc["frames_in_bag"]
-    start = summary["real"]["alignment"]
-    assert start["method"].startswith("automatic")
-    assert abs(start["bag_ns"] - true_start) < 1e9 / 30, (start["bag_ns"] - true_start) / 1e6
-    cd, cd0 = summary["engines"]["mujoco"]["CD_d"], original["engines"]["mujoco"]["CD_d"]
+    acc = summary['real']['accounting']
+    assert (
+        acc['adds_up'] and acc['frames_in_bag'] == 137
+    )  # 5 frames of rest + the 132 of the trial
+    assert acc['scored'] >= 0.95 * acc['frames_in_bag']
+    start = summary['real']['alignment']
+    assert start['method'].startswith('automatic')
+    assert abs(start['bag_ns'] - true_start) < 1e9 / 30, (start['bag_ns'] - true_start) / 1e6
+    cd, cd0 = summary['engines']['mujoco']['CD_d'], original['engines']['mujoco']['CD_d']
     assert abs(cd - cd0) <= 0.10 * cd0, (cd, cd0)
-    cleaning = summary["real"]["cleaning"]
-    assert cleaning["outside_box"] > 0 and cleaning["table_plane"] > 0 and cleaning["non_finite"] > 0
-    assert cleaning["settings"]["table_plane"] is True and cleaning["settings"]["sor_std_ratio"] == 3.0
-    assert summary["real"]["frames_from"] == "tf from /tf_static"
-    assert "real frames: 137 on the topic = " in printed and "(adds up)" in printed
-    assert "automatic (reference simulation), precision +/-" in printed
-    _check_comparison_bag(cmp_bag, acc["scored"])
-    _check_figures(tmp_path / "camera", summary)
+    cleaning = summary['real']['cleaning']
+    assert (
+        cleaning['outside_box'] > 0 and cleaning['table_plane'] > 0 and cleaning['non_finite'] > 0
+    )
+    assert (
+        cleaning['settings']['table_plane'] is True
+        and cleaning['settings']['sor_std_ratio'] == 3.0
+    )
+    assert summary['real']['frames_from'] == 'tf from /tf_static'
+    assert 'real frames: 137 on the topic = ' in printed and '(adds up)' in printed
+    assert 'automatic (reference simulation), precision +/-' in printed
+    _check_comparison_bag(cmp_bag, acc['scored'])
+    _check_figures(tmp_path / 'camera', summary)
 
 
 def _check_comparison_bag(path: Path, frames: int) -> None:
@@ -58,23 +78,30 @@ def _check_comparison_bag(path: Path, frames: int) -> None:
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.highlevel import AnyReader
 
-    topics = {"/tf_static", "/cloth_bench/comparison/real/cloud", "/cloth_bench/comparison/targets",
-              "/cloth_bench/comparison/metrics", "/cloth_bench/comparison/mujoco/cloud",
-              "/cloth_bench/comparison/mujoco/mesh"}
+    topics = {
+        '/tf_static',
+        '/cloth_bench/comparison/real/cloud',
+        '/cloth_bench/comparison/targets',
+        '/cloth_bench/comparison/metrics',
+        '/cloth_bench/comparison/mujoco/cloud',
+        '/cloth_bench/comparison/mujoco/mesh',
+    }
     with AnyReader([path]) as reader:
         seen: dict[str, int] = {}
         for conn, _, raw in reader.messages():
             msg = reader.deserialize(raw, conn.msgtype)
             seen[conn.topic] = seen.get(conn.topic, 0) + 1
-            if conn.topic.endswith("/mesh"):
+            if conn.topic.endswith('/mesh'):
                 assert msg.type == 11 and len(msg.points) == 3 * 2 * 5 * 7 and msg.color.r == 1.0
-    assert set(seen) == topics and seen["/cloth_bench/comparison/real/cloud"] == frames
+    assert set(seen) == topics and seen['/cloth_bench/comparison/real/cloud'] == frames
     decoded: dict[str, int] = {}
-    with (path / f"{path.name}_0.mcap").open("rb") as f:
-        for _, channel, _, msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+    with (path / f'{path.name}_0.mcap').open('rb') as f:
+        for _, channel, _, msg in make_reader(
+            f, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
             decoded[channel.topic] = decoded.get(channel.topic, 0) + 1
-            assert channel.metadata["topic_type_hash"].startswith("RIHS01_")
-            if channel.topic == "/cloth_bench/comparison/targets":
+            assert channel.metadata['topic_type_hash'].startswith('RIHS01_')
+            if channel.topic == '/cloth_bench/comparison/targets':
                 assert len(msg.poses) == 2
     assert decoded == seen
 
@@ -82,54 +109,81 @@ def _check_comparison_bag(path: Path, frames: int) -> None:
 def _check_figures(out: Path, summary: dict) -> None:
     from PIL import Image
 
-    comparison = summary["comparison"]
-    assert comparison["figure_panels"] == [1, 4]  # one engine, the four time steps of Fig. 4
-    figure = Path(comparison["figure"])
+    comparison = summary['comparison']
+    assert comparison['figure_panels'] == [1, 4]  # one engine, the four time steps of Fig. 4
+    figure = Path(comparison['figure'])
     assert figure.stat().st_size > 0 and Image.open(figure).size[0] > 400
-    animation = Path(comparison["animation"])
+    animation = Path(comparison['animation'])
     assert animation.stat().st_size > 0
-    if animation.suffix == ".gif":
-        assert Image.open(animation).n_frames == comparison["animation_frames"] > 10
-    from cloth_bench_ros.report.comparison import comparison_section
+    if animation.suffix == '.gif':
+        assert Image.open(animation).n_frames == comparison['animation_frames'] > 10
     from cloth_bench_ros.report.blocks import Document, write_document
+    from cloth_bench_ros.report.comparison import comparison_section
 
-    doc, report = Document("t"), out.parent / "report"
+    doc, report = Document('t'), out.parent / 'report'
     doc.extend(comparison_section(out.parent))
     _, _, copied = write_document(doc, report)
-    assert [p.name for p in copied] == ["camera_qualitative.png", f"camera_{animation.name}"]
-    assert "camera_qualitative.png" in doc.markdown() and all(p.stat().st_size > 0 for p in copied)
+    assert [p.name for p in copied] == ['camera_qualitative.png', f'camera_{animation.name}']
+    assert 'camera_qualitative.png' in doc.markdown() and all(p.stat().st_size > 0 for p in copied)
 
 
 def test_bag_info_lists_every_cloud_topic(camera_bag, capsys):
     path, _ = camera_bag
-    assert cli.main(["bag", "info", str(path)]) == 0
+    assert cli.main(['bag', 'info', str(path)]) == 0
     out = capsys.readouterr().out
-    assert f"clouds:       {CAMERA_TOPIC}: 137 frames" in out and f"clouds:       {IR_TOPIC}: 5 frames" in out
-    assert "metadata:     version 9, ros_distro rosbags" in out  # as rosbags' Writer records it
+    assert (
+        f'clouds:       {CAMERA_TOPIC}: 137 frames' in out
+        and f'clouds:       {IR_TOPIC}: 5 frames' in out
+    )
+    assert 'metadata:     version 9, ros_distro rosbags' in out  # as rosbags' Writer records it
 
 
 def test_several_cloud_topics_need_a_choice_and_a_bad_frame_is_named(camera_bag, tmp_path, capsys):
     path, _ = camera_bag
-    assert cli.main(["run", "--bag", str(path), "--output", str(tmp_path / "o")]) == 2
+    assert cli.main(['run', '--bag', str(path), '--output', str(tmp_path / 'o')]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "several" in err and "--topic" in err and IR_TOPIC in err
-    assert cli.main(["run", "--bag", str(path), "--topic", "/nope", "--output", str(tmp_path / "o")]) == 2
-    assert "/nope does not exist" in capsys.readouterr().err
-    (tmp_path / "taken" / "x").mkdir(parents=True)
-    assert cli.main(["run", "--bag", str(path), "--topic", CAMERA_TOPIC, "--record-comparison", str(tmp_path / "taken"),
-                     "--output", str(tmp_path / "o")]) == 2
-    assert "already exists" in capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and 'several' in err and '--topic' in err and IR_TOPIC in err
+    assert (
+        cli.main(['run', '--bag', str(path), '--topic', '/nope', '--output', str(tmp_path / 'o')])
+        == 2
+    )
+    assert '/nope does not exist' in capsys.readouterr().err
+    (tmp_path / 'taken' / 'x').mkdir(parents=True)
+    assert (
+        cli.main(
+            [
+                'run',
+                '--bag',
+                str(path),
+                '--topic',
+                CAMERA_TOPIC,
+                '--record-comparison',
+                str(tmp_path / 'taken'),
+                '--output',
+                str(tmp_path / 'o'),
+            ]
+        )
+        == 2
+    )
+    assert 'already exists' in capsys.readouterr().err
 
 
 def test_unresolvable_frame_is_one_line_naming_it(tmp_path, capsys):
+    from cloth_bench_ros.data import BagWriter
     import numpy as np
 
-    from cloth_bench_ros.data import BagWriter
-
-    path = tmp_path / "noframe"
+    path = tmp_path / 'noframe'
     with BagWriter(path) as bag:
         for k in range(3):
-            bag.write_cloud("/points", k * 33_000_000, np.random.default_rng(k).random((50, 3)), frame_id="lidar_link")
-    assert cli.main(["run", "--bag", str(path), "--start-time", "0", "--output", str(tmp_path / "o")]) == 2
+            bag.write_cloud(
+                '/points',
+                k * 33_000_000,
+                np.random.default_rng(k).random((50, 3)),
+                frame_id='lidar_link',
+            )
+    assert (
+        cli.main(['run', '--bag', str(path), '--start-time', '0', '--output', str(tmp_path / 'o')])
+        == 2
+    )
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "frame lidar_link cannot be resolved to world" in err
+    assert len(err.splitlines()) == 1 and 'frame lidar_link cannot be resolved to world' in err

@@ -6,137 +6,223 @@ in setup.cfg with the deviations from ament's defaults written there.
 """
 
 import ast
+from pathlib import Path
 import re
 import runpy
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-LINTED = ["cloth_bench_ros", "test", "benchmarks", "launch", "setup.py"]
+LINTED = ['cloth_bench_ros', 'test', 'benchmarks', 'launch', 'setup.py']
 
 # Checked by hand against ros/rosdistro @ 8468e88 (2026-08-22): ROS packages of
 # humble/distribution.yaml, rosdep keys of rosdep/base.yaml and rosdep/python.yaml.
-ROS_PACKAGES = {"ament_index_python", "rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs",
-                "geometry_msgs", "diagnostic_msgs", "rosgraph_msgs", "launch", "launch_ros"}
-ROSDEP_KEYS = {"python3-numpy", "python3-scipy", "python3-yaml", "python3-tqdm", "python3-matplotlib",
-               "python3-mujoco-pip", "python3-pybullet-pip", "python3-rosbags-pip", "python3-open3d-pip",
-               "python3-pytest", "mcap-ros2-support", "python3-flake8", "pydocstyle"}
+ROS_PACKAGES = {
+    'ament_index_python',
+    'rclpy',
+    'rcl_interfaces',
+    'builtin_interfaces',
+    'std_msgs',
+    'sensor_msgs',
+    'geometry_msgs',
+    'diagnostic_msgs',
+    'rosgraph_msgs',
+    'launch',
+    'launch_ros',
+}
+ROSDEP_KEYS = {
+    'python3-numpy',
+    'python3-scipy',
+    'python3-yaml',
+    'python3-tqdm',
+    'python3-matplotlib',
+    'python3-mujoco-pip',
+    'python3-pybullet-pip',
+    'python3-rosbags-pip',
+    'python3-open3d-pip',
+    'python3-pytest',
+    'mcap-ros2-support',
+    'python3-flake8',
+    'pydocstyle',
+}
 # No rosdep key checked: documented in package.xml and docs/ros2.md.
-PIP_ONLY = {"mcap", "numba", "cyclonedds", "optuna", "cmaes", "dask", "distributed", "newton", "warp"}
-OPTIONAL_IMPORTS = {"torch"}  # imported only where installed (identify --sampler gp); never a dependency
-IMPORT_TO_KEY = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml", "tqdm": "python3-tqdm",
-                 "matplotlib": "python3-matplotlib", "mujoco": "python3-mujoco-pip",
-                 "pybullet": "python3-pybullet-pip", "rosbags": "python3-rosbags-pip", "open3d": "python3-open3d-pip"}
+PIP_ONLY = {
+    'mcap',
+    'numba',
+    'cyclonedds',
+    'optuna',
+    'cmaes',
+    'dask',
+    'distributed',
+    'newton',
+    'warp',
+}
+OPTIONAL_IMPORTS = {
+    'torch'
+}  # imported only where installed (identify --sampler gp); never a dependency
+IMPORT_TO_KEY = {
+    'numpy': 'python3-numpy',
+    'scipy': 'python3-scipy',
+    'yaml': 'python3-yaml',
+    'tqdm': 'python3-tqdm',
+    'matplotlib': 'python3-matplotlib',
+    'mujoco': 'python3-mujoco-pip',
+    'pybullet': 'python3-pybullet-pip',
+    'rosbags': 'python3-rosbags-pip',
+    'open3d': 'python3-open3d-pip',
+}
 
 
 def _package_xml():
-    return ET.parse(ROOT / "package.xml").getroot()
+    return ET.parse(ROOT / 'package.xml').getroot()
 
 
 def _setup_kwargs(monkeypatch) -> dict:
     import setuptools
 
     captured = {}
-    monkeypatch.setattr(setuptools, "setup", lambda **kw: captured.update(kw))
+    monkeypatch.setattr(setuptools, 'setup', lambda **kw: captured.update(kw))
     monkeypatch.chdir(ROOT)
-    runpy.run_path(str(ROOT / "setup.py"))
+    runpy.run_path(str(ROOT / 'setup.py'))
     return captured
 
 
 def _requirement_lines(path: Path) -> set[str]:
-    lines = (line.split("#", 1)[0].strip() for line in path.read_text().splitlines())
-    return {line.replace(" ", "") for line in lines if line}
+    lines = (line.split('#', 1)[0].strip() for line in path.read_text().splitlines())
+    return {line.replace(' ', '') for line in lines if line}
 
 
 def test_flake8():
-    proc = subprocess.run([sys.executable, "-m", "flake8", *LINTED], cwd=ROOT, capture_output=True, text=True,
-                          timeout=300)
+    proc = subprocess.run(
+        [sys.executable, '-m', 'flake8', *LINTED],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
 def test_pep257():
-    proc = subprocess.run([sys.executable, "-m", "pydocstyle", *LINTED], cwd=ROOT, capture_output=True,
-                          text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, '-m', 'pydocstyle', *LINTED],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
 def test_license_file_matches_package_xml_and_setup(monkeypatch):
     """ament_copyright's concern, per package: one license, the same in every place it is named."""
-    license_text = (ROOT / "LICENSE").read_text()
-    assert license_text.startswith("MIT License") and "Permission is hereby granted, free of charge" in license_text
-    xml_license = _package_xml().find("license")
-    assert (xml_license.text, xml_license.get("file")) == ("MIT", "LICENSE")
+    license_text = (ROOT / 'LICENSE').read_text()
+    assert (
+        license_text.startswith('MIT License')
+        and 'Permission is hereby granted, free of charge' in license_text
+    )
+    xml_license = _package_xml().find('license')
+    assert (xml_license.text, xml_license.get('file')) == ('MIT', 'LICENSE')
     kwargs = _setup_kwargs(monkeypatch)
-    assert kwargs["license"] == "MIT"
-    assert any("LICENSE" in files for _, files in kwargs["data_files"])
+    assert kwargs['license'] == 'MIT'
+    assert any('LICENSE' in files for _, files in kwargs['data_files'])
 
 
 def test_install_requires_and_extras_are_requirements_txt(monkeypatch):
     """`pip install .` brings what requirements.txt lists: runtime in install_requires, the rest as extras."""
     kwargs = _setup_kwargs(monkeypatch)
-    runtime = {r.replace(" ", "") for r in kwargs["install_requires"]}
-    extras = {r.replace(" ", "") for reqs in kwargs["extras_require"].values() for r in reqs}
-    assert runtime | extras == _requirement_lines(ROOT / "requirements.txt")
+    runtime = {r.replace(' ', '') for r in kwargs['install_requires']}
+    extras = {r.replace(' ', '') for reqs in kwargs['extras_require'].values() for r in reqs}
+    assert runtime | extras == _requirement_lines(ROOT / 'requirements.txt')
     assert not runtime & extras
-    assert {r.split(">")[0] for r in kwargs["extras_require"]["test"]} >= {"pytest", "flake8", "pydocstyle"}
-    assert "open3d>=0.18" in kwargs["extras_require"]["synth"]
+    assert {r.split('>')[0] for r in kwargs['extras_require']['test']} >= {
+        'pytest',
+        'flake8',
+        'pydocstyle',
+    }
+    assert 'open3d>=0.18' in kwargs['extras_require']['synth']
 
 
 def test_py_typed_is_shipped_as_declared(monkeypatch):
-    declared = _setup_kwargs(monkeypatch)["package_data"]["cloth_bench_ros"]
-    assert "py.typed" in declared and (ROOT / "cloth_bench_ros" / "py.typed").is_file()
+    declared = _setup_kwargs(monkeypatch)['package_data']['cloth_bench_ros']
+    assert 'py.typed' in declared and (ROOT / 'cloth_bench_ros' / 'py.typed').is_file()
 
 
 def test_package_xml_keys_exist_and_cover_every_import():
     root = _package_xml()
-    deps = {e.text for tag in ("depend", "exec_depend", "test_depend", "build_depend") for e in root.findall(tag)}
+    deps = {
+        e.text
+        for tag in ('depend', 'exec_depend', 'test_depend', 'build_depend')
+        for e in root.findall(tag)
+    }
     unknown = deps - ROS_PACKAGES - ROSDEP_KEYS
-    assert not unknown, f"keys that are neither ROS packages nor rosdep keys: {unknown}"
-    assert "sensor_msgs_py" not in deps and "python3-mcap-pip" not in deps
-    comment = (ROOT / "package.xml").read_text()
+    assert not unknown, f'keys that are neither ROS packages nor rosdep keys: {unknown}'
+    assert 'sensor_msgs_py' not in deps and 'python3-mcap-pip' not in deps
+    comment = (ROOT / 'package.xml').read_text()
     assert all(name in comment for name in PIP_ONLY)
 
     stdlib = set(sys.stdlib_module_names)
-    sources = list((ROOT / "cloth_bench_ros").rglob("*.py")) + list((ROOT / "launch").glob("*.py"))
+    sources = list((ROOT / 'cloth_bench_ros').rglob('*.py')) + list((ROOT / 'launch').glob('*.py'))
     missing = {}
     for source in sources:
         for node in ast.walk(ast.parse(source.read_text())):
-            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
-                     else [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 else [])
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 else []
+            )
             for name in names:
-                top = name.split(".")[0]
-                if top in stdlib or top == "cloth_bench_ros" or top in PIP_ONLY or top in OPTIONAL_IMPORTS:
+                top = name.split('.')[0]
+                if (
+                    top in stdlib
+                    or top == 'cloth_bench_ros'
+                    or top in PIP_ONLY
+                    or top in OPTIONAL_IMPORTS
+                ):
                     continue
                 key = IMPORT_TO_KEY.get(top, top)
                 if key not in deps:
                     missing.setdefault(key, str(source.relative_to(ROOT)))
-    assert not missing, f"imported but not declared in package.xml: {missing}"
+    assert not missing, f'imported but not declared in package.xml: {missing}'
 
 
-@pytest.mark.parametrize("key", sorted(PIP_ONLY))
+@pytest.mark.parametrize('key', sorted(PIP_ONLY))
 def test_pip_only_requirements_are_documented_in_the_readme(key):
-    docs = (ROOT / "README.md").read_text() + "".join(p.read_text() for p in sorted((ROOT / "docs").glob("*.md")))
-    assert f"`{key}`" in docs
+    docs = (ROOT / 'README.md').read_text() + ''.join(
+        p.read_text() for p in sorted((ROOT / 'docs').glob('*.md'))
+    )
+    assert f'`{key}`' in docs
 
 
 def test_every_docs_page_is_reachable_from_the_readme_and_links_resolve():
-    readme = (ROOT / "README.md").read_text()
-    pages = sorted((ROOT / "docs").glob("*.md"))
-    assert pages and all(f"(docs/{p.name})" in readme for p in pages)
-    for doc in [ROOT / "README.md", *pages]:
-        for target in re.findall(r"\]\(([^)#:]+)(?:#[^)]*)?\)", doc.read_text()):
-            assert (doc.parent / target).exists(), f"{doc.relative_to(ROOT)} links to missing {target}"
+    readme = (ROOT / 'README.md').read_text()
+    pages = sorted((ROOT / 'docs').glob('*.md'))
+    assert pages and all(f'(docs/{p.name})' in readme for p in pages)
+    for doc in [ROOT / 'README.md', *pages]:
+        for target in re.findall(r'\]\(([^)#:]+)(?:#[^)]*)?\)', doc.read_text()):
+            assert (
+                doc.parent / target
+            ).exists(), f'{doc.relative_to(ROOT)} links to missing {target}'
 
 
 def test_nothing_points_outside_the_repository():
-    pattern = re.compile(r"REFERENCE\.md|DESIGN\.md|STYLE\.md|\.\./shared")
-    for path in [*ROOT.glob("*.md"), *ROOT.glob("docs/*.md"), *ROOT.glob("bags/*.md"), *ROOT.glob("config/**/*.yaml"),
-                 *ROOT.glob("cloth_bench_ros/**/*.py"), *ROOT.glob("test/*.py"), *ROOT.glob("benchmarks/*.py"),
-                 *ROOT.glob("launch/*.py"), ROOT / "setup.cfg"]:
-        if path.name == "test_package.py":
+    pattern = re.compile(r'REFERENCE\.md|DESIGN\.md|STYLE\.md|\.\./shared')
+    for path in [
+        *ROOT.glob('*.md'),
+        *ROOT.glob('docs/*.md'),
+        *ROOT.glob('bags/*.md'),
+        *ROOT.glob('config/**/*.yaml'),
+        *ROOT.glob('cloth_bench_ros/**/*.py'),
+        *ROOT.glob('test/*.py'),
+        *ROOT.glob('benchmarks/*.py'),
+        *ROOT.glob('launch/*.py'),
+        ROOT / 'setup.cfg',
+    ]:
+        if path.name == 'test_package.py':
             continue
-        assert not pattern.search(path.read_text()), f"{path.relative_to(ROOT)} points outside the repository"
+        assert not pattern.search(
+            path.read_text()
+        ), f'{path.relative_to(ROOT)} points outside the repository'

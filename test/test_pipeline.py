@@ -2,10 +2,9 @@
 
 import json
 
+from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
 import numpy as np
 import pytest
-
-from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
 
 GRID = (6, 8)  # coarse mesh: fast, still a real MuJoCo cloth
 
@@ -15,72 +14,78 @@ def _run(bag, tmp_path, name, **kw):
     return run_pipeline(config)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def two_runs(hanging_bag, tmp_path_factory):
-    out = tmp_path_factory.mktemp("runs")
-    return [_run(hanging_bag, out, f"run{i}") for i in range(2)], out
+    out = tmp_path_factory.mktemp('runs')
+    return [_run(hanging_bag, out, f'run{i}') for i in range(2)], out
 
 
 def test_every_real_frame_is_scored_and_the_window_is_cut_at_the_change_of_phase(two_runs):
     (summary, _), out = two_runs
-    m = summary["engines"]["mujoco"]
-    assert summary["real"]["frames"] == 132 and summary["real"]["unpaired_frames"] == 0
-    assert m["frames_scored"] == 132 and m["frames_in_window"] == 99  # cut-off from the bag's metadata
-    assert 0 < m["CD_d"] <= m["HD_d"] < 1.0
-    assert m["L_s"] > 0 and not m["diverged"]
-    assert m["step_time"]["count"] == 740  # 3 s settle + 4.4 s at 100 Hz, after the reset
-    assert m["step_time"]["p50"] <= m["step_time"]["p99"] <= m["step_time"]["max"]
+    m = summary['engines']['mujoco']
+    assert summary['real']['frames'] == 132 and summary['real']['unpaired_frames'] == 0
+    assert (
+        m['frames_scored'] == 132 and m['frames_in_window'] == 99
+    )  # cut-off from the bag's metadata
+    assert 0 < m['CD_d'] <= m['HD_d'] < 1.0
+    assert m['L_s'] > 0 and not m['diverged']
+    assert m['step_time']['count'] == 740  # 3 s settle + 4.4 s at 100 Hz, after the reset
+    assert m['step_time']['p50'] <= m['step_time']['p99'] <= m['step_time']['max']
 
 
 def test_report_files_match_the_summary(two_runs):
     (summary, _), out = two_runs
-    written = json.loads((out / "run0" / "summary.json").read_text())
-    assert written["engines"]["mujoco"]["CD_d"] == pytest.approx(summary["engines"]["mujoco"]["CD_d"])
-    rows = (out / "run0" / "frames.csv").read_text().splitlines()
-    assert rows[0] == "engine,frame,t,cd,hd,in_window,diverged" and len(rows) == 133
-    cds = np.array([float(r.split(",")[3]) for r in rows[1:100]])
-    assert np.mean(cds) == pytest.approx(summary["engines"]["mujoco"]["CD_d"], rel=1e-12)
+    written = json.loads((out / 'run0' / 'summary.json').read_text())
+    assert written['engines']['mujoco']['CD_d'] == pytest.approx(
+        summary['engines']['mujoco']['CD_d']
+    )
+    rows = (out / 'run0' / 'frames.csv').read_text().splitlines()
+    assert rows[0] == 'engine,frame,t,cd,hd,in_window,diverged' and len(rows) == 133
+    cds = np.array([float(r.split(',')[3]) for r in rows[1:100]])
+    assert np.mean(cds) == pytest.approx(summary['engines']['mujoco']['CD_d'], rel=1e-12)
 
 
 def test_two_runs_of_one_configuration_give_identical_metrics(two_runs):
     (a, b), out = two_runs
-    for key in ("CD_d", "HD_d", "L_s", "frames_scored"):
-        assert a["engines"]["mujoco"][key] == b["engines"]["mujoco"][key]
-    assert (out / "run0" / "frames.csv").read_text() == (out / "run1" / "frames.csv").read_text()
+    for key in ('CD_d', 'HD_d', 'L_s', 'frames_scored'):
+        assert a['engines']['mujoco'][key] == b['engines']['mujoco'][key]
+    assert (out / 'run0' / 'frames.csv').read_text() == (out / 'run1' / 'frames.csv').read_text()
 
 
 def test_another_seed_gives_another_result(hanging_bag, tmp_path, two_runs):
     (a, _), _ = two_runs
-    other = _run(hanging_bag, tmp_path, "seed1", seed=1)
-    assert other["engines"]["mujoco"]["CD_d"] != a["engines"]["mujoco"]["CD_d"]
+    other = _run(hanging_bag, tmp_path, 'seed1', seed=1)
+    assert other['engines']['mujoco']['CD_d'] != a['engines']['mujoco']['CD_d']
 
 
-@pytest.mark.parametrize("rate", [10.0, 1000.0])
+@pytest.mark.parametrize('rate', [10.0, 1000.0])
 def test_runs_at_10_and_1000_hz(hanging_bag, tmp_path, rate):
-    summary = _run(hanging_bag, tmp_path, f"r{rate}", rate_hz=rate)
-    m = summary["engines"]["mujoco"]
-    assert m["frames_scored"] == 132
-    assert m["step_time"]["count"] == round(7.4 * rate)
-    assert m["diverged"] or np.isfinite(m["CD_d"])
+    summary = _run(hanging_bag, tmp_path, f'r{rate}', rate_hz=rate)
+    m = summary['engines']['mujoco']
+    assert m['frames_scored'] == 132
+    assert m['step_time']['count'] == round(7.4 * rate)
+    assert m['diverged'] or np.isfinite(m['CD_d'])
 
 
-def test_realtime_pacing_reports_latency_deadline_misses_and_real_time_factor(hanging_bag, tmp_path):
-    summary = _run(hanging_bag, tmp_path, "rt", rate_hz=100.0, pacing="realtime")
-    m = summary["engines"]["mujoco"]
-    assert m["frames_scored"] == 132
-    assert m["latency"]["count"] == 741
-    assert 0 < m["latency"]["p50"] <= m["latency"]["p99"] <= m["latency"]["max"]
-    assert 0 <= m["deadline_misses"] <= 741
-    assert 0.5 < m["real_time_factor"] <= 1.05  # paced by the wall clock: about real time
-    assert summary["run"]["wall_time"] >= 7.4 * 0.95
+def test_realtime_pacing_reports_latency_deadline_misses_and_real_time_factor(
+    hanging_bag, tmp_path
+):
+    summary = _run(hanging_bag, tmp_path, 'rt', rate_hz=100.0, pacing='realtime')
+    m = summary['engines']['mujoco']
+    assert m['frames_scored'] == 132
+    assert m['latency']['count'] == 741
+    assert 0 < m['latency']['p50'] <= m['latency']['p99'] <= m['latency']['max']
+    assert 0 <= m['deadline_misses'] <= 741
+    assert 0.5 < m['real_time_factor'] <= 1.05  # paced by the wall clock: about real time
+    assert summary['run']['wall_time'] >= 7.4 * 0.95
 
 
 def test_two_engines_in_one_run_are_scored_against_the_same_bag(hanging_bag, tmp_path):
-    summary = _run(hanging_bag, tmp_path, "both", engines=["mujoco", "bullet"])
-    assert set(summary["engines"]) == {"mujoco", "bullet"}
-    for name, m in summary["engines"].items():
-        assert m["frames_scored"] == 132 and m["frames_in_window"] == 99, name
-        assert m["step_time"]["count"] == 740, name
-    rows = (tmp_path / "both" / "frames.csv").read_text().splitlines()[1:]
-    assert sorted({r.split(",")[0] for r in rows}) == ["bullet", "mujoco"] and len(rows) == 264
-    assert summary["engines"]["mujoco"]["CD_d"] != summary["engines"]["bullet"]["CD_d"]
+    summary = _run(hanging_bag, tmp_path, 'both', engines=['mujoco', 'bullet'])
+    assert set(summary['engines']) == {'mujoco', 'bullet'}
+    for name, m in summary['engines'].items():
+        assert m['frames_scored'] == 132 and m['frames_in_window'] == 99, name
+        assert m['step_time']['count'] == 740, name
+    rows = (tmp_path / 'both' / 'frames.csv').read_text().splitlines()[1:]
+    assert sorted({r.split(',')[0] for r in rows}) == ['bullet', 'mujoco'] and len(rows) == 264
+    assert summary['engines']['mujoco']['CD_d'] != summary['engines']['bullet']['CD_d']

@@ -12,8 +12,7 @@ import subprocess
 import time
 
 import pytest
-
-from real_ros import ROOT, ROS_PYTHON, in_namespace, require_real_ros, ros_env, ros_script
+from real_ros import in_namespace, require_real_ros, ROOT, ros_env, ROS_PYTHON, ros_script
 
 pytestmark = pytest.mark.real_ros
 
@@ -24,65 +23,111 @@ def _real_ros():
 
 
 def test_rclpy_is_real_in_the_tier():
-    out = subprocess.run(in_namespace("-c", "import rclpy, cloth_bench_ros.runtime as r; "
-                                            "print(r.EMBEDDED, rclpy.__file__)"),
-                         capture_output=True, text=True, env=ros_env(), timeout=120)
+    out = subprocess.run(
+        in_namespace(
+            '-c', 'import rclpy, cloth_bench_ros.runtime as r; print(r.EMBEDDED, rclpy.__file__)'
+        ),
+        capture_output=True,
+        text=True,
+        env=ros_env(),
+        timeout=120,
+    )
     assert out.returncode == 0, out.stderr
     embedded, path = out.stdout.split()
-    assert embedded == "False" and "site-packages" in path  # real rclpy, not the embedded runtime
+    assert embedded == 'False' and 'site-packages' in path  # real rclpy, not the embedded runtime
 
 
-@pytest.mark.parametrize("ros_args, words", [
-    (["-p", "rate_hz:=fast"], "parameter rate_hz"),
-    (["--params-file", "/nonexistent/params.yaml"], "params file"),
-    (["--log-level", "bogus"], "log level"),
-])
+@pytest.mark.parametrize(
+    'ros_args, words',
+    [
+        (['-p', 'rate_hz:=fast'], 'parameter rate_hz'),
+        (['--params-file', '/nonexistent/params.yaml'], 'params file'),
+        (['--log-level', 'bogus'], 'log level'),
+    ],
+)
 def test_bad_ros_arguments_are_one_line_and_exit_2_under_real_rclpy(ros_args, words):
-    out = subprocess.run(in_namespace("-m", "cloth_bench_ros.nodes.simulator", "--ros-args", *ros_args),
-                         capture_output=True, text=True, env=ros_env(), timeout=120)
+    out = subprocess.run(
+        in_namespace('-m', 'cloth_bench_ros.nodes.simulator', '--ros-args', *ros_args),
+        capture_output=True,
+        text=True,
+        env=ros_env(),
+        timeout=120,
+    )
     assert out.returncode == 2, out.stderr
-    errors = [line for line in out.stderr.splitlines() if line.startswith("error:")]
-    assert len(errors) == 1 and words in errors[0] and "Traceback" not in out.stderr
+    errors = [line for line in out.stderr.splitlines() if line.startswith('error:')]
+    assert len(errors) == 1 and words in errors[0] and 'Traceback' not in out.stderr
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
 def test_sigint_and_sigterm_stop_a_real_rclpy_node_cleanly(sig):
-    proc = subprocess.Popen(in_namespace("-m", "cloth_bench_ros.nodes.simulator", "--ros-args",
-                                         "-p", "grid_nx:=6", "-p", "grid_nz:=8"),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ros_env())
+    proc = subprocess.Popen(
+        in_namespace(
+            '-m',
+            'cloth_bench_ros.nodes.simulator',
+            '--ros-args',
+            '-p',
+            'grid_nx:=6',
+            '-p',
+            'grid_nz:=8',
+        ),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=ros_env(),
+    )
     deadline = time.monotonic() + 60
     lines = []
     while time.monotonic() < deadline:  # wait until the node is up (its "ready" log line)
         line = proc.stderr.readline()
         lines.append(line)
-        if "ready" in line or not line:
+        if 'ready' in line or not line:
             break
     proc.send_signal(sig)  # unshare and sh exec the node: proc is the node's own process
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 0, "".join(lines) + err
-    assert "Traceback" not in err and "ExternalShutdownException" not in err
+    assert proc.returncode == 0, ''.join(lines) + err
+    assert 'Traceback' not in err and 'ExternalShutdownException' not in err
 
 
 def test_two_in_process_runs_at_once_do_not_hear_each_other(tmp_path):
-    script = " & ".join(
-        f"(timeout 300 {ROS_PYTHON} -m cloth_bench_ros.cli run --grid 6x8 --output {tmp_path / name} "
-        f"> {tmp_path / name}.log 2>&1; echo $? > {tmp_path / name}.status)" for name in ("a", "b")) + " & wait"
+    script = (
+        ' & '.join(
+            f'(timeout 300 {ROS_PYTHON} -m cloth_bench_ros.cli run --grid 6x8 --output'
+            f' {tmp_path / name} > {tmp_path / name}.log 2>&1; echo $? > {tmp_path / name}.status)'
+            for name in ('a', 'b')
+        )
+        + ' & wait'
+    )
     subprocess.run(ros_script(script), env=ros_env(), timeout=600)
-    embedded = subprocess.run([*_embedded_python(), "-m", "cloth_bench_ros.cli", "run", "--grid", "6x8",
-                               "--output", str(tmp_path / "embedded")], capture_output=True, text=True,
-                              timeout=300, env={**ros_env(), "CLOTH_BENCH_EMBEDDED": "1"})
+    embedded = subprocess.run(
+        [
+            *_embedded_python(),
+            '-m',
+            'cloth_bench_ros.cli',
+            'run',
+            '--grid',
+            '6x8',
+            '--output',
+            str(tmp_path / 'embedded'),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**ros_env(), 'CLOTH_BENCH_EMBEDDED': '1'},
+    )
     assert embedded.returncode == 0, embedded.stderr
-    reference = json.loads((tmp_path / "embedded" / "summary.json").read_text())
-    for name in ("a", "b"):
-        assert (tmp_path / f"{name}.status").read_text().strip() == "0", (tmp_path / f"{name}.log").read_text()
-        summary = json.loads((tmp_path / name / "summary.json").read_text())
-        assert summary["real"]["accounting"]["adds_up"]
-        assert summary["engines"]["mujoco"]["CD_d"] == reference["engines"]["mujoco"]["CD_d"]
-        assert summary["engines"]["mujoco"]["HD_d"] == reference["engines"]["mujoco"]["HD_d"]
+    reference = json.loads((tmp_path / 'embedded' / 'summary.json').read_text())
+    for name in ('a', 'b'):
+        assert (tmp_path / f'{name}.status').read_text().strip() == '0', (
+            tmp_path / f'{name}.log'
+        ).read_text()
+        summary = json.loads((tmp_path / name / 'summary.json').read_text())
+        assert summary['real']['accounting']['adds_up']
+        assert summary['engines']['mujoco']['CD_d'] == reference['engines']['mujoco']['CD_d']
+        assert summary['engines']['mujoco']['HD_d'] == reference['engines']['mujoco']['HD_d']
 
 
 def _embedded_python() -> list[str]:
-    """The project's own venv's Python (the embedded runtime), for the same case without ROS."""
+    """Return the project's own venv's Python (the embedded runtime), for the same case without ROS."""
     import sys
 
     return [sys.executable]
@@ -90,30 +135,56 @@ def _embedded_python() -> list[str]:
 
 def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(tmp_path):
     """The docs' node-by-node `ros2 run` commands (as the installed console scripts run them), one
-    real-rclpy process per node over Fast DDS, in any start order: the embedded in-process run's numbers."""
-    bag = ROOT / "bags" / "towel_dynamic"
-    grid = "-p grid_nx:=6 -p grid_nz:=8"
+    real-rclpy process per node over Fast DDS, in any start order: the embedded in-process run's numbers.
+    """
+    bag = ROOT / 'bags' / 'towel_dynamic'
+    grid = '-p grid_nx:=6 -p grid_nz:=8'
     nodes = {
-        "evaluator": f"-p use_sim_time:=true -p output_dir:={tmp_path / 'ros'}",
-        "simulator": f"-p use_sim_time:=true -p engine:=mujoco {grid}",
-        "recorder": f"-p use_sim_time:=true -p bag:={bag} {grid}",
-        "trajectory_publisher": "",
+        'evaluator': f'-p use_sim_time:=true -p output_dir:={tmp_path / "ros"}',
+        'simulator': f'-p use_sim_time:=true -p engine:=mujoco {grid}',
+        'recorder': f'-p use_sim_time:=true -p bag:={bag} {grid}',
+        'trajectory_publisher': '',
     }
-    launches = [f"(timeout 300 {ROS_PYTHON} -m cloth_bench_ros.nodes.{node} --ros-args -r __ns:=/cloth_bench {args} "
-                f"> {tmp_path / node}.log 2>&1; echo $? > {tmp_path / node}.status)" for node, args in nodes.items()]
+    launches = [
+        f'(timeout 300 {ROS_PYTHON} -m cloth_bench_ros.nodes.{node} --ros-args -r'
+        f' __ns:=/cloth_bench {args} > {tmp_path / node}.log 2>&1; echo $? >'
+        f' {tmp_path / node}.status)'
+        for node, args in nodes.items()
+    ]
     # the evaluator ends the run; the simulator and the recorder are stopped as a user would, with SIGINT
-    script = (" & ".join(launches) + f" & while [ ! -f {tmp_path / 'evaluator.status'} ]; do sleep 0.2; done; "
-              + " ".join(f"pkill -INT -f '^{ROS_PYTHON} -m cloth_bench_ros.nodes.{node} ';"  # the node, not this shell
-                         for node in ("simulator", "recorder")) + " wait")
+    script = (
+        ' & '.join(launches)
+        + f' & while [ ! -f {tmp_path / "evaluator.status"} ]; do sleep 0.2; done; '
+        + ' '.join(
+            f"pkill -INT -f '^{ROS_PYTHON} -m cloth_bench_ros.nodes.{node} ';"  # the node, not this shell
+            for node in ('simulator', 'recorder')
+        )
+        + ' wait'
+    )
     subprocess.run(ros_script(script), env=ros_env(), timeout=600)
     for node in nodes:
-        assert (tmp_path / f"{node}.status").read_text().strip() == "0", (tmp_path / f"{node}.log").read_text()
-    embedded = subprocess.run([*_embedded_python(), "-m", "cloth_bench_ros.cli", "run", "--grid", "6x8",
-                               "--output", str(tmp_path / "embedded")], capture_output=True, text=True,
-                              timeout=300, env={**ros_env(), "CLOTH_BENCH_EMBEDDED": "1"})
+        assert (tmp_path / f'{node}.status').read_text().strip() == '0', (
+            tmp_path / f'{node}.log'
+        ).read_text()
+    embedded = subprocess.run(
+        [
+            *_embedded_python(),
+            '-m',
+            'cloth_bench_ros.cli',
+            'run',
+            '--grid',
+            '6x8',
+            '--output',
+            str(tmp_path / 'embedded'),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**ros_env(), 'CLOTH_BENCH_EMBEDDED': '1'},
+    )
     assert embedded.returncode == 0, embedded.stderr
-    ros = json.loads((tmp_path / "ros" / "summary.json").read_text())
-    reference = json.loads((tmp_path / "embedded" / "summary.json").read_text())
-    assert ros["real"]["accounting"]["adds_up"] and ros["real"]["accounting"]["scored"] == 132
-    for key in ("CD_d", "HD_d", "L_s", "frames_in_window"):
-        assert ros["engines"]["mujoco"][key] == reference["engines"]["mujoco"][key], key
+    ros = json.loads((tmp_path / 'ros' / 'summary.json').read_text())
+    reference = json.loads((tmp_path / 'embedded' / 'summary.json').read_text())
+    assert ros['real']['accounting']['adds_up'] and ros['real']['accounting']['scored'] == 132
+    for key in ('CD_d', 'HD_d', 'L_s', 'frames_in_window'):
+        assert ros['engines']['mujoco'][key] == reference['engines']['mujoco'][key], key

@@ -6,15 +6,14 @@ import sys
 import textwrap
 import time
 
-import numpy as np
-import pytest
-
 from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.nodes.common import run_nodes
-from cloth_bench_ros.runtime import embedded as rclpy
-from cloth_bench_ros.runtime import Node, PointCloud2, SingleThreadedExecutor, make_qos, stamp_ns
-from cloth_bench_ros.runtime.embedded import Parameter
 from cloth_bench_ros.nodes.recorder import Recorder
+from cloth_bench_ros.runtime import embedded as rclpy
+from cloth_bench_ros.runtime import make_qos, Node, PointCloud2, SingleThreadedExecutor, stamp_ns
+from cloth_bench_ros.runtime.embedded import Parameter
+import numpy as np
+import pytest
 
 BURST = textwrap.dedent('''
     import sys
@@ -53,24 +52,37 @@ BURST = textwrap.dedent('''
 
 
 def _record(tmp_path, total, wait_for, sig):
-    script = tmp_path / "burst.py"
+    script = tmp_path / 'burst.py'
     script.write_text(BURST)
-    out = tmp_path / "recorded"
+    out = tmp_path / 'recorded'
     proc = subprocess.Popen(
-        [sys.executable, str(script), str(total), "--ros-args", "-p", "mode:=record", "-p", f"output:={out}",
-         "-p", "record_topics:=['sim/cloud:sensor_msgs/msg/PointCloud2']"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            str(script),
+            str(total),
+            '--ros-args',
+            '-p',
+            'mode:=record',
+            '-p',
+            f'output:={out}',
+            '-p',
+            "record_topics:=['sim/cloud:sensor_msgs/msg/PointCloud2']",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     for line in proc.stdout:
         if line.startswith(wait_for):
             break
-    if wait_for == "started":
+    if wait_for == 'started':
         time.sleep(0.3)
     proc.send_signal(sig)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0, stderr
-    report = [l for l in stdout.splitlines() if l.startswith("recorder:")]
+    report = [l for l in stdout.splitlines() if l.startswith('recorder:')]
     assert len(report) == 1, stdout + stderr
-    received, written = (int(w) for w in report[0].replace(",", "").split() if w.isdigit())
+    received, written = (int(w) for w in report[0].replace(',', '').split() if w.isdigit())
     return out, received, written
 
 
@@ -79,14 +91,14 @@ def _stamps(bag):
 
 
 def test_sigint_after_10000_messages_keeps_all_of_them(tmp_path):
-    out, received, written = _record(tmp_path, 10_000, "published", signal.SIGINT)
+    out, received, written = _record(tmp_path, 10_000, 'published', signal.SIGINT)
     assert received == written == 10_000
     assert _stamps(out) == list(range(10_000))
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
 def test_interrupted_recording_holds_every_acknowledged_message(tmp_path, sig):
-    out, received, written = _record(tmp_path, 10_000_000, "started", sig)
+    out, received, written = _record(tmp_path, 10_000_000, 'started', sig)
     assert 100 <= received == written
     assert _stamps(out) == list(range(written))
 
@@ -94,12 +106,20 @@ def test_interrupted_recording_holds_every_acknowledged_message(tmp_path, sig):
 def _replay(bag, **params):
     ctx = rclpy.Context()
     rclpy.init(args=[], context=ctx)
-    recorder = Recorder(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in
-                                                          {"bag": str(bag), "clock": "wall", **params}.items()])
-    listener = Node("listener", context=ctx)
+    recorder = Recorder(
+        context=ctx,
+        parameter_overrides=[
+            Parameter(k, value=v) for k, v in {'bag': str(bag), 'clock': 'wall', **params}.items()
+        ],
+    )
+    listener = Node('listener', context=ctx)
     got = []
-    listener.create_subscription(PointCloud2, "/cloth_bench/real/cloud", lambda m: got.append(stamp_ns(m.header.stamp)),
-                                 make_qos(10))
+    listener.create_subscription(
+        PointCloud2,
+        '/cloth_bench/real/cloud',
+        lambda m: got.append(stamp_ns(m.header.stamp)),
+        make_qos(10),
+    )
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(recorder)
     ex.add_node(listener)
@@ -116,5 +136,5 @@ def test_wall_clock_replay_with_rate_factor_and_start_offset(hanging_bag):
 
 
 def test_replay_of_missing_bag_is_a_clear_error(tmp_path):
-    code = run_nodes([lambda: Recorder()], ["x", "--ros-args", "-p", f"bag:={tmp_path / 'none'}"])
+    code = run_nodes([lambda: Recorder()], ['x', '--ros-args', '-p', f'bag:={tmp_path / "none"}'])
     assert code == 2

@@ -5,25 +5,24 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
-import pytest
-
-from cloth_bench_ros.core import scene
-from cloth_bench_ros.core import cleaning
-from cloth_bench_ros.data import synth
-from cloth_bench_ros.data import CLOUD_TOPIC, BagReader
-from cloth_bench_ros.data.importer import CLOTH_NAMES
-from cloth_bench_ros.engines import engine_class
+from cloth_bench_ros.core import cleaning, scene
 from cloth_bench_ros.core.metrics import chamfer_l1
-from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import sample_quintic
+from cloth_bench_ros.data import BagReader, CLOUD_TOPIC, synth
+from cloth_bench_ros.data.importer import CLOTH_NAMES
+from cloth_bench_ros.engines import engine_class
+from cloth_bench_ros.paths import bundled_bag
+import numpy as np
+import pytest
 
 SMALL = synth.Camera(width=320, height=180)  # same optics (hfov 90 deg), 4x coarser pixels
 EXACT = synth.DepthNoise(sigma0=0.0, sigma2=0.0, flying_fraction=0.0, depth_step=0.0)
 
 
-def plane(x: tuple[float, float], z: tuple[float, float], y: float, flip: bool = False) -> np.ndarray:
+def plane(
+    x: tuple[float, float], z: tuple[float, float], y: float, flip: bool = False
+) -> np.ndarray:
     """Two triangles (2, 3, 3) of an x-z rectangle at depth y facing the camera (or away)."""
     (x0, x1), (z0, z1) = x, z
     tris = synth._quad((x0, y, z0), (x1, y, z0), (x1, y, z1), (x0, y, z1))
@@ -53,7 +52,7 @@ def test_camera_is_the_azure_kinect_of_the_scene():
     assert back[0] == pytest.approx([0.0, 0.0, 0.5])
 
 
-@pytest.mark.parametrize("flip_front", [False, True])
+@pytest.mark.parametrize('flip_front', [False, True])
 def test_zbuffer_keeps_only_the_visible_surface(flip_front):
     front = plane((0.0, 0.5), (0.5, 1.0), 0.0, flip=flip_front)  # both faces must render
     back = plane((-0.2, 0.7), (0.4, 1.1), -0.3)
@@ -88,7 +87,9 @@ def test_zbuffer_depth_is_perspective_correct_on_a_slanted_triangle():
 
 def test_depth_noise_is_as_configured():
     noise = synth.DepthNoise(sigma0=0.001, sigma2=0.0005, flying_fraction=0.0, depth_step=0.0)
-    sensor = synth.Sensor(camera=SMALL, noise=noise, sor_std_ratio=50.0, max_points=10**9, resolution=0.0)
+    sensor = synth.Sensor(
+        camera=SMALL, noise=noise, sor_std_ratio=50.0, max_points=10**9, resolution=0.0
+    )
     rng = np.random.default_rng(1)
     pts = synth.observe(sensor, plane((-0.3, 0.8), (0.3, 1.2), 0.0), rng)  # facing the camera
     expected = 0.001 + 0.0005 * 1.80**2  # 2.62 mm: the Azure Kinect's 1.5-3 mm at 1.8 m
@@ -105,10 +106,14 @@ def test_depth_noise_is_as_configured():
 
 def test_outlier_removal_drops_injected_outliers():
     rng = np.random.default_rng(2)
-    inliers = np.column_stack([rng.uniform(0, 0.5, 20000), rng.normal(0, 0.002, 20000), rng.uniform(0.3, 1.0, 20000)])
+    inliers = np.column_stack(
+        [rng.uniform(0, 0.5, 20000), rng.normal(0, 0.002, 20000), rng.uniform(0.3, 1.0, 20000)]
+    )
     outliers = rng.uniform([-0.3, -0.3, 0.2], [0.8, 0.3, 1.3], (200, 3))
     outliers = outliers[np.abs(outliers[:, 1]) > 0.03]  # off the sheet
-    kept = cleaning.remove_outliers(np.concatenate([inliers, outliers]), neighbors=20, std_ratio=2.0)
+    kept = cleaning.remove_outliers(
+        np.concatenate([inliers, outliers]), neighbors=20, std_ratio=2.0
+    )
     off_sheet = np.abs(kept[:, 1]) > 0.03
     assert off_sheet.sum() <= 0.05 * len(outliers)
     assert (~off_sheet).sum() >= 0.95 * len(inliers)
@@ -120,7 +125,9 @@ def test_flying_pixels_appear_at_the_silhouette_and_are_mostly_cleaned():
     background = synth.rasterize(SMALL, synth.background_triangles())
 
     def far(sor_std_ratio: float) -> int:
-        sensor = synth.Sensor(camera=SMALL, noise=noise, sor_std_ratio=sor_std_ratio, max_points=10**9)
+        sensor = synth.Sensor(
+            camera=SMALL, noise=noise, sor_std_ratio=sor_std_ratio, max_points=10**9
+        )
         pts = synth.observe(sensor, cloth, np.random.default_rng(3), background)
         return int((np.abs(pts[:, 1]) > 0.03).sum())
 
@@ -132,7 +139,12 @@ def test_flying_pixels_appear_at_the_silhouette_and_are_mostly_cleaned():
 def test_cloud_is_cropped_above_the_table():
     sensor = synth.Sensor(camera=SMALL, max_points=10**9)
     cloth = plane((0.0, 0.5), (0.0, 1.0), 0.0)  # reaches below the table top
-    pts = synth.observe(sensor, cloth, np.random.default_rng(4), synth.rasterize(SMALL, synth.background_triangles()))
+    pts = synth.observe(
+        sensor,
+        cloth,
+        np.random.default_rng(4),
+        synth.rasterize(SMALL, synth.background_triangles()),
+    )
     assert pts[:, 2].min() > scene.TABLE_TOP_Z
     assert pts[:, 2].min() < scene.TABLE_TOP_Z + 0.01
 
@@ -141,51 +153,62 @@ def test_cloud_is_cropped_above_the_table():
 
 
 def test_reference_config_differs_from_the_models_under_test():
-    tested = engine_class("mujoco").validate_params({})
+    tested = engine_class('mujoco').validate_params({})
     masses = {}
     for cloth in CLOTH_NAMES.values():
-        for primitive, frames in (("dynamic", 132), ("quasi_static", 420)):
+        for primitive, frames in (('dynamic', 132), ('quasi_static', 420)):
             cfg = synth.reference_config(cloth, primitive)
             assert cfg.frame_count == frames
-            assert cfg.params["integrator"] != tested["integrator"]
+            assert cfg.params['integrator'] != tested['integrator']
             assert cfg.grid != (ClothGrid().nx, ClothGrid().nz)
             assert cfg.steps_per_frame == 30
             assert cfg.provenance
-            masses[cloth] = cfg.params["mass"]
+            masses[cloth] = cfg.params['mass']
             # the tested 11 x 15 grid is nested in the reference grid
             fine = ClothGrid(*cfg.grid).vertices()
-            assert np.allclose(synth.coarse_vertices(fine, cfg.grid, (11, 15)), ClothGrid().vertices())
-    assert masses["towel"] > masses["chequered"] > masses["linen"]
+            assert np.allclose(
+                synth.coarse_vertices(fine, cfg.grid, (11, 15)), ClothGrid().vertices()
+            )
+    assert masses['towel'] > masses['chequered'] > masses['linen']
 
 
 def test_bad_requests_are_one_line_errors():
     with pytest.raises(synth.SynthError, match="unknown cloth 'silk'"):
-        synth.reference_config("silk", "dynamic")
-    with pytest.raises(ValueError, match="unknown primitive"):
-        synth.reference_config("towel", "fling")
-    with pytest.raises(synth.SynthError, match="not a multiple of 30 fps"):
-        synth.reference_config("towel", "dynamic", rate_hz=1000.0).steps_per_frame
-    with pytest.raises(ValueError, match="not nested"):
+        synth.reference_config('silk', 'dynamic')
+    with pytest.raises(ValueError, match='unknown primitive'):
+        synth.reference_config('towel', 'fling')
+    with pytest.raises(synth.SynthError, match='not a multiple of 30 fps'):
+        synth.reference_config('towel', 'dynamic', rate_hz=1000.0).steps_per_frame
+    with pytest.raises(ValueError, match='not nested'):
         synth.coarse_vertices(ClothGrid(25, 35).vertices(), (25, 35), (11, 15))
 
 
-def quick(cloth: str = "towel", primitive: str = "dynamic", duration: float = 1.0, **kw) -> synth.SynthConfig:
-    """A cheap reference: coarse grid, 300 Hz, a low-resolution camera, a short piece."""
+def quick(
+    cloth: str = 'towel', primitive: str = 'dynamic', duration: float = 1.0, **kw
+) -> synth.SynthConfig:
+    """Return a cheap reference: coarse grid, 300 Hz, a low-resolution camera, a short piece."""
     cfg = synth.reference_config(cloth, primitive, grid=(11, 15), rate_hz=300.0, duration=duration)
     return replace(cfg, sensor=replace(cfg.sensor, camera=SMALL), **kw)
 
 
 def test_synthetic_bag_reads_back(tmp_path):
-    cfg = quick("linen", "dynamic", duration=0.2)
-    out = synth.write_synthetic_bag(cfg, tmp_path / "linen_dynamic")
+    cfg = quick('linen', 'dynamic', duration=0.2)
+    out = synth.write_synthetic_bag(cfg, tmp_path / 'linen_dynamic')
     reader = BagReader(out)
     clouds = list(reader.clouds(CLOUD_TOPIC))
     assert [s for s, _ in clouds] == [round(k * 1e9 / 30) for k in range(6)]
     assert all(200 < len(p) <= cfg.sensor.max_points for _, p in clouds)
     trial = reader.trial
     # 0.2 s of the fling never reaches the table: no change of phase (runs then score every frame).
-    assert (trial.cloth, trial.trial, trial.primitive, trial.change_of_phase_frame) == ("linen", 0, "dynamic", None)
-    assert trial.source.startswith("synthetic: reference mujoco shell cloth 11x15, integrator discrete")
+    assert (trial.cloth, trial.trial, trial.primitive, trial.change_of_phase_frame) == (
+        'linen',
+        0,
+        'dynamic',
+        None,
+    )
+    assert trial.source.startswith(
+        'synthetic: reference mujoco shell cloth 11x15, integrator discrete'
+    )
     assert reader.stats.irregular_intervals == 0
     # The same seed gives the same bag.
     again = list(synth.render_frames(cfg))
@@ -197,17 +220,17 @@ def mean_cd(vertex_frames: list[np.ndarray], clouds: list[np.ndarray]) -> float:
 
 
 def test_reference_scores_at_the_noise_floor_and_wrong_models_clearly_worse():
-    cfg = quick("towel", "dynamic", duration=1.2)
+    cfg = quick('towel', 'dynamic', duration=1.2)
     frames = list(synth.synthetic_frames(cfg))
     own = [v for _, v, _ in frames]
     clouds = [p for _, _, p in frames]
     # Frame k is the state at t = k / 30 s of the quintic part: the corners sit on the grippers.
-    grippers = sample_quintic("dynamic", cfg.fps)
+    grippers = sample_quintic('dynamic', cfg.fps)
     assert len(own) == 36
     assert np.allclose([v[0] for v in own], grippers.left[:36], atol=1e-9)
     assert np.allclose([v[10] for v in own], grippers.right[:36], atol=1e-9)
 
-    half = replace(cfg, params={**cfg.params, "mass": cfg.params["mass"] / 2})
+    half = replace(cfg, params={**cfg.params, 'mass': cfg.params['mass'] / 2})
     half_mass = [v for _, v in synth.simulate_reference(half)]
     shift = round(0.2 * cfg.fps)  # the state 0.2 s late
     scored = slice(shift, None)
@@ -231,7 +254,7 @@ def test_reference_scores_at_the_noise_floor_and_wrong_models_clearly_worse():
 def test_bundled_bags_are_complete_and_within_budget():
     total = 0
     for cloth in CLOTH_NAMES.values():
-        for primitive, frames in (("dynamic", 132), ("quasi_static", 420)):
+        for primitive, frames in (('dynamic', 132), ('quasi_static', 420)):
             path = bundled_bag(cloth, primitive)
             reader = BagReader(path)
             stamps = [s for s, _ in reader.clouds(CLOUD_TOPIC)]
@@ -240,8 +263,10 @@ def test_bundled_bags_are_complete_and_within_budget():
             trial = reader.trial
             assert (trial.cloth, trial.trial, trial.primitive) == (cloth, 0, primitive)
             # The first table contact in the clouds (test_change_of_phase.py checks it on every dynamic bag).
-            assert (trial.change_of_phase_frame is None) == (primitive == "quasi_static")
-            assert trial.source.startswith("synthetic: reference mujoco shell cloth 31x43, integrator discrete")
+            assert (trial.change_of_phase_frame is None) == (primitive == 'quasi_static')
+            assert trial.source.startswith(
+                'synthetic: reference mujoco shell cloth 31x43, integrator discrete'
+            )
             total += sum(f.stat().st_size for f in path.iterdir())
     assert total <= 25_000_000
 
@@ -249,14 +274,18 @@ def test_bundled_bags_are_complete_and_within_budget():
 def test_bundled_newton_reference_bags_for_the_towel():
     from cloth_bench_ros.studies.cross_reference import reference_bag
 
-    for primitive, frames in (("dynamic", 132), ("quasi_static", 420)):
-        path = reference_bag("towel", primitive, "newton-vbd")
+    for primitive, frames in (('dynamic', 132), ('quasi_static', 420)):
+        path = reference_bag('towel', primitive, 'newton-vbd')
         reader = BagReader(path)
         stamps = [s for s, _ in reader.clouds(CLOUD_TOPIC)]
         assert stamps == [round(k * 1e9 / 30) for k in range(frames)], path
         assert reader.complete and reader.stats.nan_points_dropped == 0
         trial = reader.trial
-        assert (trial.cloth, trial.primitive) == ("towel", primitive)
-        assert trial.source.startswith("synthetic: reference newton vbd cloth 31x43, 300 Hz, self-collision on")
-    bags = bundled_bag("towel", "dynamic").parent
-    assert sum(f.stat().st_size for f in bags.rglob("*") if f.is_file()) <= 40_000_000  # all of bags/
+        assert (trial.cloth, trial.primitive) == ('towel', primitive)
+        assert trial.source.startswith(
+            'synthetic: reference newton vbd cloth 31x43, 300 Hz, self-collision on'
+        )
+    bags = bundled_bag('towel', 'dynamic').parent
+    assert (
+        sum(f.stat().st_size for f in bags.rglob('*') if f.is_file()) <= 40_000_000
+    )  # all of bags/

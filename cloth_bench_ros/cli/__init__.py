@@ -13,14 +13,14 @@ from cloth_bench_ros.cli.common import Parser, UserError
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
-__all__ = ["UserError", "build_parser", "main"]
+__all__ = ['UserError', 'build_parser', 'main']
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The `cloth-bench` parser with every command group's subcommands."""
-    parser = Parser(prog="cloth-bench", description="Sim-to-real benchmark of cloth simulators.")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log the nodes' messages")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    """Return the `cloth-bench` parser with every command group's subcommands."""
+    parser = Parser(prog='cloth-bench', description='Sim-to-real benchmark of cloth simulators.')
+    parser.add_argument('-v', '--verbose', action='store_true', help="log the nodes' messages")
+    sub = parser.add_subparsers(dest='command', required=True, parser_class=Parser)
     for group in (run, studies, identify, hil, data):
         group.add_parsers(sub)
     return parser
@@ -30,30 +30,41 @@ def main(argv: list[str] | None = None) -> int:
     """Parse, run the command; a user error is one line and exit 2, a bug one line and exit 1."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
-    warnings.formatwarning = lambda message, *_: f"cloth-bench: warning: {message}\n"
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format='%(levelname)s %(message)s'
+    )
+    warnings.formatwarning = lambda message, *_: f'cloth-bench: warning: {message}\n'
     try:
         return args.func(args)
     except BrokenPipeError:  # `cloth-bench ... | head`: the reader left, nothing to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except (ClothBenchError, ValueError, OSError) as exc:  # ValueError, OSError: raised plain for bad input too
-        print(f"cloth-bench: error: {_one_line(exc)}", file=sys.stderr)
+    except (
+        ClothBenchError,
+        ValueError,
+        OSError,
+    ) as exc:  # ValueError, OSError: raised plain for bad input too
+        print(f'cloth-bench: error: {_one_line(exc)}', file=sys.stderr)
         return 2
     except StudyInterrupted as exc:
-        print(f"cloth-bench: {exc}", file=sys.stderr)
+        print(f'cloth-bench: {exc}', file=sys.stderr)
         return 130
     except KeyboardInterrupt:
-        print("cloth-bench: interrupted", file=sys.stderr)
+        print('cloth-bench: interrupted', file=sys.stderr)
         return 130
-    except Exception as exc:  # noqa: BLE001 - a bug: one line (the traceback with --verbose), status 1
+    except (
+        Exception
+    ) as exc:  # noqa: BLE001 - a bug: one line (the traceback with --verbose), status 1
         if args.verbose:
             raise
-        print(f"cloth-bench: internal error: {type(exc).__name__}: {_one_line(exc)} "
-              f"(a bug; --verbose shows the traceback)", file=sys.stderr)
+        print(
+            f'cloth-bench: internal error: {type(exc).__name__}: {_one_line(exc)} '
+            '(a bug; --verbose shows the traceback)',
+            file=sys.stderr,
+        )
         return 1
 
 
 def _one_line(exc: BaseException) -> str:
     """str(exc) on one line (an OSError without a file name still says what failed)."""
-    return " ".join(str(exc).split()) or type(exc).__name__
+    return ' '.join(str(exc).split()) or type(exc).__name__

@@ -21,45 +21,52 @@ class Parser(argparse.ArgumentParser):
     """argparse, but a usage error is one line (the usage is in --help)."""
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        self.exit(2, f'{self.prog}: error: {message}\n')
 
 
 def option(check: Callable[[str, str], Any], name: str) -> Callable[[str], Any]:
-    """An argparse type from a validation check: its one-line error becomes argparse's."""
+    """Return an argparse type from a validation check: its one-line error becomes argparse's."""
+
     def parse(text: str) -> Any:
         try:
             return check(text, name)
         except validation.InputError as exc:  # argparse names the option already
-            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"{name}: ")) from None
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f'{name}: ')) from None
+
     parse.__name__ = name  # argparse names the type in some messages
     return parse
 
 
 def number(check: Callable[..., float], name: str) -> Callable[[str], float]:
-    """An argparse type for a number checked by `check(value, name)` (validation.positive, ...)."""
+    """Return an argparse type for a number checked by `check(value, name)` (validation.positive, ...)."""
     return option(lambda t, n: check(validation.parse_number(t, n), n), name)
 
 
 def integer(name: str, low: int, high: int | None = None) -> Callable[[str], int]:
-    """An argparse type for an integer in [low, high]."""
-    return option(lambda t, n: validation.integer(validation.parse_integer(t, n), n, low, high), name)
+    """Return an argparse type for an integer in [low, high]."""
+    return option(
+        lambda t, n: validation.integer(validation.parse_integer(t, n), n, low, high), name
+    )
 
 
 def factor(name: str) -> Callable[[str], float]:
-    """An argparse type for a finite factor > 1."""
+    """Return an argparse type for a finite factor > 1."""
     return number(lambda v, n: validation.number(v, n, 1.0, None, low_open=True), name)
 
 
-rate = option(lambda t, n: validation.rate_hz(validation.parse_number(t, n), n), "--rate")
-seed = option(lambda t, n: validation.seed(validation.parse_integer(t, n), n), "--seed")
-frame = option(lambda t, n: validation.frame_index(validation.parse_integer(t, n), n), "--change-of-phase-frame")
-grid = option(validation.parse_grid, "--grid")
-workers = integer("--workers", 1)
-non_negative = number(validation.non_negative, "value")
+rate = option(lambda t, n: validation.rate_hz(validation.parse_number(t, n), n), '--rate')
+seed = option(lambda t, n: validation.seed(validation.parse_integer(t, n), n), '--seed')
+frame = option(
+    lambda t, n: validation.frame_index(validation.parse_integer(t, n), n),
+    '--change-of-phase-frame',
+)
+grid = option(validation.parse_grid, '--grid')
+workers = integer('--workers', 1)
+non_negative = number(validation.non_negative, 'value')
 
 
 def scheduler(text: str) -> str:
-    """A Dask scheduler address (tcp://127.0.0.1:8786)."""
+    """Return a Dask scheduler address (tcp://127.0.0.1:8786)."""
     from cloth_bench_ros.studies.executor import check_scheduler_address
 
     try:
@@ -71,25 +78,32 @@ def scheduler(text: str) -> str:
 def scene_options(primitive: bool = True) -> argparse.ArgumentParser:
     """Parent parser: --cloth and --primitive (one trial's cloth and task)."""
     parent = argparse.ArgumentParser(add_help=False)
-    parent.add_argument("--cloth", default="towel", choices=CLOTH_CHOICES, help="default towel")
+    parent.add_argument('--cloth', default='towel', choices=CLOTH_CHOICES, help='default towel')
     if primitive:
-        parent.add_argument("--primitive", default="dynamic", choices=PRIMITIVES, help="default dynamic")
+        parent.add_argument(
+            '--primitive', default='dynamic', choices=PRIMITIVES, help='default dynamic'
+        )
     return parent
 
 
 def executor_options() -> argparse.ArgumentParser:
     """Parent parser: where a study's cells run (local workers or a Dask scheduler) and its progress bar."""
     parent = argparse.ArgumentParser(add_help=False)
-    parent.add_argument("--workers", type=workers, help="local worker processes (default: all cores)")
-    parent.add_argument("--scheduler", type=scheduler,
-                        help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
-    parent.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parent.add_argument(
+        '--workers', type=workers, help='local worker processes (default: all cores)'
+    )
+    parent.add_argument(
+        '--scheduler',
+        type=scheduler,
+        help='run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786',
+    )
+    parent.add_argument('--no-progress', action='store_true', help='no progress bar')
     return parent
 
 
 def engine_override_option(parser: argparse.ArgumentParser, help: str) -> None:
     """--set ENGINE.PARAM=VALUE (repeatable)."""
-    parser.add_argument("--set", action="append", metavar="ENGINE.PARAM=VALUE", help=help)
+    parser.add_argument('--set', action='append', metavar='ENGINE.PARAM=VALUE', help=help)
 
 
 def check_bag(bag: Path, topic: str | None = None) -> None:
@@ -102,17 +116,21 @@ def check_bag(bag: Path, topic: str | None = None) -> None:
     topic = reader.cloud_topic(topic)
     first = next(reader.raw_messages([topic]), None)
     if first is None:
-        raise UserError(f"bag {bag}: no PointCloud2 message on {topic} could be read")
+        raise UserError(f'bag {bag}: no PointCloud2 message on {topic} could be read')
     try:
         msg = deserialize(first[3], first[1])
     except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
         what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise UserError(f"bag {bag}: frame 0 on {topic} (stamp {first[2] / 1e9:.3f} s) "
-                        f"is not a valid PointCloud2 ({what})") from None
+        raise UserError(
+            f'bag {bag}: frame 0 on {topic} (stamp {first[2] / 1e9:.3f} s) '
+            f'is not a valid PointCloud2 ({what})'
+        ) from None
     try:
         read_xyz(msg)
     except ValueError as exc:
-        raise UserError(f"bag {bag}: frame 0 on {topic} (stamp {first[2] / 1e9:.3f} s): {exc}") from None
+        raise UserError(
+            f'bag {bag}: frame 0 on {topic} (stamp {first[2] / 1e9:.3f} s): {exc}'
+        ) from None
 
 
 def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) -> dict[str, dict]:
@@ -122,11 +140,13 @@ def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) 
     overrides = validation.parse_overrides(specs)
     for engine, params in overrides.items():
         if engines is not None and engine not in engines:
-            raise UserError(f"--set {engine}.…: engine {engine} is not part of this run ({', '.join(engines)})")
+            raise UserError(
+                f'--set {engine}.…: engine {engine} is not part of this run ({", ".join(engines)})'
+            )
         try:
             engine_class(engine).validate_params(params)
         except ValueError as exc:
-            raise UserError(f"--set {engine}: {exc}") from None
+            raise UserError(f'--set {engine}: {exc}') from None
     return overrides
 
 
@@ -138,16 +158,18 @@ def available_engines() -> list[str]:
 
 
 def read_transform(path: str):
-    """A 4x4 matrix from a .npy file or a text file of 16 numbers (spaces, commas or newlines)."""
+    """Return a 4x4 matrix from a .npy file or a text file of 16 numbers (spaces, commas or newlines)."""
     import numpy as np
 
     try:
-        if path.endswith(".npy"):
+        if path.endswith('.npy'):
             values = np.load(path).astype(float).ravel()
         else:
-            values = np.array([float(x) for x in Path(path).read_text().replace(",", " ").split()])
+            values = np.array([float(x) for x in Path(path).read_text().replace(',', ' ').split()])
     except (OSError, ValueError) as exc:
-        raise UserError(f"transform {path}: cannot be read ({exc})") from None
+        raise UserError(f'transform {path}: cannot be read ({exc})') from None
     if values.size != 16 or not np.isfinite(values).all():
-        raise UserError(f"transform {path}: needs 16 finite numbers (a 4x4 matrix), found {values.size}")
+        raise UserError(
+            f'transform {path}: needs 16 finite numbers (a 4x4 matrix), found {values.size}'
+        )
     return values.reshape(4, 4)

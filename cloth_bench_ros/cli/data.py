@@ -11,46 +11,86 @@ from cloth_bench_ros.cli import common
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register import, synth and bag (info, rewrite)."""
-    imp = sub.add_parser("import", help="turn the published dataset (PLY/PCD per frame) into one bag per trial")
-    imp.add_argument("root", help="dataset root: <root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd")
-    imp.add_argument("--out", required=True, help="directory for the bags")
-    imp.add_argument("--transform", help="4x4 matrix into the simulation frame (text file of 16 numbers, or .npy)")
-    imp.add_argument("--overwrite", action="store_true", help="replace bags that exist")
-    imp.add_argument("--clean", action="store_true",
-                     help="crop to the workspace, remove the table plane and outliers (core.cleaning) before writing")
-    imp.add_argument("--voxel", type=common.number(validation.non_negative, "--voxel"), default=0.0, metavar="M",
-                     help="with --clean: voxel size (default off)")
-    imp.add_argument("--quiet", action="store_true", help="no progress bar")
+    imp = sub.add_parser(
+        'import', help='turn the published dataset (PLY/PCD per frame) into one bag per trial'
+    )
+    imp.add_argument(
+        'root', help='dataset root: <root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd'
+    )
+    imp.add_argument('--out', required=True, help='directory for the bags')
+    imp.add_argument(
+        '--transform',
+        help='4x4 matrix into the simulation frame (text file of 16 numbers, or .npy)',
+    )
+    imp.add_argument('--overwrite', action='store_true', help='replace bags that exist')
+    imp.add_argument(
+        '--clean',
+        action='store_true',
+        help=(
+            'crop to the workspace, remove the table plane and outliers (core.cleaning) before'
+            ' writing'
+        ),
+    )
+    imp.add_argument(
+        '--voxel',
+        type=common.number(validation.non_negative, '--voxel'),
+        default=0.0,
+        metavar='M',
+        help='with --clean: voxel size (default off)',
+    )
+    imp.add_argument('--quiet', action='store_true', help='no progress bar')
     imp.set_defaults(func=cmd_import)
 
-    synth = sub.add_parser("synth", parents=[common.scene_options()],
-                           help="make a synthetic reference bag (reference simulation seen by a virtual Kinect)")
-    synth.add_argument("--out", help="bag directory (default <cloth>_<primitive>)")
-    synth.add_argument("--seed", type=common.seed, default=0, help="sensor noise and reference seed (default 0)")
-    synth.add_argument("--reference", default="mujoco", choices=("mujoco", "newton-vbd"),
-                       help="reference model: mujoco (config/synth.yaml, default) or newton-vbd "
-                            "(config/synth_newton_vbd.yaml); default bag name <cloth>_<primitive>[_newton_vbd]")
-    synth.add_argument("--overwrite", action="store_true", help="replace the bag if it exists")
-    synth.add_argument("--quiet", action="store_true", help="no progress bar")
+    synth = sub.add_parser(
+        'synth',
+        parents=[common.scene_options()],
+        help='make a synthetic reference bag (reference simulation seen by a virtual Kinect)',
+    )
+    synth.add_argument('--out', help='bag directory (default <cloth>_<primitive>)')
+    synth.add_argument(
+        '--seed', type=common.seed, default=0, help='sensor noise and reference seed (default 0)'
+    )
+    synth.add_argument(
+        '--reference',
+        default='mujoco',
+        choices=('mujoco', 'newton-vbd'),
+        help=(
+            'reference model: mujoco (config/synth.yaml, default) or newton-vbd '
+            '(config/synth_newton_vbd.yaml); default bag name <cloth>_<primitive>[_newton_vbd]'
+        ),
+    )
+    synth.add_argument('--overwrite', action='store_true', help='replace the bag if it exists')
+    synth.add_argument('--quiet', action='store_true', help='no progress bar')
     synth.set_defaults(func=cmd_synth)
 
-    bag = sub.add_parser("bag", help="bag tools")
-    bag_sub = bag.add_subparsers(dest="bag_command", required=True, parser_class=common.Parser)
-    info = bag_sub.add_parser("info", help="describe a bag: topics, frames, trial metadata")
-    info.add_argument("path")
+    bag = sub.add_parser('bag', help='bag tools')
+    bag_sub = bag.add_subparsers(dest='bag_command', required=True, parser_class=common.Parser)
+    info = bag_sub.add_parser('info', help='describe a bag: topics, frames, trial metadata')
+    info.add_argument('path')
     info.set_defaults(func=cmd_bag_info)
-    rewrite = bag_sub.add_parser("rewrite", help="copy a bag into the current writer's layout (rosbag2 Jazzy, "
-                                 "metadata version 9, type hashes); messages and trial unchanged")
-    rewrite.add_argument("src", help="bag to read")
-    rewrite.add_argument("dst", help="new bag directory (must not exist or be empty)")
-    rewrite.add_argument("--change-of-phase-frame", metavar="N|detected", type=_frame_or_detected,
-                         help="store this change-of-phase frame in the trial (dynamic task), or the first "
-                              "table contact found in the clouds")
+    rewrite = bag_sub.add_parser(
+        'rewrite',
+        help=(
+            "copy a bag into the current writer's layout (rosbag2 Jazzy, "
+            "metadata version 9, type hashes); messages and trial unchanged"
+        ),
+    )
+    rewrite.add_argument('src', help='bag to read')
+    rewrite.add_argument('dst', help='new bag directory (must not exist or be empty)')
+    rewrite.add_argument(
+        '--change-of-phase-frame',
+        metavar='N|detected',
+        type=_frame_or_detected,
+        help=(
+            'store this change-of-phase frame in the trial (dynamic task), or the first '
+            'table contact found in the clouds'
+        ),
+    )
     rewrite.set_defaults(func=cmd_bag_rewrite)
 
 
 def _frame_or_detected(text: str) -> int | str:
-    return "detected" if text == "detected" else common.frame(text)
+    return 'detected' if text == 'detected' else common.frame(text)
 
 
 def cmd_import(args: argparse.Namespace) -> int:
@@ -59,11 +99,17 @@ def cmd_import(args: argparse.Namespace) -> int:
     from cloth_bench_ros.data.importer import import_dataset
 
     transform = common.read_transform(args.transform) if args.transform else None
-    bags = import_dataset(Path(args.root), Path(args.out), transform=transform, progress=not args.quiet,
-                          overwrite=args.overwrite, cleaning=scene_cleaning(voxel=args.voxel) if args.clean else None)
+    bags = import_dataset(
+        Path(args.root),
+        Path(args.out),
+        transform=transform,
+        progress=not args.quiet,
+        overwrite=args.overwrite,
+        cleaning=scene_cleaning(voxel=args.voxel) if args.clean else None,
+    )
     for bag in bags:
         print(bag)
-    print(f"imported {len(bags)} trial(s) into {args.out}")
+    print(f'imported {len(bags)} trial(s) into {args.out}')
     return 0
 
 
@@ -71,11 +117,18 @@ def cmd_synth(args: argparse.Namespace) -> int:
     """Write a synthetic reference bag."""
     from cloth_bench_ros.data.synth import synth_command
 
-    suffix = "" if args.reference == "mujoco" else "_" + args.reference.replace("-", "_")
-    out = Path(args.out) if args.out else Path(f"{args.cloth}_{args.primitive}{suffix}")
-    bag = synth_command(args.cloth, args.primitive, out, seed=args.seed, overwrite=args.overwrite,
-                        progress=not args.quiet, reference=args.reference)
-    print(f"synthetic bag written: {bag}")
+    suffix = '' if args.reference == 'mujoco' else '_' + args.reference.replace('-', '_')
+    out = Path(args.out) if args.out else Path(f'{args.cloth}_{args.primitive}{suffix}')
+    bag = synth_command(
+        args.cloth,
+        args.primitive,
+        out,
+        seed=args.seed,
+        overwrite=args.overwrite,
+        progress=not args.quiet,
+        reference=args.reference,
+    )
+    print(f'synthetic bag written: {bag}')
     return 0
 
 
@@ -93,7 +146,16 @@ def cmd_bag_rewrite(args: argparse.Namespace) -> int:
     from cloth_bench_ros.data.bag_rewrite import rewrite_bag
 
     counts = rewrite_bag(Path(args.src), Path(args.dst), args.change_of_phase_frame)
-    changed = "" if args.change_of_phase_frame is None else (
-        f"; change of phase set to frame {BagReader(Path(args.dst)).trial.change_of_phase_frame}")
-    print(f"rewrote {args.src} -> {args.dst}: {sum(counts.values())} messages, unchanged (checked){changed}")
+    changed = (
+        ''
+        if args.change_of_phase_frame is None
+        else (
+            '; change of phase set to frame'
+            f' {BagReader(Path(args.dst)).trial.change_of_phase_frame}'
+        )
+    )
+    print(
+        f'rewrote {args.src} -> {args.dst}: {sum(counts.values())} messages, unchanged'
+        f' (checked){changed}'
+    )
     return 0

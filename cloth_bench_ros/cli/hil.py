@@ -13,41 +13,107 @@ from cloth_bench_ros.cli.studies import tolerance_options
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register hil."""
-    hil = sub.add_parser("hil", parents=[common.scene_options(), tolerance_options()],
-                         help="hardware in the loop: targets on the wall clock, the simulator in its own process")
-    hil.add_argument("--engine", action="append", help="repeat for several (default mujoco)")
-    hil.add_argument("--rate", type=common.rate, action="append", help="Hz, repeat for several (default 100)")
-    hil.add_argument("--config", default="preset", choices=("preset", "recommended"),
-                     help="preset (with --grid/--set) or the settings sweep's recommendation for the rate")
-    hil.add_argument("--settings", help="settings-sweep results for --config recommended (default results/settings; "
-                                        "without a result there: config/hil_recommended.yaml)")
-    hil.add_argument("--deadline-budget", dest="budget", type=common.number(validation.positive, "--deadline-budget"),
-                     default=None, help="recommendation: step p99 under this fraction of the period (default 0.5: "
-                                        "the rest is the round trip)")
-    hil.add_argument("--bag", help="rosbag2 bag (default: the bundled one)")
-    hil.add_argument("--seed", type=common.seed, default=0)
-    hil.add_argument("--grid", type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
-    common.engine_override_option(hil, "engine parameter override")
-    hil.add_argument("--layout", default="auto", choices=("auto", "none"),
-                     help="real-time layout: auto (default: the measured best this machine allows: the step "
-                          "loop polling on a core of its own, the controller on SCHED_FIFO) or none")
-    hil.add_argument("--cpu", type=common.integer("--cpu", -1), default=None,
-                     help="pin the simulator's step loop to this core (-1: not; default: from --layout)")
-    hil.add_argument("--fifo", type=common.integer("--fifo", 0, 99), default=None, metavar="PRIORITY",
-                     help="SCHED_FIFO priority for the simulator and the controller (1-99, 0: not; default: "
-                          "from --layout)")
-    hil.add_argument("--no-freeze-gc", action="store_true", help="keep automatic garbage collection in the simulator")
-    hil.add_argument("--busy-wait", action=argparse.BooleanOptionalAction, default=None,
-                     help="the simulator polls for targets instead of sleeping (needs a core of its own: "
-                          "--cpu; default: from --layout)")
-    hil.add_argument("--in-process", action="store_true", help="all nodes in one process (intra-process transport)")
-    hil.add_argument("--duration", type=common.number(validation.non_negative, "--duration"), default=0.0,
-                     help="s of the trajectory to run (default 0: all; a shortened run is not scored)")
-    hil.add_argument("--no-lockstep", action="store_true", help="skip the lockstep run that gives the CD")
-    hil.add_argument("--output", help="results directory (default results/hil)")
-    hil.add_argument("--export-recommended", metavar="FILE",
-                     help="write the recommendation of every engine, task and rate in --settings to FILE and exit")
-    hil.add_argument("--note", help="--export-recommended: a provenance note (e.g. the sweep's command)")
+    hil = sub.add_parser(
+        'hil',
+        parents=[common.scene_options(), tolerance_options()],
+        help='hardware in the loop: targets on the wall clock, the simulator in its own process',
+    )
+    hil.add_argument('--engine', action='append', help='repeat for several (default mujoco)')
+    hil.add_argument(
+        '--rate', type=common.rate, action='append', help='Hz, repeat for several (default 100)'
+    )
+    hil.add_argument(
+        '--config',
+        default='preset',
+        choices=('preset', 'recommended'),
+        help="preset (with --grid/--set) or the settings sweep's recommendation for the rate",
+    )
+    hil.add_argument(
+        '--settings',
+        help=(
+            'settings-sweep results for --config recommended (default results/settings; '
+            'without a result there: config/hil_recommended.yaml)'
+        ),
+    )
+    hil.add_argument(
+        '--deadline-budget',
+        dest='budget',
+        type=common.number(validation.positive, '--deadline-budget'),
+        default=None,
+        help=(
+            'recommendation: step p99 under this fraction of the period (default 0.5: '
+            'the rest is the round trip)'
+        ),
+    )
+    hil.add_argument('--bag', help='rosbag2 bag (default: the bundled one)')
+    hil.add_argument('--seed', type=common.seed, default=0)
+    hil.add_argument('--grid', type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
+    common.engine_override_option(hil, 'engine parameter override')
+    hil.add_argument(
+        '--layout',
+        default='auto',
+        choices=('auto', 'none'),
+        help=(
+            'real-time layout: auto (default: the measured best this machine allows: the step '
+            'loop polling on a core of its own, the controller on SCHED_FIFO) or none'
+        ),
+    )
+    hil.add_argument(
+        '--cpu',
+        type=common.integer('--cpu', -1),
+        default=None,
+        help="pin the simulator's step loop to this core (-1: not; default: from --layout)",
+    )
+    hil.add_argument(
+        '--fifo',
+        type=common.integer('--fifo', 0, 99),
+        default=None,
+        metavar='PRIORITY',
+        help=(
+            'SCHED_FIFO priority for the simulator and the controller (1-99, 0: not; default: '
+            'from --layout)'
+        ),
+    )
+    hil.add_argument(
+        '--no-freeze-gc',
+        action='store_true',
+        help='keep automatic garbage collection in the simulator',
+    )
+    hil.add_argument(
+        '--busy-wait',
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help=(
+            'the simulator polls for targets instead of sleeping (needs a core of its own: '
+            '--cpu; default: from --layout)'
+        ),
+    )
+    hil.add_argument(
+        '--in-process',
+        action='store_true',
+        help='all nodes in one process (intra-process transport)',
+    )
+    hil.add_argument(
+        '--duration',
+        type=common.number(validation.non_negative, '--duration'),
+        default=0.0,
+        help='s of the trajectory to run (default 0: all; a shortened run is not scored)',
+    )
+    hil.add_argument(
+        '--no-lockstep', action='store_true', help='skip the lockstep run that gives the CD'
+    )
+    hil.add_argument('--output', help='results directory (default results/hil)')
+    hil.add_argument(
+        '--export-recommended',
+        metavar='FILE',
+        help=(
+            'write the recommendation of every engine, task and rate in --settings to FILE and'
+            ' exit'
+        ),
+    )
+    hil.add_argument(
+        '--note', help="--export-recommended: a provenance note (e.g. the sweep's command)"
+    )
     hil.set_defaults(func=cmd_hil)
 
 
@@ -64,18 +130,25 @@ def cmd_hil(args: argparse.Namespace) -> int:
         args.budget = hil.HIL_DEADLINE_BUDGET
     if args.export_recommended:
         return _export_recommended(args)
-    engines = args.engine or ["mujoco"]
+    engines = args.engine or ['mujoco']
     for name in engines:
         engine_class(name)
-    if args.config == "recommended" and args.grid:
-        raise UserError("--grid and --config recommended both choose the mesh: give one")
+    if args.config == 'recommended' and args.grid:
+        raise UserError('--grid and --config recommended both choose the mesh: give one')
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag)
     overrides = common.engine_overrides(args.set, engines)
-    out = Path(args.output) if args.output else Path("results") / "hil"
+    out = Path(args.output) if args.output else Path('results') / 'hil'
     settings = Path(args.settings) if args.settings else hil.DEFAULT_SETTINGS
-    processes = "one process" if args.in_process else "3 processes over DDS (controller, simulator, recorder+evaluator)"
-    print(f"cloth-bench hil: {args.cloth} {args.primitive}, targets on the wall clock, {processes}; bag {bag}")
+    processes = (
+        'one process'
+        if args.in_process
+        else '3 processes over DDS (controller, simulator, recorder+evaluator)'
+    )
+    print(
+        f'cloth-bench hil: {args.cloth} {args.primitive}, targets on the wall clock, {processes};'
+        f' bag {bag}'
+    )
     try:
         layout = resolve_layout(args.layout, args.cpu, args.fifo, args.busy_wait)
     except ValueError as exc:
@@ -85,31 +158,64 @@ def cmd_hil(args: argparse.Namespace) -> int:
     for engine in engines:
         for rate in args.rate or [100.0]:
             params = dict(overrides.get(engine, {}))
-            config = hil.HilConfig(engine, float(rate), bag, args.cloth, args.primitive, args.seed, args.grid,
-                                   tuple(sorted(params.items())), config_label(args.grid, params),
-                                   not args.in_process, layout.cpu, layout.fifo, not args.no_freeze_gc,
-                                   layout.busy_wait,
-                                   args.duration)
-            if args.config == "recommended":
-                rec, source = hil.recommended(engine, args.cloth, args.primitive, float(rate), settings,
-                                              args.tolerance_rel, args.tolerance_abs, args.budget)
-                label = rec.config + (f",{config_label(None, params)}" if params else "")  # --set on top
+            config = hil.HilConfig(
+                engine,
+                float(rate),
+                bag,
+                args.cloth,
+                args.primitive,
+                args.seed,
+                args.grid,
+                tuple(sorted(params.items())),
+                config_label(args.grid, params),
+                not args.in_process,
+                layout.cpu,
+                layout.fifo,
+                not args.no_freeze_gc,
+                layout.busy_wait,
+                args.duration,
+            )
+            if args.config == 'recommended':
+                rec, source = hil.recommended(
+                    engine,
+                    args.cloth,
+                    args.primitive,
+                    float(rate),
+                    settings,
+                    args.tolerance_rel,
+                    args.tolerance_abs,
+                    args.budget,
+                )
+                label = rec.config + (
+                    f',{config_label(None, params)}' if params else ''
+                )  # --set on top
                 config = hil.with_config(config, label, rec.grid, {**rec.params, **params})
-                print(f"{engine} at {rate:g} Hz: recommended `{rec.config}` from {source}: CD {rec.cd:.4f} m "
-                      f"(best {rec.best_config}: {rec.best_cd:.4f} m), step p99 {rec.step_p99_ms:.3f} ms "
-                      + ("under" if rec.meets_deadline else "NOT under") + f" {1e3 * args.budget / rate:g} ms")
-            print(f"running {engine} at {rate:g} Hz, configuration {config.config} ...", flush=True)
+                print(
+                    f'{engine} at {rate:g} Hz: recommended `{rec.config}` from {source}: CD'
+                    f' {rec.cd:.4f} m (best {rec.best_config}: {rec.best_cd:.4f} m), step p99'
+                    f' {rec.step_p99_ms:.3f} ms '
+                    + ('under' if rec.meets_deadline else 'NOT under')
+                    + f' {1e3 * args.budget / rate:g} ms'
+                )
+            print(
+                f'running {engine} at {rate:g} Hz, configuration {config.config} ...', flush=True
+            )
             result = hil.run_hil(config, out, lockstep=not args.no_lockstep)
             results.append(result)
-            print("  simulator process: " + "; ".join(result.realtime))
+            print('  simulator process: ' + '; '.join(result.realtime))
     rows = [r.row() for r in results]
     hil.write_results(results, out)
     print(text_table(hil_table(rows)))
-    print("latency: target due on the controller's wall-clock schedule -> state back at the controller; miss: latency "
-          "> 1 / rate; skipped: targets the simulator never stepped (a newer one was waiting); RTF: simulated / wall "
-          "time; CPU busy: all cores, any process, during the run")
-    report = write_hil_report(rows, out, out / "report")
-    print(f"results: {out / 'hil.jsonl'}; report: {report} (latency over time and histogram per run)")
+    print(
+        "latency: target due on the controller's wall-clock schedule -> state back at the"
+        " controller; miss: latency > 1 / rate; skipped: targets the simulator never stepped (a"
+        " newer one was waiting); RTF: simulated / wall time; CPU busy: all cores, any process,"
+        " during the run"
+    )
+    report = write_hil_report(rows, out, out / 'report')
+    print(
+        f'results: {out / "hil.jsonl"}; report: {report} (latency over time and histogram per run)'
+    )
     return 1 if any(r.problems for r in results) else 0
 
 
@@ -120,15 +226,27 @@ def _export_recommended(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies.sweep import load_rows
 
     if not args.settings:
-        raise UserError("--export-recommended needs --settings RESULTS (a settings sweep's results)")
+        raise UserError(
+            "--export-recommended needs --settings RESULTS (a settings sweep's results)"
+        )
     rows = load_rows(Path(args.settings))
     recs = all_recommendations(rows, args.tolerance_rel, args.tolerance_abs, args.budget)
     if not recs:
-        raise UserError(f"settings {args.settings}: no settings-sweep rows with a stable configuration")
-    atomic_write_text(Path(args.export_recommended), recommendation_yaml(
-        recs, provenance(rows, args.tolerance_rel, args.tolerance_abs, args.budget, args.note or "")))
+        raise UserError(
+            f'settings {args.settings}: no settings-sweep rows with a stable configuration'
+        )
+    atomic_write_text(
+        Path(args.export_recommended),
+        recommendation_yaml(
+            recs,
+            provenance(rows, args.tolerance_rel, args.tolerance_abs, args.budget, args.note or ''),
+        ),
+    )
     for r in recs:
-        print(f"{r.engine} {r.cloth} {r.primitive} {r.rate_hz:g} Hz: {r.config} (CD {r.cd:.4f} m, step p99 "
-              f"{r.step_p99_ms:.3f} ms, deadline {'met' if r.meets_deadline else 'not met'})")
-    print(f"written: {args.export_recommended}")
+        print(
+            f'{r.engine} {r.cloth} {r.primitive} {r.rate_hz:g} Hz: {r.config} (CD {r.cd:.4f} m,'
+            f' step p99 {r.step_p99_ms:.3f} ms, deadline'
+            f' {"met" if r.meets_deadline else "not met"})'
+        )
+    print(f'written: {args.export_recommended}')
     return 0

@@ -11,67 +11,149 @@ from cloth_bench_ros.studies.errors import StudyInterrupted
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register identify."""
-    ident = sub.add_parser("identify", parents=[common.scene_options(), common.executor_options()],
-                           help="fit an engine's cloth parameters to a bag (CMA-ES and Bayesian optimisation)")
-    ident.add_argument("--engine", default="mujoco", help="default mujoco")
-    ident.add_argument("--bag", help="rosbag2 bag to fit (default: the bundled one)")
-    ident.add_argument("--sampler", default="both", choices=("cmaes", "tpe", "gp", "both"),
-                       help="cmaes, tpe (Bayesian optimisation), gp (Gaussian-process BO, needs PyTorch) or both "
-                            "(CMA-ES and TPE, keep the best; default)")
-    ident.add_argument("--trials", type=common.integer("--trials", 1), default=500,
-                       help="trials per sampler (default 500, as the paper)")
-    ident.add_argument("--objective", default="cd", choices=("cd", "hd"), help="metric of the task window (default cd)")
-    ident.add_argument("--params", help="comma-separated parameters to fit (default: the engine's identified set)")
-    ident.add_argument("--seed", type=common.seed, default=0, help="seed of every trial (default 0)")
-    ident.add_argument("--rate", type=common.rate, default=100.0, help="simulator rate in Hz (default 100)")
-    ident.add_argument("--grid", type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
-    common.engine_override_option(ident, "fixed override, not fitted")
-    ident.add_argument("--span", type=common.factor("--span"), default=10.0,
-                       help="log-scale ranges reach this factor either side of the preset (default 10)")
-    ident.add_argument("--max-frames", type=common.integer("--max-frames", 1),
-                       help="score only the first N frames of the window (faster)")
-    ident.add_argument("--batch", type=common.integer("--batch", 1),
-                       help="trials in flight (default: the cluster's worker threads)")
-    ident.add_argument("--validate-seeds", type=common.integer("--validate-seeds", 0), default=5,
-                       help="held-out seeds to validate on (default 5)")
-    ident.add_argument("--bag-dir", help="other trials' bags of the cloth and task for validation")
-    ident.add_argument("--output", help="directory (default results/identify/<engine>_<cloth>_<primitive>)")
+    ident = sub.add_parser(
+        'identify',
+        parents=[common.scene_options(), common.executor_options()],
+        help="fit an engine's cloth parameters to a bag (CMA-ES and Bayesian optimisation)",
+    )
+    ident.add_argument('--engine', default='mujoco', help='default mujoco')
+    ident.add_argument('--bag', help='rosbag2 bag to fit (default: the bundled one)')
+    ident.add_argument(
+        '--sampler',
+        default='both',
+        choices=('cmaes', 'tpe', 'gp', 'both'),
+        help=(
+            'cmaes, tpe (Bayesian optimisation), gp (Gaussian-process BO, needs PyTorch) or both '
+            '(CMA-ES and TPE, keep the best; default)'
+        ),
+    )
+    ident.add_argument(
+        '--trials',
+        type=common.integer('--trials', 1),
+        default=500,
+        help='trials per sampler (default 500, as the paper)',
+    )
+    ident.add_argument(
+        '--objective',
+        default='cd',
+        choices=('cd', 'hd'),
+        help='metric of the task window (default cd)',
+    )
+    ident.add_argument(
+        '--params', help="comma-separated parameters to fit (default: the engine's identified set)"
+    )
+    ident.add_argument(
+        '--seed', type=common.seed, default=0, help='seed of every trial (default 0)'
+    )
+    ident.add_argument(
+        '--rate', type=common.rate, default=100.0, help='simulator rate in Hz (default 100)'
+    )
+    ident.add_argument('--grid', type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
+    common.engine_override_option(ident, 'fixed override, not fitted')
+    ident.add_argument(
+        '--span',
+        type=common.factor('--span'),
+        default=10.0,
+        help='log-scale ranges reach this factor either side of the preset (default 10)',
+    )
+    ident.add_argument(
+        '--max-frames',
+        type=common.integer('--max-frames', 1),
+        help='score only the first N frames of the window (faster)',
+    )
+    ident.add_argument(
+        '--batch',
+        type=common.integer('--batch', 1),
+        help="trials in flight (default: the cluster's worker threads)",
+    )
+    ident.add_argument(
+        '--validate-seeds',
+        type=common.integer('--validate-seeds', 0),
+        default=5,
+        help='held-out seeds to validate on (default 5)',
+    )
+    ident.add_argument('--bag-dir', help="other trials' bags of the cloth and task for validation")
+    ident.add_argument(
+        '--output', help='directory (default results/identify/<engine>_<cloth>_<primitive>)'
+    )
     ident.set_defaults(func=cmd_identify)
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, validate on held-out seeds, write the preset and print the outcome."""
     from cloth_bench_ros.paths import bundled_bag
-    from cloth_bench_ros.studies.identify import JOURNAL_FILE, TRIALS_FILE, IdentifySpec, identify
+    from cloth_bench_ros.studies.identify import identify, IdentifySpec, JOURNAL_FILE, TRIALS_FILE
 
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag)
     fixed = common.engine_overrides(args.set, [args.engine]).get(args.engine, {})
-    out = Path(args.output) if args.output else (
-        Path("results") / "identify" / f"{args.engine}_{args.cloth}_{args.primitive}")
-    spec = IdentifySpec(args.engine, args.cloth, args.primitive, bag, out, args.sampler, args.trials, args.objective,
-                        [p.strip() for p in args.params.split(",") if p.strip()] if args.params else [], args.seed,
-                        args.rate, args.grid, fixed, args.span, args.max_frames, args.batch, args.validate_seeds,
-                        Path(args.bag_dir) if args.bag_dir else None)
-    print(f"cloth-bench identify: {args.engine}, {args.cloth} {args.primitive}, {args.objective.upper()}, "
-          f"sampler {args.sampler}, {args.trials} trials each; bag {bag}; output {out}", flush=True)
+    out = (
+        Path(args.output)
+        if args.output
+        else (Path('results') / 'identify' / f'{args.engine}_{args.cloth}_{args.primitive}')
+    )
+    spec = IdentifySpec(
+        args.engine,
+        args.cloth,
+        args.primitive,
+        bag,
+        out,
+        args.sampler,
+        args.trials,
+        args.objective,
+        [p.strip() for p in args.params.split(',') if p.strip()] if args.params else [],
+        args.seed,
+        args.rate,
+        args.grid,
+        fixed,
+        args.span,
+        args.max_frames,
+        args.batch,
+        args.validate_seeds,
+        Path(args.bag_dir) if args.bag_dir else None,
+    )
+    print(
+        f'cloth-bench identify: {args.engine}, {args.cloth} {args.primitive},'
+        f' {args.objective.upper()}, sampler {args.sampler}, {args.trials} trials each; bag {bag};'
+        f' output {out}',
+        flush=True,
+    )
     try:
         outcome = identify(spec, args.scheduler, args.workers, progress=not args.no_progress)
     except KeyboardInterrupt:
         trials = out / TRIALS_FILE
-        kept = sum(1 for line in trials.read_text().splitlines() if line.strip()) if trials.exists() else 0
-        raise StudyInterrupted(f"identify interrupted: {kept} finished trials are in {out / TRIALS_FILE} "
-                               f"(study: {out / JOURNAL_FILE}); run the same command again to resume") from None
+        kept = (
+            sum(1 for line in trials.read_text().splitlines() if line.strip())
+            if trials.exists()
+            else 0
+        )
+        raise StudyInterrupted(
+            f'identify interrupted: {kept} finished trials are in {out / TRIALS_FILE} '
+            f'(study: {out / JOURNAL_FILE}); run the same command again to resume'
+        ) from None
     s = outcome.summary
-    for name, result in s["per_sampler"].items():
-        print(f"{name:<6} best {args.objective.upper()} {result['value']:.5f} m after {result['trials']} trials")
-    print(f"identified ({s['best_sampler']}): " + ", ".join(f"{k}={v:.6g}" for k, v in s["params"].items()))
-    print(f"{args.objective.upper()} on seed {args.seed}: preset {s['preset_value']:.5f} m -> identified "
-          f"{s['value']:.5f} m")
-    for v in s["validation"]:
-        print(f"held-out seeds, {Path(v['bag']).name}: preset {v['preset']['mean']:.5f} ± {v['preset']['std']:.5f} m, "
-              f"identified {v['identified']['mean']:.5f} ± {v['identified']['std']:.5f} m "
-              f"({v['identified']['ok']} of {v['identified']['n']} runs ok)")
-    print(f"preset: {outcome.preset_file} (use: cloth-bench run --presets {out}); "
-          f"{outcome.wall_s:.0f} s; report: cloth-bench report {out}")
+    for name, result in s['per_sampler'].items():
+        print(
+            f'{name:<6} best {args.objective.upper()} {result["value"]:.5f} m after'
+            f' {result["trials"]} trials'
+        )
+    print(
+        f'identified ({s["best_sampler"]}): '
+        + ', '.join(f'{k}={v:.6g}' for k, v in s['params'].items())
+    )
+    print(
+        f'{args.objective.upper()} on seed {args.seed}: preset {s["preset_value"]:.5f} m ->'
+        f' identified {s["value"]:.5f} m'
+    )
+    for v in s['validation']:
+        print(
+            f'held-out seeds, {Path(v["bag"]).name}: preset {v["preset"]["mean"]:.5f} ±'
+            f' {v["preset"]["std"]:.5f} m, identified {v["identified"]["mean"]:.5f} ±'
+            f' {v["identified"]["std"]:.5f} m ({v["identified"]["ok"]} of {v["identified"]["n"]}'
+            ' runs ok)'
+        )
+    print(
+        f'preset: {outcome.preset_file} (use: cloth-bench run --presets {out}); '
+        f'{outcome.wall_s:.0f} s; report: cloth-bench report {out}'
+    )
     return 0

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 import sys
 import time
-from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
@@ -15,109 +15,204 @@ from cloth_bench_ros.core.trajectory import PRIMITIVES
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register run, trajectory and engines."""
-    run = sub.add_parser("run", parents=[common.scene_options()],
-                         help="run the node graph on a bag and print the result table")
-    run.add_argument("--engine", action="append", help="engine to run (repeat for several; default mujoco)")
-    run.add_argument("--rate", type=common.rate, default=100.0, help="simulator rate in Hz (default 100)")
-    run.add_argument("--bag", help="rosbag2 bag to score against (default: the bundled one)")
-    run.add_argument("--presets", help="directory of <engine>.yaml presets (default: config/presets)")
-    run.add_argument("--seed", type=common.seed, default=0, help="perturbs the initial cloth (default 0)")
-    run.add_argument("--pacing", default="lockstep", choices=("lockstep", "realtime"))
-    run.add_argument("--processes", action="store_true",
-                     help="one OS process per node over DDS on loopback (default: all nodes in this process)")
-    run.add_argument("--output", help="report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)")
-    scoring = run.add_argument_group("scoring your own recording (see docs/own-recording.md)")
-    scoring.add_argument("--topic", help="PointCloud2 topic to score (default: the project's, else the only one)")
-    scoring.add_argument("--start-time", metavar="S", help="start of the motion in bag time: an absolute stamp "
-                         "(>= 1e9 s) or seconds from the first message (default: targets topic, else automatic)")
-    scoring.add_argument("--targets-topic", help="recorded PoseArray gripper targets whose first motion is the start")
-    scoring.add_argument("--change-of-phase-frame", type=common.frame, metavar="N",
-                         help="last frame of the dynamic window (default: the bag's metadata, else none)")
-    scoring.add_argument("--transform", metavar="FILE", help="4x4 matrix into world for every cloud, instead of tf")
-    scoring.add_argument("--clean", default="auto", choices=("auto", "on", "off"),
-                         help="crop, table plane, outliers (default auto: on for bags without the project's metadata)")
-    scoring.add_argument("--voxel", type=common.number(validation.non_negative, "--voxel"), default=0.0, metavar="M",
-                         help="voxel down-sampling size (default off)")
-    scoring.add_argument("--table-plane", default="auto", choices=("auto", "remove", "keep"),
-                         help="remove the table plane; it also removes cloth lying flat on the table "
-                              "(default auto: remove for dynamic, keep for quasi_static)")
-    scoring.add_argument("--align-window", type=common.number(validation.positive, "--align-window"), default=1.0,
-                         metavar="S", help="seconds of motion the automatic alignment compares (default 1)")
-    scoring.add_argument("--align-step", type=common.number(validation.positive, "--align-step"),
-                         default=1.0 / 30.0, metavar="S",
-                         help="coarse step of the automatic alignment (default 1/30 s; refined 8x)")
-    scoring.add_argument("--record-comparison", metavar="DIR", help="write a comparison bag (Foxglove/RViz)")
-    scoring.add_argument("--figures", action="store_true",
-                         help="qualitative figure (paper Fig. 4) and animation in the report directory")
-    run.add_argument("--grid", type=common.grid, help="cloth mesh NXxNZ vertices, e.g. 6x8 (default: the engine's, 11x15)")
-    common.engine_override_option(run, "override an engine parameter on top of the preset (repeatable)")
+    run = sub.add_parser(
+        'run',
+        parents=[common.scene_options()],
+        help='run the node graph on a bag and print the result table',
+    )
+    run.add_argument(
+        '--engine', action='append', help='engine to run (repeat for several; default mujoco)'
+    )
+    run.add_argument(
+        '--rate', type=common.rate, default=100.0, help='simulator rate in Hz (default 100)'
+    )
+    run.add_argument('--bag', help='rosbag2 bag to score against (default: the bundled one)')
+    run.add_argument(
+        '--presets', help='directory of <engine>.yaml presets (default: config/presets)'
+    )
+    run.add_argument(
+        '--seed', type=common.seed, default=0, help='perturbs the initial cloth (default 0)'
+    )
+    run.add_argument('--pacing', default='lockstep', choices=('lockstep', 'realtime'))
+    run.add_argument(
+        '--processes',
+        action='store_true',
+        help='one OS process per node over DDS on loopback (default: all nodes in this process)',
+    )
+    run.add_argument(
+        '--output',
+        help='report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)',
+    )
+    scoring = run.add_argument_group('scoring your own recording (see docs/own-recording.md)')
+    scoring.add_argument(
+        '--topic', help="PointCloud2 topic to score (default: the project's, else the only one)"
+    )
+    scoring.add_argument(
+        '--start-time',
+        metavar='S',
+        help=(
+            'start of the motion in bag time: an absolute stamp '
+            '(>= 1e9 s) or seconds from the first message (default: targets topic, else automatic)'
+        ),
+    )
+    scoring.add_argument(
+        '--targets-topic',
+        help='recorded PoseArray gripper targets whose first motion is the start',
+    )
+    scoring.add_argument(
+        '--change-of-phase-frame',
+        type=common.frame,
+        metavar='N',
+        help="last frame of the dynamic window (default: the bag's metadata, else none)",
+    )
+    scoring.add_argument(
+        '--transform', metavar='FILE', help='4x4 matrix into world for every cloud, instead of tf'
+    )
+    scoring.add_argument(
+        '--clean',
+        default='auto',
+        choices=('auto', 'on', 'off'),
+        help=(
+            "crop, table plane, outliers (default auto: on for bags without the project's"
+            " metadata)"
+        ),
+    )
+    scoring.add_argument(
+        '--voxel',
+        type=common.number(validation.non_negative, '--voxel'),
+        default=0.0,
+        metavar='M',
+        help='voxel down-sampling size (default off)',
+    )
+    scoring.add_argument(
+        '--table-plane',
+        default='auto',
+        choices=('auto', 'remove', 'keep'),
+        help=(
+            'remove the table plane; it also removes cloth lying flat on the table '
+            '(default auto: remove for dynamic, keep for quasi_static)'
+        ),
+    )
+    scoring.add_argument(
+        '--align-window',
+        type=common.number(validation.positive, '--align-window'),
+        default=1.0,
+        metavar='S',
+        help='seconds of motion the automatic alignment compares (default 1)',
+    )
+    scoring.add_argument(
+        '--align-step',
+        type=common.number(validation.positive, '--align-step'),
+        default=1.0 / 30.0,
+        metavar='S',
+        help='coarse step of the automatic alignment (default 1/30 s; refined 8x)',
+    )
+    scoring.add_argument(
+        '--record-comparison', metavar='DIR', help='write a comparison bag (Foxglove/RViz)'
+    )
+    scoring.add_argument(
+        '--figures',
+        action='store_true',
+        help='qualitative figure (paper Fig. 4) and animation in the report directory',
+    )
+    run.add_argument(
+        '--grid',
+        type=common.grid,
+        help="cloth mesh NXxNZ vertices, e.g. 6x8 (default: the engine's, 11x15)",
+    )
+    common.engine_override_option(
+        run, 'override an engine parameter on top of the preset (repeatable)'
+    )
     run.set_defaults(func=cmd_run)
 
-    traj = sub.add_parser("trajectory", help="print the quintic part of a primitive as CSV")
-    traj.add_argument("--primitive", default="dynamic", choices=PRIMITIVES)
-    traj.add_argument("--rate", type=common.rate, default=100.0)
+    traj = sub.add_parser('trajectory', help='print the quintic part of a primitive as CSV')
+    traj.add_argument('--primitive', default='dynamic', choices=PRIMITIVES)
+    traj.add_argument('--rate', type=common.rate, default=100.0)
     traj.set_defaults(func=cmd_trajectory)
 
-    engines = sub.add_parser("engines", help="list known engines, their availability and version")
-    engines.add_argument("--warm", action="store_true",
-                         help="also compile what makes an engine's first run slow (Newton: Warp's kernel cache)")
+    engines = sub.add_parser('engines', help='list known engines, their availability and version')
+    engines.add_argument(
+        '--warm',
+        action='store_true',
+        help="also compile what makes an engine's first run slow (Newton: Warp's kernel cache)",
+    )
     engines.set_defaults(func=cmd_engines)
 
 
 def _replay_params(args: argparse.Namespace) -> dict:
     """Recorder parameters for bags that do not say everything (plain `ros2 bag record` output)."""
-    params = {"topic": args.topic or "", "start_time": args.start_time or "", "targets_topic": args.targets_topic or "",
-              "clean": args.clean, "voxel": float(args.voxel), "table_plane": args.table_plane,
-              "align_window": float(args.align_window), "align_step": float(args.align_step)}
+    params = {
+        'topic': args.topic or '',
+        'start_time': args.start_time or '',
+        'targets_topic': args.targets_topic or '',
+        'clean': args.clean,
+        'voxel': float(args.voxel),
+        'table_plane': args.table_plane,
+        'align_window': float(args.align_window),
+        'align_step': float(args.align_step),
+    }
     if args.transform:
-        params["transform"] = [float(v) for v in common.read_transform(args.transform).ravel()]
+        params['transform'] = [float(v) for v in common.read_transform(args.transform).ravel()]
     return params
 
 
 def _print_real(summary: dict) -> None:
     from cloth_bench_ros.core.evaluation import accounting_line
 
-    real = summary["real"]
-    acc = real["accounting"]
+    real = summary['real']
+    acc = real['accounting']
     print(accounting_line(acc))
-    start = real.get("alignment") or {}
+    start = real.get('alignment') or {}
     if start:
-        print(f"start of the motion: bag time {start['bag_ns'] / 1e9:.3f} s, {start['method']}, "
-              f"precision +/- {start['precision_s'] * 1e3:.1f} ms")
+        print(
+            f'start of the motion: bag time {start["bag_ns"] / 1e9:.3f} s, {start["method"]}, '
+            f'precision +/- {start["precision_s"] * 1e3:.1f} ms'
+        )
     window = window_line(summary)
     if window:
         print(window)
-    print(f"real points: {real['nan_points_dropped']} NaN points dropped, "
-          f"{real['irregular_intervals']} intervals not at 30 Hz" + (
-              f", frames from {real['frames_from']}" if real.get("frames_from") else ""))
-    if acc["scored"] == 0:
-        raise UserError(f"bag: no frame was scored ({accounting_line(acc)[len('real frames: '):]}); "
-                        "check --start-time/--topic/--primitive")
+    print(
+        f'real points: {real["nan_points_dropped"]} NaN points dropped, '
+        f'{real["irregular_intervals"]} intervals not at 30 Hz'
+        + (f', frames from {real["frames_from"]}' if real.get('frames_from') else '')
+    )
+    if acc['scored'] == 0:
+        raise UserError(
+            f'bag: no frame was scored ({accounting_line(acc)[len("real frames: ") :]}); '
+            'check --start-time/--topic/--primitive'
+        )
 
 
 def window_line(summary: dict) -> str:
     """Which frames CD_d/HD_d cover and why: the change of phase and its source (dynamic task only)."""
-    if summary["run"].get("primitive") != "dynamic":
-        return ""
-    cop = summary["real"].get("change_of_phase") or {}
-    frame = cop.get("frame")
+    if summary['run'].get('primitive') != 'dynamic':
+        return ''
+    cop = summary['real'].get('change_of_phase') or {}
+    frame = cop.get('frame')
     if frame is None:
-        return (f"CD_d/HD_d over every frame: no change of phase ({cop.get('reason', 'not given')}); "
-                "give --change-of-phase-frame N to score the dynamics only")
-    source = {"detected": f"detected ({cop.get('reason')}, t = {cop.get('t_s', 0.0):.2f} s)",
-              "metadata": "from the bag's metadata", "option": "given by --change-of-phase-frame"}
-    return (f"CD_d/HD_d over frames 0-{frame - 1}: change of phase at frame {frame}, "
-            f"{source.get(cop.get('source'), cop.get('reason', ''))}")
+        return (
+            f'CD_d/HD_d over every frame: no change of phase ({cop.get("reason", "not given")}); '
+            'give --change-of-phase-frame N to score the dynamics only'
+        )
+    source = {
+        'detected': f'detected ({cop.get("reason")}, t = {cop.get("t_s", 0.0):.2f} s)',
+        'metadata': "from the bag's metadata",
+        'option': 'given by --change-of-phase-frame',
+    }
+    return (
+        f'CD_d/HD_d over frames 0-{frame - 1}: change of phase at frame {frame}, '
+        f'{source.get(cop.get("source"), cop.get("reason", ""))}'
+    )
 
 
 def _checked_output(path: Path, option: str) -> Path:
-    """An output directory that can be written, checked before the work starts."""
+    """Return an output directory that can be written, checked before the work starts."""
     from cloth_bench_ros.safe_io import check_output_dir
 
     try:
         return check_output_dir(path)
     except ValueError as exc:
-        raise UserError(f"{option} {exc}") from None
+        raise UserError(f'{option} {exc}') from None
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -126,50 +221,81 @@ def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.run_report import result_table
-    from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
+    from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
 
-    engines = validation.unique(args.engine or ["mujoco"], "--engine")
+    engines = validation.unique(args.engine or ['mujoco'], '--engine')
     for name in engines:
         engine_class(name)
     presets = Path(args.presets) if args.presets else None
-    for name in engines:  # a missing directory, malformed preset file or bad value fails here, in one line
+    for (
+        name
+    ) in (
+        engines
+    ):  # a missing directory, malformed preset file or bad value fails here, in one line
         load_preset(name, args.cloth, args.primitive, presets)
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic)
     overrides = common.engine_overrides(args.set, engines)
     replay = _replay_params(args)
-    out = Path(args.output) if args.output else (
-        Path("results") / f"{args.cloth}_{args.primitive}_{int(args.rate)}hz_seed{args.seed}")
-    _checked_output(out, "--output")  # an unwritable or occupied --output is found before the run, not after it
-    config = RunConfig(bag=bag, engines=engines, rate_hz=args.rate, cloth=args.cloth, primitive=args.primitive,
-                       seed=args.seed, pacing=args.pacing, output_dir=out,
-                       engine_params=overrides, grid=args.grid, presets_dir=presets,
-                       replay=replay, change_of_phase_frame=args.change_of_phase_frame,
-                       record_comparison=Path(args.record_comparison) if args.record_comparison else None,
-                       comparison_figures=args.figures)
+    out = (
+        Path(args.output)
+        if args.output
+        else (
+            Path('results') / f'{args.cloth}_{args.primitive}_{int(args.rate)}hz_seed{args.seed}'
+        )
+    )
+    _checked_output(
+        out, '--output'
+    )  # an unwritable or occupied --output is found before the run, not after it
+    config = RunConfig(
+        bag=bag,
+        engines=engines,
+        rate_hz=args.rate,
+        cloth=args.cloth,
+        primitive=args.primitive,
+        seed=args.seed,
+        pacing=args.pacing,
+        output_dir=out,
+        engine_params=overrides,
+        grid=args.grid,
+        presets_dir=presets,
+        replay=replay,
+        change_of_phase_frame=args.change_of_phase_frame,
+        record_comparison=Path(args.record_comparison) if args.record_comparison else None,
+        comparison_figures=args.figures,
+    )
     if config.record_comparison is not None:  # checked before the run, not after it
         if config.record_comparison.exists() and any(config.record_comparison.iterdir()):
-            raise UserError(f"comparison bag {config.record_comparison} already exists (not empty)")
-        _checked_output(config.record_comparison, "--record-comparison")
+            raise UserError(
+                f'comparison bag {config.record_comparison} already exists (not empty)'
+            )
+        _checked_output(config.record_comparison, '--record-comparison')
     if args.processes:
         from cloth_bench_ros.studies.processes import ProcessRunError, run_processes
 
         try:
             summary = run_processes(config)
         except ProcessRunError as exc:
-            raise UserError(f"run --processes: {exc}") from None
+            raise UserError(f'run --processes: {exc}') from None
     else:
         summary = run_pipeline(config)
-    print(f"cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed}, bag {bag}")
+    print(
+        f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
+        f' bag {bag}'
+    )
     print(result_table(summary))
     _print_real(summary)
-    print(f"report: {out}/summary.json, {out}/frames.csv")
-    for key in ("bag", "figure", "animation"):
-        if key in summary.get("comparison", {}):
-            print(f"comparison {key}: {summary['comparison'][key]}")
-    if not summary["real"]["accounting"]["adds_up"]:
-        print("cloth-bench: error: the frame accounting does not add up: frames were lost, or another graph "
-              "on the same ROS domain published into this run; the metrics are not valid", file=sys.stderr)
+    print(f'report: {out}/summary.json, {out}/frames.csv')
+    for key in ('bag', 'figure', 'animation'):
+        if key in summary.get('comparison', {}):
+            print(f'comparison {key}: {summary["comparison"][key]}')
+    if not summary['real']['accounting']['adds_up']:
+        print(
+            'cloth-bench: error: the frame accounting does not add up: frames were lost, or'
+            ' another graph on the same ROS domain published into this run; the metrics are not'
+            ' valid',
+            file=sys.stderr,
+        )
         return 1
     return 0
 
@@ -186,13 +312,16 @@ def cmd_engines(args: argparse.Namespace) -> int:
     """List the engines; with --warm, compile what makes their first run slow."""
     from cloth_bench_ros.engines import engine_class, known_engines
 
-    print(f"{'engine':<10} {'available':<10} {'version':<10} reason")
+    print(f'{"engine":<10} {"available":<10} {"version":<10} reason')
     for info in known_engines():
-        print(f"{info.name:<10} {'yes' if info.available else 'no':<10} {info.version or '-':<10} {info.reason}")
+        print(
+            f'{info.name:<10} {"yes" if info.available else "no":<10} {info.version or "-":<10}'
+            f' {info.reason}'
+        )
     if args.warm:
         for info in known_engines():
             if info.available:
                 start = time.perf_counter()
                 engine_class(info.name).warm()
-                print(f"warmed {info.name} in {time.perf_counter() - start:.1f} s")
+                print(f'warmed {info.name} in {time.perf_counter() - start:.1f} s')
     return 0

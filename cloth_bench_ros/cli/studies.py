@@ -17,79 +17,181 @@ TOLERANCE_ABS = 0.002  # ... or within this many metres of it, whichever is larg
 def tolerance_options() -> argparse.ArgumentParser:
     """Parent parser: the settings recommendation's CD tolerance."""
     parent = argparse.ArgumentParser(add_help=False)
-    parent.add_argument("--tolerance-rel", type=common.number(validation.non_negative, "--tolerance-rel"),
-                        default=TOLERANCE_REL, help="recommendation: CD within this fraction of the best "
-                                                    f"(default {TOLERANCE_REL})")
-    parent.add_argument("--tolerance-abs", type=common.number(validation.non_negative, "--tolerance-abs"),
-                        default=TOLERANCE_ABS, help=f"... or this many metres, whichever is larger "
-                                                    f"(default {TOLERANCE_ABS})")
+    parent.add_argument(
+        '--tolerance-rel',
+        type=common.number(validation.non_negative, '--tolerance-rel'),
+        default=TOLERANCE_REL,
+        help=f'recommendation: CD within this fraction of the best (default {TOLERANCE_REL})',
+    )
+    parent.add_argument(
+        '--tolerance-abs',
+        type=common.number(validation.non_negative, '--tolerance-abs'),
+        default=TOLERANCE_ABS,
+        help=f'... or this many metres, whichever is larger (default {TOLERANCE_ABS})',
+    )
     return parent
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register sweep, report, stress and cross-reference."""
     executor = common.executor_options()
-    sweep = sub.add_parser("sweep", parents=[executor],
-                           help="many runs in parallel: engines x rates x cloths x tasks x seeds")
-    sweep.add_argument("--mode", default="paper", choices=("paper", "settings"),
-                       help="paper: the paper's layout (default); settings: sweep the settings that cost time")
-    sweep.add_argument("--engine", action="append", help="repeat for several (default: mujoco, bullet, newton)")
-    sweep.add_argument("--rate", type=common.rate, action="append",
-                       help="Hz, repeat for several (default 10, 100, 1000; settings mode: one rate, default 100)")
-    sweep.add_argument("--cloth", action="append", choices=common.CLOTH_CHOICES,
-                       help="repeat (default all three; settings mode: towel)")
-    sweep.add_argument("--primitive", action="append", choices=PRIMITIVES, help="task, repeat (default both)")
-    sweep.add_argument("--seeds", type=common.integer("--seeds", 1), help="number of seeds (default 20; settings mode 2)")
-    sweep.add_argument("--seed-start", type=common.seed, default=0, help="first seed (default 0)")
-    sweep.add_argument("--output", help="results directory (default results/sweep or results/settings)")
-    sweep.add_argument("--bag-dir", help="directory of <cloth>_<task> or <cloth>_<trial>_<task> bags "
-                                         "(default: the bundled bags)")
-    sweep.add_argument("--grid", type=common.grid, help="cloth mesh NXxNZ for every cell (paper mode)")
-    common.engine_override_option(sweep, "engine parameter override for every cell (repeatable)")
-    sweep.add_argument("--pacing", default="lockstep", choices=("lockstep", "realtime"))
-    sweep.add_argument("--step-per-target", action="store_true",
-                       help="internal time step = 1 / rate (the paper's frequency study) instead of the preset's")
-    sweep.add_argument("--keep-frames", default="first", choices=("first", "all", "none"),
-                       help="seeds whose per-frame CD/HD are kept for the plots (default: the first)")
-    sweep.add_argument("--axis", action="append", metavar="PARAM=V1,V2",
-                       help="settings mode: an axis of the factorial sweep, e.g. grid=6x8,11x15 or "
-                            "timestep=preset,0.005 (replaces the default axes)")
-    sweep.add_argument("--retry-errors", action="store_true", help="run cells recorded as errors again")
-    sweep.add_argument("--dry-run", action="store_true", help="count the cells and estimate the time, run nothing")
-    sweep.add_argument("--report", action="store_true", help="render the report into <output>/report afterwards")
+    sweep = sub.add_parser(
+        'sweep',
+        parents=[executor],
+        help='many runs in parallel: engines x rates x cloths x tasks x seeds',
+    )
+    sweep.add_argument(
+        '--mode',
+        default='paper',
+        choices=('paper', 'settings'),
+        help="paper: the paper's layout (default); settings: sweep the settings that cost time",
+    )
+    sweep.add_argument(
+        '--engine', action='append', help='repeat for several (default: mujoco, bullet, newton)'
+    )
+    sweep.add_argument(
+        '--rate',
+        type=common.rate,
+        action='append',
+        help=(
+            'Hz, repeat for several (default 10, 100, 1000; settings mode: one rate, default 100)'
+        ),
+    )
+    sweep.add_argument(
+        '--cloth',
+        action='append',
+        choices=common.CLOTH_CHOICES,
+        help='repeat (default all three; settings mode: towel)',
+    )
+    sweep.add_argument(
+        '--primitive', action='append', choices=PRIMITIVES, help='task, repeat (default both)'
+    )
+    sweep.add_argument(
+        '--seeds',
+        type=common.integer('--seeds', 1),
+        help='number of seeds (default 20; settings mode 2)',
+    )
+    sweep.add_argument('--seed-start', type=common.seed, default=0, help='first seed (default 0)')
+    sweep.add_argument(
+        '--output', help='results directory (default results/sweep or results/settings)'
+    )
+    sweep.add_argument(
+        '--bag-dir',
+        help=(
+            'directory of <cloth>_<task> or <cloth>_<trial>_<task> bags '
+            '(default: the bundled bags)'
+        ),
+    )
+    sweep.add_argument(
+        '--grid', type=common.grid, help='cloth mesh NXxNZ for every cell (paper mode)'
+    )
+    common.engine_override_option(sweep, 'engine parameter override for every cell (repeatable)')
+    sweep.add_argument('--pacing', default='lockstep', choices=('lockstep', 'realtime'))
+    sweep.add_argument(
+        '--step-per-target',
+        action='store_true',
+        help="internal time step = 1 / rate (the paper's frequency study) instead of the preset's",
+    )
+    sweep.add_argument(
+        '--keep-frames',
+        default='first',
+        choices=('first', 'all', 'none'),
+        help='seeds whose per-frame CD/HD are kept for the plots (default: the first)',
+    )
+    sweep.add_argument(
+        '--axis',
+        action='append',
+        metavar='PARAM=V1,V2',
+        help=(
+            'settings mode: an axis of the factorial sweep, e.g. grid=6x8,11x15 or '
+            'timestep=preset,0.005 (replaces the default axes)'
+        ),
+    )
+    sweep.add_argument(
+        '--retry-errors', action='store_true', help='run cells recorded as errors again'
+    )
+    sweep.add_argument(
+        '--dry-run', action='store_true', help='count the cells and estimate the time, run nothing'
+    )
+    sweep.add_argument(
+        '--report', action='store_true', help='render the report into <output>/report afterwards'
+    )
     sweep.set_defaults(func=cmd_sweep)
 
-    report = sub.add_parser("report", parents=[tolerance_options()],
-                            help="render a sweep's tables, plots and Markdown/HTML report")
-    report.add_argument("results", help="results.jsonl of a sweep, or its directory")
-    report.add_argument("--output", help="report directory (default <results dir>/report)")
-    report.add_argument("--stress", help="stress.jsonl (or its directory) to include "
-                                         "(default: stress.jsonl next to the results, if any)")
-    report.add_argument("--rate", type=common.rate, default=100.0, help="rate of the Table II layout (default 100 Hz)")
-    report.add_argument("--fig5-cloth", default="towel", choices=common.CLOTH_CHOICES,
-                        help="cloth of the Fig. 5 layout (default towel)")
+    report = sub.add_parser(
+        'report',
+        parents=[tolerance_options()],
+        help="render a sweep's tables, plots and Markdown/HTML report",
+    )
+    report.add_argument('results', help='results.jsonl of a sweep, or its directory')
+    report.add_argument('--output', help='report directory (default <results dir>/report)')
+    report.add_argument(
+        '--stress',
+        help=(
+            'stress.jsonl (or its directory) to include '
+            '(default: stress.jsonl next to the results, if any)'
+        ),
+    )
+    report.add_argument(
+        '--rate',
+        type=common.rate,
+        default=100.0,
+        help='rate of the Table II layout (default 100 Hz)',
+    )
+    report.add_argument(
+        '--fig5-cloth',
+        default='towel',
+        choices=common.CLOTH_CHOICES,
+        help='cloth of the Fig. 5 layout (default towel)',
+    )
     report.set_defaults(func=cmd_report)
 
-    stress = sub.add_parser("stress", parents=[executor],
-                            help="run the suite of hard cases; reports divergence, never fails")
-    stress.add_argument("--engine", action="append", help="repeat for several (default: mujoco, bullet, newton)")
-    stress.add_argument("--case", action="append", help="only these cases (repeat; see --list)")
-    stress.add_argument("--list", action="store_true", help="list the cases and exit")
-    stress.add_argument("--max-wall-s", type=common.number(validation.positive, "--max-wall-s"),
-                        help="wall-time budget per case (default 120 s)")
-    stress.add_argument("--output", help="results directory (default results/stress)")
+    stress = sub.add_parser(
+        'stress',
+        parents=[executor],
+        help='run the suite of hard cases; reports divergence, never fails',
+    )
+    stress.add_argument(
+        '--engine', action='append', help='repeat for several (default: mujoco, bullet, newton)'
+    )
+    stress.add_argument('--case', action='append', help='only these cases (repeat; see --list)')
+    stress.add_argument('--list', action='store_true', help='list the cases and exit')
+    stress.add_argument(
+        '--max-wall-s',
+        type=common.number(validation.positive, '--max-wall-s'),
+        help='wall-time budget per case (default 120 s)',
+    )
+    stress.add_argument('--output', help='results directory (default results/stress)')
     stress.set_defaults(func=cmd_stress)
 
-    xref = sub.add_parser("cross-reference", parents=[executor],
-                          help="score every engine against both synthetic references")
-    xref.add_argument("--cloth", default="towel", choices=common.CLOTH_CHOICES,
-                      help="default towel; needs its <cloth>_<task>_newton_vbd bags")
-    xref.add_argument("--primitive", action="append", choices=PRIMITIVES, help="task (repeatable; default both)")
-    xref.add_argument("--seeds", type=common.integer("--seeds", 1), default=3,
-                      help="seeds 0..N-1 per engine (default 3)")
-    xref.add_argument("--rate", type=common.rate, default=100.0, help="simulator rate in Hz (default 100)")
-    xref.add_argument("--output", default="results/cross_reference",
-                      help="results directory: results.jsonl (resumed) and cross_reference.md")
+    xref = sub.add_parser(
+        'cross-reference',
+        parents=[executor],
+        help='score every engine against both synthetic references',
+    )
+    xref.add_argument(
+        '--cloth',
+        default='towel',
+        choices=common.CLOTH_CHOICES,
+        help='default towel; needs its <cloth>_<task>_newton_vbd bags',
+    )
+    xref.add_argument(
+        '--primitive', action='append', choices=PRIMITIVES, help='task (repeatable; default both)'
+    )
+    xref.add_argument(
+        '--seeds',
+        type=common.integer('--seeds', 1),
+        default=3,
+        help='seeds 0..N-1 per engine (default 3)',
+    )
+    xref.add_argument(
+        '--rate', type=common.rate, default=100.0, help='simulator rate in Hz (default 100)'
+    )
+    xref.add_argument(
+        '--output',
+        default='results/cross_reference',
+        help='results directory: results.jsonl (resumed) and cross_reference.md',
+    )
     xref.set_defaults(func=cmd_cross_reference)
 
 
@@ -97,51 +199,101 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     """Run a sweep's cells on the executor, resuming what is done."""
     from cloth_bench_ros.studies import sweep as sw
 
-    settings = args.mode == "settings"
-    engines = validation.unique(args.engine or [e for e in sw.DEFAULT_ENGINES if e in common.available_engines()],
-                                "--engine")
-    plan = sw.SweepPlan(args.mode, engines, args.rate or [], args.cloth or [], args.primitive or list(sw.DEFAULT_PRIMITIVES),
-                        args.seeds, args.seed_start, Path(args.bag_dir) if args.bag_dir else None, args.grid,
-                        common.engine_overrides(args.set, engines), args.pacing, args.step_per_target,
-                        args.keep_frames, args.axis or [])
+    settings = args.mode == 'settings'
+    engines = validation.unique(
+        args.engine or [e for e in sw.DEFAULT_ENGINES if e in common.available_engines()],
+        '--engine',
+    )
+    plan = sw.SweepPlan(
+        args.mode,
+        engines,
+        args.rate or [],
+        args.cloth or [],
+        args.primitive or list(sw.DEFAULT_PRIMITIVES),
+        args.seeds,
+        args.seed_start,
+        Path(args.bag_dir) if args.bag_dir else None,
+        args.grid,
+        common.engine_overrides(args.set, engines),
+        args.pacing,
+        args.step_per_target,
+        args.keep_frames,
+        args.axis or [],
+    )
     cells = plan.cells()
-    out = Path(args.output) if args.output else Path("results") / ("settings" if settings else "sweep")
+    out = (
+        Path(args.output)
+        if args.output
+        else Path('results') / ('settings' if settings else 'sweep')
+    )
     if args.dry_run:
         print(sw.estimate(cells, out, args.workers))
         return 0
-    where = f"scheduler {args.scheduler}" if args.scheduler else f"{args.workers or sw.default_workers()} local workers"
-    print(f"cloth-bench sweep ({args.mode}): {len(engines)} engines x {len(set(c.rate_hz for c in cells))} rates x "
-          f"{len({c.cloth for c in cells})} cloths x {len({c.primitive for c in cells})} tasks x "
-          f"{len(plan.seeds())} seeds" + (f" x {len({c.config for c in cells})} configurations" if settings else "")
-          + f" = {len(cells)} cells -> {out / sw.RESULTS_FILE} on {where}", flush=True)
+    where = (
+        f'scheduler {args.scheduler}'
+        if args.scheduler
+        else f'{args.workers or sw.default_workers()} local workers'
+    )
+    print(
+        f'cloth-bench sweep ({args.mode}): {len(engines)} engines x'
+        f' {len(set(c.rate_hz for c in cells))} rates x {len({c.cloth for c in cells})} cloths x'
+        f' {len({c.primitive for c in cells})} tasks x {len(plan.seeds())} seeds'
+        + (f' x {len({c.config for c in cells})} configurations' if settings else '')
+        + f' = {len(cells)} cells -> {out / sw.RESULTS_FILE} on {where}',
+        flush=True,
+    )
     try:
-        outcome = sw.run_sweep(cells, out, args.workers, progress=not args.no_progress,
-                               retry_errors=args.retry_errors, scheduler=args.scheduler)
+        outcome = sw.run_sweep(
+            cells,
+            out,
+            args.workers,
+            progress=not args.no_progress,
+            retry_errors=args.retry_errors,
+            scheduler=args.scheduler,
+        )
     except KeyboardInterrupt:
-        kept = len({c.key() for c in cells} & {sw.row_key(r) for r in sw.load_rows(out / sw.RESULTS_FILE)})
-        raise StudyInterrupted(f"sweep interrupted: {kept} of {len(cells)} cells are in {out / sw.RESULTS_FILE}; "
-                               "run the same command again to resume") from None
-    print(f"sweep: {outcome.ran} cells run in {outcome.wall_s:.1f} s ({outcome.skipped} already done), "
-          f"{outcome.diverged} diverged, {outcome.errors} errors; results: {outcome.results}")
+        kept = len(
+            {c.key() for c in cells} & {sw.row_key(r) for r in sw.load_rows(out / sw.RESULTS_FILE)}
+        )
+        raise StudyInterrupted(
+            f'sweep interrupted: {kept} of {len(cells)} cells are in {out / sw.RESULTS_FILE}; '
+            'run the same command again to resume'
+        ) from None
+    print(
+        f'sweep: {outcome.ran} cells run in {outcome.wall_s:.1f} s ({outcome.skipped} already'
+        f' done), {outcome.diverged} diverged, {outcome.errors} errors; results: {outcome.results}'
+    )
     if args.report:
-        return render(out, out / "report", None, 100.0, "towel", TOLERANCE_REL, TOLERANCE_ABS)
+        return render(out, out / 'report', None, 100.0, 'towel', TOLERANCE_REL, TOLERANCE_ABS)
     return 0
 
 
-def render(results: Path, out: Path, stress: Path | None, rate: float, cloth: str, tol_rel: float,
-           tol_abs: float) -> int:
+def render(
+    results: Path,
+    out: Path,
+    stress: Path | None,
+    rate: float,
+    cloth: str,
+    tol_rel: float,
+    tol_abs: float,
+) -> int:
     """Render the report of `results` into `out` and print its headline tables."""
     from cloth_bench_ros.report.document import report_directory
 
     outcome = report_directory(Path(results), out, stress, rate, cloth, tol_rel, tol_abs)
-    if "table2" in outcome.tables:
-        print(outcome.tables["table2"].markdown())
+    if 'table2' in outcome.tables:
+        print(outcome.tables['table2'].markdown())
     for note in outcome.recommendations:
-        print(f"recommended {note['engine']} {note['cloth']} {note['primitive']} {note['rate_hz']:g} Hz: "
-              f"{note['recommended']} (CD {note['recommended_cd']:.4f} m, {note['recommended_step_ms']:.3f} ms/step); "
-              f"most accurate {note['best']} (CD {note['best_cd']:.4f} m, {note['best_step_ms']:.3f} ms/step)")
-    print(f"report: {outcome.markdown} and {outcome.html}, {len(outcome.images)} plots, "
-          f"{len(outcome.tables)} tables (CSV) in {out}")
+        print(
+            f'recommended {note["engine"]} {note["cloth"]} {note["primitive"]} {note["rate_hz"]:g}'
+            f' Hz: {note["recommended"]} (CD {note["recommended_cd"]:.4f} m,'
+            f' {note["recommended_step_ms"]:.3f} ms/step); most accurate {note["best"]} (CD'
+            f' {note["best_cd"]:.4f} m, {note["best_step_ms"]:.3f} ms/step)'
+        )
+    print(
+        f'report: {outcome.markdown} and {outcome.html}, {len(outcome.images)} plots, '
+        f'{len(outcome.tables)} tables (CSV) in {out}'
+    )
     return 0
 
 
@@ -149,9 +301,16 @@ def cmd_report(args: argparse.Namespace) -> int:
     """Render the report of a results file or directory."""
     results = Path(args.results)
     base = results if results.is_dir() else results.parent
-    out = Path(args.output) if args.output else base / "report"
-    return render(results, out, Path(args.stress) if args.stress else None, args.rate, args.fig5_cloth,
-                  args.tolerance_rel, args.tolerance_abs)
+    out = Path(args.output) if args.output else base / 'report'
+    return render(
+        results,
+        out,
+        Path(args.stress) if args.stress else None,
+        args.rate,
+        args.fig5_cloth,
+        args.tolerance_rel,
+        args.tolerance_abs,
+    )
 
 
 def cmd_stress(args: argparse.Namespace) -> int:
@@ -159,20 +318,26 @@ def cmd_stress(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies.stress import run_suite, select_cases, stress_table, verdict
 
     available = common.available_engines()
-    engines = validation.unique(args.engine or [e for e in ("mujoco", "bullet", "newton") if e in available],
-                                "--engine")
+    engines = validation.unique(
+        args.engine or [e for e in ('mujoco', 'bullet', 'newton') if e in available], '--engine'
+    )
     cases = select_cases(engines, args.case, args.max_wall_s)
     if args.list:
         for c in cases:
-            print(f"{c.engine:<8} {c.name:<24} {c.description}")
+            print(f'{c.engine:<8} {c.name:<24} {c.description}')
         return 0
-    out = Path(args.output) if args.output else Path("results") / "stress"
-    rows = run_suite(cases, out, args.workers, progress=not args.no_progress, scheduler=args.scheduler)
+    out = Path(args.output) if args.output else Path('results') / 'stress'
+    rows = run_suite(
+        cases, out, args.workers, progress=not args.no_progress, scheduler=args.scheduler
+    )
     print(stress_table(rows).markdown())
     for engine, diverged in verdict(rows).items():
-        n = sum(r["engine"] == engine for r in rows)
-        print(f"{engine}: {len(diverged)} of {n} cases diverged" + (f" ({', '.join(diverged)})" if diverged else ""))
-    print(f"stress: {out}/stress.jsonl, {out}/stress.md")
+        n = sum(r['engine'] == engine for r in rows)
+        print(
+            f'{engine}: {len(diverged)} of {n} cases diverged'
+            + (f' ({", ".join(diverged)})' if diverged else '')
+        )
+    print(f'stress: {out}/stress.jsonl, {out}/stress.md')
     return 0
 
 
@@ -181,28 +346,43 @@ def cmd_cross_reference(args: argparse.Namespace) -> int:
     from cloth_bench_ros.report.cross_reference import cross_reference_table
     from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
     from cloth_bench_ros.studies import sweep as sw
-    from cloth_bench_ros.studies.cross_reference import DEFAULT_ENTRANTS, cross_reference_cells
+    from cloth_bench_ros.studies.cross_reference import cross_reference_cells, DEFAULT_ENTRANTS
 
     available = common.available_engines()
     entrants = [(e, o) for e, o in DEFAULT_ENTRANTS if e in available]
-    cells = cross_reference_cells(args.cloth, args.primitive or ["dynamic", "quasi_static"],
-                                  range(args.seeds), args.rate, entrants)
+    cells = cross_reference_cells(
+        args.cloth,
+        args.primitive or ['dynamic', 'quasi_static'],
+        range(args.seeds),
+        args.rate,
+        entrants,
+    )
     for bag in sorted({c.bag for c in cells}):
         common.check_bag(Path(bag))
     out = check_output_dir(args.output)
     results = out / sw.RESULTS_FILE
-    print(f"cloth-bench cross-reference: {len(cells)} cells -> {results}", flush=True)
+    print(f'cloth-bench cross-reference: {len(cells)} cells -> {results}', flush=True)
     try:
-        outcome = sw.run_sweep(cells, out, args.workers, progress=not args.no_progress, desc="cross-reference",
-                               scheduler=args.scheduler)
+        outcome = sw.run_sweep(
+            cells,
+            out,
+            args.workers,
+            progress=not args.no_progress,
+            desc='cross-reference',
+            scheduler=args.scheduler,
+        )
     except KeyboardInterrupt:
         kept = len({c.key() for c in cells} & {sw.row_key(r) for r in sw.load_rows(results)})
-        raise StudyInterrupted(f"cross-reference interrupted: {kept} of {len(cells)} cells are in {results}; "
-                               "run the same command again to resume") from None
-    print(f"cross-reference: {outcome.ran} cells run in {outcome.wall_s:.1f} s ({outcome.skipped} already done), "
-          f"{outcome.diverged} diverged, {outcome.errors} errors")
+        raise StudyInterrupted(
+            f'cross-reference interrupted: {kept} of {len(cells)} cells are in {results}; '
+            'run the same command again to resume'
+        ) from None
+    print(
+        f'cross-reference: {outcome.ran} cells run in {outcome.wall_s:.1f} s ({outcome.skipped}'
+        f' already done), {outcome.diverged} diverged, {outcome.errors} errors'
+    )
     table = cross_reference_table(sw.load_rows(results))
-    text = table.markdown() if table is not None else "(no rows)"
-    atomic_write_text(out / "cross_reference.md", text + "\n")
+    text = table.markdown() if table is not None else '(no rows)'
+    atomic_write_text(out / 'cross_reference.md', text + '\n')
     print(text)
     return 0

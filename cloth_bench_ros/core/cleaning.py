@@ -10,9 +10,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-import numpy as np
-
 from cloth_bench_ros.core import scene
+import numpy as np
 
 WORKSPACE_MARGIN = 0.10  # m around the reach of the cloth
 
@@ -48,9 +47,10 @@ class CleaningStats:
         return asdict(self)
 
 
-def workspace_box(gripper_positions: np.ndarray, margin: float = WORKSPACE_MARGIN
-                  ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """A box holding the cloth wherever the grippers (k, 3) take it, bounded below by the table.
+def workspace_box(
+    gripper_positions: np.ndarray, margin: float = WORKSPACE_MARGIN
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Return a box holding the cloth wherever the grippers (k, 3) take it, bounded below by the table.
 
     The cloth hangs at most its length from the grippers and swings at most that far sideways.
     """
@@ -63,8 +63,10 @@ def workspace_box(gripper_positions: np.ndarray, margin: float = WORKSPACE_MARGI
     return tuple(float(v) for v in lo), tuple(float(v) for v in hi)
 
 
-def scene_cleaning(primitives: tuple[str, ...] = ("dynamic", "quasi_static"), voxel: float = 0.0) -> CleaningConfig:
-    """The cleaning for the benchmark scene: the workspace box of the primitives' gripper paths."""
+def scene_cleaning(
+    primitives: tuple[str, ...] = ('dynamic', 'quasi_static'), voxel: float = 0.0
+) -> CleaningConfig:
+    """Return the cleaning for the benchmark scene: the workspace box of the primitives' gripper paths."""
     from cloth_bench_ros.core.trajectory import full_targets
 
     paths = [full_targets(p, 100.0) for p in primitives]
@@ -82,7 +84,9 @@ def _remove_table(points: np.ndarray, distance: float) -> np.ndarray:
     idx = np.nonzero(near)[0]
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[idx]))
     o3d.utility.random.seed(0)  # RANSAC: the same cloud gives the same plane
-    (a, b, c, d), inliers = cloud.segment_plane(distance_threshold=distance, ransac_n=3, num_iterations=200)
+    (a, b, c, d), inliers = cloud.segment_plane(
+        distance_threshold=distance, ransac_n=3, num_iterations=200
+    )
     keep = np.ones(len(points), dtype=bool)
     if abs(c) < 0.95 or len(inliers) < 0.2 * len(idx):  # not the table: vertical or too small
         return keep
@@ -102,8 +106,10 @@ def remove_outliers(points: np.ndarray, neighbors: int, std_ratio: float) -> np.
     return np.asarray(points)[np.asarray(keep, dtype=np.int64)]
 
 
-def clean(points: np.ndarray, config: CleaningConfig, stats: CleaningStats | None = None) -> np.ndarray:
-    """The cleaned (m, 3) float64 points of a cloud (any shape (..., 3), NaN allowed)."""
+def clean(
+    points: np.ndarray, config: CleaningConfig, stats: CleaningStats | None = None
+) -> np.ndarray:
+    """Return the cleaned (m, 3) float64 points of a cloud (any shape (..., 3), NaN allowed)."""
     stats = stats if stats is not None else CleaningStats()
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     stats.frames += 1

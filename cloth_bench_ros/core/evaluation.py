@@ -8,15 +8,13 @@ only every third real frame falls on a simulator step).
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from dataclasses import dataclass, field
+import math
 
-import numpy as np
-
-from cloth_bench_ros.core.metrics import RealCloud, StabilityAccumulator, latency_stats
+from cloth_bench_ros.core.metrics import latency_stats, RealCloud, StabilityAccumulator
 from cloth_bench_ros.core.trajectory import Primitive
-
+import numpy as np
 
 IRREGULAR_TOLERANCE = 0.25  # an interval off 1/fps by more than this fraction is reported
 
@@ -42,14 +40,21 @@ class _EngineState:
     latencies: list = field(default_factory=list)  # s, target sent -> state received (wall clock)
     diverged_step: int | None = None
     diverged_time: float | None = None
-    diverged_reason: str = ""
+    diverged_reason: str = ''
 
 
 class OnlineEvaluator:
     """Pairs real frames with simulated states by stamp and scores them as they complete."""
 
-    def __init__(self, engines: list[str], primitive: Primitive, quintic_start_ns: int,
-                 change_of_phase_frame: int | None, fps: float = 30.0, keep_pairs: bool = False) -> None:
+    def __init__(
+        self,
+        engines: list[str],
+        primitive: Primitive,
+        quintic_start_ns: int,
+        change_of_phase_frame: int | None,
+        fps: float = 30.0,
+        keep_pairs: bool = False,
+    ) -> None:
         self.primitive = Primitive(primitive)
         self.quintic_start_ns = int(quintic_start_ns)
         self.change_of_phase_frame = change_of_phase_frame
@@ -65,14 +70,18 @@ class OnlineEvaluator:
         self.unpaired_real_frames = 0  # real frames no engine had a state for
         self.irregular_intervals = 0  # real frames not about 1/fps after the previous one
         self._last_real_ns: int | None = None
-        self.keep_pairs = keep_pairs  # keep (score, real points, vertices) for the comparison outputs
+        self.keep_pairs = (
+            keep_pairs  # keep (score, real points, vertices) for the comparison outputs
+        )
         self.pairs: list[tuple[FrameScore, np.ndarray, np.ndarray]] = []
 
     # inputs
     def add_state(self, engine: str, stamp_ns: int, vertices: np.ndarray) -> None:
-        """A simulated state; states before the quintic part only advance the stamp."""
+        """Return a simulated state; states before the quintic part only advance the stamp."""
         e = self.engines[engine]
-        if stamp_ns <= e.last_stamp:  # the same state again (a resent target answered): counted once
+        if (
+            stamp_ns <= e.last_stamp
+        ):  # the same state again (a resent target answered): counted once
             return
         e.last_stamp = stamp_ns
         if stamp_ns < self.quintic_start_ns:
@@ -82,9 +91,16 @@ class OnlineEvaluator:
             e.stability.add(vertices)
         self._score_ready()
 
-    def add_step(self, engine: str, stamp_ns: int, step: int, step_time: float, diverged: bool,
-                 reason: str = "") -> None:
-        """The simulator's report of one step: compute time and divergence."""
+    def add_step(
+        self,
+        engine: str,
+        stamp_ns: int,
+        step: int,
+        step_time: float,
+        diverged: bool,
+        reason: str = '',
+    ) -> None:
+        """Return the simulator's report of one step: compute time and divergence."""
         e = self.engines[engine]
         e.last_step_stamp = stamp_ns
         if step > 0:
@@ -99,7 +115,7 @@ class OnlineEvaluator:
         self.engines[engine].latencies.append(latency_s)
 
     def add_real(self, stamp_ns: int, points: np.ndarray, nan_dropped: int = 0) -> None:
-        """A real frame (stamp in run time); an empty cloud is counted and skipped."""
+        """Return a real frame (stamp in run time); an empty cloud is counted and skipped."""
         self.real_frames += 1
         self.nan_points_dropped += nan_dropped
         if self._last_real_ns is not None:
@@ -165,8 +181,10 @@ class OnlineEvaluator:
             self.unpaired_real_frames += 1
 
     def complete(self, final_stamp_ns: int) -> bool:
-        """True once every engine has reported its state and step at the final stamp."""
-        return all(min(e.last_stamp, e.last_step_stamp) >= final_stamp_ns for e in self.engines.values())
+        """Return True once every engine has reported its state and step at the final stamp."""
+        return all(
+            min(e.last_stamp, e.last_step_stamp) >= final_stamp_ns for e in self.engines.values()
+        )
 
     def finish(self) -> None:
         """Frames still waiting for a state never get one: count them as unpaired."""
@@ -175,11 +193,15 @@ class OnlineEvaluator:
         self._pending.clear()
 
     # results
-    def summary(self, period_s: float | None = None, wall_s: float | None = None,
-                sim_s: float | None = None) -> dict[str, dict]:
+    def summary(
+        self,
+        period_s: float | None = None,
+        wall_s: float | None = None,
+        sim_s: float | None = None,
+    ) -> dict[str, dict]:
         """Per engine: CD/HD over the window, L_s, step time, latency against the period, divergence."""
         out = {}
-        suffix = "d" if self.primitive is Primitive.DYNAMIC else "q"
+        suffix = 'd' if self.primitive is Primitive.DYNAMIC else 'q'
         for name, e in self.engines.items():
             rows = [s for s in self.scores if s.engine == name]
             window = [s for s in rows if s.in_window]
@@ -187,61 +209,70 @@ class OnlineEvaluator:
             cd = [s.cd for s in window]
             hd = [s.hd for s in window]
             out[name] = {
-                f"CD_{suffix}": math.nan if diverged_in_window or not cd else float(np.mean(cd)),
-                f"HD_{suffix}": math.nan if diverged_in_window or not hd else float(np.mean(hd)),
-                "L_s": e.stability.value,
-                "step_time": latency_stats(np.asarray(e.step_times)).as_dict(),
-                "latency": latency_stats(np.asarray(e.latencies)).as_dict(),
-                "deadline_misses": int(np.sum(np.asarray(e.latencies) > period_s)) if period_s else None,
-                "real_time_factor": sim_s / wall_s if sim_s and wall_s else None,
-                "frames_scored": len(rows),
-                "frames_in_window": len(window),
-                "diverged": e.diverged_step is not None,
-                "diverged_at_step": e.diverged_step,
-                "diverged_at_time": e.diverged_time,
-                "diverged_reason": e.diverged_reason,
+                f'CD_{suffix}': math.nan if diverged_in_window or not cd else float(np.mean(cd)),
+                f'HD_{suffix}': math.nan if diverged_in_window or not hd else float(np.mean(hd)),
+                'L_s': e.stability.value,
+                'step_time': latency_stats(np.asarray(e.step_times)).as_dict(),
+                'latency': latency_stats(np.asarray(e.latencies)).as_dict(),
+                'deadline_misses': (
+                    int(np.sum(np.asarray(e.latencies) > period_s)) if period_s else None
+                ),
+                'real_time_factor': sim_s / wall_s if sim_s and wall_s else None,
+                'frames_scored': len(rows),
+                'frames_in_window': len(window),
+                'diverged': e.diverged_step is not None,
+                'diverged_at_step': e.diverged_step,
+                'diverged_at_time': e.diverged_time,
+                'diverged_reason': e.diverged_reason,
             }
         return out
 
     def real_summary(self) -> dict[str, int]:
         return {
-            "frames": self.real_frames,
-            "empty_frames_skipped": self.empty_frames,
-            "nan_points_dropped": self.nan_points_dropped,
-            "unpaired_frames": self.unpaired_frames,
-            "scored_frames": self.scored_frames,
-            "unpaired_real_frames": self.unpaired_real_frames,
-            "irregular_intervals": self.irregular_intervals,
+            'frames': self.real_frames,
+            'empty_frames_skipped': self.empty_frames,
+            'nan_points_dropped': self.nan_points_dropped,
+            'unpaired_frames': self.unpaired_frames,
+            'scored_frames': self.scored_frames,
+            'unpaired_real_frames': self.unpaired_real_frames,
+            'irregular_intervals': self.irregular_intervals,
         }
 
 
-FRAME_FATES = ("scored", "before_start", "after_trajectory", "empty", "unpaired", "skipped_by_start_offset",
-               "not_received")
+FRAME_FATES = (
+    'scored',
+    'before_start',
+    'after_trajectory',
+    'empty',
+    'unpaired',
+    'skipped_by_start_offset',
+    'not_received',
+)
 
 
 def frame_accounting(replay: dict, real: dict) -> dict:
-    """What became of every frame on the bag's topic: the recorder's sorting plus the evaluator's.
+    """Return what became of every frame on the bag's topic: the recorder's sorting plus the evaluator's.
 
     replay: the recorder's counts (frames_in_bag, before_start, after_trajectory,
     empty_after_cleaning, to_send, ...); real: `OnlineEvaluator.real_summary()`. The fates add up
     to frames_in_bag unless frames went missing in transport, which `not_received` then counts.
     """
-    sent = replay.get("to_send", real["frames"]) - replay.get("skipped_by_start_offset", 0)
+    sent = replay.get('to_send', real['frames']) - replay.get('skipped_by_start_offset', 0)
     fates = {
-        "scored": real["scored_frames"],
-        "before_start": replay.get("before_start", 0),
-        "after_trajectory": replay.get("after_trajectory", 0),
-        "empty": replay.get("empty_after_cleaning", 0) + real["empty_frames_skipped"],
-        "unpaired": real["unpaired_real_frames"],
-        "skipped_by_start_offset": replay.get("skipped_by_start_offset", 0),
-        "not_received": max(0, sent - real["frames"]),
+        'scored': real['scored_frames'],
+        'before_start': replay.get('before_start', 0),
+        'after_trajectory': replay.get('after_trajectory', 0),
+        'empty': replay.get('empty_after_cleaning', 0) + real['empty_frames_skipped'],
+        'unpaired': real['unpaired_real_frames'],
+        'skipped_by_start_offset': replay.get('skipped_by_start_offset', 0),
+        'not_received': max(0, sent - real['frames']),
     }
-    total = replay.get("frames_in_bag", real["frames"])
-    return {"frames_in_bag": total, **fates, "adds_up": sum(fates.values()) == total}
+    total = replay.get('frames_in_bag', real['frames'])
+    return {'frames_in_bag': total, **fates, 'adds_up': sum(fates.values()) == total}
 
 
 def accounting_line(acc: dict) -> str:
     """One line: the bag's count and what became of each frame, e.g. for the CLI."""
-    parts = [f"{acc[k]} {k.replace('_', ' ')}" for k in FRAME_FATES if acc.get(k) or k == "scored"]
-    check = "adds up" if acc["adds_up"] else "DOES NOT add up"
-    return f"real frames: {acc['frames_in_bag']} on the topic = {' + '.join(parts)} ({check})"
+    parts = [f'{acc[k]} {k.replace("_", " ")}' for k in FRAME_FATES if acc.get(k) or k == 'scored']
+    check = 'adds up' if acc['adds_up'] else 'DOES NOT add up'
+    return f'real frames: {acc["frames_in_bag"]} on the topic = {" + ".join(parts)} ({check})'

@@ -10,14 +10,14 @@ skipped targets tells the two apart (`check_bookkeeping`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 import io
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 UNSET = -1  # a time not (yet) taken
-TIMELINE_COLUMNS = ("k", "stamp_ns", "due_ns", "sent_ns", "received_ns")
+TIMELINE_COLUMNS = ('k', 'stamp_ns', 'due_ns', 'sent_ns', 'received_ns')
 
 
 class TargetTimeline:
@@ -43,7 +43,7 @@ class TargetTimeline:
         """Index of the last target due by now, rounding to the nearest schedule point (a tick
         that fires a little before its due time still sends its target).
         """
-        return int(np.searchsorted(self.due, now_ns + period_ns // 2, side="right")) - 1
+        return int(np.searchsorted(self.due, now_ns + period_ns // 2, side='right')) - 1
 
     def index_of(self, stamp_ns: int) -> int:
         """k of a stamp, or -1 if no target has it."""
@@ -59,22 +59,32 @@ class TargetTimeline:
 
     def to_csv(self) -> str:
         """One row per target: k, stamp, due, sent, received (ns; -1 = not taken)."""
-        table = np.stack([np.arange(len(self)), self.stamps, self.due, self.sent, self.received], axis=1)
+        table = np.stack(
+            [np.arange(len(self)), self.stamps, self.due, self.sent, self.received], axis=1
+        )
         out = io.StringIO()
-        np.savetxt(out, table, fmt="%d", delimiter=",", header=",".join(TIMELINE_COLUMNS), comments="")
+        np.savetxt(
+            out, table, fmt='%d', delimiter=',', header=','.join(TIMELINE_COLUMNS), comments=''
+        )
         return out.getvalue()
 
     @classmethod
-    def from_csv(cls, text: str) -> "TargetTimeline":
-        """A timeline written by `to_csv`; ValueError on another layout."""
+    def from_csv(cls, text: str) -> 'TargetTimeline':
+        """Return a timeline written by `to_csv`; ValueError on another layout."""
         lines = text.splitlines()
-        if not lines or lines[0].strip() != ",".join(TIMELINE_COLUMNS):
-            raise ValueError(f"timeline: header is not {','.join(TIMELINE_COLUMNS)}")
-        table = np.loadtxt(io.StringIO(text), dtype=np.int64, delimiter=",", skiprows=1, ndmin=2)
-        if table.shape[1] != len(TIMELINE_COLUMNS) or not np.array_equal(table[:, 0], np.arange(len(table))):
-            raise ValueError("timeline: rows are not k = 0, 1, 2, ... with five columns")
+        if not lines or lines[0].strip() != ','.join(TIMELINE_COLUMNS):
+            raise ValueError(f'timeline: header is not {",".join(TIMELINE_COLUMNS)}')
+        table = np.loadtxt(io.StringIO(text), dtype=np.int64, delimiter=',', skiprows=1, ndmin=2)
+        if table.shape[1] != len(TIMELINE_COLUMNS) or not np.array_equal(
+            table[:, 0], np.arange(len(table))
+        ):
+            raise ValueError('timeline: rows are not k = 0, 1, 2, ... with five columns')
         timeline = cls(table[:, 1])
-        timeline.due[:], timeline.sent[:], timeline.received[:] = table[:, 2], table[:, 3], table[:, 4]
+        timeline.due[:], timeline.sent[:], timeline.received[:] = (
+            table[:, 2],
+            table[:, 3],
+            table[:, 4],
+        )
         timeline.anchor = int(table[0, 2]) if len(table) else None
         return timeline
 
@@ -94,7 +104,9 @@ class HilFigures:
     latency_p999: float
     latency_max: float
     send_lag_p99: float  # s, sent - due: the controller's own punctuality
-    real_time_factor: float  # simulated time over wall time from the first due time to the last state
+    real_time_factor: (
+        float  # simulated time over wall time from the first due time to the last state
+    )
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -124,15 +136,23 @@ def hil_figures(timeline: TargetTimeline, skipped: int, period_s: float) -> HilF
         sim = (timeline.stamps[got[-1]] - timeline.stamps[0]) / 1e9
         rtf = float(sim / wall) if wall > 0 else nan
     return HilFigures(
-        targets=len(timeline), sent=int(sent.sum()), states=states, skipped=int(skipped),
-        lost=int(sent.sum()) - states - int(skipped), deadline_misses=int(np.sum(lat > period_s)),
-        latency_p50=pct(50), latency_p99=pct(99), latency_p999=pct(99.9),
+        targets=len(timeline),
+        sent=int(sent.sum()),
+        states=states,
+        skipped=int(skipped),
+        lost=int(sent.sum()) - states - int(skipped),
+        deadline_misses=int(np.sum(lat > period_s)),
+        latency_p50=pct(50),
+        latency_p99=pct(99),
+        latency_p999=pct(99.9),
         latency_max=float(lat.max()) if lat.size else nan,
-        send_lag_p99=float(np.percentile(lag, 99)) if lag.size else nan, real_time_factor=rtf)
+        send_lag_p99=float(np.percentile(lag, 99)) if lag.size else nan,
+        real_time_factor=rtf,
+    )
 
 
 def check_bookkeeping(timeline: TargetTimeline, stepped: int, skipped: int) -> list[str]:
-    """What does not add up between the controller's timeline and the simulator's counts (empty: all does).
+    """Return what does not add up between the controller's timeline and the simulator's counts (empty: all does).
 
     Every target is sent, in order, no earlier than half a period before it is due; every sent
     target is either stepped or skipped by the simulator; a state never arrives before its
@@ -142,16 +162,16 @@ def check_bookkeeping(timeline: TargetTimeline, stepped: int, skipped: int) -> l
     n = len(timeline)
     sent = timeline.sent != UNSET
     if not sent.all():
-        problems.append(f"{n - int(sent.sum())} of {n} targets were never sent")
+        problems.append(f'{n - int(sent.sum())} of {n} targets were never sent')
     if np.any(np.diff(timeline.sent[sent]) < 0):
-        problems.append("targets were sent out of order")
+        problems.append('targets were sent out of order')
     if stepped + skipped != int(sent.sum()):
-        problems.append(f"sent {int(sent.sum())} != stepped {stepped} + skipped {skipped}")
+        problems.append(f'sent {int(sent.sum())} != stepped {stepped} + skipped {skipped}')
     got = timeline.received != UNSET
     if np.any(got & ~sent):
-        problems.append("a state came back for a target that was never sent")
+        problems.append('a state came back for a target that was never sent')
     if np.any(timeline.received[got & sent] < timeline.sent[got & sent]):
-        problems.append("a state came back before its target was sent")
+        problems.append('a state came back before its target was sent')
     if int(got.sum()) != stepped:
-        problems.append(f"states received {int(got.sum())} != targets stepped {stepped}")
+        problems.append(f'states received {int(got.sum())} != targets stepped {stepped}')
     return problems

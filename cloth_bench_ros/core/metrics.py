@@ -7,22 +7,21 @@ simulated frames, and step-latency statistics.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
-
-import numpy as np
+import hashlib
 
 from cloth_bench_ros.core.nearest import PointGrid
+import numpy as np
 
 
 def _points(name: str, a: np.ndarray) -> np.ndarray:
     a = np.asarray(a, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != 3:
-        raise ValueError(f"{name} must have shape (n, 3), got {a.shape}")
+        raise ValueError(f'{name} must have shape (n, 3), got {a.shape}')
     if len(a) == 0:
-        raise ValueError(f"{name} is empty")
+        raise ValueError(f'{name} is empty')
     if not np.isfinite(a).all():
-        raise ValueError(f"{name} holds non-finite values")
+        raise ValueError(f'{name} holds non-finite values')
     return a
 
 
@@ -30,11 +29,11 @@ class RealCloud:
     """A real point cloud P indexed once (a uniform grid, core/nearest.py) so that several meshes can be scored on it."""
 
     def __init__(self, points: np.ndarray) -> None:
-        self.points = _points("P", points)
+        self.points = _points('P', points)
         self._grid = PointGrid(self.points)
 
     @classmethod
-    def of(cls, points: np.ndarray) -> "RealCloud":
+    def of(cls, points: np.ndarray) -> 'RealCloud':
         """RealCloud(points), from the process's tree cache when `keep_trees` enabled it."""
         if _TREE_CACHE_LIMIT <= 0:
             return cls(points)
@@ -52,7 +51,7 @@ class RealCloud:
 
     def nearest_l1(self, vertices: np.ndarray) -> np.ndarray:
         """For each vertex v, min over p of ||v - p||_1 (exact: the grid is searched in L1)."""
-        return self._grid.nearest_l1(_points("V", vertices))
+        return self._grid.nearest_l1(_points('V', vertices))
 
     def chamfer_hausdorff(self, vertices: np.ndarray) -> tuple[float, float]:
         """(CD, HD) of the vertices against this cloud."""
@@ -89,7 +88,7 @@ def stability(frames: np.ndarray) -> float:
     """L_s = (1/N) sum_{t=1}^{N-2} mean |(V_{t-1} + V_t + V_{t+1}) / 3 - V_t| over frames (N, n, 3)."""
     frames = np.asarray(frames, dtype=np.float64)
     if frames.ndim != 3 or frames.shape[2] != 3:
-        raise ValueError(f"frames must have shape (N, n, 3), got {frames.shape}")
+        raise ValueError(f'frames must have shape (N, n, 3), got {frames.shape}')
     acc = StabilityAccumulator()
     for frame in frames:
         acc.add(frame)
@@ -115,7 +114,7 @@ class StabilityAccumulator:
 
     @property
     def value(self) -> float:
-        return self._sum / self.count if self.count else float("nan")
+        return self._sum / self.count if self.count else float('nan')
 
 
 @dataclass(frozen=True)
@@ -129,14 +128,20 @@ class LatencyStats:
     max: float
 
     def as_dict(self) -> dict[str, float]:
-        return {"count": self.count, "mean": self.mean, "p50": self.p50, "p99": self.p99, "max": self.max}
+        return {
+            'count': self.count,
+            'mean': self.mean,
+            'p50': self.p50,
+            'p99': self.p99,
+            'max': self.max,
+        }
 
 
 def latency_stats(samples: np.ndarray) -> LatencyStats:
     """Mean, median, 99th percentile and maximum of step times (NaN when there are none)."""
     s = np.asarray(samples, dtype=np.float64)
     if s.size == 0:
-        nan = float("nan")
+        nan = float('nan')
         return LatencyStats(0, nan, nan, nan, nan)
     return LatencyStats(
         int(s.size),

@@ -12,8 +12,8 @@ in that order, as a brute force over all pairs computes it.
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
+import numpy as np
 
 POINTS_PER_CELL = 16.0  # cells ~ points / 16 (measured best of 2, 8, 16, 32 on camera-like frames)
 
@@ -34,7 +34,9 @@ class PointGrid:
     def nearest_l1(self, vertices: np.ndarray) -> np.ndarray:
         """For each vertex, min over the cloud of ||v - p||_1 (exact)."""
         queries = np.ascontiguousarray(vertices, dtype=np.float64)
-        return _nearest(self.points, self.order, self.starts, self.lo, self.cell, self.dims, queries)
+        return _nearest(
+            self.points, self.order, self.starts, self.lo, self.cell, self.dims, queries
+        )
 
 
 @njit(cache=True)
@@ -59,7 +61,7 @@ def _bounds(points):
 
 @njit(cache=True)
 def _bucket(points, lo, inv, dims):
-    """The points' indices ordered by cell (counting sort) and each cell's start in that order."""
+    """Return the points' indices ordered by cell (counting sort) and each cell's start in that order."""
     n = points.shape[0]
     ncell = dims[0] * dims[1] * dims[2]
     ids = np.empty(n, dtype=np.int32)
@@ -75,7 +77,13 @@ def _bucket(points, lo, inv, dims):
         partial[k & 3, ids[k] + 1] += 1
     starts = np.zeros(ncell + 1, dtype=np.int32)
     for c in range(ncell):
-        starts[c + 1] = starts[c] + partial[0, c + 1] + partial[1, c + 1] + partial[2, c + 1] + partial[3, c + 1]
+        starts[c + 1] = (
+            starts[c]
+            + partial[0, c + 1]
+            + partial[1, c + 1]
+            + partial[2, c + 1]
+            + partial[3, c + 1]
+        )
     fill = starts[:-1].copy()
     order = np.empty(n, dtype=np.int32)  # indices, not points: a quarter of the scattered bytes
     for k in range(n):
@@ -100,7 +108,9 @@ def _nearest(points, order, starts, lo, cell, dims, queries):
     inv = 1.0 / cell
     out = np.empty(queries.shape[0])
     reach = max(dims[0], max(dims[1], dims[2]))
-    slack = 1e-9 * cell  # the cell bounds are computed, not exact: prune only what is clearly farther
+    slack = (
+        1e-9 * cell
+    )  # the cell bounds are computed, not exact: prune only what is clearly farther
     for q in range(queries.shape[0]):
         vx, vy, vz = queries[q, 0], queries[q, 1], queries[q, 2]
         cx = _cell_of(vx, lo[0], inv, dims[0])
@@ -127,7 +137,11 @@ def _nearest(points, order, starts, lo, cell, dims, queries):
                             c = (iz * dims[1] + iy) * dims[0] + ix
                             for j in range(starts[c], starts[c + 1]):
                                 k = order[j]
-                                d = abs(points[k, 0] - vx) + abs(points[k, 1] - vy) + abs(points[k, 2] - vz)
+                                d = (
+                                    abs(points[k, 0] - vx)
+                                    + abs(points[k, 1] - vy)
+                                    + abs(points[k, 2] - vz)
+                                )
                                 if d < best:
                                     best = d
                         ix += step

@@ -14,9 +14,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-import numpy as np
-
 from cloth_bench_ros.core.scene import TABLE_TOP_Z
+import numpy as np
 
 CONTACT_MARGIN = 0.02  # m above the table top; more than the cleaning's 1 cm plane band
 CONTACT_MIN_POINTS = 8  # points in the band, at the least ...
@@ -31,34 +30,42 @@ class ContactSearch:
     reason: str  # one line: what was found
 
 
-def contact_points(points: np.ndarray, table_z: float = TABLE_TOP_Z, margin: float = CONTACT_MARGIN) -> int:
+def contact_points(
+    points: np.ndarray, table_z: float = TABLE_TOP_Z, margin: float = CONTACT_MARGIN
+) -> int:
     """Points of one frame (n, 3) within `margin` above the table top (below it too: they touch)."""
     z = np.asarray(points, dtype=np.float64).reshape(-1, 3)[:, 2]
     return int(np.count_nonzero(z <= table_z + margin))
 
 
-def in_contact(points: np.ndarray, table_z: float = TABLE_TOP_Z, margin: float = CONTACT_MARGIN) -> bool:
-    """True if enough of the frame's points lie at the table to be cloth resting on it."""
+def in_contact(
+    points: np.ndarray, table_z: float = TABLE_TOP_Z, margin: float = CONTACT_MARGIN
+) -> bool:
+    """Return True if enough of the frame's points lie at the table to be cloth resting on it."""
     n = len(points)
     needed = max(CONTACT_MIN_POINTS, int(np.ceil(CONTACT_MIN_FRACTION * n)))
     return n > 0 and contact_points(points, table_z, margin) >= needed
 
 
-def first_table_contact(frames: Iterable[np.ndarray], table_z: float = TABLE_TOP_Z,
-                        margin: float = CONTACT_MARGIN) -> ContactSearch:
-    """The first of `frames` (world-frame clouds in time order) in which the cloth touches the table."""
-    return first_contact((in_contact(points, table_z, margin) for points in frames))
+def first_table_contact(
+    frames: Iterable[np.ndarray], table_z: float = TABLE_TOP_Z, margin: float = CONTACT_MARGIN
+) -> ContactSearch:
+    """Return the first of `frames` (world-frame clouds in time order) in which the cloth touches the table."""
+    return first_contact(in_contact(points, table_z, margin) for points in frames)
 
 
 def first_contact(flags: Iterable[bool]) -> ContactSearch:
-    """The first True of per-frame `in_contact` flags, unless the very first frame is one."""
+    """Return the first True of per-frame `in_contact` flags, unless the very first frame is one."""
     seen = 0
     for i, touching in enumerate(flags):
         seen += 1
         if not touching:
             continue
         if i == 0:
-            return ContactSearch(None, "points at the table top from the first frame on (the table is in "
-                                       "the clouds: clean them, or give the frame)")
-        return ContactSearch(i, "first table contact")
-    return ContactSearch(None, f"no table contact in {seen} frames")
+            return ContactSearch(
+                None,
+                'points at the table top from the first frame on (the table is in '
+                'the clouds: clean them, or give the frame)',
+            )
+        return ContactSearch(i, 'first table contact')
+    return ContactSearch(None, f'no table contact in {seen} frames')

@@ -10,21 +10,20 @@ import array
 import sys
 from typing import Any
 
-import numpy as np
-
 from cloth_bench_ros.errors import ClothBenchError
+import numpy as np
 
 # sensor_msgs/PointField datatypes
 INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
 _NUMPY_TYPES = {
-    INT8: "i1",
-    UINT8: "u1",
-    INT16: "i2",
-    UINT16: "u2",
-    INT32: "i4",
-    UINT32: "u4",
-    FLOAT32: "f4",
-    FLOAT64: "f8",
+    INT8: 'i1',
+    UINT8: 'u1',
+    INT16: 'i2',
+    UINT16: 'u2',
+    INT32: 'i4',
+    UINT32: 'u4',
+    FLOAT32: 'f4',
+    FLOAT64: 'f8',
 }
 
 
@@ -34,24 +33,24 @@ class PointCloudError(ClothBenchError, ValueError):
 
 def _cloud_data(cloud_type: type, raw: bytes) -> object:
     """PointCloud2.data in the form the class expects: rclpy's fast path is array.array('B')."""
-    if hasattr(cloud_type, "_fields_and_field_types"):  # an rclpy message class
-        return array.array("B", raw)
+    if hasattr(cloud_type, '_fields_and_field_types'):  # an rclpy message class
+        return array.array('B', raw)
     return np.frombuffer(raw, dtype=np.uint8)
 
 
 def create_cloud_xyz32(header: Any, points: np.ndarray, cloud_type: type, field_type: type) -> Any:
-    """A dense-or-not PointCloud2 of x, y, z float32 (point_step 12), one row, native byte order."""
+    """Return a dense-or-not PointCloud2 of x, y, z float32 (point_step 12), one row, native byte order."""
     pts = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
     fields = [
         field_type(name=name, offset=4 * i, datatype=FLOAT32, count=1)
-        for i, name in enumerate("xyz")
+        for i, name in enumerate('xyz')
     ]
     return cloud_type(
         header=header,
         height=1,
         width=len(pts),
         fields=fields,
-        is_bigendian=sys.byteorder != "little",
+        is_bigendian=sys.byteorder != 'little',
         point_step=12,
         row_step=12 * len(pts),
         data=_cloud_data(cloud_type, pts.tobytes()),
@@ -68,42 +67,46 @@ def _as_bytes(data: Any) -> bytes | np.ndarray:
 
 
 def read_xyz(cloud: Any) -> np.ndarray:
-    """The x, y, z of every point as float64 (n, 3), NaN points kept (see `drop_nan`)."""
+    """Return the x, y, z of every point as float64 (n, 3), NaN points kept (see `drop_nan`)."""
     names = [f.name for f in cloud.fields]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise PointCloudError(f"PointCloud2 has two fields named {', '.join(twice)}")
+        raise PointCloudError(f'PointCloud2 has two fields named {", ".join(twice)}')
     by_name = {f.name: f for f in cloud.fields}
-    missing = [c for c in "xyz" if c not in by_name]
+    missing = [c for c in 'xyz' if c not in by_name]
     if missing:
-        names = ", ".join(sorted(by_name)) or "none"
-        raise PointCloudError(f"PointCloud2 has no {'/'.join(missing)} field (fields: {names})")
+        names = ', '.join(sorted(by_name)) or 'none'
+        raise PointCloudError(f'PointCloud2 has no {"/".join(missing)} field (fields: {names})')
     n = int(cloud.width) * int(cloud.height)
     if n == 0:
         return np.zeros((0, 3))
-    order = ">" if cloud.is_bigendian else "<"
+    order = '>' if cloud.is_bigendian else '<'
     point_step, row_step = int(cloud.point_step), int(cloud.row_step)
     raw = _as_bytes(cloud.data)
     if row_step < point_step * int(cloud.width) or len(raw) < row_step * int(cloud.height):
         raise PointCloudError(
-            f"PointCloud2 data of {len(raw)} bytes does not hold {cloud.height} rows of "
-            f"{cloud.width} points (point_step {point_step}, row_step {row_step})"
+            f'PointCloud2 data of {len(raw)} bytes does not hold {cloud.height} rows of '
+            f'{cloud.width} points (point_step {point_step}, row_step {row_step})'
         )
-    if (point_step == 12 and row_step == 12 * int(cloud.width)
-            and [(by_name[c].offset, by_name[c].datatype) for c in "xyz"] == [(0, FLOAT32), (4, FLOAT32), (8, FLOAT32)]):
+    if (
+        point_step == 12
+        and row_step == 12 * int(cloud.width)
+        and [(by_name[c].offset, by_name[c].datatype) for c in 'xyz']
+        == [(0, FLOAT32), (4, FLOAT32), (8, FLOAT32)]
+    ):
         # The layout create_cloud_xyz32 writes: one flat read, no per-field copies.
-        return np.frombuffer(raw, dtype=order + "f4", count=3 * n).reshape(n, 3).astype(np.float64)
+        return np.frombuffer(raw, dtype=order + 'f4', count=3 * n).reshape(n, 3).astype(np.float64)
     # Drop the padding at the end of each row so that points are evenly spaced.
     rows = raw[: row_step * int(cloud.height)].reshape(int(cloud.height), row_step)
     packed = np.ascontiguousarray(rows[:, : point_step * int(cloud.width)]).reshape(n, point_step)
     out = np.empty((n, 3))
-    for i, c in enumerate("xyz"):
+    for i, c in enumerate('xyz'):
         f = by_name[c]
         if f.datatype not in _NUMPY_TYPES:
-            raise PointCloudError(f"PointCloud2 field {c} has unknown datatype {f.datatype}")
+            raise PointCloudError(f'PointCloud2 field {c} has unknown datatype {f.datatype}')
         dtype = np.dtype(order + _NUMPY_TYPES[f.datatype])
         if f.offset + dtype.itemsize > point_step:
-            raise PointCloudError(f"PointCloud2 field {c} lies outside point_step {point_step}")
+            raise PointCloudError(f'PointCloud2 field {c} lies outside point_step {point_step}')
         out[:, i] = packed[:, f.offset : f.offset + dtype.itemsize].copy().view(dtype).ravel()
     return out
 

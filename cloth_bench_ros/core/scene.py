@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from cloth_bench_ros import validation
+import numpy as np
 
 CLOTH_WIDTH = 0.50  # m, the grasped edge (along x)
 CLOTH_LENGTH = 0.70  # m, the hanging length (along -z)

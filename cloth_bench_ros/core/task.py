@@ -9,9 +9,8 @@ Engines apply this displacement to their own state; they do not draw it.
 
 from __future__ import annotations
 
-import numpy as np
-
 from cloth_bench_ros.core.scene import ClothGrid
+import numpy as np
 
 SEED_NOISE_STD = 0.0005  # m
 
@@ -21,7 +20,9 @@ def grasped_corners(grid: ClothGrid) -> list[int]:
     return [grid.left_corner, grid.right_corner]
 
 
-def initial_displacement(grid: ClothGrid, seed: int, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+def initial_displacement(
+    grid: ClothGrid, seed: int, left: np.ndarray, right: np.ndarray
+) -> np.ndarray:
     """Per vertex (n, 3), the initial state minus the rest shape: the grasped corners at `left`
     and `right`, every other vertex also perturbed by the seeded noise.
     """

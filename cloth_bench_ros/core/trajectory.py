@@ -8,19 +8,18 @@ begins.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from enum import Enum
-
-import numpy as np
+import math
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core import scene
+import numpy as np
 
 
 class Primitive(str, Enum):
-    DYNAMIC = "dynamic"
-    QUASI_STATIC = "quasi_static"
+    DYNAMIC = 'dynamic'
+    QUASI_STATIC = 'quasi_static'
 
 
 PRIMITIVES = tuple(p.value for p in Primitive)
@@ -31,7 +30,7 @@ def parse_primitive(name: str) -> Primitive:
     try:
         return Primitive(name)
     except ValueError:
-        raise ValueError(f"unknown primitive {name!r} (valid: {', '.join(PRIMITIVES)})") from None
+        raise ValueError(f'unknown primitive {name!r} (valid: {", ".join(PRIMITIVES)})') from None
 
 
 @dataclass(frozen=True)
@@ -96,7 +95,7 @@ class QuinticChain:
         ends = self.breakpoints
         starts = ends - np.array([s.duration for s in self.segments])
         # A time on a breakpoint belongs to the segment that ends there (its end conditions hold).
-        index = np.clip(np.searchsorted(ends, t - 1e-12, side="left"), 0, len(self.segments) - 1)
+        index = np.clip(np.searchsorted(ends, t - 1e-12, side='left'), 0, len(self.segments) - 1)
         for i, seg in enumerate(self.segments):
             mask = index == i
             if mask.any():
@@ -134,7 +133,7 @@ def _deg(seg: QuinticSegment) -> QuinticSegment:
 
 
 def quintic_part(primitive: Primitive | str) -> PrimitiveTrajectory:
-    """The quintic part of a primitive, exactly as docs/benchmark.md section 2 tabulates it."""
+    """Return the quintic part of a primitive, exactly as docs/benchmark.md section 2 tabulates it."""
     primitive = parse_primitive(primitive) if isinstance(primitive, str) else primitive
     y0 = float(scene.PREGRASP_LEFT[1])
     z0 = float(scene.PREGRASP_LEFT[2])
@@ -221,7 +220,7 @@ class GripperTargets:
 
 
 def sample_quintic(primitive: Primitive | str, rate_hz: float) -> GripperTargets:
-    """The quintic part alone, t from 0 at its start (what `cloth-bench trajectory` prints)."""
+    """Return the quintic part alone, t from 0 at its start (what `cloth-bench trajectory` prints)."""
     traj = quintic_part(primitive)
     t = sample_times(traj.duration, rate_hz)
     y, _, _ = traj.y.evaluate(t)
@@ -280,7 +279,7 @@ def quaternion_xyz(roll: float, pitch: float, yaw: float) -> tuple[float, float,
     )
 
 
-CSV_HEADER = "t,left_x,left_y,left_z,left_roll,right_x,right_y,right_z,right_roll"
+CSV_HEADER = 't,left_x,left_y,left_z,left_roll,right_x,right_y,right_z,right_roll'
 
 
 def to_csv(targets: GripperTargets) -> str:
@@ -291,6 +290,6 @@ def to_csv(targets: GripperTargets) -> str:
         rx, ry, rz = targets.right[k]
         r = targets.roll[k]
         rows.append(
-            f"{targets.t[k]:.6f},{lx:.9f},{ly:.9f},{lz:.9f},{r:.9f},{rx:.9f},{ry:.9f},{rz:.9f},{r:.9f}"
+            f'{targets.t[k]:.6f},{lx:.9f},{ly:.9f},{lz:.9f},{r:.9f},{rx:.9f},{ry:.9f},{rz:.9f},{r:.9f}'
         )
-    return "\n".join(rows) + "\n"
+    return '\n'.join(rows) + '\n'

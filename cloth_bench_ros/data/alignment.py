@@ -12,13 +12,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 
-import numpy as np
-
 from cloth_bench_ros.core.metrics import RealCloud
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.errors import ClothBenchError
+import numpy as np
 
-EPOCH_THRESHOLD_S = 1e9  # a --start-time this large is an absolute stamp, else seconds from the first message
+EPOCH_THRESHOLD_S = (
+    1e9  # a --start-time this large is an absolute stamp, else seconds from the first message
+)
 MOTION_THRESHOLD = 0.001  # m: a gripper target this far from its first position has moved
 
 
@@ -35,7 +36,7 @@ class StartTime:
     precision_s: float  # half-width of the interval the start is known to lie in
 
     def as_dict(self) -> dict:
-        return {"bag_ns": self.bag_ns, "method": self.method, "precision_s": self.precision_s}
+        return {'bag_ns': self.bag_ns, 'method': self.method, 'precision_s': self.precision_s}
 
 
 @dataclass(frozen=True)
@@ -54,32 +55,39 @@ def given_start(text: str, first_ns: int) -> StartTime:
     try:
         value = Decimal(text.strip())  # exact: an epoch stamp in float64 loses its nanoseconds
     except InvalidOperation:
-        raise AlignmentError(f"start time {text!r} is not a number of seconds") from None
+        raise AlignmentError(f'start time {text!r} is not a number of seconds') from None
     if not value.is_finite():
-        raise AlignmentError(f"start time {text!r} is not finite")
+        raise AlignmentError(f'start time {text!r} is not finite')
     ns = int((value * 1_000_000_000).to_integral_value())
     if value >= EPOCH_THRESHOLD_S:
-        return StartTime(ns, "--start-time (absolute stamp)", 0.0)
-    return StartTime(first_ns + ns, "--start-time (seconds from the first message)", 0.0)
+        return StartTime(ns, '--start-time (absolute stamp)', 0.0)
+    return StartTime(first_ns + ns, '--start-time (seconds from the first message)', 0.0)
 
 
 def targets_start(stamps_ns: list[int], positions: list[np.ndarray], topic: str) -> StartTime:
-    """The first recorded target at which a gripper has left its first position."""
+    """Return the first recorded target at which a gripper has left its first position."""
     if not stamps_ns:
-        raise AlignmentError(f"targets topic {topic} holds no message")
+        raise AlignmentError(f'targets topic {topic} holds no message')
     first = positions[0]
     for k, (stamp, pos) in enumerate(zip(stamps_ns, positions)):
         if pos.shape != first.shape:
-            raise AlignmentError(f"targets topic {topic}: message {k} has {len(pos)} poses, the first {len(first)}")
+            raise AlignmentError(
+                f'targets topic {topic}: message {k} has {len(pos)} poses, the first {len(first)}'
+            )
         if np.abs(pos - first).max() > MOTION_THRESHOLD:
             # The motion began between the last target at rest and this one.
             period = (stamp - stamps_ns[k - 1]) / 1e9 if k > 0 else 0.0
-            return StartTime(stamps_ns[k - 1] if k > 0 else stamp, f"targets topic {topic}", period / 2)
-    raise AlignmentError(f"targets topic {topic}: the grippers never move more than {MOTION_THRESHOLD * 1e3:g} mm")
+            return StartTime(
+                stamps_ns[k - 1] if k > 0 else stamp, f'targets topic {topic}', period / 2
+            )
+    raise AlignmentError(
+        f'targets topic {topic}: the grippers never move more than {MOTION_THRESHOLD * 1e3:g} mm'
+    )
 
 
-def reference_motion(engine, primitive: str, rate_hz: float, seconds: float, seed: int = 0
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def reference_motion(
+    engine, primitive: str, rate_hz: float, seconds: float, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
     """(t, vertices): t in s from the start of the quintic part, through `seconds` of motion."""
     targets = full_targets(primitive, rate_hz)
     q0 = targets.quintic_index
@@ -97,35 +105,54 @@ def _interp(t_ref: np.ndarray, states: np.ndarray, t: float) -> np.ndarray:
     return (1 - w) * states[i - 1] + w * states[i]
 
 
-def _cost(offset_s: float, times: np.ndarray, clouds: list[RealCloud], t_ref: np.ndarray,
-          states: np.ndarray, s: SearchSettings, fps: float) -> float:
+def _cost(
+    offset_s: float,
+    times: np.ndarray,
+    clouds: list[RealCloud],
+    t_ref: np.ndarray,
+    states: np.ndarray,
+    s: SearchSettings,
+    fps: float,
+) -> float:
     tau = times - offset_s
     inside = np.nonzero((tau >= -s.pre) & (tau <= s.window))[0]
     if len(inside) < s.min_coverage * (s.pre + s.window) * fps:
         return np.inf
-    return float(np.mean([clouds[i].chamfer_hausdorff(_interp(t_ref, states, tau[i]))[0] for i in inside]))
+    return float(
+        np.mean([clouds[i].chamfer_hausdorff(_interp(t_ref, states, tau[i]))[0] for i in inside])
+    )
 
 
-def search_start(stamps_ns: list[int], clouds: list[np.ndarray], t_ref: np.ndarray, states: np.ndarray,
-                 settings: SearchSettings = SearchSettings()) -> StartTime:
-    """The bag time at which the real frames best match the reference motion (see module doc)."""
+def search_start(
+    stamps_ns: list[int],
+    clouds: list[np.ndarray],
+    t_ref: np.ndarray,
+    states: np.ndarray,
+    settings: SearchSettings = SearchSettings(),
+) -> StartTime:
+    """Return the bag time at which the real frames best match the reference motion (see module doc)."""
     usable = [(st, c) for st, c in zip(stamps_ns, clouds) if len(c)]
     if len(usable) < 2:
-        raise AlignmentError("automatic alignment needs at least two non-empty frames")
+        raise AlignmentError('automatic alignment needs at least two non-empty frames')
     base = usable[0][0]
     times = np.array([(st - base) / 1e9 for st, _ in usable])
     real = [RealCloud(c) for _, c in usable]
     fps = (len(times) - 1) / max(times[-1] - times[0], 1e-9)
     cost = lambda o: _cost(o, times, real, t_ref, states, settings, fps)  # noqa: E731
-    coarse = np.arange(times[0] - settings.pre, times[-1] - settings.window / 2, settings.coarse_step)
+    coarse = np.arange(
+        times[0] - settings.pre, times[-1] - settings.window / 2, settings.coarse_step
+    )
     costs = [cost(o) for o in coarse]
     if not costs or not np.isfinite(np.min(costs)):
         raise AlignmentError(
-            f"automatic alignment: the bag ({times[-1]:.2f} s of frames) is too short for "
-            f"{settings.pre + settings.window:g} s of comparison")
+            f'automatic alignment: the bag ({times[-1]:.2f} s of frames) is too short for '
+            f'{settings.pre + settings.window:g} s of comparison'
+        )
     best = float(coarse[int(np.argmin(costs))])
     fine_step = settings.coarse_step / settings.fine_steps
     fine = best + fine_step * np.arange(-settings.fine_steps, settings.fine_steps + 1)
     fine_costs = [cost(o) for o in fine]
     best = float(fine[int(np.argmin(fine_costs))])
-    return StartTime(base + int(round(best * 1e9)), "automatic (reference simulation)", fine_step / 2)
+    return StartTime(
+        base + int(round(best * 1e9)), 'automatic (reference simulation)', fine_step / 2
+    )

@@ -9,17 +9,12 @@ through rosbags (data/bag_storage.py). Payloads are CDR.
 
 from __future__ import annotations
 
-import os
-import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+import os
 from pathlib import Path
 from typing import Any
-
-import numpy as np
-from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema
-from mcap.reader import SeekingReader
-from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk
+import warnings
 
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
@@ -28,12 +23,21 @@ from cloth_bench_ros.data.bag_storage import RosbagsStorage
 from cloth_bench_ros.data.errors import BagError, BagWarning
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
 from cloth_bench_ros.data.trial import (
-    CLOUD_TOPIC, CUSTOM_DATA_PREFIX, MCAP_TRIAL_RECORD, TRIAL_TOPIC, TrialInfo, trial_from_message,
+    CLOUD_TOPIC,
+    CUSTOM_DATA_PREFIX,
+    MCAP_TRIAL_RECORD,
+    trial_from_message,
+    TRIAL_TOPIC,
+    TrialInfo,
 )
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema
+from mcap.stream_reader import breakup_chunk, MAGIC_SIZE, StreamReader
+import numpy as np
 
 IRREGULAR_TOLERANCE = 0.25  # an interval off 1/fps by more than this fraction is irregular
 
-_MAGIC = b"\x89MCAP0\r\n"
+_MAGIC = b'\x89MCAP0\r\n'
 
 
 @dataclass
@@ -66,15 +70,15 @@ class _McapFile:
 
 def _stamp_from_cdr(cdr: bytes) -> int:
     """Header stamp at the start of a CDR payload whose first field is std_msgs/Header."""
-    order = "<" if cdr[1] & 1 else ">"
-    sec = int.from_bytes(cdr[4:8], "little" if order == "<" else "big", signed=True)
-    nsec = int.from_bytes(cdr[8:12], "little" if order == "<" else "big")
+    order = '<' if cdr[1] & 1 else '>'
+    sec = int.from_bytes(cdr[4:8], 'little' if order == '<' else 'big', signed=True)
+    nsec = int.from_bytes(cdr[8:12], 'little' if order == '<' else 'big')
     return sec * 1_000_000_000 + nsec
 
 
 def _schema_name(schemas: dict[int, Schema], channel: Channel) -> str:
     schema = schemas.get(channel.schema_id)
-    return schema.name if schema is not None else ""
+    return schema.name if schema is not None else ''
 
 
 class BagReader:
@@ -95,16 +99,18 @@ class BagReader:
         self._bag_meta: dict[str, Any] = dict(layout.metadata or {})
         self._rosbags: RosbagsStorage | None = None
         if layout.rosbags_sources:
-            self._rosbags = RosbagsStorage.open(self.path, layout.rosbags_storage, layout.rosbags_sources)
+            self._rosbags = RosbagsStorage.open(
+                self.path, layout.rosbags_storage, layout.rosbags_sources
+            )
         self._files = [self._open_file(p) for p in layout.mcap_files]
         self.topics: dict[str, str] = {}
         self.message_counts: dict[str, int] = {}
         if self._rosbags is not None:
             self.topics.update(self._rosbags.topics)
             self.message_counts.update(self._rosbags.counts)
-        for topic in self._bag_meta.get("topics", []):
-            self.topics[topic["name"]] = topic["type"]
-            self.message_counts[topic["name"]] = topic["message_count"]
+        for topic in self._bag_meta.get('topics', []):
+            self.topics[topic['name']] = topic['type']
+            self.message_counts[topic['name']] = topic['message_count']
         for f in self._files:
             self.topics.update(f.topics)
             if not self._bag_meta:
@@ -120,16 +126,16 @@ class BagReader:
 
     def _open_file(self, path: Path) -> _McapFile:
         try:
-            with path.open("rb") as f:
+            with path.open('rb') as f:
                 head = f.read(MAGIC_SIZE)
                 f.seek(0, os.SEEK_END)
                 size = f.tell()
                 if head != _MAGIC:
-                    raise BagError(f"bag {path} is not an MCAP file (no MCAP magic at the start)")
+                    raise BagError(f'bag {path} is not an MCAP file (no MCAP magic at the start)')
                 try:
                     f.seek(size - MAGIC_SIZE)
                     if f.read(MAGIC_SIZE) != _MAGIC:
-                        raise ValueError("no closing magic")
+                        raise ValueError('no closing magic')
                     f.seek(0)
                     summary = SeekingReader(f).get_summary()
                     complete = True
@@ -142,9 +148,9 @@ class BagReader:
                         for rec in SeekingReader(f).iter_metadata():
                             metadata[rec.name] = dict(rec.metadata)
                     except Exception as exc:  # noqa: BLE001
-                        raise BagError(f"bag {path} is corrupt (metadata: {exc})") from None
+                        raise BagError(f'bag {path} is corrupt (metadata: {exc})') from None
         except OSError as exc:
-            raise BagError(f"bag {path} cannot be read ({exc.strerror or exc})") from None
+            raise BagError(f'bag {path} cannot be read ({exc.strerror or exc})') from None
         if summary is not None and summary.channels:
             stats = summary.statistics
             topics = {
@@ -155,27 +161,37 @@ class BagReader:
                 for cid, n in stats.channel_message_counts.items():
                     topic = summary.channels[cid].topic
                     counts[topic] = counts.get(topic, 0) + n
-            compression = ",".join(sorted({c.compression or "none" for c in summary.chunk_indexes}))
+            compression = ','.join(
+                sorted({c.compression or 'none' for c in summary.chunk_indexes})
+            )
             start = stats.message_start_time if stats and stats.message_count else None
             end = stats.message_end_time if stats and stats.message_count else None
-            return _McapFile(path, True, topics, counts, metadata, start, end, compression or "none")
+            return _McapFile(
+                path, True, topics, counts, metadata, start, end, compression or 'none'
+            )
         # No summary: scan the data section (a truncated file, or a writer that skipped it).
-        scan = _McapFile(path, complete, {}, {}, metadata, None, None, "")
+        scan = _McapFile(path, complete, {}, {}, metadata, None, None, '')
         kinds: set[str] = set()
-        for rec, _ in self._records(scan, on_chunk=lambda c: kinds.add(c.compression or "none")):
+        for rec, _ in self._records(scan, on_chunk=lambda c: kinds.add(c.compression or 'none')):
             if isinstance(rec, Message):
-                scan.start_ns = rec.log_time if scan.start_ns is None else min(scan.start_ns, rec.log_time)
-                scan.end_ns = rec.log_time if scan.end_ns is None else max(scan.end_ns, rec.log_time)
+                scan.start_ns = (
+                    rec.log_time if scan.start_ns is None else min(scan.start_ns, rec.log_time)
+                )
+                scan.end_ns = (
+                    rec.log_time if scan.end_ns is None else max(scan.end_ns, rec.log_time)
+                )
             elif isinstance(rec, Metadata):
                 scan.metadata[rec.name] = dict(rec.metadata)
-        scan.compression = ",".join(sorted(kinds)) or "none"
+        scan.compression = ','.join(sorted(kinds)) or 'none'
         if scan.damage and scan.start_ns is None:
-            raise BagError(f"bag {path} is corrupt: no message could be read before the damage")
+            raise BagError(f'bag {path} is corrupt: no message could be read before the damage')
         if scan.damage:
             self._warn(scan.damage)
         return scan
 
-    def _records(self, mf: _McapFile, topics: set[str] | None = None, on_chunk: Any = None) -> Iterator[tuple[Any, str]]:
+    def _records(
+        self, mf: _McapFile, topics: set[str] | None = None, on_chunk: Any = None
+    ) -> Iterator[tuple[Any, str]]:
         """(record, topic) for Message (topic set) and Metadata records in file order.
 
         Keeps the file's topic table and message counts current while scanning; stops at the
@@ -198,16 +214,16 @@ class BagReader:
                 n += 1
                 ch = channels.get(rec.channel_id)
                 if ch is None:
-                    raise ValueError(f"message on unknown channel {rec.channel_id}")
+                    raise ValueError(f'message on unknown channel {rec.channel_id}')
                 if scanning:
                     mf.counts[ch.topic] = mf.counts.get(ch.topic, 0) + 1
                 if topics is None or ch.topic in topics:
                     yield rec, ch.topic
             elif isinstance(rec, Metadata):
-                yield rec, ""
+                yield rec, ''
 
         try:
-            with mf.path.open("rb") as f:
+            with mf.path.open('rb') as f:
                 size = os.fstat(f.fileno()).st_size
                 reader = StreamReader(f, emit_chunks=True, record_size_limit=max(size, 1))
                 for rec in reader.records:
@@ -221,21 +237,23 @@ class BagReader:
                     else:
                         yield from sort(rec)
         except OSError as exc:
-            raise BagError(f"bag {mf.path} cannot be read ({exc.strerror or exc})") from None
+            raise BagError(f'bag {mf.path} cannot be read ({exc.strerror or exc})') from None
         except BagError:
             raise
         except Exception as exc:  # noqa: BLE001 - the mcap library raises many types on bad data
-            what = f"{type(exc).__name__}: {exc}".splitlines()[0] if str(exc) else type(exc).__name__
+            what = (
+                f'{type(exc).__name__}: {exc}'.splitlines()[0] if str(exc) else type(exc).__name__
+            )
             if mf.complete:
-                raise BagError(f"bag {mf.path} is corrupt after {n} messages ({what})") from None
+                raise BagError(f'bag {mf.path} is corrupt after {n} messages ({what})') from None
             if mf.damage is None:
                 mf.damage = (
-                    f"bag {mf.path} is truncated (no MCAP summary, recording interrupted?); "
-                    f"read {n} messages up to the damage ({what})"
+                    f'bag {mf.path} is truncated (no MCAP summary, recording interrupted?); '
+                    f'read {n} messages up to the damage ({what})'
                 )
             return
         if not mf.complete and mf.damage is None:
-            mf.damage = f"bag {mf.path} has no MCAP footer; read {n} messages"
+            mf.damage = f'bag {mf.path} has no MCAP footer; read {n} messages'
 
     # -- public surface
 
@@ -260,8 +278,10 @@ class BagReader:
         """The storage and its compression, e.g. `mcap, chunk compression zstd` or `sqlite3, file:zstd`."""
         if self._rosbags is not None:
             compression = self._rosbags.compression
-            return f"{self._rosbags.kind}, " + ("uncompressed" if compression == "none" else f"compression {compression}")
-        return f"mcap, chunk compression {self.compression}"
+            return f'{self._rosbags.kind}, ' + (
+                'uncompressed' if compression == 'none' else f'compression {compression}'
+            )
+        return f'mcap, chunk compression {self.compression}'
 
     @property
     def complete(self) -> bool:
@@ -272,12 +292,15 @@ class BagReader:
     def metadata_summary(self) -> str:
         """metadata.yaml's version and distro, or why there is none."""
         if not self._bag_meta:
-            return "no metadata.yaml"
-        return f"version {self._bag_meta['version']}, ros_distro {self._bag_meta['ros_distro'] or 'not set'}"
+            return 'no metadata.yaml'
+        return (
+            f'version {self._bag_meta["version"]}, ros_distro'
+            f' {self._bag_meta["ros_distro"] or "not set"}'
+        )
 
     @property
     def custom_data(self) -> dict[str, str]:
-        return dict(self._bag_meta.get("custom_data") or {})
+        return dict(self._bag_meta.get('custom_data') or {})
 
     @property
     def start_ns(self) -> int | None:
@@ -297,7 +320,7 @@ class BagReader:
     def compression(self) -> str:
         if self._rosbags is not None:
             return self._rosbags.compression
-        return ",".join(sorted({f.compression for f in self._files}))
+        return ','.join(sorted({f.compression for f in self._files}))
 
     @property
     def trial(self) -> TrialInfo | None:
@@ -309,7 +332,11 @@ class BagReader:
     def _find_trial(self) -> TrialInfo | None:
         try:
             custom = self.custom_data
-            keys = {k[len(CUSTOM_DATA_PREFIX):]: str(v) for k, v in custom.items() if k.startswith(CUSTOM_DATA_PREFIX)}
+            keys = {
+                k[len(CUSTOM_DATA_PREFIX) :]: str(v)
+                for k, v in custom.items()
+                if k.startswith(CUSTOM_DATA_PREFIX)
+            }
             if keys:
                 return TrialInfo.from_strings(keys)
             for f in self._files:
@@ -319,7 +346,7 @@ class BagReader:
                 for _, _, _, cdr in self.raw_messages([TRIAL_TOPIC]):
                     return trial_from_message(messages.deserialize(cdr, DIAGNOSTIC_ARRAY))
         except (ValueError, TypeError, KeyError) as exc:
-            raise BagError(f"bag {self.path} has invalid trial metadata ({exc})") from None
+            raise BagError(f'bag {self.path} has invalid trial metadata ({exc})') from None
         return None
 
     @property
@@ -328,21 +355,25 @@ class BagReader:
         return sorted(t for t, m in self.topics.items() if m == POINTCLOUD2)
 
     def cloud_topic(self, chosen: str | None = None) -> str:
-        """The PointCloud2 topic to score: `chosen`, else CLOUD_TOPIC if present, else the only one."""
+        """Return the PointCloud2 topic to score: `chosen`, else CLOUD_TOPIC if present, else the only one."""
         clouds = self.cloud_topics
         if chosen:
             if chosen not in clouds:
-                what = f"is {self.topics[chosen]}" if chosen in self.topics else "does not exist"
-                raise BagError(f"bag {self.path}: topic {chosen} {what} (PointCloud2 topics: "
-                               f"{', '.join(clouds) or 'none'})")
+                what = f'is {self.topics[chosen]}' if chosen in self.topics else 'does not exist'
+                raise BagError(
+                    f'bag {self.path}: topic {chosen} {what} (PointCloud2 topics: '
+                    f'{", ".join(clouds) or "none"})'
+                )
             return chosen
         if CLOUD_TOPIC in clouds:
             return CLOUD_TOPIC
         if not clouds:
-            raise BagError(f"bag {self.path} has no {POINTCLOUD2} topic")
+            raise BagError(f'bag {self.path} has no {POINTCLOUD2} topic')
         if len(clouds) > 1:
-            raise BagError(f"bag {self.path} has several {POINTCLOUD2} topics ({', '.join(clouds)}); "
-                           "choose one with --topic")
+            raise BagError(
+                f'bag {self.path} has several {POINTCLOUD2} topics ({", ".join(clouds)}); '
+                'choose one with --topic'
+            )
         return clouds[0]
 
     def raw_messages(
@@ -357,15 +388,24 @@ class BagReader:
                 pass
             yield topic, msgtype, stamp, data
 
-    def logged_messages(self, topics: Iterable[str] | str | None = None) -> Iterator[tuple[str, str, int, bytes]]:
+    def logged_messages(
+        self, topics: Iterable[str] | str | None = None
+    ) -> Iterator[tuple[str, str, int, bytes]]:
         """(topic, msgtype, log_time_ns, cdr) in record order: the MCAP log time, not the header stamp."""
-        wanted = {topics} if isinstance(topics, str) else (set(topics) if topics is not None else None)
+        wanted = (
+            {topics} if isinstance(topics, str) else (set(topics) if topics is not None else None)
+        )
         if self._rosbags is not None:
             yield from self._rosbags.messages(wanted)
         for mf in self._files:
             for rec, topic in self._records(mf, wanted):
                 if isinstance(rec, Message):
-                    yield topic, mf.topics.get(topic) or self.topics.get(topic, ""), rec.log_time, rec.data
+                    yield (
+                        topic,
+                        mf.topics.get(topic) or self.topics.get(topic, ''),
+                        rec.log_time,
+                        rec.data,
+                    )
 
     def clouds(self, topic: str | None = None) -> Iterator[tuple[int, np.ndarray]]:
         """(stamp_ns, float64 (n, 3) points) of each non-empty cloud, NaN points dropped.
@@ -374,9 +414,14 @@ class BagReader:
         """
         topic = topic or self.cloud_topic()
         if topic not in self.topics:
-            raise BagError(f"bag {self.path} has no topic {topic} (topics: {', '.join(sorted(self.topics)) or 'none'})")
+            raise BagError(
+                f'bag {self.path} has no topic {topic} (topics:'
+                f' {", ".join(sorted(self.topics)) or "none"})'
+            )
         if self.topics[topic] != POINTCLOUD2:
-            raise BagError(f"bag {self.path}: topic {topic} is {self.topics[topic]}, not {POINTCLOUD2}")
+            raise BagError(
+                f'bag {self.path}: topic {topic} is {self.topics[topic]}, not {POINTCLOUD2}'
+            )
         trial = self.trial
         period = 1e9 / (trial.fps if trial else 30.0)
         stats = self.stats = CloudStats()
@@ -386,12 +431,16 @@ class BagReader:
                 msg = messages.deserialize(cdr, POINTCLOUD2)
             except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
                 what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-                raise BagError(f"bag {self.path}: frame {i} on {topic} (stamp {stamp / 1e9:.3f} s) "
-                               f"is not a valid PointCloud2 ({what})") from None
+                raise BagError(
+                    f'bag {self.path}: frame {i} on {topic} (stamp {stamp / 1e9:.3f} s) '
+                    f'is not a valid PointCloud2 ({what})'
+                ) from None
             try:
                 pts = pointcloud2.read_xyz(msg)
             except pointcloud2.PointCloudError as exc:
-                raise BagError(f"bag {self.path}: frame {i} on {topic} (stamp {stamp / 1e9:.3f} s): {exc}") from None
+                raise BagError(
+                    f'bag {self.path}: frame {i} on {topic} (stamp {stamp / 1e9:.3f} s): {exc}'
+                ) from None
             stats.messages += 1
             if prev is not None and abs((stamp - prev) - period) > IRREGULAR_TOLERANCE * period:
                 stats.irregular_intervals += 1
@@ -405,10 +454,14 @@ class BagReader:
             stats.points += len(pts)
             yield stamp, pts
 
-    def messages(self, topics: Iterable[str] | str | None = None) -> Iterator[tuple[str, int, Any]]:
+    def messages(
+        self, topics: Iterable[str] | str | None = None
+    ) -> Iterator[tuple[str, int, Any]]:
         """(topic, stamp_ns, rosbags message) in record order."""
         for topic, msgtype, stamp, cdr in self.raw_messages(topics):
             try:
                 yield topic, stamp, messages.deserialize(cdr, msgtype)
             except Exception as exc:  # noqa: BLE001
-                raise BagError(f"bag {self.path}: a {msgtype} message on {topic} does not decode ({exc})") from None
+                raise BagError(
+                    f'bag {self.path}: a {msgtype} message on {topic} does not decode ({exc})'
+                ) from None

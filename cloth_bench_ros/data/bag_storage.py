@@ -9,15 +9,14 @@ BagError line naming the bag.
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-
-from rosbags.rosbag2 import Reader
+import threading
 
 from cloth_bench_ros.data.errors import BagError
+from rosbags.rosbag2 import Reader
 
 
 @dataclass
@@ -44,7 +43,9 @@ class RosbagsStorage:
                     storage.topics[conn.topic] = conn.msgtype
                     storage.counts[conn.topic] = storage.counts.get(conn.topic, 0) + conn.msgcount
                 if reader.message_count:
-                    storage.start_ns = min(reader.start_time, storage.start_ns or reader.start_time)
+                    storage.start_ns = min(
+                        reader.start_time, storage.start_ns or reader.start_time
+                    )
                     end = reader.end_time - 1  # rosbags' end is one past the last message
                     storage.end_ns = max(end, storage.end_ns or end)
                 if reader.compression_mode:
@@ -62,7 +63,9 @@ class RosbagsStorage:
         try:
             reader = Reader(source)
             reader.open()
-        except Exception as exc:  # noqa: BLE001 - rosbags, sqlite3 and zstd raise many types on bad files
+        except (
+            Exception
+        ) as exc:  # noqa: BLE001 - rosbags, sqlite3 and zstd raise many types on bad files
             raise BagError(f'bag {self.path} cannot be read ({_one_line(exc)})') from None
         keep = reader.compression_mode == 'file'
         if keep:
@@ -83,7 +86,11 @@ class RosbagsStorage:
         """The storage files on disk."""
         out: list[Path] = []
         for source in self.sources:
-            out += sorted(p for p in source.iterdir() if p.name != 'metadata.yaml') if source.is_dir() else [source]
+            out += (
+                sorted(p for p in source.iterdir() if p.name != 'metadata.yaml')
+                if source.is_dir()
+                else [source]
+            )
         return out
 
     def messages(self, topics: set[str] | None) -> Iterator[tuple[str, str, int, bytes]]:

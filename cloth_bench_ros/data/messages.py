@@ -9,16 +9,15 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Any
 
-from rosbags.typesys import Stores, get_typestore
-
 from cloth_bench_ros.errors import ClothBenchError
+from rosbags.typesys import get_typestore, Stores
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
 
-POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
-POSE_ARRAY = "geometry_msgs/msg/PoseArray"
-DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
-HEADER = "std_msgs/msg/Header"
+POINTCLOUD2 = 'sensor_msgs/msg/PointCloud2'
+POSE_ARRAY = 'geometry_msgs/msg/PoseArray'
+DIAGNOSTIC_ARRAY = 'diagnostic_msgs/msg/DiagnosticArray'
+HEADER = 'std_msgs/msg/Header'
 
 
 class MessageTypeError(ClothBenchError, ValueError):
@@ -26,11 +25,11 @@ class MessageTypeError(ClothBenchError, ValueError):
 
 
 def msg_class(msgtype: str) -> type:
-    """The rosbags dataclass of a message type, e.g. `msg_class("std_msgs/msg/Header")`."""
+    """Return the rosbags dataclass of a message type, e.g. `msg_class("std_msgs/msg/Header")`."""
     try:
         return TYPESTORE.types[msgtype]
     except KeyError:
-        raise MessageTypeError(f"unknown message type {msgtype!r}") from None
+        raise MessageTypeError(f'unknown message type {msgtype!r}') from None
 
 
 def serialize(msg: Any, msgtype: str | None = None) -> bytes:
@@ -41,14 +40,14 @@ def serialize(msg: Any, msgtype: str | None = None) -> bytes:
 
 
 def deserialize(cdr: bytes | memoryview, msgtype: str) -> Any:
-    """The rosbags message object encoded by CDR bytes."""
+    """Return the rosbags message object encoded by CDR bytes."""
     msg_class(msgtype)
     return TYPESTORE.deserialize_cdr(cdr, msgtype)
 
 
 @lru_cache(maxsize=None)
 def msgdef(msgtype: str) -> str:
-    """The `ros2msg` definition text of a type, with its dependencies, as MCAP schemas carry it."""
+    """Return the `ros2msg` definition text of a type, with its dependencies, as MCAP schemas carry it."""
     msg_class(msgtype)
     text, _ = TYPESTORE.generate_msgdef(msgtype, ros_version=2)
     return text
@@ -56,29 +55,29 @@ def msgdef(msgtype: str) -> str:
 
 @lru_cache(maxsize=None)
 def type_hash(msgtype: str) -> str:
-    """The RIHS01 type description hash of a type (rosbag2 metadata version 8+)."""
+    """Return the RIHS01 type description hash of a type (rosbag2 metadata version 8+)."""
     msg_class(msgtype)
     return TYPESTORE.hash_rihs01(msgtype)
 
 
 @lru_cache(maxsize=None)
 def has_header(msgtype: str) -> bool:
-    """True if the type's first field is a std_msgs/Header (its stamp opens the CDR payload)."""
+    """Return True if the type's first field is a std_msgs/Header (its stamp opens the CDR payload)."""
     msg_class(msgtype)
     _, fields = TYPESTORE.fielddefs[msgtype]
     if not fields:
         return False
     name, (_, detail) = fields[0]
-    return name == "header" and detail == HEADER
+    return name == 'header' and detail == HEADER
 
 
 def time_msg(stamp_ns: int) -> Any:
     """builtin_interfaces/Time of an integer nanosecond stamp."""
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    return msg_class("builtin_interfaces/msg/Time")(sec=sec, nanosec=nanosec)
+    return msg_class('builtin_interfaces/msg/Time')(sec=sec, nanosec=nanosec)
 
 
-def header(stamp_ns: int, frame_id: str = "world") -> Any:
+def header(stamp_ns: int, frame_id: str = 'world') -> Any:
     """std_msgs/Header with an integer nanosecond stamp."""
     return msg_class(HEADER)(stamp=time_msg(stamp_ns), frame_id=frame_id)
 

@@ -12,40 +12,43 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
-import numpy as np
-
 from cloth_bench_ros.core import pointcloud2
-from cloth_bench_ros.core.cleaning import CleaningConfig, CleaningStats, clean, scene_cleaning
+from cloth_bench_ros.core.cleaning import clean, CleaningConfig, CleaningStats, scene_cleaning
 from cloth_bench_ros.core.phase import first_table_contact
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.data import alignment, messages
-from cloth_bench_ros.data.bag_reader import IRREGULAR_TOLERANCE, BagReader
+from cloth_bench_ros.data.bag_reader import BagReader, IRREGULAR_TOLERANCE
 from cloth_bench_ros.data.errors import BagError
 from cloth_bench_ros.data.messages import POINTCLOUD2, POSE_ARRAY
-from cloth_bench_ros.data.tf_buffer import TF_MESSAGE, TF_TOPICS, TfBuffer, TransformError, apply
+from cloth_bench_ros.data.tf_buffer import apply, TF_MESSAGE, TF_TOPICS, TfBuffer, TransformError
 from cloth_bench_ros.data.trial import TARGETS_TOPIC, TrialInfo
+import numpy as np
 
-WORLD = "world"
-CLEAN_MODES = ("auto", "on", "off")
-TABLE_MODES = ("auto", "remove", "keep")
+WORLD = 'world'
+CLEAN_MODES = ('auto', 'on', 'off')
+TABLE_MODES = ('auto', 'remove', 'keep')
 
 
 @dataclass(frozen=True)
 class ReplayOptions:
     """What the bag does not say, and how to treat it (CLI options / recorder parameters)."""
 
-    cloth: str = "towel"
-    primitive: str = "dynamic"
+    cloth: str = 'towel'
+    primitive: str = 'dynamic'
     change_of_phase_frame: int | None = None
-    topic: str = ""  # "" : the project's cloud topic, else the only PointCloud2 topic
-    start_time: str = ""  # "" : targets topic, bag stamps (project bags) or automatic
-    targets_topic: str = ""  # "" : TARGETS_TOPIC when the bag has it
+    topic: str = ''  # "" : the project's cloud topic, else the only PointCloud2 topic
+    start_time: str = ''  # "" : targets topic, bag stamps (project bags) or automatic
+    targets_topic: str = ''  # "" : TARGETS_TOPIC when the bag has it
     transform: tuple | None = None  # 16 numbers, row-major: replaces tf for every cloud
-    clean: str = "auto"  # auto: on for bags without project metadata
+    clean: str = 'auto'  # auto: on for bags without project metadata
     voxel: float = 0.0
-    table_plane: str = "auto"  # remove, keep, or auto: remove for dynamic (scored before contact), keep for quasi_static
+    table_plane: (
+        str
+    ) = (  # remove, keep, or auto: remove for dynamic (scored before contact), keep for quasi_static
+        'auto'
+    )
     rate_hz: float = 100.0
-    align_engine: str = "mujoco"
+    align_engine: str = 'mujoco'
     search: alignment.SearchSettings = alignment.SearchSettings()
 
 
@@ -61,39 +64,52 @@ class ReplayPlan:
     counts: dict[str, int] = field(default_factory=dict)
     cleaning: CleaningStats | None = None
     cleaning_config: CleaningConfig | None = None
-    frames_source: str = ""
+    frames_source: str = ''
     nan_points_dropped: int = 0
     irregular_intervals: int = 0  # stamp steps off 1/fps by more than IRREGULAR_TOLERANCE
     change_of_phase: dict[str, Any] = field(default_factory=dict)  # see `change_of_phase`
 
     def accounting(self) -> dict[str, Any]:
-        """The recorder's share of the frame accounting, for the summary."""
-        return {"topic": self.topic, "frames_in_bag": self.frames_in_bag, **self.counts,
-                "start": self.start.as_dict(), "frames": self.frames_source,
-                "change_of_phase": self.change_of_phase,
-                "nan_points_dropped": self.nan_points_dropped, "irregular_intervals": self.irregular_intervals,
-                "cleaning": None if self.cleaning is None else {
-                    **self.cleaning.as_dict(), "settings": asdict(self.cleaning_config)}}
+        """Return the recorder's share of the frame accounting, for the summary."""
+        return {
+            'topic': self.topic,
+            'frames_in_bag': self.frames_in_bag,
+            **self.counts,
+            'start': self.start.as_dict(),
+            'frames': self.frames_source,
+            'change_of_phase': self.change_of_phase,
+            'nan_points_dropped': self.nan_points_dropped,
+            'irregular_intervals': self.irregular_intervals,
+            'cleaning': (
+                None
+                if self.cleaning is None
+                else {**self.cleaning.as_dict(), 'settings': asdict(self.cleaning_config)}
+            ),
+        }
 
 
 def _trial(reader: BagReader, options: ReplayOptions, topic: str) -> TrialInfo:
     if reader.trial is not None:
         return reader.trial
-    return TrialInfo(cloth=options.cloth, trial=0, primitive=options.primitive,
-                     change_of_phase_frame=options.change_of_phase_frame,
-                     source=f"plain rosbag2 recording {reader.path}, topic {topic}")
+    return TrialInfo(
+        cloth=options.cloth,
+        trial=0,
+        primitive=options.primitive,
+        change_of_phase_frame=options.change_of_phase_frame,
+        source=f'plain rosbag2 recording {reader.path}, topic {topic}',
+    )
 
 
 def _to_world(reader: BagReader, options: ReplayOptions) -> tuple[Any, str]:
-    """A function (frame_id, stamp_ns) -> 4x4 into world, and a sentence saying where it comes from."""
+    """Return a function (frame_id, stamp_ns) -> 4x4 into world, and a sentence saying where it comes from."""
     if options.transform is not None:
         fixed = np.asarray(options.transform, dtype=float).reshape(4, 4)
-        return (lambda frame, stamp: fixed), "--transform matrix applied to every cloud"
+        return (lambda frame, stamp: fixed), '--transform matrix applied to every cloud'
     buffer = TfBuffer()
     tf_topics = [t for t in TF_TOPICS if reader.topics.get(t) == TF_MESSAGE]
     if tf_topics:
         buffer.add_messages((topic, msg) for topic, _, msg in reader.messages(tf_topics))
-    source = f"tf from {', '.join(tf_topics)}" if tf_topics else "clouds already in world"
+    source = f'tf from {", ".join(tf_topics)}' if tf_topics else 'clouds already in world'
     return (lambda frame, stamp: buffer.lookup(WORLD, frame, stamp)), source
 
 
@@ -105,28 +121,38 @@ def _targets(reader: BagReader, topic: str) -> tuple[list[int], list[np.ndarray]
     return stamps, positions
 
 
-def _decode(reader: BagReader, topic: str, index: int, stamp: int, cdr: bytes) -> tuple[np.ndarray, str]:
+def _decode(
+    reader: BagReader, topic: str, index: int, stamp: int, cdr: bytes
+) -> tuple[np.ndarray, str]:
     try:
         msg = messages.deserialize(cdr, POINTCLOUD2)
         return pointcloud2.read_xyz(msg), msg.header.frame_id
     except pointcloud2.PointCloudError as exc:
-        raise BagError(f"bag {reader.path}: frame {index} on {topic} (stamp {stamp / 1e9:.3f} s): {exc}") from None
+        raise BagError(
+            f'bag {reader.path}: frame {index} on {topic} (stamp {stamp / 1e9:.3f} s): {exc}'
+        ) from None
     except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
         what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise BagError(f"bag {reader.path}: frame {index} on {topic} (stamp {stamp / 1e9:.3f} s) "
-                       f"is not a valid PointCloud2 ({what})") from None
+        raise BagError(
+            f'bag {reader.path}: frame {index} on {topic} (stamp {stamp / 1e9:.3f} s) '
+            f'is not a valid PointCloud2 ({what})'
+        ) from None
 
 
 def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig | None:
-    """The cleaning of a replay, or None when off (project bags are cleaned when written)."""
+    """Return the cleaning of a replay, or None when off (project bags are cleaned when written)."""
     if options.clean not in CLEAN_MODES:
-        raise ValueError(f"clean mode {options.clean!r} is not one of {', '.join(CLEAN_MODES)}")
-    if options.clean == "off" or (options.clean == "auto" and project_bag):
+        raise ValueError(f'clean mode {options.clean!r} is not one of {", ".join(CLEAN_MODES)}')
+    if options.clean == 'off' or (options.clean == 'auto' and project_bag):
         return None
     if options.table_plane not in TABLE_MODES:
-        raise ValueError(f"table plane mode {options.table_plane!r} is not one of {', '.join(TABLE_MODES)}")
+        raise ValueError(
+            f'table plane mode {options.table_plane!r} is not one of {", ".join(TABLE_MODES)}'
+        )
     # Removing the plane also removes cloth lying flat on the table, which the quasi-static drag scores.
-    remove = options.table_plane == "remove" or (options.table_plane == "auto" and options.primitive == "dynamic")
+    remove = options.table_plane == 'remove' or (
+        options.table_plane == 'auto' and options.primitive == 'dynamic'
+    )
     return replace(scene_cleaning((options.primitive,), options.voxel), table_plane=remove)
 
 
@@ -148,8 +174,10 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
         try:
             matrix = to_world(frame_id, stamp)
         except TransformError as exc:
-            raise BagError(f"bag {reader.path}: frame {index} on {topic}: {exc}") from None
-        points = apply(matrix, points.reshape(-1, 3)) if not np.allclose(matrix, np.eye(4)) else points
+            raise BagError(f'bag {reader.path}: frame {index} on {topic}: {exc}') from None
+        points = (
+            apply(matrix, points.reshape(-1, 3)) if not np.allclose(matrix, np.eye(4)) else points
+        )
         if config is not None:
             points = clean(points, config, stats)
         else:
@@ -158,71 +186,108 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
         stamps.append(stamp)
         clouds.append(points)
     if not stamps:
-        raise BagError(f"bag {reader.path}: topic {topic} holds no message")
+        raise BagError(f'bag {reader.path}: topic {topic} holds no message')
     start = _start(reader, options, project_bag, stamps, clouds, reference)
     targets = full_targets(options.primitive, options.rate_hz)
     end_ns = targets.stamp_ns(len(targets) - 1) - int(round(targets.quintic_start * 1e9))
-    plan = ReplayPlan(trial, topic, len(stamps), start, cleaning=stats, cleaning_config=config,
-                      frames_source=frames_source,
-                      nan_points_dropped=nan_dropped if stats is None else stats.non_finite)
-    counts = {"before_start": 0, "after_trajectory": 0, "empty_after_cleaning": 0, "to_send": 0}
+    plan = ReplayPlan(
+        trial,
+        topic,
+        len(stamps),
+        start,
+        cleaning=stats,
+        cleaning_config=config,
+        frames_source=frames_source,
+        nan_points_dropped=nan_dropped if stats is None else stats.non_finite,
+    )
+    counts = {'before_start': 0, 'after_trajectory': 0, 'empty_after_cleaning': 0, 'to_send': 0}
     # A frame within the start's precision of it is at the start (not before it).
-    tolerance = max(int(round(start.precision_s * 1e9)), 1000)  # 1 us: stamps given in decimal seconds
+    tolerance = max(
+        int(round(start.precision_s * 1e9)), 1000
+    )  # 1 us: stamps given in decimal seconds
     for stamp, points in zip(stamps, clouds):
         t_ns = stamp - start.bag_ns
         t_ns = 0 if -tolerance <= t_ns < 0 else t_ns
         if t_ns < 0:
-            counts["before_start"] += 1
+            counts['before_start'] += 1
         elif t_ns > end_ns:
-            counts["after_trajectory"] += 1
+            counts['after_trajectory'] += 1
         elif len(points) == 0:
-            counts["empty_after_cleaning"] += 1
+            counts['empty_after_cleaning'] += 1
         else:
-            counts["to_send"] += 1
+            counts['to_send'] += 1
             plan.frames.append((t_ns, points))
     plan.counts = counts
     plan.change_of_phase = change_of_phase(trial, options, project_bag, plan.frames)
-    trial.change_of_phase_frame = plan.change_of_phase["frame"]
+    trial.change_of_phase_frame = plan.change_of_phase['frame']
     period = 1e9 / trial.fps
     steps = np.diff(np.asarray(stamps, dtype=np.int64))
     plan.irregular_intervals = int(np.sum(np.abs(steps - period) > IRREGULAR_TOLERANCE * period))
     return plan
 
 
-def change_of_phase(trial: TrialInfo, options: ReplayOptions, project_bag: bool,
-                    frames: list[tuple[int, np.ndarray]]) -> dict[str, Any]:
-    """The frame that ends a dynamic trial's scored window, and where it comes from.
+def change_of_phase(
+    trial: TrialInfo,
+    options: ReplayOptions,
+    project_bag: bool,
+    frames: list[tuple[int, np.ndarray]],
+) -> dict[str, Any]:
+    """Return the frame that ends a dynamic trial's scored window, and where it comes from.
 
     In order: the option (`--change-of-phase-frame`), the bag's trial metadata, else the first
     table contact found in `frames` ((t_ns from the start, world points) in time order). The
     quasi-static task has none: it is scored over its whole length.
     """
-    if options.primitive != "dynamic":
-        return {"frame": None, "source": "none", "reason": "the quasi-static task is scored over its whole length"}
+    if options.primitive != 'dynamic':
+        return {
+            'frame': None,
+            'source': 'none',
+            'reason': 'the quasi-static task is scored over its whole length',
+        }
     if options.change_of_phase_frame is not None:
-        return {"frame": options.change_of_phase_frame, "source": "option", "reason": "--change-of-phase-frame"}
+        return {
+            'frame': options.change_of_phase_frame,
+            'source': 'option',
+            'reason': '--change-of-phase-frame',
+        }
     if project_bag and trial.change_of_phase_frame is not None:
-        return {"frame": trial.change_of_phase_frame, "source": "metadata", "reason": "the bag's trial metadata"}
+        return {
+            'frame': trial.change_of_phase_frame,
+            'source': 'metadata',
+            'reason': "the bag's trial metadata",
+        }
     found = first_table_contact(points for _, points in frames)
     if found.index is None:
-        return {"frame": None, "source": "none", "reason": found.reason}
+        return {'frame': None, 'source': 'none', 'reason': found.reason}
     t_ns = frames[found.index][0]
-    return {"frame": int(round(t_ns * trial.fps / 1e9)), "source": "detected", "reason": found.reason,
-            "t_s": t_ns / 1e9}
+    return {
+        'frame': int(round(t_ns * trial.fps / 1e9)),
+        'source': 'detected',
+        'reason': found.reason,
+        't_s': t_ns / 1e9,
+    }
 
 
-def _start(reader: BagReader, options: ReplayOptions, project_bag: bool, stamps: list[int],
-           clouds: list[np.ndarray], reference) -> alignment.StartTime:
+def _start(
+    reader: BagReader,
+    options: ReplayOptions,
+    project_bag: bool,
+    stamps: list[int],
+    clouds: list[np.ndarray],
+    reference,
+) -> alignment.StartTime:
     if options.start_time:
         return alignment.given_start(options.start_time, min(stamps))
-    targets_topic = options.targets_topic or (TARGETS_TOPIC if not project_bag else "")
+    targets_topic = options.targets_topic or (TARGETS_TOPIC if not project_bag else '')
     if options.targets_topic and reader.topics.get(targets_topic) != POSE_ARRAY:
-        raise BagError(f"bag {reader.path} has no {POSE_ARRAY} topic {targets_topic}")
+        raise BagError(f'bag {reader.path} has no {POSE_ARRAY} topic {targets_topic}')
     if targets_topic and reader.topics.get(targets_topic) == POSE_ARRAY:
         return alignment.targets_start(*_targets(reader, targets_topic), targets_topic)
     if project_bag:
-        return alignment.StartTime(0, "bag stamps (the project's bags count from the start of the motion)", 0.0)
+        return alignment.StartTime(
+            0, "bag stamps (the project's bags count from the start of the motion)", 0.0
+        )
     if reference is None:
-        raise alignment.AlignmentError("automatic alignment needs a reference simulation")
+        raise alignment.AlignmentError('automatic alignment needs a reference simulation')
     t_ref, states = reference(options.search.window)
     return alignment.search_start(stamps, clouds, t_ref, states, options.search)

@@ -11,24 +11,23 @@ noisy clouds, far denser than the simulated mesh, like the real ones.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, replace
+import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import yaml
-
 from cloth_bench_ros.core import cleaning, scene
 from cloth_bench_ros.core.phase import first_table_contact
-from cloth_bench_ros.data import CLOUD_TOPIC, BagWriter, TrialInfo
-from cloth_bench_ros.engines import engine_class, make_engine
-from cloth_bench_ros.paths import share_dir
-from cloth_bench_ros.safe_io import staged_directory
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quintic_part
+from cloth_bench_ros.data import BagWriter, CLOUD_TOPIC, TrialInfo
+from cloth_bench_ros.engines import engine_class, make_engine
 from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.paths import share_dir
+from cloth_bench_ros.safe_io import staged_directory
+import numpy as np
+import yaml
 
 WALL_Y = -1.5  # m: a wall behind the scene, the background of the flying pixels
 
@@ -38,15 +37,17 @@ class SynthError(ClothBenchError, ValueError):
 
 
 # Reference models (`cloth-bench synth --reference`): name -> file under config/. MuJoCo is the default.
-REFERENCES = {"mujoco": "synth.yaml", "newton-vbd": "synth_newton_vbd.yaml"}
-DEFAULT_REFERENCE = "mujoco"
+REFERENCES = {'mujoco': 'synth.yaml', 'newton-vbd': 'synth_newton_vbd.yaml'}
+DEFAULT_REFERENCE = 'mujoco'
 
 
 def config_path(reference: str = DEFAULT_REFERENCE) -> Path:
     """config/synth.yaml (or the file of another reference) of the source tree or installed package."""
     if reference not in REFERENCES:
-        raise SynthError(f"unknown synthetic reference {reference!r} (valid: {', '.join(REFERENCES)})")
-    return share_dir("config") / REFERENCES[reference]
+        raise SynthError(
+            f'unknown synthetic reference {reference!r} (valid: {", ".join(REFERENCES)})'
+        )
+    return share_dir('config') / REFERENCES[reference]
 
 
 # ------------------------------------------------------------------------------------- camera
@@ -81,18 +82,24 @@ class Camera:
         cam = (np.asarray(points, float) - np.asarray(self.position)) @ self.rotation.T
         z = cam[..., 2]
         cu, cv = self.center
-        with np.errstate(divide="ignore", invalid="ignore"):
-            uv = np.stack([cu + self.focal * cam[..., 0] / z, cv + self.focal * cam[..., 1] / z], axis=-1)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            uv = np.stack(
+                [cu + self.focal * cam[..., 0] / z, cv + self.focal * cam[..., 1] / z], axis=-1
+            )
         return uv, z
 
     def back_project(self, u: np.ndarray, v: np.ndarray, depth: np.ndarray) -> np.ndarray:
         """World points (n, 3) of pixels (u, v) at the given depths."""
         cu, cv = self.center
-        cam = np.stack([(u - cu) / self.focal * depth, (v - cv) / self.focal * depth, depth], axis=1)
+        cam = np.stack(
+            [(u - cu) / self.focal * depth, (v - cv) / self.focal * depth, depth], axis=1
+        )
         return cam @ self.rotation + np.asarray(self.position)
 
 
-def rasterize(camera: Camera, triangles: np.ndarray, near: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+def rasterize(
+    camera: Camera, triangles: np.ndarray, near: float = 0.05
+) -> tuple[np.ndarray, np.ndarray]:
     """Z-buffer of world triangles (m, 3, 3): depth (H, W), inf where empty, and triangle id (-1).
 
     No face culling (both faces of the cloth render); depth is interpolated perspective-correctly
@@ -186,7 +193,11 @@ class Sensor:
 
     camera: Camera = Camera()
     noise: DepthNoise = DepthNoise()
-    crop_min: tuple[float, float, float] = (scene.TABLE_X[0], scene.TABLE_Y[0], scene.TABLE_TOP_Z + 0.001)
+    crop_min: tuple[float, float, float] = (
+        scene.TABLE_X[0],
+        scene.TABLE_Y[0],
+        scene.TABLE_TOP_Z + 0.001,
+    )
     crop_max: tuple[float, float, float] = (scene.TABLE_X[1], scene.TABLE_Y[1], 1.5)
     sor_neighbors: int = 20
     sor_std_ratio: float = 2.0
@@ -196,20 +207,34 @@ class Sensor:
     @property
     def cleaning(self) -> cleaning.CleaningConfig:
         """The crop (above the table top) and outlier removal of the one cleaning pipeline."""
-        return cleaning.CleaningConfig(self.crop_min, self.crop_max, table_plane=False,
-                                       sor_neighbors=self.sor_neighbors, sor_std_ratio=self.sor_std_ratio)
+        return cleaning.CleaningConfig(
+            self.crop_min,
+            self.crop_max,
+            table_plane=False,
+            sor_neighbors=self.sor_neighbors,
+            sor_std_ratio=self.sor_std_ratio,
+        )
 
 
-def noisy_depth(depth: np.ndarray, cloth: np.ndarray, noise: DepthNoise, rng: np.random.Generator) -> np.ndarray:
+def noisy_depth(
+    depth: np.ndarray, cloth: np.ndarray, noise: DepthNoise, rng: np.random.Generator
+) -> np.ndarray:
     """Depth image with ray noise on every pixel and flying pixels on the cloth's silhouette."""
-    out = depth + rng.normal(0.0, 1.0, depth.shape) * noise.sigma(np.where(np.isfinite(depth), depth, 0.0))
+    out = depth + rng.normal(0.0, 1.0, depth.shape) * noise.sigma(
+        np.where(np.isfinite(depth), depth, 0.0)
+    )
     if noise.flying_fraction > 0:
         _fly(out, depth, cloth, noise, rng)
     return np.round(out / noise.depth_step) * noise.depth_step if noise.depth_step > 0 else out
 
 
-def _fly(out: np.ndarray, depth: np.ndarray, cloth: np.ndarray, noise: DepthNoise,
-         rng: np.random.Generator) -> None:
+def _fly(
+    out: np.ndarray,
+    depth: np.ndarray,
+    cloth: np.ndarray,
+    noise: DepthNoise,
+    rng: np.random.Generator,
+) -> None:
     """Turn some silhouette pixels of the cloth into flying pixels, in place."""
     padded = np.pad(depth, 1, constant_values=np.inf)
     behind = np.max(
@@ -229,7 +254,7 @@ def observe(
     rng: np.random.Generator,
     background: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """The point cloud (n, 3) the sensor makes of the cloth `triangles` in front of `background`.
+    """Return the point cloud (n, 3) the sensor makes of the cloth `triangles` in front of `background`.
 
     `background` is a (depth, ids) z-buffer of the static scene from `rasterize` (none: empty).
     """
@@ -246,7 +271,11 @@ def observe(
     points = cleaning.clean(points, sensor.cleaning)
     if len(points) > sensor.max_points:
         points = points[np.sort(rng.choice(len(points), sensor.max_points, replace=False))]
-    return np.round(points / sensor.resolution) * sensor.resolution if sensor.resolution > 0 else points
+    return (
+        np.round(points / sensor.resolution) * sensor.resolution
+        if sensor.resolution > 0
+        else points
+    )
 
 
 # ---------------------------------------------------------------------------- reference model
@@ -265,7 +294,7 @@ class SynthConfig:
     seed: int = 0
     sensor: Sensor = Sensor()
     duration: float | None = None  # s of the quintic part to render; None: all of it
-    provenance: str = ""
+    provenance: str = ''
 
     @property
     def fps(self) -> float:
@@ -274,62 +303,91 @@ class SynthConfig:
     @property
     def frame_count(self) -> int:
         """Frames k = 0, 1, ... at t = k / fps while t <= duration - 1 / fps (132 and 420)."""
-        duration = quintic_part(self.primitive).duration if self.duration is None else self.duration
+        duration = (
+            quintic_part(self.primitive).duration if self.duration is None else self.duration
+        )
         return int(math.floor(duration * self.fps + 1e-9))
 
     @property
     def steps_per_frame(self) -> int:
         n = self.rate_hz / self.fps
         if abs(n - round(n)) > 1e-9 or round(n) < 1:
-            raise SynthError(f"synthetic reference rate {self.rate_hz:g} Hz is not a multiple of {self.fps:g} fps")
+            raise SynthError(
+                f'synthetic reference rate {self.rate_hz:g} Hz is not a multiple of'
+                f' {self.fps:g} fps'
+            )
         return int(round(n))
 
     def describe(self) -> str:
         """One line naming the reference model and the camera (the bag's `source`)."""
         p = dict(self.params)
         cam, noise = self.sensor.camera, self.sensor.noise
-        physics = ", ".join(f"{k} {p[k]:g}" for k in ("mass", "young", "poisson", "thickness", "bending",
-                                                      "tri_stiffness", "friction") if k in p)
-        integrator = f"integrator {p['integrator']}, " if "integrator" in p else ""
+        physics = ', '.join(
+            f'{k} {p[k]:g}'
+            for k in (
+                'mass',
+                'young',
+                'poisson',
+                'thickness',
+                'bending',
+                'tri_stiffness',
+                'friction',
+            )
+            if k in p
+        )
+        integrator = f'integrator {p["integrator"]}, ' if 'integrator' in p else ''
         return (
-            f"synthetic: reference {self.engine} {p.get('model', '')} cloth {self.grid[0]}x{self.grid[1]}, "
-            f"{integrator}{self.rate_hz:g} Hz, self-collision "
-            f"{'on' if p.get('self_collision') else 'off'} ({physics}), seed {self.seed}; "
-            f"virtual Azure Kinect {cam.width}x{cam.height} hfov {cam.hfov_deg:g} deg at "
-            f"({', '.join(f'{x:g}' for x in cam.position)}) looking along -y, z-buffer visibility, "
-            f"depth noise {1000 * noise.sigma0:g} mm + {1000 * noise.sigma2:g} mm/m^2 z^2 in "
-            f"{1000 * noise.depth_step:g} mm steps, flying pixels "
-            f"{noise.flying_fraction:g} of the silhouette, crop z > {self.sensor.crop_min[2]:g} m, "
-            f"SOR {self.sensor.sor_neighbors}/{self.sensor.sor_std_ratio:g}, "
-            f"at most {self.sensor.max_points} points"
+            f'synthetic: reference {self.engine} {p.get("model", "")} cloth'
+            f' {self.grid[0]}x{self.grid[1]}, {integrator}{self.rate_hz:g} Hz, self-collision'
+            f' {"on" if p.get("self_collision") else "off"} ({physics}), seed {self.seed}; virtual'
+            f' Azure Kinect {cam.width}x{cam.height} hfov {cam.hfov_deg:g} deg at'
+            f' ({", ".join(f"{x:g}" for x in cam.position)}) looking along -y, z-buffer'
+            f' visibility, depth noise {1000 * noise.sigma0:g} mm + {1000 * noise.sigma2:g} mm/m^2'
+            f' z^2 in {1000 * noise.depth_step:g} mm steps, flying pixels'
+            f' {noise.flying_fraction:g} of the silhouette, crop z > {self.sensor.crop_min[2]:g}'
+            f' m, SOR {self.sensor.sor_neighbors}/{self.sensor.sor_std_ratio:g}, at most'
+            f' {self.sensor.max_points} points'
         )
 
 
-def reference_config(cloth: str, primitive: str, seed: int = 0, path: Path | None = None,
-                     reference: str = DEFAULT_REFERENCE, **overrides: Any) -> SynthConfig:
-    """The reference model of `cloth` and `primitive` from the reference's config file (config/synth.yaml
+def reference_config(
+    cloth: str,
+    primitive: str,
+    seed: int = 0,
+    path: Path | None = None,
+    reference: str = DEFAULT_REFERENCE,
+    **overrides: Any,
+) -> SynthConfig:
+    """Return the reference model of `cloth` and `primitive` from the reference's config file (config/synth.yaml
     for MuJoCo); SynthError if unknown. `overrides` replace SynthConfig fields (e.g. a coarser grid
     or a shorter duration for tests).
     """
     primitive = parse_primitive(primitive).value
     path = path or config_path(reference)
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-        ref = doc["reference"]
-        cloths = doc["cloths"]
+        doc = yaml.safe_load(path.read_text(encoding='utf-8'))
+        ref = doc['reference']
+        cloths = doc['cloths']
     except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
-        raise SynthError(f"synthetic reference config {path} is unreadable ({exc})") from None
+        raise SynthError(f'synthetic reference config {path} is unreadable ({exc})') from None
     if cloth not in cloths:
-        raise SynthError(f"unknown cloth {cloth!r} in {path} (valid: {', '.join(cloths)})")
+        raise SynthError(f'unknown cloth {cloth!r} in {path} (valid: {", ".join(cloths)})')
     entry = cloths[cloth]
     if primitive not in entry:
-        raise SynthError(f"{path}: cloth {cloth} has no {primitive} entry")
-    params = {**ref.get("params", {}), **entry[primitive]}
-    engine_class(ref["engine"]).validate_params(params)  # EngineError (a ValueError) names the bad one
+        raise SynthError(f'{path}: cloth {cloth} has no {primitive} entry')
+    params = {**ref.get('params', {}), **entry[primitive]}
+    engine_class(ref['engine']).validate_params(
+        params
+    )  # EngineError (a ValueError) names the bad one
     config = SynthConfig(
-        cloth=cloth, primitive=primitive, seed=int(seed), engine=str(ref["engine"]),
-        grid=(int(ref["grid"][0]), int(ref["grid"][1])), rate_hz=float(ref["rate_hz"]),
-        params=params, provenance=str(entry.get("provenance", "")).strip(),
+        cloth=cloth,
+        primitive=primitive,
+        seed=int(seed),
+        engine=str(ref['engine']),
+        grid=(int(ref['grid'][0]), int(ref['grid'][1])),
+        rate_hz=float(ref['rate_hz']),
+        params=params,
+        provenance=str(entry.get('provenance', '')).strip(),
     )
     return replace(config, **overrides)
 
@@ -340,7 +398,9 @@ def simulate_reference(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
     targets = full_targets(config.primitive, config.rate_hz)
     start = targets.quintic_index
     last = start + (config.frame_count - 1) * per_frame
-    engine = make_engine(config.engine, config.rate_hz, dict(config.params), ClothGrid(*config.grid))
+    engine = make_engine(
+        config.engine, config.rate_hz, dict(config.params), ClothGrid(*config.grid)
+    )
     try:
         vertices = engine.reset(config.seed, targets.left[0], targets.right[0])
         for i in range(1, last + 1):
@@ -348,19 +408,21 @@ def simulate_reference(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
             if i >= start and (i - start) % per_frame == 0:
                 if engine.diverged:
                     raise SynthError(
-                        f"synthetic reference {config.cloth} {config.primitive} diverged at step {i}: "
-                        f"{engine.divergence.reason}"
+                        f'synthetic reference {config.cloth} {config.primitive} diverged at step'
+                        f' {i}: {engine.divergence.reason}'
                     )
                 yield (i - start) // per_frame, vertices
     finally:
         engine.close()
 
 
-def coarse_vertices(vertices: np.ndarray, fine: tuple[int, int], coarse: tuple[int, int]) -> np.ndarray:
-    """The vertices of a coarse grid nested in a fine one (every n-th row and column)."""
+def coarse_vertices(
+    vertices: np.ndarray, fine: tuple[int, int], coarse: tuple[int, int]
+) -> np.ndarray:
+    """Return the vertices of a coarse grid nested in a fine one (every n-th row and column)."""
     (fx, fz), (cx, cz) = fine, coarse
     if (fx - 1) % (cx - 1) or (fz - 1) % (cz - 1):
-        raise ValueError(f"grid {cx}x{cz} is not nested in grid {fx}x{fz}")
+        raise ValueError(f'grid {cx}x{cz} is not nested in grid {fx}x{fz}')
     grid = np.asarray(vertices).reshape(fz, fx, 3)
     return grid[:: (fz - 1) // (cz - 1), :: (fx - 1) // (cx - 1)].reshape(-1, 3)
 
@@ -392,13 +454,18 @@ def trial_info(config: SynthConfig, clouds: list[np.ndarray] | None = None) -> T
     None if the clouds never touch the table (a shortened trial): its runs then say so and score every frame.
     """
     cop = None
-    if config.primitive == "dynamic":
+    if config.primitive == 'dynamic':
         cop = first_table_contact(clouds or []).index  # frame k is stamped k / fps from the start
     return TrialInfo(config.cloth, 0, config.primitive, cop, config.describe(), fps=config.fps)
 
 
-def write_synthetic_bag(config: SynthConfig, out_dir: Path, overwrite: bool = False, progress: bool = False,
-                        on_frame: Callable[[int, np.ndarray, np.ndarray], None] | None = None) -> Path:
+def write_synthetic_bag(
+    config: SynthConfig,
+    out_dir: Path,
+    overwrite: bool = False,
+    progress: bool = False,
+    on_frame: Callable[[int, np.ndarray, np.ndarray], None] | None = None,
+) -> Path:
     """Render `config` into a rosbag2 MCAP bag at out_dir (clouds on CLOUD_TOPIC); the bag path.
 
     `on_frame(k, reference_vertices, points)` sees every frame as it is written. The bag is
@@ -411,21 +478,34 @@ def write_synthetic_bag(config: SynthConfig, out_dir: Path, overwrite: bool = Fa
         if progress:
             from tqdm import tqdm
 
-            frames = tqdm(frames, total=config.frame_count, unit="frame", desc=out_dir.name)
-        rendered = list(frames)  # the trial (its change of phase) is written first, found from the clouds
-        with BagWriter(staged, trial_info(config, [points for _, _, points in rendered])) as writer:
+            frames = tqdm(frames, total=config.frame_count, unit='frame', desc=out_dir.name)
+        rendered = list(
+            frames
+        )  # the trial (its change of phase) is written first, found from the clouds
+        with BagWriter(
+            staged, trial_info(config, [points for _, _, points in rendered])
+        ) as writer:
             for k, vertices, points in rendered:
                 writer.write_cloud(CLOUD_TOPIC, frame_stamp_ns(k, config.fps), points)
                 if on_frame is not None:
                     on_frame(k, vertices, points)
             if writer.counts.get(CLOUD_TOPIC, 0) != config.frame_count:
-                raise SynthError(f"synthetic bag {out_dir}: {writer.counts.get(CLOUD_TOPIC, 0)} of "
-                                 f"{config.frame_count} frames rendered")
+                raise SynthError(
+                    f'synthetic bag {out_dir}: {writer.counts.get(CLOUD_TOPIC, 0)} of '
+                    f'{config.frame_count} frames rendered'
+                )
     return out_dir
 
 
-def synth_command(cloth: str, primitive: str, out: Path, seed: int = 0, overwrite: bool = False,
-                  progress: bool = True, reference: str = DEFAULT_REFERENCE) -> Path:
+def synth_command(
+    cloth: str,
+    primitive: str,
+    out: Path,
+    seed: int = 0,
+    overwrite: bool = False,
+    progress: bool = True,
+    reference: str = DEFAULT_REFERENCE,
+) -> Path:
     """`cloth-bench synth`: the synthetic bag of a cloth and primitive from a reference's config."""
     config = reference_config(cloth, primitive, seed, reference=reference)
     return write_synthetic_bag(config, Path(out), overwrite, progress)

@@ -11,13 +11,12 @@ import bisect
 from collections.abc import Iterable
 from typing import Any
 
-import numpy as np
-
 from cloth_bench_ros.data.messages import stamp_ns
 from cloth_bench_ros.errors import ClothBenchError
+import numpy as np
 
-TF_TOPICS = ("/tf_static", "/tf")
-TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+TF_TOPICS = ('/tf_static', '/tf')
+TF_MESSAGE = 'tf2_msgs/msg/TFMessage'
 
 
 class TransformError(ClothBenchError, ValueError):
@@ -25,7 +24,7 @@ class TransformError(ClothBenchError, ValueError):
 
 
 def _strip(frame: str) -> str:
-    return frame[1:] if frame.startswith("/") else frame  # tf2 ignores a leading slash
+    return frame[1:] if frame.startswith('/') else frame  # tf2 ignores a leading slash
 
 
 def quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
@@ -33,13 +32,15 @@ def quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
     q = np.array([x, y, z, w], dtype=float)
     n = np.linalg.norm(q)
     if not np.isfinite(n) or n < 1e-9:
-        raise TransformError(f"quaternion {q.tolist()} cannot be normalised")
+        raise TransformError(f'quaternion {q.tolist()} cannot be normalised')
     x, y, z, w = q / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _slerp(q0: np.ndarray, q1: np.ndarray, w: float) -> np.ndarray:
@@ -87,7 +88,7 @@ class TfBuffer:
         """(topic, tf2_msgs/TFMessage) pairs as a bag holds them on /tf_static and /tf."""
         for topic, msg in items:
             for transform in msg.transforms:
-                self.set_transform(transform, static=topic == "/tf_static")
+                self.set_transform(transform, static=topic == '/tf_static')
 
     @property
     def frames(self) -> set[str]:
@@ -105,8 +106,9 @@ class TfBuffer:
             return _matrix(samples[i][1], samples[i][2])
         if i == 0 or i == len(stamps):
             raise TransformError(
-                f"frame {child}: no transform to {self._parent[child]} at {stamp / 1e9:.3f} s "
-                f"(extrapolation; /tf covers {stamps[0] / 1e9:.3f} .. {stamps[-1] / 1e9:.3f} s)")
+                f'frame {child}: no transform to {self._parent[child]} at {stamp / 1e9:.3f} s '
+                f'(extrapolation; /tf covers {stamps[0] / 1e9:.3f} .. {stamps[-1] / 1e9:.3f} s)'
+            )
         (s0, t0, q0), (s1, t1, q1) = samples[i - 1], samples[i]
         w = (stamp - s0) / (s1 - s0)
         return _matrix(t0 + w * (t1 - t0), _slerp(q0, q1, w))
@@ -116,21 +118,23 @@ class TfBuffer:
         while chain[-1] in self._parent:
             chain.append(self._parent[chain[-1]])
             if len(chain) > 1000:
-                raise TransformError(f"frame {frame}: the tf tree has a loop")
+                raise TransformError(f'frame {frame}: the tf tree has a loop')
         return chain
 
     def lookup(self, target: str, source: str, stamp: int = 0) -> np.ndarray:
         """4x4 matrix taking points in `source` to `target` at `stamp` ns; TransformError if none."""
         target, source = _strip(target), _strip(source)
         if not source:
-            raise TransformError("a cloud has an empty frame_id")
+            raise TransformError('a cloud has an empty frame_id')
         if target == source:
             return np.eye(4)
         up, down = self._chain(source), self._chain(target)
         common = next((f for f in up if f in down), None)
         if common is None:
-            known = ", ".join(sorted(self.frames)) or "none"
-            raise TransformError(f"frame {source} cannot be resolved to {target} (tf frames: {known})")
+            known = ', '.join(sorted(self.frames)) or 'none'
+            raise TransformError(
+                f'frame {source} cannot be resolved to {target} (tf frames: {known})'
+            )
         to_common = np.eye(4)
         for child in up[: up.index(common)]:
             to_common = self._link(child, stamp) @ to_common

@@ -12,12 +12,14 @@ from importlib.metadata import entry_points
 
 from cloth_bench_ros.engines.base import ClothEngine, EngineError
 
-ENTRY_POINT_GROUP = "cloth_bench_ros.engines"
+ENTRY_POINT_GROUP = 'cloth_bench_ros.engines'
 
 # Engines of the paper that cannot be installed from PyPI or Debian: listed with the reason.
 UNAVAILABLE = {
-    "flex": "NVIDIA Flex 1.2 (SoftGym) needs CUDA and a source build; no package on PyPI or Debian",
-    "sofa": "SOFA 23.06 has no package on PyPI or Debian (binary releases and conda only)",
+    'flex': (
+        'NVIDIA Flex 1.2 (SoftGym) needs CUDA and a source build; no package on PyPI or Debian'
+    ),
+    'sofa': 'SOFA 23.06 has no package on PyPI or Debian (binary releases and conda only)',
 }
 
 
@@ -34,17 +36,17 @@ def _entry_points() -> dict:
 
 
 def engine_class(name: str) -> type[ClothEngine]:
-    """The engine class registered under `name`; EngineError if unknown or unavailable."""
+    """Return the engine class registered under `name`; EngineError if unknown or unavailable."""
     eps = _entry_points()
     if name in eps:
         try:
             return eps[name].load()
         except ImportError as exc:
-            raise EngineError(f"engine {name} is not available: {exc}") from None
+            raise EngineError(f'engine {name} is not available: {exc}') from None
     if name in UNAVAILABLE:
-        raise EngineError(f"engine {name} is not available: {UNAVAILABLE[name]}")
+        raise EngineError(f'engine {name} is not available: {UNAVAILABLE[name]}')
     known = sorted(set(eps) | set(UNAVAILABLE))
-    raise EngineError(f"unknown engine {name!r} (known: {', '.join(known)})")
+    raise EngineError(f'unknown engine {name!r} (known: {", ".join(known)})')
 
 
 def known_engines() -> list[EngineInfo]:
@@ -53,12 +55,12 @@ def known_engines() -> list[EngineInfo]:
     for name, ep in sorted(_entry_points().items()):
         try:
             cls = ep.load()
-            infos.append(EngineInfo(name, True, cls.version(), ""))
+            infos.append(EngineInfo(name, True, cls.version(), ''))
         except ImportError as exc:
-            infos.append(EngineInfo(name, False, "", f"import failed: {exc}"))
+            infos.append(EngineInfo(name, False, '', f'import failed: {exc}'))
     for name, reason in UNAVAILABLE.items():
         if name not in {i.name for i in infos}:
-            infos.append(EngineInfo(name, False, "", reason))
+            infos.append(EngineInfo(name, False, '', reason))
     return infos
 
 

@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 import abc
-import math
 from dataclasses import dataclass, field
+import math
 from typing import ClassVar, Mapping
-
-import numpy as np
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.task import grasped_corners, initial_displacement
 from cloth_bench_ros.errors import ClothBenchError
+import numpy as np
 
 
 class EngineError(ClothBenchError, ValueError):
@@ -28,12 +27,12 @@ class Param:
     unit: str
     low: float | None = None
     high: float | None = None
-    doc: str = ""
+    doc: str = ''
     choices: tuple[str, ...] = ()
 
     def validate(self, value: object) -> object:
         """`value` checked against this parameter's type and range (validation's rules)."""
-        name = f"parameter {self.name}"
+        name = f'parameter {self.name}'
         try:
             if self.choices:
                 return validation.choice(value, name, self.choices)
@@ -61,18 +60,19 @@ MAX_DISTANCE_FROM_GRIPPERS = 5.0  # m (the cloth is 0.86 m across its diagonal)
 MAX_VERTEX_SPEED = 100.0  # m/s
 
 
-def check_divergence(vertices: np.ndarray, previous: np.ndarray | None, dt: float,
-                     grippers_mid: np.ndarray) -> str | None:
+def check_divergence(
+    vertices: np.ndarray, previous: np.ndarray | None, dt: float, grippers_mid: np.ndarray
+) -> str | None:
     """Why this state counts as diverged, or None."""
     if not np.isfinite(vertices).all():
-        return "non-finite vertex positions"
+        return 'non-finite vertex positions'
     reach = float(np.abs(vertices - grippers_mid).max())
     if reach > MAX_DISTANCE_FROM_GRIPPERS:
-        return f"a vertex is {reach:.1f} m from the grippers"
+        return f'a vertex is {reach:.1f} m from the grippers'
     if previous is not None:
         speed = float(np.linalg.norm(vertices - previous, axis=1).max() / dt)
         if speed > MAX_VERTEX_SPEED:
-            return f"a vertex moves at {speed:.0f} m/s"
+            return f'a vertex moves at {speed:.0f} m/s'
     return None
 
 
@@ -87,8 +87,12 @@ class ClothEngine(abc.ABC):
     name: ClassVar[str]
     params: ClassVar[tuple[Param, ...]]
 
-    def __init__(self, rate_hz: float, params: Mapping[str, object] | None = None,
-                 grid: ClothGrid | None = None) -> None:
+    def __init__(
+        self,
+        rate_hz: float,
+        params: Mapping[str, object] | None = None,
+        grid: ClothGrid | None = None,
+    ) -> None:
         try:
             self.rate_hz = validation.rate_hz(rate_hz)
         except validation.InputError as exc:
@@ -98,13 +102,19 @@ class ClothEngine(abc.ABC):
         self.divergence: Divergence | None = None
         self.steps = 0
         self._vertices: np.ndarray | None = None
-        self._mid = np.zeros(3)  # scratch of the divergence check, so a step allocates nothing for it
+        self._mid = np.zeros(
+            3
+        )  # scratch of the divergence check, so a step allocates nothing for it
         self._scratch: np.ndarray | None = None
         self._row: np.ndarray | None = None
         self._rest = self.grid.vertices()
         self._corners = grasped_corners(self.grid)
-        if "timestep" in self.config and "substeps" in self.config:  # the one substep rule of the engines
-            self.substeps = self.internal_steps(float(self.config["timestep"]), int(self.config["substeps"]))
+        if (
+            'timestep' in self.config and 'substeps' in self.config
+        ):  # the one substep rule of the engines
+            self.substeps = self.internal_steps(
+                float(self.config['timestep']), int(self.config['substeps'])
+            )
             self.h = self.dt / self.substeps
 
     @classmethod
@@ -114,7 +124,7 @@ class ClothEngine(abc.ABC):
         unknown = sorted(set(params) - set(schema))
         if unknown:
             raise EngineError(
-                f"unknown {cls.name} parameter {', '.join(unknown)} (known: {', '.join(schema)})"
+                f'unknown {cls.name} parameter {", ".join(unknown)} (known: {", ".join(schema)})'
             )
         config = {p.name: p.default for p in cls.params}
         config.update({k: schema[k].validate(v) for k, v in params.items()})
@@ -123,7 +133,7 @@ class ClothEngine(abc.ABC):
     @classmethod
     def version(cls) -> str:
         """Version of the underlying simulator."""
-        return "unknown"
+        return 'unknown'
 
     @classmethod
     def warm(cls) -> None:
@@ -150,13 +160,15 @@ class ClothEngine(abc.ABC):
         self.divergence = None
         self.steps = 0
         left, right = np.asarray(left_xyz, float), np.asarray(right_xyz, float)
-        self._vertices = self._reset(initial_displacement(self.grid, int(seed), left, right), left, right)
+        self._vertices = self._reset(
+            initial_displacement(self.grid, int(seed), left, right), left, right
+        )
         return self._vertices
 
     def step(self, left_xyz: np.ndarray, right_xyz: np.ndarray) -> np.ndarray:
         """Advance dt with the grippers moved to the targets; the vertices (n, 3) after it."""
         if self._vertices is None:
-            raise RuntimeError("reset() before step()")
+            raise RuntimeError('reset() before step()')
         self.steps += 1
         if self.divergence is not None:
             return self._vertices
@@ -164,7 +176,7 @@ class ClothEngine(abc.ABC):
         try:
             vertices = self._step(left, right)
         except Exception as exc:  # an engine's own failure (e.g. a solver error) is a divergence
-            self.divergence = Divergence(self.steps, f"{type(exc).__name__}: {exc}")
+            self.divergence = Divergence(self.steps, f'{type(exc).__name__}: {exc}')
             return self._vertices
         reason = self._check(vertices, left, right)
         if reason is not None:
@@ -177,7 +189,10 @@ class ClothEngine(abc.ABC):
         exact reason only when a bound fails (NaN fails every comparison, so it gets there too).
         """
         if self._scratch is None or self._scratch.shape != vertices.shape:
-            self._scratch, self._row = np.empty_like(vertices, dtype=float), np.empty(len(vertices))
+            self._scratch, self._row = (
+                np.empty_like(vertices, dtype=float),
+                np.empty(len(vertices)),
+            )
         mid, buf = self._mid, self._scratch
         np.add(left, right, out=mid)
         mid *= 0.5

@@ -15,36 +15,35 @@ every substep along the straight line from the previous target to the new one.
 
 from __future__ import annotations
 
-import tempfile
-from importlib.metadata import PackageNotFoundError, version as package_version
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as package_version
 from pathlib import Path
+import tempfile
 from typing import ClassVar, Mapping
 
-import numpy as np
-
 from cloth_bench_ros.engines.quiet import quiet_c_output
+import numpy as np
 
 with quiet_c_output():  # pybullet prints its build time on import
     import pybullet as pb
 
 from cloth_bench_ros.core import scene
-from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
 from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
 
-
-MODELS = ("mass_spring", "neo_hookean")
+MODELS = ('mass_spring', 'neo_hookean')
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 
 def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
-    """A triangle mesh as Wavefront OBJ (1-based face indices)."""
-    lines = [f"v {x:.9f} {y:.9f} {z:.9f}" for x, y, z in vertices]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
-    path.write_text("\n".join(lines) + "\n")
+    """Return a triangle mesh as Wavefront OBJ (1-based face indices)."""
+    lines = [f'v {x:.9f} {y:.9f} {z:.9f}' for x, y, z in vertices]
+    lines += [f'f {a + 1} {b + 1} {c + 1}' for a, b, c in faces]
+    path.write_text('\n'.join(lines) + '\n')
 
 
 def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.ndarray]:
-    """The cloth as a slab: nodes (2n, 3), layer 0 at y = -t/2 then layer 1 at +t/2, and
+    """Return the cloth as a slab: nodes (2n, 3), layer 0 at y = -t/2 then layer 1 at +t/2, and
     positively oriented tetrahedra (6 per grid cell, Kuhn split, conforming across cells)."""
     rest = grid.vertices()
     n = len(rest)
@@ -53,6 +52,7 @@ def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.n
     tets = []
     for j in range(grid.nz - 1):
         for i in range(grid.nx - 1):
+
             def corner(bits: tuple[int, int, int]) -> int:
                 dx, dz, layer = bits
                 return layer * n + (j + dz) * grid.nx + (i + dx)
@@ -73,23 +73,30 @@ def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.n
 
 
 def write_vtk(path: Path, nodes: np.ndarray, tets: np.ndarray) -> None:
-    """A tetrahedral mesh as legacy ASCII VTK (unstructured grid), the format Bullet loads."""
-    lines = ["# vtk DataFile Version 2.0", "cloth slab", "ASCII", "DATASET UNSTRUCTURED_GRID",
-             f"POINTS {len(nodes)} double"]
-    lines += [f"{x:.9f} {y:.9f} {z:.9f}" for x, y, z in nodes]
-    lines.append(f"CELLS {len(tets)} {5 * len(tets)}")
-    lines += [f"4 {a} {b} {c} {d}" for a, b, c, d in tets]
-    lines.append(f"CELL_TYPES {len(tets)}")
-    lines += ["10"] * len(tets)
-    path.write_text("\n".join(lines) + "\n")
+    """Return a tetrahedral mesh as legacy ASCII VTK (unstructured grid), the format Bullet loads."""
+    lines = [
+        '# vtk DataFile Version 2.0',
+        'cloth slab',
+        'ASCII',
+        'DATASET UNSTRUCTURED_GRID',
+        f'POINTS {len(nodes)} double',
+    ]
+    lines += [f'{x:.9f} {y:.9f} {z:.9f}' for x, y, z in nodes]
+    lines.append(f'CELLS {len(tets)} {5 * len(tets)}')
+    lines += [f'4 {a} {b} {c} {d}' for a, b, c, d in tets]
+    lines.append(f'CELL_TYPES {len(tets)}')
+    lines += ['10'] * len(tets)
+    path.write_text('\n'.join(lines) + '\n')
 
 
 def match_nodes(loaded: np.ndarray, wanted: np.ndarray, tolerance: float = 1e-5) -> np.ndarray:
     """Index into `loaded` of the node at each `wanted` position; RuntimeError if one is missing."""
     d2 = ((wanted[:, None, :] - loaded[None, :, :]) ** 2).sum(axis=2)
     index = d2.argmin(axis=1)
-    if np.sqrt(d2[np.arange(len(wanted)), index]).max() > tolerance or len(set(index)) != len(index):
-        raise RuntimeError("PyBullet soft-body nodes do not match the cloth mesh")
+    if np.sqrt(d2[np.arange(len(wanted)), index]).max() > tolerance or len(set(index)) != len(
+        index
+    ):
+        raise RuntimeError('PyBullet soft-body nodes do not match the cloth mesh')
     return index
 
 
@@ -100,53 +107,83 @@ class BulletCloth(ClothEngine):
     cloth in the task's seeded initial state (core/task.py); both layers of a FEM slab move together.
     """
 
-    name: ClassVar[str] = "bullet"
+    name: ClassVar[str] = 'bullet'
     params: ClassVar[tuple[Param, ...]] = (
-        Param("model", "mass_spring", "", doc="mass_spring (with bending springs) or neo_hookean (FEM slab)",
-              choices=MODELS),
-        Param("mass", 0.5, "kg", 1e-4, 100.0, "mass of the whole cloth"),
-        Param("elastic", 10.0, "N/m", 0.0, 1e6, "spring elastic stiffness (mass_spring)"),
-        Param("damping", 0.05, "N s/m", 0.0, 100.0, "spring damping stiffness (mass_spring)"),
-        Param("bending", 30.0, "N/m", 0.0, 1e6, "bending spring stiffness (mass_spring)"),
-        Param("bending_springs", True, "", doc="add bending springs (mass_spring)"),
-        Param("neohookean_mu", 20000.0, "Pa", 0.0, 1e9, "Neo-Hookean shear modulus (neo_hookean)"),
-        Param("neohookean_lambda", 40000.0, "Pa", 0.0, 1e9, "Neo-Hookean first Lame parameter (neo_hookean)"),
-        Param("neohookean_damping", 0.01, "s", 0.0, 10.0, "Neo-Hookean damping (neo_hookean)"),
-        Param("fem_thickness", 0.005, "m", 1e-4, 0.05, "slab thickness of the FEM cloth (neo_hookean)"),
-        Param("friction", 0.5, "", 0.0, 20.0, "soft-body friction coefficient"),
-        Param("collision_margin", 0.004, "m", 1e-4, 0.05, "soft-body collision margin"),
-        Param("timestep", 0.0025, "s", 1e-5, 0.1,
-              "longest internal step; substeps = ceil(dt / timestep); neo_hookean needs <= 0.001 for the fling"),
-        Param("substeps", 1, "", 1, 10000, "least number of internal steps per engine step"),
-        Param("solver_iterations", 50, "", 1, 10000, "solver iterations per internal step"),
-        Param("self_collision", False, "", doc="cloth self-collision"),
+        Param(
+            'model',
+            'mass_spring',
+            '',
+            doc='mass_spring (with bending springs) or neo_hookean (FEM slab)',
+            choices=MODELS,
+        ),
+        Param('mass', 0.5, 'kg', 1e-4, 100.0, 'mass of the whole cloth'),
+        Param('elastic', 10.0, 'N/m', 0.0, 1e6, 'spring elastic stiffness (mass_spring)'),
+        Param('damping', 0.05, 'N s/m', 0.0, 100.0, 'spring damping stiffness (mass_spring)'),
+        Param('bending', 30.0, 'N/m', 0.0, 1e6, 'bending spring stiffness (mass_spring)'),
+        Param('bending_springs', True, '', doc='add bending springs (mass_spring)'),
+        Param('neohookean_mu', 20000.0, 'Pa', 0.0, 1e9, 'Neo-Hookean shear modulus (neo_hookean)'),
+        Param(
+            'neohookean_lambda',
+            40000.0,
+            'Pa',
+            0.0,
+            1e9,
+            'Neo-Hookean first Lame parameter (neo_hookean)',
+        ),
+        Param('neohookean_damping', 0.01, 's', 0.0, 10.0, 'Neo-Hookean damping (neo_hookean)'),
+        Param(
+            'fem_thickness',
+            0.005,
+            'm',
+            1e-4,
+            0.05,
+            'slab thickness of the FEM cloth (neo_hookean)',
+        ),
+        Param('friction', 0.5, '', 0.0, 20.0, 'soft-body friction coefficient'),
+        Param('collision_margin', 0.004, 'm', 1e-4, 0.05, 'soft-body collision margin'),
+        Param(
+            'timestep',
+            0.0025,
+            's',
+            1e-5,
+            0.1,
+            'longest internal step; substeps = ceil(dt / timestep); neo_hookean needs <= 0.001 for'
+            ' the fling',
+        ),
+        Param('substeps', 1, '', 1, 10000, 'least number of internal steps per engine step'),
+        Param('solver_iterations', 50, '', 1, 10000, 'solver iterations per internal step'),
+        Param('self_collision', False, '', doc='cloth self-collision'),
     )
 
     @classmethod
     def version(cls) -> str:
         try:
-            return package_version("pybullet")
+            return package_version('pybullet')
         except PackageNotFoundError:
             return str(pb.getAPIVersion())
 
-    def __init__(self, rate_hz: float, params: Mapping[str, object] | None = None,
-                 grid: ClothGrid | None = None) -> None:
+    def __init__(
+        self,
+        rate_hz: float,
+        params: Mapping[str, object] | None = None,
+        grid: ClothGrid | None = None,
+    ) -> None:
         super().__init__(rate_hz, params, grid)
         c = self.config
-        self._fem = c["model"] == "neo_hookean"
-        self._tmp = tempfile.TemporaryDirectory(prefix="cloth_bench_bullet_")
+        self._fem = c['model'] == 'neo_hookean'
+        self._tmp = tempfile.TemporaryDirectory(prefix='cloth_bench_bullet_')
         if self._fem:
-            self._nodes_rest, tets = slab_tetrahedra(self.grid, float(c["fem_thickness"]))
-            self._mesh = Path(self._tmp.name) / "cloth.vtk"
+            self._nodes_rest, tets = slab_tetrahedra(self.grid, float(c['fem_thickness']))
+            self._mesh = Path(self._tmp.name) / 'cloth.vtk'
             write_vtk(self._mesh, self._nodes_rest, tets)
         else:
             self._nodes_rest = self._rest
-            self._mesh = Path(self._tmp.name) / "cloth.obj"
+            self._mesh = Path(self._tmp.name) / 'cloth.obj'
             write_obj(self._mesh, self._rest, self.grid.faces())
         self._layers = 2 if self._fem else 1
         self._client = pb.connect(pb.DIRECT)
         if self._client < 0:
-            raise RuntimeError("PyBullet could not start a DIRECT physics client")
+            raise RuntimeError('PyBullet could not start a DIRECT physics client')
         self._target = np.zeros((2, 3))
         self._cloth = -1
         self._grippers: list[int] = []
@@ -155,39 +192,63 @@ class BulletCloth(ClothEngine):
     # -- world --------------------------------------------------------------------------------
 
     def _build(self) -> None:
-        """A fresh deformable world: gravity, table, cloth, kinematic grippers and anchors."""
+        """Return a fresh deformable world: gravity, table, cloth, kinematic grippers and anchors."""
         c, cid = self.config, self._client
         pb.resetSimulation(pb.RESET_USE_DEFORMABLE_WORLD, physicsClientId=cid)
         pb.setGravity(0.0, 0.0, scene.GRAVITY, physicsClientId=cid)
-        pb.setPhysicsEngineParameter(fixedTimeStep=self.h, numSubSteps=0,
-                                     numSolverIterations=int(c["solver_iterations"]), physicsClientId=cid)
+        pb.setPhysicsEngineParameter(
+            fixedTimeStep=self.h,
+            numSubSteps=0,
+            numSolverIterations=int(c['solver_iterations']),
+            physicsClientId=cid,
+        )
         x0, x1 = scene.TABLE_X
         y0, y1 = scene.TABLE_Y
         half = scene.TABLE_THICKNESS / 2
-        box = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[(x1 - x0) / 2, (y1 - y0) / 2, half],
-                                      physicsClientId=cid)
-        table = pb.createMultiBody(0.0, box, -1, [(x0 + x1) / 2, (y0 + y1) / 2, scene.TABLE_TOP_Z - half],
-                                   physicsClientId=cid)
+        box = pb.createCollisionShape(
+            pb.GEOM_BOX, halfExtents=[(x1 - x0) / 2, (y1 - y0) / 2, half], physicsClientId=cid
+        )
+        table = pb.createMultiBody(
+            0.0,
+            box,
+            -1,
+            [(x0 + x1) / 2, (y0 + y1) / 2, scene.TABLE_TOP_Z - half],
+            physicsClientId=cid,
+        )
         pb.changeDynamics(table, -1, lateralFriction=1.0, physicsClientId=cid)
         common = dict(
-            basePosition=[0.0, 0.0, 0.0], baseOrientation=list(_IDENTITY), scale=1.0, mass=float(c["mass"]),
-            collisionMargin=float(c["collision_margin"]), frictionCoeff=float(c["friction"]),
-            useSelfCollision=int(c["self_collision"]), useFaceContact=1, physicsClientId=cid,
+            basePosition=[0.0, 0.0, 0.0],
+            baseOrientation=list(_IDENTITY),
+            scale=1.0,
+            mass=float(c['mass']),
+            collisionMargin=float(c['collision_margin']),
+            frictionCoeff=float(c['friction']),
+            useSelfCollision=int(c['self_collision']),
+            useFaceContact=1,
+            physicsClientId=cid,
         )
         with quiet_c_output():
             self._cloth = self._load_cloth(common)
         if self._cloth < 0:
-            raise RuntimeError(f"PyBullet could not load the cloth mesh {self._mesh}")
+            raise RuntimeError(f'PyBullet could not load the cloth mesh {self._mesh}')
         self._order = match_nodes(self._mesh_nodes(), self._nodes_rest)
         n = len(self._rest)
         self._grippers = []
         for corner in self._corners:
-            body = pb.createMultiBody(0.0, -1, -1, self._rest[corner].tolist(), physicsClientId=cid)
+            body = pb.createMultiBody(
+                0.0, -1, -1, self._rest[corner].tolist(), physicsClientId=cid
+            )
             for layer in range(self._layers):
                 node = layer * n + corner
                 offset = self._nodes_rest[node] - self._rest[corner]
-                pb.createSoftBodyAnchor(self._cloth, int(self._order[node]), body, -1, offset.tolist(),
-                                        physicsClientId=cid)
+                pb.createSoftBodyAnchor(
+                    self._cloth,
+                    int(self._order[node]),
+                    body,
+                    -1,
+                    offset.tolist(),
+                    physicsClientId=cid,
+                )
             self._grippers.append(body)
 
     def _load_cloth(self, common: dict) -> int:
@@ -195,18 +256,31 @@ class BulletCloth(ClothEngine):
         c = self.config
         if self._fem:
             return pb.loadSoftBody(
-                str(self._mesh), useNeoHookean=1, useMassSpring=0, useBendingSprings=0,
-                NeoHookeanMu=float(c["neohookean_mu"]), NeoHookeanLambda=float(c["neohookean_lambda"]),
-                NeoHookeanDamping=float(c["neohookean_damping"]), **common)
+                str(self._mesh),
+                useNeoHookean=1,
+                useMassSpring=0,
+                useBendingSprings=0,
+                NeoHookeanMu=float(c['neohookean_mu']),
+                NeoHookeanLambda=float(c['neohookean_lambda']),
+                NeoHookeanDamping=float(c['neohookean_damping']),
+                **common,
+            )
         return pb.loadSoftBody(
-            str(self._mesh), useNeoHookean=0, useMassSpring=1, useBendingSprings=int(c["bending_springs"]),
-            springElasticStiffness=float(c["elastic"]), springDampingStiffness=float(c["damping"]),
-            springBendingStiffness=float(c["bending"]), **common)
+            str(self._mesh),
+            useNeoHookean=0,
+            useMassSpring=1,
+            useBendingSprings=int(c['bending_springs']),
+            springElasticStiffness=float(c['elastic']),
+            springDampingStiffness=float(c['damping']),
+            springBendingStiffness=float(c['bending']),
+            **common,
+        )
 
     def _mesh_nodes(self) -> np.ndarray:
         """Soft-body node positions in PyBullet's order, (m, 3)."""
-        _, nodes = pb.getMeshData(self._cloth, -1, flags=pb.MESH_DATA_SIMULATION_MESH,
-                                  physicsClientId=self._client)
+        _, nodes = pb.getMeshData(
+            self._cloth, -1, flags=pb.MESH_DATA_SIMULATION_MESH, physicsClientId=self._client
+        )
         return np.asarray(nodes, dtype=float)
 
     def _vertices_now(self) -> np.ndarray:
@@ -218,7 +292,9 @@ class BulletCloth(ClothEngine):
 
     def _move_grippers(self, positions: np.ndarray) -> None:
         for body, xyz in zip(self._grippers, positions):
-            pb.resetBasePositionAndOrientation(body, xyz.tolist(), _IDENTITY, physicsClientId=self._client)
+            pb.resetBasePositionAndOrientation(
+                body, xyz.tolist(), _IDENTITY, physicsClientId=self._client
+            )
 
     # -- ClothEngine --------------------------------------------------------------------------
 

@@ -23,12 +23,11 @@ from __future__ import annotations
 
 from typing import ClassVar, Mapping
 
+from cloth_bench_ros.core import scene
+from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
 import mujoco
 import numpy as np
-
-from cloth_bench_ros.core import scene
-from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
-from cloth_bench_ros.core.scene import ClothGrid
 
 # MuJoCo reports an unstable state (NaN/Inf/huge qpos, qvel or qacc) as a warning and resets the
 # data to the model's rest state; unhandled, it also writes MUJOCO_LOG.TXT into the working
@@ -43,9 +42,9 @@ _INSTABILITY_WARNINGS = (
 # Mass of each grasped corner, so that the cloth cannot move it within a substep.
 GRIPPER_MASS = 1000.0  # kg
 
-MODELS = ("shell", "edges")
-INTEGRATORS = ("Euler", "discrete")
-SOLVERS = ("Newton", "CG", "PGS")
+MODELS = ('shell', 'edges')
+INTEGRATORS = ('Euler', 'discrete')
+SOLVERS = ('Newton', 'CG', 'PGS')
 
 
 def spring_edges(grid: ClothGrid) -> np.ndarray:
@@ -69,29 +68,79 @@ class MujocoCloth(ClothEngine):
     reset(seed) starts the cloth in the task's seeded initial state (core/task.py) at rest.
     """
 
-    name: ClassVar[str] = "mujoco"
+    name: ClassVar[str] = 'mujoco'
     params: ClassVar[tuple[Param, ...]] = (
-        Param("model", "shell", "", doc="shell (bending + inextensible edges) or edges (mass-spring)",
-              choices=MODELS),
-        Param("mass", 0.5, "kg", 1e-4, 100.0, "mass of the whole cloth"),
-        Param("young", 30000.0, "Pa", 0.0, 1e10, "Young's modulus of the shell bending (model shell)"),
-        Param("poisson", 0.45, "", 0.0, 0.499, "Poisson ratio of the shell bending (model shell)"),
-        Param("thickness", 0.001, "m", 1e-5, 0.05, "shell thickness; bending rigidity ~ young t^3 (model shell)"),
-        Param("damping", 0.05, "N s/m", 0.0, 100.0, "passive damping of every flex edge"),
-        Param("edge_stiffness", 200.0, "N/m", 0.0, 1e7, "stiffness of every spring (model edges)"),
-        Param("edge_timeconst", 0.01, "s", 1e-4, 1.0,
-              "time constant of the edge equality constraints (model shell), at least 2 internal steps"),
-        Param("friction", 0.5, "", 0.0, 10.0, "sliding friction coefficient of cloth contacts"),
-        Param("radius", 0.004, "m", 1e-4, 0.05, "collision radius (half thickness) of the cloth"),
-        Param("timestep", 0.002, "s", 1e-5, 0.1, "longest internal step; substeps = ceil(dt / timestep)"),
-        Param("substeps", 1, "", 1, 10000, "least number of internal steps per engine step"),
-        Param("solver_iterations", 50, "", 1, 10000, "constraint solver iterations per internal step"),
-        Param("solver", "Newton", "", doc="constraint solver: Newton (exact), CG (no factorisation; cheaper at a few "
-              "iterations) or PGS", choices=SOLVERS),
-        Param("condim", 3, "", 1, 3, "contact dimensionality: 3 (with friction) or 1 (frictionless, 4x fewer rows)"),
-        Param("integrator", "Euler", "", doc="semi-implicit Euler (as in the paper) or discrete (implicit)",
-              choices=INTEGRATORS),
-        Param("self_collision", False, "", doc="cloth self-collision"),
+        Param(
+            'model',
+            'shell',
+            '',
+            doc='shell (bending + inextensible edges) or edges (mass-spring)',
+            choices=MODELS,
+        ),
+        Param('mass', 0.5, 'kg', 1e-4, 100.0, 'mass of the whole cloth'),
+        Param(
+            'young', 30000.0, 'Pa', 0.0, 1e10, "Young's modulus of the shell bending (model shell)"
+        ),
+        Param('poisson', 0.45, '', 0.0, 0.499, 'Poisson ratio of the shell bending (model shell)'),
+        Param(
+            'thickness',
+            0.001,
+            'm',
+            1e-5,
+            0.05,
+            'shell thickness; bending rigidity ~ young t^3 (model shell)',
+        ),
+        Param('damping', 0.05, 'N s/m', 0.0, 100.0, 'passive damping of every flex edge'),
+        Param('edge_stiffness', 200.0, 'N/m', 0.0, 1e7, 'stiffness of every spring (model edges)'),
+        Param(
+            'edge_timeconst',
+            0.01,
+            's',
+            1e-4,
+            1.0,
+            'time constant of the edge equality constraints (model shell), at least 2 internal'
+            ' steps',
+        ),
+        Param('friction', 0.5, '', 0.0, 10.0, 'sliding friction coefficient of cloth contacts'),
+        Param('radius', 0.004, 'm', 1e-4, 0.05, 'collision radius (half thickness) of the cloth'),
+        Param(
+            'timestep',
+            0.002,
+            's',
+            1e-5,
+            0.1,
+            'longest internal step; substeps = ceil(dt / timestep)',
+        ),
+        Param('substeps', 1, '', 1, 10000, 'least number of internal steps per engine step'),
+        Param(
+            'solver_iterations', 50, '', 1, 10000, 'constraint solver iterations per internal step'
+        ),
+        Param(
+            'solver',
+            'Newton',
+            '',
+            doc=(
+                'constraint solver: Newton (exact), CG (no factorisation; cheaper at a few '
+                'iterations) or PGS'
+            ),
+            choices=SOLVERS,
+        ),
+        Param(
+            'condim',
+            3,
+            '',
+            1,
+            3,
+            'contact dimensionality: 3 (with friction) or 1 (frictionless, 4x fewer rows)',
+        ),
+        Param(
+            'integrator',
+            'Euler',
+            '',
+            doc='semi-implicit Euler (as in the paper) or discrete (implicit)',
+            choices=INTEGRATORS,
+        ),
+        Param('self_collision', False, '', doc='cloth self-collision'),
     )
 
     @classmethod
@@ -101,24 +150,36 @@ class MujocoCloth(ClothEngine):
     @classmethod
     def validate_params(cls, params: Mapping[str, object]) -> dict[str, object]:
         config = super().validate_params(params)
-        if config["condim"] == 2:
-            raise EngineError("parameter condim must be 1 or 3 (MuJoCo has no 2-dimensional contact)")
-        if config["integrator"] == "discrete":
-            if config["model"] != "shell":
+        if config['condim'] == 2:
+            raise EngineError(
+                'parameter condim must be 1 or 3 (MuJoCo has no 2-dimensional contact)'
+            )
+        if config['integrator'] == 'discrete':
+            if config['model'] != 'shell':
                 raise EngineError(
-                    "parameter integrator=discrete needs model=shell (MuJoCo has no 1D edge springs there)")
-            if config["damping"] > 0:
+                    'parameter integrator=discrete needs model=shell (MuJoCo has no 1D edge'
+                    ' springs there)'
+                )
+            if config['damping'] > 0:
                 raise EngineError(
-                    "parameter damping must be 0 with integrator=discrete (MuJoCo has no edge damping there)")
+                    'parameter damping must be 0 with integrator=discrete (MuJoCo has no edge'
+                    ' damping there)'
+                )
         return config
 
-    def __init__(self, rate_hz: float, params: Mapping[str, object] | None = None,
-                 grid: ClothGrid | None = None) -> None:
+    def __init__(
+        self,
+        rate_hz: float,
+        params: Mapping[str, object] | None = None,
+        grid: ClothGrid | None = None,
+    ) -> None:
         super().__init__(rate_hz, params, grid)
         try:
             self.model = mujoco.MjModel.from_xml_string(self._mjcf())
         except ValueError as exc:  # MuJoCo's compiler rejects a parameter combination
-            raise EngineError(f"MuJoCo rejects the cloth parameters: {str(exc).splitlines()[0]}") from None
+            raise EngineError(
+                f'MuJoCo rejects the cloth parameters: {str(exc).splitlines()[0]}'
+            ) from None
         self.data = mujoco.MjData(self.model)
         self._index_model()
         self._target = np.zeros((2, 3))  # gripper positions at the end of the last step
@@ -129,18 +190,19 @@ class MujocoCloth(ClothEngine):
     # -- model --------------------------------------------------------------------------------
 
     def _mjcf(self) -> str:
-        """The scene as MJCF: table and cloth (flexcomp with points in grid order)."""
+        """Return the scene as MJCF: table and cloth (flexcomp with points in grid order)."""
         c = self.config
         x0, x1 = scene.TABLE_X
         y0, y1 = scene.TABLE_Y
         half = scene.TABLE_THICKNESS / 2
         friction = f'{c["friction"]:.9g} 0.005 0.0001'
         contact = (
-            f'<contact selfcollide="{"auto" if c["self_collision"] else "none"}" friction="{friction}" '
-            f'condim="{c["condim"]}" solref="{max(2 * self.h, 0.005):.9g} 1" solimp="0.95 0.99 0.001"/>'
+            f'<contact selfcollide="{"auto" if c["self_collision"] else "none"}"'
+            f' friction="{friction}" condim="{c["condim"]}" solref="{max(2 * self.h, 0.005):.9g}'
+            ' 1" solimp="0.95 0.99 0.001"/>'
         )
-        points = " ".join(f"{v:.12g}" for v in self._rest.ravel())
-        if c["model"] == "shell":
+        points = ' '.join(f'{v:.12g}' for v in self._rest.ravel())
+        if c['model'] == 'shell':
             elements = self.grid.faces()
             material = (
                 f'<edge equality="true" solref="{max(c["edge_timeconst"], 2 * self.h):.9g} 1" '
@@ -151,9 +213,11 @@ class MujocoCloth(ClothEngine):
             dim = 2
         else:
             elements = spring_edges(self.grid)
-            material = f'<edge stiffness="{c["edge_stiffness"]:.9g}" damping="{c["damping"]:.9g}"/>'
+            material = (
+                f'<edge stiffness="{c["edge_stiffness"]:.9g}" damping="{c["damping"]:.9g}"/>'
+            )
             dim = 1
-        element = " ".join(str(int(i)) for i in elements.ravel())
+        element = ' '.join(str(int(i)) for i in elements.ravel())
         return f"""
 <mujoco model="cloth_bench_{c['model']}">
   <option timestep="{self.h:.12g}" gravity="0 0 {scene.GRAVITY}" integrator="{c['integrator']}"
@@ -175,15 +239,19 @@ class MujocoCloth(ClothEngine):
         mujoco.mj_forward(m, d)
         n = len(self._rest)
         if not np.allclose(d.flexvert_xpos[:n], self._rest, atol=1e-9):
-            raise RuntimeError("MuJoCo flex vertex order differs from the grid order")
+            raise RuntimeError('MuJoCo flex vertex order differs from the grid order')
         bodies = m.flex_vertbodyid[:n]
         joints = m.body_jntadr[bodies][:, None] + np.arange(3)
-        if not (np.all(m.body_jntnum[bodies] == 3) and np.allclose(m.jnt_axis[joints], np.eye(3)[None])):
-            raise RuntimeError("MuJoCo flex vertices are not point masses on world x, y, z slides")
+        if not (
+            np.all(m.body_jntnum[bodies] == 3) and np.allclose(m.jnt_axis[joints], np.eye(3)[None])
+        ):
+            raise RuntimeError('MuJoCo flex vertices are not point masses on world x, y, z slides')
         self._qadr = m.jnt_qposadr[joints]  # (n, 3): qpos = displacement from the rest grid
         first = int(self._qadr[0, 0])
         contiguous = np.array_equal(self._qadr.ravel(), np.arange(first, first + 3 * n))
-        self._qpos_slice = slice(first, first + 3 * n) if contiguous else None  # read as a view, no gather
+        self._qpos_slice = (
+            slice(first, first + 3 * n) if contiguous else None
+        )  # read as a view, no gather
         self._corner_q = self._qadr[self._corners]
         self._corner_dof = m.jnt_dofadr[joints[self._corners]]
         self._corner_rest = self._rest[self._corners]
@@ -228,7 +296,7 @@ class MujocoCloth(ClothEngine):
         for w in _INSTABILITY_WARNINGS:
             if d.warning[w].number:
                 # MuJoCo has already reset the state: report it rather than return the reset.
-                raise FloatingPointError(f"MuJoCo {w.name[5:]}: the state went NaN, Inf or huge")
+                raise FloatingPointError(f'MuJoCo {w.name[5:]}: the state went NaN, Inf or huge')
         self._target[:] = self._goal
         return self._vertices_now()
 

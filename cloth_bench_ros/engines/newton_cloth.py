@@ -22,33 +22,35 @@ kernel cache (by default ~/.cache/warp); `cloth-bench engines --warm` fills it.
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version as package_version
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as package_version
 from typing import ClassVar, Mapping
 
-import numpy as np
-
-import warp as wp
-
 from cloth_bench_ros.engines.quiet import quiet_c_output
+import numpy as np
+import warp as wp
 
 wp.config.log_level = wp.LOG_ERROR  # no banner and no line per compiled module
 with quiet_c_output():  # Warp's C++ init warns on stderr that there is no CUDA driver
     wp.init()
-import newton  # noqa: E402
-
 from cloth_bench_ros.core import scene  # noqa: E402  (after Warp's quiet init)
 from cloth_bench_ros.core.scene import ClothGrid  # noqa: E402
 from cloth_bench_ros.engines.base import ClothEngine, Param  # noqa: E402
+import newton  # noqa: E402
 
-
-MODELS = ("xpbd", "vbd")
-DEVICE = "cpu"
+MODELS = ('xpbd', 'vbd')
+DEVICE = 'cpu'
 
 
 @wp.kernel
-def _move_grasps(start: wp.array(dtype=wp.vec3), velocity: wp.array(dtype=wp.vec3),
-                 index: wp.array(dtype=wp.int32), t: float,
-                 q: wp.array(dtype=wp.vec3), qd: wp.array(dtype=wp.vec3)):
+def _move_grasps(
+    start: wp.array(dtype=wp.vec3),
+    velocity: wp.array(dtype=wp.vec3),
+    index: wp.array(dtype=wp.int32),
+    t: float,
+    q: wp.array(dtype=wp.vec3),
+    qd: wp.array(dtype=wp.vec3),
+):
     """Kinematic corner i at start[i] + t * velocity[i], moving with velocity[i]."""
     i = wp.tid()
     q[index[i]] = start[i] + t * velocity[i]
@@ -61,44 +63,132 @@ class NewtonCloth(ClothEngine):
     reset(seed) starts the cloth in the task's seeded initial state (core/task.py) at rest.
     """
 
-    name: ClassVar[str] = "newton"
+    name: ClassVar[str] = 'newton'
     params: ClassVar[tuple[Param, ...]] = (
-        Param("model", "xpbd", "", doc="xpbd (springs + bending, Flex class) or vbd (triangle FEM, SOFA class)",
-              choices=MODELS),
-        Param("mass", 0.5, "kg", 1e-4, 100.0,
-              "mass of the whole cloth, spread by area over the free (not grasped) vertices"),
-        Param("spring_stiffness", 100.0, "N/m", 0.0, 1e7,
-              "stiffness of the structural, shear and bending springs (model xpbd); too stiff for the "
-              "particle mass and substep diverges (1000 did at 11x15 and 2 ms)"),
-        Param("spring_damping", 0.01, "N s/m", 0.0, 1e4,
-              "damping of the springs (model xpbd); 0.1 at 0.5 kg already crumples the cloth (Jacobi solve)"),
-        Param("tri_stiffness", 1000.0, "N/m", 0.0, 1e7,
-              "membrane shear stiffness of the Neo-Hookean triangles, Lame mu x thickness (model vbd)"),
-        Param("tri_area_stiffness", 1000.0, "N/m", 0.0, 1e7,
-              "membrane area stiffness of the Neo-Hookean triangles, Lame lambda x thickness (model vbd)"),
-        Param("tri_damping", 0.01, "N s/m", 0.0, 100.0,
-              "damping of the triangles' strain rate (Newton tri_kd; model vbd)"),
-        Param("bending", 6e-5, "N m", 0.0, 1.0,
-              "flexural rigidity D of the cloth, turned into dihedral-edge stiffness for the grid spacing"),
-        Param("bending_damping", 0.0, "N m s", 0.0, 10.0, "damping of the dihedral angles (Newton edge_kd)"),
-        Param("friction", 0.5, "", 0.0, 10.0, "friction coefficient of cloth-table contacts"),
-        Param("particle_radius", 0.004, "m", 1e-4, 0.05, "collision radius (half thickness) of the cloth"),
-        Param("contact_stiffness", 1000.0, "N/m", 1.0, 1e7, "cloth-table contact stiffness (model vbd)"),
-        Param("contact_damping", 0.01, "N s/m", 0.0, 1e4, "cloth-table contact damping (model vbd)"),
-        Param("timestep", 0.002, "s", 1e-5, 0.1, "longest internal step; substeps = ceil(dt / timestep)"),
-        Param("substeps", 1, "", 1, 10000, "least number of internal steps per engine step"),
-        Param("solver_iterations", 10, "", 1, 1000, "solver iterations per internal step"),
-        Param("self_collision", False, "", doc="cloth self-collision (particle spheres for xpbd, "
-              "vertex-triangle and edge-edge for vbd)"),
-        Param("graph_capture", True, "", doc="record one step as a Warp graph and replay it"),
+        Param(
+            'model',
+            'xpbd',
+            '',
+            doc='xpbd (springs + bending, Flex class) or vbd (triangle FEM, SOFA class)',
+            choices=MODELS,
+        ),
+        Param(
+            'mass',
+            0.5,
+            'kg',
+            1e-4,
+            100.0,
+            'mass of the whole cloth, spread by area over the free (not grasped) vertices',
+        ),
+        Param(
+            'spring_stiffness',
+            100.0,
+            'N/m',
+            0.0,
+            1e7,
+            'stiffness of the structural, shear and bending springs (model xpbd); too stiff for'
+            ' the particle mass and substep diverges (1000 did at 11x15 and 2 ms)',
+        ),
+        Param(
+            'spring_damping',
+            0.01,
+            'N s/m',
+            0.0,
+            1e4,
+            'damping of the springs (model xpbd); 0.1 at 0.5 kg already crumples the cloth (Jacobi'
+            ' solve)',
+        ),
+        Param(
+            'tri_stiffness',
+            1000.0,
+            'N/m',
+            0.0,
+            1e7,
+            'membrane shear stiffness of the Neo-Hookean triangles, Lame mu x thickness (model'
+            ' vbd)',
+        ),
+        Param(
+            'tri_area_stiffness',
+            1000.0,
+            'N/m',
+            0.0,
+            1e7,
+            'membrane area stiffness of the Neo-Hookean triangles, Lame lambda x thickness (model'
+            ' vbd)',
+        ),
+        Param(
+            'tri_damping',
+            0.01,
+            'N s/m',
+            0.0,
+            100.0,
+            "damping of the triangles' strain rate (Newton tri_kd; model vbd)",
+        ),
+        Param(
+            'bending',
+            6e-5,
+            'N m',
+            0.0,
+            1.0,
+            'flexural rigidity D of the cloth, turned into dihedral-edge stiffness for the grid'
+            ' spacing',
+        ),
+        Param(
+            'bending_damping',
+            0.0,
+            'N m s',
+            0.0,
+            10.0,
+            'damping of the dihedral angles (Newton edge_kd)',
+        ),
+        Param('friction', 0.5, '', 0.0, 10.0, 'friction coefficient of cloth-table contacts'),
+        Param(
+            'particle_radius',
+            0.004,
+            'm',
+            1e-4,
+            0.05,
+            'collision radius (half thickness) of the cloth',
+        ),
+        Param(
+            'contact_stiffness',
+            1000.0,
+            'N/m',
+            1.0,
+            1e7,
+            'cloth-table contact stiffness (model vbd)',
+        ),
+        Param(
+            'contact_damping', 0.01, 'N s/m', 0.0, 1e4, 'cloth-table contact damping (model vbd)'
+        ),
+        Param(
+            'timestep',
+            0.002,
+            's',
+            1e-5,
+            0.1,
+            'longest internal step; substeps = ceil(dt / timestep)',
+        ),
+        Param('substeps', 1, '', 1, 10000, 'least number of internal steps per engine step'),
+        Param('solver_iterations', 10, '', 1, 1000, 'solver iterations per internal step'),
+        Param(
+            'self_collision',
+            False,
+            '',
+            doc=(
+                'cloth self-collision (particle spheres for xpbd, '
+                'vertex-triangle and edge-edge for vbd)'
+            ),
+        ),
+        Param('graph_capture', True, '', doc='record one step as a Warp graph and replay it'),
     )
 
     @classmethod
     def version(cls) -> str:
         try:
-            return f"{package_version('newton')} (warp {wp.config.version})"
+            return f'{package_version("newton")} (warp {wp.config.version})'
         except PackageNotFoundError:
-            return f"unknown (warp {wp.config.version})"
+            return f'unknown (warp {wp.config.version})'
 
     @classmethod
     def warm(cls) -> None:
@@ -107,16 +197,20 @@ class NewtonCloth(ClothEngine):
         left, right = grid.vertices()[grid.left_corner], grid.vertices()[grid.right_corner]
         for model in MODELS:
             for self_collision in (False, True):
-                engine = cls(100.0, {"model": model, "self_collision": self_collision}, grid)
+                engine = cls(100.0, {'model': model, 'self_collision': self_collision}, grid)
                 engine.reset(0, left, right)
                 engine.step(left, right)
                 engine.close()
 
-    def __init__(self, rate_hz: float, params: Mapping[str, object] | None = None,
-                 grid: ClothGrid | None = None) -> None:
+    def __init__(
+        self,
+        rate_hz: float,
+        params: Mapping[str, object] | None = None,
+        grid: ClothGrid | None = None,
+    ) -> None:
         super().__init__(rate_hz, params, grid)
         c = self.config
-        self._vbd = c["model"] == "vbd"
+        self._vbd = c['model'] == 'vbd'
         with wp.ScopedDevice(DEVICE):
             self.model = self._build_model()
             self._states = (self.model.state(), self.model.state())
@@ -132,43 +226,63 @@ class NewtonCloth(ClothEngine):
 
     # -- model --------------------------------------------------------------------------------
 
-    def _build_model(self) -> "newton.Model":
+    def _build_model(self) -> 'newton.Model':
         """Table box, cloth mesh in grid order, corner particles kinematic."""
         c = self.config
         builder = newton.ModelBuilder(gravity=(0.0, 0.0, scene.GRAVITY))
         x0, x1 = scene.TABLE_X
         y0, y1 = scene.TABLE_Y
         half = scene.TABLE_THICKNESS / 2
-        table = newton.ModelBuilder.ShapeConfig(mu=float(c["friction"]), ke=float(c["contact_stiffness"]),
-                                                kd=float(c["contact_damping"]))
-        builder.add_shape_box(-1, xform=wp.transform(wp.vec3((x0 + x1) / 2, (y0 + y1) / 2,
-                                                             scene.TABLE_TOP_Z - half), wp.quat_identity()),
-                              hx=(x1 - x0) / 2, hy=(y1 - y0) / 2, hz=half, cfg=table, label="table")
+        table = newton.ModelBuilder.ShapeConfig(
+            mu=float(c['friction']),
+            ke=float(c['contact_stiffness']),
+            kd=float(c['contact_damping']),
+        )
+        builder.add_shape_box(
+            -1,
+            xform=wp.transform(
+                wp.vec3((x0 + x1) / 2, (y0 + y1) / 2, scene.TABLE_TOP_Z - half), wp.quat_identity()
+            ),
+            hx=(x1 - x0) / 2,
+            hy=(y1 - y0) / 2,
+            hz=half,
+            cfg=table,
+            label='table',
+        )
         area = self.grid.width * self.grid.length
         xpbd = not self._vbd
         builder.add_cloth_mesh(
-            pos=wp.vec3(0.0, 0.0, 0.0), rot=wp.quat_identity(), scale=1.0, vel=wp.vec3(0.0, 0.0, 0.0),
-            vertices=[wp.vec3(*v) for v in self._rest], indices=self.grid.faces().ravel().tolist(),
-            density=float(c["mass"]) / area,
-            tri_ke=0.0 if xpbd else float(c["tri_stiffness"]),
-            tri_ka=0.0 if xpbd else float(c["tri_area_stiffness"]),
-            tri_kd=0.0 if xpbd else float(c["tri_damping"]),
-            edge_ke=self._edge_stiffness(), edge_kd=float(c["bending_damping"]),
-            add_springs=xpbd, spring_ke=float(c["spring_stiffness"]), spring_kd=float(c["spring_damping"]),
-            particle_radius=float(c["particle_radius"]),
+            pos=wp.vec3(0.0, 0.0, 0.0),
+            rot=wp.quat_identity(),
+            scale=1.0,
+            vel=wp.vec3(0.0, 0.0, 0.0),
+            vertices=[wp.vec3(*v) for v in self._rest],
+            indices=self.grid.faces().ravel().tolist(),
+            density=float(c['mass']) / area,
+            tri_ke=0.0 if xpbd else float(c['tri_stiffness']),
+            tri_ka=0.0 if xpbd else float(c['tri_area_stiffness']),
+            tri_kd=0.0 if xpbd else float(c['tri_damping']),
+            edge_ke=self._edge_stiffness(),
+            edge_kd=float(c['bending_damping']),
+            add_springs=xpbd,
+            spring_ke=float(c['spring_stiffness']),
+            spring_kd=float(c['spring_damping']),
+            particle_radius=float(c['particle_radius']),
         )
         for corner in self._corners:
             builder.particle_mass[corner] = 0.0
-            builder.particle_flags[corner] = int(builder.particle_flags[corner]) & ~int(newton.ParticleFlags.ACTIVE)
+            builder.particle_flags[corner] = int(builder.particle_flags[corner]) & ~int(
+                newton.ParticleFlags.ACTIVE
+            )
         free = sum(builder.particle_mass)  # the free particles carry the whole mass
-        builder.particle_mass = [m * float(c["mass"]) / free for m in builder.particle_mass]
+        builder.particle_mass = [m * float(c['mass']) / free for m in builder.particle_mass]
         if self._vbd:
             builder.color(include_bending=True)
         model = builder.finalize()
-        model.soft_contact_ke = float(c["contact_stiffness"])
-        model.soft_contact_kd = float(c["contact_damping"])
-        model.soft_contact_mu = float(c["friction"])
-        if xpbd and not c["self_collision"]:
+        model.soft_contact_ke = float(c['contact_stiffness'])
+        model.soft_contact_kd = float(c['contact_damping'])
+        model.soft_contact_mu = float(c['friction'])
+        if xpbd and not c['self_collision']:
             # SolverXPBD solves particle-particle contacts whenever the largest radius is positive;
             # particle-shape contacts read the per-particle radii, not this maximum.
             model.particle_max_radius = 0.0
@@ -185,18 +299,21 @@ class NewtonCloth(ClothEngine):
         """
         dx, dz = self.grid.spacing
         a = float(np.sqrt(dx * dz))
-        per_length = 1.91 * float(self.config["bending"]) / a
+        per_length = 1.91 * float(self.config['bending']) / a
         return per_length if self._vbd else per_length * a
 
     def _make_solver(self):
         c = self.config
         if self._vbd:
-            radius = float(c["particle_radius"])
-            return newton.solvers.SolverVBD(self.model, iterations=int(c["solver_iterations"]),
-                                            particle_enable_self_contact=bool(c["self_collision"]),
-                                            particle_self_contact_margin=2 * radius,  # two cloth layers touch
-                                            particle_self_contact_gap=2 * radius)
-        return newton.solvers.SolverXPBD(self.model, iterations=int(c["solver_iterations"]))
+            radius = float(c['particle_radius'])
+            return newton.solvers.SolverVBD(
+                self.model,
+                iterations=int(c['solver_iterations']),
+                particle_enable_self_contact=bool(c['self_collision']),
+                particle_self_contact_margin=2 * radius,  # two cloth layers touch
+                particle_self_contact_gap=2 * radius,
+            )
+        return newton.solvers.SolverXPBD(self.model, iterations=int(c['solver_iterations']))
 
     # -- stepping -----------------------------------------------------------------------------
 
@@ -205,8 +322,13 @@ class NewtonCloth(ClothEngine):
         a, b = self._states
         for k in range(1, self.substeps + 1):
             for s in (a, b):
-                wp.launch(_move_grasps, dim=2, inputs=[self._start, self._velocity, self._index, k * self.h],
-                          outputs=[s.particle_q, s.particle_qd], device=DEVICE)
+                wp.launch(
+                    _move_grasps,
+                    dim=2,
+                    inputs=[self._start, self._velocity, self._index, k * self.h],
+                    outputs=[s.particle_q, s.particle_qd],
+                    device=DEVICE,
+                )
             a.clear_forces()
             self._pipeline.collide(a, self._contacts)
             self.solver.step(a, b, self._control, self._contacts, self.h)
@@ -216,7 +338,7 @@ class NewtonCloth(ClothEngine):
             wp.copy(self._states[0].particle_qd, a.particle_qd)
 
     def _run_step(self) -> None:
-        if not self.config["graph_capture"]:
+        if not self.config['graph_capture']:
             self._substeps()
             return
         if self._graph is None:

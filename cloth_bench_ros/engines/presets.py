@@ -14,65 +14,79 @@ from __future__ import annotations
 from pathlib import Path
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.trajectory import PRIMITIVES
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.paths import share_dir
-from cloth_bench_ros.core.trajectory import PRIMITIVES
-from cloth_bench_ros.safe_io import UnsafeInputError, load_yaml_file
+from cloth_bench_ros.safe_io import load_yaml_file, UnsafeInputError
 
-CLOTHS = ("towel", "chequered", "linen")
-REQUIRED_KEYS = ("engine", "engine_version", "provenance", "presets")
+CLOTHS = ('towel', 'chequered', 'linen')
+REQUIRED_KEYS = ('engine', 'engine_version', 'provenance', 'presets')
 MAX_PRESET_BYTES = 1024 * 1024
 
 
 def config_dir() -> Path:
     """<repo>/config in a source checkout, else <prefix>/share/cloth_bench_ros/config."""
-    return share_dir("config")
+    return share_dir('config')
 
 
 def preset_file(engine: str, config_dir_: Path | None = None) -> Path:
-    """The preset file of an engine: <config>/presets/<engine>.yaml (or <dir>/<engine>.yaml).
+    """Return the preset file of an engine: <config>/presets/<engine>.yaml (or <dir>/<engine>.yaml).
 
     A directory given by the user must exist (EngineError naming it), never falling back silently.
     """
     if config_dir_ is not None:
         try:
-            validation.existing_dir(config_dir_, "presets directory")
+            validation.existing_dir(config_dir_, 'presets directory')
         except validation.InputError as exc:
             raise EngineError(str(exc)) from None
     base = Path(config_dir_) if config_dir_ is not None else config_dir()
-    nested = base / "presets" / f"{engine}.yaml"
-    return nested if nested.is_file() or not (base / f"{engine}.yaml").is_file() else base / f"{engine}.yaml"
+    nested = base / 'presets' / f'{engine}.yaml'
+    return (
+        nested
+        if nested.is_file() or not (base / f'{engine}.yaml').is_file()
+        else base / f'{engine}.yaml'
+    )
 
 
 def read_preset_file(path: Path) -> dict:
-    """The parsed, structurally checked preset file."""
+    """Return the parsed, structurally checked preset file."""
     try:
         data = load_yaml_file(path, MAX_PRESET_BYTES)
     except UnsafeInputError as exc:
-        raise EngineError(f"preset file {exc}") from None
+        raise EngineError(f'preset file {exc}') from None
     if not isinstance(data, dict):
-        raise EngineError(f"preset file {path}: expected a mapping with keys {', '.join(REQUIRED_KEYS)}")
+        raise EngineError(
+            f'preset file {path}: expected a mapping with keys {", ".join(REQUIRED_KEYS)}'
+        )
     missing = [k for k in REQUIRED_KEYS if k not in data]
     if missing:
-        raise EngineError(f"preset file {path}: missing key {', '.join(missing)}")
-    if data["engine"] != path.stem:
-        raise EngineError(f"preset file {path}: engine is {data['engine']!r}, expected {path.stem!r}")
-    presets = data["presets"]
+        raise EngineError(f'preset file {path}: missing key {", ".join(missing)}')
+    if data['engine'] != path.stem:
+        raise EngineError(
+            f'preset file {path}: engine is {data["engine"]!r}, expected {path.stem!r}'
+        )
+    presets = data['presets']
     if not isinstance(presets, dict):
-        raise EngineError(f"preset file {path}: presets must map cloth -> primitive -> parameters")
+        raise EngineError(f'preset file {path}: presets must map cloth -> primitive -> parameters')
     for cloth, tasks in presets.items():
         if cloth not in CLOTHS:
-            raise EngineError(f"preset file {path}: unknown cloth {cloth!r} (valid: {', '.join(CLOTHS)})")
+            raise EngineError(
+                f'preset file {path}: unknown cloth {cloth!r} (valid: {", ".join(CLOTHS)})'
+            )
         if not isinstance(tasks, dict):
-            raise EngineError(f"preset file {path}: presets.{cloth} must map primitive -> parameters")
+            raise EngineError(
+                f'preset file {path}: presets.{cloth} must map primitive -> parameters'
+            )
         for primitive, values in tasks.items():
             if primitive not in PRIMITIVES:
                 raise EngineError(
-                    f"preset file {path}: unknown primitive {primitive!r} in presets.{cloth} "
-                    f"(valid: {', '.join(PRIMITIVES)})"
+                    f'preset file {path}: unknown primitive {primitive!r} in presets.{cloth} '
+                    f'(valid: {", ".join(PRIMITIVES)})'
                 )
             if not isinstance(values, dict) or not all(isinstance(k, str) for k in values):
-                raise EngineError(f"preset file {path}: presets.{cloth}.{primitive} must map parameter -> value")
+                raise EngineError(
+                    f'preset file {path}: presets.{cloth}.{primitive} must map parameter -> value'
+                )
     return data
 
 
@@ -82,20 +96,22 @@ def load_preset(engine: str, cloth: str, primitive: str, config_dir: Path | None
     An engine without a preset file (e.g. one added by another package) gets {} (its defaults).
     """
     if cloth not in CLOTHS:
-        raise EngineError(f"unknown cloth {cloth!r} (valid: {', '.join(CLOTHS)})")
+        raise EngineError(f'unknown cloth {cloth!r} (valid: {", ".join(CLOTHS)})')
     if primitive not in PRIMITIVES:
-        raise EngineError(f"unknown primitive {primitive!r} (valid: {', '.join(PRIMITIVES)})")
+        raise EngineError(f'unknown primitive {primitive!r} (valid: {", ".join(PRIMITIVES)})')
     path = preset_file(engine, config_dir)
     if not path.is_file():
         if config_dir is not None:  # the user named a directory: a missing file is not "defaults"
-            raise EngineError(f"presets directory {config_dir}: no {engine}.yaml (nor presets/{engine}.yaml)")
+            raise EngineError(
+                f'presets directory {config_dir}: no {engine}.yaml (nor presets/{engine}.yaml)'
+            )
         return {}
-    presets = read_preset_file(path)["presets"]
+    presets = read_preset_file(path)['presets']
     try:
         values = dict(presets[cloth][primitive])
     except KeyError:
-        raise EngineError(f"preset file {path}: no preset for {cloth} {primitive}") from None
-    _check_against_engine(engine, values, path, f"{cloth}.{primitive}")
+        raise EngineError(f'preset file {path}: no preset for {cloth} {primitive}') from None
+    _check_against_engine(engine, values, path, f'{cloth}.{primitive}')
     return values
 
 
@@ -110,4 +126,4 @@ def _check_against_engine(engine: str, values: dict, path: Path, where: str) -> 
     try:
         cls.validate_params(values)
     except EngineError as exc:
-        raise EngineError(f"preset file {path}: presets.{where}: {exc}") from None
+        raise EngineError(f'preset file {path}: presets.{where}: {exc}') from None

@@ -21,7 +21,7 @@ def quiet_c_output() -> Iterator[None]:
     except OSError:  # no standard file descriptors: nothing to silence
         yield
         return
-    with open(os.devnull, "w") as devnull:
+    with open(os.devnull, 'w') as devnull:
         os.dup2(devnull.fileno(), 1)
         os.dup2(devnull.fileno(), 2)
         try:

@@ -8,22 +8,22 @@ import threading
 from typing import Callable, Iterable, Sequence
 
 from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.runtime import EMBEDDED, is_user_error, rclpy, SingleThreadedExecutor
 from cloth_bench_ros.runtime.transport import transport_choice
-from cloth_bench_ros.runtime import EMBEDDED, SingleThreadedExecutor, is_user_error, rclpy
 
-NAMESPACE = "cloth_bench"
+NAMESPACE = 'cloth_bench'
 # The recorder's announcement, beside the trial on real/trial: the run-time stamps of the frames it
 # replays on /clock. DDS gives no order across topics, so the evaluator closes the run only once
 # it holds every announced frame up to the last target, not at the last engine state.
-REPLAY_STATUS_NAME = "cloth_bench/recorder/replay"
+REPLAY_STATUS_NAME = 'cloth_bench/recorder/replay'
 
 
 def replay_stamps(msg) -> list[int] | None:
-    """The stamps (ns) announced in a real/trial DiagnosticArray, or None without an announcement."""
+    """Return the stamps (ns) announced in a real/trial DiagnosticArray, or None without an announcement."""
     for status in msg.status:
         if status.name == REPLAY_STATUS_NAME:
-            text = {kv.key: kv.value for kv in status.values}.get("stamps_ns", "")
-            return [int(s) for s in text.split(",") if s]
+            text = {kv.key: kv.value for kv in status.values}.get('stamps_ns', '')
+            return [int(s) for s in text.split(',') if s]
     return None
 
 
@@ -31,10 +31,10 @@ _stop_requested = threading.Event()
 
 
 def publish_serialises(node) -> bool:
-    """True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
+    """Return True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
     the embedded intra-process transport hands subscribers the object itself.
     """
-    return not EMBEDDED or node.context.transport.name != "intra"
+    return not EMBEDDED or node.context.transport.name != 'intra'
 
 
 def _request_stop(signum, frame) -> None:
@@ -45,7 +45,7 @@ def _request_stop(signum, frame) -> None:
 def close_nodes(nodes: Sequence) -> None:
     """Each node's close() (engines freed, recordings finalised), then destroy_node()."""
     for node in nodes:
-        close = getattr(node, "close", None)
+        close = getattr(node, 'close', None)
         if close:
             close()
         node.destroy_node()
@@ -57,13 +57,13 @@ def node_keys(infos: Iterable) -> set[tuple[str, str]]:
 
 
 def publishers_matched(node, subscription) -> int:
-    """Publishers matched with a subscription (rclpy >= Iron), else those in the graph (Humble)."""
-    count = getattr(subscription, "get_publisher_count", None)
+    """Return publishers matched with a subscription (rclpy >= Iron), else those in the graph (Humble)."""
+    count = getattr(subscription, 'get_publisher_count', None)
     return count() if count is not None else node.count_publishers(subscription.topic_name)
 
 
 def all_subscriptions_matched(node, publisher) -> bool:
-    """True once the publisher has matched every subscription of its topic that the graph lists.
+    """Return True once the publisher has matched every subscription of its topic that the graph lists.
 
     Under DDS, discovery is asynchronous and pairwise: a reader another node has created is in the
     graph before this publisher's writer has matched it, and a reliable volatile writer delivers
@@ -73,8 +73,11 @@ def all_subscriptions_matched(node, publisher) -> bool:
     return listed > 0 and publisher.get_subscription_count() >= listed
 
 
-def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None = None,
-              transport: str | None = None) -> int:
+def run_nodes(
+    factories: Sequence[Callable[[], object]],
+    args: list[str] | None = None,
+    transport: str | None = None,
+) -> int:
     """Spin nodes in one executor until all are `done`, SIGINT/SIGTERM or shutdown.
 
     In the embedded runtime the nodes talk over `transport` (default: CLOTH_BENCH_TRANSPORT, else
@@ -92,8 +95,11 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
     try:
         # a bad --ros-args (or CLOTH_BENCH_TRANSPORT) fails here; real rclpy installs no signal
         # handler of its own (it would end spin_once in ExternalShutdownException), ours stops the loop
-        init_options = ({"transport": transport or transport_choice("intra")} if EMBEDDED
-                        else {"signal_handler_options": _no_rclpy_signal_handlers()})
+        init_options = (
+            {'transport': transport or transport_choice('intra')}
+            if EMBEDDED
+            else {'signal_handler_options': _no_rclpy_signal_handlers()}
+        )
         rclpy.init(args=args if args is not None else sys.argv, **init_options)
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, _request_stop)
@@ -103,20 +109,32 @@ def run_nodes(factories: Sequence[Callable[[], object]], args: list[str] | None 
         for node in nodes:
             executor.add_node(node)
         starting = False
-        while rclpy.ok() and not _stop_requested.is_set() and not all(getattr(n, "done", False) for n in nodes):
+        while (
+            rclpy.ok()
+            and not _stop_requested.is_set()
+            and not all(getattr(n, 'done', False) for n in nodes)
+        ):
             executor.spin_once(timeout_sec=0.1)
-        return max((getattr(n, "exit_status", 0) for n in nodes), default=0)
+        return max((getattr(n, 'exit_status', 0) for n in nodes), default=0)
     except Exception as exc:
-        if type(exc).__name__ == "ExternalShutdownException":  # rclpy shut down from outside: a stop
+        if (
+            type(exc).__name__ == 'ExternalShutdownException'
+        ):  # rclpy shut down from outside: a stop
             return 0
         # rclpy's parameter, name and argument errors are not ValueErrors: matched by class name;
         # rcl's own RCLError while starting is a bad argument, parameter or params file too
-        user = isinstance(exc, (ClothBenchError, ValueError)) or is_user_error(exc) or (
-            starting and type(exc).__name__ == "RCLError")
+        user = (
+            isinstance(exc, (ClothBenchError, ValueError))
+            or is_user_error(exc)
+            or (starting and type(exc).__name__ == 'RCLError')
+        )
         if not user:
             raise
-        print(f"error: {str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__}",
-              file=sys.stderr)
+        print(
+            'error:'
+            f' {str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__}',
+            file=sys.stderr,
+        )
         return 2
     finally:
         if executor is not None:
@@ -139,4 +157,4 @@ def run_node(factory: Callable[[], object], args: list[str] | None = None) -> in
     In the embedded runtime it talks DDS unless CLOTH_BENCH_TRANSPORT=intra, so that console
     scripts in separate processes make one graph, as under `ros2 run`.
     """
-    return run_nodes([factory], args, transport_choice("dds") if EMBEDDED else None)
+    return run_nodes([factory], args, transport_choice('dds') if EMBEDDED else None)

@@ -9,17 +9,16 @@ data/comparison_bag.py's.
 
 from __future__ import annotations
 
-import shutil
 from collections import defaultdict
 from pathlib import Path
+import shutil
 from typing import Any
 
+from cloth_bench_ros.data.comparison_bag import grid_for, write_comparison_bag
 import numpy as np
 
-from cloth_bench_ros.data.comparison_bag import grid_for, write_comparison_bag
-
 # The paper's Fig. 4: time steps (s from the start of the motion) of each primitive.
-FIG4_TIMES = {"dynamic": (0.5, 1.5, 2.5, 3.5), "quasi_static": (1.0, 4.0, 8.0, 14.0)}
+FIG4_TIMES = {'dynamic': (0.5, 1.5, 2.5, 3.5), 'quasi_static': (1.0, 4.0, 8.0, 14.0)}
 ANIMATION_FRAMES = 60  # at most; frames are spread evenly over the trial
 
 
@@ -32,33 +31,35 @@ def _by_engine(pairs: list) -> dict[str, list]:
 
 def _draw(ax: Any, real: np.ndarray, vertices: np.ndarray) -> None:
     """Side view (y right, z up), where the fling shows: cloud black, mesh red."""
-    ax.scatter(real[:, 1], real[:, 2], s=0.5, c="black", linewidths=0)
+    ax.scatter(real[:, 1], real[:, 2], s=0.5, c='black', linewidths=0)
     faces = grid_for(len(vertices)).faces()
-    ax.triplot(vertices[:, 1], vertices[:, 2], faces, color="red", linewidth=0.4)
-    ax.set_aspect("equal")
+    ax.triplot(vertices[:, 1], vertices[:, 2], faces, color='red', linewidth=0.4)
+    ax.set_aspect('equal')
     ax.set_xticks([])
     ax.set_yticks([])
 
 
 def qualitative_figure(pairs: list, primitive: str, path: Path) -> tuple[int, int]:
-    """The paper's Fig. 4 for this run: (rows, columns) drawn = (engines, time steps)."""
+    """Return the paper's Fig. 4 for this run: (rows, columns) drawn = (engines, time steps)."""
     import matplotlib
 
-    matplotlib.use("Agg")
+    matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
     engines = _by_engine(pairs)
     times = FIG4_TIMES[primitive]
-    fig, axes = plt.subplots(len(engines), len(times), figsize=(2.2 * len(times), 2.6 * len(engines)), squeeze=False)
+    fig, axes = plt.subplots(
+        len(engines), len(times), figsize=(2.2 * len(times), 2.6 * len(engines)), squeeze=False
+    )
     for row, (engine, rows) in enumerate(engines.items()):
         for col, t in enumerate(times):
             ax = axes[row][col]
             score, real, vertices = min(rows, key=lambda p: abs(p[0].t - t))
             _draw(ax, real, vertices)
-            ax.set_xlabel(f"t={score.t:.1f} s\nCD {score.cd:.3f}  HD {score.hd:.3f}", fontsize=7)
+            ax.set_xlabel(f't={score.t:.1f} s\nCD {score.cd:.3f}  HD {score.hd:.3f}', fontsize=7)
             if col == 0:
                 ax.set_ylabel(engine)
-    fig.suptitle("simulated mesh (red) over the real cloud (black), side view (y-z)", fontsize=8)
+    fig.suptitle('simulated mesh (red) over the real cloud (black), side view (y-z)', fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -69,9 +70,9 @@ def animation(pairs: list, path: Path) -> tuple[Path, int]:
     """Sim against real over the trial, one panel per engine: MP4 with ffmpeg, else GIF (PillowWriter)."""
     import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    matplotlib.use('Agg')
     from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
+    import matplotlib.pyplot as plt
 
     engines = _by_engine(pairs)
     count = min(len(rows) for rows in engines.values())
@@ -83,32 +84,39 @@ def animation(pairs: list, path: Path) -> tuple[Path, int]:
             ax.clear()
             score, real, vertices = rows[picks[i]]
             _draw(ax, real, vertices)
-            ax.set_title(f"{engine} t={score.t:.2f} s CD {score.cd:.3f}", fontsize=7)
+            ax.set_title(f'{engine} t={score.t:.2f} s CD {score.cd:.3f}', fontsize=7)
 
     anim = FuncAnimation(fig, update, frames=len(picks))
-    if shutil.which("ffmpeg"):
-        path = path.with_suffix(".mp4")
+    if shutil.which('ffmpeg'):
+        path = path.with_suffix('.mp4')
         anim.save(path, writer=FFMpegWriter(fps=10))
     else:
-        path = path.with_suffix(".gif")
+        path = path.with_suffix('.gif')
         anim.save(path, writer=PillowWriter(fps=10))
     plt.close(fig)
     return path, len(picks)
 
 
-def write_comparison(pairs: list, summary: dict, bag_path: Path | None, figures_dir: Path | None) -> dict:
+def write_comparison(
+    pairs: list, summary: dict, bag_path: Path | None, figures_dir: Path | None
+) -> dict:
     """Every comparison output asked for; returns what was written, for the summary."""
-    run = summary["run"]
+    run = summary['run']
     out: dict[str, Any] = {}
     if not pairs:
-        return {"skipped": "no frame was scored"}
+        return {'skipped': 'no frame was scored'}
     if bag_path is not None:
-        out["bag"] = str(bag_path)
-        out["bag_topics"] = write_comparison_bag(bag_path, pairs, run["primitive"], float(run["rate_hz"]))
+        out['bag'] = str(bag_path)
+        out['bag_topics'] = write_comparison_bag(
+            bag_path, pairs, run['primitive'], float(run['rate_hz'])
+        )
     if figures_dir is not None:
         figures_dir.mkdir(parents=True, exist_ok=True)
-        fig_path = figures_dir / "qualitative.png"
-        out["figure"], out["figure_panels"] = str(fig_path), qualitative_figure(pairs, run["primitive"], fig_path)
-        anim_path, frames = animation(pairs, figures_dir / "animation")
-        out["animation"], out["animation_frames"] = str(anim_path), frames
+        fig_path = figures_dir / 'qualitative.png'
+        out['figure'], out['figure_panels'] = (
+            str(fig_path),
+            qualitative_figure(pairs, run['primitive'], fig_path),
+        )
+        anim_path, frames = animation(pairs, figures_dir / 'animation')
+        out['animation'], out['animation_frames'] = str(anim_path), frames
     return out

@@ -2,25 +2,33 @@
 
 from __future__ import annotations
 
-import json
-import time
 from functools import partial
+import json
 from pathlib import Path
+import time
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.data.trial import trial_from_message
-from cloth_bench_ros.core.evaluation import OnlineEvaluator, accounting_line, frame_accounting
-from cloth_bench_ros.core.run_files import write_run_report
-from cloth_bench_ros.nodes.common import NAMESPACE, publishers_matched, replay_stamps, run_node
-from cloth_bench_ros.nodes.comparison import write_comparison
+from cloth_bench_ros.core.evaluation import accounting_line, frame_accounting, OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
-from cloth_bench_ros.safe_io import check_output_dir
-from cloth_bench_ros.runtime import (
-    DiagnosticArray, DiagnosticStatus, KeyValue, Node, PointCloud2, PoseArray, declare_float, make_qos,
-    stamp_ns, steady_clock,
-)
+from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.core.scene import REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
+from cloth_bench_ros.data.trial import trial_from_message
+from cloth_bench_ros.nodes.common import NAMESPACE, publishers_matched, replay_stamps, run_node
+from cloth_bench_ros.nodes.comparison import write_comparison
+from cloth_bench_ros.runtime import (
+    declare_float,
+    DiagnosticArray,
+    DiagnosticStatus,
+    KeyValue,
+    make_qos,
+    Node,
+    PointCloud2,
+    PoseArray,
+    stamp_ns,
+    steady_clock,
+)
+from cloth_bench_ros.safe_io import check_output_dir
 
 
 def _values(msg: DiagnosticArray) -> dict[str, str]:
@@ -31,46 +39,79 @@ class Evaluator(Node):
     """Publishes per-frame CD/HD and the final summary on `metrics`; writes JSON and CSV."""
 
     def __init__(self, **kwargs) -> None:
-        super().__init__("evaluator", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
-        self.declare_parameter("engines", ["mujoco"])
-        self.primitive = parse_primitive(self.declare_parameter("primitive", "dynamic").value)
-        declare_float(self, "rate_hz", 100.0)
-        declare_float(self, "time_offset", SETTLE_DURATION)
-        self.declare_parameter("change_of_phase_frame", -1)
-        self.output_dir = self.declare_parameter("output_dir", "").value
-        self.comparison_bag = self.declare_parameter("record_comparison", "").value
-        self.declare_parameter("comparison_figures", False)
-        cloth = self.declare_parameter("cloth", "towel").value
-        self.declare_parameter("seed", 0)
+        super().__init__('evaluator', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
+        self.declare_parameter('engines', ['mujoco'])
+        self.primitive = parse_primitive(self.declare_parameter('primitive', 'dynamic').value)
+        declare_float(self, 'rate_hz', 100.0)
+        declare_float(self, 'time_offset', SETTLE_DURATION)
+        self.declare_parameter('change_of_phase_frame', -1)
+        self.output_dir = self.declare_parameter('output_dir', '').value
+        self.comparison_bag = self.declare_parameter('record_comparison', '').value
+        self.declare_parameter('comparison_figures', False)
+        cloth = self.declare_parameter('cloth', 'towel').value
+        self.declare_parameter('seed', 0)
         # Every value through the one validation layer; an error names the node and parameter.
-        p = validation.node_parameters(self, {
-            "rate_hz": validation.rate_hz, "time_offset": validation.time_offset, "seed": validation.seed,
-            "engines": validation.unique, "comparison_figures": validation.boolean,
-            "change_of_phase_frame": lambda v, n: validation.frame_index(v, n, unset=-1)})
-        self.engines, rate_hz, offset, cut = p["engines"], p["rate_hz"], p["time_offset"], p["change_of_phase_frame"]
-        self.comparison_figures = p["comparison_figures"]
-        self.run_info = {"primitive": self.primitive.value, "rate_hz": rate_hz, "engines": self.engines,
-                         "cloth": cloth, "seed": p["seed"]}
+        p = validation.node_parameters(
+            self,
+            {
+                'rate_hz': validation.rate_hz,
+                'time_offset': validation.time_offset,
+                'seed': validation.seed,
+                'engines': validation.unique,
+                'comparison_figures': validation.boolean,
+                'change_of_phase_frame': lambda v, n: validation.frame_index(v, n, unset=-1),
+            },
+        )
+        self.engines, rate_hz, offset, cut = (
+            p['engines'],
+            p['rate_hz'],
+            p['time_offset'],
+            p['change_of_phase_frame'],
+        )
+        self.comparison_figures = p['comparison_figures']
+        self.run_info = {
+            'primitive': self.primitive.value,
+            'rate_hz': rate_hz,
+            'engines': self.engines,
+            'cloth': cloth,
+            'seed': p['seed'],
+        }
         if self.output_dir:  # an unwritable report directory is found now, not after the run
             try:
                 check_output_dir(self.output_dir)
             except ValueError as exc:
-                raise validation.InputError(f"evaluator: parameter output_dir: {exc}") from None
+                raise validation.InputError(f'evaluator: parameter output_dir: {exc}') from None
         targets = full_targets(self.primitive, rate_hz)
         self.final_stamp = targets.stamp_ns(len(targets) - 1)
-        self.core = OnlineEvaluator(self.engines, self.primitive, int(round(offset * 1e9)), cut, REAL_FPS,
-                                    keep_pairs=bool(self.comparison_bag or self.comparison_figures))
+        self.core = OnlineEvaluator(
+            self.engines,
+            self.primitive,
+            int(round(offset * 1e9)),
+            cut,
+            REAL_FPS,
+            keep_pairs=bool(self.comparison_bag or self.comparison_figures),
+        )
         self.replay: dict = {}  # the recorder's frame accounting, from the trial message
         self.expected_real_frames: int | None = None  # as announced by the recorder
         # Inputs keep every sample until taken: a slow evaluator delays, never loses, a frame.
         data_qos = make_qos(100, keep_all=True)
-        self.inputs = [self.create_subscription(PointCloud2, "real/cloud", self.on_real, data_qos),
-                       self.create_subscription(DiagnosticArray, "real/trial", self.on_trial, make_qos(1, latched=True))]
+        self.inputs = [
+            self.create_subscription(PointCloud2, 'real/cloud', self.on_real, data_qos),
+            self.create_subscription(
+                DiagnosticArray, 'real/trial', self.on_trial, make_qos(1, latched=True)
+            ),
+        ]
         for engine in self.engines:
-            self.inputs.append(self.create_subscription(PointCloud2, f"{engine}/cloud", partial(self.on_state, engine),
-                                                        data_qos))
-            self.inputs.append(self.create_subscription(DiagnosticArray, f"{engine}/step_time",
-                                                        partial(self.on_step, engine), data_qos))
+            self.inputs.append(
+                self.create_subscription(
+                    PointCloud2, f'{engine}/cloud', partial(self.on_state, engine), data_qos
+                )
+            )
+            self.inputs.append(
+                self.create_subscription(
+                    DiagnosticArray, f'{engine}/step_time', partial(self.on_step, engine), data_qos
+                )
+            )
         # Ready (the `metrics` publisher appears, which the trajectory publisher waits for) once every
         # input is matched with a publisher and the recorder's trial (and replay) announcement is in.
         self.metrics_pub = None
@@ -81,8 +122,8 @@ class Evaluator(Node):
         # Latency: lockstep measures from each target's arrival; realtime from the wall-clock
         # schedule the targets should have kept (first target + sim time), so a simulator that
         # falls behind shows its queueing delay too.
-        self.realtime = self.declare_parameter("pacing", "lockstep").value == "realtime"
-        self.create_subscription(PoseArray, "targets", self.on_target, make_qos(100))
+        self.realtime = self.declare_parameter('pacing', 'lockstep').value == 'realtime'
+        self.create_subscription(PoseArray, 'targets', self.on_target, make_qos(100))
         self.period_s = 1.0 / rate_hz
         self.target_sent: dict[int, int] = {}  # stamp -> monotonic ns when the target arrived
         self.first_target_ns: int | None = None
@@ -97,7 +138,7 @@ class Evaluator(Node):
     def check_ready(self) -> None:
         if self.trial_received and all(publishers_matched(self, sub) for sub in self.inputs):
             self.destroy_timer(self.ready_timer)
-            self.metrics_pub = self.create_publisher(DiagnosticArray, "metrics", make_qos(100))
+            self.metrics_pub = self.create_publisher(DiagnosticArray, 'metrics', make_qos(100))
             self.publish_scores()
 
     def on_trial(self, msg: DiagnosticArray) -> None:
@@ -106,10 +147,10 @@ class Evaluator(Node):
         if stamps is not None:
             self.expected_real = {s for s in stamps if s <= self.final_stamp}
         values = _values(msg)
-        if "replay" in values:
-            self.replay = json.loads(values["replay"])
-        if "frames_to_send" in values:
-            self.expected_real_frames = int(values["frames_to_send"])
+        if 'replay' in values:
+            self.replay = json.loads(values['replay'])
+        if 'frames_to_send' in values:
+            self.expected_real_frames = int(values['frames_to_send'])
         trial = trial_from_message(msg)
         if trial is None:
             return
@@ -117,7 +158,9 @@ class Evaluator(Node):
         if self.core.change_of_phase_frame is None:
             self.core.change_of_phase_frame = trial.change_of_phase_frame
         if trial.primitive != self.primitive.value:
-            self.get_logger().warning(f"bag holds a {trial.primitive} trial, scored as {self.primitive.value}")
+            self.get_logger().warning(
+                f'bag holds a {trial.primitive} trial, scored as {self.primitive.value}'
+            )
 
     def on_real(self, msg: PointCloud2) -> None:
         points, dropped = drop_nan(read_xyz(msg))
@@ -133,11 +176,16 @@ class Evaluator(Node):
         elif self.realtime and not self.schedule_known:
             # The first target may be a start-up handshake, sent well before the schedule starts:
             # the schedule is read off the second target.
-            self.first_target_ns, self.schedule_known = now - (stamp - self.first_target_stamp), True
+            self.first_target_ns, self.schedule_known = (
+                now - (stamp - self.first_target_stamp),
+                True,
+            )
         elif self.realtime:
             # The schedule starts at the earliest arrival less its sim time: a target that reached
             # this node late must not shift every later deadline (negative latencies).
-            self.first_target_ns = min(self.first_target_ns, now - (stamp - self.first_target_stamp))
+            self.first_target_ns = min(
+                self.first_target_ns, now - (stamp - self.first_target_stamp)
+            )
         if not self.realtime:
             self.target_sent[stamp] = now
 
@@ -156,8 +204,14 @@ class Evaluator(Node):
 
     def on_step(self, engine: str, msg: DiagnosticArray) -> None:
         v = _values(msg)
-        self.core.add_step(engine, stamp_ns(msg.header.stamp), int(v["step"]), float(v["step_time"]),
-                           v["diverged"] == "true", msg.status[0].message)
+        self.core.add_step(
+            engine,
+            stamp_ns(msg.header.stamp),
+            int(v['step']),
+            float(v['step_time']),
+            v['diverged'] == 'true',
+            msg.status[0].message,
+        )
         self.finish_if_complete()
 
     def finish_if_complete(self) -> None:
@@ -177,19 +231,38 @@ class Evaluator(Node):
         for s in new:
             status = DiagnosticStatus(
                 level=DiagnosticStatus.ERROR if s.diverged else DiagnosticStatus.OK,
-                name=f"cloth_bench/{s.engine}/frame", message=f"frame {s.frame}", hardware_id=s.engine,
-                values=[KeyValue(key=k, value=repr(v)) for k, v in
-                        (("frame", s.frame), ("t", s.t), ("cd", s.cd), ("hd", s.hd), ("in_window", s.in_window))],
+                name=f'cloth_bench/{s.engine}/frame',
+                message=f'frame {s.frame}',
+                hardware_id=s.engine,
+                values=[
+                    KeyValue(key=k, value=repr(v))
+                    for k, v in (
+                        ('frame', s.frame),
+                        ('t', s.t),
+                        ('cd', s.cd),
+                        ('hd', s.hd),
+                        ('in_window', s.in_window),
+                    )
+                ],
             )
             self.metrics_pub.publish(DiagnosticArray(status=[status]))
 
     def _change_of_phase(self) -> dict:
-        """The scored window's end as used (frame, source: option, metadata, detected or none)."""
+        """Return the scored window's end as used (frame, source: option, metadata, detected or none)."""
         used = self.core.change_of_phase_frame
-        told = dict(self.replay.get("change_of_phase") or {})
-        if told.get("frame") != used:  # the evaluator's own parameter overrides the recorder's choice
-            told = {"frame": used, "source": "option" if used is not None else "none",
-                    "reason": "evaluator parameter change_of_phase_frame" if used is not None else "not given"}
+        told = dict(self.replay.get('change_of_phase') or {})
+        if (
+            told.get('frame') != used
+        ):  # the evaluator's own parameter overrides the recorder's choice
+            told = {
+                'frame': used,
+                'source': 'option' if used is not None else 'none',
+                'reason': (
+                    'evaluator parameter change_of_phase_frame'
+                    if used is not None
+                    else 'not given'
+                ),
+            }
         return told
 
     def finish(self) -> None:
@@ -198,42 +271,63 @@ class Evaluator(Node):
             return
         if self.metrics_pub is None:
             self.destroy_timer(self.ready_timer)
-            self.metrics_pub = self.create_publisher(DiagnosticArray, "metrics", make_qos(100))
+            self.metrics_pub = self.create_publisher(DiagnosticArray, 'metrics', make_qos(100))
             self.publish_scores()
         self.core.finish()
-        wall_s = (time.monotonic_ns() - self.first_target_ns) / 1e9 if self.first_target_ns else None
+        wall_s = (
+            (time.monotonic_ns() - self.first_target_ns) / 1e9 if self.first_target_ns else None
+        )
         engines = self.core.summary(self.period_s, wall_s, self.final_stamp / 1e9)
         real = self.core.real_summary()
         # NaN points and stamp intervals are counted by the recorder on every frame of the bag.
-        real["nan_points_dropped"] += int(self.replay.get("nan_points_dropped", 0))
-        real["irregular_intervals"] = int(self.replay.get("irregular_intervals", real["irregular_intervals"]))
+        real['nan_points_dropped'] += int(self.replay.get('nan_points_dropped', 0))
+        real['irregular_intervals'] = int(
+            self.replay.get('irregular_intervals', real['irregular_intervals'])
+        )
         accounting = frame_accounting(self.replay, real)
-        if not accounting["adds_up"]:  # frames from another graph, or lost ones: the run is not valid
+        if not accounting[
+            'adds_up'
+        ]:  # frames from another graph, or lost ones: the run is not valid
             self.exit_status = 1
             self.get_logger().error(accounting_line(accounting))
-        self.summary = {"run": {**self.run_info, "trial": self.trial, "wall_time": wall_s},
-                        "real": {**real, "accounting": accounting,
-                                 "alignment": self.replay.get("start"), "frames_from": self.replay.get("frames"),
-                                 "cleaning": self.replay.get("cleaning"), "topic": self.replay.get("topic"),
-                                 "change_of_phase": self._change_of_phase()},
-                        "engines": engines}
+        self.summary = {
+            'run': {**self.run_info, 'trial': self.trial, 'wall_time': wall_s},
+            'real': {
+                **real,
+                'accounting': accounting,
+                'alignment': self.replay.get('start'),
+                'frames_from': self.replay.get('frames'),
+                'cleaning': self.replay.get('cleaning'),
+                'topic': self.replay.get('topic'),
+                'change_of_phase': self._change_of_phase(),
+            },
+            'engines': engines,
+        }
         statuses = []
-        for engine, m in self.summary["engines"].items():
+        for engine, m in self.summary['engines'].items():
             flat = {k: v for k, v in m.items() if not isinstance(v, dict)}
-            for group in ("step_time", "latency"):
-                flat.update({f"{group}_{k}": v for k, v in m[group].items()})
-            statuses.append(DiagnosticStatus(
-                level=DiagnosticStatus.ERROR if m["diverged"] else DiagnosticStatus.OK,
-                name=f"cloth_bench/{engine}/summary", message="diverged" if m["diverged"] else "ok",
-                hardware_id=engine, values=[KeyValue(key=k, value=str(v)) for k, v in flat.items()]))
+            for group in ('step_time', 'latency'):
+                flat.update({f'{group}_{k}': v for k, v in m[group].items()})
+            statuses.append(
+                DiagnosticStatus(
+                    level=DiagnosticStatus.ERROR if m['diverged'] else DiagnosticStatus.OK,
+                    name=f'cloth_bench/{engine}/summary',
+                    message='diverged' if m['diverged'] else 'ok',
+                    hardware_id=engine,
+                    values=[KeyValue(key=k, value=str(v)) for k, v in flat.items()],
+                )
+            )
         self.metrics_pub.publish(DiagnosticArray(status=statuses))
         if self.comparison_bag or (self.comparison_figures and self.output_dir):
-            self.summary["comparison"] = write_comparison(
-                self.core.pairs, self.summary, Path(self.comparison_bag) if self.comparison_bag else None,
-                Path(self.output_dir) if self.comparison_figures and self.output_dir else None)
+            self.summary['comparison'] = write_comparison(
+                self.core.pairs,
+                self.summary,
+                Path(self.comparison_bag) if self.comparison_bag else None,
+                Path(self.output_dir) if self.comparison_figures and self.output_dir else None,
+            )
         if self.output_dir:
             write_run_report(Path(self.output_dir), self.summary, self.core.scores)
-            self.get_logger().info(f"report written to {self.output_dir}")
+            self.get_logger().info(f'report written to {self.output_dir}')
         self.done = True
 
 
@@ -241,5 +335,5 @@ def main(args: list[str] | None = None) -> int:
     return run_node(Evaluator, args)
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     raise SystemExit(main())

@@ -14,25 +14,38 @@ mode record: subscribes to `record_topics` ("topic:type" entries, e.g.
 from __future__ import annotations
 
 import errno
+from functools import partial
 import json
 import shutil
 import time
-from functools import partial
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
-from cloth_bench_ros.core.scene import SETTLE_DURATION, ClothGrid
+from cloth_bench_ros.core.scene import ClothGrid, SETTLE_DURATION
 from cloth_bench_ros.data import BagReader, BagWriter
-from cloth_bench_ros.data.alignment import SearchSettings, reference_motion
-from cloth_bench_ros.data.replay import ReplayOptions, plan_replay
+from cloth_bench_ros.data.alignment import reference_motion, SearchSettings
+from cloth_bench_ros.data.replay import plan_replay, ReplayOptions
 from cloth_bench_ros.data.trial import TRIAL_STATUS_NAME
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.nodes.common import NAMESPACE, REPLAY_STATUS_NAME, run_node
 from cloth_bench_ros.runtime import (
-    Clock, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, Time,
-    declare_float, make_qos, message_type, serialize_message, stamp_ns, steady_clock,
+    Clock,
+    declare_float,
+    DiagnosticArray,
+    DiagnosticStatus,
+    Header,
+    KeyValue,
+    make_qos,
+    message_type,
+    Node,
+    PointCloud2,
+    PointField,
+    serialize_message,
+    stamp_ns,
+    steady_clock,
+    Time,
 )
 
 MAX_RATE_FACTOR = 1e6  # wall-clock replay speed
@@ -41,7 +54,7 @@ MAX_RATE_FACTOR = 1e6  # wall-clock replay speed
 # process fills the disk first.
 DISK_MARGIN_BYTES = 4 * 1024 * 1024
 DISK_CHECK_EVERY_BYTES = 256 * 1024
-RESERVE_NAME = ".cloth_bench_reserve"
+RESERVE_NAME = '.cloth_bench_reserve'
 RESERVE_BYTES = 64 * 1024
 
 
@@ -51,95 +64,120 @@ class RecordingStopped(ClothBenchError, ValueError):
 
 class Recorder(Node):
     def __init__(self, **kwargs) -> None:
-        super().__init__("recorder", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
-        self.mode = self.declare_parameter("mode", "replay").value
+        super().__init__('recorder', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
+        self.mode = self.declare_parameter('mode', 'replay').value
         self.done = False
         self.writer: BagWriter | None = None
-        if self.mode == "record":
+        if self.mode == 'record':
             self.start_recording()
-        elif self.mode == "replay":
+        elif self.mode == 'replay':
             self.start_replay()
         else:
-            raise ValueError(f"recorder: unknown mode {self.mode!r} (valid: replay, record)")
+            raise ValueError(f'recorder: unknown mode {self.mode!r} (valid: replay, record)')
 
     # --- replay ------------------------------------------------------------------------------
 
     def start_replay(self) -> None:
-        path = self.declare_parameter("bag", "").value
+        path = self.declare_parameter('bag', '').value
         if not path:
             raise ValueError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
         # Frames are stamped from the start of the quintic part; the run starts with the settle phase.
-        declare_float(self, "time_offset", SETTLE_DURATION)
-        clock = self.declare_parameter("clock", "sim").value
-        declare_float(self, "rate_factor", 1.0)
-        declare_float(self, "start_offset", 0.0)
-        self.declare_parameter("loop", False)
+        declare_float(self, 'time_offset', SETTLE_DURATION)
+        clock = self.declare_parameter('clock', 'sim').value
+        declare_float(self, 'rate_factor', 1.0)
+        declare_float(self, 'start_offset', 0.0)
+        self.declare_parameter('loop', False)
         # Every value through the one validation layer; an error names the node and parameter.
-        p = validation.node_parameters(self, {
-            "time_offset": validation.time_offset, "start_offset": validation.time_offset,
-            "rate_factor": lambda v, n: validation.positive(v, n, MAX_RATE_FACTOR), "loop": validation.boolean})
-        self.offset_ns = int(round(p["time_offset"] * 1e9))
-        self.start_offset_ns = int(round(p["start_offset"] * 1e9))
-        self.rate_factor, self.loop = p["rate_factor"], p["loop"]
-        if clock not in ("sim", "wall"):
-            raise ValueError(f"recorder: unknown clock {clock!r} (valid: sim, wall)")
+        p = validation.node_parameters(
+            self,
+            {
+                'time_offset': validation.time_offset,
+                'start_offset': validation.time_offset,
+                'rate_factor': lambda v, n: validation.positive(v, n, MAX_RATE_FACTOR),
+                'loop': validation.boolean,
+            },
+        )
+        self.offset_ns = int(round(p['time_offset'] * 1e9))
+        self.start_offset_ns = int(round(p['start_offset'] * 1e9))
+        self.rate_factor, self.loop = p['rate_factor'], p['loop']
+        if clock not in ('sim', 'wall'):
+            raise ValueError(f'recorder: unknown clock {clock!r} (valid: sim, wall)')
         self.bag = BagReader(path)
         options = self.replay_options()
-        self.declare_parameter("grid_nx", 0)  # 0: the preset's grid
-        self.declare_parameter("grid_nz", 0)
+        self.declare_parameter('grid_nx', 0)  # 0: the preset's grid
+        self.declare_parameter('grid_nz', 0)
         side = partial(validation.integer, low=0, high=validation.MAX_GRID_SIDE)
-        g = validation.node_parameters(self, {"grid_nx": side, "grid_nz": side})
-        nx, nz = g["grid_nx"], g["grid_nz"]
+        g = validation.node_parameters(self, {'grid_nx': side, 'grid_nz': side})
+        nx, nz = g['grid_nx'], g['grid_nz']
         self.plan = plan_replay(self.bag, options, partial(self.reference_motion, options, nx, nz))
         self.topic = self.plan.topic
         self.published = 0
-        self.cloud_pub = self.create_publisher(PointCloud2, "real/cloud", make_qos(10))
-        self.trial_pub = self.create_publisher(DiagnosticArray, "real/trial", make_qos(1, latched=True))
+        self.cloud_pub = self.create_publisher(PointCloud2, 'real/cloud', make_qos(10))
+        self.trial_pub = self.create_publisher(
+            DiagnosticArray, 'real/trial', make_qos(1, latched=True)
+        )
         self.rewind()
         trial = self.trial_message()
-        if clock == "sim":
+        if clock == 'sim':
             trial.status.append(self.replay_status())
         self.trial_pub.publish(trial)
-        if clock == "sim":
-            self.create_subscription(Clock, "/clock", self.on_clock, make_qos(10))
+        if clock == 'sim':
+            self.create_subscription(Clock, '/clock', self.on_clock, make_qos(10))
         else:
             self.wall_start_ns = time.monotonic_ns()
-            self.wall_timer = self.create_timer(0.001, self.on_wall_tick, clock=steady_clock())  # not sim time
+            self.wall_timer = self.create_timer(
+                0.001, self.on_wall_tick, clock=steady_clock()
+            )  # not sim time
 
     def replay_options(self) -> ReplayOptions:
-        """What the bag does not say, from the node's parameters."""
-        self.declare_parameter("change_of_phase_frame", -1)
-        transform = list(self.declare_parameter("transform", [0.0]).value)
+        """Return what the bag does not say, from the node's parameters."""
+        self.declare_parameter('change_of_phase_frame', -1)
+        transform = list(self.declare_parameter('transform', [0.0]).value)
         if transform != [0.0] and len(transform) != 16:
-            raise ValueError(f"recorder: transform needs 16 numbers (a 4x4 matrix), got {len(transform)}")
-        for name, default in (("align_window", 1.0), ("align_step", 1.0 / 30.0), ("voxel", 0.0), ("rate_hz", 100.0)):
+            raise ValueError(
+                f'recorder: transform needs 16 numbers (a 4x4 matrix), got {len(transform)}'
+            )
+        for name, default in (
+            ('align_window', 1.0),
+            ('align_step', 1.0 / 30.0),
+            ('voxel', 0.0),
+            ('rate_hz', 100.0),
+        ):
             declare_float(self, name, default)
-        p = validation.node_parameters(self, {
-            "change_of_phase_frame": lambda v, n: validation.frame_index(v, n, unset=-1),
-            "align_window": validation.positive, "align_step": validation.positive,
-            "voxel": validation.non_negative, "rate_hz": validation.rate_hz})
-        search = SearchSettings(window=p["align_window"], coarse_step=p["align_step"])
+        p = validation.node_parameters(
+            self,
+            {
+                'change_of_phase_frame': lambda v, n: validation.frame_index(v, n, unset=-1),
+                'align_window': validation.positive,
+                'align_step': validation.positive,
+                'voxel': validation.non_negative,
+                'rate_hz': validation.rate_hz,
+            },
+        )
+        search = SearchSettings(window=p['align_window'], coarse_step=p['align_step'])
         return ReplayOptions(
-            cloth=self.declare_parameter("cloth", "towel").value,
-            primitive=self.declare_parameter("primitive", "dynamic").value,
-            change_of_phase_frame=p["change_of_phase_frame"],
-            topic=self.declare_parameter("topic", "").value,
-            start_time=self.declare_parameter("start_time", "").value,
-            targets_topic=self.declare_parameter("targets_topic", "").value,
+            cloth=self.declare_parameter('cloth', 'towel').value,
+            primitive=self.declare_parameter('primitive', 'dynamic').value,
+            change_of_phase_frame=p['change_of_phase_frame'],
+            topic=self.declare_parameter('topic', '').value,
+            start_time=self.declare_parameter('start_time', '').value,
+            targets_topic=self.declare_parameter('targets_topic', '').value,
             transform=tuple(transform) if len(transform) == 16 else None,
-            clean=self.declare_parameter("clean", "auto").value,
-            voxel=p["voxel"],
-            table_plane=self.declare_parameter("table_plane", "auto").value,
-            rate_hz=p["rate_hz"],
-            align_engine=self.declare_parameter("align_engine", "mujoco").value,
+            clean=self.declare_parameter('clean', 'auto').value,
+            voxel=p['voxel'],
+            table_plane=self.declare_parameter('table_plane', 'auto').value,
+            rate_hz=p['rate_hz'],
+            align_engine=self.declare_parameter('align_engine', 'mujoco').value,
             search=search,
         )
 
     @staticmethod
     def reference_motion(options: ReplayOptions, nx: int, nz: int, seconds: float):
-        """The reference simulation the automatic alignment compares the bag with (the run's engine and grid)."""
+        """Return the reference simulation the automatic alignment compares the bag with (the run's engine and grid)."""
         preset = load_preset(options.align_engine, options.cloth, options.primitive)
-        engine = make_engine(options.align_engine, options.rate_hz, preset, ClothGrid(nx, nz) if nx and nz else None)
+        engine = make_engine(
+            options.align_engine, options.rate_hz, preset, ClothGrid(nx, nz) if nx and nz else None
+        )
         try:
             return reference_motion(engine, options.primitive, options.rate_hz, seconds)
         finally:
@@ -152,28 +190,41 @@ class Recorder(Node):
 
     def rewind(self) -> None:
         skipped = sum(1 for t, _ in self.plan.frames if t < self.start_offset_ns)
-        self.plan.counts["skipped_by_start_offset"] = skipped
+        self.plan.counts['skipped_by_start_offset'] = skipped
         self.frames = iter([f for f in self.plan.frames if f[0] >= self.start_offset_ns])
         self.next_frame = next(self.frames, None)
         self.done = self.next_frame is None
 
     def trial_message(self) -> DiagnosticArray:
-        """The trial (cloth, primitive, change of phase, ...) and the replay's frame accounting."""
+        """Return the trial (cloth, primitive, change of phase, ...) and the replay's frame accounting."""
         info = self.plan.trial.to_strings()
-        info["replay"] = json.dumps(self.plan.accounting())
-        info["frames_to_send"] = str(self.frames_to_send - self.plan.counts["skipped_by_start_offset"])
+        info['replay'] = json.dumps(self.plan.accounting())
+        info['frames_to_send'] = str(
+            self.frames_to_send - self.plan.counts['skipped_by_start_offset']
+        )
         values = [KeyValue(key=k, value=v) for k, v in info.items()]
-        status = DiagnosticStatus(level=DiagnosticStatus.OK, name=TRIAL_STATUS_NAME,
-                                  message=str(self.bag.path), hardware_id="recorder", values=values)
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.OK,
+            name=TRIAL_STATUS_NAME,
+            message=str(self.bag.path),
+            hardware_id='recorder',
+            values=values,
+        )
         return DiagnosticArray(status=[status])
 
     def replay_status(self) -> DiagnosticStatus:
-        """The run-time stamps of every frame the sim-clock replay will send (common.REPLAY_STATUS_NAME)."""
+        """Return the run-time stamps of every frame the sim-clock replay will send (common.REPLAY_STATUS_NAME)."""
         stamps = [t + self.offset_ns for t, _ in self.plan.frames if t >= self.start_offset_ns]
-        return DiagnosticStatus(level=DiagnosticStatus.OK, name=REPLAY_STATUS_NAME, hardware_id="recorder",
-                                message=f"{len(stamps)} frames, sent as /clock reaches their stamps",
-                                values=[KeyValue(key="frames", value=str(len(stamps))),
-                                        KeyValue(key="stamps_ns", value=",".join(map(str, stamps)))])
+        return DiagnosticStatus(
+            level=DiagnosticStatus.OK,
+            name=REPLAY_STATUS_NAME,
+            hardware_id='recorder',
+            message=f'{len(stamps)} frames, sent as /clock reaches their stamps',
+            values=[
+                KeyValue(key='frames', value=str(len(stamps))),
+                KeyValue(key='stamps_ns', value=','.join(map(str, stamps))),
+            ],
+        )
 
     def publish_until(self, t_ns: int, restamp_offset_ns: int) -> None:
         """Publish every frame at or before t_ns (from the motion's start), restamped by the offset."""
@@ -181,7 +232,9 @@ class Recorder(Node):
             frame_t, points = self.next_frame
             if frame_t > t_ns:
                 break
-            header = Header(stamp=Time(nanoseconds=frame_t + restamp_offset_ns).to_msg(), frame_id="world")
+            header = Header(
+                stamp=Time(nanoseconds=frame_t + restamp_offset_ns).to_msg(), frame_id='world'
+            )
             self.cloud_pub.publish(create_cloud_xyz32(header, points, PointCloud2, PointField))
             self.published += 1
             self.next_frame = next(self.frames, None)
@@ -202,11 +255,13 @@ class Recorder(Node):
     # --- record ------------------------------------------------------------------------------
 
     def start_recording(self) -> None:
-        output = self.declare_parameter("output", "").value
-        entries = list(self.declare_parameter("record_topics", [""]).value)
+        output = self.declare_parameter('output', '').value
+        entries = list(self.declare_parameter('record_topics', ['']).value)
         if not output:
-            raise ValueError("recorder: parameter 'output' is empty (bag directory to record into)")
-        topics = [e.rsplit(":", 1) for e in entries if e]
+            raise ValueError(
+                "recorder: parameter 'output' is empty (bag directory to record into)"
+            )
+        topics = [e.rsplit(':', 1) for e in entries if e]
         if not topics or any(len(t) != 2 for t in topics):
             raise ValueError("recorder: record_topics needs entries 'topic:package/msg/Type'")
         self.received = 0
@@ -221,8 +276,10 @@ class Recorder(Node):
         for topic, typename in topics:
             msg_type = message_type(typename)
             name = self.resolve_topic_name(topic)
-            self.create_subscription(msg_type, topic, partial(self.on_record, name, typename), make_qos(1000))
-        self.get_logger().info(f"recording {', '.join(t for t, _ in topics)} to {output}")
+            self.create_subscription(
+                msg_type, topic, partial(self.on_record, name, typename), make_qos(1000)
+            )
+        self.get_logger().info(f'recording {", ".join(t for t, _ in topics)} to {output}')
 
     def on_record(self, topic: str, typename: str, msg) -> None:
         self.received += 1
@@ -234,10 +291,14 @@ class Recorder(Node):
             self.unchecked_bytes = 0
             free = shutil.disk_usage(self.writer.path).free
             if free < DISK_MARGIN_BYTES:  # stop while the bag can still be finished cleanly
-                self.stop_recording(OSError(errno.ENOSPC, f"disk nearly full, {free} bytes left"), False)
+                self.stop_recording(
+                    OSError(errno.ENOSPC, f'disk nearly full, {free} bytes left'), False
+                )
         try:
             # As rosbag2 records: log time is the receive time, the header stamp stays in the message.
-            self.writer.write(topic, typename, 0, cdr, log_time_ns=self.get_clock().now().nanoseconds)
+            self.writer.write(
+                topic, typename, 0, cdr, log_time_ns=self.get_clock().now().nanoseconds
+            )
         except OSError as exc:
             self.stop_recording(exc, failed_write=True)
 
@@ -254,8 +315,10 @@ class Recorder(Node):
         else:
             self.close_writer()
         reason = exc.strerror or str(exc)
-        raise RecordingStopped(f"recorder: bag {self.writer.path}: {reason}; recording stopped, the bag keeps "
-                               f"the {self.writer.written} messages written before")
+        raise RecordingStopped(
+            f'recorder: bag {self.writer.path}: {reason}; recording stopped, the bag keeps '
+            f'the {self.writer.written} messages written before'
+        )
 
     def close_writer(self) -> None:
         """Finalise the bag; if finishing it fails (disk full), keep what is on disk."""
@@ -268,12 +331,14 @@ class Recorder(Node):
 
     def close(self) -> None:
         """Finalise a recording and report received and written counts."""
-        if self.writer is not None and not getattr(self, "reported", False):
+        if self.writer is not None and not getattr(self, 'reported', False):
             self.reported = True
             self.close_writer()
-            report = f"recorder: received {self.received} messages, wrote {self.writer.written}"
-            if self.received != self.writer.written and not self.stopped:  # a stop has said so already
-                self.get_logger().error(report + " (some were lost)")
+            report = f'recorder: received {self.received} messages, wrote {self.writer.written}'
+            if (
+                self.received != self.writer.written and not self.stopped
+            ):  # a stop has said so already
+                self.get_logger().error(report + ' (some were lost)')
             print(report, flush=True)
 
 
@@ -281,5 +346,5 @@ def main(args: list[str] | None = None) -> int:
     return run_node(Recorder, args)
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     raise SystemExit(main())

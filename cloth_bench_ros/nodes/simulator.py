@@ -9,23 +9,32 @@ for SCHED_FIFO and freezes its start-up heap (`cpu`, `realtime_priority`, `freez
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
-
-import numpy as np
+import time
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
+from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.nodes.common import NAMESPACE, publish_serialises, run_node
-from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
-from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.runtime import (
-    DiagnosticArray, DiagnosticStatus, Header, KeyValue, Node, PointCloud2, PointField, PoseArray,
-    declare_float, make_qos, serialize_message, stamp_ns,
+    declare_float,
+    DiagnosticArray,
+    DiagnosticStatus,
+    Header,
+    KeyValue,
+    make_qos,
+    Node,
+    PointCloud2,
+    PointField,
+    PoseArray,
+    realtime,
+    serialize_message,
+    stamp_ns,
 )
-from cloth_bench_ros.runtime import realtime
-from cloth_bench_ros.core.scene import ClothGrid
+import numpy as np
 
 
 class StateMessages:
@@ -35,29 +44,37 @@ class StateMessages:
     fresh messages instead, so that states still queued for a subscriber keep their own data.
     """
 
-    STATUS_KEYS = ("step", "step_time", "diverged", "diverged_at_step", "skipped_targets")
+    STATUS_KEYS = ('step', 'step_time', 'diverged', 'diverged_at_step', 'skipped_targets')
 
     def __init__(self, engine_name: str, n_vertices: int, in_place: bool) -> None:
         self.engine_name, self.n_vertices, self.in_place = engine_name, n_vertices, in_place
         self.cloud, self.xyz, self.status = self._build()
 
     def _build(self) -> tuple[PointCloud2, np.ndarray, DiagnosticArray]:
-        header = Header(frame_id="world")
+        header = Header(frame_id='world')
         cloud = create_cloud_xyz32(header, np.zeros((self.n_vertices, 3)), PointCloud2, PointField)
         if isinstance(cloud.data, np.ndarray):  # the embedded runtime's: a read-only view of bytes
             cloud.data = cloud.data.copy()
         xyz = np.frombuffer(cloud.data, dtype=np.float32).reshape(self.n_vertices, 3)
-        values = [KeyValue(key=k, value="") for k in self.STATUS_KEYS]
-        status = DiagnosticStatus(level=DiagnosticStatus.OK, name=f"cloth_bench/{self.engine_name}", message="ok",
-                                  hardware_id=self.engine_name, values=values)
+        values = [KeyValue(key=k, value='') for k in self.STATUS_KEYS]
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.OK,
+            name=f'cloth_bench/{self.engine_name}',
+            message='ok',
+            hardware_id=self.engine_name,
+            values=values,
+        )
         return cloud, xyz, DiagnosticArray(header=header, status=[status])
 
-    def fill(self, stamp, vertices: np.ndarray, step: int, step_time: float, divergence,
-             skipped: int) -> tuple[PointCloud2, DiagnosticArray]:
-        """The two messages of one step (the vertex conversion to float32 is the one copy)."""
-        cloud, xyz, status = (self.cloud, self.xyz, self.status) if self.in_place else self._build()
+    def fill(
+        self, stamp, vertices: np.ndarray, step: int, step_time: float, divergence, skipped: int
+    ) -> tuple[PointCloud2, DiagnosticArray]:
+        """Return the two messages of one step (the vertex conversion to float32 is the one copy)."""
+        cloud, xyz, status = (
+            (self.cloud, self.xyz, self.status) if self.in_place else self._build()
+        )
         cloud.header.stamp = stamp
-        np.copyto(xyz, vertices, casting="same_kind")
+        np.copyto(xyz, vertices, casting='same_kind')
         values = status.status[0].values
         values[0].value = str(step)
         values[1].value = repr(step_time)
@@ -65,10 +82,13 @@ class StateMessages:
         if divergence is not None:
             cloud.is_dense = bool(np.isfinite(xyz).all())
             s = status.status[0]
-            s.level, s.message = DiagnosticStatus.ERROR, f"diverged at step {divergence.step}: {divergence.reason}"
-            values[2].value, values[3].value = "true", str(divergence.step)
+            s.level, s.message = (
+                DiagnosticStatus.ERROR,
+                f'diverged at step {divergence.step}: {divergence.reason}',
+            )
+            values[2].value, values[3].value = 'true', str(divergence.step)
         else:
-            values[2].value = "false"
+            values[2].value = 'false'
         return cloud, status
 
 
@@ -76,7 +96,9 @@ def _grid_side(value: object, name: str) -> int:
     """0 (the engine's default) or 2..MAX_GRID_SIDE vertices."""
     n = validation.integer(value, name, 0, validation.MAX_GRID_SIDE)
     if n == 1:
-        raise validation.InputError(f"{name}: 1 vertex per side is no cloth (0 keeps the engine's default, else >= 2)")
+        raise validation.InputError(
+            f"{name}: 1 vertex per side is no cloth (0 keeps the engine's default, else >= 2)"
+        )
     return n
 
 
@@ -84,51 +106,77 @@ class Simulator(Node):
     """One engine: reset on the first target, one step per further target."""
 
     def __init__(self, **kwargs) -> None:
-        super().__init__(kwargs.pop("node_name", "simulator"),
-                         namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
-        self.engine_name = self.declare_parameter("engine", "mujoco").value
-        rate_hz = declare_float(self, "rate_hz", 100.0)
-        cloth = self.declare_parameter("cloth", "towel").value
-        primitive = self.declare_parameter("primitive", "dynamic").value
-        self.seed = int(self.declare_parameter("seed", 0).value)
-        self.declare_parameter("engine_params", "{}")
-        self.declare_parameter("grid_nx", 0)
-        self.declare_parameter("grid_nz", 0)
-        presets_dir = self.declare_parameter("presets_dir", "").value
+        super().__init__(
+            kwargs.pop('node_name', 'simulator'),
+            namespace=kwargs.pop('namespace', NAMESPACE),
+            **kwargs,
+        )
+        self.engine_name = self.declare_parameter('engine', 'mujoco').value
+        rate_hz = declare_float(self, 'rate_hz', 100.0)
+        cloth = self.declare_parameter('cloth', 'towel').value
+        primitive = self.declare_parameter('primitive', 'dynamic').value
+        self.seed = int(self.declare_parameter('seed', 0).value)
+        self.declare_parameter('engine_params', '{}')
+        self.declare_parameter('grid_nx', 0)
+        self.declare_parameter('grid_nz', 0)
+        presets_dir = self.declare_parameter('presets_dir', '').value
         # Every value through the one validation layer; an error names the node and parameter.
-        checked = validation.node_parameters(self, {
-            "rate_hz": validation.rate_hz, "seed": validation.seed, "engine_params": validation.parameter_mapping,
-            "grid_nx": _grid_side, "grid_nz": _grid_side})
-        overrides, nx, nz = checked["engine_params"], checked["grid_nx"], checked["grid_nz"]
+        checked = validation.node_parameters(
+            self,
+            {
+                'rate_hz': validation.rate_hz,
+                'seed': validation.seed,
+                'engine_params': validation.parameter_mapping,
+                'grid_nx': _grid_side,
+                'grid_nz': _grid_side,
+            },
+        )
+        overrides, nx, nz = checked['engine_params'], checked['grid_nx'], checked['grid_nz']
         if (nx == 0) != (nz == 0):
-            raise validation.InputError(f"{self.get_name()}: parameters grid_nx and grid_nz: set both or neither "
-                                        f"(got {nx} and {nz})")
+            raise validation.InputError(
+                f'{self.get_name()}: parameters grid_nx and grid_nz: set both or neither '
+                f'(got {nx} and {nz})'
+            )
         grid = ClothGrid(nx, nz) if nx and nz else None
-        preset = load_preset(self.engine_name, cloth, primitive, Path(presets_dir) if presets_dir else None)
+        preset = load_preset(
+            self.engine_name, cloth, primitive, Path(presets_dir) if presets_dir else None
+        )
         params = {**preset, **overrides}
         self.engine = make_engine(self.engine_name, rate_hz, params, grid)
-        self.cloud_pub = self.create_publisher(PointCloud2, f"{self.engine_name}/cloud", make_qos(10))
-        self.status_pub = self.create_publisher(DiagnosticArray, f"{self.engine_name}/step_time", make_qos(10))
+        self.cloud_pub = self.create_publisher(
+            PointCloud2, f'{self.engine_name}/cloud', make_qos(10)
+        )
+        self.status_pub = self.create_publisher(
+            DiagnosticArray, f'{self.engine_name}/step_time', make_qos(10)
+        )
         self.step = -1
         self.skipped = 0
         self.reported_divergence = False
         self.targets = full_targets(primitive, rate_hz)
-        self.stamps = np.array([self.targets.stamp_ns(k) for k in range(len(self.targets))], dtype=np.int64)
+        self.stamps = np.array(
+            [self.targets.stamp_ns(k) for k in range(len(self.targets))], dtype=np.int64
+        )
         self.last_k = -1
-        self.last_cloud: PointCloud2 | None = None  # the state of target last_k, sent again on a repeat
+        self.last_cloud: PointCloud2 | None = (
+            None  # the state of target last_k, sent again on a repeat
+        )
         self.step_times = np.full(len(self.stamps), np.nan)  # s per step, kept for a HIL report
         self.grippers = np.zeros((2, 3))
         self.left, self.right = self.grippers[0], self.grippers[1]
-        self.messages = StateMessages(self.engine_name, len(self.engine.grid.vertices()), publish_serialises(self))
+        self.messages = StateMessages(
+            self.engine_name, len(self.engine.grid.vertices()), publish_serialises(self)
+        )
         self.prepared = self.warm_up()
-        self.realtime = realtime.apply(int(self.declare_parameter("cpu", -1).value),
-                                       int(self.declare_parameter("realtime_priority", 0).value),
-                                       bool(self.declare_parameter("freeze_gc", False).value))
+        self.realtime = realtime.apply(
+            int(self.declare_parameter('cpu', -1).value),
+            int(self.declare_parameter('realtime_priority', 0).value),
+            bool(self.declare_parameter('freeze_gc', False).value),
+        )
         # Subscribed last, once start-up is done, so the first target finds the engine ready. Keep-last 1,
         # as a controller's command topic: a simulator that falls behind steps to the newest target and
         # counts the ones it never saw (under transports that drop old samples: DDS and rclpy).
-        self.create_subscription(PoseArray, "targets", self.on_target, make_qos(1))
-        self.get_logger().info(f"{self.engine_name} ready; " + "; ".join(self.realtime.lines()))
+        self.create_subscription(PoseArray, 'targets', self.on_target, make_qos(1))
+        self.get_logger().info(f'{self.engine_name} ready; ' + '; '.join(self.realtime.lines()))
 
     def warm_up(self) -> np.ndarray:
         """Start-up work before the first deadline: the reset at the trajectory's first target, one
@@ -138,7 +186,9 @@ class Simulator(Node):
         self.engine.reset(self.seed, left, right)
         self.engine.step(left, right)
         vertices = self.engine.reset(self.seed, left, right)
-        cloud, status = self.messages.fill(self.messages.cloud.header.stamp, vertices, 0, 0.0, None, 0)
+        cloud, status = self.messages.fill(
+            self.messages.cloud.header.stamp, vertices, 0, 0.0, None, 0
+        )
         serialize_message(cloud)  # the serialisers are generated on first use
         serialize_message(status)
         return vertices
@@ -167,8 +217,9 @@ class Simulator(Node):
         step_time = time.perf_counter() - start
         if self.step < len(self.step_times):
             self.step_times[self.step] = step_time
-        cloud, status = self.messages.fill(msg.header.stamp, vertices, self.step, step_time, self.engine.divergence,
-                                           self.skipped)
+        cloud, status = self.messages.fill(
+            msg.header.stamp, vertices, self.step, step_time, self.engine.divergence, self.skipped
+        )
         self.cloud_pub.publish(cloud)
         self.status_pub.publish(status)
         self.last_cloud = cloud
@@ -177,11 +228,13 @@ class Simulator(Node):
         if self.engine.diverged and not self.reported_divergence:
             self.reported_divergence = True
             d = self.engine.divergence
-            self.get_logger().error(f"{self.engine_name} diverged at step {d.step}: {d.reason}")
+            self.get_logger().error(f'{self.engine_name} diverged at step {d.step}: {d.reason}')
 
     def first_state(self) -> np.ndarray:
-        """The state at the first target: prepared by warm_up when the target is the trajectory's own."""
-        if self.prepared is not None and np.array_equal(self.grippers, [self.targets.left[0], self.targets.right[0]]):
+        """Return the state at the first target: prepared by warm_up when the target is the trajectory's own."""
+        if self.prepared is not None and np.array_equal(
+            self.grippers, [self.targets.left[0], self.targets.right[0]]
+        ):
             vertices, self.prepared = self.prepared, None
             return vertices
         return self.engine.reset(self.seed, self.left, self.right)
@@ -195,5 +248,5 @@ def main(args: list[str] | None = None) -> int:
     return run_node(Simulator, args)
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     raise SystemExit(main())

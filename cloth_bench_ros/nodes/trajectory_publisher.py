@@ -2,70 +2,110 @@
 
 from __future__ import annotations
 
-import time
 from functools import partial
 from pathlib import Path
-
-import numpy as np
+import time
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.hil_timing import TargetTimeline
+from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
 from cloth_bench_ros.nodes.common import (
-    NAMESPACE, all_subscriptions_matched, node_keys, publish_serialises, publishers_matched, run_node,
+    all_subscriptions_matched,
+    NAMESPACE,
+    node_keys,
+    publish_serialises,
+    publishers_matched,
+    run_node,
 )
 from cloth_bench_ros.runtime import (
-    Clock, Header, Node, Pose, PoseArray, PointCloud2, Time, declare_float, make_qos, stamp_ns, steady_clock,
+    Clock,
+    declare_float,
+    Header,
+    make_qos,
+    Node,
+    PointCloud2,
+    Pose,
+    PoseArray,
+    stamp_ns,
+    steady_clock,
+    Time,
 )
-from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
+import numpy as np
 
-PACINGS = ("lockstep", "realtime")
-PREROLL_RESEND_S = 0.5  # real time: the start-up handshake's target 0 is sent again after this long
-LOCKSTEP_RESEND_S = 1.0  # lockstep: a target whose states have not all come back is sent again after this long
+PACINGS = ('lockstep', 'realtime')
+PREROLL_RESEND_S = (
+    0.5  # real time: the start-up handshake's target 0 is sent again after this long
+)
+LOCKSTEP_RESEND_S = (
+    1.0  # lockstep: a target whose states have not all come back is sent again after this long
+)
 
 
 class TrajectoryPublisher(Node):
     """Publishes target k; in lockstep, target k+1 once every simulator has published state k."""
 
     def __init__(self, **kwargs) -> None:
-        super().__init__("trajectory_publisher", namespace=kwargs.pop("namespace", NAMESPACE), **kwargs)
-        primitive = parse_primitive(self.declare_parameter("primitive", "dynamic").value)
-        declare_float(self, "rate_hz", 100.0)
-        self.pacing = self.declare_parameter("pacing", "lockstep").value
-        self.declare_parameter("engines", ["mujoco"])
-        self.declare_parameter("wait_for_recorder", True)
-        self.declare_parameter("wait_for_evaluator", True)
+        super().__init__(
+            'trajectory_publisher', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs
+        )
+        primitive = parse_primitive(self.declare_parameter('primitive', 'dynamic').value)
+        declare_float(self, 'rate_hz', 100.0)
+        self.pacing = self.declare_parameter('pacing', 'lockstep').value
+        self.declare_parameter('engines', ['mujoco'])
+        self.declare_parameter('wait_for_recorder', True)
+        self.declare_parameter('wait_for_evaluator', True)
         # Every value through the one validation layer; an error names the node and parameter.
-        p = validation.node_parameters(self, {
-            "rate_hz": validation.rate_hz, "engines": validation.unique,
-            "wait_for_recorder": validation.boolean, "wait_for_evaluator": validation.boolean})
-        self.engines, rate_hz = p["engines"], p["rate_hz"]
-        self.wait_for_recorder, self.wait_for_evaluator = p["wait_for_recorder"], p["wait_for_evaluator"]
+        p = validation.node_parameters(
+            self,
+            {
+                'rate_hz': validation.rate_hz,
+                'engines': validation.unique,
+                'wait_for_recorder': validation.boolean,
+                'wait_for_evaluator': validation.boolean,
+            },
+        )
+        self.engines, rate_hz = p['engines'], p['rate_hz']
+        self.wait_for_recorder, self.wait_for_evaluator = (
+            p['wait_for_recorder'],
+            p['wait_for_evaluator'],
+        )
         if self.pacing not in PACINGS:
-            raise ValueError(f"unknown pacing {self.pacing!r} (valid: {', '.join(PACINGS)})")
-        self.timing_log = self.declare_parameter("timing_log", "").value
-        duration = declare_float(self, "duration", 0.0)
+            raise ValueError(f'unknown pacing {self.pacing!r} (valid: {", ".join(PACINGS)})')
+        self.timing_log = self.declare_parameter('timing_log', '').value
+        duration = declare_float(self, 'duration', 0.0)
         self.targets = full_targets(primitive, rate_hz)
         # duration > 0: only the targets of the first `duration` seconds (short real-time checks).
-        self.n_targets = min(len(self.targets), int(duration * rate_hz) + 1) if duration > 0 else len(self.targets)
-        self.target_pub = self.create_publisher(PoseArray, "targets", make_qos(10))
-        self.clock_pub = self.create_publisher(Clock, "/clock", make_qos(10))
-        self.state_subs = {engine: self.create_subscription(PointCloud2, f"{engine}/cloud",
-                                                            partial(self.on_state, engine), make_qos(10))
-                           for engine in self.engines}
+        self.n_targets = (
+            min(len(self.targets), int(duration * rate_hz) + 1)
+            if duration > 0
+            else len(self.targets)
+        )
+        self.target_pub = self.create_publisher(PoseArray, 'targets', make_qos(10))
+        self.clock_pub = self.create_publisher(Clock, '/clock', make_qos(10))
+        self.state_subs = {
+            engine: self.create_subscription(
+                PointCloud2, f'{engine}/cloud', partial(self.on_state, engine), make_qos(10)
+            )
+            for engine in self.engines
+        }
         self.k = -1
         self.reported: dict[str, int] = {}
         self.done = False
         self.pace_timer = None
         # Realtime: the controller's view of each target (due, sent, state received), per engine.
-        stamps = np.array([self.targets.stamp_ns(k) for k in range(self.n_targets)], dtype=np.int64)
+        stamps = np.array(
+            [self.targets.stamp_ns(k) for k in range(self.n_targets)], dtype=np.int64
+        )
         self.timelines = {engine: TargetTimeline(stamps) for engine in self.engines}
         self.period_ns = round(1e9 / rate_hz)
         # Real time: one target message filled in place before each send where publish serialises it
         # (the embedded intra-process transport hands subscribers the object itself).
-        self.fill_in_place = self.pacing == "realtime" and publish_serialises(self)
+        self.fill_in_place = self.pacing == 'realtime' and publish_serialises(self)
         self.target_msg = self._new_target_msg()
         self.wait_until_ns: int | None = None
-        self.preroll_sent_ns: int | None = None  # real time: when the start-up handshake's target 0 went out
+        self.preroll_sent_ns: int | None = (
+            None  # real time: when the start-up handshake's target 0 went out
+        )
         self.sent_ns = 0  # lockstep: when the newest target went out (steady clock)
         self.resend_timer = None
         self.start_timer = self.create_timer(0.02, self.try_start)
@@ -78,27 +118,30 @@ class TrajectoryPublisher(Node):
         subscription matched; the evaluator (subscribes `targets`, publishes `metrics` once its
         inputs are matched); every `targets` subscription matched.
         """
-        target_readers = node_keys(self.get_subscriptions_info_by_topic("targets"))
+        target_readers = node_keys(self.get_subscriptions_info_by_topic('targets'))
         for engine, sub in self.state_subs.items():
-            simulators = target_readers & node_keys(self.get_publishers_info_by_topic(f"{engine}/cloud"))
+            simulators = target_readers & node_keys(
+                self.get_publishers_info_by_topic(f'{engine}/cloud')
+            )
             if not simulators or not publishers_matched(self, sub):
                 return False
         if not all_subscriptions_matched(self, self.target_pub):
             return False
         if self.wait_for_recorder:
-            clock_readers = node_keys(self.get_subscriptions_info_by_topic("/clock"))
-            if not clock_readers & node_keys(self.get_publishers_info_by_topic("real/cloud")):
+            clock_readers = node_keys(self.get_subscriptions_info_by_topic('/clock'))
+            if not clock_readers & node_keys(self.get_publishers_info_by_topic('real/cloud')):
                 return False
             if not all_subscriptions_matched(self, self.clock_pub):
                 return False
         return not self.wait_for_evaluator or bool(
-            target_readers & node_keys(self.get_publishers_info_by_topic("metrics")))
+            target_readers & node_keys(self.get_publishers_info_by_topic('metrics'))
+        )
 
     def try_start(self) -> None:
         """Start once the graph is complete (graph_ready); polled on a timer until then."""
         if not self.graph_ready():
             return
-        if self.pacing == "realtime":
+        if self.pacing == 'realtime':
             self.send_preroll()
             return
         self.destroy_timer(self.start_timer)
@@ -106,7 +149,9 @@ class TrajectoryPublisher(Node):
         # Under DDS a first sample can be lost before a reader has matched; a lockstep graph would
         # then wait for ever. The newest target goes out again until its states are back (a
         # simulator answers a repeated target with its state, without a step).
-        self.resend_timer = self.create_timer(LOCKSTEP_RESEND_S / 4, self.resend_if_stalled, clock=steady_clock())
+        self.resend_timer = self.create_timer(
+            LOCKSTEP_RESEND_S / 4, self.resend_if_stalled, clock=steady_clock()
+        )
 
     def resend_if_stalled(self) -> None:
         """Lockstep: send target k (and /clock) again when no progress was made for LOCKSTEP_RESEND_S."""
@@ -121,7 +166,7 @@ class TrajectoryPublisher(Node):
 
     @staticmethod
     def _new_target_msg() -> PoseArray:
-        return PoseArray(header=Header(frame_id="world"), poses=[Pose(), Pose()])
+        return PoseArray(header=Header(frame_id='world'), poses=[Pose(), Pose()])
 
     def _target(self, k: int) -> PoseArray:
         """Target k as a message (the real-time one filled in place)."""
@@ -130,8 +175,17 @@ class TrajectoryPublisher(Node):
         msg.header.stamp = Time(nanoseconds=tg.stamp_ns(k)).to_msg()
         qx, qy, qz, qw = quaternion_xyz(tg.roll[k], tg.pitch[k], tg.yaw[k])
         for pose, position in zip(msg.poses, (tg.left[k], tg.right[k])):
-            pose.position.x, pose.position.y, pose.position.z = float(position[0]), float(position[1]), float(position[2])
-            pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = qx, qy, qz, qw
+            pose.position.x, pose.position.y, pose.position.z = (
+                float(position[0]),
+                float(position[1]),
+                float(position[2]),
+            )
+            pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = (
+                qx,
+                qy,
+                qz,
+                qw,
+            )
         return msg
 
     def publish_next(self) -> None:
@@ -140,7 +194,7 @@ class TrajectoryPublisher(Node):
             return
         self.k += 1
         msg = self._target(self.k)
-        if self.pacing != "realtime":
+        if self.pacing != 'realtime':
             self.sent_ns = time.monotonic_ns()
             self.clock_pub.publish(Clock(clock=msg.header.stamp))
             self.target_pub.publish(msg)
@@ -149,7 +203,9 @@ class TrajectoryPublisher(Node):
         for timeline in self.timelines.values():
             timeline.sent[self.k] = now
         self.target_pub.publish(msg)
-        self.clock_pub.publish(Clock(clock=msg.header.stamp))  # after the target: /clock serves the observer
+        self.clock_pub.publish(
+            Clock(clock=msg.header.stamp)
+        )  # after the target: /clock serves the observer
 
     # --- realtime: targets on the wall-clock schedule, as a controller sends them --------------
 
@@ -173,7 +229,9 @@ class TrajectoryPublisher(Node):
         a deadline); target 1 goes out one period later.
         """
         # On the steady clock, as the schedule: a step of the system clock must not move a deadline.
-        self.pace_timer = self.create_timer(1.0 / self.targets.rate_hz, self.publish_due, clock=steady_clock())
+        self.pace_timer = self.create_timer(
+            1.0 / self.targets.rate_hz, self.publish_due, clock=steady_clock()
+        )
         now = time.monotonic_ns()
         for timeline in self.timelines.values():
             timeline.start(now)
@@ -185,7 +243,12 @@ class TrajectoryPublisher(Node):
         """Send every target due by now, in order (a late tick catches up); then wait for the last states."""
         last = self.n_targets - 1
         if self.k < last:
-            due = min(next(iter(self.timelines.values())).due_through(time.monotonic_ns(), self.period_ns), last)
+            due = min(
+                next(iter(self.timelines.values())).due_through(
+                    time.monotonic_ns(), self.period_ns
+                ),
+                last,
+            )
             while self.k < due:
                 self.publish_next()
             if self.k == last:
@@ -207,17 +270,19 @@ class TrajectoryPublisher(Node):
 
             Path(self.timing_log).mkdir(parents=True, exist_ok=True)
             for engine, timeline in self.timelines.items():
-                atomic_write_text(Path(self.timing_log) / f"timeline_{engine}.csv", timeline.to_csv())
+                atomic_write_text(
+                    Path(self.timing_log) / f'timeline_{engine}.csv', timeline.to_csv()
+                )
         self.done = True
 
     def on_state(self, engine: str, msg: PointCloud2) -> None:
         self.reported[engine] = stamp_ns(msg.header.stamp)
-        if self.pacing == "realtime" and self.k < 0:
+        if self.pacing == 'realtime' and self.k < 0:
             if all(self.reported.get(e) == self.targets.stamp_ns(0) for e in self.engines):
                 self.destroy_timer(self.start_timer)
                 self.start_realtime()  # every simulator answered the handshake: the schedule starts
             return
-        if self.pacing == "realtime":
+        if self.pacing == 'realtime':
             self.timelines[engine].mark_received(self.reported[engine], time.monotonic_ns())
             if self.k == self.n_targets - 1 and not self.done and self.all_states_back():
                 self.finish_realtime()
@@ -233,5 +298,5 @@ def main(args: list[str] | None = None) -> int:
     return run_node(TrajectoryPublisher, args)
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     raise SystemExit(main())

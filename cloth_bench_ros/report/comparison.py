@@ -5,9 +5,9 @@
 
 from __future__ import annotations
 
-import shutil
 from functools import partial
 from pathlib import Path
+import shutil
 
 
 def comparison_section(results_dir: Path) -> list:
@@ -18,17 +18,23 @@ def comparison_section(results_dir: Path) -> list:
     """
     from cloth_bench_ros.report.blocks import figure_block, heading, paragraph
 
-    found = sorted({*results_dir.glob("qualitative.png"), *results_dir.glob("*/qualitative.png")})
+    found = sorted({*results_dir.glob('qualitative.png'), *results_dir.glob('*/qualitative.png')})
     if not found:
         return []
-    blocks = [heading(2, "Qualitative comparison (the paper's Fig. 4)"), paragraph(
-        "Simulated mesh in red over the real cloud in black at the paper's time steps, CD/HD (m) under each "
-        "panel, one row per engine; the animation shows the whole trial.")]
+    blocks = [
+        heading(2, "Qualitative comparison (the paper's Fig. 4)"),
+        paragraph(
+            "Simulated mesh in red over the real cloud in black at the paper's time steps, CD/HD"
+            " (m) under each panel, one row per engine; the animation shows the whole trial."
+        ),
+    ]
     for figure in found:
         run = figure.parent.name
-        for src in [figure, *sorted(figure.parent.glob("animation.*"))]:
-            what = "qualitative figure" if src == figure else "animation"
-            blocks.append(figure_block(f"{run}_{src.name}", f"{run}: {what}", partial(_copy_into, src)))
+        for src in [figure, *sorted(figure.parent.glob('animation.*'))]:
+            what = 'qualitative figure' if src == figure else 'animation'
+            blocks.append(
+                figure_block(f'{run}_{src.name}', f'{run}: {what}', partial(_copy_into, src))
+            )
     return blocks
 
 

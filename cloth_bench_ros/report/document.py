@@ -9,24 +9,44 @@ recommendation, the stress suite, and parameter identification when the director
 
 from __future__ import annotations
 
-import re
 from collections import Counter
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
+import re
 from typing import Sequence
-
-import numpy as np
 
 from cloth_bench_ros.report import figures
 from cloth_bench_ros.report.blocks import (
-    Block, Document, Table, figure_block, heading, paragraph, table_block, write_document)
+    Block,
+    Document,
+    figure_block,
+    heading,
+    paragraph,
+    Table,
+    table_block,
+    write_document,
+)
 from cloth_bench_ros.report.settings import settings_tables
 from cloth_bench_ros.report.statistics import (
-    cloths_of, engine_label, engines_of, fmt_fixed, fmt_sig, paper_rows, table_rate)
+    cloths_of,
+    engine_label,
+    engines_of,
+    fmt_fixed,
+    fmt_sig,
+    paper_rows,
+    table_rate,
+)
 from cloth_bench_ros.report.tables import (
-    PAPER_FIG5, errors_table, fig5_table, stability_table, table2, timing_table)
+    errors_table,
+    fig5_table,
+    PAPER_FIG5,
+    stability_table,
+    table2,
+    timing_table,
+)
 from cloth_bench_ros.studies.aggregate import finite
+import numpy as np
 
 
 @dataclass
@@ -44,168 +64,289 @@ def results_table(rows: Sequence[dict]) -> Table:
     keys: list[str] = []
     for r in rows:
         keys += [k for k in r if k not in keys]
-    return Table("results", keys, [[_csv_cell(r.get(k)) for k in keys] for r in rows])
+    return Table('results', keys, [[_csv_cell(r.get(k)) for k in keys] for r in rows])
 
 
 def _csv_cell(value: object) -> str:
     if isinstance(value, dict):
-        return ";".join(f"{a}={b}" for a, b in value.items())
-    return "" if value is None else f"{value}"
+        return ';'.join(f'{a}={b}' for a, b in value.items())
+    return '' if value is None else f'{value}'
 
 
 def overview_section(rows: Sequence[dict]) -> list[Block]:
-    """What the report is made of: cells, status, engine versions, compute, machine load."""
-    status = Counter(r.get("status") for r in rows)
-    versions = sorted({f"{engine_label(r['engine'])} {r['engine_version']}" for r in rows if r.get("engine_version")})
-    compute = float(finite(r.get("cell_wall_s") for r in rows).sum())
-    loads = finite(r.get("load_avg_1min") for r in rows)
-    load_text = (f" Step times are wall times: the 1-minute load average at the end of the cells was "
-                 f"{np.median(loads):.1f} (median; {loads.min():.1f}-{loads.max():.1f}) on "
-                 f"{rows[0].get('cpu_count') or '?'} cores; a load above the core count inflates them."
-                 if len(loads) else "")
-    return [paragraph(
-        f"Rendered {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')} from {len(rows)} cells "
-        f"({status.get('ok', 0)} ok, {status.get('diverged', 0)} diverged, {status.get('error', 0)} errors); "
-        f"engines {', '.join(versions) or '-'}; {compute / 3600:.2f} h of cell compute in total. "
-        f"CD and HD are one-sided L1 distances in metres (docs/benchmark.md, section 3); mean ± std over seeds and trial "
-        f"bags (population std); a diverged run is counted, not averaged. All results here are ours unless a "
-        f"column or paragraph is marked **paper**." + load_text)]
+    """Return what the report is made of: cells, status, engine versions, compute, machine load."""
+    status = Counter(r.get('status') for r in rows)
+    versions = sorted(
+        {
+            f'{engine_label(r["engine"])} {r["engine_version"]}'
+            for r in rows
+            if r.get('engine_version')
+        }
+    )
+    compute = float(finite(r.get('cell_wall_s') for r in rows).sum())
+    loads = finite(r.get('load_avg_1min') for r in rows)
+    load_text = (
+        ' Step times are wall times: the 1-minute load average at the end of the cells was '
+        f'{np.median(loads):.1f} (median; {loads.min():.1f}-{loads.max():.1f}) on '
+        f'{rows[0].get("cpu_count") or "?"} cores; a load above the core count inflates them.'
+        if len(loads)
+        else ''
+    )
+    return [
+        paragraph(
+            f'Rendered {datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")} from'
+            f' {len(rows)} cells ({status.get("ok", 0)} ok, {status.get("diverged", 0)} diverged,'
+            f' {status.get("error", 0)} errors); engines {", ".join(versions) or "-"};'
+            f' {compute / 3600:.2f} h of cell compute in total. CD and HD are one-sided L1'
+            ' distances in metres (docs/benchmark.md, section 3); mean ± std over seeds and trial'
+            ' bags (population std); a diverged run is counted, not averaged. All results here'
+            ' are ours unless a column or paragraph is marked **paper**.'
+            + load_text
+        )
+    ]
 
 
 def paper_configs(rows: Sequence[dict]) -> list[str]:
-    """Configurations of the lockstep paper sweep, the Table II one first (the presets if present)."""
-    counts = Counter(r.get("config", "preset") for r in rows if r.get("mode", "paper") == "paper"
-                     and r.get("pacing", "lockstep") == "lockstep")
+    """Return configurations of the lockstep paper sweep, the Table II one first (the presets if present)."""
+    counts = Counter(
+        r.get('config', 'preset')
+        for r in rows
+        if r.get('mode', 'paper') == 'paper' and r.get('pacing', 'lockstep') == 'lockstep'
+    )
     if not counts:
         return []
-    main = "preset" if "preset" in counts else counts.most_common(1)[0][0]
+    main = 'preset' if 'preset' in counts else counts.most_common(1)[0][0]
     return [main] + sorted(c for c in counts if c != main)
 
 
 def table2_section(paper: Sequence[dict], config: str, wanted_rate: float) -> list[Block]:
-    """The paper's Table II layout at one rate, ours beside the paper's numbers."""
+    """Return the paper's Table II layout at one rate, ours beside the paper's numbers."""
     rate = table_rate(paper, wanted_rate)
-    what = "engine presets" if config == "preset" else f"configuration `{config}`"
+    what = 'engine presets' if config == 'preset' else f'configuration `{config}`'
     combos = len({(r['seed'], r.get('trial', 0)) for r in paper if float(r['rate_hz']) == rate})
-    return [heading(2, f"Table II layout: accuracy per cloth and engine at {rate:g} Hz"), paragraph(
-        f"Columns marked (ours): this system, {what}, lockstep pacing, {rate:g} Hz, over {combos} seed x trial "
-        f"combinations per cell; bold = best of ours. Columns marked (paper) are the paper's Table II "
-        f"(docs/benchmark.md, section 6: real rags, 3 trials x 20 seeds, MuJoCo 3.1.1, Bullet 3.26, Flex 1.2, "
-        f"SOFA 23.06; bold = best in the paper). The paper scores real clouds; ours are scored against the "
-        f"bags given to the sweep, so the columns compare layouts and magnitudes, not the same data."),
-        table_block(table2(paper, rate))]
+    return [
+        heading(2, f'Table II layout: accuracy per cloth and engine at {rate:g} Hz'),
+        paragraph(
+            f'Columns marked (ours): this system, {what}, lockstep pacing, {rate:g} Hz, over'
+            f' {combos} seed x trial '
+            f"combinations per cell; bold = best of ours. Columns marked (paper) are the paper's"
+            f" Table II "
+            f'(docs/benchmark.md, section 6: real rags, 3 trials x 20 seeds, MuJoCo 3.1.1, Bullet'
+            f' 3.26, Flex 1.2, '
+            f'SOFA 23.06; bold = best in the paper). The paper scores real clouds; ours are scored'
+            f' against the '
+            f'bags given to the sweep, so the columns compare layouts and magnitudes, not the same'
+            f' data.'
+        ),
+        table_block(table2(paper, rate)),
+    ]
 
 
-def fig5_section(sel: Sequence[dict], config: str, main_config: str, wanted_cloth: str) -> list[Block]:
-    """The paper's Fig. 5 layout (frequency study) for one configuration."""
+def fig5_section(
+    sel: Sequence[dict], config: str, main_config: str, wanted_cloth: str
+) -> list[Block]:
+    """Return the paper's Fig. 5 layout (frequency study) for one configuration."""
     cloths = cloths_of(sel)
     cloth = wanted_cloth if wanted_cloth in cloths else cloths[0]
-    suffix = "" if config == main_config else "_" + re.sub(r"[^A-Za-z0-9]+", "_", config).strip("_")
-    what = ("engine presets (internal time step from the preset; the rate is the target rate)"
-            if config == "preset" else f"configuration `{config}`"
-            + (" (one internal step per target, as in the paper's frequency study)" if "step=1/rate" in config else ""))
-    title = f"{cloth}: step time, L_s, CD_d, CD_q against rate ({config})"
-    return [heading(2, f"Fig. 5 layout: frequency study, {cloth}" + ("" if config == "preset" else f", {config}")),
-            paragraph(f"Ours: {what}; mean ± std over seeds, log scales; open markers: some runs diverged."),
-            figure_block(f"fig5{suffix}.png", f"Fig. 5 layout, {cloth}, {config} (ours)",
-                         lambda path: figures.plot_fig5(sel, cloth, path, title)),
-            table_block(fig5_table(sel, cloth, f"fig5{suffix}")),
-            paragraph("**paper** — " + PAPER_FIG5)]
+    suffix = (
+        '' if config == main_config else '_' + re.sub(r'[^A-Za-z0-9]+', '_', config).strip('_')
+    )
+    what = (
+        'engine presets (internal time step from the preset; the rate is the target rate)'
+        if config == 'preset'
+        else f'configuration `{config}`'
+        + (
+            " (one internal step per target, as in the paper's frequency study)"
+            if 'step=1/rate' in config
+            else ''
+        )
+    )
+    title = f'{cloth}: step time, L_s, CD_d, CD_q against rate ({config})'
+    return [
+        heading(
+            2,
+            f'Fig. 5 layout: frequency study, {cloth}'
+            + ('' if config == 'preset' else f', {config}'),
+        ),
+        paragraph(
+            f'Ours: {what}; mean ± std over seeds, log scales; open markers: some runs diverged.'
+        ),
+        figure_block(
+            f'fig5{suffix}.png',
+            f'Fig. 5 layout, {cloth}, {config} (ours)',
+            lambda path: figures.plot_fig5(sel, cloth, path, title),
+        ),
+        table_block(fig5_table(sel, cloth, f'fig5{suffix}')),
+        paragraph('**paper** — ' + PAPER_FIG5),
+    ]
 
 
-def speed_error_section(rows: Sequence[dict], wanted_cloth: str, pareto: list[dict]) -> list[Block]:
+def speed_error_section(
+    rows: Sequence[dict], wanted_cloth: str, pareto: list[dict]
+) -> list[Block]:
     """Speed against error for one cloth, with its Pareto front (appended to `pareto`)."""
-    lockstep = [r for r in rows if r.get("mode", "paper") == "paper" and r.get("pacing", "lockstep") == "lockstep"]
-    cloth = wanted_cloth if any(r["cloth"] == wanted_cloth for r in lockstep) else (cloths_of(lockstep) or [None])[0]
-    sel = [r for r in lockstep if r["cloth"] == cloth]  # one cloth: every configuration has it
+    lockstep = [
+        r
+        for r in rows
+        if r.get('mode', 'paper') == 'paper' and r.get('pacing', 'lockstep') == 'lockstep'
+    ]
+    cloth = (
+        wanted_cloth
+        if any(r['cloth'] == wanted_cloth for r in lockstep)
+        else (cloths_of(lockstep) or [None])[0]
+    )
+    sel = [r for r in lockstep if r['cloth'] == cloth]  # one cloth: every configuration has it
     if not sel:
         return []
-    title = f"{cloth}: CD against compute per simulated second; Pareto front dashed"
+    title = f'{cloth}: CD against compute per simulated second; Pareto front dashed'
     front = figures.speed_error_front(sel)
     pareto += front
-    return [heading(2, f"Speed against error ({cloth})"), paragraph(
-        "One point per engine, rate and configuration (mean over seeds); x: engine compute per simulated "
-        "second (mean step time x rate; below 1 the engine alone is faster than real time); y: CD of the "
-        "task. The Pareto front joins the points that no other point beats in both."),
-        figure_block("speed_error.png", "speed against error with its Pareto front (ours)",
-                     lambda path: figures.plot_speed_error(sel, path, title)[0]),
-        table_block(Table("pareto", ["task", "engine", "point", "compute s/s", "CD (m)"],
-                          [[f["task"], engine_label(f["engine"]), f["point"], fmt_sig(f["compute_s_per_s"]),
-                            fmt_fixed(f["CD"], 4)] for f in front], "lllrr"))]
+    return [
+        heading(2, f'Speed against error ({cloth})'),
+        paragraph(
+            'One point per engine, rate and configuration (mean over seeds); x: engine compute per'
+            ' simulated second (mean step time x rate; below 1 the engine alone is faster than'
+            ' real time); y: CD of the task. The Pareto front joins the points that no other point'
+            ' beats in both.'
+        ),
+        figure_block(
+            'speed_error.png',
+            'speed against error with its Pareto front (ours)',
+            lambda path: figures.plot_speed_error(sel, path, title)[0],
+        ),
+        table_block(
+            Table(
+                'pareto',
+                ['task', 'engine', 'point', 'compute s/s', 'CD (m)'],
+                [
+                    [
+                        f['task'],
+                        engine_label(f['engine']),
+                        f['point'],
+                        fmt_sig(f['compute_s_per_s']),
+                        fmt_fixed(f['CD'], 4),
+                    ]
+                    for f in front
+                ],
+                'lllrr',
+            )
+        ),
+    ]
 
 
 def frames_section(paper: Sequence[dict], results_dir: Path) -> list[Block]:
     """Per-frame CD and HD over time, first seed, per cloth."""
-    blocks = [heading(2, "Per-frame CD and HD over time")]
+    blocks = [heading(2, 'Per-frame CD and HD over time')]
     kept = [r for r in paper if figures.frames_file(results_dir, r) is not None]
     for cloth in cloths_of(kept):
-        blocks.append(figure_block(f"frames_{cloth}.png",
-                                   f"{cloth}: per-frame CD and HD, first seed; red: change of phase (ours)",
-                                   lambda path, cloth=cloth: figures.plot_frames(kept, results_dir, cloth, path)))
+        blocks.append(
+            figure_block(
+                f'frames_{cloth}.png',
+                f'{cloth}: per-frame CD and HD, first seed; red: change of phase (ours)',
+                lambda path, cloth=cloth: figures.plot_frames(kept, results_dir, cloth, path),
+            )
+        )
     if not kept:
-        blocks.append(paragraph("No per-frame scores were kept in this sweep "
-                                "(frames are kept for the first seed by default)."))
+        blocks.append(
+            paragraph(
+                'No per-frame scores were kept in this sweep '
+                '(frames are kept for the first seed by default).'
+            )
+        )
     return blocks
 
 
 def timing_section(rows: Sequence[dict]) -> list[Block]:
     """Step time, latency, deadline misses and real-time factor."""
-    timed = [r for r in rows if r.get("status") in ("ok", "diverged")]
+    timed = [r for r in rows if r.get('status') in ('ok', 'diverged')]
     if not timed:
         return []
-    return [heading(2, "Timing and hardware in the loop"), paragraph(
-        "Step time: wall time of one engine step (all internal substeps) per target. Latency: wall time "
-        "until the engine's state reaches the evaluator, counted from the target's due time on the "
-        "wall-clock schedule (first target + k / rate) with realtime pacing, so a run that falls behind "
-        "its schedule shows it, and from the target's arrival with lockstep pacing. "
-        "Deadline misses: steps whose latency exceeds 1 / rate (mean per run / steps per run). Real-time "
-        "factor: simulated time over wall time of the run (lockstep runs as fast as they can; realtime "
-        "runs are paced by the wall clock and cannot exceed 1). Medians over runs."),
+    return [
+        heading(2, 'Timing and hardware in the loop'),
+        paragraph(
+            'Step time: wall time of one engine step (all internal substeps) per target. Latency:'
+            " wall time until the engine's state reaches the evaluator, counted from the"
+            " target's due time on the wall-clock schedule (first target + k / rate) with"
+            ' realtime pacing, so a run that falls behind its schedule shows it, and from the'
+            " target's arrival with lockstep pacing. Deadline misses: steps whose latency exceeds"
+            ' 1 / rate (mean per run / steps per run). Real-time factor: simulated time over wall'
+            ' time of the run (lockstep runs as fast as they can; realtime runs are paced by the'
+            ' wall clock and cannot exceed 1). Medians over runs.'
+        ),
         table_block(timing_table(timed)),
-        figure_block("latency.png", "latency percentiles against the deadline (ours)",
-                     lambda path: figures.plot_latency(timed, path))]
+        figure_block(
+            'latency.png',
+            'latency percentiles against the deadline (ours)',
+            lambda path: figures.plot_latency(timed, path),
+        ),
+    ]
 
 
 def stability_section(rows: Sequence[dict]) -> list[Block]:
     """Divergences per engine, rate, configuration and task; the cells that failed."""
-    blocks = [heading(2, "Stability"), table_block(stability_table(rows))]
+    blocks = [heading(2, 'Stability'), table_block(stability_table(rows))]
     errs = errors_table(rows)
     if errs.rows:
-        blocks += [heading(3, "Cells that failed"), table_block(errs)]
+        blocks += [heading(3, 'Cells that failed'), table_block(errs)]
     return blocks
 
 
-def settings_section(rows: Sequence[dict], tol_rel: float, tol_abs: float, recs: list[dict]) -> list[Block]:
-    """Settings sweep: every configuration against error, and the recommendation (appended to `recs`)."""
-    settings = [r for r in rows if r.get("mode") == "settings"]
+def settings_section(
+    rows: Sequence[dict], tol_rel: float, tol_abs: float, recs: list[dict]
+) -> list[Block]:
+    """Return settings sweep: every configuration against error, and the recommendation (appended to `recs`)."""
+    settings = [r for r in rows if r.get('mode') == 'settings']
     if not settings:
         return []
     s_tables, notes, found = settings_tables(rows, tol_rel, tol_abs)
     recs += found
-    blocks = [heading(2, "Model only what the scene needs: settings against error"), paragraph(
-        f"Factorial sweep over the settings that cost time. Tolerance: a configuration is within tolerance "
-        f"when its mean CD is at most the best stable configuration's plus max({tol_rel:.0%} of it, "
-        f"{tol_abs * 1e3:g} mm); the recommendation is the cheapest (mean step time) within tolerance. "
-        f"A configuration with any diverged seed is unstable and never recommended. Table contact cannot be "
-        f"switched off: neither engine exposes it.")]
+    blocks = [
+        heading(2, 'Model only what the scene needs: settings against error'),
+        paragraph(
+            f'Factorial sweep over the settings that cost time. Tolerance: a configuration is'
+            f' within tolerance '
+            f"when its mean CD is at most the best stable configuration's plus max({tol_rel:.0%}"
+            " of it, "
+            f'{tol_abs * 1e3:g} mm); the recommendation is the cheapest (mean step time) within'
+            ' tolerance. '
+            f'A configuration with any diverged seed is unstable and never recommended. Table'
+            f' contact cannot be '
+            f'switched off: neither engine exposes it.'
+        ),
+    ]
     for e in engines_of(settings):
-        chosen = [x["recommended"] for x in found if x["engine"] == e]
-        sel = [r for r in settings if r["engine"] == e]
-        title = f"{engine_label(e)}: configurations, CD against compute (stable ones)"
-        blocks.append(figure_block(
-            f"settings_{e}.png", f"{engine_label(e)}: speed against error per configuration, Pareto front dashed, "
-                                 f"recommended starred (ours)",
-            lambda path, sel=sel, title=title, chosen=chosen: figures.plot_settings(sel, path, title, chosen)))
-    blocks += [paragraph("Within one configuration, settings that do not change the result (equal CD) can still "
-                         "differ in measured step time by run-to-run timing noise of the machine; compare step "
-                         "times that differ by less than about 20 % with care."), heading(3, "Recommendations")]
+        chosen = [x['recommended'] for x in found if x['engine'] == e]
+        sel = [r for r in settings if r['engine'] == e]
+        title = f'{engine_label(e)}: configurations, CD against compute (stable ones)'
+        blocks.append(
+            figure_block(
+                f'settings_{e}.png',
+                f'{engine_label(e)}: speed against error per configuration, Pareto front dashed, '
+                'recommended starred (ours)',
+                lambda path, sel=sel, title=title, chosen=chosen: figures.plot_settings(
+                    sel, path, title, chosen
+                ),
+            )
+        )
+    blocks += [
+        paragraph(
+            'Within one configuration, settings that do not change the result (equal CD) can still'
+            ' differ in measured step time by run-to-run timing noise of the machine; compare step'
+            ' times that differ by less than about 20 % with care.'
+        ),
+        heading(3, 'Recommendations'),
+    ]
     blocks += [paragraph(n) for n in notes]
     for t in s_tables:
-        blocks += [heading(3, t.name.replace("settings_", "").replace("_", " ")), table_block(t)]
-    from cloth_bench_ros.report.hil import deadline_tables  # the deadline criterion (hardware in the loop)
+        blocks += [heading(3, t.name.replace('settings_', '').replace('_', ' ')), table_block(t)]
+    from cloth_bench_ros.report.hil import (
+        deadline_tables,
+    )  # the deadline criterion (hardware in the loop)
 
     d_tables, d_notes = deadline_tables(rows, tol_rel, tol_abs)
-    blocks += [heading(3, "Fast enough for the rate: step p99 under the period (hardware in the loop)")]
+    blocks += [
+        heading(3, 'Fast enough for the rate: step p99 under the period (hardware in the loop)')
+    ]
     blocks += [paragraph(n) for n in d_notes] + [table_block(t) for t in d_tables]
     return blocks
 
@@ -219,23 +360,39 @@ def cross_reference_blocks(rows: Sequence[dict]) -> list[Block]:
 
 
 def stress_section(stress_rows: Sequence[dict]) -> list[Block]:
-    """The stress suite: which hard cases each engine survives."""
+    """Return the stress suite: which hard cases each engine survives."""
     from cloth_bench_ros.studies.stress import stress_table, verdict
 
     v = verdict(stress_rows)
-    return [heading(2, "Stress suite: hard cases"),
-            paragraph("; ".join(f"{engine_label(e)}: {len(c)} of {sum(r['engine'] == e for r in stress_rows)} "
-                                f"cases diverged ({', '.join(c) or 'none'})" for e, c in v.items()) + "."),
-            table_block(stress_table(stress_rows))]
+    return [
+        heading(2, 'Stress suite: hard cases'),
+        paragraph(
+            '; '.join(
+                f'{engine_label(e)}: {len(c)} of {sum(r["engine"] == e for r in stress_rows)} '
+                f'cases diverged ({", ".join(c) or "none"})'
+                for e, c in v.items()
+            )
+            + '.'
+        ),
+        table_block(stress_table(stress_rows)),
+    ]
 
 
-def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress_rows: Sequence[dict] | None = None,
-                  wanted_rate: float = 100.0, fig5_cloth: str = "towel", tol_rel: float = 0.05,
-                  tol_abs: float = 0.002, title: str = "cloth_bench_ros: speed against error",
-                  identifications: Sequence[dict] = ()) -> ReportOutcome:
+def render_report(
+    rows: Sequence[dict],
+    results_dir: Path,
+    out_dir: Path,
+    stress_rows: Sequence[dict] | None = None,
+    wanted_rate: float = 100.0,
+    fig5_cloth: str = 'towel',
+    tol_rel: float = 0.05,
+    tol_abs: float = 0.002,
+    title: str = 'cloth_bench_ros: speed against error',
+    identifications: Sequence[dict] = (),
+) -> ReportOutcome:
     """Render every table and figure of the rows into out_dir (report.md, report.html, *.png, *.csv)."""
-    from cloth_bench_ros.report.identification import identification_section
     from cloth_bench_ros.report.comparison import comparison_section
+    from cloth_bench_ros.report.identification import identification_section
 
     results_dir, out_dir = Path(results_dir), Path(out_dir)
     doc = Document(title)
@@ -267,26 +424,46 @@ def render_report(rows: Sequence[dict], results_dir: Path, out_dir: Path, stress
     return ReportOutcome(md, html, images, tables, recs, pareto)
 
 
-def report_directory(results: Path, out: Path, stress: Path | None = None, wanted_rate: float = 100.0,
-                     fig5_cloth: str = "towel", tol_rel: float = 0.05, tol_abs: float = 0.002) -> ReportOutcome:
+def report_directory(
+    results: Path,
+    out: Path,
+    stress: Path | None = None,
+    wanted_rate: float = 100.0,
+    fig5_cloth: str = 'towel',
+    tol_rel: float = 0.05,
+    tol_abs: float = 0.002,
+) -> ReportOutcome:
     """`cloth-bench report`: the report of a results.jsonl (or its directory), with the stress suite and the
     identifications found beside it; ValueError (one line) when there is nothing usable to report.
     """
     from cloth_bench_ros.report.identification import find_identifications
-    from cloth_bench_ros.studies.results import RESULTS_FILE, load_rows
-    from cloth_bench_ros.studies.stress import STRESS_FILE, load_stress
+    from cloth_bench_ros.studies.results import load_rows, RESULTS_FILE
+    from cloth_bench_ros.studies.stress import load_stress, STRESS_FILE
 
     results_file = results / RESULTS_FILE if results.is_dir() else results
-    identifications = find_identifications(results_file.parent) if results_file.parent.is_dir() else []
+    identifications = (
+        find_identifications(results_file.parent) if results_file.parent.is_dir() else []
+    )
     if not results_file.is_file() and not identifications:
-        raise ValueError(f"results {results}: no {RESULTS_FILE} there (run `cloth-bench sweep` first)")
+        raise ValueError(
+            f'results {results}: no {RESULTS_FILE} there (run `cloth-bench sweep` first)'
+        )
     rows = load_rows(results_file)
     if not rows and not identifications:
-        raise ValueError(f"results {results_file}: holds no result rows")
+        raise ValueError(f'results {results_file}: holds no result rows')
     if stress is None and (results_file.parent / STRESS_FILE).is_file():
         stress = results_file.parent / STRESS_FILE
     if stress is not None and not Path(stress).exists():
-        raise ValueError(f"stress results {stress}: no such file or directory")
+        raise ValueError(f'stress results {stress}: no such file or directory')
     stress_rows = load_stress(Path(stress)) if stress is not None else None
-    return render_report(rows, results_file.parent, out, stress_rows, wanted_rate, fig5_cloth, tol_rel, tol_abs,
-                         identifications=identifications)
+    return render_report(
+        rows,
+        results_file.parent,
+        out,
+        stress_rows,
+        wanted_rate,
+        fig5_cloth,
+        tol_rel,
+        tol_abs,
+        identifications=identifications,
+    )

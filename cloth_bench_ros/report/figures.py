@@ -11,29 +11,42 @@ from typing import Sequence
 
 import matplotlib
 
-matplotlib.use("Agg")
+matplotlib.use('Agg')
+from cloth_bench_ros.report.statistics import (  # noqa: E402
+    ENGINE_COLOR,
+    engine_label,
+    engines_of,
+    FPS,
+    metric_name,
+    pareto_front,
+    rates_of,
+)
+from cloth_bench_ros.studies.aggregate import (
+    compute_per_sim_second,
+    finite,
+    group,
+    stat,
+)  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from cloth_bench_ros.report.statistics import (  # noqa: E402
-    ENGINE_COLOR, FPS, engine_label, engines_of, metric_name, pareto_front, rates_of)
-from cloth_bench_ros.studies.aggregate import compute_per_sim_second, finite, group, stat  # noqa: E402
 
-
-def _plain_log(ax, axis: str = "xy") -> None:
+def _plain_log(ax, axis: str = 'xy') -> None:
     """Log-axis tick labels as plain numbers (0.2, 10, 1000) rather than 2 x 10^-1."""
     from matplotlib.ticker import FuncFormatter
 
-    fmt = FuncFormatter(lambda v, _: f"{v:g}")
+    fmt = FuncFormatter(lambda v, _: f'{v:g}')
     for name in axis:
-        a = ax.xaxis if name == "x" else ax.yaxis
-        if a.get_scale() != "log":
+        a = ax.xaxis if name == 'x' else ax.yaxis
+        if a.get_scale() != 'log':
             continue
-        low, high = sorted(ax.get_xlim() if name == "x" else ax.get_ylim())
+        low, high = sorted(ax.get_xlim() if name == 'x' else ax.get_ylim())
         a.set_major_formatter(fmt)
         # Less than about a decade shown: label the minor ticks too, or the axis has no numbers.
         few = low > 0 and high / low < 20
-        a.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:.3g}") if few else FuncFormatter(lambda v, _: ""))
+        a.set_minor_formatter(
+            FuncFormatter(lambda v, _: f'{v:.3g}') if few else FuncFormatter(lambda v, _: '')
+        )
 
 
 def save_figure(fig, path: Path) -> Path:
@@ -48,16 +61,25 @@ def plot_fig5(rows: Sequence[dict], cloth: str, path: Path, title: str) -> Path:
     """Step time, L_s, CD_d and CD_q against rate per engine (log-log), mean +- std over seeds.
     Rates at which some runs diverged are marked with an open marker and their count.
     """
-    sel = [r for r in rows if r["cloth"] == cloth]
+    sel = [r for r in rows if r['cloth'] == cloth]
     fig, axes = plt.subplots(2, 2, figsize=(10, 7.5))
-    panels = [("step_time_mean", None, 1e3, "step time (ms)"), ("L_s", None, 1.0, "L_s (m)"),
-              ("CD", "dynamic", 1.0, "CD_d (m)"), ("CD", "quasi_static", 1.0, "CD_q (m)")]
+    panels = [
+        ('step_time_mean', None, 1e3, 'step time (ms)'),
+        ('L_s', None, 1.0, 'L_s (m)'),
+        ('CD', 'dynamic', 1.0, 'CD_d (m)'),
+        ('CD', 'quasi_static', 1.0, 'CD_q (m)'),
+    ]
     for ax, (key, prim, scale, label) in zip(axes.ravel(), panels):
         for e in engines_of(sel):
             xs, ys, es, div = [], [], [], []
             for rate in rates_of(sel):
-                g = [r for r in sel if r["engine"] == e and float(r["rate_hz"]) == rate
-                     and (prim is None or r["primitive"] == prim)]
+                g = [
+                    r
+                    for r in sel
+                    if r['engine'] == e
+                    and float(r['rate_hz']) == rate
+                    and (prim is None or r['primitive'] == prim)
+                ]
                 if not g:
                     continue
                 s = stat(g, key)
@@ -66,173 +88,262 @@ def plot_fig5(rows: Sequence[dict], cloth: str, path: Path, title: str) -> Path:
                     ys.append(s.mean * scale)
                     es.append(s.std * scale)
                     if s.diverged:
-                        div.append((rate, s.mean * scale, f"{s.diverged}/{s.n} div."))
+                        div.append((rate, s.mean * scale, f'{s.diverged}/{s.n} div.'))
                 elif s.diverged:
-                    div.append((rate, None, f"all {s.n} div."))
+                    div.append((rate, None, f'all {s.n} div.'))
             color = ENGINE_COLOR.get(e)
             if xs:
-                ax.errorbar(xs, ys, yerr=es, marker="o", capsize=3, color=color, label=engine_label(e))
+                ax.errorbar(
+                    xs, ys, yerr=es, marker='o', capsize=3, color=color, label=engine_label(e)
+                )
             for rate, y, text in div:
                 if y is None:
-                    ax.annotate(f"{engine_label(e)}: {text}", (rate, 0.02), xycoords=("data", "axes fraction"),
-                                color=color, fontsize=8, rotation=90, va="bottom")
+                    ax.annotate(
+                        f'{engine_label(e)}: {text}',
+                        (rate, 0.02),
+                        xycoords=('data', 'axes fraction'),
+                        color=color,
+                        fontsize=8,
+                        rotation=90,
+                        va='bottom',
+                    )
                 else:
-                    ax.plot([rate], [y], marker="o", mfc="white", ms=11, color=color)
-                    ax.annotate(text, (rate, y), textcoords="offset points", xytext=(6, 6), color=color, fontsize=8)
-        ax.set_xscale("log")
+                    ax.plot([rate], [y], marker='o', mfc='white', ms=11, color=color)
+                    ax.annotate(
+                        text,
+                        (rate, y),
+                        textcoords='offset points',
+                        xytext=(6, 6),
+                        color=color,
+                        fontsize=8,
+                    )
+        ax.set_xscale('log')
         if ax.has_data():
-            ax.set_yscale("log")
+            ax.set_yscale('log')
         _plain_log(ax)
         from matplotlib.ticker import FixedLocator, NullFormatter
 
         ax.xaxis.set_major_locator(FixedLocator(rates_of(sel)))
         ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.set_xlabel("simulator rate (Hz)")
+        ax.set_xlabel('simulator rate (Hz)')
         ax.set_ylabel(label)
-        ax.grid(True, which="both", alpha=0.3)
+        ax.grid(True, which='both', alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
     fig.suptitle(title, fontsize=11)
     return save_figure(fig, path)
 
 
-def speed_error_points(rows: Sequence[dict], label_key: str = "rate") -> tuple[list, list]:
+def speed_error_points(rows: Sequence[dict], label_key: str = 'rate') -> tuple[list, list]:
     """((compute s/s, mean CD) per engine x rate x config, (engine, label, CD std) of each)."""
     pts, labels = [], []
-    for (e, rate, config), g in sorted(group(rows, "engine", "rate_hz", "config").items(), key=lambda x: str(x[0])):
-        cd = stat(g, "CD")
-        cost = finite(compute_per_sim_second(r) for r in g if r.get("status") == "ok")
+    for (e, rate, config), g in sorted(
+        group(rows, 'engine', 'rate_hz', 'config').items(), key=lambda x: str(x[0])
+    ):
+        cd = stat(g, 'CD')
+        cost = finite(compute_per_sim_second(r) for r in g if r.get('status') == 'ok')
         if not cd.used or not len(cost):
             continue
         pts.append((float(cost.mean()), cd.mean))
-        text = f"{rate:g} Hz" if label_key == "rate" else config
-        if label_key == "rate" and config != "preset":
-            text += f" {config}"
+        text = f'{rate:g} Hz' if label_key == 'rate' else config
+        if label_key == 'rate' and config != 'preset':
+            text += f' {config}'
         labels.append((e, text, cd.std))
     return pts, labels
 
 
 def speed_error_front(rows: Sequence[dict]) -> list[dict]:
-    """The Pareto front (minimal compute and CD) of each task, as rows for a table."""
+    """Return the Pareto front (minimal compute and CD) of each task, as rows for a table."""
     fronts = []
-    for prim in ("dynamic", "quasi_static"):
-        pts, labels = speed_error_points([r for r in rows if r["primitive"] == prim])
-        fronts += [{"task": prim, "engine": labels[i][0], "point": labels[i][1], "compute_s_per_s": pts[i][0],
-                    "CD": pts[i][1]} for i in pareto_front(pts)]
+    for prim in ('dynamic', 'quasi_static'):
+        pts, labels = speed_error_points([r for r in rows if r['primitive'] == prim])
+        fronts += [
+            {
+                'task': prim,
+                'engine': labels[i][0],
+                'point': labels[i][1],
+                'compute_s_per_s': pts[i][0],
+                'CD': pts[i][1],
+            }
+            for i in pareto_front(pts)
+        ]
     return fronts
 
 
-def plot_speed_error(rows: Sequence[dict], path: Path, title: str, label_key: str = "rate") -> tuple[Path, list]:
+def plot_speed_error(
+    rows: Sequence[dict], path: Path, title: str, label_key: str = 'rate'
+) -> tuple[Path, list]:
     """CD against compute per simulated second, one point per engine x rate (x config), with the
     Pareto front (minimal compute and CD) per task. Returns the path and the front points.
     """
     fig, axes = plt.subplots(1, 2, figsize=(12, 5))
     fronts = []
-    for ax, prim in zip(axes, ("dynamic", "quasi_static")):
-        sel = [r for r in rows if r["primitive"] == prim]
+    for ax, prim in zip(axes, ('dynamic', 'quasi_static')):
+        sel = [r for r in rows if r['primitive'] == prim]
         pts, labels = speed_error_points(sel, label_key)
-        colors = [ENGINE_COLOR.get(e, "gray") for e, _, _ in labels]
+        colors = [ENGINE_COLOR.get(e, 'gray') for e, _, _ in labels]
         for (x, y), (e, text, sd), c in zip(pts, labels, colors):
-            ax.errorbar([x], [y], yerr=[sd], marker="o", color=c, capsize=2, ms=5)
-            ax.annotate(text, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7, color=c)
+            ax.errorbar([x], [y], yerr=[sd], marker='o', color=c, capsize=2, ms=5)
+            ax.annotate(
+                text, (x, y), textcoords='offset points', xytext=(4, 4), fontsize=7, color=c
+            )
         front = pareto_front(pts)
         if front:
             fx = [pts[i][0] for i in front]
             fy = [pts[i][1] for i in front]
-            ax.step(fx, fy, where="post", color="black", lw=1.2, ls="--", label="Pareto front")
-            ax.scatter(fx, fy, s=120, facecolors="none", edgecolors="black", zorder=3)
-            fronts += [{"task": prim, "engine": labels[i][0], "point": labels[i][1], "compute_s_per_s": pts[i][0],
-                        "CD": pts[i][1]} for i in front]
+            ax.step(fx, fy, where='post', color='black', lw=1.2, ls='--', label='Pareto front')
+            ax.scatter(fx, fy, s=120, facecolors='none', edgecolors='black', zorder=3)
+            fronts += [
+                {
+                    'task': prim,
+                    'engine': labels[i][0],
+                    'point': labels[i][1],
+                    'compute_s_per_s': pts[i][0],
+                    'CD': pts[i][1],
+                }
+                for i in front
+            ]
         for e in engines_of(sel):
-            ax.plot([], [], marker="o", color=ENGINE_COLOR.get(e, "gray"), ls="", label=engine_label(e))
-        ax.axvline(1.0, color="gray", lw=0.8, ls=":")
-        ax.set_xscale("log")
+            ax.plot(
+                [], [], marker='o', color=ENGINE_COLOR.get(e, 'gray'), ls='', label=engine_label(e)
+            )
+        ax.axvline(1.0, color='gray', lw=0.8, ls=':')
+        ax.set_xscale('log')
         _plain_log(ax)
-        ax.set_xlabel("engine compute per simulated second (s/s); left of 1 = faster than real time")
-        ax.set_ylabel(f"{metric_name(prim, 'CD')} (m)")
+        ax.set_xlabel(
+            'engine compute per simulated second (s/s); left of 1 = faster than real time'
+        )
+        ax.set_ylabel(f'{metric_name(prim, "CD")} (m)')
         ax.set_title(prim)
-        ax.grid(True, which="both", alpha=0.3)
+        ax.grid(True, which='both', alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
         else:
-            ax.text(0.5, 0.5, "no runs of this task", transform=ax.transAxes, ha="center", color="gray")
+            ax.text(
+                0.5, 0.5, 'no runs of this task', transform=ax.transAxes, ha='center', color='gray'
+            )
     fig.suptitle(title, fontsize=11)
     return save_figure(fig, path), fronts
 
 
-_SHORT = {"grid": "", "self_collision": "sc:", "timestep": "dt:", "solver_iterations": "it:", "substeps": "sub:"}
+_SHORT = {
+    'grid': '',
+    'self_collision': 'sc:',
+    'timestep': 'dt:',
+    'solver_iterations': 'it:',
+    'substeps': 'sub:',
+}
 
 
 def short_config(label: str) -> str:
     """Short label: "grid=11x15,self_collision=off,timestep=0.005" -> "11x15 sc:off dt:0.005"."""
     parts = []
-    for item in label.split(","):
-        name, _, value = item.partition("=")
-        parts.append(f"{_SHORT.get(name, name + ':')}{value}" if value else item)
-    return " ".join(parts)
+    for item in label.split(','):
+        name, _, value = item.partition('=')
+        parts.append(f'{_SHORT.get(name, name + ":")}{value}' if value else item)
+    return ' '.join(parts)
 
 
-def plot_settings(rows: Sequence[dict], path: Path, title: str, recommended: Sequence[str] = ()) -> Path:
+def plot_settings(
+    rows: Sequence[dict], path: Path, title: str, recommended: Sequence[str] = ()
+) -> Path:
     """One engine's settings sweep: CD against compute per configuration and task. Colour: mesh;
     marker: internal time step; open marker: self-collision on; the Pareto front dashed and
     labelled; the recommended configuration starred.
     """
     from matplotlib.lines import Line2D
 
-    prims = [p for p in ("dynamic", "quasi_static") if any(r["primitive"] == p for r in rows)]
+    prims = [p for p in ('dynamic', 'quasi_static') if any(r['primitive'] == p for r in rows)]
     fig, axes = plt.subplots(1, len(prims), figsize=(7.5 * len(prims), 5.5), squeeze=False)
-    grids = sorted({r.get("grid") or "default" for r in rows},
-                   key=lambda g: (math.prod(int(v) for v in g.split("x")) if "x" in g else 0))
-    steps = sorted({str(r.get("params", {}).get("timestep", "preset")) for r in rows})
-    cmap = plt.get_cmap("viridis", max(2, len(grids)))
-    markers = ["o", "s", "^", "D", "v", "P", "X"]
+    grids = sorted(
+        {r.get('grid') or 'default' for r in rows},
+        key=lambda g: math.prod(int(v) for v in g.split('x')) if 'x' in g else 0,
+    )
+    steps = sorted({str(r.get('params', {}).get('timestep', 'preset')) for r in rows})
+    cmap = plt.get_cmap('viridis', max(2, len(grids)))
+    markers = ['o', 's', '^', 'D', 'v', 'P', 'X']
     for ax, prim in zip(axes[0], prims):
         pts, labels = [], []
-        for config, g in sorted(group([r for r in rows if r["primitive"] == prim], "config").items(), key=str):
-            cd = stat(g, "CD")
-            cost = finite(compute_per_sim_second(r) for r in g if r.get("status") == "ok")
+        for config, g in sorted(
+            group([r for r in rows if r['primitive'] == prim], 'config').items(), key=str
+        ):
+            cd = stat(g, 'CD')
+            cost = finite(compute_per_sim_second(r) for r in g if r.get('status') == 'ok')
             if not cd.used or not len(cost) or cd.used < cd.n:
                 continue  # unstable configurations are in the table, not on the plot
             r0 = g[0]
-            color = cmap(grids.index(r0.get("grid") or "default"))
-            marker = markers[steps.index(str(r0.get("params", {}).get("timestep", "preset"))) % len(markers)]
-            hollow = bool(r0.get("params", {}).get("self_collision"))
+            color = cmap(grids.index(r0.get('grid') or 'default'))
+            marker = markers[
+                steps.index(str(r0.get('params', {}).get('timestep', 'preset'))) % len(markers)
+            ]
+            hollow = bool(r0.get('params', {}).get('self_collision'))
             x, y = float(cost.mean()), cd.mean
-            ax.errorbar([x], [y], yerr=[cd.std], color=color, marker=marker, ms=7, capsize=2, ls="",
-                        mfc="white" if hollow else color)
+            ax.errorbar(
+                [x],
+                [y],
+                yerr=[cd.std],
+                color=color,
+                marker=marker,
+                ms=7,
+                capsize=2,
+                ls='',
+                mfc='white' if hollow else color,
+            )
             if config[0] in recommended:
-                ax.scatter([x], [y], marker="*", s=260, facecolors="none", edgecolors="red", zorder=4)
+                ax.scatter(
+                    [x], [y], marker='*', s=260, facecolors='none', edgecolors='red', zorder=4
+                )
             pts.append((x, y))
             labels.append(config[0])
         front = pareto_front(pts)
         if front:
-            ax.step([pts[i][0] for i in front], [pts[i][1] for i in front], where="post", color="black", lw=1,
-                    ls="--")
+            ax.step(
+                [pts[i][0] for i in front],
+                [pts[i][1] for i in front],
+                where='post',
+                color='black',
+                lw=1,
+                ls='--',
+            )
             for n, i in enumerate(front):
-                ax.annotate(short_config(labels[i]), pts[i], textcoords="offset points",
-                            xytext=(6, 8 if n % 2 == 0 else -12), fontsize=7)
-        ax.set_xscale("log")
+                ax.annotate(
+                    short_config(labels[i]),
+                    pts[i],
+                    textcoords='offset points',
+                    xytext=(6, 8 if n % 2 == 0 else -12),
+                    fontsize=7,
+                )
+        ax.set_xscale('log')
         _plain_log(ax)
-        ax.set_xlabel("engine compute per simulated second (s/s)")
-        ax.set_ylabel(f"{metric_name(prim, 'CD')} (m)")
+        ax.set_xlabel('engine compute per simulated second (s/s)')
+        ax.set_ylabel(f'{metric_name(prim, "CD")} (m)')
         ax.set_title(prim)
-        ax.grid(True, which="both", alpha=0.3)
-        handles = [Line2D([], [], color=cmap(i), marker="o", ls="", label=f"mesh {g}") for i, g in enumerate(grids)]
-        handles += [Line2D([], [], color="gray", marker=markers[i % len(markers)], ls="", label=f"dt {t}")
-                    for i, t in enumerate(steps)]
-        handles += [Line2D([], [], color="gray", marker="o", mfc="white", ls="", label="self-collision on"),
-                    Line2D([], [], color="black", ls="--", label="Pareto front"),
-                    Line2D([], [], color="red", marker="*", mfc="none", ls="", ms=12, label="recommended")]
-        ax.legend(handles=handles, fontsize=7, loc="best")
+        ax.grid(True, which='both', alpha=0.3)
+        handles = [
+            Line2D([], [], color=cmap(i), marker='o', ls='', label=f'mesh {g}')
+            for i, g in enumerate(grids)
+        ]
+        handles += [
+            Line2D([], [], color='gray', marker=markers[i % len(markers)], ls='', label=f'dt {t}')
+            for i, t in enumerate(steps)
+        ]
+        handles += [
+            Line2D(
+                [], [], color='gray', marker='o', mfc='white', ls='', label='self-collision on'
+            ),
+            Line2D([], [], color='black', ls='--', label='Pareto front'),
+            Line2D([], [], color='red', marker='*', mfc='none', ls='', ms=12, label='recommended'),
+        ]
+        ax.legend(handles=handles, fontsize=7, loc='best')
     fig.suptitle(title, fontsize=11)
     return save_figure(fig, path)
 
 
 def frames_file(results_dir: Path, row: dict) -> Path | None:
-    """The row's frames.csv if it is a file inside results_dir (a row's path is untrusted)."""
-    from cloth_bench_ros.safe_io import UnsafeInputError, confined_path
+    """Return the row's frames.csv if it is a file inside results_dir (a row's path is untrusted)."""
+    from cloth_bench_ros.safe_io import confined_path, UnsafeInputError
 
-    name = row.get("frames_csv")
+    name = row.get('frames_csv')
     if not isinstance(name, str) or not name:
         return None
     try:
@@ -245,42 +356,71 @@ def frames_file(results_dir: Path, row: dict) -> Path | None:
 def _read_frames(path: Path) -> dict[str, np.ndarray]:
     with path.open() as f:
         rows = list(csv.DictReader(f))
-    return {k: np.array([float(r[k]) if r[k] not in ("", "nan") else np.nan for r in rows])
-            for k in ("t", "cd", "hd")}
+    return {
+        k: np.array([float(r[k]) if r[k] not in ('', 'nan') else np.nan for r in rows])
+        for k in ('t', 'cd', 'hd')
+    }
 
 
 def plot_frames(rows: Sequence[dict], results_dir: Path, cloth: str, path: Path) -> Path | None:
     """Per-frame CD and HD over time for each task, engine and rate (first seed and trial),
     with the change of phase of the dynamic trial marked.
     """
-    sel = [r for r in rows if r["cloth"] == cloth and r.get("frames_csv")]
-    prims = [p for p in ("dynamic", "quasi_static") if any(r["primitive"] == p for r in sel)]
+    sel = [r for r in rows if r['cloth'] == cloth and r.get('frames_csv')]
+    prims = [p for p in ('dynamic', 'quasi_static') if any(r['primitive'] == p for r in sel)]
     if not prims:
         return None
     fig, axes = plt.subplots(len(prims), 2, figsize=(12, 3.8 * len(prims)), squeeze=False)
-    styles = ["-", "--", ":", "-."]
+    styles = ['-', '--', ':', '-.']
     for row_axes, prim in zip(axes, prims):
-        g = [r for r in sel if r["primitive"] == prim]
+        g = [r for r in sel if r['primitive'] == prim]
         first = {}
-        for r in sorted(g, key=lambda r: (r.get("trial", 0), r["seed"])):
-            first.setdefault((r["engine"], float(r["rate_hz"])), r)
+        for r in sorted(g, key=lambda r: (r.get('trial', 0), r['seed'])):
+            first.setdefault((r['engine'], float(r['rate_hz'])), r)
         rates = sorted({k[1] for k in first})
-        cut = next((r.get("change_of_phase_frame") for r in g if r.get("change_of_phase_frame") is not None), None)
-        for ax, kind in zip(row_axes, ("cd", "hd")):
-            for (e, rate), r in sorted(first.items(), key=lambda x: (engines_of(g).index(x[0][0]), x[0][1])):
+        cut = next(
+            (
+                r.get('change_of_phase_frame')
+                for r in g
+                if r.get('change_of_phase_frame') is not None
+            ),
+            None,
+        )
+        for ax, kind in zip(row_axes, ('cd', 'hd')):
+            for (e, rate), r in sorted(
+                first.items(), key=lambda x: (engines_of(g).index(x[0][0]), x[0][1])
+            ):
                 f = frames_file(results_dir, r)
                 if f is None:
                     continue
                 data = _read_frames(f)
-                ax.plot(data["t"], data[kind], color=ENGINE_COLOR.get(e), ls=styles[rates.index(rate) % 4], lw=1.2,
-                        label=f"{engine_label(e)} {rate:g} Hz" + (" (diverged)" if r.get("diverged") else ""))
-            if prim == "dynamic" and cut is not None:
-                ax.axvline(cut / FPS, color="red", lw=1, ls="--")
-                ax.annotate(f"change of phase (frame {cut}) ", (cut / FPS, 0.03), xycoords=("data", "axes fraction"),
-                            color="red", fontsize=8, ha="right", va="bottom", rotation=90)
-            ax.set_xlabel("time since the start of the quintic part (s)")
-            ax.set_ylabel(f"{kind.upper()} (m)")
-            ax.set_title(f"{cloth} {prim}: per-frame {kind.upper()} (seed {min(r['seed'] for r in first.values())})")
+                ax.plot(
+                    data['t'],
+                    data[kind],
+                    color=ENGINE_COLOR.get(e),
+                    ls=styles[rates.index(rate) % 4],
+                    lw=1.2,
+                    label=f'{engine_label(e)} {rate:g} Hz'
+                    + (' (diverged)' if r.get('diverged') else ''),
+                )
+            if prim == 'dynamic' and cut is not None:
+                ax.axvline(cut / FPS, color='red', lw=1, ls='--')
+                ax.annotate(
+                    f'change of phase (frame {cut}) ',
+                    (cut / FPS, 0.03),
+                    xycoords=('data', 'axes fraction'),
+                    color='red',
+                    fontsize=8,
+                    ha='right',
+                    va='bottom',
+                    rotation=90,
+                )
+            ax.set_xlabel('time since the start of the quintic part (s)')
+            ax.set_ylabel(f'{kind.upper()} (m)')
+            ax.set_title(
+                f'{cloth} {prim}: per-frame {kind.upper()} (seed'
+                f' {min(r["seed"] for r in first.values())})'
+            )
             ax.grid(True, alpha=0.3)
             if ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=7)
@@ -289,26 +429,38 @@ def plot_frames(rows: Sequence[dict], results_dir: Path, cloth: str, path: Path)
 
 def plot_latency(rows: Sequence[dict], path: Path) -> Path | None:
     """Latency p50 / p99 / max per engine and rate (realtime-paced runs if any, else all)."""
-    rt = [r for r in rows if r.get("pacing") == "realtime" and r.get("status") in ("ok", "diverged")]
-    sel = rt or [r for r in rows if r.get("status") == "ok"]
-    groups = group([r for r in sel if r.get("latency_p50") is not None], "engine", "rate_hz", "pacing")
+    rt = [
+        r for r in rows if r.get('pacing') == 'realtime' and r.get('status') in ('ok', 'diverged')
+    ]
+    sel = rt or [r for r in rows if r.get('status') == 'ok']
+    groups = group(
+        [r for r in sel if r.get('latency_p50') is not None], 'engine', 'rate_hz', 'pacing'
+    )
     if not groups:
         return None
     fig, ax = plt.subplots(figsize=(max(6, 1.3 * len(groups) + 2), 4.5))
     keys = sorted(groups, key=lambda k: (k[2], engines_of(sel).index(k[0]), k[1]))
     x = np.arange(len(keys))
-    for i, (q, marker) in enumerate((("latency_p50", "o"), ("latency_p99", "s"), ("latency_max", "^"))):
-        vals = [np.median(finite(r.get(q) for r in groups[k])) * 1e3 if len(finite(r.get(q) for r in groups[k]))
-                else np.nan for k in keys]
-        ax.scatter(x + (i - 1) * 0.15, vals, marker=marker, label=q.split("_")[1], zorder=3)
+    for i, (q, marker) in enumerate(
+        (('latency_p50', 'o'), ('latency_p99', 's'), ('latency_max', '^'))
+    ):
+        vals = [
+            (
+                np.median(finite(r.get(q) for r in groups[k])) * 1e3
+                if len(finite(r.get(q) for r in groups[k]))
+                else np.nan
+            )
+            for k in keys
+        ]
+        ax.scatter(x + (i - 1) * 0.15, vals, marker=marker, label=q.split('_')[1], zorder=3)
     for j, k in enumerate(keys):
-        ax.plot([j - 0.35, j + 0.35], [1e3 / k[1]] * 2, color="red", lw=1.5)
-    ax.plot([], [], color="red", label="deadline = 1 / rate")
-    ax.set_xticks(x, [f"{engine_label(k[0])}\n{k[1]:g} Hz\n{k[2]}" for k in keys], fontsize=8)
-    ax.set_yscale("log")
+        ax.plot([j - 0.35, j + 0.35], [1e3 / k[1]] * 2, color='red', lw=1.5)
+    ax.plot([], [], color='red', label='deadline = 1 / rate')
+    ax.set_xticks(x, [f'{engine_label(k[0])}\n{k[1]:g} Hz\n{k[2]}' for k in keys], fontsize=8)
+    ax.set_yscale('log')
     _plain_log(ax)
-    ax.set_ylabel("latency, target due -> state received (ms)")
-    ax.grid(True, which="both", axis="y", alpha=0.3)
+    ax.set_ylabel('latency, target due -> state received (ms)')
+    ax.grid(True, which='both', axis='y', alpha=0.3)
     ax.legend(fontsize=8)
-    ax.set_title("per-step latency against the deadline")
+    ax.set_title('per-step latency against the deadline')
     return save_figure(fig, path)

@@ -14,47 +14,99 @@ import math
 from pathlib import Path
 from typing import Sequence
 
-import numpy as np
-
-from cloth_bench_ros.report.blocks import Document, Table, figure_block, paragraph, table_block, write_document
-from cloth_bench_ros.report.statistics import engine_label, fmt_fixed as _fmt, metric_name
+from cloth_bench_ros.report.blocks import (
+    Document,
+    figure_block,
+    paragraph,
+    Table,
+    table_block,
+    write_document,
+)
+from cloth_bench_ros.report.statistics import engine_label, metric_name
+from cloth_bench_ros.report.statistics import fmt_fixed as _fmt
 from cloth_bench_ros.studies.aggregate import finite
 from cloth_bench_ros.studies.recommend import (
-    DEADLINE_BUDGET, Recommendation, recommend_for_rate, settings_results, step_ms_by_config)
+    DEADLINE_BUDGET,
+    recommend_for_rate,
+    Recommendation,
+    settings_results,
+    step_ms_by_config,
+)
+import numpy as np
 
 
-def deadline_tables(rows: Sequence[dict], tol_rel: float = 0.05, tol_abs: float = 0.002,
-                    budget: float = DEADLINE_BUDGET) -> tuple[list[Table], list[str]]:
+def deadline_tables(
+    rows: Sequence[dict],
+    tol_rel: float = 0.05,
+    tol_abs: float = 0.002,
+    budget: float = DEADLINE_BUDGET,
+) -> tuple[list[Table], list[str]]:
     """Per engine, task and rate of a settings sweep: every configuration against the deadline."""
-    settings = [r for r in rows if r.get("mode") == "settings"]
-    keys = sorted({(r["engine"], r["cloth"], r["primitive"], float(r["rate_hz"])) for r in settings})
+    settings = [r for r in rows if r.get('mode') == 'settings']
+    keys = sorted(
+        {(r['engine'], r['cloth'], r['primitive'], float(r['rate_hz'])) for r in settings}
+    )
     tables, notes = [], []
     for engine, cloth, primitive, rate in keys:
-        sel = [r for r in settings if (r["engine"], r["cloth"], r["primitive"], float(r["rate_hz"]))
-               == (engine, cloth, primitive, rate)]
+        sel = [
+            r
+            for r in settings
+            if (r['engine'], r['cloth'], r['primitive'], float(r['rate_hz']))
+            == (engine, cloth, primitive, rate)
+        ]
         rec = recommend_for_rate(sel, engine, cloth, primitive, rate, tol_rel, tol_abs, budget)
-        p50, p99 = step_ms_by_config(sel, "step_time_p50"), step_ms_by_config(sel, "step_time_p99")
+        p50, p99 = step_ms_by_config(sel, 'step_time_p50'), step_ms_by_config(sel, 'step_time_p99')
         period_ms = 1e3 / rate
         out = []
         for r in sorted(settings_results(sel), key=lambda r: p99.get(r.config, math.inf)):
             within = rec is not None and r.stable and r.cd.mean <= rec.best_cd + rec.tolerance_m
             fast = p99.get(r.config, math.nan) < budget * period_ms
-            flag = "**recommended**" if rec is not None and r.config == rec.config else ""
-            out.append([r.config, _fmt(p50.get(r.config), 3), _fmt(p99.get(r.config), 3), "yes" if fast else "no",
-                        r.cd.text(4, False), "yes" if within else "no", flag])
-        tables.append(Table(f"deadline_{engine}_{cloth}_{primitive}_{rate:g}hz",
-                            ["configuration", "step p50 ms", "step p99 ms", f"p99 < {budget * period_ms:g} ms",
-                             metric_name(primitive, "CD") + " (m)", "within tolerance", "notes"], out, "lrrlrll"))
+            flag = '**recommended**' if rec is not None and r.config == rec.config else ''
+            out.append(
+                [
+                    r.config,
+                    _fmt(p50.get(r.config), 3),
+                    _fmt(p99.get(r.config), 3),
+                    'yes' if fast else 'no',
+                    r.cd.text(4, False),
+                    'yes' if within else 'no',
+                    flag,
+                ]
+            )
+        tables.append(
+            Table(
+                f'deadline_{engine}_{cloth}_{primitive}_{rate:g}hz',
+                [
+                    'configuration',
+                    'step p50 ms',
+                    'step p99 ms',
+                    f'p99 < {budget * period_ms:g} ms',
+                    metric_name(primitive, 'CD') + ' (m)',
+                    'within tolerance',
+                    'notes',
+                ],
+                out,
+                'lrrlrll',
+            )
+        )
         if rec is None:
-            notes.append(f"{engine_label(engine)}, {cloth} {primitive} at {rate:g} Hz: no stable configuration.")
+            notes.append(
+                f'{engine_label(engine)}, {cloth} {primitive} at {rate:g} Hz: no stable'
+                ' configuration.'
+            )
         elif rec.meets_deadline:
-            notes.append(f"{engine_label(engine)}, {cloth} {primitive} at {rate:g} Hz: **`{rec.config}`** is the "
-                         f"cheapest configuration both within tolerance (CD {rec.cd:.4f} m, best {rec.best_cd:.4f} m) "
-                         f"and with step p99 {rec.step_p99_ms:.3f} ms under {budget * period_ms:g} ms.")
+            notes.append(
+                f'{engine_label(engine)}, {cloth} {primitive} at {rate:g} Hz: **`{rec.config}`**'
+                f' is the cheapest configuration both within tolerance (CD {rec.cd:.4f} m, best'
+                f' {rec.best_cd:.4f} m) and with step p99 {rec.step_p99_ms:.3f} ms under'
+                f' {budget * period_ms:g} ms.'
+            )
         else:
-            notes.append(f"{engine_label(engine)}, {cloth} {primitive} at {rate:g} Hz: no configuration within "
-                         f"tolerance has a step p99 under {budget * period_ms:g} ms; the cheapest within tolerance is "
-                         f"`{rec.config}` (step p99 {rec.step_p99_ms:.3f} ms).")
+            notes.append(
+                f'{engine_label(engine)}, {cloth} {primitive} at {rate:g} Hz: no configuration'
+                f' within tolerance has a step p99 under {budget * period_ms:g} ms; the cheapest'
+                f' within tolerance is `{rec.config}` (step p99 {rec.step_p99_ms:.3f} ms).'
+            )
     return tables, notes
 
 
@@ -62,38 +114,63 @@ def deadline_tables(rows: Sequence[dict], tol_rel: float = 0.05, tol_abs: float 
 
 
 def recommendation_yaml(recs: Sequence[Recommendation], provenance: dict) -> str:
-    """The shipped recommendation file: provenance, then one entry per engine, task and rate."""
+    """Return the shipped recommendation file: provenance, then one entry per engine, task and rate."""
     import yaml
 
-    return yaml.safe_dump({"provenance": provenance, "recommendations": [r.as_dict() for r in recs]},
-                          sort_keys=False, width=110)
+    return yaml.safe_dump(
+        {'provenance': provenance, 'recommendations': [r.as_dict() for r in recs]},
+        sort_keys=False,
+        width=110,
+    )
 
 
-def all_recommendations(rows: Sequence[dict], tol_rel: float = 0.05, tol_abs: float = 0.002,
-                        budget: float = DEADLINE_BUDGET) -> list[Recommendation]:
+def all_recommendations(
+    rows: Sequence[dict],
+    tol_rel: float = 0.05,
+    tol_abs: float = 0.002,
+    budget: float = DEADLINE_BUDGET,
+) -> list[Recommendation]:
     """`recommend_for_rate` for every engine, task and rate of a settings sweep's rows."""
-    keys = sorted({(r["engine"], r["cloth"], r["primitive"], float(r["rate_hz"])) for r in rows
-                   if r.get("mode") == "settings"})
+    keys = sorted(
+        {
+            (r['engine'], r['cloth'], r['primitive'], float(r['rate_hz']))
+            for r in rows
+            if r.get('mode') == 'settings'
+        }
+    )
     recs = [recommend_for_rate(rows, *key, tol_rel, tol_abs, budget) for key in keys]
     return [r for r in recs if r is not None]
 
 
-def provenance(rows: Sequence[dict], tol_rel: float, tol_abs: float, budget: float, note: str = "") -> dict:
+def provenance(
+    rows: Sequence[dict], tol_rel: float, tol_abs: float, budget: float, note: str = ''
+) -> dict:
     """Where a recommendation file's numbers come from: the sweep's size, engines, machine load, rule."""
     from datetime import datetime, timezone
 
-    settings = [r for r in rows if r.get("mode") == "settings"]
-    loads = finite(r.get("load_avg_1min") for r in settings)
+    settings = [r for r in rows if r.get('mode') == 'settings']
+    loads = finite(r.get('load_avg_1min') for r in settings)
     return {
-        "generated": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-        "from": f"{len(settings)} settings-sweep cells (`cloth-bench sweep --mode settings`), lockstep",
-        "engines": sorted({f"{r['engine']} {r['engine_version']}" for r in settings if r.get("engine_version")}),
-        "rule": f"cheapest (median step time) with CD <= best + max({tol_rel:g} x best, {tol_abs:g} m) and step p99 < "
-                f"{budget:g} x period; if none meets the deadline, the cheapest within tolerance (meets_deadline false)",
-        "machine": (f"{settings[0].get('cpu_count') if settings else '?'} cores; 1-minute load average during the "
-                    f"sweep {np.median(loads):.1f} (median, {loads.min():.1f}-{loads.max():.1f})" if len(loads)
-                    else "unknown"),
-        "note": note,
+        'generated': datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
+        'from': (
+            f'{len(settings)} settings-sweep cells (`cloth-bench sweep --mode settings`), lockstep'
+        ),
+        'engines': sorted(
+            {f'{r["engine"]} {r["engine_version"]}' for r in settings if r.get('engine_version')}
+        ),
+        'rule': (
+            f'cheapest (median step time) with CD <= best + max({tol_rel:g} x best, {tol_abs:g} m)'
+            f' and step p99 < {budget:g} x period; if none meets the deadline, the cheapest within'
+            ' tolerance (meets_deadline false)'
+        ),
+        'machine': (
+            f'{settings[0].get("cpu_count") if settings else "?"} cores; 1-minute load average'
+            f' during the sweep {np.median(loads):.1f} (median,'
+            f' {loads.min():.1f}-{loads.max():.1f})'
+            if len(loads)
+            else 'unknown'
+        ),
+        'note': note,
     }
 
 
@@ -108,66 +185,111 @@ def hil_table(rows: Sequence[dict]) -> Table:
     """Item 4 per run: latency percentiles, misses, skipped targets, RTF, load, CD in lockstep."""
     out = []
     for r in rows:
-        n = max(int(r.get("states") or 0), 1)
-        out.append([engine_label(r["engine"]), f"{r['rate_hz']:g}", r["config"],
-                    "3 processes" if r.get("processes") else "1 process",
-                    _ms(r["latency_p50"]), _ms(r["latency_p99"]), _ms(r["latency_p999"]), _ms(r["latency_max"]),
-                    f"{r['deadline_misses']} ({100 * r['deadline_misses'] / n:.2f} %)",
-                    f"{r['skipped']} of {r['sent']}", _ms(r.get("send_lag_p99")), _fmt(r["real_time_factor"], 3),
-                    _ms(r.get("step_time_p99")), _percent(r.get("cpu_busy")), _percent(r.get("cpu_steal")),
-                    f"{r.get('loadavg_after', math.nan):.2f} / {r.get('cpu_count') or '?'}",
-                    _fmt(r.get("cd_lockstep"), 4), _fmt(r.get("cd_realtime"), 4),
-                    "ok" if not r.get("problems") else "; ".join(r["problems"])])
-    return Table("hil", ["engine", "rate Hz", "configuration", "layout", "lat p50 ms", "lat p99 ms", "lat p99.9 ms",
-                         "lat max ms", "deadline misses", "skipped targets", "send lag p99 ms", "RTF", "step p99 ms", "CPU busy",
-                         "CPU steal", "load / cores", "CD lockstep (m)", "CD realtime (m)", "bookkeeping"], out,
-                 "lrllrrrrrrrrrrrrrrl")
+        n = max(int(r.get('states') or 0), 1)
+        out.append(
+            [
+                engine_label(r['engine']),
+                f'{r["rate_hz"]:g}',
+                r['config'],
+                '3 processes' if r.get('processes') else '1 process',
+                _ms(r['latency_p50']),
+                _ms(r['latency_p99']),
+                _ms(r['latency_p999']),
+                _ms(r['latency_max']),
+                f'{r["deadline_misses"]} ({100 * r["deadline_misses"] / n:.2f} %)',
+                f'{r["skipped"]} of {r["sent"]}',
+                _ms(r.get('send_lag_p99')),
+                _fmt(r['real_time_factor'], 3),
+                _ms(r.get('step_time_p99')),
+                _percent(r.get('cpu_busy')),
+                _percent(r.get('cpu_steal')),
+                f'{r.get("loadavg_after", math.nan):.2f} / {r.get("cpu_count") or "?"}',
+                _fmt(r.get('cd_lockstep'), 4),
+                _fmt(r.get('cd_realtime'), 4),
+                'ok' if not r.get('problems') else '; '.join(r['problems']),
+            ]
+        )
+    return Table(
+        'hil',
+        [
+            'engine',
+            'rate Hz',
+            'configuration',
+            'layout',
+            'lat p50 ms',
+            'lat p99 ms',
+            'lat p99.9 ms',
+            'lat max ms',
+            'deadline misses',
+            'skipped targets',
+            'send lag p99 ms',
+            'RTF',
+            'step p99 ms',
+            'CPU busy',
+            'CPU steal',
+            'load / cores',
+            'CD lockstep (m)',
+            'CD realtime (m)',
+            'bookkeeping',
+        ],
+        out,
+        'lrllrrrrrrrrrrrrrrl',
+    )
 
 
 def _percent(share: float | None) -> str:
-    return f"{100 * share:.1f} %" if isinstance(share, float) and math.isfinite(share) else "-"
+    return f'{100 * share:.1f} %' if isinstance(share, float) and math.isfinite(share) else '-'
 
 
 def text_table(table: Table) -> str:
-    """A table as fixed-width text for the terminal (numbers right-aligned)."""
-    cells = [table.headers] + [[str(c).replace("**", "") for c in row] for row in table.rows]
+    """Return a table as fixed-width text for the terminal (numbers right-aligned)."""
+    cells = [table.headers] + [[str(c).replace('**', '') for c in row] for row in table.rows]
     widths = [max(len(r[i]) for r in cells) for i in range(len(table.headers))]
-    align = table.align or "l" * len(widths)
-    lines = ["  ".join(c.rjust(w) if a == "r" else c.ljust(w) for c, w, a in zip(row, widths, align)).rstrip()
-             for row in cells]
-    return "\n".join([lines[0], "-" * len(lines[0])] + lines[1:])
+    align = table.align or 'l' * len(widths)
+    lines = [
+        '  '.join(
+            c.rjust(w) if a == 'r' else c.ljust(w) for c, w, a in zip(row, widths, align)
+        ).rstrip()
+        for row in cells
+    ]
+    return '\n'.join([lines[0], '-' * len(lines[0])] + lines[1:])
 
 
 def plot_run(timeline, period_s: float, path: Path, title: str) -> Path:
     """Latency over the run (left) and its histogram (right), deadline in red, skipped targets marked."""
     import matplotlib
 
-    matplotlib.use("Agg")
+    matplotlib.use('Agg')
+    from cloth_bench_ros.core.hil_timing import latencies, UNSET
     import matplotlib.pyplot as plt
-
-    from cloth_bench_ros.core.hil_timing import UNSET, latencies
 
     got = timeline.received != UNSET
     t = (timeline.stamps - timeline.stamps[0]) / 1e9
     lat_ms = latencies(timeline) * 1e3
-    fig, (ax, hist) = plt.subplots(1, 2, figsize=(12, 4), gridspec_kw={"width_ratios": [2.2, 1]})
-    ax.plot(t[got], lat_ms, lw=0.6, color="tab:blue", label="latency (due -> state received)")
+    fig, (ax, hist) = plt.subplots(1, 2, figsize=(12, 4), gridspec_kw={'width_ratios': [2.2, 1]})
+    ax.plot(t[got], lat_ms, lw=0.6, color='tab:blue', label='latency (due -> state received)')
     missing = ~got & (timeline.sent != UNSET)
     if missing.any():
-        ax.scatter(t[missing], np.full(int(missing.sum()), period_s * 1e3), marker="|", color="tab:orange",
-                   label="skipped target", zorder=3)
-    ax.axhline(period_s * 1e3, color="red", lw=1, label="deadline = 1 / rate")
-    ax.set_xlabel("time in the run (s)")
-    ax.set_ylabel("latency (ms)")
+        ax.scatter(
+            t[missing],
+            np.full(int(missing.sum()), period_s * 1e3),
+            marker='|',
+            color='tab:orange',
+            label='skipped target',
+            zorder=3,
+        )
+    ax.axhline(period_s * 1e3, color='red', lw=1, label='deadline = 1 / rate')
+    ax.set_xlabel('time in the run (s)')
+    ax.set_ylabel('latency (ms)')
     if lat_ms.size and np.nanmax(lat_ms) > 20 * period_s * 1e3:
-        ax.set_yscale("log")
+        ax.set_yscale('log')
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(fontsize=8, loc='upper left')
     if lat_ms.size:
-        hist.hist(lat_ms, bins=80, color="tab:blue", log=True)
-    hist.axvline(period_s * 1e3, color="red", lw=1)
-    hist.set_xlabel("latency (ms)")
-    hist.set_ylabel("targets")
+        hist.hist(lat_ms, bins=80, color='tab:blue', log=True)
+    hist.axvline(period_s * 1e3, color='red', lw=1)
+    hist.set_xlabel('latency (ms)')
+    hist.set_ylabel('targets')
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -181,25 +303,42 @@ def write_hil_report(rows: Sequence[dict], results_dir: Path, out_dir: Path) -> 
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    doc = Document("cloth_bench_ros: hardware in the loop")
-    doc.extend([paragraph("Latency: from the target's due time on the controller's wall-clock schedule (first target + k / rate) to "
-                          "the state's arrival back at the controller (the trajectory publisher), so a late send and a simulator "
-                          "that falls behind both count. A miss is a state later than one period; a skipped target is one the "
-                          "simulator never stepped because a newer one was waiting (keep-last), counted beside the misses. RTF: "
-                          "simulated over wall time. CPU busy: share of all cores busy during the run (/proc/stat), any process; "
-                          "CPU steal: share the hypervisor of a virtual machine ran something else on our cores (the vCPU "
-                          "was runnable but stopped; no setting inside the machine prevents it); "
-                          "load: 1-minute load average at the end. CD lockstep: the same configuration run in lockstep.")])
+    doc = Document('cloth_bench_ros: hardware in the loop')
+    doc.extend(
+        [
+            paragraph(
+                "Latency: from the target's due time on the controller's wall-clock schedule"
+                " (first target + k / rate) to the state's arrival back at the controller (the"
+                " trajectory publisher), so a late send and a simulator that falls behind both"
+                " count. A miss is a state later than one period; a skipped target is one the"
+                " simulator never stepped because a newer one was waiting (keep-last), counted"
+                " beside the misses. RTF: simulated over wall time. CPU busy: share of all cores"
+                " busy during the run (/proc/stat), any process; CPU steal: share the hypervisor"
+                " of a virtual machine ran something else on our cores (the vCPU was runnable but"
+                " stopped; no setting inside the machine prevents it); load: 1-minute load average"
+                " at the end. CD lockstep: the same configuration run in lockstep."
+            )
+        ]
+    )
     table = hil_table(rows)
     doc.extend([table_block(table)])
     for r in rows:
-        run_dir = Path(results_dir) / (r.get("run_dir") or "")
-        csv = run_dir / f"timeline_{r['engine']}.csv"
-        if r.get("run_dir") and csv.is_file():
-            title = f"{engine_label(r['engine'])} at {r['rate_hz']:g} Hz, {r['config']}"
-            draw = (lambda path, timeline=TargetTimeline.from_csv(csv.read_text()), period=1.0 / r["rate_hz"],
-                    title=title: plot_run(timeline, period, path, title) or path)
-            doc.extend([figure_block(f"latency_{r['run_dir']}.png", f"{engine_label(r['engine'])} {r['rate_hz']:g} Hz "
-                                     f"{r['config']}: latency over the run and its histogram", draw)])
-    md, _, _ = write_document(doc, out_dir, names=("hil.md", "hil.html"))
+        run_dir = Path(results_dir) / (r.get('run_dir') or '')
+        csv = run_dir / f'timeline_{r["engine"]}.csv'
+        if r.get('run_dir') and csv.is_file():
+            title = f'{engine_label(r["engine"])} at {r["rate_hz"]:g} Hz, {r["config"]}'
+            draw = lambda path, timeline=TargetTimeline.from_csv(csv.read_text()), period=1.0 / r[
+                'rate_hz'
+            ], title=title: (plot_run(timeline, period, path, title) or path)
+            doc.extend(
+                [
+                    figure_block(
+                        f'latency_{r["run_dir"]}.png',
+                        f'{engine_label(r["engine"])} {r["rate_hz"]:g} Hz '
+                        f'{r["config"]}: latency over the run and its histogram',
+                        draw,
+                    )
+                ]
+            )
+    md, _, _ = write_document(doc, out_dir, names=('hil.md', 'hil.html'))
     return md

@@ -7,23 +7,26 @@ import math
 
 def _fmt(value: float | None, digits: int = 4) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "-"
-    return f"{value:.{digits}f}"
+        return '-'
+    return f'{value:.{digits}f}'
 
 
 def result_table(summary: dict) -> str:
     """One row per engine: CD, HD, L_s and step latency (ms), in a fixed-width table."""
-    suffix = "d" if summary["run"]["primitive"] == "dynamic" else "q"
-    header = (f"{'engine':<10} {'CD_' + suffix:>8} {'HD_' + suffix:>8} {'L_s':>10} "
-              f"{'step mean':>10} {'p50':>8} {'p99':>8} {'max':>8}  status")
-    lines = [header, "-" * len(header)]
-    for engine, m in summary["engines"].items():
-        st = m["step_time"]
-        ms = {k: (st[k] * 1e3 if st[k] is not None else None) for k in ("mean", "p50", "p99", "max")}
-        status = f"diverged at step {m['diverged_at_step']}" if m["diverged"] else "ok"
+    suffix = 'd' if summary['run']['primitive'] == 'dynamic' else 'q'
+    header = (
+        f'{"engine":<10} {"CD_" + suffix:>8} {"HD_" + suffix:>8} {"L_s":>10} '
+        f'{"step mean":>10} {"p50":>8} {"p99":>8} {"max":>8}  status'
+    )
+    lines = [header, '-' * len(header)]
+    for engine, m in summary['engines'].items():
+        st = m['step_time']
+        ms = {k: st[k] * 1e3 if st[k] is not None else None for k in ('mean', 'p50', 'p99', 'max')}
+        status = f'diverged at step {m["diverged_at_step"]}' if m['diverged'] else 'ok'
         lines.append(
-            f"{engine:<10} {_fmt(m['CD_' + suffix]):>8} {_fmt(m['HD_' + suffix]):>8} {_fmt(m['L_s'], 7):>10} "
-            f"{_fmt(ms['mean'], 3):>10} {_fmt(ms['p50'], 3):>8} {_fmt(ms['p99'], 3):>8} {_fmt(ms['max'], 3):>8}  {status}"
+            f'{engine:<10} {_fmt(m["CD_" + suffix]):>8} {_fmt(m["HD_" + suffix]):>8}'
+            f' {_fmt(m["L_s"], 7):>10} {_fmt(ms["mean"], 3):>10} {_fmt(ms["p50"], 3):>8}'
+            f' {_fmt(ms["p99"], 3):>8} {_fmt(ms["max"], 3):>8}  {status}'
         )
-    lines.append("CD/HD in m (one-sided, L1); L_s in m; step times in ms.")
-    return "\n".join(lines)
+    lines.append('CD/HD in m (one-sided, L1); L_s in m; step times in ms.')
+    return '\n'.join(lines)

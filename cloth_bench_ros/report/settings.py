@@ -2,16 +2,25 @@
 
 from __future__ import annotations
 
-import math
 from collections import defaultdict
+import math
 from typing import Sequence
 
 from cloth_bench_ros.report.blocks import Table
-from cloth_bench_ros.report.statistics import engine_label, engines_of, fmt_fixed, fmt_sig, metric_name, pareto_front
+from cloth_bench_ros.report.statistics import (
+    engine_label,
+    engines_of,
+    fmt_fixed,
+    fmt_sig,
+    metric_name,
+    pareto_front,
+)
 from cloth_bench_ros.studies.recommend import recommend, settings_results
 
 
-def settings_tables(rows: Sequence[dict], tol_rel: float, tol_abs: float) -> tuple[list[Table], list[str], list[dict]]:
+def settings_tables(
+    rows: Sequence[dict], tol_rel: float, tol_abs: float
+) -> tuple[list[Table], list[str], list[dict]]:
     """Per engine, cloth, task and rate: every configuration, and the recommendation sentences."""
     results = settings_results(rows)
     tables, notes, recs = [], [], []
@@ -21,40 +30,88 @@ def settings_tables(rows: Sequence[dict], tol_rel: float, tol_abs: float) -> tup
     for key in sorted(by, key=lambda k: (engines_of(rows).index(k[0]), k[1], k[2], k[3])):
         group_results = by[key]
         best, cheap, tol = recommend(group_results, tol_rel, tol_abs)
-        front = pareto_front([(r.step_ms, r.cd.mean) if r.stable else (math.nan, math.nan) for r in group_results])
+        front = pareto_front(
+            [(r.step_ms, r.cd.mean) if r.stable else (math.nan, math.nan) for r in group_results]
+        )
         rows_out = []
-        for i, r in sorted(enumerate(group_results), key=lambda x: (x[1].step_ms if math.isfinite(x[1].step_ms) else math.inf)):
+        for i, r in sorted(
+            enumerate(group_results),
+            key=lambda x: x[1].step_ms if math.isfinite(x[1].step_ms) else math.inf,
+        ):
             flags = []
             if best is not None and r is best:
-                flags.append("most accurate")
+                flags.append('most accurate')
             if cheap is not None and r is cheap:
-                flags.append("**recommended**")
+                flags.append('**recommended**')
             if i in front:
-                flags.append("Pareto")
+                flags.append('Pareto')
             if not r.stable:
-                flags.append("unstable")
-            within = best is not None and r.stable and math.isfinite(r.cd.mean) and r.cd.mean <= best.cd.mean + tol
-            rows_out.append([r.config, fmt_fixed(r.step_ms, 3), fmt_sig(r.cost), r.cd.text(4, False), r.hd.text(4, False),
-                             "yes" if within else "no", ", ".join(flags)])
+                flags.append('unstable')
+            within = (
+                best is not None
+                and r.stable
+                and math.isfinite(r.cd.mean)
+                and r.cd.mean <= best.cd.mean + tol
+            )
+            rows_out.append(
+                [
+                    r.config,
+                    fmt_fixed(r.step_ms, 3),
+                    fmt_sig(r.cost),
+                    r.cd.text(4, False),
+                    r.hd.text(4, False),
+                    'yes' if within else 'no',
+                    ', '.join(flags),
+                ]
+            )
         e, cloth, prim, rate = key
-        name = f"settings_{e}_{cloth}_{prim}_{rate:g}hz"
-        tables.append(Table(name, ["configuration", "step mean ms", "compute s/s", metric_name(prim, "CD") + " (m)",
-                                   metric_name(prim, "HD") + " (m)", "within tolerance", "notes"],
-                            rows_out, "lrrrrll"))
+        name = f'settings_{e}_{cloth}_{prim}_{rate:g}hz'
+        tables.append(
+            Table(
+                name,
+                [
+                    'configuration',
+                    'step mean ms',
+                    'compute s/s',
+                    metric_name(prim, 'CD') + ' (m)',
+                    metric_name(prim, 'HD') + ' (m)',
+                    'within tolerance',
+                    'notes',
+                ],
+                rows_out,
+                'lrrrrll',
+            )
+        )
         if best is None:
-            notes.append(f"{engine_label(e)}, {cloth} {prim} at {rate:g} Hz: no stable configuration.")
+            notes.append(
+                f'{engine_label(e)}, {cloth} {prim} at {rate:g} Hz: no stable configuration.'
+            )
             continue
         notes.append(
-            f"{engine_label(e)}, {cloth} {prim} at {rate:g} Hz: the most accurate configuration is `{best.config}` "
-            f"({metric_name(prim, 'CD')} = {best.cd.mean:.4f} m, {best.step_ms:.3f} ms per step); the cheapest "
-            f"within tolerance (CD <= best + max({tol_rel:.0%} of best, {tol_abs * 1e3:g} mm) = "
-            f"{best.cd.mean + tol:.4f} m) is **`{cheap.config}`** (CD = {cheap.cd.mean:.4f} m, "
-            f"{cheap.step_ms:.3f} ms per step, {best.step_ms / cheap.step_ms:.1f}x faster than the most accurate).")
-        recs.append({"engine": e, "cloth": cloth, "primitive": prim, "rate_hz": rate, "best": best.config,
-                     "best_cd": best.cd.mean, "best_step_ms": best.step_ms, "recommended": cheap.config,
-                     "recommended_cd": cheap.cd.mean, "recommended_step_ms": cheap.step_ms, "tolerance_m": tol})
+            f'{engine_label(e)}, {cloth} {prim} at {rate:g} Hz: the most accurate configuration is'
+            f' `{best.config}` ({metric_name(prim, "CD")} = {best.cd.mean:.4f} m,'
+            f' {best.step_ms:.3f} ms per step); the cheapest within tolerance (CD <= best +'
+            f' max({tol_rel:.0%} of best, {tol_abs * 1e3:g} mm) = {best.cd.mean + tol:.4f} m) is'
+            f' **`{cheap.config}`** (CD = {cheap.cd.mean:.4f} m, {cheap.step_ms:.3f} ms per step,'
+            f' {best.step_ms / cheap.step_ms:.1f}x faster than the most accurate).'
+        )
+        recs.append(
+            {
+                'engine': e,
+                'cloth': cloth,
+                'primitive': prim,
+                'rate_hz': rate,
+                'best': best.config,
+                'best_cd': best.cd.mean,
+                'best_step_ms': best.step_ms,
+                'recommended': cheap.config,
+                'recommended_cd': cheap.cd.mean,
+                'recommended_step_ms': cheap.step_ms,
+                'tolerance_m': tol,
+            }
+        )
     # One configuration for every task and cloth of an engine: within tolerance everywhere, cheapest in total.
-    for e in engines_of([r for r in rows if r.get("mode") == "settings"]):
+    for e in engines_of([r for r in rows if r.get('mode') == 'settings']):
         keys = [k for k in by if k[0] == e]
         if len(keys) < 2:
             continue
@@ -62,14 +119,23 @@ def settings_tables(rows: Sequence[dict], tol_rel: float, tol_abs: float) -> tup
         cost = defaultdict(float)
         for k in keys:
             best, _, tol = recommend(by[k], tol_rel, tol_abs)
-            within = {r.config for r in by[k] if best is not None and r.stable and r.cd.mean <= best.cd.mean + tol}
+            within = {
+                r.config
+                for r in by[k]
+                if best is not None and r.stable and r.cd.mean <= best.cd.mean + tol
+            }
             ok_everywhere = within if ok_everywhere is None else ok_everywhere & within
             for r in by[k]:
                 cost[r.config] += r.step_ms if math.isfinite(r.step_ms) else math.inf
         if ok_everywhere:
             choice = min(ok_everywhere, key=lambda c: cost[c])
-            notes.append(f"{engine_label(e)}, one configuration for all {len(keys)} task/cloth/rate groups: "
-                         f"**`{choice}`** is within tolerance in each, at {cost[choice]:.3f} ms summed step time.")
+            notes.append(
+                f'{engine_label(e)}, one configuration for all {len(keys)} task/cloth/rate groups:'
+                f' **`{choice}`** is within tolerance in each, at {cost[choice]:.3f} ms summed'
+                ' step time.'
+            )
         else:
-            notes.append(f"{engine_label(e)}: no single configuration is within tolerance in every group.")
+            notes.append(
+                f'{engine_label(e)}: no single configuration is within tolerance in every group.'
+            )
     return tables, notes, recs

@@ -5,26 +5,39 @@ Mean +- std per group is studies/aggregate.py's (a study's choice of configurati
 
 from __future__ import annotations
 
-import math
 from collections import Counter
+import math
 from typing import Iterable, Sequence
 
-ENGINE_LABEL = {"mujoco": "MuJoCo", "bullet": "Bullet", "flex": "Flex", "sofa": "SOFA", "newton": "Newton"}
-ENGINE_COLOR = {"mujoco": "tab:blue", "bullet": "tab:orange", "flex": "tab:green", "sofa": "tab:red",
-                "newton": "tab:purple"}
-METRICS = ("CD_d", "HD_d", "CD_q", "HD_q")
-PAPER_ENGINES = ("mujoco", "bullet", "flex", "sofa")
+ENGINE_LABEL = {
+    'mujoco': 'MuJoCo',
+    'bullet': 'Bullet',
+    'flex': 'Flex',
+    'sofa': 'SOFA',
+    'newton': 'Newton',
+}
+ENGINE_COLOR = {
+    'mujoco': 'tab:blue',
+    'bullet': 'tab:orange',
+    'flex': 'tab:green',
+    'sofa': 'tab:red',
+    'newton': 'tab:purple',
+}
+METRICS = ('CD_d', 'HD_d', 'CD_q', 'HD_q')
+PAPER_ENGINES = ('mujoco', 'bullet', 'flex', 'sofa')
 FPS = 30.0
 
 
 def metric_name(primitive: str, kind: str) -> str:
-    return f"{kind}_{'d' if primitive == 'dynamic' else 'q'}"
+    return f'{kind}_{"d" if primitive == "dynamic" else "q"}'
 
 
 def pareto_front(points: Sequence[tuple[float, float]]) -> list[int]:
-    """Indices of the points not dominated in (x, y), both minimised, sorted by x."""
-    order = sorted((i for i, (x, y) in enumerate(points) if math.isfinite(x) and math.isfinite(y)),
-                   key=lambda i: (points[i][0], points[i][1]))
+    """Return indices of the points not dominated in (x, y), both minimised, sorted by x."""
+    order = sorted(
+        (i for i, (x, y) in enumerate(points) if math.isfinite(x) and math.isfinite(y)),
+        key=lambda i: (points[i][0], points[i][1]),
+    )
     front, best = [], math.inf
     for i in order:
         if points[i][1] < best:
@@ -40,20 +53,27 @@ def engine_label(name: str) -> str:
 def fmt_fixed(value, digits: int = 3, scale: float = 1.0) -> str:
     """`value * scale` with `digits` decimals; "-" for a missing or non-finite value."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
-    return f"{value * scale:.{digits}f}"
+        return '-'
+    return f'{value * scale:.{digits}f}'
 
 
 def fmt_sig(value, digits: int = 3) -> str:
     """`value` with `digits` significant digits; "-" for a missing or non-finite value."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
-    return f"{value:.{digits}g}"
+        return '-'
+    return f'{value:.{digits}g}'
 
 
-def paper_rows(rows: Sequence[dict], config: str = "preset", pacing: str = "lockstep") -> list[dict]:
-    return [r for r in rows if r.get("mode", "paper") == "paper" and r.get("config", "preset") == config
-            and r.get("pacing", "lockstep") == pacing]
+def paper_rows(
+    rows: Sequence[dict], config: str = 'preset', pacing: str = 'lockstep'
+) -> list[dict]:
+    return [
+        r
+        for r in rows
+        if r.get('mode', 'paper') == 'paper'
+        and r.get('config', 'preset') == config
+        and r.get('pacing', 'lockstep') == pacing
+    ]
 
 
 def _ordered(values: Iterable, order: Sequence = ()) -> list:
@@ -63,20 +83,20 @@ def _ordered(values: Iterable, order: Sequence = ()) -> list:
 
 
 def engines_of(rows: Iterable[dict]) -> list[str]:
-    return _ordered((r["engine"] for r in rows), PAPER_ENGINES)
+    return _ordered((r['engine'] for r in rows), PAPER_ENGINES)
 
 
 def cloths_of(rows: Iterable[dict]) -> list[str]:
-    return _ordered((r["cloth"] for r in rows), ("towel", "chequered", "linen"))
+    return _ordered((r['cloth'] for r in rows), ('towel', 'chequered', 'linen'))
 
 
 def rates_of(rows: Iterable[dict]) -> list[float]:
-    return sorted({float(r["rate_hz"]) for r in rows})
+    return sorted({float(r['rate_hz']) for r in rows})
 
 
 def table_rate(rows: Sequence[dict], wanted: float) -> float | None:
     """`wanted` if rows hold it, else the rate with the most rows."""
-    rates = Counter(float(r["rate_hz"]) for r in rows)
+    rates = Counter(float(r['rate_hz']) for r in rows)
     if not rates:
         return None
     return float(wanted) if float(wanted) in rates else rates.most_common(1)[0][0]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 
-EMBEDDED = bool(os.environ.get("CLOTH_BENCH_EMBEDDED"))
+EMBEDDED = bool(os.environ.get('CLOTH_BENCH_EMBEDDED'))
 if not EMBEDDED:
     try:
         import rclpy
@@ -21,6 +21,7 @@ if EMBEDDED:
     from cloth_bench_ros.runtime.embedded import Clock as _RosClock
     from cloth_bench_ros.runtime.embedded import ClockType as _ClockType
     from cloth_bench_ros.runtime.embedded import (
+        deserialize_message,
         DurabilityPolicy,
         HistoryPolicy,
         Node,
@@ -28,10 +29,9 @@ if EMBEDDED:
         ParameterDescriptor,
         QoSProfile,
         ReliabilityPolicy,
+        serialize_message,
         SingleThreadedExecutor,
         Time,
-        deserialize_message,
-        serialize_message,
     )
     from cloth_bench_ros.runtime.messages import (
         Clock,
@@ -64,27 +64,27 @@ else:
     from std_msgs.msg import Header
 
 MESSAGE_TYPES = {
-    "sensor_msgs/msg/PointCloud2": PointCloud2,
-    "geometry_msgs/msg/PoseArray": PoseArray,
-    "diagnostic_msgs/msg/DiagnosticArray": DiagnosticArray,
-    "rosgraph_msgs/msg/Clock": Clock,
+    'sensor_msgs/msg/PointCloud2': PointCloud2,
+    'geometry_msgs/msg/PoseArray': PoseArray,
+    'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray,
+    'rosgraph_msgs/msg/Clock': Clock,
 }
 
 
 def message_type(typename: str) -> type:
-    """The runtime's class for a ROS type name such as 'sensor_msgs/msg/PointCloud2'."""
+    """Return the runtime's class for a ROS type name such as 'sensor_msgs/msg/PointCloud2'."""
     try:
         return MESSAGE_TYPES[typename]
     except KeyError:
-        raise ValueError(f"message type {typename} is not used by cloth_bench_ros") from None
+        raise ValueError(f'message type {typename} is not used by cloth_bench_ros') from None
 
 
 def typename(msg_type: type) -> str:
-    """The ROS type name of a runtime message class."""
+    """Return the ROS type name of a runtime message class."""
     for name, cls in MESSAGE_TYPES.items():
         if cls is msg_type:
             return name
-    raise ValueError(f"{msg_type} is not a message type used by cloth_bench_ros")
+    raise ValueError(f'{msg_type} is not a message type used by cloth_bench_ros')
 
 
 def stamp_ns(stamp) -> int:
@@ -109,27 +109,35 @@ def make_qos(depth: int, latched: bool = False, keep_all: bool = False) -> QoSPr
 # file), by class name so that rclpy's own (rclpy.exceptions.ParameterException,
 # NameValidationException, _rclpy.RCLInvalidROSArgsError, UnknownROSArgsError) and the embedded
 # runtime's twins are both one line and exit status 2.
-USER_ERROR_CLASSES = frozenset({"ParameterException", "NameValidationException", "RCLInvalidROSArgsError",
-                                "UnknownROSArgsError"})
+USER_ERROR_CLASSES = frozenset(
+    {
+        'ParameterException',
+        'NameValidationException',
+        'RCLInvalidROSArgsError',
+        'UnknownROSArgsError',
+    }
+)
 
 
 def is_user_error(exc: BaseException) -> bool:
-    """True for rclpy's (or the embedded runtime's) parameter, name and argument errors."""
+    """Return True for rclpy's (or the embedded runtime's) parameter, name and argument errors."""
     return any(cls.__name__ in USER_ERROR_CLASSES for cls in type(exc).__mro__)
 
 
 def declare_float(node, name: str, default: float) -> float:
-    """A double parameter that also takes an integer (`-p rate_hz:=1000`), in rclpy and embedded alike.
+    """Return a double parameter that also takes an integer (`-p rate_hz:=1000`), in rclpy and embedded alike.
 
     rclpy refuses an INTEGER override for a parameter declared DOUBLE; declared with dynamic
     typing, any type is accepted and this is the one place that keeps numbers and refuses the rest.
     """
-    value = node.declare_parameter(name, float(default), ParameterDescriptor(dynamic_typing=True)).value
+    value = node.declare_parameter(
+        name, float(default), ParameterDescriptor(dynamic_typing=True)
+    ).value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"parameter {name}: expected a number (double or integer), got {value!r}")
+        raise ValueError(f'parameter {name}: expected a number (double or integer), got {value!r}')
     return float(value)
 
 
 def steady_clock():
-    """A steady clock for timers that must follow the wall clock even under use_sim_time."""
+    """Return a steady clock for timers that must follow the wall clock even under use_sim_time."""
     return _RosClock(clock_type=_ClockType.STEADY_TIME)

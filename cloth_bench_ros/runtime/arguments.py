@@ -8,19 +8,28 @@ wildcards in a remap) is refused with one line rather than ignored.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 import re
 import sys
-from dataclasses import dataclass, field
 
 from cloth_bench_ros.runtime.parameters import (
-    Overrides, RCLInvalidROSArgsError, UnknownROSArgsError, load_params_file, parse_param_rule,
+    load_params_file,
+    Overrides,
+    parse_param_rule,
+    RCLInvalidROSArgsError,
+    UnknownROSArgsError,
 )
 
-_TOKEN = r"[A-Za-z_][A-Za-z0-9_]*"
-_TOPIC = re.compile(rf"(~|~/{_TOKEN}(/{_TOKEN})*|/?({_TOKEN}|\{{node\}})(/({_TOKEN}|\{{node\}}))*|/)")
-_FLAGS_WITH_VALUE = {"--log-level", "--log-file-name", "--log-config-file", "--enclave", "-e"}
-_LOG_SWITCHES = {f"--{state}-{what}-logs" for state in ("enable", "disable")
-                 for what in ("stdout", "rosout", "external-lib")}
+_TOKEN = r'[A-Za-z_][A-Za-z0-9_]*'
+_TOPIC = re.compile(
+    rf'(~|~/{_TOKEN}(/{_TOKEN})*|/?({_TOKEN}|\{{node\}})(/({_TOKEN}|\{{node\}}))*|/)'
+)
+_FLAGS_WITH_VALUE = {'--log-level', '--log-file-name', '--log-config-file', '--enclave', '-e'}
+_LOG_SWITCHES = {
+    f'--{state}-{what}-logs'
+    for state in ('enable', 'disable')
+    for what in ('stdout', 'rosout', 'external-lib')
+}
 
 
 @dataclass
@@ -42,24 +51,28 @@ class RosArguments:
 
 def _remap_rule(text: str) -> RemapRule:
     bad = RCLInvalidROSArgsError(f"Couldn't parse remap rule: '-r {text}'")
-    head, sep, replacement = text.partition(":=")
+    head, sep, replacement = text.partition(':=')
     if not sep:
         raise bad
-    if head.startswith("rosservice://") or head.startswith("rostopic://"):
-        if head.startswith("rosservice://"):
-            raise RCLInvalidROSArgsError(f"remap rule '-r {text}': the embedded runtime has no services")
-        head = head[len("rostopic://"):]
-    node, colon, match = head.rpartition(":")
+    if head.startswith('rosservice://') or head.startswith('rostopic://'):
+        if head.startswith('rosservice://'):
+            raise RCLInvalidROSArgsError(
+                f"remap rule '-r {text}': the embedded runtime has no services"
+            )
+        head = head[len('rostopic://') :]
+    node, colon, match = head.rpartition(':')
     if colon and not re.fullmatch(_TOKEN, node):
         raise bad
-    if "*" in match:
-        raise RCLInvalidROSArgsError(f"remap rule '-r {text}': wildcards in remap rules are not supported")
-    if match in ("__node", "__name"):
+    if '*' in match:
+        raise RCLInvalidROSArgsError(
+            f"remap rule '-r {text}': wildcards in remap rules are not supported"
+        )
+    if match in ('__node', '__name'):
         if not re.fullmatch(_TOKEN, replacement):
             raise bad
-        match = "__node"
-    elif match == "__ns":
-        if not re.fullmatch(rf"/|(/{_TOKEN})+", replacement):
+        match = '__node'
+    elif match == '__ns':
+        if not re.fullmatch(rf'/|(/{_TOKEN})+', replacement):
             raise bad
     elif not (_TOPIC.fullmatch(match) and _TOPIC.fullmatch(replacement)):
         raise bad
@@ -76,23 +89,23 @@ def parse_ros_args(args: list[str] | None) -> RosArguments:
     while i < len(args):
         arg = args[i]
         if not inside:
-            inside = arg == "--ros-args"
+            inside = arg == '--ros-args'
             i += 1
             continue
-        if arg == "--ros-args":
+        if arg == '--ros-args':
             i += 1
-        elif arg == "--":
+        elif arg == '--':
             inside = False
             i += 1
-        elif arg in ("-p", "--param", "-r", "--remap", "--params-file") + tuple(_FLAGS_WITH_VALUE):
+        elif arg in ('-p', '--param', '-r', '--remap', '--params-file') + tuple(_FLAGS_WITH_VALUE):
             if i + 1 >= len(args):
                 raise RCLInvalidROSArgsError(f"Couldn't parse trailing {arg} flag")
             value = args[i + 1]
-            if arg in ("-p", "--param"):
+            if arg in ('-p', '--param'):
                 parse_param_rule(value, parsed.overrides)
-            elif arg in ("-r", "--remap"):
+            elif arg in ('-r', '--remap'):
                 parsed.remaps.append(_remap_rule(value))
-            elif arg == "--params-file":
+            elif arg == '--params-file':
                 load_params_file(value, parsed.overrides)
             i += 2
         elif arg in _LOG_SWITCHES:
@@ -101,21 +114,21 @@ def parse_ros_args(args: list[str] | None) -> RosArguments:
             unknown.append(arg)
             i += 1
     if unknown:
-        raise UnknownROSArgsError(f"Found unknown ROS arguments or parameters: {unknown}")
+        raise UnknownROSArgsError(f'Found unknown ROS arguments or parameters: {unknown}')
     return parsed
 
 
 def expand_topic_name(name: str, node_name: str, namespace: str) -> str:
-    """A topic name made fully qualified as rcl_expand_topic_name does."""
-    name = name.replace("{node}", node_name)
-    base = namespace.rstrip("/")
-    if name == "~":
-        return f"{base}/{node_name}"
-    if name.startswith("~/"):
-        return f"{base}/{node_name}/{name[2:]}"
-    if name.startswith("/"):
+    """Return a topic name made fully qualified as rcl_expand_topic_name does."""
+    name = name.replace('{node}', node_name)
+    base = namespace.rstrip('/')
+    if name == '~':
+        return f'{base}/{node_name}'
+    if name.startswith('~/'):
+        return f'{base}/{node_name}/{name[2:]}'
+    if name.startswith('/'):
         return name
-    return f"{base}/{name}"
+    return f'{base}/{name}'
 
 
 def _first(rules: list[RemapRule], match: str, node: str) -> RemapRule | None:
@@ -123,21 +136,21 @@ def _first(rules: list[RemapRule], match: str, node: str) -> RemapRule | None:
 
 
 def remap_node_name(rules: list[RemapRule], node_name: str) -> str:
-    """The name after the first `__node` rule for this node (rcl_remap_node_name)."""
-    rule = _first(rules, "__node", node_name)
+    """Return the name after the first `__node` rule for this node (rcl_remap_node_name)."""
+    rule = _first(rules, '__node', node_name)
     return rule.replacement if rule else node_name
 
 
 def remap_namespace(rules: list[RemapRule], node_name: str, namespace: str) -> str:
-    """The namespace after the first `__ns` rule for this node (rcl_remap_node_namespace)."""
-    rule = _first(rules, "__ns", node_name)
+    """Return the namespace after the first `__ns` rule for this node (rcl_remap_node_namespace)."""
+    rule = _first(rules, '__ns', node_name)
     return rule.replacement if rule else namespace
 
 
 def remap_topic_name(rules: list[RemapRule], topic: str, node_name: str, namespace: str) -> str:
-    """A fully qualified topic after the first rule whose expanded match equals it."""
+    """Return a fully qualified topic after the first rule whose expanded match equals it."""
     for rule in rules:
-        if rule.match in ("__node", "__ns") or rule.node not in (None, node_name):
+        if rule.match in ('__node', '__ns') or rule.node not in (None, node_name):
             continue
         if expand_topic_name(rule.match, node_name, namespace) == topic:
             return expand_topic_name(rule.replacement, node_name, namespace)
@@ -159,12 +172,16 @@ class InvalidNamespaceException(NameValidationException):
 def validate_node_name(name: str) -> None:
     """rmw_validate_node_name's rule (rclpy raises InvalidNodeNameException)."""
     if not re.fullmatch(_TOKEN, name) or len(name) > 255:
-        raise InvalidNodeNameException(f"Invalid node name: node name '{name}' must be letters, digits "
-                                       "and '_', not starting with a digit")
+        raise InvalidNodeNameException(
+            f"Invalid node name: node name '{name}' must be letters, digits "
+            "and '_', not starting with a digit"
+        )
 
 
 def validate_namespace(namespace: str) -> None:
     """rmw_validate_namespace's rule (rclpy raises InvalidNamespaceException)."""
-    if not re.fullmatch(rf"/|(/{_TOKEN})+", namespace):
-        raise InvalidNamespaceException(f"Invalid namespace: namespace '{namespace}' must be '/' or "
-                                        "'/'-separated tokens of letters, digits and '_'")
+    if not re.fullmatch(rf'/|(/{_TOKEN})+', namespace):
+        raise InvalidNamespaceException(
+            f"Invalid namespace: namespace '{namespace}' must be '/' or "
+            "'/'-separated tokens of letters, digits and '_'"
+        )

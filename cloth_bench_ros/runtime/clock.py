@@ -21,7 +21,7 @@ class Time:
         self.nanoseconds = int(seconds * 1_000_000_000) + int(nanoseconds)
 
     @classmethod
-    def from_msg(cls, msg: Any) -> "Time":
+    def from_msg(cls, msg: Any) -> 'Time':
         return cls(nanoseconds=int(msg.sec) * 1_000_000_000 + int(msg.nanosec))
 
     def to_msg(self) -> Any:
@@ -29,7 +29,7 @@ class Time:
         return messages.Time(sec=sec, nanosec=nanosec)
 
     def __repr__(self) -> str:
-        return f"Time(nanoseconds={self.nanoseconds})"
+        return f'Time(nanoseconds={self.nanoseconds})'
 
 
 class ClockType(enum.IntEnum):

@@ -30,42 +30,69 @@ transient-local history.
 
 from __future__ import annotations
 
+from collections import deque
 import dataclasses
 import logging
-from collections import deque
 from typing import Any, Callable
 
 from cloth_bench_ros.data import messages as cdr
 from cloth_bench_ros.runtime import messages
-from cloth_bench_ros.runtime.clock import Clock, ClockType, Time, Timer  # noqa: F401 (rclpy's names)
 from cloth_bench_ros.runtime.arguments import (
-    RosArguments, expand_topic_name, parse_ros_args, remap_namespace, remap_node_name, remap_topic_name,
-    validate_namespace, validate_node_name,
+    expand_topic_name,
+    parse_ros_args,
+    remap_namespace,
+    remap_node_name,
+    remap_topic_name,
+    RosArguments,
+    validate_namespace,
+    validate_node_name,
+)
+from cloth_bench_ros.runtime.clock import (
+    Clock,
+    ClockType,
+    Time,
+    Timer,
+)  # noqa: F401 (rclpy's names)
+from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
+    InvalidParameterException,
+    InvalidParameterTypeException,
+    load_params_file,
+    Parameter,
+    ParameterAlreadyDeclaredException,
+    ParameterDescriptor,
+    ParameterException,
+    ParameterNotDeclaredException,
+    ParameterType,
+    ParameterUninitializedException,
+    RCLError,
+    RCLInvalidROSArgsError,
+    UnknownROSArgsError,
 )
 from cloth_bench_ros.runtime.qos import (  # noqa: F401 (re-exported as rclpy's names)
-    DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, as_profile, time_source_qos,
+    as_profile,
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    time_source_qos,
 )
-from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum  # noqa: F401
-from cloth_bench_ros.runtime.transport import TRANSPORTS, IntraProcessTransport, transport_choice
-from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
-    InvalidParameterException, InvalidParameterTypeException, Parameter, ParameterAlreadyDeclaredException,
-    ParameterDescriptor, ParameterException, ParameterNotDeclaredException, ParameterType,
-    ParameterUninitializedException,
-    RCLError, RCLInvalidROSArgsError, UnknownROSArgsError, load_params_file,
-)
-
+from cloth_bench_ros.runtime.topic_endpoint_info import (
+    TopicEndpointInfo,
+    TopicEndpointTypeEnum,
+)  # noqa: F401
+from cloth_bench_ros.runtime.transport import IntraProcessTransport, transport_choice, TRANSPORTS
 
 # --- parameters and arguments: runtime/parameters.py, runtime/arguments.py ---------------------
 
 
-def make_transport(context: "Context", name: str, domain_id: int | None = None) -> Any:
-    """The transport `name` ('intra' or 'dds') for a context; DDS loads Cyclone only when chosen."""
-    if name == "dds":
+def make_transport(context: 'Context', name: str, domain_id: int | None = None) -> Any:
+    """Return the transport `name` ('intra' or 'dds') for a context; DDS loads Cyclone only when chosen."""
+    if name == 'dds':
         from cloth_bench_ros.runtime.dds.transport import DdsTransport
 
         return DdsTransport(context, domain_id)
     if name not in TRANSPORTS:
-        raise ValueError(f"unknown transport {name!r} (valid: intra, dds)")
+        raise ValueError(f'unknown transport {name!r} (valid: intra, dds)')
     return IntraProcessTransport(context)
 
 
@@ -75,17 +102,22 @@ class Context:
     def __init__(self) -> None:
         self.args = RosArguments()
         self._ok = False
-        self.subscriptions: dict[str, list["Subscription"]] = {}
-        self.publishers: dict[str, list["Publisher"]] = {}
-        self.queue: deque[tuple["Subscription", Any]] = deque()
-        self.nodes: list["Node"] = []
+        self.subscriptions: dict[str, list['Subscription']] = {}
+        self.publishers: dict[str, list['Publisher']] = {}
+        self.queue: deque[tuple['Subscription', Any]] = deque()
+        self.nodes: list['Node'] = []
         self.transport: Any = IntraProcessTransport(self)
 
-    def init(self, args: list[str] | None = None, *, domain_id: int | None = None,
-             transport: str | None = None) -> None:
+    def init(
+        self,
+        args: list[str] | None = None,
+        *,
+        domain_id: int | None = None,
+        transport: str | None = None,
+    ) -> None:
         """Parse the ROS arguments and open the transport (None: CLOTH_BENCH_TRANSPORT, else intra)."""
         self.args = parse_ros_args(args)
-        self.transport = make_transport(self, transport or transport_choice("intra"), domain_id)
+        self.transport = make_transport(self, transport or transport_choice('intra'), domain_id)
         self._ok = True
 
     def ok(self) -> bool:
@@ -101,8 +133,12 @@ class Context:
 _default_context = Context()
 
 
-def init(args: list[str] | None = None, context: Context | None = None, domain_id: int | None = None,
-         transport: str | None = None) -> None:
+def init(
+    args: list[str] | None = None,
+    context: Context | None = None,
+    domain_id: int | None = None,
+    transport: str | None = None,
+) -> None:
     """rclpy.init; `transport` ('intra' or 'dds') is the embedded runtime's own addition."""
     (context or _default_context).init(args, domain_id=domain_id, transport=transport)
 
@@ -119,7 +155,7 @@ def shutdown(context: Context | None = None) -> None:
 
 
 class Publisher:
-    def __init__(self, node: "Node", msg_type: type, topic: str, qos: QoSProfile) -> None:
+    def __init__(self, node: 'Node', msg_type: type, topic: str, qos: QoSProfile) -> None:
         self.node, self.msg_type, self.topic_name, self.qos = node, msg_type, topic, qos
         self._history: deque = deque(maxlen=max(1, qos.depth))
 
@@ -127,10 +163,12 @@ class Publisher:
         """As rclpy: a message of the publisher's type, or its serialized bytes; else TypeError."""
         if isinstance(msg, bytes):
             msg = deserialize_message(msg, self.msg_type)
-        elif not (isinstance(msg, self.msg_type)
-                  or getattr(type(msg), "__msgtype__", None) == self.msg_type.__msgtype__):
+        elif not (
+            isinstance(msg, self.msg_type)
+            or getattr(type(msg), '__msgtype__', None) == self.msg_type.__msgtype__
+        ):
             # rosbags' class of the same ROS type (what deserialize_message returns) is that type
-            raise TypeError(f"Expected {self.msg_type}, got {type(msg)}")
+            raise TypeError(f'Expected {self.msg_type}, got {type(msg)}')
         ctx = self.node.context
         if not ctx.ok():
             return
@@ -145,11 +183,19 @@ class Publisher:
 
 
 class Subscription:
-    def __init__(self, node: "Node", msg_type: type, topic: str, callback: Callable, qos: QoSProfile) -> None:
-        self.node, self.msg_type, self.topic_name, self.callback, self.qos = node, msg_type, topic, callback, qos
+    def __init__(
+        self, node: 'Node', msg_type: type, topic: str, callback: Callable, qos: QoSProfile
+    ) -> None:
+        self.node, self.msg_type, self.topic_name, self.callback, self.qos = (
+            node,
+            msg_type,
+            topic,
+            callback,
+            qos,
+        )
 
     def get_publisher_count(self) -> int:
-        """Publishers matched with this subscription (rmw: the reader's matched writers)."""
+        """Return publishers matched with this subscription (rmw: the reader's matched writers)."""
         return self.node.context.transport.matched_publications(self)
 
     def destroy(self) -> None:
@@ -172,17 +218,19 @@ class Node:
     ) -> None:
         self.context = context or _default_context
         if not self.context.ok():
-            raise RuntimeError("rclpy.init() has not been called")
+            raise RuntimeError('rclpy.init() has not been called')
         local = parse_ros_args(cli_args) if cli_args else RosArguments()
         global_args = self.context.args if use_global_arguments else RosArguments()
-        self._remaps = local.remaps + global_args.remaps  # rcl: local rules first, first match wins
+        self._remaps = (
+            local.remaps + global_args.remaps
+        )  # rcl: local rules first, first match wins
         validate_node_name(node_name)
         self._name = remap_node_name(self._remaps, node_name)
-        ns = remap_namespace(self._remaps, node_name, namespace or "/")
-        self._namespace = ns if ns.startswith("/") else "/" + ns
+        ns = remap_namespace(self._remaps, node_name, namespace or '/')
+        self._namespace = ns if ns.startswith('/') else '/' + ns
         validate_node_name(self._name)
         validate_namespace(self._namespace)
-        full = f"{self._namespace.rstrip('/')}/{self._name}"
+        full = f'{self._namespace.rstrip("/")}/{self._name}'
         self._overrides: dict[str, Parameter] = {}
         for args in (global_args, local):  # rclpy node.cpp get_parameters: global, then the node's
             self._overrides.update(args.overrides.for_node(full))
@@ -193,13 +241,13 @@ class Node:
         self._subscriptions: list[Subscription] = []
         self._publishers: list[Publisher] = []
         self._clock = Clock(clock_type=ClockType.ROS_TIME)
-        self._logger = _Logger(logging.getLogger(f"cloth_bench_ros.{self._name}"), self._name)
+        self._logger = _Logger(logging.getLogger(f'cloth_bench_ros.{self._name}'), self._name)
         self.context.nodes.append(self)
         self.context.transport.graph_changed(self)
         # rclpy's TimeSource: use_sim_time declared as a bool; when true, /clock drives the clock.
-        if self.declare_parameter("use_sim_time", False).value:
+        if self.declare_parameter('use_sim_time', False).value:
             self._clock.ros_time_is_active = True
-            self.create_subscription(messages.Clock, "/clock", self._on_clock, time_source_qos())
+            self.create_subscription(messages.Clock, '/clock', self._on_clock, time_source_qos())
 
     def _on_clock(self, msg: Any) -> None:
         self._clock.sim_time_ns = Time.from_msg(msg.clock).nanoseconds
@@ -212,31 +260,48 @@ class Node:
         return self._namespace
 
     def get_fully_qualified_name(self) -> str:
-        return f"{self._namespace.rstrip('/')}/{self._name}"
+        return f'{self._namespace.rstrip("/")}/{self._name}'
 
     def resolve_topic_name(self, topic: str, *, only_expand: bool = False) -> str:
-        """The topic expanded and, unless only_expand, remapped (rcl_node_resolve_name)."""
+        """Return the topic expanded and, unless only_expand, remapped (rcl_node_resolve_name)."""
         full = expand_topic_name(topic, self._name, self._namespace)
-        return full if only_expand else remap_topic_name(self._remaps, full, self._name, self._namespace)
+        return (
+            full
+            if only_expand
+            else remap_topic_name(self._remaps, full, self._name, self._namespace)
+        )
 
     # parameters (rclpy/node.py declare_parameters, _apply_descriptor, get_parameter)
-    def declare_parameter(self, name: str, value: Any = None, descriptor: ParameterDescriptor | None = None,
-                          ignore_override: bool = False) -> Parameter:
+    def declare_parameter(
+        self,
+        name: str,
+        value: Any = None,
+        descriptor: ParameterDescriptor | None = None,
+        ignore_override: bool = False,
+    ) -> Parameter:
         if not name:
             raise InvalidParameterException(name)
-        descriptor = dataclasses.replace(descriptor) if descriptor is not None else ParameterDescriptor()
+        descriptor = (
+            dataclasses.replace(descriptor) if descriptor is not None else ParameterDescriptor()
+        )
         if isinstance(value, ParameterType):
             if value == ParameterType.NOT_SET:
-                raise ValueError(f"Cannot declare parameter {{{name}}} as statically typed of type NOT_SET")
+                raise ValueError(
+                    f'Cannot declare parameter {{{name}}} as statically typed of type NOT_SET'
+                )
             if descriptor.dynamic_typing:
-                raise ValueError(f"When declaring parameter {{{name}}} passing a descriptor with"
-                                 "`dynamic_typing=True` is not allowed when the parameter type is provided")
+                raise ValueError(
+                    f'When declaring parameter {{{name}}} passing a descriptor with'
+                    '`dynamic_typing=True` is not allowed when the parameter type is provided'
+                )
             descriptor.type, value = int(value), None
         elif not descriptor.dynamic_typing:
             descriptor.type = int(ParameterType.from_parameter_value(value))
             if descriptor.type == ParameterType.NOT_SET:
-                raise ValueError("Cannot declare a statically typed parameter with default value "
-                                 "of type PARAMETER_NOT_SET")
+                raise ValueError(
+                    'Cannot declare a statically typed parameter with default value '
+                    'of type PARAMETER_NOT_SET'
+                )
         if not ignore_override and name in self._overrides:
             value = self._overrides[name].value
         parameter = Parameter(name, value=value)
@@ -267,22 +332,33 @@ class Node:
         return self._descriptors[name]
 
     # graph
-    def create_publisher(self, msg_type: type, topic: str, qos_profile: QoSProfile | int) -> Publisher:
+    def create_publisher(
+        self, msg_type: type, topic: str, qos_profile: QoSProfile | int
+    ) -> Publisher:
         pub = Publisher(self, msg_type, self.resolve_topic_name(topic), as_profile(qos_profile))
         self._publishers.append(pub)
         self.context.transport.add_publisher(pub)
         return pub
 
-    def create_subscription(self, msg_type: type, topic: str, callback: Callable,
-                            qos_profile: QoSProfile | int) -> Subscription:
-        sub = Subscription(self, msg_type, self.resolve_topic_name(topic), callback, as_profile(qos_profile))
+    def create_subscription(
+        self, msg_type: type, topic: str, callback: Callable, qos_profile: QoSProfile | int
+    ) -> Subscription:
+        sub = Subscription(
+            self, msg_type, self.resolve_topic_name(topic), callback, as_profile(qos_profile)
+        )
         self._subscriptions.append(sub)
         self.context.transport.add_subscription(sub)
         return sub
 
-    def create_timer(self, timer_period_sec: float, callback: Callable, callback_group: Any = None,
-                     clock: Clock | None = None, **_: Any) -> Timer:
-        """A timer on `clock`, by default the node's (sim time under use_sim_time, as rclpy)."""
+    def create_timer(
+        self,
+        timer_period_sec: float,
+        callback: Callable,
+        callback_group: Any = None,
+        clock: Clock | None = None,
+        **_: Any,
+    ) -> Timer:
+        """Return a timer on `clock`, by default the node's (sim time under use_sim_time, as rclpy)."""
         timer = Timer(timer_period_sec, callback, clock or self._clock)
         self._timers.append(timer)
         return timer
@@ -299,12 +375,16 @@ class Node:
     def count_publishers(self, topic: str) -> int:
         return len(self.get_publishers_info_by_topic(topic))
 
-    def get_publishers_info_by_topic(self, topic_name: str, no_mangle: bool = False) -> list[TopicEndpointInfo]:
+    def get_publishers_info_by_topic(
+        self, topic_name: str, no_mangle: bool = False
+    ) -> list[TopicEndpointInfo]:
         """Every publisher of the topic in the graph, with its node (rclpy; the name is expanded)."""
         topic = topic_name if no_mangle else self.resolve_topic_name(topic_name, only_expand=True)
         return self.context.transport.endpoints(topic, TopicEndpointTypeEnum.PUBLISHER)
 
-    def get_subscriptions_info_by_topic(self, topic_name: str, no_mangle: bool = False) -> list[TopicEndpointInfo]:
+    def get_subscriptions_info_by_topic(
+        self, topic_name: str, no_mangle: bool = False
+    ) -> list[TopicEndpointInfo]:
         """Every subscription of the topic in the graph, with its node (rclpy; the name is expanded)."""
         topic = topic_name if no_mangle else self.resolve_topic_name(topic_name, only_expand=True)
         return self.context.transport.endpoints(topic, TopicEndpointTypeEnum.SUBSCRIPTION)
@@ -315,7 +395,7 @@ class Node:
     def get_clock(self) -> Clock:
         return self._clock
 
-    def get_logger(self) -> "_Logger":
+    def get_logger(self) -> '_Logger':
         return self._logger
 
     def destroy_node(self) -> None:
@@ -336,7 +416,7 @@ class _Logger:
         self._logger, self._name = logger, name
 
     def _log(self, level: int, msg: str) -> None:
-        self._logger.log(level, "[%s]: %s", self._name, msg)
+        self._logger.log(level, '[%s]: %s', self._name, msg)
 
     def debug(self, msg: str) -> None:
         self._log(logging.DEBUG, msg)
@@ -403,7 +483,9 @@ class SingleThreadedExecutor:
             transport = self.context.transport
             if not waits:
                 if timeout_sec:
-                    transport.wait(timeout_sec if transport.name == "dds" else min(timeout_sec, 0.01))
+                    transport.wait(
+                        timeout_sec if transport.name == 'dds' else min(timeout_sec, 0.01)
+                    )
                 return
             wait = min(waits) / 1e9
             if timeout_sec is not None and wait > timeout_sec:
@@ -421,7 +503,9 @@ class SingleThreadedExecutor:
 
     def spin_until_idle(self) -> None:
         """Spin until no message is queued and no timer is armed (the run is complete)."""
-        while self.context.ok() and (self.context.queue or any(t.follows_wall_time for t in self._armed_timers())):
+        while self.context.ok() and (
+            self.context.queue or any(t.follows_wall_time for t in self._armed_timers())
+        ):
             self.spin_once(0.1)
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:
@@ -429,8 +513,9 @@ class SingleThreadedExecutor:
         return True
 
 
-def spin_once(node: Node, *, executor: SingleThreadedExecutor | None = None,
-              timeout_sec: float | None = None) -> None:
+def spin_once(
+    node: Node, *, executor: SingleThreadedExecutor | None = None, timeout_sec: float | None = None
+) -> None:
     ex = executor or SingleThreadedExecutor(node.context)
     ex.add_node(node)
     ex.spin_once(timeout_sec)

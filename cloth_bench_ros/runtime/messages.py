@@ -9,24 +9,37 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
+from cloth_bench_ros.data.messages import TYPESTORE
 import numpy as np
 
-from cloth_bench_ros.data.messages import TYPESTORE
-
 _NUMPY = {
-    "bool": np.bool_, "byte": np.uint8, "char": np.uint8, "int8": np.int8, "uint8": np.uint8,
-    "int16": np.int16, "uint16": np.uint16, "int32": np.int32, "uint32": np.uint32,
-    "int64": np.int64, "uint64": np.uint64, "float32": np.float32, "float64": np.float64,
+    'bool': np.bool_,
+    'byte': np.uint8,
+    'char': np.uint8,
+    'int8': np.int8,
+    'uint8': np.uint8,
+    'int16': np.int16,
+    'uint16': np.uint16,
+    'int32': np.int32,
+    'uint32': np.uint32,
+    'int64': np.int64,
+    'uint64': np.uint64,
+    'float32': np.float32,
+    'float64': np.float64,
 }
 _classes: dict[str, type] = {}
 
 
 def _factory(node: tuple) -> Callable[[], Any]:
-    """A zero-argument maker of a field's default value, as rclpy's constructors give it."""
+    """Return a zero-argument maker of a field's default value, as rclpy's constructors give it."""
     kind, detail = int(node[0]), node[1]
     if kind == 1:  # base type: an immutable constant
         name = detail[0]
-        value: Any = "" if name == "string" else False if name == "bool" else 0.0 if name.startswith("float") else 0
+        value: Any = (
+            ''
+            if name == 'string'
+            else False if name == 'bool' else 0.0 if name.startswith('float') else 0
+        )
         return lambda: value
     if kind == 2:  # nested message
         return lambda: message_class(detail)()
@@ -43,7 +56,7 @@ def _factory(node: tuple) -> Callable[[], Any]:
 
 
 def message_class(typename: str) -> type:
-    """A subclass of rosbags' class for `typename` whose constructor defaults every field."""
+    """Return a subclass of rosbags' class for `typename` whose constructor defaults every field."""
     if typename not in _classes:
         base = TYPESTORE.types[typename]
         factories = [(name, _factory(node)) for name, node in TYPESTORE.fielddefs[typename][1]]
@@ -54,20 +67,20 @@ def message_class(typename: str) -> type:
                     kwargs[name] = make()
             base.__init__(self, **kwargs)
 
-        _classes[typename] = type(typename.rsplit("/", 1)[-1], (base,), {"__init__": __init__})
+        _classes[typename] = type(typename.rsplit('/', 1)[-1], (base,), {'__init__': __init__})
     return _classes[typename]
 
 
-Time = message_class("builtin_interfaces/msg/Time")
-Header = message_class("std_msgs/msg/Header")
-String = message_class("std_msgs/msg/String")
-Clock = message_class("rosgraph_msgs/msg/Clock")
-Point = message_class("geometry_msgs/msg/Point")
-Quaternion = message_class("geometry_msgs/msg/Quaternion")
-Pose = message_class("geometry_msgs/msg/Pose")
-PoseArray = message_class("geometry_msgs/msg/PoseArray")
-PointField = message_class("sensor_msgs/msg/PointField")
-PointCloud2 = message_class("sensor_msgs/msg/PointCloud2")
-KeyValue = message_class("diagnostic_msgs/msg/KeyValue")
-DiagnosticStatus = message_class("diagnostic_msgs/msg/DiagnosticStatus")
-DiagnosticArray = message_class("diagnostic_msgs/msg/DiagnosticArray")
+Time = message_class('builtin_interfaces/msg/Time')
+Header = message_class('std_msgs/msg/Header')
+String = message_class('std_msgs/msg/String')
+Clock = message_class('rosgraph_msgs/msg/Clock')
+Point = message_class('geometry_msgs/msg/Point')
+Quaternion = message_class('geometry_msgs/msg/Quaternion')
+Pose = message_class('geometry_msgs/msg/Pose')
+PoseArray = message_class('geometry_msgs/msg/PoseArray')
+PointField = message_class('sensor_msgs/msg/PointField')
+PointCloud2 = message_class('sensor_msgs/msg/PointCloud2')
+KeyValue = message_class('diagnostic_msgs/msg/KeyValue')
+DiagnosticStatus = message_class('diagnostic_msgs/msg/DiagnosticStatus')
+DiagnosticArray = message_class('diagnostic_msgs/msg/DiagnosticArray')

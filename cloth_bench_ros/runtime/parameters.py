@@ -8,17 +8,17 @@ the file's keys, declare_parameter's type checks). Nothing here imports rclpy.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 import enum
 import math
-import re
-from dataclasses import dataclass, field
 from pathlib import Path
+import re
 from typing import Any
 
 import yaml
 
-PARAMS_KEY = "ros__parameters"
-_STR_TAG = "tag:yaml.org,2002:str"
+PARAMS_KEY = 'ros__parameters'
+_STR_TAG = 'tag:yaml.org,2002:str'
 
 
 # --- types (rclpy/parameter.py) ----------------------------------------------------------------
@@ -39,32 +39,52 @@ class ParameterType(enum.IntEnum):
     STRING_ARRAY = 9
 
     @classmethod
-    def from_parameter_value(cls, value: Any) -> "ParameterType":
-        """The type rclpy infers from a Python value (an empty list is a BYTE_ARRAY, as there)."""
+    def from_parameter_value(cls, value: Any) -> 'ParameterType':
+        """Return the type rclpy infers from a Python value (an empty list is a BYTE_ARRAY, as there)."""
         if value is None:
             return cls.NOT_SET
-        for py_type, scalar in ((bool, cls.BOOL), (int, cls.INTEGER), (float, cls.DOUBLE), (str, cls.STRING)):
+        for py_type, scalar in (
+            (bool, cls.BOOL),
+            (int, cls.INTEGER),
+            (float, cls.DOUBLE),
+            (str, cls.STRING),
+        ):
             if isinstance(value, py_type):
                 return scalar
         if isinstance(value, (list, tuple)):
-            for py_type, array in ((bytes, cls.BYTE_ARRAY), (bool, cls.BOOL_ARRAY), (int, cls.INTEGER_ARRAY),
-                                   (float, cls.DOUBLE_ARRAY), (str, cls.STRING_ARRAY)):
+            for py_type, array in (
+                (bytes, cls.BYTE_ARRAY),
+                (bool, cls.BOOL_ARRAY),
+                (int, cls.INTEGER_ARRAY),
+                (float, cls.DOUBLE_ARRAY),
+                (str, cls.STRING_ARRAY),
+            ):
                 if all(isinstance(v, py_type) for v in value):
                     return array
-            raise TypeError(f"The given value is not a list of one of the allowed types '{value}'.")
+            raise TypeError(
+                f"The given value is not a list of one of the allowed types '{value}'."
+            )
         raise TypeError(f"The given value is not one of the allowed types '{value}'.")
 
     def check(self, value: Any) -> bool:
-        """True if `value` is of this type, with rclpy's isinstance rules (bool is an int)."""
-        scalar = {ParameterType.BOOL: bool, ParameterType.INTEGER: int, ParameterType.DOUBLE: float,
-                  ParameterType.STRING: str}
+        """Return True if `value` is of this type, with rclpy's isinstance rules (bool is an int)."""
+        scalar = {
+            ParameterType.BOOL: bool,
+            ParameterType.INTEGER: int,
+            ParameterType.DOUBLE: float,
+            ParameterType.STRING: str,
+        }
         if self == ParameterType.NOT_SET:
             return value is None
         if self in scalar:
             return isinstance(value, scalar[self])
-        element = {ParameterType.BYTE_ARRAY: bytes, ParameterType.BOOL_ARRAY: bool,
-                   ParameterType.INTEGER_ARRAY: int, ParameterType.DOUBLE_ARRAY: float,
-                   ParameterType.STRING_ARRAY: str}[self]
+        element = {
+            ParameterType.BYTE_ARRAY: bytes,
+            ParameterType.BOOL_ARRAY: bool,
+            ParameterType.INTEGER_ARRAY: int,
+            ParameterType.DOUBLE_ARRAY: float,
+            ParameterType.STRING_ARRAY: str,
+        }[self]
         return isinstance(value, (list, tuple)) and all(isinstance(v, element) for v in value)
 
 
@@ -95,16 +115,16 @@ class Parameter:
         return self._value
 
     def __repr__(self) -> str:
-        return f"Parameter({self._name!r}, {self._type_.name}, value={self._value!r})"
+        return f'Parameter({self._name!r}, {self._type_.name}, value={self._value!r})'
 
 
 @dataclass
 class ParameterDescriptor:
     """rcl_interfaces/msg/ParameterDescriptor, the fields declare_parameter reads."""
 
-    name: str = ""
+    name: str = ''
     type: int = 0
-    description: str = ""
+    description: str = ''
     read_only: bool = False
     dynamic_typing: bool = False
 
@@ -116,28 +136,28 @@ class ParameterException(Exception):
     """Base exception for parameter-related errors."""
 
     def __init__(self, error_msg: str, parameters: Any) -> None:
-        Exception.__init__(self, f"{error_msg}: {parameters}")
+        Exception.__init__(self, f'{error_msg}: {parameters}')
 
 
 class ParameterNotDeclaredException(ParameterException):
     """An undeclared parameter was read."""
 
     def __init__(self, parameters: Any) -> None:
-        ParameterException.__init__(self, "Invalid access to undeclared parameter(s)", parameters)
+        ParameterException.__init__(self, 'Invalid access to undeclared parameter(s)', parameters)
 
 
 class ParameterAlreadyDeclaredException(ParameterException):
     """A parameter was declared twice."""
 
     def __init__(self, parameters: Any) -> None:
-        ParameterException.__init__(self, "Parameter(s) already declared", parameters)
+        ParameterException.__init__(self, 'Parameter(s) already declared', parameters)
 
 
 class InvalidParameterException(ParameterException):
     """A parameter name rclpy refuses (validate_parameter_name: an empty one)."""
 
     def __init__(self, parameter_name: str) -> None:
-        ParameterException.__init__(self, "Invalid parameter name", parameter_name)
+        ParameterException.__init__(self, 'Invalid parameter name', parameter_name)
 
 
 class InvalidParameterTypeException(ParameterException):
@@ -148,15 +168,17 @@ class InvalidParameterTypeException(ParameterException):
             self,
             f"Trying to set parameter '{desired_parameter.name}' to '{desired_parameter.value}'"
             f" of type '{desired_parameter.type_.name}', expecting type '{expected_type}'",
-            desired_parameter.name)
+            desired_parameter.name,
+        )
 
 
 class ParameterUninitializedException(ParameterException):
     """A statically typed parameter without a value was read."""
 
     def __init__(self, parameter_name: str) -> None:
-        ParameterException.__init__(self, f"The parameter '{parameter_name}' is not initialized",
-                                    parameter_name)
+        ParameterException.__init__(
+            self, f"The parameter '{parameter_name}' is not initialized", parameter_name
+        )
 
 
 class RCLError(RuntimeError):
@@ -173,35 +195,49 @@ class UnknownROSArgsError(RCLError):
 
 # --- rcl's scalar typing (parse.c get_value) and node-name keys (parse.c _validate_name) -------
 
-_BOOL_TRUE = {"Y", "y", "yes", "Yes", "YES", "true", "True", "TRUE", "on", "On", "ON"}
-_BOOL_FALSE = {"N", "n", "no", "No", "NO", "false", "False", "FALSE", "off", "Off", "OFF"}
-_STRTOLL = re.compile(r"\s*[+-]?(0[xX][0-9a-fA-F]+|0[0-7]*|[1-9][0-9]*)")
-_STRTOD = re.compile(r"\s*[+-]?((\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|0[xX]([0-9a-fA-F]+\.?[0-9a-fA-F]*|\.[0-9a-fA-F]+)"
-                     r"([pP][+-]?\d+)?|inf|infinity|nan(\([0-9a-zA-Z_]*\))?)", re.IGNORECASE)
-_SPECIAL_FLOATS = {f"{sign}.{word}" for sign in ("", "+", "-") for word in ("inf", "Inf", "INF")} | {
-    ".nan", ".NaN", ".NAN"}
-_NAME_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_BOOL_TRUE = {'Y', 'y', 'yes', 'Yes', 'YES', 'true', 'True', 'TRUE', 'on', 'On', 'ON'}
+_BOOL_FALSE = {'N', 'n', 'no', 'No', 'NO', 'false', 'False', 'FALSE', 'off', 'Off', 'OFF'}
+_STRTOLL = re.compile(r'\s*[+-]?(0[xX][0-9a-fA-F]+|0[0-7]*|[1-9][0-9]*)')
+_STRTOD = re.compile(
+    r'\s*[+-]?((\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|0[xX]([0-9a-fA-F]+\.?[0-9a-fA-F]*|\.[0-9a-fA-F]+)'
+    r'([pP][+-]?\d+)?|inf|infinity|nan(\([0-9a-zA-Z_]*\))?)',
+    re.IGNORECASE,
+)
+_SPECIAL_FLOATS = {
+    f'{sign}.{word}' for sign in ('', '+', '-') for word in ('inf', 'Inf', 'INF')
+} | {'.nan', '.NaN', '.NAN'}
+_NAME_TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 
 
 def rcl_scalar(text: str, quoted: bool, str_tag: bool) -> Any:
-    """The value rcl gives a YAML scalar: bool, int (int64, C strtoll), float (strtod), else str."""
+    """Return the value rcl gives a YAML scalar: bool, int (int64, C strtoll), float (strtod), else str."""
     if str_tag or quoted:
         return text
     if text in _BOOL_TRUE or text in _BOOL_FALSE:
         return text in _BOOL_TRUE
     if _STRTOLL.fullmatch(text):
-        value = int(text.strip(), 0) if not re.fullmatch(r"\s*[+-]?0[0-7]+", text) else int(text.strip(), 8)
-        if -(2 ** 63) <= value < 2 ** 63:
+        value = (
+            int(text.strip(), 0)
+            if not re.fullmatch(r'\s*[+-]?0[0-7]+', text)
+            else int(text.strip(), 8)
+        )
+        if -(2**63) <= value < 2**63:
             return value
     if text in _SPECIAL_FLOATS:
-        return math.nan if "nan" in text.lower() else (-math.inf if text.startswith("-") else math.inf)
+        return (
+            math.nan
+            if 'nan' in text.lower()
+            else (-math.inf if text.startswith('-') else math.inf)
+        )
     if _STRTOD.fullmatch(text):
         body = text.strip()
-        stripped = body.lstrip("+-")
-        value = float.fromhex(body) if stripped[:2].lower() == "0x" else float(body)
-        overflow = math.isinf(value) and not stripped.lower().startswith("inf")
-        underflow = value == 0.0 and any(c in "123456789" for c in re.split(r"[eEpP]", stripped)[0][2 * (
-            stripped[:2].lower() == "0x"):])
+        stripped = body.lstrip('+-')
+        value = float.fromhex(body) if stripped[:2].lower() == '0x' else float(body)
+        overflow = math.isinf(value) and not stripped.lower().startswith('inf')
+        underflow = value == 0.0 and any(
+            c in '123456789'
+            for c in re.split(r'[eEpP]', stripped)[0][2 * (stripped[:2].lower() == '0x') :]
+        )
         if not (overflow or underflow):  # strtod sets ERANGE: rcl then keeps the text
             return value
     return text
@@ -209,25 +245,27 @@ def rcl_scalar(text: str, quoted: bool, str_tag: bool) -> Any:
 
 def validate_node_key(key: str) -> str | None:
     """None if rcl accepts `key` as a parameter file's node name, else why not."""
-    if key in ("/**", "/*"):
+    if key in ('/**', '/*'):
         return None
-    namespace, slash, node = key.rpartition("/")
+    namespace, slash, node = key.rpartition('/')
     if slash:
-        tokens = ("/" + namespace if not namespace.startswith("/") else namespace).split("/")[1:]
-        if "" in tokens and tokens != [""]:
-            return "contains repeated forward slash"
+        tokens = ('/' + namespace if not namespace.startswith('/') else namespace).split('/')[1:]
+        if '' in tokens and tokens != ['']:
+            return 'contains repeated forward slash'
         for token in tokens:
-            if token in ("*", "**") or token == "":
+            if token in ('*', '**') or token == '':
                 continue
             if not _NAME_TOKEN.fullmatch(token):
                 return f"namespace token '{token}' is not a name ([A-Za-z_][A-Za-z0-9_]*)"
-    if node in ("*", "**"):
+    if node in ('*', '**'):
         return None
     if not node:
-        return "node name must not be empty"
+        return 'node name must not be empty'
     if not _NAME_TOKEN.fullmatch(node):
-        return (f"node name '{node}' is not valid: a node name is letters, digits and '_', not starting "
-                "with a digit, and a wildcard is only a whole '*' or '**' token")
+        return (
+            f"node name '{node}' is not valid: a node name is letters, digits and '_', not"
+            " starting with a digit, and a wildcard is only a whole '*' or '**' token"
+        )
     return None
 
 
@@ -253,28 +291,31 @@ class Overrides:
         self.entries.setdefault(node_key, {})[name] = value
 
     def for_node(self, fully_qualified_name: str) -> dict[str, Parameter]:
-        """The overrides rclpy's Node.get_parameters hands a node (src/rclpy/node.cpp)."""
+        """Return the overrides rclpy's Node.get_parameters hands a node (src/rclpy/node.cpp)."""
         out: dict[str, Parameter] = {}
         for key, params in self.entries.items():
-            pattern = ("/" + key if not key.startswith("/") else key).replace("/*", r"(/\w+)")
+            pattern = ('/' + key if not key.startswith('/') else key).replace('/*', r'(/\w+)')
             if re.fullmatch(pattern, fully_qualified_name):
                 out.update({name: Parameter(name, value=value) for name, value in params.items()})
         return out
 
 
 def _events_tree(events: list, path: str) -> list:
-    """The mapping/sequence/scalar tree of each YAML document; aliases refused as rcl refuses them."""
+    """Return the mapping/sequence/scalar tree of each YAML document; aliases refused as rcl refuses them."""
     stack: list[list] = []
     roots: list = []
     for event in events:
         node: Any = None
         if isinstance(event, yaml.AliasEvent):
-            raise ParamsFileError(f"params file {path}: line {event.start_mark.line + 1}: "
-                                  "aliases are not supported")
+            raise ParamsFileError(
+                f'params file {path}: line {event.start_mark.line + 1}: aliases are not supported'
+            )
         if isinstance(event, yaml.ScalarEvent):
-            node = ("scalar", event)
+            node = ('scalar', event)
         elif isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
-            stack.append(["map" if isinstance(event, yaml.MappingStartEvent) else "seq", event, []])
+            stack.append(
+                ['map' if isinstance(event, yaml.MappingStartEvent) else 'seq', event, []]
+            )
             continue
         elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
             kind, start, items = stack.pop()
@@ -293,88 +334,104 @@ def _line(event: Any) -> int:
 
 
 def _value(node: Any, where: str) -> Any:
-    """A parameter value: a scalar, or a sequence of scalars of one type (parse.c parse_value)."""
-    if node[0] == "scalar":
+    """Return a parameter value: a scalar, or a sequence of scalars of one type (parse.c parse_value)."""
+    if node[0] == 'scalar':
         event = node[1]
-        if event.style not in ("'", '"') and event.value == "":
-            raise ValueError(f"{where}: no value at line {_line(event)}")
+        if event.style not in ("'", '"') and event.value == '':
+            raise ValueError(f'{where}: no value at line {_line(event)}')
         return rcl_scalar(event.value, event.style in ("'", '"'), event.tag == _STR_TAG)
-    if node[0] == "seq":
+    if node[0] == 'seq':
         values = []
         for item in node[2]:
-            if item[0] != "scalar":
-                raise ValueError(f"{where}: a sequence may only hold scalars (line {_line(item[1])})")
+            if item[0] != 'scalar':
+                raise ValueError(
+                    f'{where}: a sequence may only hold scalars (line {_line(item[1])})'
+                )
             values.append(_value(item, where))
         kinds = {ParameterType.from_parameter_value([v]) for v in values}
         if len(kinds) > 1:
-            raise ValueError(f"{where}: sequence should be of same type (line {_line(node[1])})")
+            raise ValueError(f'{where}: sequence should be of same type (line {_line(node[1])})')
         return values or None  # an empty sequence sets no value: the parameter stays NOT_SET
-    raise ValueError(f"{where}: a mapping is not a parameter value (line {_line(node[1])})")
+    raise ValueError(f'{where}: a mapping is not a parameter value (line {_line(node[1])})')
 
 
 def _node_entries(node: Any, prefix: str, path: str, out: Overrides) -> None:
-    if node[0] != "map":
-        raise ParamsFileError(f"params file {path}: line {_line(node[1])}: cannot have a value before "
-                              f"{PARAMS_KEY}")
+    if node[0] != 'map':
+        raise ParamsFileError(
+            f'params file {path}: line {_line(node[1])}: cannot have a value before {PARAMS_KEY}'
+        )
     items = node[2]
     for key_node, child in zip(items[::2], items[1::2]):
-        if key_node[0] != "scalar":
-            raise ParamsFileError(f"params file {path}: line {_line(key_node[1])}: a key must be a scalar")
+        if key_node[0] != 'scalar':
+            raise ParamsFileError(
+                f'params file {path}: line {_line(key_node[1])}: a key must be a scalar'
+            )
         key = key_node[1].value
         if key.startswith(PARAMS_KEY):
             if not prefix:
-                raise ParamsFileError(f"params file {path}: line {_line(key_node[1])}: there are no node "
-                                      f"names before {PARAMS_KEY}")
+                raise ParamsFileError(
+                    f'params file {path}: line {_line(key_node[1])}: there are no node '
+                    f'names before {PARAMS_KEY}'
+                )
             problem = validate_node_key(prefix)
             if problem:
                 raise ParamsFileError(f"params file {path}: key '{prefix}': {problem}")
             out.entries.setdefault(prefix, {})
-            _parameters(child, prefix, "", path, out)
+            _parameters(child, prefix, '', path, out)
         else:
-            _node_entries(child, key if not prefix else prefix.rstrip("/") + "/" + key, path, out)
+            _node_entries(child, key if not prefix else prefix.rstrip('/') + '/' + key, path, out)
 
 
 def _parameters(node: Any, node_key: str, param_prefix: str, path: str, out: Overrides) -> None:
-    if node[0] != "map":
-        raise ParamsFileError(f"params file {path}: key '{node_key}': {PARAMS_KEY} must be a mapping")
+    if node[0] != 'map':
+        raise ParamsFileError(
+            f"params file {path}: key '{node_key}': {PARAMS_KEY} must be a mapping"
+        )
     items = node[2]
     for key_node, child in zip(items[::2], items[1::2]):
         name = param_prefix + key_node[1].value
-        if child[0] == "map":
-            _parameters(child, node_key, name + ".", path, out)
+        if child[0] == 'map':
+            _parameters(child, node_key, name + '.', path, out)
             continue
         try:
-            out.set(node_key, name, _value(child, f"params file {path}: key '{node_key}' parameter '{name}'"))
+            out.set(
+                node_key,
+                name,
+                _value(child, f"params file {path}: key '{node_key}' parameter '{name}'"),
+            )
         except ValueError as exc:
             raise ParamsFileError(str(exc)) from None
 
 
 def load_params_file(path: str | Path, into: Overrides | None = None) -> Overrides:
-    """A ROS 2 parameter file parsed and checked as rcl parses it, merged into `into`."""
+    """Return a ROS 2 parameter file parsed and checked as rcl parses it, merged into `into`."""
     out = into if into is not None else Overrides()
     try:
         text = Path(path).read_text()
         events = list(yaml.parse(text, Loader=yaml.SafeLoader))
     except OSError as exc:
-        raise ParamsFileError(f"params file {path}: {exc.strerror or exc}") from None
+        raise ParamsFileError(f'params file {path}: {exc.strerror or exc}') from None
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise ParamsFileError(f"params file {path}: not YAML"
-                              + (f" (line {mark.line + 1})" if mark else "")) from None
+        mark = getattr(exc, 'problem_mark', None)
+        raise ParamsFileError(
+            f'params file {path}: not YAML' + (f' (line {mark.line + 1})' if mark else '')
+        ) from None
     for root in _events_tree(events, str(path)):  # rcl reads every document of the file
-        _node_entries(root, "", str(path), out)
+        _node_entries(root, '', str(path), out)
     return out
 
 
 def parse_param_rule(rule: str, into: Overrides) -> None:
     """`-p [node:]name:=value` as rcl's _rcl_parse_param_rule (node key `/**` by default)."""
-    head, sep, text = rule.partition(":=")
-    node_key, colon, name = head.rpartition(":")
-    node_key = node_key if colon else "/**"
+    head, sep, text = rule.partition(':=')
+    node_key, colon, name = head.rpartition(':')
+    node_key = node_key if colon else '/**'
     if not sep or not name or not text or (colon and not _NAME_TOKEN.fullmatch(node_key)):
         raise RCLInvalidROSArgsError(f"Couldn't parse parameter override rule: '-p {rule}'")
     try:
-        (root,) = _events_tree(list(yaml.parse(text, Loader=yaml.SafeLoader)), "-p")
-        into.set(node_key, name, _value(root, f"-p {rule}"))
+        (root,) = _events_tree(list(yaml.parse(text, Loader=yaml.SafeLoader)), '-p')
+        into.set(node_key, name, _value(root, f'-p {rule}'))
     except (ValueError, yaml.YAMLError, ParamsFileError, TypeError):
-        raise RCLInvalidROSArgsError(f"Couldn't parse parameter override rule: '-p {rule}'") from None
+        raise RCLInvalidROSArgsError(
+            f"Couldn't parse parameter override rule: '-p {rule}'"
+        ) from None

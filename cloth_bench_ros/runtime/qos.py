@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
+import enum
 
 
 class ReliabilityPolicy(enum.IntEnum):
@@ -38,5 +38,5 @@ def as_profile(qos: QoSProfile | int) -> QoSProfile:
 
 
 def time_source_qos() -> QoSProfile:
-    """The /clock subscription of rclpy's TimeSource: depth 1, best effort (time_source.py)."""
+    """Return the /clock subscription of rclpy's TimeSource: depth 1, best effort (time_source.py)."""
     return QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)

@@ -19,7 +19,7 @@ from typing import Any, Protocol
 from cloth_bench_ros.runtime.qos import DurabilityPolicy, QoSProfile
 from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 
-TRANSPORTS = ("intra", "dds")
+TRANSPORTS = ('intra', 'dds')
 
 
 class Endpoint(Protocol):
@@ -33,16 +33,18 @@ class Endpoint(Protocol):
 
 def transport_choice(default: str) -> str:
     """CLOTH_BENCH_TRANSPORT if set (intra or dds), else `default`; ValueError for another value."""
-    choice = os.environ.get("CLOTH_BENCH_TRANSPORT", "").strip().lower() or default
+    choice = os.environ.get('CLOTH_BENCH_TRANSPORT', '').strip().lower() or default
     if choice not in TRANSPORTS:
-        raise ValueError(f"CLOTH_BENCH_TRANSPORT: unknown transport {choice!r} (valid: intra, dds)")
+        raise ValueError(
+            f'CLOTH_BENCH_TRANSPORT: unknown transport {choice!r} (valid: intra, dds)'
+        )
     return choice
 
 
 class IntraProcessTransport:
     """Nodes of one context in one process: one FIFO, callbacks in publish order, nothing lost."""
 
-    name = "intra"
+    name = 'intra'
 
     def __init__(self, context: Any) -> None:
         self.context = context
@@ -80,9 +82,21 @@ class IntraProcessTransport:
         return len(self.context.publishers.get(sub.topic_name, ()))
 
     def endpoints(self, topic: str, kind: TopicEndpointTypeEnum) -> list[TopicEndpointInfo]:
-        table = self.context.publishers if kind == TopicEndpointTypeEnum.PUBLISHER else self.context.subscriptions
-        return [TopicEndpointInfo(e.node.get_name(), e.node.get_namespace(), e.msg_type.__msgtype__, kind,
-                                  qos_profile=e.qos) for e in table.get(topic, ())]
+        table = (
+            self.context.publishers
+            if kind == TopicEndpointTypeEnum.PUBLISHER
+            else self.context.subscriptions
+        )
+        return [
+            TopicEndpointInfo(
+                e.node.get_name(),
+                e.node.get_namespace(),
+                e.msg_type.__msgtype__,
+                kind,
+                qos_profile=e.qos,
+            )
+            for e in table.get(topic, ())
+        ]
 
     def node_names(self) -> list[tuple[str, str]]:
         return [(n.get_name(), n.get_namespace()) for n in self.context.nodes]

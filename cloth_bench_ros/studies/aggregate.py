@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import math
 from collections import defaultdict
 from dataclasses import dataclass
+import math
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -29,27 +29,31 @@ class Stat:
     def text(self, digits: int = 3, show_n: bool = True) -> str:
         if self.used == 0:
             if self.diverged:
-                return f"diverged ({self.diverged}/{self.n})"
-            return "error" if self.errors else "-"
-        out = f"{self.mean:.{digits}f} ± {self.std:.{digits}f}"
+                return f'diverged ({self.diverged}/{self.n})'
+            return 'error' if self.errors else '-'
+        out = f'{self.mean:.{digits}f} ± {self.std:.{digits}f}'
         notes = []
         if show_n:
-            notes.append(f"n={self.used}")
+            notes.append(f'n={self.used}')
         if self.diverged:
-            notes.append(f"{self.diverged} diverged")
+            notes.append(f'{self.diverged} diverged')
         if self.errors:
-            notes.append(f"{self.errors} errors")
-        return out + (f" ({', '.join(notes)})" if notes else "")
+            notes.append(f'{self.errors} errors')
+        return out + (f' ({", ".join(notes)})' if notes else '')
 
 
 def stat(rows: Sequence[dict], key: str) -> Stat:
     """Mean and (population) std of `key` over the rows that neither diverged nor failed."""
-    usable = [r for r in rows if r.get("status") == "ok"]
+    usable = [r for r in rows if r.get('status') == 'ok']
     values = finite(r.get(key) for r in usable)
-    return Stat(len(rows), len(values), sum(r.get("status") == "diverged" for r in rows),
-                sum(r.get("status") == "error" for r in rows),
-                float(values.mean()) if len(values) else math.nan,
-                float(values.std()) if len(values) else math.nan)
+    return Stat(
+        len(rows),
+        len(values),
+        sum(r.get('status') == 'diverged' for r in rows),
+        sum(r.get('status') == 'error' for r in rows),
+        float(values.mean()) if len(values) else math.nan,
+        float(values.std()) if len(values) else math.nan,
+    )
 
 
 def group(rows: Iterable[dict], *keys: str) -> dict[tuple, list[dict]]:
@@ -61,7 +65,7 @@ def group(rows: Iterable[dict], *keys: str) -> dict[tuple, list[dict]]:
 
 def compute_per_sim_second(row: dict) -> float:
     """Engine compute time per simulated second (s/s): mean step time x rate; < 1 is faster than real time."""
-    st = row.get("step_time_mean")
+    st = row.get('step_time_mean')
     if st is None or not math.isfinite(st):
         return math.nan
-    return float(st) * float(row["rate_hz"])
+    return float(st) * float(row['rate_hz'])

@@ -11,34 +11,34 @@ Two kinds of sweep build cells:
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from itertools import product
 from pathlib import Path
+import re
 from typing import Iterable, Sequence
 
 from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
 
 DEFAULT_RATES = (10.0, 100.0, 1000.0)
-DEFAULT_ENGINES = ("mujoco", "bullet", "newton")
-DEFAULT_CLOTHS = ("towel", "chequered", "linen")
-DEFAULT_PRIMITIVES = ("dynamic", "quasi_static")
+DEFAULT_ENGINES = ('mujoco', 'bullet', 'newton')
+DEFAULT_CLOTHS = ('towel', 'chequered', 'linen')
+DEFAULT_PRIMITIVES = ('dynamic', 'quasi_static')
 DEFAULT_SEEDS = 20
-PRESET = "preset"
+PRESET = 'preset'
 
 # Settings sweep (mode "settings"): the settings that cost time, each axis a list of values;
 # None means "the preset's value". The cells are the full factorial product.
 DEFAULT_SETTINGS_AXES: dict[str, list] = {
-    "grid": [(6, 8), (11, 15), (16, 22)],
-    "self_collision": [False, True],
-    "timestep": [None, 0.005, 0.01],
-    "solver_iterations": [None, 5],
+    'grid': [(6, 8), (11, 15), (16, 22)],
+    'self_collision': [False, True],
+    'timestep': [None, 0.005, 0.01],
+    'solver_iterations': [None, 5],
 }
 SETTINGS_RATE = 100.0
 SETTINGS_SEEDS = 2
 
 
-CROSS_REFERENCE = "cross_reference"  # the mode of cells scored against a named synthetic reference
+CROSS_REFERENCE = 'cross_reference'  # the mode of cells scored against a named synthetic reference
 
 
 @dataclass(frozen=True)
@@ -52,22 +52,24 @@ class Cell:
     seed: int
     bag: str
     trial: int = 0
-    mode: str = "paper"
+    mode: str = 'paper'
     config: str = PRESET  # name of the engine configuration (grid + overrides)
     grid: tuple[int, int] | None = None
     overrides: tuple[tuple[str, object], ...] = ()  # sorted (parameter, value) pairs
-    pacing: str = "lockstep"
+    pacing: str = 'lockstep'
     keep_frames: bool = False  # write summary.json + frames.csv of this run (per-frame plots)
 
     def key(self) -> tuple:
-        """What makes a cell unique in a results file (resume compares these with row_key)."""
+        """Return what makes a cell unique in a results file (resume compares these with row_key)."""
         return result_key({name: getattr(self, name) for name in KEY_FIELDS})
 
     def ident(self) -> str:
-        """A file-system-safe name of the cell."""
-        text = (f"{self.mode}_{self.config}_{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}"
-                f"_t{self.trial}_s{self.seed}_{self.pacing}")
-        return re.sub(r"[^A-Za-z0-9_.=-]+", "-", text)
+        """Return a file-system-safe name of the cell."""
+        text = (
+            f'{self.mode}_{self.config}_{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}'
+            f'_t{self.trial}_s{self.seed}_{self.pacing}'
+        )
+        return re.sub(r'[^A-Za-z0-9_.=-]+', '-', text)
 
     @property
     def params(self) -> dict:
@@ -79,27 +81,27 @@ class Cell:
         """The synthetic reference a cross-reference cell is scored against (its config's first entry)."""
         if self.mode != CROSS_REFERENCE:
             return None
-        return self.config.split(",")[0].removeprefix("reference=")
+        return self.config.split(',')[0].removeprefix('reference=')
 
 
 def _shown(value: object) -> str:
-    """A setting's value in a configuration name: on/off, numbers as %g, text as it is."""
+    """Return a setting's value in a configuration name: on/off, numbers as %g, text as it is."""
     if isinstance(value, bool):
-        return "on" if value else "off"
-    return f"{value:g}" if isinstance(value, float) else str(value)
+        return 'on' if value else 'off'
+    return f'{value:g}' if isinstance(value, float) else str(value)
 
 
 def config_label(grid: tuple[int, int] | None, overrides: dict) -> str:
-    """A canonical name of a configuration: "preset" or "grid=6x8,param=value,..."."""
+    """Return a canonical name of a configuration: "preset" or "grid=6x8,param=value,..."."""
     parts = []
     if grid is not None:
-        parts.append(f"grid={grid[0]}x{grid[1]}")
+        parts.append(f'grid={grid[0]}x{grid[1]}')
     for name in sorted(overrides):
-        parts.append(f"{name}={_shown(overrides[name])}")
-    return ",".join(parts) or PRESET
+        parts.append(f'{name}={_shown(overrides[name])}')
+    return ','.join(parts) or PRESET
 
 
-_BAG_NAME = r"^{cloth}(?:_(\d+))?_{primitive}$"
+_BAG_NAME = r'^{cloth}(?:_(\d+))?_{primitive}$'
 
 
 def find_bags(bag_dir: Path | None, cloth: str, primitive: str) -> list[tuple[int, Path]]:
@@ -110,7 +112,7 @@ def find_bags(bag_dir: Path | None, cloth: str, primitive: str) -> list[tuple[in
     """
     from cloth_bench_ros.paths import share_dir
 
-    base = Path(bag_dir) if bag_dir is not None else share_dir("bags")
+    base = Path(bag_dir) if bag_dir is not None else share_dir('bags')
     pattern = re.compile(_BAG_NAME.format(cloth=re.escape(cloth), primitive=re.escape(primitive)))
     found = []
     if base.is_dir():
@@ -119,7 +121,10 @@ def find_bags(bag_dir: Path | None, cloth: str, primitive: str) -> list[tuple[in
             if m and path.is_dir():
                 found.append((int(m.group(1)) if m.group(1) else _bag_trial(path), path))
     if not found:
-        raise ValueError(f"bag directory {base}: no bag named {cloth}_{primitive} or {cloth}_<trial>_{primitive}")
+        raise ValueError(
+            f'bag directory {base}: no bag named {cloth}_{primitive} or'
+            f' {cloth}_<trial>_{primitive}'
+        )
     return sorted(found)
 
 
@@ -142,13 +147,20 @@ def _check_engines(engines: Iterable[str], overrides: dict[str, dict]) -> None:
         cls.validate_params(overrides.get(name, {}))
 
 
-def paper_cells(engines: Sequence[str] = DEFAULT_ENGINES, rates: Sequence[float] = DEFAULT_RATES,
-                cloths: Sequence[str] = DEFAULT_CLOTHS, primitives: Sequence[str] = DEFAULT_PRIMITIVES,
-                seeds: Sequence[int] = tuple(range(DEFAULT_SEEDS)), bag_dir: Path | None = None,
-                grid: tuple[int, int] | None = None, overrides: dict[str, dict] | None = None,
-                pacing: str = "lockstep", step_per_target: bool = False,
-                keep_frames_seeds: Iterable[int] | None = None) -> list[Cell]:
-    """The cells of the paper's layout. step_per_target: internal time step = 1 / rate, one
+def paper_cells(
+    engines: Sequence[str] = DEFAULT_ENGINES,
+    rates: Sequence[float] = DEFAULT_RATES,
+    cloths: Sequence[str] = DEFAULT_CLOTHS,
+    primitives: Sequence[str] = DEFAULT_PRIMITIVES,
+    seeds: Sequence[int] = tuple(range(DEFAULT_SEEDS)),
+    bag_dir: Path | None = None,
+    grid: tuple[int, int] | None = None,
+    overrides: dict[str, dict] | None = None,
+    pacing: str = 'lockstep',
+    step_per_target: bool = False,
+    keep_frames_seeds: Iterable[int] | None = None,
+) -> list[Cell]:
+    """Return the cells of the paper's layout. step_per_target: internal time step = 1 / rate, one
     engine step per target (the paper's frequency study), instead of the preset's time step.
     keep_frames_seeds: seeds whose per-frame scores are kept (default: the first seed).
     """
@@ -163,16 +175,37 @@ def paper_cells(engines: Sequence[str] = DEFAULT_ENGINES, rates: Sequence[float]
                 label = config_label(grid, params)
                 if step_per_target:
                     params.update(timestep=1.0 / float(rate), substeps=1)
-                    label = "step=1/rate" if label == PRESET else f"{label},step=1/rate"
-                cells.append(Cell(engine, float(rate), cloth, primitive, int(seed), str(bag), trial, "paper",
-                                  label, grid, tuple(sorted(params.items())), pacing, seed in keep))
+                    label = 'step=1/rate' if label == PRESET else f'{label},step=1/rate'
+                cells.append(
+                    Cell(
+                        engine,
+                        float(rate),
+                        cloth,
+                        primitive,
+                        int(seed),
+                        str(bag),
+                        trial,
+                        'paper',
+                        label,
+                        grid,
+                        tuple(sorted(params.items())),
+                        pacing,
+                        seed in keep,
+                    )
+                )
     return cells
 
 
-def settings_cells(engines: Sequence[str] = DEFAULT_ENGINES, rate: float = SETTINGS_RATE,
-                   cloths: Sequence[str] = ("towel",), primitives: Sequence[str] = DEFAULT_PRIMITIVES,
-                   seeds: Sequence[int] = tuple(range(SETTINGS_SEEDS)), bag_dir: Path | None = None,
-                   axes: dict[str, list] | None = None, overrides: dict[str, dict] | None = None) -> list[Cell]:
+def settings_cells(
+    engines: Sequence[str] = DEFAULT_ENGINES,
+    rate: float = SETTINGS_RATE,
+    cloths: Sequence[str] = ('towel',),
+    primitives: Sequence[str] = DEFAULT_PRIMITIVES,
+    seeds: Sequence[int] = tuple(range(SETTINGS_SEEDS)),
+    bag_dir: Path | None = None,
+    axes: dict[str, list] | None = None,
+    overrides: dict[str, dict] | None = None,
+) -> list[Cell]:
     """Factorial sweep over the settings that cost time, per engine, at one rate.
 
     axes: parameter -> values ("grid" -> [(nx, nz), ...]); None as a value means the preset's.
@@ -183,7 +216,7 @@ def settings_cells(engines: Sequence[str] = DEFAULT_ENGINES, rate: float = SETTI
     axes = dict(DEFAULT_SETTINGS_AXES if axes is None else axes)
     overrides = overrides or {}
     _check_engines(engines, overrides)
-    grids = axes.pop("grid", [None])
+    grids = axes.pop('grid', [None])
     cells = []
     for engine in engines:
         schema = {p.name for p in engine_class(engine).params}
@@ -194,31 +227,52 @@ def settings_cells(engines: Sequence[str] = DEFAULT_ENGINES, rate: float = SETTI
                 params = dict(overrides.get(engine, {}))
                 params.update({n: v for n, v in zip(names, values) if v is not None})
                 engine_class(engine).validate_params(params)
-                parts = [f"grid={grid[0]}x{grid[1]}" if grid else "grid=default"]
+                parts = [f'grid={grid[0]}x{grid[1]}' if grid else 'grid=default']
                 for n, v in zip(names, values):
-                    parts.append(f"{n}={PRESET if v is None else _shown(v)}")
+                    parts.append(f'{n}={PRESET if v is None else _shown(v)}')
                 fixed = {k: v for k, v in overrides.get(engine, {}).items() if k not in names}
                 if fixed:  # --set values shared by every configuration are part of its name
                     parts.append(config_label(None, fixed))
-                combos.append((",".join(parts), tuple(grid) if grid else None, tuple(sorted(params.items()))))
+                combos.append(
+                    (','.join(parts), tuple(grid) if grid else None, tuple(sorted(params.items())))
+                )
         for cloth, primitive in product(cloths, primitives):
             for trial, bag in find_bags(bag_dir, cloth, primitive):
                 for (label, grid, params), seed in product(combos, seeds):
-                    cells.append(Cell(engine, float(rate), cloth, primitive, int(seed), str(bag), trial,
-                                      "settings", label, grid, params, "lockstep", False))
+                    cells.append(
+                        Cell(
+                            engine,
+                            float(rate),
+                            cloth,
+                            primitive,
+                            int(seed),
+                            str(bag),
+                            trial,
+                            'settings',
+                            label,
+                            grid,
+                            params,
+                            'lockstep',
+                            False,
+                        )
+                    )
     return cells
 
 
 def estimated_cost(cell: Cell) -> float:
-    """A rough cost of a cell in seconds of one core: internal steps x a per-step cost, plus the
+    """Return a rough cost of a cell in seconds of one core: internal steps x a per-step cost, plus the
     nodes' work per target (fitted to the default sweep's cells on 2 idle cores, 11 x 15 mesh:
     0.8 ms per MuJoCo internal step on the fling, 1.4x that with the cloth on the table).
     """
-    duration = 7.4 if cell.primitive == "dynamic" else 17.0  # settle phase + quintic part, s
+    duration = 7.4 if cell.primitive == 'dynamic' else 17.0  # settle phase + quintic part, s
     params = cell.params
     nx, nz = cell.grid or (11, 15)
-    timestep = float(params.get("timestep", 0.002 if cell.engine == "mujoco" else 0.0025))
+    timestep = float(params.get('timestep', 0.002 if cell.engine == 'mujoco' else 0.0025))
     internal_steps = duration * max(cell.rate_hz, 1.0 / timestep)
-    per_internal_step = (0.8e-3 * (nx * nz / 165.0) * {"bullet": 1.5, "newton": 5.0}.get(cell.engine, 1.0)
-                         * (1.4 if cell.primitive == "quasi_static" else 1.0))
+    per_internal_step = (
+        0.8e-3
+        * (nx * nz / 165.0)
+        * {'bullet': 1.5, 'newton': 5.0}.get(cell.engine, 1.0)
+        * (1.4 if cell.primitive == 'quasi_static' else 1.0)
+    )
     return internal_steps * per_internal_step + duration * cell.rate_hz * 0.5e-3 + 1.0

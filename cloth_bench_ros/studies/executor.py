@@ -21,18 +21,17 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+from pathlib import Path
 import signal
 import socket
-import warnings
-from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
-
-from distributed.diagnostics.plugin import WorkerPlugin
+import warnings
 
 from cloth_bench_ros.errors import ClothBenchError
+from distributed.diagnostics.plugin import WorkerPlugin
 
 WORKER_TREE_CACHE_POINTS = 20_000_000  # ~ 400 frames of 50,000 points per worker
-_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+_THREAD_VARS = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS')
 
 
 @contextlib.contextmanager
@@ -41,10 +40,12 @@ def quiet_shutdown() -> Iterator[None]:
     try:
         yield
     except KeyboardInterrupt:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the clean-up short
-        logging.getLogger("distributed").setLevel(logging.CRITICAL)
-        logging.getLogger("asyncio").setLevel(logging.CRITICAL)
-        warnings.filterwarnings("ignore", message="coroutine .* was never awaited")
+        signal.signal(
+            signal.SIGINT, signal.SIG_IGN
+        )  # a second Ctrl-C must not cut the clean-up short
+        logging.getLogger('distributed').setLevel(logging.CRITICAL)
+        logging.getLogger('asyncio').setLevel(logging.CRITICAL)
+        warnings.filterwarnings('ignore', message='coroutine .* was never awaited')
         raise
 
 
@@ -60,7 +61,7 @@ def default_workers() -> int:
 class _WorkerSetup(WorkerPlugin):
     """Worker plugin: quiet output (to the study's log file), one thread for numpy, the tree cache."""
 
-    name = "cloth-bench-setup"
+    name = 'cloth-bench-setup'
 
     def __init__(self, log_path: str | None, local: bool) -> None:
         self.log_path = log_path
@@ -72,7 +73,7 @@ class _WorkerSetup(WorkerPlugin):
         from cloth_bench_ros.core import metrics
 
         for var in _THREAD_VARS:
-            os.environ.setdefault(var, "1")  # the engines are single-threaded: one core per worker
+            os.environ.setdefault(var, '1')  # the engines are single-threaded: one core per worker
         metrics.keep_trees(WORKER_TREE_CACHE_POINTS)
         if self.local and self.log_path:
             # What the engines' C code prints goes to the log, not to the terminal of the progress bar.
@@ -83,51 +84,65 @@ class _WorkerSetup(WorkerPlugin):
                 os.close(fd)
             except OSError:
                 pass
-        warnings.simplefilter("ignore")
+        warnings.simplefilter('ignore')
 
 
 def check_scheduler_address(address: str) -> str:
     """`address` if it looks like tcp://HOST:PORT (or tls://), else ExecutorError."""
-    scheme, sep, rest = address.partition("://")
-    host, colon, port = rest.rpartition(":")
-    if not sep or scheme not in ("tcp", "tls") or not colon or not host or not port.isdigit():
-        raise ExecutorError(f"--scheduler {address!r} is not tcp://HOST:PORT (e.g. tcp://127.0.0.1:8786)")
+    scheme, sep, rest = address.partition('://')
+    host, colon, port = rest.rpartition(':')
+    if not sep or scheme not in ('tcp', 'tls') or not colon or not host or not port.isdigit():
+        raise ExecutorError(
+            f'--scheduler {address!r} is not tcp://HOST:PORT (e.g. tcp://127.0.0.1:8786)'
+        )
     return address
 
 
 @contextlib.contextmanager
-def open_client(scheduler: str | None = None, workers: int | None = None,
-                log_path: Path | None = None) -> Iterator[Any]:
-    """A Dask client: of a new LocalCluster on 127.0.0.1 (`workers` processes), or of `scheduler`."""
+def open_client(
+    scheduler: str | None = None, workers: int | None = None, log_path: Path | None = None
+) -> Iterator[Any]:
+    """Return a Dask client: of a new LocalCluster on 127.0.0.1 (`workers` processes), or of `scheduler`."""
     for var in _THREAD_VARS:
-        os.environ.setdefault(var, "1")
-    logging.getLogger("distributed").setLevel(logging.ERROR)
+        os.environ.setdefault(var, '1')
+    logging.getLogger('distributed').setLevel(logging.ERROR)
     plugin = _WorkerSetup(str(log_path) if log_path else None, scheduler is None)
-    with _cluster_client(scheduler, workers, plugin) as client, quiet_shutdown():  # quiet before closing
+    with (
+        _cluster_client(scheduler, workers, plugin) as client,
+        quiet_shutdown(),
+    ):  # quiet before closing
         yield client
 
 
 @contextlib.contextmanager
-def _cluster_client(scheduler: str | None, workers: int | None, plugin: _WorkerSetup) -> Iterator[Any]:
+def _cluster_client(
+    scheduler: str | None, workers: int | None, plugin: _WorkerSetup
+) -> Iterator[Any]:
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
         address = check_scheduler_address(scheduler)
         try:
-            client = Client(address, timeout="20s")
+            client = Client(address, timeout='20s')
         except (OSError, TimeoutError) as exc:
-            raise ExecutorError(f"--scheduler {address}: cannot connect ({exc})") from None
+            raise ExecutorError(f'--scheduler {address}: cannot connect ({exc})') from None
         try:
             _register(client, plugin)
             yield client
         finally:
             client.close()
         return
-    cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
-                           host="127.0.0.1", dashboard_address=None, memory_limit=0,
-                           silence_logs=logging.ERROR,
-                           # No dashboard; the scheduler's HTTP routes (health) on a free loopback port.
-                           scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"})
+    cluster = LocalCluster(
+        n_workers=workers or default_workers(),
+        threads_per_worker=1,
+        processes=True,
+        host='127.0.0.1',
+        dashboard_address=None,
+        memory_limit=0,
+        silence_logs=logging.ERROR,
+        # No dashboard; the scheduler's HTTP routes (health) on a free loopback port.
+        scheduler_kwargs={'dashboard': False, 'dashboard_address': '127.0.0.1:0'},
+    )
     try:
         client = Client(cluster)
         try:
@@ -140,7 +155,7 @@ def _cluster_client(scheduler: str | None, workers: int | None, plugin: _WorkerS
 
 
 def _register(client: Any, plugin: _WorkerSetup) -> None:
-    if hasattr(client, "register_plugin"):
+    if hasattr(client, 'register_plugin'):
         client.register_plugin(plugin, name=plugin.name)
     else:  # distributed before 2023.9
         client.register_worker_plugin(plugin, name=plugin.name)
@@ -151,8 +166,15 @@ def worker_slots(client: Any) -> int:
     return max(1, sum(client.nthreads().values()))
 
 
-def run_tasks(client: Any, func: Callable, items: Sequence, on_result: Callable[[Any, Any], None],
-              on_crash: Callable[[Any, str], None], args: tuple = (), in_flight: int | None = None) -> None:
+def run_tasks(
+    client: Any,
+    func: Callable,
+    items: Sequence,
+    on_result: Callable[[Any, Any], None],
+    on_crash: Callable[[Any, str], None],
+    args: tuple = (),
+    in_flight: int | None = None,
+) -> None:
     """func(item, *args) for every item on the cluster, at most `in_flight` at a time (default:
     twice the worker threads); on_result(item, result) in the client as each finishes.
 
@@ -160,7 +182,7 @@ def run_tasks(client: Any, func: Callable, items: Sequence, on_result: Callable[
     workers can be declared killed too. Killed tasks run again at the end, one at a time: an
     innocent one then finishes, and only the one that kills its workers alone goes to on_crash.
     """
-    from distributed import KilledWorker, as_completed
+    from distributed import as_completed, KilledWorker
 
     limit = in_flight or 2 * worker_slots(client)
     pending = list(items)[::-1]
@@ -205,10 +227,10 @@ def _crash_message(exc: BaseException) -> str:
     from distributed import KilledWorker
 
     if isinstance(exc, KilledWorker):
-        return "the worker process died while running this case (on every worker that tried it)"
-    return f"{type(exc).__name__}: {exc}"
+        return 'the worker process died while running this case (on every worker that tried it)'
+    return f'{type(exc).__name__}: {exc}'
 
 
 def host_label() -> str:
-    """This machine's name and core count, for provenance."""
-    return f"{socket.gethostname()} ({os.cpu_count()} cores)"
+    """Return this machine's name and core count, for provenance."""
+    return f'{socket.gethostname()} ({os.cpu_count()} cores)'

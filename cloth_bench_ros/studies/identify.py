@@ -14,27 +14,29 @@ seeds (and the other trials' bags) against the engine's preset through the full 
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 import json
 import math
-import sys
-import warnings
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
+import sys
+import time
 from typing import Any, Sequence
+import warnings
 
-from cloth_bench_ros.studies.objective import Trial, evaluate
+from cloth_bench_ros.studies.objective import evaluate, Trial
 
-SAMPLERS = ("cmaes", "tpe", "gp", "both")
+SAMPLERS = ('cmaes', 'tpe', 'gp', 'both')
 DEFAULT_TRIALS = 500
 DEFAULT_SPAN = 10.0
-JOURNAL_FILE = "study.journal"
-TRIALS_FILE = "trials.jsonl"
-SUMMARY_FILE = "identification.json"
+JOURNAL_FILE = 'study.journal'
+TRIALS_FILE = 'trials.jsonl'
+SUMMARY_FILE = 'identification.json'
 # What the reference identified per engine (docs/benchmark.md, section 7); others: every ranged number.
-DEFAULT_PARAMS = {"mujoco": ("mass", "young", "poisson", "thickness", "damping"),
-                  "bullet": ("mass", "elastic", "damping", "bending")}
-NOT_FITTED = ("timestep", "substeps", "solver_iterations")
+DEFAULT_PARAMS = {
+    'mujoco': ('mass', 'young', 'poisson', 'thickness', 'damping'),
+    'bullet': ('mass', 'elastic', 'damping', 'bending'),
+}
+NOT_FITTED = ('timestep', 'substeps', 'solver_iterations')
 
 
 @dataclass
@@ -46,9 +48,9 @@ class IdentifySpec:
     primitive: str
     bag: Path
     output: Path
-    sampler: str = "both"
+    sampler: str = 'both'
     trials: int = DEFAULT_TRIALS  # per sampler
-    objective: str = "cd"
+    objective: str = 'cd'
     params: Sequence[str] = ()
     seed: int = 0
     rate_hz: float = 100.0
@@ -62,14 +64,21 @@ class IdentifySpec:
 
 
 def default_params(engine: str) -> list[str]:
-    """The parameters fitted by default: the reference's set, else every ranged number of the schema."""
+    """Return the parameters fitted by default: the reference's set, else every ranged number of the schema."""
     from cloth_bench_ros.engines import engine_class
 
     schema = engine_class(engine).params
     if engine in DEFAULT_PARAMS:
         return list(DEFAULT_PARAMS[engine])
-    return [p.name for p in schema if p.low is not None and p.high is not None and not p.choices
-            and not isinstance(p.default, bool) and p.name not in NOT_FITTED]
+    return [
+        p.name
+        for p in schema
+        if p.low is not None
+        and p.high is not None
+        and not p.choices
+        and not isinstance(p.default, bool)
+        and p.name not in NOT_FITTED
+    ]
 
 
 def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> dict[str, Any]:
@@ -77,52 +86,57 @@ def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> 
     100 times the base value when low is 0), a log range within a factor `span` either side of the
     base (preset) value. ValueError for a parameter that cannot be fitted.
     """
-    from optuna.distributions import FloatDistribution
-
     from cloth_bench_ros.engines import engine_class
+    from optuna.distributions import FloatDistribution
 
     schema = {p.name: p for p in engine_class(engine).params}
     space = {}
     for name in names:
         p = schema.get(name)
         if p is None:
-            raise ValueError(f"--params: unknown {engine} parameter {name} (known: {', '.join(schema)})")
+            raise ValueError(
+                f'--params: unknown {engine} parameter {name} (known: {", ".join(schema)})'
+            )
         if p.choices or isinstance(p.default, bool) or p.low is None or p.high is None:
-            raise ValueError(f"--params: {engine} parameter {name} is not a number with a range")
+            raise ValueError(f'--params: {engine} parameter {name} is not a number with a range')
         value = float(base.get(name, p.default))
         low, high = float(p.low), float(p.high)
         decades = high >= 100 * low if low > 0 else value > 0 and high >= 100 * value
         if decades and value > 0:
-            space[name] = FloatDistribution(max(low, value / span), min(high, value * span), log=True)
+            space[name] = FloatDistribution(
+                max(low, value / span), min(high, value * span), log=True
+            )
         else:
             space[name] = FloatDistribution(low, high)
     return space
 
 
 def make_sampler(name: str, seed: int) -> Any:
-    """The Optuna sampler `name` (cmaes, tpe or gp), seeded. CMA-ES starts at the centre of the space,
+    """Return the Optuna sampler `name` (cmaes, tpe or gp), seeded. CMA-ES starts at the centre of the space,
     which is the preset for the log-scale parameters (their ranges are a factor `span` either side).
     """
     import optuna
 
-    if name == "cmaes":
+    if name == 'cmaes':
         return optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
-    if name == "tpe":
+    if name == 'tpe':
         return optuna.samplers.TPESampler(seed=seed, multivariate=True, n_startup_trials=10)
-    if name == "gp":
+    if name == 'gp':
         try:
             import torch  # noqa: F401
         except ImportError:
-            raise ValueError("--sampler gp needs PyTorch (pip install torch); use tpe or cmaes") from None
+            raise ValueError(
+                '--sampler gp needs PyTorch (pip install torch); use tpe or cmaes'
+            ) from None
         return optuna.samplers.GPSampler(seed=seed)
-    raise ValueError(f"unknown sampler {name!r} (valid: {', '.join(SAMPLERS)})")
+    raise ValueError(f'unknown sampler {name!r} (valid: {", ".join(SAMPLERS)})')
 
 
 def samplers_of(choice: str) -> list[str]:
-    """The samplers a --sampler choice runs (both: CMA-ES, then BO with TPE)."""
+    """Return the samplers a --sampler choice runs (both: CMA-ES, then BO with TPE)."""
     if choice not in SAMPLERS:
-        raise ValueError(f"unknown sampler {choice!r} (valid: {', '.join(SAMPLERS)})")
-    return ["cmaes", "tpe"] if choice == "both" else [choice]
+        raise ValueError(f'unknown sampler {choice!r} (valid: {", ".join(SAMPLERS)})')
+    return ['cmaes', 'tpe'] if choice == 'both' else [choice]
 
 
 def repair_journal(path: Path) -> int:
@@ -134,7 +148,7 @@ def repair_journal(path: Path) -> int:
     if not path.exists():
         return 0
     data = path.read_bytes()
-    lines = data.split(b"\n")
+    lines = data.split(b'\n')
     kept = []
     for number, line in enumerate(lines, 1):
         if line.strip():
@@ -142,23 +156,28 @@ def repair_journal(path: Path) -> int:
                 json.loads(line)
             except ValueError:
                 if any(rest.strip() for rest in lines[number:]):
-                    raise ValueError(f"identify: journal {path} is damaged at line {number} (not a torn last "
-                                     "line); move it aside to start the identification again") from None
+                    raise ValueError(
+                        f'identify: journal {path} is damaged at line {number} (not a torn last '
+                        'line); move it aside to start the identification again'
+                    ) from None
                 break
         kept.append(line)
-    repaired = b"\n".join(line for line in kept if line.strip())
-    repaired += b"\n" if repaired else b""
+    repaired = b'\n'.join(line for line in kept if line.strip())
+    repaired += b'\n' if repaired else b''
     dropped = len(data) - len(repaired)
     if repaired != data:
         path.write_bytes(repaired)  # before Optuna appends to it
     if dropped > 0:
-        warnings.warn(f"journal {path} ended in a torn line ({dropped} bytes, a crash while writing?); "
-                      "dropped it and kept every complete trial", stacklevel=2)
+        warnings.warn(
+            f'journal {path} ended in a torn line ({dropped} bytes, a crash while writing?); '
+            'dropped it and kept every complete trial',
+            stacklevel=2,
+        )
     return dropped
 
 
 def open_study(spec: IdentifySpec, sampler: str) -> Any:
-    """The sampler's study in the journal beside the results (created, or loaded to resume); trials
+    """Return the sampler's study in the journal beside the results (created, or loaded to resume); trials
     left running by an interrupted identification are marked failed.
     """
     import optuna
@@ -170,45 +189,69 @@ def open_study(spec: IdentifySpec, sampler: str) -> Any:
     except ImportError:  # optuna < 4
         from optuna.storages import JournalFileStorage as Backend
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
+    warnings.filterwarnings('ignore', category=optuna.exceptions.ExperimentalWarning)
     repair_journal(spec.output / JOURNAL_FILE)
     storage = JournalStorage(Backend(str(spec.output / JOURNAL_FILE)))
-    study = optuna.create_study(study_name=f"{spec.engine}-{spec.cloth}-{spec.primitive}-{sampler}",
-                                storage=storage, sampler=make_sampler(sampler, spec.seed),
-                                direction="minimize", load_if_exists=True)
+    study = optuna.create_study(
+        study_name=f'{spec.engine}-{spec.cloth}-{spec.primitive}-{sampler}',
+        storage=storage,
+        sampler=make_sampler(sampler, spec.seed),
+        direction='minimize',
+        load_if_exists=True,
+    )
     for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
         study.tell(t.number, state=TrialState.FAIL)
     return study
 
 
 def trial_of(spec: IdentifySpec, params: dict, number: int, sampler: str) -> Trial:
-    return Trial(spec.engine, spec.cloth, spec.primitive, str(spec.bag),
-                 tuple(sorted({**spec.fixed, **params}.items())), spec.objective, spec.seed, spec.rate_hz,
-                 spec.grid, spec.max_frames, number, sampler)
+    return Trial(
+        spec.engine,
+        spec.cloth,
+        spec.primitive,
+        str(spec.bag),
+        tuple(sorted({**spec.fixed, **params}.items())),
+        spec.objective,
+        spec.seed,
+        spec.rate_hz,
+        spec.grid,
+        spec.max_frames,
+        number,
+        sampler,
+    )
 
 
-def run_sampler(client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any,
-                progress: bool) -> Any:
+def run_sampler(
+    client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool
+) -> Any:
     """Ask and tell until the study holds `spec.trials` finished trials, a batch in flight on the cluster."""
+    from cloth_bench_ros.studies.executor import worker_slots
     from distributed import as_completed
     from optuna.trial import TrialState
     from tqdm import tqdm
-
-    from cloth_bench_ros.studies.executor import worker_slots
 
     study = open_study(spec, sampler)
     finished = len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)))
     left = max(0, spec.trials - finished)
     batch = spec.batch or worker_slots(client)
-    bar = tqdm(total=spec.trials, initial=spec.trials - left, desc=f"identify {sampler}", unit="trial",
-               disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    bar = tqdm(
+        total=spec.trials,
+        initial=spec.trials - left,
+        desc=f'identify {sampler}',
+        unit='trial',
+        disable=not progress,
+        file=sys.stderr,
+        dynamic_ncols=True,
+    )
     running = as_completed()
     asked: dict[str, Any] = {}
 
     def ask() -> None:
         nonlocal left
         trial = study.ask(space)
-        future = client.submit(evaluate, trial_of(spec, trial.params, trial.number, sampler), pure=False)
+        future = client.submit(
+            evaluate, trial_of(spec, trial.params, trial.number, sampler), pure=False
+        )
         asked[future.key] = trial
         running.add(future)
         left -= 1
@@ -220,18 +263,25 @@ def run_sampler(client: Any, spec: IdentifySpec, sampler: str, space: dict, reco
         try:
             result = future.result()
         except Exception as exc:  # the trial killed every worker that tried it
-            result = {"number": trial.number, "sampler": sampler, "params": trial.params, "value": math.nan,
-                      "status": "error", "reason": f"{type(exc).__name__}: {exc}", "step": None}
+            result = {
+                'number': trial.number,
+                'sampler': sampler,
+                'params': trial.params,
+                'value': math.nan,
+                'status': 'error',
+                'reason': f'{type(exc).__name__}: {exc}',
+                'step': None,
+            }
         future.release()
-        if result["status"] == "ok":
-            study.tell(trial, result["value"])
+        if result['status'] == 'ok':
+            study.tell(trial, result['value'])
         else:
-            trial.set_user_attr("status", result["status"])
-            trial.set_user_attr("reason", str(result["reason"])[:500])
-            trial.set_user_attr("step", result["step"])
+            trial.set_user_attr('status', result['status'])
+            trial.set_user_attr('reason', str(result['reason'])[:500])
+            trial.set_user_attr('step', result['step'])
             study.tell(trial, state=TrialState.FAIL)
         record(result)
-        bar.set_postfix(best=f"{_best_value(study):.5f}", refresh=False)
+        bar.set_postfix(best=f'{_best_value(study):.5f}', refresh=False)
         bar.update(1)
         if left > 0:
             ask()
@@ -271,7 +321,10 @@ def importance(study: Any) -> dict[str, float]:
 
     try:
         evaluator = optuna.importance.PedAnovaImportanceEvaluator()
-        return {k: float(v) for k, v in optuna.importance.get_param_importances(study, evaluator=evaluator).items()}
+        return {
+            k: float(v)
+            for k, v in optuna.importance.get_param_importances(study, evaluator=evaluator).items()
+        }
     except Exception:  # too few complete trials, or every value equal
         return {}
 
@@ -283,14 +336,18 @@ class IdentifyOutcome:
     wall_s: float
 
 
-def identify(spec: IdentifySpec, scheduler: str | None = None, workers: int | None = None,
-             progress: bool = True) -> IdentifyOutcome:
+def identify(
+    spec: IdentifySpec,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+) -> IdentifyOutcome:
     """Run the identification of `spec` and its validation; write the preset and identification.json."""
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.executor import open_client
     from cloth_bench_ros.studies.identify_output import validate, write_outputs
-    from cloth_bench_ros.studies.results import ResultsLock, append_row
+    from cloth_bench_ros.studies.results import append_row, ResultsLock
 
     start = time.perf_counter()
     spec.output = check_output_dir(spec.output)
@@ -300,33 +357,73 @@ def identify(spec: IdentifySpec, scheduler: str | None = None, workers: int | No
     samplers = samplers_of(spec.sampler)
     for s in samplers:
         make_sampler(s, spec.seed)  # a missing dependency fails before any work
-    with ResultsLock(spec.output, "identify"), open_client(scheduler, workers, spec.output / "workers.log") as client:
-        before = client.submit(evaluate, trial_of(spec, {}, -1, "preset"), pure=False).result()
-        studies = {s: run_sampler(client, spec, s, space, lambda r: append_row(spec.output / TRIALS_FILE, r),
-                                  progress) for s in samplers}
+    with (
+        ResultsLock(spec.output, 'identify'),
+        open_client(scheduler, workers, spec.output / 'workers.log') as client,
+    ):
+        before = client.submit(evaluate, trial_of(spec, {}, -1, 'preset'), pure=False).result()
+        studies = {
+            s: run_sampler(
+                client,
+                spec,
+                s,
+                space,
+                lambda r: append_row(spec.output / TRIALS_FILE, r),
+                progress,
+            )
+            for s in samplers
+        }
         best = min(studies, key=lambda s: _finite_or_inf(_best_value(studies[s])))
         if not math.isfinite(_best_value(studies[best])):
-            raise ValueError(f"identify: no trial of {', '.join(samplers)} finished without diverging "
-                             f"(see {spec.output / TRIALS_FILE})")
+            raise ValueError(
+                f'identify: no trial of {", ".join(samplers)} finished without diverging '
+                f'(see {spec.output / TRIALS_FILE})'
+            )
         validation = validate(client, spec, {**spec.fixed, **studies[best].best_params}, progress)
         summary = summarise(spec, space, base, before, studies, best, validation)
-        summary["wall_s"] = time.perf_counter() - start
+        summary['wall_s'] = time.perf_counter() - start
         preset = write_outputs(spec, base, summary)
-    return IdentifyOutcome(summary, preset, summary["wall_s"])
+    return IdentifyOutcome(summary, preset, summary['wall_s'])
 
 
-def summarise(spec: IdentifySpec, space: dict, base: dict, before: dict, studies: dict, best: str,
-              validation: list) -> dict:
+def summarise(
+    spec: IdentifySpec,
+    space: dict,
+    base: dict,
+    before: dict,
+    studies: dict,
+    best: str,
+    validation: list,
+) -> dict:
     """Everything identification.json keeps: the problem, each sampler's result, the kept one, validation."""
-    return {"engine": spec.engine, "cloth": spec.cloth, "primitive": spec.primitive, "bag": str(spec.bag),
-            "objective": spec.objective, "seed": spec.seed, "rate_hz": spec.rate_hz,
-            "grid": list(spec.grid) if spec.grid else None, "fixed": spec.fixed, "max_frames": spec.max_frames,
-            "space": {n: [d.low, d.high, d.log] for n, d in space.items()}, "samplers": list(studies),
-            "best_sampler": best, "params": dict(studies[best].best_params), "value": _best_value(studies[best]),
-            "preset_params": {n: base.get(n) for n in space}, "preset_value": before["value"],
-            "preset_status": before["status"],
-            "per_sampler": {s: {"value": _best_value(st),
-                                "params": st.best_params if math.isfinite(_best_value(st)) else {},
-                                "convergence": convergence(st), "importance": importance(st),
-                                "trials": len(convergence(st))} for s, st in studies.items()},
-            "validation": validation}
+    return {
+        'engine': spec.engine,
+        'cloth': spec.cloth,
+        'primitive': spec.primitive,
+        'bag': str(spec.bag),
+        'objective': spec.objective,
+        'seed': spec.seed,
+        'rate_hz': spec.rate_hz,
+        'grid': list(spec.grid) if spec.grid else None,
+        'fixed': spec.fixed,
+        'max_frames': spec.max_frames,
+        'space': {n: [d.low, d.high, d.log] for n, d in space.items()},
+        'samplers': list(studies),
+        'best_sampler': best,
+        'params': dict(studies[best].best_params),
+        'value': _best_value(studies[best]),
+        'preset_params': {n: base.get(n) for n in space},
+        'preset_value': before['value'],
+        'preset_status': before['status'],
+        'per_sampler': {
+            s: {
+                'value': _best_value(st),
+                'params': st.best_params if math.isfinite(_best_value(st)) else {},
+                'convergence': convergence(st),
+                'importance': importance(st),
+                'trials': len(convergence(st)),
+            }
+            for s, st in studies.items()
+        },
+        'validation': validation,
+    }

@@ -4,19 +4,18 @@ identification.json (everything the report needs, so the report needs no Optuna)
 
 from __future__ import annotations
 
+from datetime import datetime, timezone
 import json
 import math
-import platform
-from datetime import datetime, timezone
 from pathlib import Path
+import platform
 from typing import Any
 
+from cloth_bench_ros.studies.cells import Cell, find_bags
+from cloth_bench_ros.studies.results import append_row, json_safe, load_rows, RESULTS_FILE
 import numpy as np
 
-from cloth_bench_ros.studies.cells import Cell, find_bags
-from cloth_bench_ros.studies.results import RESULTS_FILE, append_row, json_safe, load_rows
-
-PRESETS_DIR = "presets"
+PRESETS_DIR = 'presets'
 
 
 def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
@@ -25,7 +24,9 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
     """
     bags = {Path(spec.bag).resolve(): 0}
     try:
-        for trial, path in find_bags(spec.bag_dir or Path(spec.bag).parent, spec.cloth, spec.primitive):
+        for trial, path in find_bags(
+            spec.bag_dir or Path(spec.bag).parent, spec.cloth, spec.primitive
+        ):
             bags.setdefault(path.resolve(), trial)
     except ValueError:
         pass  # no other bag named after the cloth and task
@@ -33,9 +34,22 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
     cells = []
     for bag, trial in bags.items():
         for seed in seeds:
-            for config, params in (("preset", spec.fixed), ("identified", fitted)):
-                cells.append(Cell(spec.engine, float(spec.rate_hz), spec.cloth, spec.primitive, seed, str(bag),
-                                  trial, "paper", config, spec.grid, tuple(sorted(params.items()))))
+            for config, params in (('preset', spec.fixed), ('identified', fitted)):
+                cells.append(
+                    Cell(
+                        spec.engine,
+                        float(spec.rate_hz),
+                        spec.cloth,
+                        spec.primitive,
+                        seed,
+                        str(bag),
+                        trial,
+                        'paper',
+                        config,
+                        spec.grid,
+                        tuple(sorted(params.items())),
+                    )
+                )
     return cells
 
 
@@ -48,20 +62,35 @@ def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]
     cells = validation_cells(spec, fitted)
     todo = cells_to_run(cells, load_rows(results))
     if todo:
-        run_tasks(client, run_cell, todo, on_result=lambda cell, row: append_row(results, row),
-                  on_crash=lambda cell, message: append_row(results, error_row(cell, message)),
-                  args=(str(spec.output),))
+        run_tasks(
+            client,
+            run_cell,
+            todo,
+            on_result=lambda cell, row: append_row(results, row),
+            on_crash=lambda cell, message: append_row(results, error_row(cell, message)),
+            args=(str(spec.output),),
+        )
     keys = {c.key() for c in cells}
     rows = [r for r in load_rows(results) if _key(r) in keys]
     out = []
-    for bag in sorted({r["bag"] for r in rows}):
-        entry: dict = {"bag": bag}
-        for config in ("preset", "identified"):
-            sel = [r for r in rows if r["bag"] == bag and r.get("config") == config]
-            values = np.array([r["CD" if spec.objective == "cd" else "HD"] for r in sel if r.get("status") == "ok"])
-            entry[config] = {"mean": float(values.mean()) if len(values) else math.nan,
-                             "std": float(values.std()) if len(values) else math.nan, "n": len(sel),
-                             "ok": int(len(values)), "diverged": sum(r.get("status") == "diverged" for r in sel)}
+    for bag in sorted({r['bag'] for r in rows}):
+        entry: dict = {'bag': bag}
+        for config in ('preset', 'identified'):
+            sel = [r for r in rows if r['bag'] == bag and r.get('config') == config]
+            values = np.array(
+                [
+                    r['CD' if spec.objective == 'cd' else 'HD']
+                    for r in sel
+                    if r.get('status') == 'ok'
+                ]
+            )
+            entry[config] = {
+                'mean': float(values.mean()) if len(values) else math.nan,
+                'std': float(values.std()) if len(values) else math.nan,
+                'n': len(sel),
+                'ok': int(len(values)),
+                'diverged': sum(r.get('status') == 'diverged' for r in sel),
+            }
         out.append(entry)
     return out
 
@@ -73,39 +102,48 @@ def _key(row: dict) -> tuple:
 
 
 def provenance_text(spec: Any, summary: dict, version: str) -> str:
-    """The preset file's provenance: what was fitted against what, how, when and where."""
-    params = ", ".join(f"{k} = {v:.6g}" for k, v in summary["params"].items())
-    return (f"Identified by cloth-bench identify against bag {spec.bag} ({spec.cloth}, {spec.primitive}): "
-            f"minimised {spec.objective.upper()} of the task window to {summary['value']:.6g} m "
-            f"(the preset: {summary['preset_value']:.6g} m) with {summary['best_sampler']} "
-            f"(samplers {', '.join(summary['samplers'])}, {spec.trials} trials each, seed {spec.seed}, "
-            f"{spec.rate_hz:g} Hz, grid {'x'.join(map(str, spec.grid)) if spec.grid else 'default'}"
-            f"{', first ' + str(spec.max_frames) + ' frames' if spec.max_frames else ''}); fitted {params}; "
-            f"{'fixed ' + ', '.join(f'{k} = {v}' for k, v in spec.fixed.items()) + '; ' if spec.fixed else ''}"
-            f"the other values are the preset's. Engine version {version}; "
-            f"{datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')} on {platform.node()} "
-            f"({platform.machine()}, {platform.python_implementation()} {platform.python_version()}).")
+    """Return the preset file's provenance: what was fitted against what, how, when and where."""
+    params = ', '.join(f'{k} = {v:.6g}' for k, v in summary['params'].items())
+    return (
+        f'Identified by cloth-bench identify against bag {spec.bag} ({spec.cloth},'
+        f' {spec.primitive}): '
+        f'minimised {spec.objective.upper()} of the task window to {summary["value"]:.6g} m '
+        f'(the preset: {summary["preset_value"]:.6g} m) with {summary["best_sampler"]} '
+        f'(samplers {", ".join(summary["samplers"])}, {spec.trials} trials each, seed'
+        f' {spec.seed}, '
+        f'{spec.rate_hz:g} Hz, grid {"x".join(map(str, spec.grid)) if spec.grid else "default"}'
+        f'{", first " + str(spec.max_frames) + " frames" if spec.max_frames else ""}); fitted'
+        f' {params}; '
+        f'{"fixed " + ", ".join(f"{k} = {v}" for k, v in spec.fixed.items()) + "; " if spec.fixed else ""}'
+        f"the other values are the preset's. Engine version {version}; "
+        f'{datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")} on {platform.node()} '
+        f'({platform.machine()}, {platform.python_implementation()} {platform.python_version()}).'
+    )
 
 
 def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
     """<output>/presets/<engine>.yaml (config/presets format) and <output>/identification.json."""
-    import yaml
-
     from cloth_bench_ros.engines import engine_class
     from cloth_bench_ros.safe_io import atomic_write_text
+    import yaml
 
-    version = engine_class(spec.engine).version() or "unknown"
-    values = {**base, **{k: float(v) for k, v in summary["params"].items()}}
-    document = {"engine": spec.engine, "engine_version": str(version),
-                "provenance": provenance_text(spec, summary, version),
-                "presets": {spec.cloth: {spec.primitive: values}}}
+    version = engine_class(spec.engine).version() or 'unknown'
+    values = {**base, **{k: float(v) for k, v in summary['params'].items()}}
+    document = {
+        'engine': spec.engine,
+        'engine_version': str(version),
+        'provenance': provenance_text(spec, summary, version),
+        'presets': {spec.cloth: {spec.primitive: values}},
+    }
     folder = spec.output / PRESETS_DIR
     folder.mkdir(parents=True, exist_ok=True)
-    preset = folder / f"{spec.engine}.yaml"
+    preset = folder / f'{spec.engine}.yaml'
     atomic_write_text(preset, yaml.safe_dump(document, sort_keys=False, width=100))
-    summary["preset_file"] = str(Path(PRESETS_DIR) / preset.name)
-    summary["engine_version"] = str(version)
-    summary["date"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    summary["machine"] = f"{platform.node()} ({platform.machine()})"
-    atomic_write_text(spec.output / "identification.json", json.dumps(json_safe(summary), indent=1) + "\n")
+    summary['preset_file'] = str(Path(PRESETS_DIR) / preset.name)
+    summary['engine_version'] = str(version)
+    summary['date'] = datetime.now(timezone.utc).isoformat(timespec='seconds')
+    summary['machine'] = f'{platform.node()} ({platform.machine()})'
+    atomic_write_text(
+        spec.output / 'identification.json', json.dumps(json_safe(summary), indent=1) + '\n'
+    )
     return preset

@@ -9,15 +9,15 @@ clouds once and keeps them, with their k-d trees, for every later trial on that 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
 import os
-import time
-from dataclasses import dataclass
 from pathlib import Path
+import time
 
 import numpy as np
 
-OBJECTIVES = ("cd", "hd")
+OBJECTIVES = ('cd', 'hd')
 FPS = 30.0
 _BAG_CACHE: dict[tuple, tuple] = {}
 _BAG_CACHE_SIZE = 4
@@ -32,13 +32,13 @@ class Trial:
     primitive: str
     bag: str
     params: tuple[tuple[str, object], ...]  # sorted (name, value) on top of the preset
-    objective: str = "cd"
+    objective: str = 'cd'
     seed: int = 0
     rate_hz: float = 100.0
     grid: tuple[int, int] | None = None
     max_frames: int | None = None  # score at most this many frames of the window
     number: int = -1  # Optuna's trial number (-1: the preset, before identification)
-    sampler: str = ""
+    sampler: str = ''
 
 
 def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
@@ -48,7 +48,7 @@ def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]
     from cloth_bench_ros.data import BagReader
     from cloth_bench_ros.data.messages import deserialize
 
-    st = os.stat(bag) if os.path.isfile(bag) else os.stat(Path(bag) / "metadata.yaml")
+    st = os.stat(bag) if os.path.isfile(bag) else os.stat(Path(bag) / 'metadata.yaml')
     key = (str(Path(bag).resolve()), st.st_mtime_ns, st.st_size)
     if key not in _BAG_CACHE:
         reader = BagReader(Path(bag))
@@ -58,7 +58,9 @@ def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]
             frames.append((stamp, points, dropped))
         trial = reader.trial
         cop = trial.change_of_phase_frame if trial is not None else None
-        if cop is None and (trial is None or trial.primitive == "dynamic"):  # found in the data, as a run does
+        if cop is None and (
+            trial is None or trial.primitive == 'dynamic'
+        ):  # found in the data, as a run does
             cop = first_table_contact(points for _, points, _ in frames).index
         while len(_BAG_CACHE) >= _BAG_CACHE_SIZE:
             _BAG_CACHE.pop(next(iter(_BAG_CACHE)))
@@ -69,31 +71,45 @@ def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]
 def evaluate(trial: Trial) -> dict:
     """Run one trial; never raises. status ok (value finite), diverged (reason, step) or error."""
     start, cpu_start = time.perf_counter(), time.process_time()
-    out = {"number": trial.number, "sampler": trial.sampler, "params": dict(trial.params), "value": math.nan,
-           "status": "error", "reason": "", "step": None, "CD": math.nan, "HD": math.nan, "frames": 0}
+    out = {
+        'number': trial.number,
+        'sampler': trial.sampler,
+        'params': dict(trial.params),
+        'value': math.nan,
+        'status': 'error',
+        'reason': '',
+        'step': None,
+        'CD': math.nan,
+        'HD': math.nan,
+        'frames': 0,
+    }
     engine = None
     try:
         from cloth_bench_ros.core.evaluation import OnlineEvaluator
-        from cloth_bench_ros.core.scene import SETTLE_DURATION
+        from cloth_bench_ros.core.scene import ClothGrid, SETTLE_DURATION
         from cloth_bench_ros.core.trajectory import full_targets
         from cloth_bench_ros.engines import make_engine
         from cloth_bench_ros.engines.presets import load_preset
-        from cloth_bench_ros.core.scene import ClothGrid
 
         cut, frames = bag_clouds(trial.bag)
         offset = int(round(SETTLE_DURATION * 1e9))
         core = OnlineEvaluator([trial.engine], trial.primitive, offset, cut, FPS)
-        used = [f for f in frames if trial.primitive != "dynamic" or cut is None
-                or int(round(f[0] / 1e9 * FPS)) < cut]
-        used = used[:trial.max_frames] if trial.max_frames else used
+        used = [
+            f
+            for f in frames
+            if trial.primitive != 'dynamic' or cut is None or int(round(f[0] / 1e9 * FPS)) < cut
+        ]
+        used = used[: trial.max_frames] if trial.max_frames else used
         if not used:
-            raise ValueError(f"bag {trial.bag}: no frame to score")
+            raise ValueError(f'bag {trial.bag}: no frame to score')
         for stamp, points, dropped in used:
             core.add_real(stamp + offset, points, dropped)
         last = used[-1][0] + offset
         targets = full_targets(trial.primitive, trial.rate_hz)
         params = {**load_preset(trial.engine, trial.cloth, trial.primitive), **dict(trial.params)}
-        engine = make_engine(trial.engine, trial.rate_hz, params, ClothGrid(*trial.grid) if trial.grid else None)
+        engine = make_engine(
+            trial.engine, trial.rate_hz, params, ClothGrid(*trial.grid) if trial.grid else None
+        )
         for k in range(len(targets)):
             t0 = time.perf_counter()
             if k == 0:
@@ -102,31 +118,42 @@ def evaluate(trial: Trial) -> dict:
                 vertices = engine.step(targets.left[k], targets.right[k])
             stamp = targets.stamp_ns(k)
             d = engine.divergence
-            core.add_step(trial.engine, stamp, k, time.perf_counter() - t0, d is not None, d.reason if d else "")
+            core.add_step(
+                trial.engine,
+                stamp,
+                k,
+                time.perf_counter() - t0,
+                d is not None,
+                d.reason if d else '',
+            )
             core.add_state(trial.engine, stamp, np.array(vertices, dtype=float))
             if d is not None or stamp >= last:
                 break
         core.finish()
         m = core.summary()[trial.engine]
-        suffix = "d" if trial.primitive == "dynamic" else "q"
-        out.update(CD=_num(m[f"CD_{suffix}"]), HD=_num(m[f"HD_{suffix}"]), frames=m["frames_in_window"])
-        out["value"] = out["CD"] if trial.objective == "cd" else out["HD"]
-        if m["diverged"] and not math.isfinite(out["value"]):
-            out.update(status="diverged", reason=m["diverged_reason"], step=m["diverged_at_step"])
-        elif not math.isfinite(out["value"]):
-            out.update(status="error", reason="no frame could be scored")
+        suffix = 'd' if trial.primitive == 'dynamic' else 'q'
+        out.update(
+            CD=_num(m[f'CD_{suffix}']), HD=_num(m[f'HD_{suffix}']), frames=m['frames_in_window']
+        )
+        out['value'] = out['CD'] if trial.objective == 'cd' else out['HD']
+        if m['diverged'] and not math.isfinite(out['value']):
+            out.update(status='diverged', reason=m['diverged_reason'], step=m['diverged_at_step'])
+        elif not math.isfinite(out['value']):
+            out.update(status='error', reason='no frame could be scored')
         else:
-            out["status"] = "ok"
-    except Exception as exc:  # a trial that cannot even run is a failed trial, never a crash of the study
-        out.update(status="error", reason=f"{type(exc).__name__}: {exc}")
+            out['status'] = 'ok'
+    except (
+        Exception
+    ) as exc:  # a trial that cannot even run is a failed trial, never a crash of the study
+        out.update(status='error', reason=f'{type(exc).__name__}: {exc}')
     finally:
         if engine is not None:
             try:
                 engine.close()
             except Exception:
                 pass
-    out["wall_s"] = time.perf_counter() - start
-    out["cpu_s"] = time.process_time() - cpu_start  # what the trial costs on an idle core
+    out['wall_s'] = time.perf_counter() - start
+    out['cpu_s'] = time.process_time() - cpu_start  # what the trial costs on an idle core
     return out
 
 

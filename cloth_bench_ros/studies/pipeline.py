@@ -2,35 +2,36 @@
 
 from __future__ import annotations
 
-import os
-import random
 from dataclasses import dataclass, field
+import os
 from pathlib import Path
-
-import yaml
+import random
 
 from cloth_bench_ros.nodes.common import close_nodes
 from cloth_bench_ros.nodes.evaluator import Evaluator
 from cloth_bench_ros.nodes.recorder import Recorder
 from cloth_bench_ros.nodes.simulator import Simulator
 from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
-from cloth_bench_ros.runtime import EMBEDDED, Parameter, SingleThreadedExecutor, rclpy
+from cloth_bench_ros.runtime import EMBEDDED, Parameter, rclpy, SingleThreadedExecutor
+import yaml
 
 
 @dataclass
 class RunConfig:
     bag: Path
-    engines: list[str] = field(default_factory=lambda: ["mujoco"])
+    engines: list[str] = field(default_factory=lambda: ['mujoco'])
     rate_hz: float = 100.0
-    cloth: str = "towel"
-    primitive: str = "dynamic"
+    cloth: str = 'towel'
+    primitive: str = 'dynamic'
     seed: int = 0
-    pacing: str = "lockstep"
+    pacing: str = 'lockstep'
     output_dir: Path | None = None
     engine_params: dict[str, dict] = field(default_factory=dict)  # engine -> parameter overrides
     grid: tuple[int, int] | None = None  # (nx, nz) vertices; None: the engine's default
     presets_dir: Path | None = None  # directory of <engine>.yaml presets; None: config/presets
-    replay: dict = field(default_factory=dict)  # recorder parameters for plain bags (topic, start_time, ...)
+    replay: dict = field(
+        default_factory=dict
+    )  # recorder parameters for plain bags (topic, start_time, ...)
     change_of_phase_frame: int | None = None  # None: the bag's own
     record_comparison: Path | None = None  # comparison MCAP bag to write
     comparison_figures: bool = False  # qualitative figure and animation in output_dir
@@ -47,30 +48,58 @@ def _cut(config: RunConfig) -> int:
 def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[str, dict]:
     """{node name: parameters} of every node of the graph; the one source for both kinds of run."""
     out = config.output_dir if output_dir is None else output_dir
-    common = {"primitive": config.primitive, "rate_hz": float(config.rate_hz), "use_sim_time": True}
+    common = {
+        'primitive': config.primitive,
+        'rate_hz': float(config.rate_hz),
+        'use_sim_time': True,
+    }
     nx, nz = config.grid or (0, 0)
     nodes = {
-        "trajectory_publisher": {"primitive": config.primitive, "rate_hz": float(config.rate_hz),
-                                 "engines": list(config.engines), "pacing": config.pacing},
-        "evaluator": {**common, "engines": list(config.engines), "output_dir": str(out or ""),
-                      "cloth": config.cloth, "seed": int(config.seed), "pacing": config.pacing,
-                      "record_comparison": str(config.record_comparison or ""),
-                      "comparison_figures": config.comparison_figures, "change_of_phase_frame": _cut(config)},
+        'trajectory_publisher': {
+            'primitive': config.primitive,
+            'rate_hz': float(config.rate_hz),
+            'engines': list(config.engines),
+            'pacing': config.pacing,
+        },
+        'evaluator': {
+            **common,
+            'engines': list(config.engines),
+            'output_dir': str(out or ''),
+            'cloth': config.cloth,
+            'seed': int(config.seed),
+            'pacing': config.pacing,
+            'record_comparison': str(config.record_comparison or ''),
+            'comparison_figures': config.comparison_figures,
+            'change_of_phase_frame': _cut(config),
+        },
     }
     for engine in config.engines:
-        nodes[f"simulator_{engine}"] = {
-            **common, "engine": engine, "cloth": config.cloth, "seed": int(config.seed), "grid_nx": nx,
-            "grid_nz": nz, "presets_dir": str(config.presets_dir or ""),
-            "engine_params": yaml.safe_dump(config.engine_params.get(engine, {}))}
-    nodes["recorder"] = {**common, "bag": str(config.bag), "cloth": config.cloth,
-                         "change_of_phase_frame": _cut(config), "align_engine": config.engines[0],
-                         "grid_nx": nx, "grid_nz": nz, **config.replay}
+        nodes[f'simulator_{engine}'] = {
+            **common,
+            'engine': engine,
+            'cloth': config.cloth,
+            'seed': int(config.seed),
+            'grid_nx': nx,
+            'grid_nz': nz,
+            'presets_dir': str(config.presets_dir or ''),
+            'engine_params': yaml.safe_dump(config.engine_params.get(engine, {})),
+        }
+    nodes['recorder'] = {
+        **common,
+        'bag': str(config.bag),
+        'cloth': config.cloth,
+        'change_of_phase_frame': _cut(config),
+        'align_engine': config.engines[0],
+        'grid_nx': nx,
+        'grid_nz': nz,
+        **config.replay,
+    }
     return nodes
 
 
 def isolated_domain() -> int:
-    """A ROS domain for one in-process run under real rclpy: random in 1-101, not ROS_DOMAIN_ID's."""
-    taken = os.environ.get("ROS_DOMAIN_ID", "0")
+    """Return a ROS domain for one in-process run under real rclpy: random in 1-101, not ROS_DOMAIN_ID's."""
+    taken = os.environ.get('ROS_DOMAIN_ID', '0')
     choices = [d for d in range(1, 102) if str(d) != taken]
     return random.SystemRandom().choice(choices)
 
@@ -82,20 +111,32 @@ def run_pipeline(config: RunConfig) -> dict:
     # (that switch is for the node console scripts): deterministic, and parallel sweeps stay apart.
     # Under real rclpy the nodes talk DDS even in one process: a domain of its own keeps two runs
     # (or a sweep's workers) from hearing each other.
-    rclpy.init(args=[], context=context, **({"transport": "intra"} if EMBEDDED else {"domain_id": isolated_domain()}))
+    rclpy.init(
+        args=[],
+        context=context,
+        **({'transport': 'intra'} if EMBEDDED else {'domain_id': isolated_domain()}),
+    )
     params = node_parameters(config)
     nodes = []
     try:
-        nodes.append(TrajectoryPublisher(context=context, parameter_overrides=_params(params["trajectory_publisher"])))
+        nodes.append(
+            TrajectoryPublisher(
+                context=context, parameter_overrides=_params(params['trajectory_publisher'])
+            )
+        )
         # The evaluator subscribes to the targets before the simulators do: the embedded runtime
         # delivers a message to its subscribers in subscription order, so the evaluator notes a
         # target's send time before a simulator steps on it (else latency would miss the step).
-        evaluator = Evaluator(context=context, parameter_overrides=_params(params["evaluator"]))
+        evaluator = Evaluator(context=context, parameter_overrides=_params(params['evaluator']))
         nodes.append(evaluator)
         for engine in config.engines:
-            name = f"simulator_{engine}"
-            nodes.append(Simulator(node_name=name, context=context, parameter_overrides=_params(params[name])))
-        nodes.append(Recorder(context=context, parameter_overrides=_params(params["recorder"])))
+            name = f'simulator_{engine}'
+            nodes.append(
+                Simulator(
+                    node_name=name, context=context, parameter_overrides=_params(params[name])
+                )
+            )
+        nodes.append(Recorder(context=context, parameter_overrides=_params(params['recorder'])))
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)

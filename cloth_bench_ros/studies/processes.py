@@ -12,19 +12,18 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 import random
 import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
-
-import yaml
 
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.nodes.common import NAMESPACE
 from cloth_bench_ros.runtime.dds import loopback_environment
-from cloth_bench_ros.studies.pipeline import RunConfig, node_parameters
+from cloth_bench_ros.studies.pipeline import node_parameters, RunConfig
+import yaml
 
 
 class ProcessRunError(ClothBenchError, RuntimeError):
@@ -32,49 +31,70 @@ class ProcessRunError(ClothBenchError, RuntimeError):
 
 
 def _command(name: str, params_file: Path) -> list[str]:
-    module = "simulator" if name.startswith("simulator_") else name
-    return [sys.executable, "-m", f"cloth_bench_ros.nodes.{module}", "--ros-args", "-r", f"__ns:=/{NAMESPACE}",
-            "-r", f"__node:={name}", "--params-file", str(params_file)]
+    module = 'simulator' if name.startswith('simulator_') else name
+    return [
+        sys.executable,
+        '-m',
+        f'cloth_bench_ros.nodes.{module}',
+        '--ros-args',
+        '-r',
+        f'__ns:=/{NAMESPACE}',
+        '-r',
+        f'__node:={name}',
+        '--params-file',
+        str(params_file),
+    ]
 
 
 def _last_line(path: Path) -> str:
-    lines = [line for line in path.read_text(errors="replace").splitlines() if line.strip()]
-    return lines[-1] if lines else "(no output)"
+    lines = [line for line in path.read_text(errors='replace').splitlines() if line.strip()]
+    return lines[-1] if lines else '(no output)'
 
 
 def run_processes(config: RunConfig, timeout_s: float = 900.0) -> dict:
     """Run the graph of `config` with one process per node until the evaluator ends; its summary."""
-    domain = int(os.environ["ROS_DOMAIN_ID"]) if os.environ.get("ROS_DOMAIN_ID") else random.randint(1, 200)
-    env = {**os.environ, **loopback_environment(domain), "CLOTH_BENCH_TRANSPORT": "dds"}
-    with tempfile.TemporaryDirectory(prefix="cloth_bench_processes_") as tmp:
+    domain = (
+        int(os.environ['ROS_DOMAIN_ID'])
+        if os.environ.get('ROS_DOMAIN_ID')
+        else random.randint(1, 200)
+    )
+    env = {**os.environ, **loopback_environment(domain), 'CLOTH_BENCH_TRANSPORT': 'dds'}
+    with tempfile.TemporaryDirectory(prefix='cloth_bench_processes_') as tmp:
         work = Path(tmp)
-        output_dir = Path(config.output_dir) if config.output_dir else work / "report"
-        params = {f"/{NAMESPACE}/{name}": {"ros__parameters": p}
-                  for name, p in node_parameters(config, output_dir).items()}
-        params_file = work / "params.yaml"
+        output_dir = Path(config.output_dir) if config.output_dir else work / 'report'
+        params = {
+            f'/{NAMESPACE}/{name}': {'ros__parameters': p}
+            for name, p in node_parameters(config, output_dir).items()
+        }
+        params_file = work / 'params.yaml'
         params_file.write_text(yaml.safe_dump(params))
         procs: dict[str, subprocess.Popen] = {}
         logs: dict[str, Path] = {}
         try:
             for name in params:  # all at once: start-up does not depend on the order
-                node = name.rsplit("/", 1)[-1]
-                logs[node] = work / f"{node}.log"
-                with logs[node].open("w") as log:
-                    procs[node] = subprocess.Popen(_command(node, params_file), env=env, stdout=log,
-                                                   stderr=subprocess.STDOUT)
+                node = name.rsplit('/', 1)[-1]
+                logs[node] = work / f'{node}.log'
+                with logs[node].open('w') as log:
+                    procs[node] = subprocess.Popen(
+                        _command(node, params_file), env=env, stdout=log, stderr=subprocess.STDOUT
+                    )
             deadline = time.monotonic() + timeout_s
-            while procs["evaluator"].poll() is None:
+            while procs['evaluator'].poll() is None:
                 for node, proc in procs.items():
                     if proc.poll() not in (None, 0):
-                        raise ProcessRunError(f"node {node} exited with status {proc.returncode}: "
-                                              f"{_last_line(logs[node])}")
+                        raise ProcessRunError(
+                            f'node {node} exited with status {proc.returncode}: '
+                            f'{_last_line(logs[node])}'
+                        )
                 if time.monotonic() > deadline:
-                    raise ProcessRunError(f"the run did not end within {timeout_s:.0f} s")
+                    raise ProcessRunError(f'the run did not end within {timeout_s:.0f} s')
                 time.sleep(0.05)
-            if procs["evaluator"].returncode != 0:
-                raise ProcessRunError(f"node evaluator exited with status {procs['evaluator'].returncode}: "
-                                      f"{_last_line(logs['evaluator'])}")
-            return json.loads((output_dir / "summary.json").read_text())
+            if procs['evaluator'].returncode != 0:
+                raise ProcessRunError(
+                    f'node evaluator exited with status {procs["evaluator"].returncode}: '
+                    f'{_last_line(logs["evaluator"])}'
+                )
+            return json.loads((output_dir / 'summary.json').read_text())
         finally:
             for proc in procs.values():
                 if proc.poll() is None:

@@ -9,17 +9,29 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
+import math
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.studies.aggregate import compute_per_sim_second, finite, group, Stat, stat
 import numpy as np
 
-from cloth_bench_ros.studies.aggregate import Stat, compute_per_sim_second, finite, group, stat
-
-RECOMMENDATION_KEYS = ("engine", "cloth", "primitive", "rate_hz", "config", "grid", "params", "cd", "step_p99_ms",
-                       "best_config", "best_cd", "tolerance_m", "meets_deadline")
+RECOMMENDATION_KEYS = (
+    'engine',
+    'cloth',
+    'primitive',
+    'rate_hz',
+    'config',
+    'grid',
+    'params',
+    'cd',
+    'step_p99_ms',
+    'best_config',
+    'best_cd',
+    'tolerance_m',
+    'meets_deadline',
+)
 
 
 # The step's share of the period: the rest is the round trip (two DDS hops, the messages in Python),
@@ -45,21 +57,34 @@ class ConfigResult:
 
 def settings_results(rows: Sequence[dict]) -> list[ConfigResult]:
     """One ConfigResult per engine, cloth, task, rate and configuration of the settings-sweep rows."""
-    sel = [r for r in rows if r.get("mode") == "settings"]
+    sel = [r for r in rows if r.get('mode') == 'settings']
     out = []
-    for (e, cloth, prim, rate, config), g in group(sel, "engine", "cloth", "primitive", "rate_hz", "config").items():
-        ok = [r for r in g if r.get("status") == "ok"]
-        st = finite(r.get("step_time_mean") for r in ok)
+    for (e, cloth, prim, rate, config), g in group(
+        sel, 'engine', 'cloth', 'primitive', 'rate_hz', 'config'
+    ).items():
+        ok = [r for r in g if r.get('status') == 'ok']
+        st = finite(r.get('step_time_mean') for r in ok)
         cost = finite(compute_per_sim_second(r) for r in ok)
-        out.append(ConfigResult(e, cloth, prim, float(rate), config, stat(g, "CD"), stat(g, "HD"),
-                                float(st.mean() * 1e3) if len(st) else math.nan,
-                                float(cost.mean()) if len(cost) else math.nan,
-                                len(ok) == len(g) and len(g) > 0))
+        out.append(
+            ConfigResult(
+                e,
+                cloth,
+                prim,
+                float(rate),
+                config,
+                stat(g, 'CD'),
+                stat(g, 'HD'),
+                float(st.mean() * 1e3) if len(st) else math.nan,
+                float(cost.mean()) if len(cost) else math.nan,
+                len(ok) == len(g) and len(g) > 0,
+            )
+        )
     return out
 
 
-def recommend(results: Sequence[ConfigResult], tol_rel: float, tol_abs: float
-              ) -> tuple[ConfigResult | None, ConfigResult | None, float]:
+def recommend(
+    results: Sequence[ConfigResult], tol_rel: float, tol_abs: float
+) -> tuple[ConfigResult | None, ConfigResult | None, float]:
     """(most accurate, cheapest within tolerance, tolerance in m) among stable configurations.
 
     Within tolerance: mean CD <= best CD + max(tol_rel * best CD, tol_abs).
@@ -87,14 +112,16 @@ class Recommendation:
     params: dict = field(default_factory=dict)
     cd: float = math.nan
     step_p99_ms: float = math.nan  # measured in the settings sweep (lockstep) at this rate
-    best_config: str = ""
+    best_config: str = ''
     best_cd: float = math.nan
     tolerance_m: float = math.nan
-    meets_deadline: bool = False  # step p99 under budget x period; False: the most accurate-enough cheapest
+    meets_deadline: bool = (
+        False  # step p99 under budget x period; False: the most accurate-enough cheapest
+    )
 
     def as_dict(self) -> dict:
         d = {k: getattr(self, k) for k in RECOMMENDATION_KEYS}
-        d["grid"] = list(self.grid) if self.grid else None
+        d['grid'] = list(self.grid) if self.grid else None
         return d
 
 
@@ -102,38 +129,60 @@ def step_ms_by_config(rows: Sequence[dict], key: str) -> dict[str, float]:
     """Median over seeds of a step-time statistic (step_time_p50, step_time_p99) per configuration, in ms."""
     by: dict[str, list] = {}
     for r in rows:
-        if r.get("status") == "ok":
-            by.setdefault(r["config"], []).append(r.get(key))
-    return {c: float(np.median(v)) * 1e3 if len(v := finite(vals)) else math.nan for c, vals in by.items()}
+        if r.get('status') == 'ok':
+            by.setdefault(r['config'], []).append(r.get(key))
+    return {
+        c: float(np.median(v)) * 1e3 if len(v := finite(vals)) else math.nan
+        for c, vals in by.items()
+    }
 
 
 def _grid_params(rows: Sequence[dict], config: str) -> tuple[tuple[int, int] | None, dict]:
-    row = next(r for r in rows if r["config"] == config)
-    grid = row.get("grid")
+    row = next(r for r in rows if r['config'] == config)
+    grid = row.get('grid')
     if isinstance(grid, str):
-        nx, _, nz = grid.partition("x")
+        nx, _, nz = grid.partition('x')
         grid = (int(nx), int(nz))
-    return (tuple(grid) if grid else None), dict(row.get("params") or {})
+    return (tuple(grid) if grid else None), dict(row.get('params') or {})
 
 
-def recommend_for_rate(rows: Sequence[dict], engine: str, cloth: str, primitive: str, rate_hz: float,
-                       tol_rel: float = 0.05, tol_abs: float = 0.002, budget: float = DEADLINE_BUDGET) -> Recommendation | None:
-    """The cheapest configuration within tolerance of the most accurate whose step p99 < budget / rate.
+def recommend_for_rate(
+    rows: Sequence[dict],
+    engine: str,
+    cloth: str,
+    primitive: str,
+    rate_hz: float,
+    tol_rel: float = 0.05,
+    tol_abs: float = 0.002,
+    budget: float = DEADLINE_BUDGET,
+) -> Recommendation | None:
+    """Return the cheapest configuration within tolerance of the most accurate whose step p99 < budget / rate.
 
     Cheapest: the lowest median step time (p50), which other work on a shared machine inflates far
     less than the mean. If no accurate-enough configuration meets the deadline, the cheapest
     accurate-enough one, with meets_deadline False. None without stable settings-sweep rows for
     this engine, task and rate.
     """
-    sel = [r for r in rows if r.get("mode") == "settings" and r["engine"] == engine and r["cloth"] == cloth
-           and r["primitive"] == primitive and float(r["rate_hz"]) == float(rate_hz)]
+    sel = [
+        r
+        for r in rows
+        if r.get('mode') == 'settings'
+        and r['engine'] == engine
+        and r['cloth'] == cloth
+        and r['primitive'] == primitive
+        and float(r['rate_hz']) == float(rate_hz)
+    ]
     results = settings_results(sel)
     best, _, tol = recommend(results, tol_rel, tol_abs)
     if best is None:
         return None
-    p50, p99 = step_ms_by_config(sel, "step_time_p50"), step_ms_by_config(sel, "step_time_p99")
+    p50, p99 = step_ms_by_config(sel, 'step_time_p50'), step_ms_by_config(sel, 'step_time_p99')
     period_ms = 1e3 / rate_hz
-    accurate = [r for r in results if r.stable and math.isfinite(r.cd.mean) and r.cd.mean <= best.cd.mean + tol]
+    accurate = [
+        r
+        for r in results
+        if r.stable and math.isfinite(r.cd.mean) and r.cd.mean <= best.cd.mean + tol
+    ]
     fast = [r for r in accurate if p99.get(r.config, math.nan) < budget * period_ms]
 
     def cost(r) -> tuple[float, float]:
@@ -142,30 +191,73 @@ def recommend_for_rate(rows: Sequence[dict], engine: str, cloth: str, primitive:
 
     choice = min(fast or accurate, key=cost)
     grid, params = _grid_params(sel, choice.config)
-    return Recommendation(engine, cloth, primitive, float(rate_hz), choice.config, grid, params, choice.cd.mean,
-                          p99.get(choice.config, math.nan), best.config, best.cd.mean, tol, bool(fast))
+    return Recommendation(
+        engine,
+        cloth,
+        primitive,
+        float(rate_hz),
+        choice.config,
+        grid,
+        params,
+        choice.cd.mean,
+        p99.get(choice.config, math.nan),
+        best.config,
+        best.cd.mean,
+        tol,
+        bool(fast),
+    )
 
 
 def load_recommendations(path: Path) -> list[Recommendation]:
-    """The entries of a recommendation file; ValueError naming the file on a malformed one."""
+    """Return the entries of a recommendation file; ValueError naming the file on a malformed one."""
     from cloth_bench_ros.safe_io import load_yaml_file
 
     data = load_yaml_file(path)
-    entries = data.get("recommendations") if isinstance(data, dict) else None
+    entries = data.get('recommendations') if isinstance(data, dict) else None
     if not isinstance(entries, list):
         raise ValueError(f"recommendation file {path}: no 'recommendations' list")
     out = []
     for i, e in enumerate(entries):
-        if not isinstance(e, dict) or not {"engine", "cloth", "primitive", "rate_hz", "config"} <= set(e):
-            raise ValueError(f"recommendation file {path}: entry {i} lacks engine, cloth, primitive, rate_hz or config")
-        grid = e.get("grid")
-        if grid is not None and not (isinstance(grid, list) and len(grid) == 2 and all(isinstance(g, int) for g in grid)):
-            raise ValueError(f"recommendation file {path}: entry {i} grid is not [nx, nz]")
-        params = e.get("params") or {}
+        if not isinstance(e, dict) or not {
+            'engine',
+            'cloth',
+            'primitive',
+            'rate_hz',
+            'config',
+        } <= set(e):
+            raise ValueError(
+                f'recommendation file {path}: entry {i} lacks engine, cloth, primitive, rate_hz or'
+                ' config'
+            )
+        grid = e.get('grid')
+        if grid is not None and not (
+            isinstance(grid, list) and len(grid) == 2 and all(isinstance(g, int) for g in grid)
+        ):
+            raise ValueError(f'recommendation file {path}: entry {i} grid is not [nx, nz]')
+        params = e.get('params') or {}
         if not isinstance(params, dict):
-            raise ValueError(f"recommendation file {path}: entry {i} params is not a mapping")
-        out.append(Recommendation(str(e["engine"]), str(e["cloth"]), str(e["primitive"]), float(e["rate_hz"]),
-                                  str(e["config"]), tuple(grid) if grid else None, params,
-                                  **{k: e[k] for k in ("cd", "step_p99_ms", "best_config", "best_cd", "tolerance_m",
-                                                       "meets_deadline") if k in e}))
+            raise ValueError(f'recommendation file {path}: entry {i} params is not a mapping')
+        out.append(
+            Recommendation(
+                str(e['engine']),
+                str(e['cloth']),
+                str(e['primitive']),
+                float(e['rate_hz']),
+                str(e['config']),
+                tuple(grid) if grid else None,
+                params,
+                **{
+                    k: e[k]
+                    for k in (
+                        'cd',
+                        'step_p99_ms',
+                        'best_config',
+                        'best_cd',
+                        'tolerance_m',
+                        'meets_deadline',
+                    )
+                    if k in e
+                },
+            )
+        )
     return out

@@ -15,23 +15,45 @@ import fcntl
 import json
 import math
 import os
-import socket
 from pathlib import Path
+import socket
 from typing import Any, Mapping, TypedDict
 
 from cloth_bench_ros.errors import ClothBenchError
-from cloth_bench_ros.safe_io import UnsafeInputError, confined_path, read_text_bounded, safe_name
+from cloth_bench_ros.safe_io import confined_path, read_text_bounded, safe_name, UnsafeInputError
 
-RESULTS_FILE = "results.jsonl"
-LOCK_FILE = ".results.lock"
+RESULTS_FILE = 'results.jsonl'
+LOCK_FILE = '.results.lock'
 MAX_RESULTS_BYTES = 512 * 1024 * 1024
 
 # What makes a cell unique, with the default of each field that older rows may lack.
-KEY_FIELDS: dict[str, Any] = {"mode": "paper", "config": "preset", "engine": None, "rate_hz": None, "cloth": None,
-                              "primitive": None, "trial": 0, "seed": None, "pacing": "lockstep"}
-NAME_FIELDS = ("mode", "engine", "cloth", "primitive", "pacing")
-NUMERIC_FIELDS = ("CD", "HD", "L_s", "step_time_mean", "step_time_p50", "step_time_p99", "step_time_max",
-                  "latency_mean", "latency_p50", "latency_p99", "latency_max", "real_time_factor", "cell_wall_s")
+KEY_FIELDS: dict[str, Any] = {
+    'mode': 'paper',
+    'config': 'preset',
+    'engine': None,
+    'rate_hz': None,
+    'cloth': None,
+    'primitive': None,
+    'trial': 0,
+    'seed': None,
+    'pacing': 'lockstep',
+}
+NAME_FIELDS = ('mode', 'engine', 'cloth', 'primitive', 'pacing')
+NUMERIC_FIELDS = (
+    'CD',
+    'HD',
+    'L_s',
+    'step_time_mean',
+    'step_time_p50',
+    'step_time_p99',
+    'step_time_max',
+    'latency_mean',
+    'latency_p50',
+    'latency_p99',
+    'latency_max',
+    'real_time_factor',
+    'cell_wall_s',
+)
 
 
 class ResultsError(ClothBenchError, ValueError):
@@ -67,18 +89,22 @@ class ResultRow(TypedDict, total=False):
 
 
 def result_key(fields: Mapping[str, Any]) -> tuple:
-    """The unique key of a cell from its fields (a Cell's or a row's); missing fields take their default."""
+    """Return the unique key of a cell from its fields (a Cell's or a row's); missing fields take their default."""
     values = []
     for name, default in KEY_FIELDS.items():
         value = fields.get(name, default)
         if value is None:
             raise KeyError(name)
-        values.append(float(value) if name == "rate_hz" else int(value) if name in ("trial", "seed") else value)
+        values.append(
+            float(value)
+            if name == 'rate_hz'
+            else int(value) if name in ('trial', 'seed') else value
+        )
     return tuple(values)
 
 
 def row_key(row: Mapping[str, Any]) -> tuple:
-    """The key of a results row (the same as its Cell.key())."""
+    """Return the key of a results row (the same as its Cell.key())."""
     return result_key(row)
 
 
@@ -94,37 +120,45 @@ def json_safe(value: Any) -> Any:
 
 
 def check_row(row: Any, base: Path, where: str) -> ResultRow:
-    """The row if it is a usable results row, else ResultsError naming `where`."""
+    """Return the row if it is a usable results row, else ResultsError naming `where`."""
     if not isinstance(row, dict):
-        raise ResultsError(f"{where}: a result row must be a JSON object, found {type(row).__name__}")
+        raise ResultsError(
+            f'{where}: a result row must be a JSON object, found {type(row).__name__}'
+        )
     missing = [k for k, default in KEY_FIELDS.items() if default is None and k not in row]
     if missing:
-        raise ResultsError(f"{where}: result row lacks {', '.join(missing)}")
+        raise ResultsError(f'{where}: result row lacks {", ".join(missing)}')
     try:
         for name in NAME_FIELDS:
             if name in row:
                 safe_name(row[name], name)
-        if not isinstance(row.get("config", ""), str) or len(row.get("config", "")) > 500:
-            raise ResultsError(f"{where}: config must be a string of at most 500 characters")
-        rate = row["rate_hz"]
-        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not (math.isfinite(rate) and rate > 0):
-            raise ResultsError(f"{where}: rate_hz {rate!r} is not a positive number")
-        for name in ("seed", "trial"):
-            if name in row and (isinstance(row[name], bool) or not isinstance(row[name], int) or row[name] < 0):
-                raise ResultsError(f"{where}: {name} {row[name]!r} is not a whole number >= 0")
-        frames = row.get("frames_csv")
+        if not isinstance(row.get('config', ''), str) or len(row.get('config', '')) > 500:
+            raise ResultsError(f'{where}: config must be a string of at most 500 characters')
+        rate = row['rate_hz']
+        if (
+            isinstance(rate, bool)
+            or not isinstance(rate, (int, float))
+            or not (math.isfinite(rate) and rate > 0)
+        ):
+            raise ResultsError(f'{where}: rate_hz {rate!r} is not a positive number')
+        for name in ('seed', 'trial'):
+            if name in row and (
+                isinstance(row[name], bool) or not isinstance(row[name], int) or row[name] < 0
+            ):
+                raise ResultsError(f'{where}: {name} {row[name]!r} is not a whole number >= 0')
+        frames = row.get('frames_csv')
         if frames is not None:
             if not isinstance(frames, str):
-                raise ResultsError(f"{where}: frames_csv must be a path or null")
+                raise ResultsError(f'{where}: frames_csv must be a path or null')
             confined_path(base, frames)
     except UnsafeInputError as exc:
-        raise ResultsError(f"{where}: {exc}") from None
+        raise ResultsError(f'{where}: {exc}') from None
     for name in NUMERIC_FIELDS:
         value = row.get(name)
         if value is None and name in row:
             row[name] = math.nan
         elif name in row and (isinstance(value, bool) or not isinstance(value, (int, float))):
-            raise ResultsError(f"{where}: {name} {value!r} is not a number")
+            raise ResultsError(f'{where}: {name} {value!r} is not a number')
     return row  # type: ignore[return-value]
 
 
@@ -152,20 +186,20 @@ def load_rows(path: Path) -> list[ResultRow]:
             row = json.loads(line)
         except json.JSONDecodeError:
             continue  # a line cut short by an interrupted study: that cell runs again
-        rows.append(check_row(row, path.parent, f"{path}:{number}"))
+        rows.append(check_row(row, path.parent, f'{path}:{number}'))
     return rows
 
 
 def append_row(path: Path, row: Mapping[str, Any]) -> None:
     """One JSON line, flushed to disk; after a line torn by an interrupted study, on a line of its own."""
     path = Path(path)
-    data = (json.dumps(json_safe(dict(row)), sort_keys=True) + "\n").encode()
-    with path.open("ab") as f:
+    data = (json.dumps(json_safe(dict(row)), sort_keys=True) + '\n').encode()
+    with path.open('ab') as f:
         if f.tell() > 0:
-            with path.open("rb") as r:
+            with path.open('rb') as r:
                 r.seek(-1, os.SEEK_END)
-                if r.read(1) != b"\n":
-                    data = b"\n" + data
+                if r.read(1) != b'\n':
+                    data = b'\n' + data
         f.write(data)
         f.flush()
         os.fsync(f.fileno())
@@ -183,18 +217,20 @@ class ResultsLock:
         self.what = what
         self._fd: int | None = None
 
-    def __enter__(self) -> "ResultsLock":
+    def __enter__(self) -> 'ResultsLock':
         path = self.directory / LOCK_FILE
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "another study"
+            holder = os.pread(fd, 200, 0).decode(errors='replace').strip() or 'another study'
             os.close(fd)
-            raise ResultsError(f"results directory {self.directory} is in use by {holder}; wait for it to "
-                               f"finish or choose another --output") from None
+            raise ResultsError(
+                f'results directory {self.directory} is in use by {holder}; wait for it to '
+                'finish or choose another --output'
+            ) from None
         os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{self.what} (pid {os.getpid()} on {socket.gethostname()})\n".encode(), 0)
+        os.pwrite(fd, f'{self.what} (pid {os.getpid()} on {socket.gethostname()})\n'.encode(), 0)
         self._fd = fd
         return self
 

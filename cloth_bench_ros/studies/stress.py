@@ -18,18 +18,17 @@ reported ("time limit"). Nothing a case does ends the suite.
 
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass, field
 import json
 import math
-import time
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
+import time
 from typing import Sequence
 
+from cloth_bench_ros.core.table import Table
 import numpy as np
 
-from cloth_bench_ros.core.table import Table
-
-STRESS_FILE = "stress.jsonl"
+STRESS_FILE = 'stress.jsonl'
 MAX_CASE_WALL_S = 120.0
 
 
@@ -38,68 +37,163 @@ class StressCase:
     name: str
     engine: str
     description: str
-    primitive: str = "dynamic"
+    primitive: str = 'dynamic'
     rate_hz: float = 100.0
     params: dict = field(default_factory=dict)  # overrides on top of the towel preset of the task
     grid: tuple[int, int] | None = None
     time_compression: float = 1.0  # the trajectory is played this many times faster
-    drag_height: float | None = None  # m: the grippers' lowest height above the table top (< 0: into it)
+    drag_height: float | None = (
+        None  # m: the grippers' lowest height above the table top (< 0: into it)
+    )
     jump: float = 0.0  # m: the right gripper jumps this far outwards (x) 1 s into the quintic part
     max_wall_s: float = MAX_CASE_WALL_S
 
 
 def _one_step(rate: float) -> dict:
     """One internal step per target (the paper's frequency study)."""
-    return {"timestep": 1.0 / rate, "substeps": 1}
+    return {'timestep': 1.0 / rate, 'substeps': 1}
 
 
-def default_cases(engines: Sequence[str] = ("mujoco", "bullet", "newton")) -> list[StressCase]:
-    """The suite: the hard cases of issue 5 and some more, with each engine's own parameter names."""
+def default_cases(engines: Sequence[str] = ('mujoco', 'bullet', 'newton')) -> list[StressCase]:
+    """Return the suite: the hard cases of issue 5 and some more, with each engine's own parameter names."""
     cases: list[StressCase] = []
     for e in engines:
-        stiff = ({"model": "edges", "edge_stiffness": 1e6} if e == "mujoco"
-                 else {"elastic": 1e5, "bending": 1e5} if e == "bullet"
-                 else {"tri_stiffness": 1e6, "tri_area_stiffness": 1e6, "spring_stiffness": 1e5} if e == "newton"
-                 else {})
-        damping = "tri_damping" if e == "newton" else "damping"  # Newton's preset model is vbd
+        stiff = (
+            {'model': 'edges', 'edge_stiffness': 1e6}
+            if e == 'mujoco'
+            else (
+                {'elastic': 1e5, 'bending': 1e5}
+                if e == 'bullet'
+                else (
+                    {'tri_stiffness': 1e6, 'tri_area_stiffness': 1e6, 'spring_stiffness': 1e5}
+                    if e == 'newton'
+                    else {}
+                )
+            )
+        )
+        damping = 'tri_damping' if e == 'newton' else 'damping'  # Newton's preset model is vbd
         common = [
-            StressCase("fling_10hz", e, "fling at 10 Hz, one internal step per target (dt = 0.1 s)",
-                       "dynamic", 10.0, _one_step(10.0)),
-            StressCase("fling_100hz_one_step", e, "fling at 100 Hz, one internal step per target (dt = 0.01 s)",
-                       "dynamic", 100.0, _one_step(100.0)),
-            StressCase("stiff_cloth", e, "very stiff cloth (" + ", ".join(f"{k}={v:g}" for k, v in stiff.items()
-                       if not isinstance(v, str)) + "), fling at 100 Hz with the preset time step",
-                       "dynamic", 100.0, stiff),
-            StressCase("light_cloth", e, "very light cloth (mass 1 g), fling at 100 Hz",
-                       "dynamic", 100.0, {"mass": 0.001}),
-            StressCase("heavy_cloth", e, "very heavy cloth (mass 100 kg), fling at 100 Hz",
-                       "dynamic", 100.0, {"mass": 100.0}),
-            StressCase("fast_drag_onto_table", e,
-                       "quasi-static drag played 5x faster, grippers lowered to 2 cm above the table top",
-                       "quasi_static", 100.0, {}, time_compression=5.0, drag_height=0.02),
-            StressCase("fast_drag_into_table", e,
-                       "quasi-static drag played 5x faster, grippers driven 2 cm into the table",
-                       "quasi_static", 100.0, {}, time_compression=5.0, drag_height=-0.02),
-            StressCase("large_dt_high_damping", e, "dt = 0.1 s (10 Hz, one step per target) with damping 100",
-                       "dynamic", 10.0, {**_one_step(10.0), damping: 100.0}),
-            StressCase("fine_mesh_one_step", e, "fine 21 x 29 mesh, fling at 100 Hz with one step per target",
-                       "dynamic", 100.0, _one_step(100.0), grid=(21, 29)),
-            StressCase("gripper_jump", e, "the right gripper jumps 0.3 m outwards in one step (tears the cloth)",
-                       "dynamic", 100.0, {}, jump=0.3),
-            StressCase("one_solver_iteration", e, "fling at 100 Hz, 1 solver iteration per internal step",
-                       "dynamic", 100.0, {"solver_iterations": 1}),
-            StressCase("self_collision_fling", e, "fling at 100 Hz with cloth self-collision",
-                       "dynamic", 100.0, {"self_collision": True}),
-            StressCase("no_damping_one_step", e, "fling at 100 Hz, one step per target, no damping",
-                       "dynamic", 100.0, {**_one_step(100.0), damping: 0.0}),
+            StressCase(
+                'fling_10hz',
+                e,
+                'fling at 10 Hz, one internal step per target (dt = 0.1 s)',
+                'dynamic',
+                10.0,
+                _one_step(10.0),
+            ),
+            StressCase(
+                'fling_100hz_one_step',
+                e,
+                'fling at 100 Hz, one internal step per target (dt = 0.01 s)',
+                'dynamic',
+                100.0,
+                _one_step(100.0),
+            ),
+            StressCase(
+                'stiff_cloth',
+                e,
+                'very stiff cloth ('
+                + ', '.join(f'{k}={v:g}' for k, v in stiff.items() if not isinstance(v, str))
+                + '), fling at 100 Hz with the preset time step',
+                'dynamic',
+                100.0,
+                stiff,
+            ),
+            StressCase(
+                'light_cloth',
+                e,
+                'very light cloth (mass 1 g), fling at 100 Hz',
+                'dynamic',
+                100.0,
+                {'mass': 0.001},
+            ),
+            StressCase(
+                'heavy_cloth',
+                e,
+                'very heavy cloth (mass 100 kg), fling at 100 Hz',
+                'dynamic',
+                100.0,
+                {'mass': 100.0},
+            ),
+            StressCase(
+                'fast_drag_onto_table',
+                e,
+                'quasi-static drag played 5x faster, grippers lowered to 2 cm above the table top',
+                'quasi_static',
+                100.0,
+                {},
+                time_compression=5.0,
+                drag_height=0.02,
+            ),
+            StressCase(
+                'fast_drag_into_table',
+                e,
+                'quasi-static drag played 5x faster, grippers driven 2 cm into the table',
+                'quasi_static',
+                100.0,
+                {},
+                time_compression=5.0,
+                drag_height=-0.02,
+            ),
+            StressCase(
+                'large_dt_high_damping',
+                e,
+                'dt = 0.1 s (10 Hz, one step per target) with damping 100',
+                'dynamic',
+                10.0,
+                {**_one_step(10.0), damping: 100.0},
+            ),
+            StressCase(
+                'fine_mesh_one_step',
+                e,
+                'fine 21 x 29 mesh, fling at 100 Hz with one step per target',
+                'dynamic',
+                100.0,
+                _one_step(100.0),
+                grid=(21, 29),
+            ),
+            StressCase(
+                'gripper_jump',
+                e,
+                'the right gripper jumps 0.3 m outwards in one step (tears the cloth)',
+                'dynamic',
+                100.0,
+                {},
+                jump=0.3,
+            ),
+            StressCase(
+                'one_solver_iteration',
+                e,
+                'fling at 100 Hz, 1 solver iteration per internal step',
+                'dynamic',
+                100.0,
+                {'solver_iterations': 1},
+            ),
+            StressCase(
+                'self_collision_fling',
+                e,
+                'fling at 100 Hz with cloth self-collision',
+                'dynamic',
+                100.0,
+                {'self_collision': True},
+            ),
+            StressCase(
+                'no_damping_one_step',
+                e,
+                'fling at 100 Hz, one step per target, no damping',
+                'dynamic',
+                100.0,
+                {**_one_step(100.0), damping: 0.0},
+            ),
         ]
         cases += common
     return cases
 
 
-def select_cases(engines: Sequence[str], names: Sequence[str] | None = None,
-                 max_wall_s: float | None = None) -> list[StressCase]:
-    """The suite for `engines`, only the cases `names` if given, with another wall-time budget if given."""
+def select_cases(
+    engines: Sequence[str], names: Sequence[str] | None = None, max_wall_s: float | None = None
+) -> list[StressCase]:
+    """Return the suite for `engines`, only the cases `names` if given, with another wall-time budget if given."""
     from dataclasses import replace
 
     from cloth_bench_ros.engines import engine_class
@@ -111,11 +205,13 @@ def select_cases(engines: Sequence[str], names: Sequence[str] | None = None,
         known = {c.name for c in cases}
         unknown = sorted(set(names) - known)
         if unknown:
-            raise ValueError(f"unknown stress case {', '.join(unknown)} (known: {', '.join(sorted(known))})")
+            raise ValueError(
+                f'unknown stress case {", ".join(unknown)} (known: {", ".join(sorted(known))})'
+            )
         cases = [c for c in cases if c.name in names]
     if max_wall_s is not None:
         if not (math.isfinite(max_wall_s) and max_wall_s > 0):
-            raise ValueError(f"--max-wall-s must be a number of seconds > 0, got {max_wall_s}")
+            raise ValueError(f'--max-wall-s must be a number of seconds > 0, got {max_wall_s}')
         cases = [replace(c, max_wall_s=max_wall_s) for c in cases]
     return cases
 
@@ -144,116 +240,172 @@ def case_targets(case: StressCase):
 
 def run_case(case: StressCase) -> dict:
     """Run one case to its end, its divergence or its wall-time budget; never raises."""
-    from cloth_bench_ros.engines import make_engine
-    from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.core.metrics import StabilityAccumulator
     from cloth_bench_ros.core.scene import ClothGrid
+    from cloth_bench_ros.engines import make_engine
+    from cloth_bench_ros.engines.presets import load_preset
 
-    row = {"case": case.name, "engine": case.engine, "description": case.description,
-           "primitive": case.primitive, "rate_hz": case.rate_hz, "params": case.params,
-           "grid": f"{case.grid[0]}x{case.grid[1]}" if case.grid else None,
-           "status": "error", "diverged": False, "diverged_at_step": None, "diverged_at_time": None,
-           "diverged_reason": "", "L_s": math.nan, "max_vertex_speed": math.nan, "steps": 0,
-           "step_time_mean": math.nan, "step_time_p99": math.nan, "step_time_max": math.nan,
-           "wall_s": math.nan, "error": ""}
+    row = {
+        'case': case.name,
+        'engine': case.engine,
+        'description': case.description,
+        'primitive': case.primitive,
+        'rate_hz': case.rate_hz,
+        'params': case.params,
+        'grid': f'{case.grid[0]}x{case.grid[1]}' if case.grid else None,
+        'status': 'error',
+        'diverged': False,
+        'diverged_at_step': None,
+        'diverged_at_time': None,
+        'diverged_reason': '',
+        'L_s': math.nan,
+        'max_vertex_speed': math.nan,
+        'steps': 0,
+        'step_time_mean': math.nan,
+        'step_time_p99': math.nan,
+        'step_time_max': math.nan,
+        'wall_s': math.nan,
+        'error': '',
+    }
     start = time.perf_counter()
     engine = None
     try:
         left, right, q, dt = case_targets(case)
-        params = {**load_preset(case.engine, "towel", case.primitive), **case.params}
-        engine = make_engine(case.engine, case.rate_hz, params, ClothGrid(*case.grid) if case.grid else None)
+        params = {**load_preset(case.engine, 'towel', case.primitive), **case.params}
+        engine = make_engine(
+            case.engine, case.rate_hz, params, ClothGrid(*case.grid) if case.grid else None
+        )
         previous = engine.reset(0, left[0], right[0]).copy()
         stability = StabilityAccumulator()
         times = []
         max_speed = 0.0
-        row["status"] = "ok"
+        row['status'] = 'ok'
         for k in range(1, len(left)):
             t0 = time.perf_counter()
             vertices = engine.step(left[k], right[k])
             times.append(time.perf_counter() - t0)
             vertices = np.array(vertices, dtype=float)
             if np.isfinite(vertices).all():
-                max_speed = max(max_speed, float(np.linalg.norm(vertices - previous, axis=1).max() / dt))
+                max_speed = max(
+                    max_speed, float(np.linalg.norm(vertices - previous, axis=1).max() / dt)
+                )
             if engine.diverged:
                 break
             if k >= q:
                 stability.add(vertices)
             previous = vertices
             if time.perf_counter() - start > case.max_wall_s:
-                row["status"] = "time limit"
-                row["error"] = f"stopped after {case.max_wall_s:g} s of wall time at step {k} of {len(left) - 1}"
+                row['status'] = 'time limit'
+                row['error'] = (
+                    f'stopped after {case.max_wall_s:g} s of wall time at step {k} of'
+                    f' {len(left) - 1}'
+                )
                 break
         if engine.diverged:
             d = engine.divergence
-            row.update(status="diverged", diverged=True, diverged_at_step=d.step,
-                       diverged_at_time=d.step * dt, diverged_reason=d.reason)
+            row.update(
+                status='diverged',
+                diverged=True,
+                diverged_at_step=d.step,
+                diverged_at_time=d.step * dt,
+                diverged_reason=d.reason,
+            )
         s = np.asarray(times)
         if engine.diverged and max_speed == 0.0:
             max_speed = math.nan  # the engine failed before any state could be compared
-        row.update(L_s=stability.value, max_vertex_speed=max_speed, steps=len(times),
-                   step_time_mean=float(s.mean()) if len(s) else math.nan,
-                   step_time_p99=float(np.percentile(s, 99)) if len(s) else math.nan,
-                   step_time_max=float(s.max()) if len(s) else math.nan)
-        row["substeps"] = getattr(engine, "substeps", None)
+        row.update(
+            L_s=stability.value,
+            max_vertex_speed=max_speed,
+            steps=len(times),
+            step_time_mean=float(s.mean()) if len(s) else math.nan,
+            step_time_p99=float(np.percentile(s, 99)) if len(s) else math.nan,
+            step_time_max=float(s.max()) if len(s) else math.nan,
+        )
+        row['substeps'] = getattr(engine, 'substeps', None)
     except Exception as exc:  # a case that cannot even be built is a result too
-        row["status"] = "error"
-        row["error"] = f"{type(exc).__name__}: {exc}"
+        row['status'] = 'error'
+        row['error'] = f'{type(exc).__name__}: {exc}'
     finally:
         if engine is not None:
             try:
                 engine.close()
             except Exception:
                 pass
-    row["wall_s"] = time.perf_counter() - start
+    row['wall_s'] = time.perf_counter() - start
     return row
 
 
 def crashed_row(case: StressCase, message: str) -> dict:
-    """The row of a case whose worker died (a crash in the engine's C code) on every try."""
-    return {"case": case.name, "engine": case.engine, "description": case.description,
-            "primitive": case.primitive, "rate_hz": case.rate_hz, "params": case.params,
-            "status": "crashed", "diverged": False, "error": message, "L_s": math.nan,
-            "max_vertex_speed": math.nan, "step_time_mean": math.nan, "steps": 0}
+    """Return the row of a case whose worker died (a crash in the engine's C code) on every try."""
+    return {
+        'case': case.name,
+        'engine': case.engine,
+        'description': case.description,
+        'primitive': case.primitive,
+        'rate_hz': case.rate_hz,
+        'params': case.params,
+        'status': 'crashed',
+        'diverged': False,
+        'error': message,
+        'L_s': math.nan,
+        'max_vertex_speed': math.nan,
+        'step_time_mean': math.nan,
+        'steps': 0,
+    }
 
 
-def run_suite(cases: Sequence[StressCase], out_dir: Path | None = None, workers: int | None = None,
-              progress: bool = True, scheduler: str | None = None) -> list[dict]:
+def run_suite(
+    cases: Sequence[StressCase],
+    out_dir: Path | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+    scheduler: str | None = None,
+) -> list[dict]:
     """Run every case on the executor; rows in the order of `cases` (and to stress.jsonl, stress.md)."""
-    from tqdm import tqdm
-
     from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
     from cloth_bench_ros.studies.executor import default_workers, open_client, run_tasks
     from cloth_bench_ros.studies.results import json_safe
+    from tqdm import tqdm
 
     if out_dir is not None:
         out_dir = check_output_dir(out_dir)
     rows: dict[int, dict] = {}
     index = {id(c): i for i, c in enumerate(cases)}
-    bar = tqdm(total=len(cases), desc="stress", unit="case", disable=not progress)
+    bar = tqdm(total=len(cases), desc='stress', unit='case', disable=not progress)
 
     def done(case: StressCase, row: dict) -> None:
         rows[index[id(case)]] = row
-        bar.set_postfix_str(f"{case.engine}/{case.name}: {row['status']}", refresh=False)
+        bar.set_postfix_str(f'{case.engine}/{case.name}: {row["status"]}', refresh=False)
         bar.update(1)
 
     try:
-        with open_client(scheduler, workers or min(default_workers(), len(cases)),
-                         Path(out_dir) / "workers.log" if out_dir is not None else None) as client:
-            run_tasks(client, run_case, list(cases), on_result=done,
-                      on_crash=lambda case, message: done(case, crashed_row(case, message)))
+        with open_client(
+            scheduler,
+            workers or min(default_workers(), len(cases)),
+            Path(out_dir) / 'workers.log' if out_dir is not None else None,
+        ) as client:
+            run_tasks(
+                client,
+                run_case,
+                list(cases),
+                on_result=done,
+                on_crash=lambda case, message: done(case, crashed_row(case, message)),
+            )
     finally:
         bar.close()
     ordered = [rows[i] for i in sorted(rows)]
     if out_dir is not None:
-        atomic_write_text(Path(out_dir) / STRESS_FILE,
-                          "".join(json.dumps(json_safe(r), sort_keys=True) + "\n" for r in ordered))
-        atomic_write_text(Path(out_dir) / "stress.md", stress_table(ordered).markdown() + "\n")
+        atomic_write_text(
+            Path(out_dir) / STRESS_FILE,
+            ''.join(json.dumps(json_safe(r), sort_keys=True) + '\n' for r in ordered),
+        )
+        atomic_write_text(Path(out_dir) / 'stress.md', stress_table(ordered).markdown() + '\n')
     return ordered
 
 
 def load_stress(path: Path) -> list[dict]:
     """Rows of a stress.jsonl, checked as untrusted input (ValueError of one line naming the file)."""
-    from cloth_bench_ros.safe_io import UnsafeInputError, read_text_bounded, safe_name
+    from cloth_bench_ros.safe_io import read_text_bounded, safe_name, UnsafeInputError
 
     path = Path(path)
     if path.is_dir():
@@ -262,21 +414,26 @@ def load_stress(path: Path) -> list[dict]:
     for number, line in enumerate(read_text_bounded(path).splitlines(), 1):
         if not line.strip():
             continue
-        where = f"{path}:{number}"
+        where = f'{path}:{number}'
         try:
             r = json.loads(line)
         except json.JSONDecodeError:
-            raise ValueError(f"{where}: not a JSON line") from None
-        if not isinstance(r, dict) or not all(k in r for k in ("case", "engine", "rate_hz", "status")):
-            raise ValueError(f"{where}: a stress row must be a JSON object with case, engine, rate_hz and status")
+            raise ValueError(f'{where}: not a JSON line') from None
+        if not isinstance(r, dict) or not all(
+            k in r for k in ('case', 'engine', 'rate_hz', 'status')
+        ):
+            raise ValueError(
+                f'{where}: a stress row must be a JSON object with case, engine, rate_hz and'
+                ' status'
+            )
         try:
-            safe_name(r["case"], "case")
-            safe_name(r["engine"], "engine")
+            safe_name(r['case'], 'case')
+            safe_name(r['engine'], 'engine')
         except UnsafeInputError as exc:
-            raise ValueError(f"{where}: {exc}") from None
-        if isinstance(r["rate_hz"], bool) or not isinstance(r["rate_hz"], (int, float)):
-            raise ValueError(f"{where}: rate_hz {r['rate_hz']!r} is not a number")
-        for k in ("L_s", "max_vertex_speed", "step_time_mean", "step_time_p99", "step_time_max"):
+            raise ValueError(f'{where}: {exc}') from None
+        if isinstance(r['rate_hz'], bool) or not isinstance(r['rate_hz'], (int, float)):
+            raise ValueError(f'{where}: rate_hz {r["rate_hz"]!r} is not a number')
+        for k in ('L_s', 'max_vertex_speed', 'step_time_mean', 'step_time_p99', 'step_time_max'):
             if r.get(k) is None:
                 r[k] = math.nan
         rows.append(r)
@@ -285,22 +442,44 @@ def load_stress(path: Path) -> list[dict]:
 
 def _f(value, fmt: str) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
+        return '-'
     return format(value, fmt)
 
 
 def stress_table(rows: Sequence[dict]) -> Table:
     """One row per case and engine; stress.md and the report both render this table."""
-    headers = ["engine", "case", "rate Hz", "status", "diverged at step", "L_s (m)", "max vertex speed (m/s)",
-               "step mean (ms)", "step max (ms)", "steps", "why"]
+    headers = [
+        'engine',
+        'case',
+        'rate Hz',
+        'status',
+        'diverged at step',
+        'L_s (m)',
+        'max vertex speed (m/s)',
+        'step mean (ms)',
+        'step max (ms)',
+        'steps',
+        'why',
+    ]
     out = []
     for r in rows:
-        step = r.get("diverged_at_step")
-        out.append([r["engine"], r["case"], f"{r['rate_hz']:g}", r["status"], "-" if step is None else str(step),
-                    _f(r.get("L_s"), ".2e"), _f(r.get("max_vertex_speed"), ".3g"),
-                    _f(_scaled(r.get("step_time_mean"), 1e3), ".3f"), _f(_scaled(r.get("step_time_max"), 1e3), ".3f"),
-                    str(r.get("steps", 0)), r.get("diverged_reason") or r.get("error") or ""])
-    return Table("stress", headers, out, "llrlrrrrrrl")
+        step = r.get('diverged_at_step')
+        out.append(
+            [
+                r['engine'],
+                r['case'],
+                f'{r["rate_hz"]:g}',
+                r['status'],
+                '-' if step is None else str(step),
+                _f(r.get('L_s'), '.2e'),
+                _f(r.get('max_vertex_speed'), '.3g'),
+                _f(_scaled(r.get('step_time_mean'), 1e3), '.3f'),
+                _f(_scaled(r.get('step_time_max'), 1e3), '.3f'),
+                str(r.get('steps', 0)),
+                r.get('diverged_reason') or r.get('error') or '',
+            ]
+        )
+    return Table('stress', headers, out, 'llrlrrrrrrl')
 
 
 def _scaled(value, scale: float):
@@ -311,9 +490,9 @@ def verdict(rows: Sequence[dict]) -> dict[str, list[str]]:
     """engine -> names of the cases that diverged."""
     out: dict[str, list[str]] = {}
     for r in rows:
-        out.setdefault(r["engine"], [])
-        if r.get("diverged"):
-            out[r["engine"]].append(r["case"])
+        out.setdefault(r['engine'], [])
+        if r.get('diverged'):
+            out[r['engine']].append(r['case'])
     return out
 
 

@@ -11,23 +11,47 @@ segfault in an engine, or a machine lost) is replaced and the cell runs again el
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 import math
 import os
+from pathlib import Path
 import sys
 import time
 import traceback
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Sequence
 
 from cloth_bench_ros.studies.cells import (  # noqa: F401  (re-exported: the studies' one vocabulary)
-    DEFAULT_CLOTHS, DEFAULT_ENGINES, DEFAULT_PRIMITIVES, DEFAULT_RATES, DEFAULT_SEEDS, PRESET, SETTINGS_RATE,
-    SETTINGS_SEEDS, Cell, config_label, estimated_cost, find_bags, paper_cells, settings_cells)
+    Cell,
+    config_label,
+    DEFAULT_CLOTHS,
+    DEFAULT_ENGINES,
+    DEFAULT_PRIMITIVES,
+    DEFAULT_RATES,
+    DEFAULT_SEEDS,
+    estimated_cost,
+    find_bags,
+    paper_cells,
+    PRESET,
+    settings_cells,
+    SETTINGS_RATE,
+    SETTINGS_SEEDS,
+)
 from cloth_bench_ros.studies.executor import default_workers, open_client, run_tasks  # noqa: F401
-from cloth_bench_ros.studies.parsing import parse_grid, parse_overrides, parse_settings_axes, parse_value  # noqa: F401
+from cloth_bench_ros.studies.parsing import (
+    parse_grid,
+    parse_overrides,
+    parse_settings_axes,
+    parse_value,
+)  # noqa: F401
 from cloth_bench_ros.studies.results import (  # noqa: F401
-    RESULTS_FILE, ResultRow, ResultsLock, append_row, json_safe, load_rows, row_key)
-
+    append_row,
+    json_safe,
+    load_rows,
+    ResultRow,
+    RESULTS_FILE,
+    ResultsLock,
+    row_key,
+)
 
 # -------------------------------------------------------------------------------------- rows
 
@@ -37,37 +61,58 @@ def _nan(value):
 
 
 def summary_row(cell: Cell, summary: dict) -> dict:
-    """The flat results row of one finished run."""
-    m = summary["engines"][cell.engine]
-    suffix = "d" if cell.primitive == "dynamic" else "q"
-    trial = summary["run"].get("trial") or {}
-    st, lat = m["step_time"], m["latency"]
+    """Return the flat results row of one finished run."""
+    m = summary['engines'][cell.engine]
+    suffix = 'd' if cell.primitive == 'dynamic' else 'q'
+    trial = summary['run'].get('trial') or {}
+    st, lat = m['step_time'], m['latency']
     return {
-        "CD": _nan(m.get(f"CD_{suffix}")), "HD": _nan(m.get(f"HD_{suffix}")), "task_suffix": suffix,
-        "L_s": _nan(m.get("L_s")),
-        "step_count": st["count"], "step_time_mean": st["mean"], "step_time_p50": st["p50"],
-        "step_time_p99": st["p99"], "step_time_max": st["max"],
-        "latency_count": lat["count"], "latency_mean": lat["mean"], "latency_p50": lat["p50"],
-        "latency_p99": lat["p99"], "latency_max": lat["max"],
-        "deadline_misses": m.get("deadline_misses"), "real_time_factor": m.get("real_time_factor"),
-        "frames_scored": m.get("frames_scored"), "frames_in_window": m.get("frames_in_window"),
-        "diverged": bool(m.get("diverged")), "diverged_at_step": m.get("diverged_at_step"),
-        "diverged_at_time": m.get("diverged_at_time"), "diverged_reason": m.get("diverged_reason") or "",
-        "change_of_phase_frame": trial.get("change_of_phase_frame"),
-        "real_frames": summary["real"].get("frames"), "unpaired_frames": summary["real"].get("unpaired_frames"),
-        "run_wall_time": summary["run"].get("wall_time"),
+        'CD': _nan(m.get(f'CD_{suffix}')),
+        'HD': _nan(m.get(f'HD_{suffix}')),
+        'task_suffix': suffix,
+        'L_s': _nan(m.get('L_s')),
+        'step_count': st['count'],
+        'step_time_mean': st['mean'],
+        'step_time_p50': st['p50'],
+        'step_time_p99': st['p99'],
+        'step_time_max': st['max'],
+        'latency_count': lat['count'],
+        'latency_mean': lat['mean'],
+        'latency_p50': lat['p50'],
+        'latency_p99': lat['p99'],
+        'latency_max': lat['max'],
+        'deadline_misses': m.get('deadline_misses'),
+        'real_time_factor': m.get('real_time_factor'),
+        'frames_scored': m.get('frames_scored'),
+        'frames_in_window': m.get('frames_in_window'),
+        'diverged': bool(m.get('diverged')),
+        'diverged_at_step': m.get('diverged_at_step'),
+        'diverged_at_time': m.get('diverged_at_time'),
+        'diverged_reason': m.get('diverged_reason') or '',
+        'change_of_phase_frame': trial.get('change_of_phase_frame'),
+        'real_frames': summary['real'].get('frames'),
+        'unpaired_frames': summary['real'].get('unpaired_frames'),
+        'run_wall_time': summary['run'].get('wall_time'),
     }
 
 
 def _cell_fields(cell: Cell) -> dict:
     fields = {
-        "mode": cell.mode, "config": cell.config, "engine": cell.engine, "rate_hz": float(cell.rate_hz),
-        "cloth": cell.cloth, "primitive": cell.primitive, "trial": int(cell.trial), "seed": int(cell.seed),
-        "pacing": cell.pacing, "bag": cell.bag, "grid": f"{cell.grid[0]}x{cell.grid[1]}" if cell.grid else None,
-        "params": cell.params,
+        'mode': cell.mode,
+        'config': cell.config,
+        'engine': cell.engine,
+        'rate_hz': float(cell.rate_hz),
+        'cloth': cell.cloth,
+        'primitive': cell.primitive,
+        'trial': int(cell.trial),
+        'seed': int(cell.seed),
+        'pacing': cell.pacing,
+        'bag': cell.bag,
+        'grid': f'{cell.grid[0]}x{cell.grid[1]}' if cell.grid else None,
+        'params': cell.params,
     }
     if cell.reference:  # a cross-reference cell names the synthetic reference it is scored against
-        fields["reference"] = cell.reference
+        fields['reference'] = cell.reference
     return fields
 
 
@@ -78,48 +123,72 @@ def _substeps(cell: Cell) -> int | None:
         from cloth_bench_ros.engines.presets import load_preset
 
         config = engine_class(cell.engine).validate_params(
-            {**load_preset(cell.engine, cell.cloth, cell.primitive), **cell.params})
+            {**load_preset(cell.engine, cell.cloth, cell.primitive), **cell.params}
+        )
     except Exception:
         return None
-    if "timestep" not in config:
+    if 'timestep' not in config:
         return None
-    return max(int(config.get("substeps", 1)), math.ceil(1.0 / cell.rate_hz / float(config["timestep"]) - 1e-9))
+    return max(
+        int(config.get('substeps', 1)),
+        math.ceil(1.0 / cell.rate_hz / float(config['timestep']) - 1e-9),
+    )
 
 
 def error_row(cell: Cell, message: str, wall_s: float = math.nan) -> dict:
-    """The row of a cell whose run failed."""
-    return {**_cell_fields(cell), "status": "error", "error": message, "diverged": False,
-            "CD": math.nan, "HD": math.nan, "L_s": math.nan, "cell_wall_s": wall_s, "frames_csv": None}
+    """Return the row of a cell whose run failed."""
+    return {
+        **_cell_fields(cell),
+        'status': 'error',
+        'error': message,
+        'diverged': False,
+        'CD': math.nan,
+        'HD': math.nan,
+        'L_s': math.nan,
+        'cell_wall_s': wall_s,
+        'frames_csv': None,
+    }
 
 
 def run_cell(cell: Cell, out_dir: str) -> dict:
     """Run one cell (in a worker process); never raises for a failure of the run itself."""
     start = time.perf_counter()
-    frames_dir = Path(out_dir) / "frames" / cell.ident() if cell.keep_frames else None
+    frames_dir = Path(out_dir) / 'frames' / cell.ident() if cell.keep_frames else None
     try:
         from cloth_bench_ros.engines import engine_class
-        from cloth_bench_ros.studies.pipeline import RunConfig, run_pipeline
+        from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
 
-        config = RunConfig(bag=Path(cell.bag), engines=[cell.engine], rate_hz=cell.rate_hz, cloth=cell.cloth,
-                           primitive=cell.primitive, seed=cell.seed, pacing=cell.pacing, output_dir=frames_dir,
-                           engine_params={cell.engine: cell.params}, grid=cell.grid)
+        config = RunConfig(
+            bag=Path(cell.bag),
+            engines=[cell.engine],
+            rate_hz=cell.rate_hz,
+            cloth=cell.cloth,
+            primitive=cell.primitive,
+            seed=cell.seed,
+            pacing=cell.pacing,
+            output_dir=frames_dir,
+            engine_params={cell.engine: cell.params},
+            grid=cell.grid,
+        )
         summary = run_pipeline(config)
         if summary is None:
-            raise RuntimeError("the pipeline ended without a summary")
+            raise RuntimeError('the pipeline ended without a summary')
         row = {**_cell_fields(cell), **summary_row(cell, summary)}
-        row["status"] = "diverged" if row["diverged"] else "ok"
-        row["error"] = ""
-        row["engine_version"] = engine_class(cell.engine).version()
+        row['status'] = 'diverged' if row['diverged'] else 'ok'
+        row['error'] = ''
+        row['engine_version'] = engine_class(cell.engine).version()
     except Exception as exc:  # a failure of this cell is a result row, never a crash of the sweep
         last = traceback.extract_tb(exc.__traceback__)[-1:] if exc.__traceback__ else []
-        where = f" ({Path(last[0].filename).name}:{last[0].lineno})" if last else ""
-        return error_row(cell, f"{type(exc).__name__}: {exc}{where}", time.perf_counter() - start)
-    row["substeps"] = _substeps(cell)
+        where = f' ({Path(last[0].filename).name}:{last[0].lineno})' if last else ''
+        return error_row(cell, f'{type(exc).__name__}: {exc}{where}', time.perf_counter() - start)
+    row['substeps'] = _substeps(cell)
     # Step times are wall times: the machine's load tells whether other work slowed them down.
-    row["load_avg_1min"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
-    row["cpu_count"] = os.cpu_count()
-    row["frames_csv"] = str((frames_dir / "frames.csv").relative_to(out_dir)) if frames_dir else None
-    row["cell_wall_s"] = time.perf_counter() - start
+    row['load_avg_1min'] = os.getloadavg()[0] if hasattr(os, 'getloadavg') else None
+    row['cpu_count'] = os.cpu_count()
+    row['frames_csv'] = (
+        str((frames_dir / 'frames.csv').relative_to(out_dir)) if frames_dir else None
+    )
+    row['cell_wall_s'] = time.perf_counter() - start
     return row
 
 
@@ -138,9 +207,11 @@ class SweepOutcome:
     rows: list = field(default_factory=list)  # rows finished now
 
 
-def cells_to_run(cells: Sequence[Cell], existing: Sequence[dict], retry_errors: bool = False) -> list[Cell]:
-    """The cells not yet in `existing` (each once), seed by seed, the longest first within a seed."""
-    done = {row_key(r) for r in existing if not retry_errors or r.get("status") != "error"}
+def cells_to_run(
+    cells: Sequence[Cell], existing: Sequence[dict], retry_errors: bool = False
+) -> list[Cell]:
+    """Return the cells not yet in `existing` (each once), seed by seed, the longest first within a seed."""
+    done = {row_key(r) for r in existing if not retry_errors or r.get('status') != 'error'}
     todo: dict[tuple, Cell] = {}
     for cell in cells:
         if cell.key() not in done:
@@ -149,12 +220,18 @@ def cells_to_run(cells: Sequence[Cell], existing: Sequence[dict], retry_errors: 
     return sorted(todo.values(), key=lambda c: (c.seed, -estimated_cost(c)))
 
 
-def run_sweep(cells: Sequence[Cell], out_dir: Path, workers: int | None = None, progress: bool = True,
-              retry_errors: bool = False, desc: str = "sweep", scheduler: str | None = None) -> SweepOutcome:
+def run_sweep(
+    cells: Sequence[Cell],
+    out_dir: Path,
+    workers: int | None = None,
+    progress: bool = True,
+    retry_errors: bool = False,
+    desc: str = 'sweep',
+    scheduler: str | None = None,
+) -> SweepOutcome:
     """Run every cell not yet in <out_dir>/results.jsonl on the executor, appending rows as they finish."""
-    from tqdm import tqdm
-
     from cloth_bench_ros.safe_io import check_output_dir
+    from tqdm import tqdm
 
     out_dir = check_output_dir(out_dir)
     results = out_dir / RESULTS_FILE
@@ -162,24 +239,35 @@ def run_sweep(cells: Sequence[Cell], out_dir: Path, workers: int | None = None, 
         todo = cells_to_run(cells, load_rows(results), retry_errors)
         outcome = SweepOutcome(results, len(cells), len(cells) - len(todo), 0, 0, 0, 0.0)
         start = time.perf_counter()
-        bar = tqdm(total=len(todo), desc=desc, unit="cell", disable=not progress, file=sys.stderr,
-                   dynamic_ncols=True)
+        bar = tqdm(
+            total=len(todo),
+            desc=desc,
+            unit='cell',
+            disable=not progress,
+            file=sys.stderr,
+            dynamic_ncols=True,
+        )
 
         def record(row: dict) -> None:
             append_row(results, row)
             outcome.rows.append(row)
             outcome.ran += 1
-            outcome.errors += row.get("status") == "error"
-            outcome.diverged += row.get("status") == "diverged"
+            outcome.errors += row.get('status') == 'error'
+            outcome.diverged += row.get('status') == 'diverged'
             bar.set_postfix(diverged=outcome.diverged, errors=outcome.errors, refresh=False)
             bar.update(1)
 
         try:
             if todo:
-                with open_client(scheduler, workers, out_dir / "workers.log") as client:
-                    run_tasks(client, run_cell, todo, on_result=lambda cell, row: record(row),
-                              on_crash=lambda cell, message: record(error_row(cell, message)),
-                              args=(str(out_dir),))
+                with open_client(scheduler, workers, out_dir / 'workers.log') as client:
+                    run_tasks(
+                        client,
+                        run_cell,
+                        todo,
+                        on_result=lambda cell, row: record(row),
+                        on_crash=lambda cell, message: record(error_row(cell, message)),
+                        args=(str(out_dir),),
+                    )
         finally:
             bar.close()
             outcome.wall_s = time.perf_counter() - start
@@ -193,7 +281,7 @@ def run_sweep(cells: Sequence[Cell], out_dir: Path, workers: int | None = None, 
 class SweepPlan:
     """What `cloth-bench sweep` was asked for, checked; `cells()` builds the cells."""
 
-    mode: str = "paper"
+    mode: str = 'paper'
     engines: Sequence[str] = DEFAULT_ENGINES
     rates: Sequence[float] = ()
     cloths: Sequence[str] = ()
@@ -203,43 +291,69 @@ class SweepPlan:
     bag_dir: Path | None = None
     grid: tuple[int, int] | None = None
     overrides: dict = field(default_factory=dict)
-    pacing: str = "lockstep"
+    pacing: str = 'lockstep'
     step_per_target: bool = False
-    keep_frames: str = "first"  # first | all | none
+    keep_frames: str = 'first'  # first | all | none
     axes: Sequence[str] = ()  # settings mode: "name=v1,v2" strings
 
     def seeds(self) -> list[int]:
-        settings = self.mode == "settings"
-        n = self.n_seeds if self.n_seeds is not None else (SETTINGS_SEEDS if settings else DEFAULT_SEEDS)
+        settings = self.mode == 'settings'
+        n = (
+            self.n_seeds
+            if self.n_seeds is not None
+            else (SETTINGS_SEEDS if settings else DEFAULT_SEEDS)
+        )
         if n < 1:
-            raise ValueError(f"--seeds must be at least 1, got {n}")
+            raise ValueError(f'--seeds must be at least 1, got {n}')
         if self.seed_start < 0:
-            raise ValueError(f"--seed-start must be >= 0, got {self.seed_start}")
+            raise ValueError(f'--seed-start must be >= 0, got {self.seed_start}')
         return list(range(self.seed_start, self.seed_start + n))
 
     def cells(self) -> list[Cell]:
-        """The sweep's cells; ValueError (one line) on a combination that makes no sense."""
+        """Return the sweep's cells; ValueError (one line) on a combination that makes no sense."""
         from cloth_bench_ros.engines.presets import CLOTHS
 
-        settings = self.mode == "settings"
-        cloths = list(self.cloths) or (["towel"] if settings else list(DEFAULT_CLOTHS))
+        settings = self.mode == 'settings'
+        cloths = list(self.cloths) or (['towel'] if settings else list(DEFAULT_CLOTHS))
         for cloth in cloths:
             if cloth not in CLOTHS:
-                raise ValueError(f"unknown cloth {cloth!r} (valid: {', '.join(CLOTHS)})")
+                raise ValueError(f'unknown cloth {cloth!r} (valid: {", ".join(CLOTHS)})')
         seeds = self.seeds()
         if settings:
             if len(self.rates) > 1:
-                raise ValueError("--mode settings runs at one rate: give --rate once")
+                raise ValueError('--mode settings runs at one rate: give --rate once')
             if self.grid:
-                raise ValueError("--mode settings sweeps the grid itself: use --axis grid=6x8,11x15 instead of --grid")
+                raise ValueError(
+                    '--mode settings sweeps the grid itself: use --axis grid=6x8,11x15 instead of'
+                    ' --grid'
+                )
             axes = parse_settings_axes(self.axes) if self.axes else None
-            return settings_cells(self.engines, (list(self.rates) or [SETTINGS_RATE])[0], cloths, self.primitives,
-                                  seeds, self.bag_dir, axes, self.overrides)
+            return settings_cells(
+                self.engines,
+                (list(self.rates) or [SETTINGS_RATE])[0],
+                cloths,
+                self.primitives,
+                seeds,
+                self.bag_dir,
+                axes,
+                self.overrides,
+            )
         if self.axes:
-            raise ValueError("--axis is for --mode settings")
-        keep = {"first": seeds[:1], "all": seeds, "none": []}[self.keep_frames]
-        return paper_cells(self.engines, list(self.rates) or list(DEFAULT_RATES), cloths, self.primitives, seeds,
-                           self.bag_dir, self.grid, self.overrides, self.pacing, self.step_per_target, keep)
+            raise ValueError('--axis is for --mode settings')
+        keep = {'first': seeds[:1], 'all': seeds, 'none': []}[self.keep_frames]
+        return paper_cells(
+            self.engines,
+            list(self.rates) or list(DEFAULT_RATES),
+            cloths,
+            self.primitives,
+            seeds,
+            self.bag_dir,
+            self.grid,
+            self.overrides,
+            self.pacing,
+            self.step_per_target,
+            keep,
+        )
 
 
 def estimate(cells: Sequence[Cell], out_dir: Path, workers: int | None) -> str:
@@ -247,6 +361,8 @@ def estimate(cells: Sequence[Cell], out_dir: Path, workers: int | None) -> str:
     todo = cells_to_run(cells, load_rows(Path(out_dir) / RESULTS_FILE))
     cost = sum(estimated_cost(c) for c in todo)
     workers = workers or default_workers()
-    return (f"cloth-bench sweep: {len(cells)} cells, {len(cells) - len(todo)} already in "
-            f"{Path(out_dir) / RESULTS_FILE}; about {cost / 60:.0f} core-minutes left, "
-            f"{cost / 60 / workers:.0f} min on {workers} workers")
+    return (
+        f'cloth-bench sweep: {len(cells)} cells, {len(cells) - len(todo)} already in '
+        f'{Path(out_dir) / RESULTS_FILE}; about {cost / 60:.0f} core-minutes left, '
+        f'{cost / 60 / workers:.0f} min on {workers} workers'
+    )

@@ -4,7 +4,7 @@ idl.py: the rosidl IDL types; qos.py: QoS and discovery settings; graph.py: ros_
 and the node of every endpoint; transport.py: the transport a Context uses.
 """
 
-from cloth_bench_ros.runtime.dds.qos import LOOPBACK_URI, loopback_environment
-from cloth_bench_ros.runtime.dds.transport import DdsTransport, dds_topic_name
+from cloth_bench_ros.runtime.dds.qos import loopback_environment, LOOPBACK_URI
+from cloth_bench_ros.runtime.dds.transport import dds_topic_name, DdsTransport
 
-__all__ = ["LOOPBACK_URI", "DdsTransport", "dds_topic_name", "loopback_environment"]
+__all__ = ['LOOPBACK_URI', 'DdsTransport', 'dds_topic_name', 'loopback_environment']

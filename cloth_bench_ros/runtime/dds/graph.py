@@ -10,11 +10,28 @@ endpoint, which is what get_publishers_info_by_topic and `ros2 node list` report
 
 from __future__ import annotations
 
-import uuid
 from typing import Any
+import uuid
 
+from cloth_bench_ros.runtime.dds.idl import (
+    Gid_,
+    NodeEntitiesInfo_,
+    ParticipantEntitiesInfo_,
+    ros_type_name,
+)
+from cloth_bench_ros.runtime.dds.qos import endpoint_qos
+from cloth_bench_ros.runtime.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
+from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 from cyclonedds.builtin import (
-    BuiltinDataReader, BuiltinTopicDcpsParticipant, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription,
+    BuiltinDataReader,
+    BuiltinTopicDcpsParticipant,
+    BuiltinTopicDcpsPublication,
+    BuiltinTopicDcpsSubscription,
 )
 from cyclonedds.core import InstanceState
 from cyclonedds.domain import DomainParticipant
@@ -23,19 +40,18 @@ from cyclonedds.qos import Policy
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
-from cloth_bench_ros.runtime.dds.idl import Gid_, NodeEntitiesInfo_, ParticipantEntitiesInfo_, ros_type_name
-from cloth_bench_ros.runtime.dds.qos import endpoint_qos
-from cloth_bench_ros.runtime.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
-
-DISCOVERY_TOPIC = "ros_discovery_info"
-UNKNOWN_NODE = ("_NODE_NAME_UNKNOWN_", "_NODE_NAMESPACE_UNKNOWN_")  # rmw_dds_common's placeholders
+DISCOVERY_TOPIC = 'ros_discovery_info'
+UNKNOWN_NODE = ('_NODE_NAME_UNKNOWN_', '_NODE_NAMESPACE_UNKNOWN_')  # rmw_dds_common's placeholders
 
 
 def _discovery_profile(history: HistoryPolicy) -> QoSProfile:
-    """The QoS of rmw_cyclonedds' discovery endpoints (rmw_node.cpp, rmw_context_impl_s::init)."""
-    return QoSProfile(depth=1, history=history, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    """Return the QoS of rmw_cyclonedds' discovery endpoints (rmw_node.cpp, rmw_context_impl_s::init)."""
+    return QoSProfile(
+        depth=1,
+        history=history,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
 
 
 def _gid(guid: uuid.UUID) -> Gid_:
@@ -53,24 +69,38 @@ class Graph:
         self.participant = participant
         self.gid = _gid(participant.get_guid())
         topic = Topic(participant, DISCOVERY_TOPIC, ParticipantEntitiesInfo_)
-        self.writer = DataWriter(participant, topic, qos=endpoint_qos(_discovery_profile(HistoryPolicy.KEEP_LAST)))
-        self.reader = DataReader(participant, topic,
-                                 qos=endpoint_qos(_discovery_profile(HistoryPolicy.KEEP_ALL), ignore_local=True))
+        self.writer = DataWriter(
+            participant, topic, qos=endpoint_qos(_discovery_profile(HistoryPolicy.KEEP_LAST))
+        )
+        self.reader = DataReader(
+            participant,
+            topic,
+            qos=endpoint_qos(_discovery_profile(HistoryPolicy.KEEP_ALL), ignore_local=True),
+        )
         self.builtin = {
-            TopicEndpointTypeEnum.PUBLISHER: BuiltinDataReader(participant, BuiltinTopicDcpsPublication),
-            TopicEndpointTypeEnum.SUBSCRIPTION: BuiltinDataReader(participant, BuiltinTopicDcpsSubscription),
+            TopicEndpointTypeEnum.PUBLISHER: BuiltinDataReader(
+                participant, BuiltinTopicDcpsPublication
+            ),
+            TopicEndpointTypeEnum.SUBSCRIPTION: BuiltinDataReader(
+                participant, BuiltinTopicDcpsSubscription
+            ),
         }
         self.participants = BuiltinDataReader(participant, BuiltinTopicDcpsParticipant)
         self.local: dict[Any, NodeEntitiesInfo_] = {}  # embedded Node -> its entry
         self.remote: dict[bytes, list[NodeEntitiesInfo_]] = {}  # participant GID -> its nodes
-        self.endpoint_cache: dict[TopicEndpointTypeEnum, dict[uuid.UUID, Any]] = {k: {} for k in self.builtin}
+        self.endpoint_cache: dict[TopicEndpointTypeEnum, dict[uuid.UUID, Any]] = {
+            k: {} for k in self.builtin
+        }
 
     # this participant's nodes
     def update_node(self, node: Any, readers: list[uuid.UUID], writers: list[uuid.UUID]) -> None:
         """Record a node's endpoints (GUIDs) and publish the participant's ParticipantEntitiesInfo."""
         self.local[node] = NodeEntitiesInfo_(
-            node_namespace=node.get_namespace(), node_name=node.get_name(),
-            reader_gid_seq=[_gid(g) for g in readers], writer_gid_seq=[_gid(g) for g in writers])
+            node_namespace=node.get_namespace(),
+            node_name=node.get_name(),
+            reader_gid_seq=[_gid(g) for g in readers],
+            writer_gid_seq=[_gid(g) for g in writers],
+        )
         self.announce()
 
     def remove_node(self, node: Any) -> None:
@@ -78,20 +108,29 @@ class Graph:
             self.announce()
 
     def announce(self) -> None:
-        self.writer.write(ParticipantEntitiesInfo_(gid=self.gid, node_entities_info_seq=list(self.local.values())))
+        self.writer.write(
+            ParticipantEntitiesInfo_(
+                gid=self.gid, node_entities_info_seq=list(self.local.values())
+            )
+        )
 
     # everyone's
     def _refresh(self) -> None:
         for sample in self.reader.take(N=1000):
             if isinstance(sample, ParticipantEntitiesInfo_):  # the latest of each participant wins
                 self.remote[_key(sample.gid)] = list(sample.node_entities_info_seq)
-        for sample in self.participants.take(N=1000):  # a participant that left takes its nodes along
+        for sample in self.participants.take(
+            N=1000
+        ):  # a participant that left takes its nodes along
             if sample.sample_info.instance_state != InstanceState.Alive:
                 self.remote.pop(sample.key.bytes, None)
         for kind, reader in self.builtin.items():
             cache = self.endpoint_cache[kind]
             for sample in reader.take(N=1000):
-                if sample.sample_info.valid_data and sample.sample_info.instance_state == InstanceState.Alive:
+                if (
+                    sample.sample_info.valid_data
+                    and sample.sample_info.instance_state == InstanceState.Alive
+                ):
                     cache[sample.key] = sample
                 else:
                     cache.pop(sample.key, None)
@@ -99,7 +138,11 @@ class Graph:
     def _owner(self, guid: uuid.UUID, kind: TopicEndpointTypeEnum) -> tuple[str, str]:
         entries = list(self.local.values()) + [n for nodes in self.remote.values() for n in nodes]
         for entry in entries:
-            gids = entry.writer_gid_seq if kind == TopicEndpointTypeEnum.PUBLISHER else entry.reader_gid_seq
+            gids = (
+                entry.writer_gid_seq
+                if kind == TopicEndpointTypeEnum.PUBLISHER
+                else entry.reader_gid_seq
+            )
             if any(bytes(g.data) == guid.bytes for g in gids):
                 return entry.node_name, entry.node_namespace
         return UNKNOWN_NODE
@@ -112,8 +155,16 @@ class Graph:
             if endpoint.topic_name != dds_topic:
                 continue
             name, namespace = self._owner(endpoint.key, kind)
-            out.append(TopicEndpointInfo(name, namespace, ros_type_name(endpoint.type_name), kind,
-                                         list(endpoint.key.bytes), _profile(endpoint.qos)))
+            out.append(
+                TopicEndpointInfo(
+                    name,
+                    namespace,
+                    ros_type_name(endpoint.type_name),
+                    kind,
+                    list(endpoint.key.bytes),
+                    _profile(endpoint.qos),
+                )
+            )
         return out
 
     def node_names(self) -> list[tuple[str, str]]:
@@ -124,16 +175,31 @@ class Graph:
 
 
 def _profile(qos: Any) -> QoSProfile:
-    """A QoSProfile of the embedded runtime from a discovered endpoint's Cyclone QoS."""
+    """Return a QoSProfile of the embedded runtime from a discovered endpoint's Cyclone QoS."""
+
     def policy(kind: Any) -> Any:
         return qos[kind] if qos is not None and kind in qos else None
 
-    history, reliability, durability = policy(Policy.History), policy(Policy.Reliability), policy(Policy.Durability)
+    history, reliability, durability = (
+        policy(Policy.History),
+        policy(Policy.Reliability),
+        policy(Policy.Durability),
+    )
     return QoSProfile(
-        depth=getattr(history, "depth", 0),
-        history=HistoryPolicy.KEEP_ALL if history is Policy.History.KeepAll else HistoryPolicy.KEEP_LAST,
-        reliability=(ReliabilityPolicy.BEST_EFFORT if reliability is Policy.Reliability.BestEffort
-                     else ReliabilityPolicy.RELIABLE),
-        durability=(DurabilityPolicy.TRANSIENT_LOCAL if durability is Policy.Durability.TransientLocal
-                    else DurabilityPolicy.VOLATILE),
+        depth=getattr(history, 'depth', 0),
+        history=(
+            HistoryPolicy.KEEP_ALL
+            if history is Policy.History.KeepAll
+            else HistoryPolicy.KEEP_LAST
+        ),
+        reliability=(
+            ReliabilityPolicy.BEST_EFFORT
+            if reliability is Policy.Reliability.BestEffort
+            else ReliabilityPolicy.RELIABLE
+        ),
+        durability=(
+            DurabilityPolicy.TRANSIENT_LOCAL
+            if durability is Policy.Durability.TransientLocal
+            else DurabilityPolicy.VOLATILE
+        ),
     )

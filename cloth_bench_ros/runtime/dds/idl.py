@@ -8,7 +8,6 @@ declared from ROS 2's IDL matches these writers. The payload itself never goes t
 classes: the transport writes and reads rosbags' CDR bytes (see transport.py).
 """
 
-
 from dataclasses import dataclass, field
 
 from cyclonedds.idl import IdlStruct
@@ -17,15 +16,15 @@ from cyclonedds.idl import types as t
 
 def dds_type_name(ros_type: str) -> str:
     """`sensor_msgs/msg/PointCloud2` -> `sensor_msgs::msg::dds_::PointCloud2_` (rmw_cyclonedds)."""
-    package, kind, name = ros_type.split("/")
-    return f"{package}::{kind}::dds_::{name}_"
+    package, kind, name = ros_type.split('/')
+    return f'{package}::{kind}::dds_::{name}_'
 
 
 def ros_type_name(dds_type: str) -> str:
-    """The inverse of dds_type_name; other DDS type names come back unchanged."""
-    parts = dds_type.split("::")
-    if len(parts) == 4 and parts[2] == "dds_" and parts[3].endswith("_"):
-        return f"{parts[0]}/{parts[1]}/{parts[3][:-1]}"
+    """Return the inverse of dds_type_name; other DDS type names come back unchanged."""
+    parts = dds_type.split('::')
+    if len(parts) == 4 and parts[2] == 'dds_' and parts[3].endswith('_'):
+        return f'{parts[0]}/{parts[1]}/{parts[3][:-1]}'
     return dds_type
 
 
@@ -33,24 +32,24 @@ def ros_type_name(dds_type: str) -> str:
 
 
 @dataclass
-class Time_(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+class Time_(IdlStruct, typename='builtin_interfaces::msg::dds_::Time_'):
     sec: t.int32 = 0
     nanosec: t.uint32 = 0
 
 
 @dataclass
-class Header_(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+class Header_(IdlStruct, typename='std_msgs::msg::dds_::Header_'):
     stamp: Time_ = field(default_factory=Time_)
-    frame_id: str = ""
+    frame_id: str = ''
 
 
 @dataclass
-class String_(IdlStruct, typename="std_msgs::msg::dds_::String_"):
-    data: str = ""
+class String_(IdlStruct, typename='std_msgs::msg::dds_::String_'):
+    data: str = ''
 
 
 @dataclass
-class Clock_(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
+class Clock_(IdlStruct, typename='rosgraph_msgs::msg::dds_::Clock_'):
     clock: Time_ = field(default_factory=Time_)
 
 
@@ -58,14 +57,14 @@ class Clock_(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
 
 
 @dataclass
-class Point_(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+class Point_(IdlStruct, typename='geometry_msgs::msg::dds_::Point_'):
     x: t.float64 = 0.0
     y: t.float64 = 0.0
     z: t.float64 = 0.0
 
 
 @dataclass
-class Quaternion_(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
+class Quaternion_(IdlStruct, typename='geometry_msgs::msg::dds_::Quaternion_'):
     x: t.float64 = 0.0
     y: t.float64 = 0.0
     z: t.float64 = 0.0
@@ -73,13 +72,13 @@ class Quaternion_(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
 
 
 @dataclass
-class Pose_(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+class Pose_(IdlStruct, typename='geometry_msgs::msg::dds_::Pose_'):
     position: Point_ = field(default_factory=Point_)
     orientation: Quaternion_ = field(default_factory=Quaternion_)
 
 
 @dataclass
-class PoseArray_(IdlStruct, typename="geometry_msgs::msg::dds_::PoseArray_"):
+class PoseArray_(IdlStruct, typename='geometry_msgs::msg::dds_::PoseArray_'):
     header: Header_ = field(default_factory=Header_)
     poses: t.sequence[Pose_] = field(default_factory=list)
 
@@ -88,15 +87,15 @@ class PoseArray_(IdlStruct, typename="geometry_msgs::msg::dds_::PoseArray_"):
 
 
 @dataclass
-class PointField_(IdlStruct, typename="sensor_msgs::msg::dds_::PointField_"):
-    name: str = ""
+class PointField_(IdlStruct, typename='sensor_msgs::msg::dds_::PointField_'):
+    name: str = ''
     offset: t.uint32 = 0
     datatype: t.uint8 = 0
     count: t.uint32 = 0
 
 
 @dataclass
-class PointCloud2_(IdlStruct, typename="sensor_msgs::msg::dds_::PointCloud2_"):
+class PointCloud2_(IdlStruct, typename='sensor_msgs::msg::dds_::PointCloud2_'):
     header: Header_ = field(default_factory=Header_)
     height: t.uint32 = 0
     width: t.uint32 = 0
@@ -112,22 +111,22 @@ class PointCloud2_(IdlStruct, typename="sensor_msgs::msg::dds_::PointCloud2_"):
 
 
 @dataclass
-class KeyValue_(IdlStruct, typename="diagnostic_msgs::msg::dds_::KeyValue_"):
-    key: str = ""
-    value: str = ""
+class KeyValue_(IdlStruct, typename='diagnostic_msgs::msg::dds_::KeyValue_'):
+    key: str = ''
+    value: str = ''
 
 
 @dataclass
-class DiagnosticStatus_(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticStatus_"):
+class DiagnosticStatus_(IdlStruct, typename='diagnostic_msgs::msg::dds_::DiagnosticStatus_'):
     level: t.byte = 0
-    name: str = ""
-    message: str = ""
-    hardware_id: str = ""
+    name: str = ''
+    message: str = ''
+    hardware_id: str = ''
     values: t.sequence[KeyValue_] = field(default_factory=list)
 
 
 @dataclass
-class DiagnosticArray_(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticArray_"):
+class DiagnosticArray_(IdlStruct, typename='diagnostic_msgs::msg::dds_::DiagnosticArray_'):
     header: Header_ = field(default_factory=Header_)
     status: t.sequence[DiagnosticStatus_] = field(default_factory=list)
 
@@ -136,45 +135,47 @@ class DiagnosticArray_(IdlStruct, typename="diagnostic_msgs::msg::dds_::Diagnost
 
 
 @dataclass
-class Gid_(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
+class Gid_(IdlStruct, typename='rmw_dds_common::msg::dds_::Gid_'):
     data: t.array[t.uint8, 16] = field(default_factory=lambda: [0] * 16)
 
 
 @dataclass
-class NodeEntitiesInfo_(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
-    node_namespace: t.bounded_str[256] = ""
-    node_name: t.bounded_str[256] = ""
+class NodeEntitiesInfo_(IdlStruct, typename='rmw_dds_common::msg::dds_::NodeEntitiesInfo_'):
+    node_namespace: t.bounded_str[256] = ''
+    node_name: t.bounded_str[256] = ''
     reader_gid_seq: t.sequence[Gid_] = field(default_factory=list)
     writer_gid_seq: t.sequence[Gid_] = field(default_factory=list)
 
 
 @dataclass
-class ParticipantEntitiesInfo_(IdlStruct, typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"):
+class ParticipantEntitiesInfo_(
+    IdlStruct, typename='rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_'
+):
     gid: Gid_ = field(default_factory=Gid_)
     node_entities_info_seq: t.sequence[NodeEntitiesInfo_] = field(default_factory=list)
 
 
 DDS_TYPES: dict[str, type] = {
-    "builtin_interfaces/msg/Time": Time_,
-    "std_msgs/msg/Header": Header_,
-    "std_msgs/msg/String": String_,
-    "rosgraph_msgs/msg/Clock": Clock_,
-    "geometry_msgs/msg/Point": Point_,
-    "geometry_msgs/msg/Quaternion": Quaternion_,
-    "geometry_msgs/msg/Pose": Pose_,
-    "geometry_msgs/msg/PoseArray": PoseArray_,
-    "sensor_msgs/msg/PointField": PointField_,
-    "sensor_msgs/msg/PointCloud2": PointCloud2_,
-    "diagnostic_msgs/msg/KeyValue": KeyValue_,
-    "diagnostic_msgs/msg/DiagnosticStatus": DiagnosticStatus_,
-    "diagnostic_msgs/msg/DiagnosticArray": DiagnosticArray_,
-    "rmw_dds_common/msg/ParticipantEntitiesInfo": ParticipantEntitiesInfo_,
+    'builtin_interfaces/msg/Time': Time_,
+    'std_msgs/msg/Header': Header_,
+    'std_msgs/msg/String': String_,
+    'rosgraph_msgs/msg/Clock': Clock_,
+    'geometry_msgs/msg/Point': Point_,
+    'geometry_msgs/msg/Quaternion': Quaternion_,
+    'geometry_msgs/msg/Pose': Pose_,
+    'geometry_msgs/msg/PoseArray': PoseArray_,
+    'sensor_msgs/msg/PointField': PointField_,
+    'sensor_msgs/msg/PointCloud2': PointCloud2_,
+    'diagnostic_msgs/msg/KeyValue': KeyValue_,
+    'diagnostic_msgs/msg/DiagnosticStatus': DiagnosticStatus_,
+    'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray_,
+    'rmw_dds_common/msg/ParticipantEntitiesInfo': ParticipantEntitiesInfo_,
 }
 
 
 def dds_type(ros_type: str) -> type:
-    """The DDS type class of a ROS type name; ValueError for a type the transport does not carry."""
+    """Return the DDS type class of a ROS type name; ValueError for a type the transport does not carry."""
     try:
         return DDS_TYPES[ros_type]
     except KeyError:
-        raise ValueError(f"message type {ros_type} has no DDS type in cloth_bench_ros") from None
+        raise ValueError(f'message type {ros_type} has no DDS type in cloth_bench_ros') from None

@@ -11,16 +11,8 @@ readers declared from ROS 2's IDL match.
 
 from __future__ import annotations
 
-import uuid
 from typing import Any
-
-from cyclonedds._clayer import ddspy_take, ddspy_write
-from cyclonedds.core import DDSException, GuardCondition, InstanceState, ReadCondition, SampleState, ViewState, WaitSet
-from cyclonedds.domain import Domain, DomainParticipant
-from cyclonedds.pub import DataWriter
-from cyclonedds.qos import Policy, Qos
-from cyclonedds.sub import DataReader
-from cyclonedds.topic import Topic
+import uuid
 
 from cloth_bench_ros.data import messages as cdr
 from cloth_bench_ros.runtime.dds.graph import Graph
@@ -28,8 +20,23 @@ from cloth_bench_ros.runtime.dds.idl import dds_type
 from cloth_bench_ros.runtime.dds.qos import domain_config, domain_id, endpoint_qos
 from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 from cloth_bench_ros.runtime.transport import Endpoint
+from cyclonedds._clayer import ddspy_take, ddspy_write
+from cyclonedds.core import (
+    DDSException,
+    GuardCondition,
+    InstanceState,
+    ReadCondition,
+    SampleState,
+    ViewState,
+    WaitSet,
+)
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
 
-ROS_TOPIC_PREFIX = "rt"  # rmw_cyclonedds namespace_prefix.hpp
+ROS_TOPIC_PREFIX = 'rt'  # rmw_cyclonedds namespace_prefix.hpp
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 _TAKE_BATCH = 64
 _INFINITE_NS = 0x7FFFFFFFFFFFFFFF
@@ -42,8 +49,8 @@ def dds_topic_name(ros_topic: str) -> str:
 
 
 def padded(payload: bytes) -> bytes:
-    """A serialized sample padded with zeros to a multiple of 4 bytes, as Cyclone sends it."""
-    return payload + b"\0" * (-len(payload) % 4)
+    """Return a serialized sample padded with zeros to a multiple of 4 bytes, as Cyclone sends it."""
+    return payload + b'\0' * (-len(payload) % 4)
 
 
 def _dispose(entity: Any) -> None:
@@ -54,19 +61,19 @@ def _dispose(entity: Any) -> None:
 
 
 def _participant(domain: int) -> DomainParticipant:
-    """A participant on `domain`, its Cyclone domain configured from the ROS environment first."""
+    """Return a participant on `domain`, its Cyclone domain configured from the ROS environment first."""
     if domain not in _domains:
         config = domain_config()
         if config:
             _domains[domain] = Domain(domain, config)
     # rmw_cyclonedds' participant USER_DATA names the enclave; ROS tools read it.
-    return DomainParticipant(domain, qos=Qos(Policy.Userdata(data=b"enclave=/;")))
+    return DomainParticipant(domain, qos=Qos(Policy.Userdata(data=b'enclave=/;')))
 
 
 class DdsTransport:
     """Writers and readers of one context's publishers and subscriptions on a DDS domain."""
 
-    name = "dds"
+    name = 'dds'
 
     def __init__(self, context: Any, domain: int | None = None) -> None:
         self.context = context
@@ -89,8 +96,11 @@ class DdsTransport:
     # endpoints
     def add_publisher(self, pub: Endpoint) -> None:
         ros_type = pub.msg_type.__msgtype__
-        self.writers[pub] = DataWriter(self.participant, self._topic(pub.topic_name, ros_type),
-                                       qos=endpoint_qos(pub.qos, ros_type))
+        self.writers[pub] = DataWriter(
+            self.participant,
+            self._topic(pub.topic_name, ros_type),
+            qos=endpoint_qos(pub.qos, ros_type),
+        )
         self.graph_changed(pub.node)
 
     def remove_publisher(self, pub: Endpoint) -> None:
@@ -101,8 +111,11 @@ class DdsTransport:
 
     def add_subscription(self, sub: Endpoint) -> None:
         ros_type = sub.msg_type.__msgtype__
-        reader = DataReader(self.participant, self._topic(sub.topic_name, ros_type),
-                            qos=endpoint_qos(sub.qos, ros_type))
+        reader = DataReader(
+            self.participant,
+            self._topic(sub.topic_name, ros_type),
+            qos=endpoint_qos(sub.qos, ros_type),
+        )
         condition = ReadCondition(reader, _ANY)
         self.waitset.attach(condition)
         self.readers[sub] = (reader, condition)
@@ -133,7 +146,7 @@ class DdsTransport:
             return
         ret = ddspy_write(writer._ref, padded(cdr.serialize(msg, pub.msg_type.__msgtype__)))
         if ret < 0:
-            raise DDSException(ret, f"writing to {pub.topic_name}")
+            raise DDSException(ret, f'writing to {pub.topic_name}')
 
     def receive(self) -> None:
         """Take every sample that arrived, in subscription order, into the context's queue."""
@@ -145,7 +158,7 @@ class DdsTransport:
             while True:
                 samples = ddspy_take(reader._ref, _ANY, _TAKE_BATCH)
                 if isinstance(samples, int):
-                    raise DDSException(samples, f"taking from {sub.topic_name}")
+                    raise DDSException(samples, f'taking from {sub.topic_name}')
                 for payload, info in samples:
                     if info.valid_data:
                         queue.append((sub, cdr.deserialize(payload, ros_type)))
@@ -180,7 +193,7 @@ class DdsTransport:
         return self.graph.node_names()
 
     def endpoint_guid(self, entity: Any) -> uuid.UUID | None:
-        """The GUID of a publisher's writer or a subscription's reader (its rmw GID)."""
+        """Return the GUID of a publisher's writer or a subscription's reader (its rmw GID)."""
         if entity in self.writers:
             return self.writers[entity].get_guid()
         if entity in self.readers:
