@@ -1,4 +1,5 @@
-"""Round trip over the DDS transport between two processes: a 20k-point PointCloud2 and a PoseArray.
+"""
+Round trip over the DDS transport between two processes: a 20k-point PointCloud2 and a PoseArray.
 
 This process publishes on `ping`; a child process (this script with --echo) republishes each
 message on `pong`. Both run the embedded runtime over Cyclone DDS, confined to loopback (interface
@@ -51,7 +52,7 @@ def echo(kind: str) -> None:
 
 
 def round_trips(kind: str, msg: object, count: int, env: dict[str, str]) -> np.ndarray:
-    """count round trips of msg through an echo process; seconds each."""
+    """Count round trips of msg through an echo process; seconds each."""
     child = subprocess.Popen([sys.executable, __file__, '--echo', kind], env=env)
     rclpy.init(args=[], transport='dds')
     try:

@@ -1,4 +1,5 @@
-"""Step time of each available cloth engine at 10, 100 and 1000 Hz with the towel presets.
+"""
+Step time of each available cloth engine at 10, 100 and 1000 Hz with the towel presets.
 
 Runs the full trajectory (settle phase + quintic part) of a primitive on the default 11 x 15
 grid, timing every engine.step() with perf_counter, and prints per engine and rate the

@@ -1,4 +1,5 @@
-"""Cost of scoring one real frame: CD + HD of the simulated mesh against a real cloud.
+"""
+Cost of scoring one real frame: CD + HD of the simulated mesh against a real cloud.
 
 The evaluator buckets each real frame on a grid once (core/nearest.py) and searches it in L1 for
 every mesh. Measured in this process beside brute force (all pairwise L1 distances) on the same
@@ -31,7 +32,7 @@ def brute_force(V: np.ndarray, P: np.ndarray) -> tuple[float, float]:
 
 
 def camera_frame(n: int, rng) -> np.ndarray:
-    """n points of a hanging cloth seen by a depth camera: a raster over the cloth, depth noise."""
+    """N points of a hanging cloth seen by a depth camera: a raster over the cloth, depth noise."""
     width = int(round(np.sqrt(n * 0.5 / 0.7)))
     height = n // width
     u, w = np.meshgrid(

@@ -1,4 +1,5 @@
-"""Overhead of the node graph: the full lockstep pipeline against the bare engine loop.
+"""
+Overhead of the node graph: the full lockstep pipeline against the bare engine loop.
 
 Runs, in one process and alternately, (a) the four nodes (trajectory publisher, MuJoCo simulator,
 recorder replaying the bundled towel dynamic bag, evaluator scoring every real frame) at 100 Hz
@@ -22,7 +23,8 @@ from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
 
 
 def bare_loop(engine_name: str, rate: float, cloth: str, primitive: str) -> float:
-    """Wall time of building the engine, reset and every step over the run's targets, nothing else.
+    """
+    Wall time of building the engine, reset and every step over the run's targets, nothing else.
 
     Engine construction (model compilation) is inside both timings, as the pipeline's simulator
     node builds its engine too.

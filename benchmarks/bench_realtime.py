@@ -1,4 +1,5 @@
-"""Hardware in the loop: MuJoCo and PyBullet at 100 and 1000 Hz, controller, simulator and observer
+"""
+Hardware in the loop: MuJoCo and PyBullet at 100 and 1000 Hz, controller, simulator and observer
 in three processes over DDS on loopback, with the preset and the recommended configuration.
 
 For each engine, rate and configuration it prints latency p50 / p99 / p99.9 / max (target due on

@@ -1,4 +1,5 @@
-"""Replay throughput: BagReader.clouds versus rosbags alone (AnyReader + deserialize).
+"""
+Replay throughput: BagReader.clouds versus rosbags alone (AnyReader + deserialize).
 
 Writes its own bag (default 132 frames x 50,000 points) to a temporary directory, reads it
 with both in this process, and prints frames/s, MB/s of CDR payload and their ratio. Both

@@ -1,4 +1,5 @@
-"""Sweep throughput on the Dask executor against the same cells run one after another in this process.
+"""
+Sweep throughput on the Dask executor against the same cells run one after another in this process.
 
 Runs a slice of the default sweep (MuJoCo and Bullet, towel, both tasks, 100 Hz, `--seeds` seeds,
 the bundled bags) twice: serially in-process (the baseline), then with `run_sweep` on a local

@@ -1,4 +1,5 @@
-"""The root of the package's user-facing errors.
+"""
+The root of the package's user-facing errors.
 
 Every error that reports bad input or a failing environment to the user (a bag that cannot be
 read, an unknown engine parameter, an unsafe file) derives from ClothBenchError; str() is one line

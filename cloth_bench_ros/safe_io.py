@@ -1,4 +1,5 @@
-"""File I/O for untrusted inputs and results that must not be lost: bounded reads, atomic writes.
+"""
+File I/O for untrusted inputs and results that must not be lost: bounded reads, atomic writes.
 
 Everything the project reads from a file it did not write (bag metadata, parameter files, results
 rows, presets) goes through `read_text_bounded` / `load_yaml_bounded`; every results or report
@@ -122,7 +123,8 @@ def check_output_dir(path: str | Path) -> Path:
 
 @contextmanager
 def staged_directory(final: str | Path, overwrite: bool = False) -> Iterator[Path]:
-    """Return a directory to fill beside `final`, renamed to `final` only when the block completes.
+    """
+    Return a directory to fill beside `final`, renamed to `final` only when the block completes.
 
     On any error (or a signal) nothing is left at `final`, and an old `final` stays as it was:
     readers see the old directory or the complete new one. The checks (exists, writable) run

@@ -1,4 +1,5 @@
-"""The one validation layer for user-facing values: CLI options, node parameters, presets, metadata.
+"""
+The one validation layer for user-facing values: CLI options, node parameters, presets, metadata.
 
 Every value a user (or a file a user gave) hands the project goes through these functions, so the
 same rules hold everywhere: numbers are finite and inside their range, integers are integers
@@ -244,7 +245,8 @@ def parameter_mapping(text: object, name: str) -> dict[str, Any]:
 
 
 def node_parameters(node: Any, checks: Mapping[str, Any]) -> dict[str, Any]:
-    """Each declared parameter `name` of `node` checked by `checks[name](value, "parameter name")`.
+    """
+    Each declared parameter `name` of `node` checked by `checks[name](value, "parameter name")`.
 
     The error names the node and the parameter, e.g. "simulator: parameter grid_nx: -3 is outside
     [0, 201]".

@@ -1,4 +1,5 @@
-"""Turn a bundled bag into what `ros2 bag record` of a depth camera would give (test helper).
+"""
+Turn a bundled bag into what `ros2 bag record` of a depth camera would give (test helper).
 
 Organized PointCloud2 (x, y, z, rgb; NaN where a pixel has no return) in the camera's optical
 frame, /tf_static world -> camera_link -> camera_depth_optical_frame, epoch stamps from an
@@ -121,7 +122,8 @@ def make_camera_recording(
     storage: str = 'mcap',
     compression: str = 'none',
 ) -> int:
-    """Write the camera-like bag; returns the true bag time (ns) of the start of the motion.
+    """
+    Write the camera-like bag; returns the true bag time (ns) of the start of the motion.
 
     The camera runs `pre_roll` frames before the motion starts (the cloth hangs still: frame 0);
     `noise` (m) is the standard deviation of the sensor noise added to the cloth's points;

@@ -17,7 +17,8 @@ def hanging_bag(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope='session', autouse=True)
 def dds_on_loopback():
-    """Every DDS participant of the run (here and in the node processes tests start) on loopback.
+    """
+    Every DDS participant of the run (here and in the node processes tests start) on loopback.
 
     Interface lo, no multicast, peer 127.0.0.1, on a random ROS domain so parallel runs stay apart.
     """

@@ -25,7 +25,8 @@ def write_engine_target_bag(
     cloth: str = 'towel',
     primitive: str = 'dynamic',
 ) -> Path:
-    """Return the engine's own vertices at 30 Hz (linear between steps, as the evaluator pairs them): a bag
+    """
+    Return the engine's own vertices at 30 Hz (linear between steps, as the evaluator pairs them): a bag
     whose noise floor is 0 for the same engine, seed and parameters.
     """
     targets = full_targets(primitive, rate_hz)

@@ -1,4 +1,5 @@
-"""The real-ROS 2 tier's harness: the project on real rclpy (Jazzy wheels from PyPI) in its own venv.
+"""
+The real-ROS 2 tier's harness: the project on real rclpy (Jazzy wheels from PyPI) in its own venv.
 
 Every command runs inside a network namespace of its own with only loopback up (`unshare -n`), so
 Fast DDS, which multicasts on every interface by default, cannot leave the machine. The venv is
@@ -64,7 +65,7 @@ def ros_env(**extra: str) -> dict[str, str]:
 
 
 def in_namespace(*argv: str) -> list[str]:
-    """argv run with the real-ROS 2 venv's Python inside a loopback-only network namespace."""
+    """Argv run with the real-ROS 2 venv's Python inside a loopback-only network namespace."""
     return [*NAMESPACE_PREFIX, str(ROS_PYTHON), *argv]
 
 

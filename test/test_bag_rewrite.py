@@ -74,7 +74,7 @@ def info_type(info: dict, topic: str) -> str:
 
 
 def write_old_layout(src: Path, dst: Path) -> Path:
-    """src's messages in the older layout: metadata version 8/humble, QoS as a string, no channel hash."""
+    """Src's messages in the older layout: metadata version 8/humble, QoS as a string, no channel hash."""
     dst.mkdir()
     with next(src.glob('*.mcap')).open('rb') as f, (dst / f'{dst.name}_0.mcap').open('wb') as out:
         reader = make_reader(f)

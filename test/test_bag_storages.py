@@ -1,4 +1,5 @@
-"""Every rosbag2 storage a user records, written by independent writers, scores like the original.
+"""
+Every rosbag2 storage a user records, written by independent writers, scores like the original.
 
 The variants of a bundled bag are made by rosbags' Writer (sqlite3 and MCAP storage, file and
 message compression, metadata versions 8 and 9, older versions by editing metadata.yaml as
@@ -97,8 +98,10 @@ def downgrade_database(database: Path, schema: int) -> None:
 
 
 def write_split(out: Path, storage: str, parts: int = 2) -> Path:
-    """Return the source's messages in `parts` storage files of one bag, named and listed as
-    `ros2 bag record --max-bag-size` splits them (`<bag>_0`, `<bag>_1`, ...)."""
+    """
+    Return the source's messages in `parts` storage files of one bag, named and listed as
+    `ros2 bag record --max-bag-size` splits them (`<bag>_0`, `<bag>_1`, ...).
+    """
     messages = list(BagReader(SOURCE).logged_messages())
     suffix = '.db3' if storage == 'sqlite3' else '.mcap'
     bounds = [round(i * len(messages) / parts) for i in range(parts + 1)]

@@ -1,4 +1,5 @@
-"""The benchmark as four kinds of OS process over real Cyclone DDS, watched by a plain DDS reader.
+"""
+The benchmark as four kinds of OS process over real Cyclone DDS, watched by a plain DDS reader.
 
 trajectory_publisher, one simulator per engine, recorder and evaluator run as separate processes
 (`python -m cloth_bench_ros.nodes.<node>`, what the console scripts run) on loopback (the session

@@ -1,4 +1,5 @@
-"""Conformance suite: every available cloth engine, in each of its cloth models, obeys the
+"""
+Conformance suite: every available cloth engine, in each of its cloth models, obeys the
 ClothEngine contract in the benchmark scene. Real engines, coarse 6 x 8 grid, 100 Hz fling.
 
 Tolerances:

@@ -1,4 +1,5 @@
-"""One root for the user-facing errors: every error class of the package (outside the rclpy-compatible
+"""
+One root for the user-facing errors: every error class of the package (outside the rclpy-compatible
 runtime, whose classes mirror rclpy's) derives from ClothBenchError, and the CLI reports one in one line.
 """
 

@@ -1,4 +1,5 @@
-"""The Dask executor with real processes on loopback: an external scheduler and two workers (one killed
+"""
+The Dask executor with real processes on loopback: an external scheduler and two workers (one killed
 mid-run), two sweeps on one directory, and a client killed with SIGKILL leaving no worker behind.
 """
 

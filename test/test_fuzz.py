@@ -1,4 +1,5 @@
-"""Fuzz: randomly corrupted bags and results files end cleanly in `bag info`, `run` and `report`.
+"""
+Fuzz: randomly corrupted bags and results files end cleanly in `bag info`, `run` and `report`.
 
 A few hundred variants, seeded: bytes flipped, truncated, MCAP chunks swapped, blocks zeroed,
 metadata.yaml damaged (bags); keys dropped, values of the wrong type, rows that are not objects,

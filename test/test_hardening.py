@@ -1,4 +1,5 @@
-"""Issue 12: untrusted values refused in one line naming them, no silent wrong numbers, nothing lost.
+"""
+Issue 12: untrusted values refused in one line naming them, no silent wrong numbers, nothing lost.
 
 Each case asserts the exit status, a single stderr line naming the input, no traceback and, where
 results existed beforehand, that they are intact afterwards. CLI cases run `cli.main` in-process

@@ -1,6 +1,8 @@
-"""Hardware in the loop: a short real-time run in three processes over DDS (loopback, own domain),
+"""
+Hardware in the loop: a short real-time run in three processes over DDS (loopback, own domain),
 the controller's timeline and its bookkeeping, keep-last skipping, the lean step path, process
-settings, and the configuration recommended for a rate; real engines, real Cyclone DDS."""
+settings, and the configuration recommended for a rate; real engines, real Cyclone DDS.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Parameter identification: recovery of known parameters (both samplers), resume, failed trials, the preset
+"""
+Parameter identification: recovery of known parameters (both samplers), resume, failed trials, the preset
 file, the report section and user errors; real MuJoCo and PyBullet, real Optuna, a real Dask LocalCluster.
 """
 

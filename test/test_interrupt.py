@@ -1,4 +1,5 @@
-"""Ctrl-C during a study is ordinary use: one line, exit 130, workers gone, and a rerun resumes.
+"""
+Ctrl-C during a study is ordinary use: one line, exit 130, workers gone, and a rerun resumes.
 
 The CLI runs in its own session, as in a terminal; SIGINT goes to its whole process group (what
 Ctrl-C does), after the first results are on disk.

@@ -1,4 +1,5 @@
-"""config/*.yaml follow rcl's rules and every launch argument reaches its node.
+"""
+config/*.yaml follow rcl's rules and every launch argument reaches its node.
 
 launch and launch_ros are not installable here (launch_ros is not on PyPI; PyPI's `launch` is a
 2017 pre-release), so launch/benchmark.launch.py is loaded against a small stand-in of the launch

@@ -1,4 +1,5 @@
-"""The package's layers import only downwards, without circles, and the report runs nothing.
+"""
+The package's layers import only downwards, without circles, and the report runs nothing.
 
 Layers, top to bottom: core -> engines -> data -> runtime -> nodes -> studies -> report -> cli; a
 module imports only from its own layer or those above it. The modules at the package's top level

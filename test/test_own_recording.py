@@ -73,7 +73,7 @@ def test_camera_recording_is_scored_with_automatic_alignment(camera_bag, tmp_pat
 
 
 def _check_comparison_bag(path: Path, frames: int) -> None:
-    """rosbags and the mcap reader with mcap_ros2's decoder both read every topic."""
+    """Rosbags and the mcap reader with mcap_ros2's decoder both read every topic."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.highlevel import AnyReader

@@ -1,4 +1,5 @@
-"""ROS 2 package conventions and pip packaging: lint, license, dependencies, requirements.
+"""
+ROS 2 package conventions and pip packaging: lint, license, dependencies, requirements.
 
 The lint tests stand in for the ament_python template's test_flake8.py, test_pep257.py and
 test_copyright.py (ament_flake8/ament_pep257 are not installable without ROS); their settings are

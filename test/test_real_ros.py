@@ -1,4 +1,5 @@
-"""Real ROS 2 (rclpy Jazzy over Fast DDS) runs the project's nodes: the defects found against it stay fixed.
+"""
+Real ROS 2 (rclpy Jazzy over Fast DDS) runs the project's nodes: the defects found against it stay fixed.
 
 Each case runs real rclpy in its own loopback-only network namespace (test/real_ros.py) and is
 compared with what the embedded runtime does for the same input.
@@ -134,7 +135,8 @@ def _embedded_python() -> list[str]:
 
 
 def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(tmp_path):
-    """The docs' node-by-node `ros2 run` commands (as the installed console scripts run them), one
+    """
+    The docs' node-by-node `ros2 run` commands (as the installed console scripts run them), one
     real-rclpy process per node over Fast DDS, in any start order: the embedded in-process run's numbers.
     """
     bag = ROOT / 'bags' / 'towel_dynamic'

@@ -1,4 +1,5 @@
-"""Acceptance: a small sweep on the real engines runs in CI time and its report renders.
+"""
+Acceptance: a small sweep on the real engines runs in CI time and its report renders.
 
 2 engines x 2 rates (10, 100 Hz) x 1 cloth x 2 tasks x 2 seeds = 16 cells on a coarse grid with
 short fixture bags, 2 workers; then `cloth-bench report`: files exist, the tables hold the

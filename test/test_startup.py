@@ -1,4 +1,5 @@
-"""Start-up by who is in the graph, not by counting; the end of a run whatever the arrival order.
+"""
+Start-up by who is in the graph, not by counting; the end of a run whatever the arrival order.
 
 Both rules are checked on the intra-process transport and on real Cyclone DDS (loopback, from the
 session fixture), with the real trajectory publisher, recorder and evaluator; the other graph

@@ -1,4 +1,5 @@
-"""The embedded runtime is as strict as rcl and rclpy: each test states the rule and its source.
+"""
+The embedded runtime is as strict as rcl and rclpy: each test states the rule and its source.
 
 Sources read (GitHub): ros2/rcl @ c19dab5 (rcl_yaml_param_parser/src/parse.c and its
 test/test_parse_yaml.cpp with test/wildcards*.yaml; rcl/src/rcl/arguments.c, remap.c, timer.c),
@@ -66,7 +67,7 @@ ACCEPTED_KEYS = [
 
 @pytest.mark.parametrize('key', ACCEPTED_KEYS)
 def test_wildcard_keys_that_rcl_accepts(tmp_path, key):
-    """rcl parse.c _validate_name: `*` and `**` as whole tokens (rcl test/wildcards.yaml is accepted)."""
+    """Rcl parse.c _validate_name: `*` and `**` as whole tokens (rcl test/wildcards.yaml is accepted)."""
     nested = key == '/'  # root_ns.yaml: "/" then the node name one level down
     text = (
         f"'{key}':\n  my_node:\n    ros__parameters:\n      id: 10\n"
@@ -96,7 +97,7 @@ PARTIAL_WILDCARDS = [
 
 @pytest.mark.parametrize('key', PARTIAL_WILDCARDS)
 def test_partial_wildcards_are_refused_with_one_line_naming_file_and_key(tmp_path, key):
-    """rcl test_parse_yaml.cpp wildcards_partial_01..12 expect rcl_parse_yaml_file to fail."""
+    """Rcl test_parse_yaml.cpp wildcards_partial_01..12 expect rcl_parse_yaml_file to fail."""
     path = _params_file(tmp_path, f"'{key}':\n  ros__parameters:\n    id: 10\n")
     with pytest.raises(ParamsFileError) as err:
         load_params_file(path)
@@ -119,13 +120,13 @@ def test_partial_wildcards_are_refused_with_one_line_naming_file_and_key(tmp_pat
     ],
 )
 def test_structures_rcl_refuses(tmp_path, text):
-    """rcl test_parse_yaml.cpp: these files make rcl_parse_yaml_file return false."""
+    """Rcl test_parse_yaml.cpp: these files make rcl_parse_yaml_file return false."""
     with pytest.raises(ParamsFileError, match='params file'):
         load_params_file(_params_file(tmp_path, text))
 
 
 def test_scalars_are_typed_as_rcl_types_them_not_as_yaml_does(tmp_path):
-    """rcl parse.c get_value: bool words, strtoll (base 0), strtod, else string; quotes and !!str keep text."""
+    """Rcl parse.c get_value: bool words, strtoll (base 0), strtod, else string; quotes and !!str keep text."""
     assert rcl_scalar('1000', False, False) == 1000 and isinstance(
         rcl_scalar('1000', False, False), int
     )
@@ -154,7 +155,7 @@ def test_scalars_are_typed_as_rcl_types_them_not_as_yaml_does(tmp_path):
 
 
 def test_keys_match_as_rclpy_matches_them(tmp_path, context):
-    """rclpy src/rclpy/node.cpp: '/' prepended, then "/*" -> "(/\\w+)" ("/**" -> "(/\\w+)*"), full match."""
+    """Rclpy src/rclpy/node.cpp: '/' prepended, then "/*" -> "(/\\w+)" ("/**" -> "(/\\w+)*"), full match."""
     path = _params_file(
         tmp_path,
         '/*/n:\n  ros__parameters:\n    one_token: 1\n'
@@ -179,7 +180,8 @@ def test_keys_match_as_rclpy_matches_them(tmp_path, context):
 
 
 def test_a_later_key_wins_and_a_key_keeps_the_place_it_first_appeared(tmp_path, context):
-    """rcl parse.c find_node keeps one entry per key in order of first appearance (over all files and -p
+    """
+    Rcl parse.c find_node keeps one entry per key in order of first appearance (over all files and -p
     rules, arguments.c); rclpy node.cpp applies matching entries in that order, the last one winning.
     """
     first = _params_file(
@@ -219,7 +221,7 @@ def test_a_later_key_wins_and_a_key_keeps_the_place_it_first_appeared(tmp_path, 
 
 
 def test_constructor_overrides_come_last(tmp_path, context):
-    """rclpy node.py: parameter_overrides update the overrides read from the arguments."""
+    """Rclpy node.py: parameter_overrides update the overrides read from the arguments."""
     rclpy.init(args=['prog', '--ros-args', '-p', 'seed:=1'], context=context)
     node = Node('n', context=context, parameter_overrides=[Parameter('seed', value=5)])
     assert node.declare_parameter('seed', 0).value == 5
@@ -229,7 +231,7 @@ def test_constructor_overrides_come_last(tmp_path, context):
 
 
 def test_an_integer_for_a_double_is_refused(context):
-    """rclpy node.py _apply_descriptor: 'Wrong parameter type' -> InvalidParameterTypeException."""
+    """Rclpy node.py _apply_descriptor: 'Wrong parameter type' -> InvalidParameterTypeException."""
     rclpy.init(args=['prog', '--ros-args', '-p', 'rate_hz:=1000'], context=context)
     node = Node('n', context=context)
     with pytest.raises(InvalidParameterTypeException, match="expecting type 'DOUBLE'"):
@@ -252,7 +254,7 @@ def test_declare_float_takes_an_integer_and_refuses_a_string(context):
 
 
 def test_declared_types_undeclared_and_uninitialised(context):
-    """rclpy node.py: static type from the default, ParameterNotDeclared/AlreadyDeclared/Uninitialized."""
+    """Rclpy node.py: static type from the default, ParameterNotDeclared/AlreadyDeclared/Uninitialized."""
     rclpy.init(args=[], context=context)
     node = Node('n', context=context)
     assert node.declare_parameter('engines', ['mujoco']).type_ == ParameterType.STRING_ARRAY
@@ -275,7 +277,7 @@ def test_declared_types_undeclared_and_uninitialised(context):
 
 
 def test_use_sim_time_must_be_a_bool(context):
-    """rclpy time_source.py declares use_sim_time False: a non-bool override is a type error."""
+    """Rclpy time_source.py declares use_sim_time False: a non-bool override is a type error."""
     rclpy.init(args=['prog', '--ros-args', '-p', 'use_sim_time:=1'], context=context)
     with pytest.raises(InvalidParameterTypeException, match='use_sim_time'):
         Node('n', context=context)
@@ -296,7 +298,7 @@ def _publish_clock(context, seconds):
 
 
 def test_clock_reads_zero_before_the_first_clock_message(context):
-    """rclpy time_source.py: 'Zero time is a special value that means time is uninitialized'."""
+    """Rclpy time_source.py: 'Zero time is a special value that means time is uninitialized'."""
     rclpy.init(args=[], context=context)
     node = _sim_node(context)
     assert node.get_clock().now().nanoseconds == 0
@@ -304,7 +306,7 @@ def test_clock_reads_zero_before_the_first_clock_message(context):
 
 
 def test_clock_subscription_is_depth_1_best_effort(context):
-    """rclpy time_source.py: QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)."""
+    """Rclpy time_source.py: QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)."""
     rclpy.init(args=[], context=context)
     node = _sim_node(context)
     (sub,) = [s for s in context.subscriptions['/clock'] if s.node is node]
@@ -312,7 +314,7 @@ def test_clock_subscription_is_depth_1_best_effort(context):
 
 
 def test_timers_run_on_sim_time_under_use_sim_time(context):
-    """rclpy node.py create_timer uses the node's clock; rcl timer.c skips missed periods."""
+    """Rclpy node.py create_timer uses the node's clock; rcl timer.c skips missed periods."""
     rclpy.init(args=[], context=context)
     node = _sim_node(context)
     ticks = []
@@ -338,7 +340,7 @@ def test_timers_run_on_sim_time_under_use_sim_time(context):
 
 
 def test_remaps_are_applied_as_rcl_applies_them(context):
-    """rcl remap.c: first matching rule, node-specific rules only for that node, names expanded first."""
+    """Rcl remap.c: first matching rule, node-specific rules only for that node, names expanded first."""
     rclpy.init(
         args=[
             'prog',
@@ -380,13 +382,13 @@ def test_remaps_are_applied_as_rcl_applies_them(context):
     ],
 )
 def test_arguments_rcl_refuses_are_refused(context, args, error):
-    """rcl arguments.c: invalid rules are RCL_RET_INVALID_ROS_ARGS; rclpy raises on unknown ROS args."""
+    """Rcl arguments.c: invalid rules are RCL_RET_INVALID_ROS_ARGS; rclpy raises on unknown ROS args."""
     with pytest.raises(error):
         rclpy.init(args=['prog', '--ros-args', *args], context=context)
 
 
 def test_publishing_a_message_of_another_type_raises_type_error(context):
-    """rclpy publisher.py publish: 'Expected {msg_type}, got {type(msg)}' TypeError."""
+    """Rclpy publisher.py publish: 'Expected {msg_type}, got {type(msg)}' TypeError."""
     rclpy.init(args=[], context=context)
     pub = Node('n', context=context).create_publisher(PoseArray, 'targets', 10)
     with pytest.raises(TypeError, match='Expected'):

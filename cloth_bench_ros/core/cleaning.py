@@ -1,4 +1,5 @@
-"""The one cloud-cleaning pipeline (the paper's pre-processing, segmentation aside).
+"""
+The one cloud-cleaning pipeline (the paper's pre-processing, segmentation aside).
 
 In order: drop non-finite points (organized clouds mark missing pixels with NaN), crop to a box
 around the cloth's workspace, remove the table plane, statistical outlier removal (open3d), and
@@ -50,7 +51,8 @@ class CleaningStats:
 def workspace_box(
     gripper_positions: np.ndarray, margin: float = WORKSPACE_MARGIN
 ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """Return a box holding the cloth wherever the grippers (k, 3) take it, bounded below by the table.
+    """
+    Return a box holding the cloth wherever the grippers (k, 3) take it, bounded below by the table.
 
     The cloth hangs at most its length from the grippers and swings at most that far sideways.
     """

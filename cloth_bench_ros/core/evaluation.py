@@ -1,4 +1,5 @@
-"""Online scoring of simulated states against real frames (the evaluator node's core, no ROS).
+"""
+Online scoring of simulated states against real frames (the evaluator node's core, no ROS).
 
 Real frames and simulated states arrive in any interleaving, each in time order. A real frame at
 time t is scored against the simulated state of the same time: the state stamped t when there is
@@ -251,7 +252,8 @@ FRAME_FATES = (
 
 
 def frame_accounting(replay: dict, real: dict) -> dict:
-    """Return what became of every frame on the bag's topic: the recorder's sorting plus the evaluator's.
+    """
+    Return what became of every frame on the bag's topic: the recorder's sorting plus the evaluator's.
 
     replay: the recorder's counts (frames_in_bag, before_start, after_trajectory,
     empty_after_cleaning, to_send, ...); real: `OnlineEvaluator.real_summary()`. The fates add up

@@ -1,4 +1,5 @@
-"""Hardware-in-the-loop timing as a controller sees it: per target, due, sent and state received.
+"""
+Hardware-in-the-loop timing as a controller sees it: per target, due, sent and state received.
 
 The controller (the trajectory publisher) keeps one `TargetTimeline`: target k is due at
 `anchor + (stamp_k - stamp_0)` on the monotonic clock, goes out at `sent[k]`, and its state comes
@@ -40,13 +41,14 @@ class TargetTimeline:
         np.add(self.stamps - self.stamps[0], self.anchor, out=self.due)
 
     def due_through(self, now_ns: int, period_ns: int) -> int:
-        """Index of the last target due by now, rounding to the nearest schedule point (a tick
+        """
+        Index of the last target due by now, rounding to the nearest schedule point (a tick
         that fires a little before its due time still sends its target).
         """
         return int(np.searchsorted(self.due, now_ns + period_ns // 2, side='right')) - 1
 
     def index_of(self, stamp_ns: int) -> int:
-        """k of a stamp, or -1 if no target has it."""
+        """K of a stamp, or -1 if no target has it."""
         k = int(np.searchsorted(self.stamps, stamp_ns))
         return k if k < len(self.stamps) and self.stamps[k] == stamp_ns else -1
 
@@ -113,7 +115,7 @@ class HilFigures:
 
 
 def latencies(timeline: TargetTimeline) -> np.ndarray:
-    """received - due in seconds, for the targets whose state came back."""
+    """Received - due in seconds, for the targets whose state came back."""
     got = timeline.received != UNSET
     return (timeline.received[got] - timeline.due[got]) / 1e9
 
@@ -152,7 +154,8 @@ def hil_figures(timeline: TargetTimeline, skipped: int, period_s: float) -> HilF
 
 
 def check_bookkeeping(timeline: TargetTimeline, stepped: int, skipped: int) -> list[str]:
-    """Return what does not add up between the controller's timeline and the simulator's counts (empty: all does).
+    """
+    Return what does not add up between the controller's timeline and the simulator's counts (empty: all does).
 
     Every target is sent, in order, no earlier than half a period before it is due; every sent
     target is either stepped or skipped by the simulator; a state never arrives before its

@@ -1,4 +1,5 @@
-"""Sim-to-real metrics (docs/benchmark.md, section 3).
+"""
+Sim-to-real metrics (docs/benchmark.md, section 3).
 
 One-sided L1 Chamfer and Hausdorff distances from the simulated vertices V to the real cloud P
 (the nearest neighbour is taken under the L1 norm too), the stability L_s of a sequence of
@@ -65,7 +66,8 @@ _TREE_CACHE_LIMIT = 0
 
 
 def keep_trees(max_points: int) -> None:
-    """Keep the k-d trees of the clouds scored in this process (up to `max_points` points in all):
+    """
+    Keep the k-d trees of the clouds scored in this process (up to `max_points` points in all):
     a study's worker that scores the same bag again finds its trees built (0 turns the cache off).
     """
     global _TREE_CACHE_LIMIT, _TREE_CACHE_POINTS

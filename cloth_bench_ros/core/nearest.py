@@ -1,4 +1,5 @@
-"""Exact L1 nearest-neighbour distances from a few query points to a large cloud, on a uniform grid.
+"""
+Exact L1 nearest-neighbour distances from a few query points to a large cloud, on a uniform grid.
 
 The evaluator asks, for every vertex of a simulated mesh (hundreds), the L1 distance to the
 nearest point of a real frame (50,000 to 300,000 points). A k-d tree over the frame costs

@@ -1,4 +1,5 @@
-"""The change of phase of a dynamic trial: the first frame in which the cloth touches the table.
+"""
+The change of phase of a dynamic trial: the first frame in which the cloth touches the table.
 
 The paper scores its fling only "before the change of phase", the frame at which the falling
 cloth first contacts the table. A recording rarely says which frame that is, so it is found in

@@ -1,4 +1,5 @@
-"""sensor_msgs/PointCloud2 <-> numpy, as sensor_msgs_py.point_cloud2 does it.
+"""
+sensor_msgs/PointCloud2 <-> numpy, as sensor_msgs_py.point_cloud2 does it.
 
 Works on any message object with PointCloud2's fields (the real sensor_msgs class or the
 rosbags one); the classes to build with are passed in, so this module stays free of ROS.

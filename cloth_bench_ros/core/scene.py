@@ -38,7 +38,8 @@ CAMERA_HFOV_DEG = 90.0  # colour camera, 16:9 mode
 
 @dataclass(frozen=True)
 class ClothGrid:
-    """A rectangular cloth mesh of nx x nz vertices hanging in the x-z plane at y = 0.
+    """
+    A rectangular cloth mesh of nx x nz vertices hanging in the x-z plane at y = 0.
 
     Vertex (i, j) sits at x = i * width / (nx - 1), z = top_z - j * length / (nz - 1); index
     j * nx + i. The grasped corners are (0, 0) and (nx - 1, 0).

@@ -1,4 +1,5 @@
-"""The task's episode set-up that every engine starts from: the grasped corners and the seeded initial state.
+"""
+The task's episode set-up that every engine starts from: the grasped corners and the seeded initial state.
 
 The cloth starts at rest in its grid shape with the grasped corners at the grippers (each column
 of the grid shifted by the linear blend of the two corners' shifts), then every vertex except the
@@ -23,7 +24,8 @@ def grasped_corners(grid: ClothGrid) -> list[int]:
 def initial_displacement(
     grid: ClothGrid, seed: int, left: np.ndarray, right: np.ndarray
 ) -> np.ndarray:
-    """Per vertex (n, 3), the initial state minus the rest shape: the grasped corners at `left`
+    """
+    Per vertex (n, 3), the initial state minus the rest shape: the grasped corners at `left`
     and `right`, every other vertex also perturbed by the seeded noise.
     """
     rest = grid.vertices()

@@ -1,4 +1,5 @@
-"""Quintic Cartesian gripper trajectories of the two primitives (docs/benchmark.md, section 2).
+"""
+Quintic Cartesian gripper trajectories of the two primitives (docs/benchmark.md, section 2).
 
 Every axis is a chain of quintic segments; the trajectory is an analytic function of time and
 is sampled at t = k * dt, so it is the same at every rate. The full run starts with the settle
@@ -187,7 +188,7 @@ def quintic_part(primitive: Primitive | str) -> PrimitiveTrajectory:
 
 
 def sample_times(duration: float, rate_hz: float) -> np.ndarray:
-    """t = k / rate for k = 0 .. floor(duration * rate), the end included when it falls on a step."""
+    """T = k / rate for k = 0 .. floor(duration * rate), the end included when it falls on a step."""
     rate_hz = validation.rate_hz(rate_hz)  # bounded before anything is allocated
     n = int(math.floor(duration * rate_hz + 1e-9)) + 1
     return np.arange(n) / rate_hz

@@ -1,4 +1,5 @@
-"""Where the quintic part starts in a bag's time: given, read from recorded targets, or searched.
+"""
+Where the quintic part starts in a bag's time: given, read from recorded targets, or searched.
 
 The automatic search simulates the reference (an engine, the run's cloth and primitive) from the
 settle phase to `window` s into the motion and finds the bag time whose real frames, from `pre`

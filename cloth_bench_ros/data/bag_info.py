@@ -12,7 +12,8 @@ import numpy as np
 
 
 def describe(path: str | os.PathLike[str], validate: bool = True) -> str:
-    """Human-readable summary of a bag (for `cloth-bench bag info`); BagError if unreadable.
+    """
+    Human-readable summary of a bag (for `cloth-bench bag info`); BagError if unreadable.
 
     With validate, every cloud is decoded and the frame counts are reported.
     """

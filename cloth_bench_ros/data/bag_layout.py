@@ -1,4 +1,5 @@
-"""Where a bag's messages are: which storage files, read by which path, from what a user points at.
+"""
+Where a bag's messages are: which storage files, read by which path, from what a user points at.
 
 A user may give a bag directory (metadata.yaml and its files), its metadata.yaml, one storage file,
 or a directory whose metadata.yaml is missing (a recording killed before writing it: its files are
@@ -42,7 +43,8 @@ def regular_file(path: Path) -> Path:
 
 
 def raw_storage_files(directory: Path, suffix: str) -> list[Path]:
-    """Return the `suffix` (.mcap, .db3, .mcap.zstd) files of a directory, in recording order.
+    """
+    Return the `suffix` (.mcap, .db3, .mcap.zstd) files of a directory, in recording order.
 
     rosbag2 names split files `<bag>_<n><suffix>`; they are ordered by n, as `ros2 bag reindex`
     orders them (by name, `bag_10` would come before `bag_2`).

@@ -1,4 +1,5 @@
-"""The one bag reader of the project: any rosbag2 bag a user records, in record order.
+"""
+The one bag reader of the project: any rosbag2 bag a user records, in record order.
 
 A bag is a directory holding `metadata.yaml` and its storage file(s); a bare `.mcap` or `.db3`
 file, or a directory whose metadata.yaml is missing, also reads (data/bag_layout.py finds the
@@ -82,7 +83,8 @@ def _schema_name(schemas: dict[int, Schema], channel: Channel) -> str:
 
 
 class BagReader:
-    """Reads a rosbag2 MCAP bag (directory or bare .mcap) in record order.
+    """
+    Reads a rosbag2 MCAP bag (directory or bare .mcap) in record order.
 
     Opening validates the files and reads the summaries; `raw_messages` and `clouds` stream the
     data. A truncated file without summary is read up to the damage, with a `BagWarning`.
@@ -192,7 +194,8 @@ class BagReader:
     def _records(
         self, mf: _McapFile, topics: set[str] | None = None, on_chunk: Any = None
     ) -> Iterator[tuple[Any, str]]:
-        """(record, topic) for Message (topic set) and Metadata records in file order.
+        """
+        (record, topic) for Message (topic set) and Metadata records in file order.
 
         Keeps the file's topic table and message counts current while scanning; stops at the
         damage of an incomplete file (recording `mf.damage`), raises BagError on a complete one.
@@ -408,7 +411,8 @@ class BagReader:
                     )
 
     def clouds(self, topic: str | None = None) -> Iterator[tuple[int, np.ndarray]]:
-        """(stamp_ns, float64 (n, 3) points) of each non-empty cloud, NaN points dropped.
+        """
+        (stamp_ns, float64 (n, 3) points) of each non-empty cloud, NaN points dropped.
 
         Counts go to `self.stats` (reset at each call).
         """

@@ -1,4 +1,5 @@
-"""`cloth-bench bag rewrite`: copy a bag into the current writer's layout, messages unchanged.
+"""
+`cloth-bench bag rewrite`: copy a bag into the current writer's layout, messages unchanged.
 
 Older bags of the project (metadata version 8, no `topic_type_hash` on the MCAP channels) are
 read with BagReader and written again with BagWriter; the copy is then read back and compared.
@@ -58,7 +59,8 @@ def rewrite_bag(
     dst: str | os.PathLike[str],
     change_of_phase_frame: int | str | None = None,
 ) -> dict[str, int]:
-    """Write the bag src anew at dst with BagWriter (current layout); messages per topic.
+    """
+    Write the bag src anew at dst with BagWriter (current layout); messages per topic.
 
     Payloads, topics, types, log times and trial metadata stay the same, which is checked by
     reading dst back; BagError (and no dst) if src cannot be carried over unchanged. A

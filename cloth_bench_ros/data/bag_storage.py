@@ -1,4 +1,5 @@
-"""Bags the project's own MCAP path does not read, read through rosbags' maintained reader.
+"""
+Bags the project's own MCAP path does not read, read through rosbags' maintained reader.
 
 ROS 2 Humble records sqlite3 (`.db3`) by default, `ros2 bag record --compression-mode file|message`
 writes zstd-compressed files or messages, and a recording killed with SIGKILL leaves its storage

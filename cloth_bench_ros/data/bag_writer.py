@@ -1,4 +1,5 @@
-"""The one bag writer of the project: rosbag2 bags with MCAP storage.
+"""
+The one bag writer of the project: rosbag2 bags with MCAP storage.
 
 MCAP chunks are zstd-compressed, schemas are `ros2msg` text and payloads CDR, so `ros2 bag`,
 Foxglove, `rosbags` and the `mcap` library all open the bags written here.
@@ -70,7 +71,8 @@ def _qos_yaml(latched: bool) -> str:
 
 
 class BagWriter:
-    """Writes a rosbag2 MCAP bag directory; `close()` writes the MCAP summary and metadata.yaml.
+    """
+    Writes a rosbag2 MCAP bag directory; `close()` writes the MCAP summary and metadata.yaml.
 
     Thread-safe, and `close()` may be called from a signal handler, even one that interrupted a
     `write()` on the same thread: the close then happens as that write returns. Every message
@@ -170,7 +172,8 @@ class BagWriter:
     def write(
         self, topic: str, msgtype: str, stamp_ns: int, cdr: bytes, log_time_ns: int | None = None
     ) -> bool:
-        """Append one CDR message logged at log_time_ns (default stamp_ns); False if already closed.
+        """
+        Append one CDR message logged at log_time_ns (default stamp_ns); False if already closed.
 
         rosbag2 logs the receive time; a recorder passes it as log_time_ns (the header stamp stays
         in the message). Refused writes are counted in `rejected`.
@@ -230,7 +233,8 @@ class BagWriter:
             return dict(self.counts)
 
     def abandon(self) -> dict[str, int]:
-        """After a failed write (disk full): keep the file as it is, recount it, write metadata.yaml.
+        """
+        After a failed write (disk full): keep the file as it is, recount it, write metadata.yaml.
 
         The .mcap then ends at the damage without a summary (BagReader reads it up to there, with a
         warning); `written` and `counts` become what is readable in it, never what was lost.

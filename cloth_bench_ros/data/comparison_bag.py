@@ -1,4 +1,5 @@
-"""The comparison bag of a run, for Foxglove/RViz, stamped in run time.
+"""
+The comparison bag of a run, for Foxglove/RViz, stamped in run time.
 
 Input is what the evaluator kept of each scored real frame: its `FrameScore`, the real points and
 the engine's vertices at that time. The bag holds the real cloud, each engine's vertices

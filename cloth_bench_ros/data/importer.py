@@ -1,4 +1,5 @@
-"""Import the published dataset (PLY/PCD folders) into one rosbag2 MCAP bag per trial.
+"""
+Import the published dataset (PLY/PCD folders) into one rosbag2 MCAP bag per trial.
 
 Layout (docs/benchmark.md, section 5): `<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`.
 Frame NNNNN is stamped NNNNN / 30 s; points are kept exactly (NaN included; the reader drops
@@ -342,7 +343,8 @@ def import_dataset(
     overwrite: bool = False,
     cleaning: CleaningConfig | None = None,
 ) -> list[Path]:
-    """Write one bag per trial folder under root into out; returns the bag paths.
+    """
+    Write one bag per trial folder under root into out; returns the bag paths.
 
     With `cleaning`, each transformed cloud goes through the one cleaning pipeline
     (core.cleaning) before it is written; without, points are kept exactly.

@@ -1,4 +1,5 @@
-"""ROS 2 message types without ROS: one `rosbags` typestore (ROS 2 Humble) for the project.
+"""
+ROS 2 message types without ROS: one `rosbags` typestore (ROS 2 Humble) for the project.
 
 `serialize`/`deserialize` turn messages into CDR bytes and back; the bytes are those that
 rclpy would put on the wire, so bags written here play in `ros2 bag play` and Foxglove.

@@ -1,4 +1,5 @@
-"""rosbag2 metadata.yaml, versions 4 to 9, read as strictly as rosbag2_storage's yaml.hpp.
+"""
+rosbag2 metadata.yaml, versions 4 to 9, read as strictly as rosbag2_storage's yaml.hpp.
 
 Fields by version (rosbag2_storage/yaml.hpp): 3 compression_format/mode; 4 offered_qos_profiles
 as a YAML string; 5 files; 6 custom_data; 7 type_description_hash; 8 ros_distro; 9

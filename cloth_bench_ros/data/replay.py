@@ -1,4 +1,5 @@
-"""What the recorder replays from a bag: every frame of the topic, accounted for.
+"""
+What the recorder replays from a bag: every frame of the topic, accounted for.
 
 `plan_replay` reads the cloud topic once: decodes each cloud (organized, with rgb and NaNs or
 not), moves it from its frame_id to `world` (the bag's /tf_static and /tf, or a fixed 4x4),
@@ -157,7 +158,8 @@ def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig
 
 
 def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> ReplayPlan:
-    """Read, transform, clean, align and sort every frame of the topic (see module doc).
+    """
+    Read, transform, clean, align and sort every frame of the topic (see module doc).
 
     `reference` is a callable (seconds) -> (t, vertices) of the reference simulation, needed
     only when the start must be searched automatically.
@@ -232,7 +234,8 @@ def change_of_phase(
     project_bag: bool,
     frames: list[tuple[int, np.ndarray]],
 ) -> dict[str, Any]:
-    """Return the frame that ends a dynamic trial's scored window, and where it comes from.
+    """
+    Return the frame that ends a dynamic trial's scored window, and where it comes from.
 
     In order: the option (`--change-of-phase-frame`), the bag's trial metadata, else the first
     table contact found in `frames` ((t_ns from the start, world points) in time order). The

@@ -1,4 +1,5 @@
-"""Synthetic reference bags: a high-resolution reference cloth seen by a virtual Azure Kinect.
+"""
+Synthetic reference bags: a high-resolution reference cloth seen by a virtual Azure Kinect.
 
 A reference simulation (config/synth.yaml: finer grid and another integrator than the models
 under test) runs along the full trajectory; at every 30 fps frame its mesh is rasterised into a
@@ -100,7 +101,8 @@ class Camera:
 def rasterize(
     camera: Camera, triangles: np.ndarray, near: float = 0.05
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Z-buffer of world triangles (m, 3, 3): depth (H, W), inf where empty, and triangle id (-1).
+    """
+    Z-buffer of world triangles (m, 3, 3): depth (H, W), inf where empty, and triangle id (-1).
 
     No face culling (both faces of the cloth render); depth is interpolated perspective-correctly
     (1/z is linear in the image); triangles reaching behind `near` are skipped.
@@ -168,7 +170,8 @@ def background_triangles() -> np.ndarray:
 
 @dataclass(frozen=True)
 class DepthNoise:
-    """Azure-Kinect-like depth error: sigma(z) = sigma0 + sigma2 z^2 along the ray, flying pixels.
+    """
+    Azure-Kinect-like depth error: sigma(z) = sigma0 + sigma2 z^2 along the ray, flying pixels.
 
     Depth is reported in steps of `depth_step` (the Azure Kinect's depth image is in whole mm).
 
@@ -254,7 +257,8 @@ def observe(
     rng: np.random.Generator,
     background: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Return the point cloud (n, 3) the sensor makes of the cloth `triangles` in front of `background`.
+    """
+    Return the point cloud (n, 3) the sensor makes of the cloth `triangles` in front of `background`.
 
     `background` is a (depth, ids) z-buffer of the static scene from `rasterize` (none: empty).
     """
@@ -358,7 +362,8 @@ def reference_config(
     reference: str = DEFAULT_REFERENCE,
     **overrides: Any,
 ) -> SynthConfig:
-    """Return the reference model of `cloth` and `primitive` from the reference's config file (config/synth.yaml
+    """
+    Return the reference model of `cloth` and `primitive` from the reference's config file (config/synth.yaml
     for MuJoCo); SynthError if unknown. `overrides` replace SynthConfig fields (e.g. a coarser grid
     or a shorter duration for tests).
     """
@@ -449,7 +454,8 @@ def render_frames(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
 
 
 def trial_info(config: SynthConfig, clouds: list[np.ndarray] | None = None) -> TrialInfo:
-    """Trial 0 of the cloth; a dynamic trial's change of phase is the first table contact in its clouds.
+    """
+    Trial 0 of the cloth; a dynamic trial's change of phase is the first table contact in its clouds.
 
     None if the clouds never touch the table (a shortened trial): its runs then say so and score every frame.
     """
@@ -466,7 +472,8 @@ def write_synthetic_bag(
     progress: bool = False,
     on_frame: Callable[[int, np.ndarray, np.ndarray], None] | None = None,
 ) -> Path:
-    """Render `config` into a rosbag2 MCAP bag at out_dir (clouds on CLOUD_TOPIC); the bag path.
+    """
+    Render `config` into a rosbag2 MCAP bag at out_dir (clouds on CLOUD_TOPIC); the bag path.
 
     `on_frame(k, reference_vertices, points)` sees every frame as it is written. The bag is
     written beside out_dir and renamed when complete: a failed run leaves no bag (and an old one

@@ -1,4 +1,5 @@
-"""A small tf2 buffer: the transforms of a bag's /tf_static and /tf, looked up as tf2 does.
+"""
+A small tf2 buffer: the transforms of a bag's /tf_static and /tf, looked up as tf2 does.
 
 Each child frame has one parent. Static transforms hold at every time; dynamic ones are
 interpolated between the two samples around the asked time (linear translation, slerp rotation)

@@ -1,4 +1,5 @@
-"""Trial metadata: which real trial a bag holds and how its clouds are expressed.
+"""
+Trial metadata: which real trial a bag holds and how its clouds are expressed.
 
 The trial lives in `metadata.yaml` custom_data (primary, keys `cloth_bench.*`), mirrored into an
 MCAP metadata record and the first message on `TRIAL_TOPIC`; see bags/README.md.

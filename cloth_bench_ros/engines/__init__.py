@@ -1,4 +1,5 @@
-"""Cloth engines behind one interface, discovered through the `cloth_bench_ros.engines` entry points.
+"""
+Cloth engines behind one interface, discovered through the `cloth_bench_ros.engines` entry points.
 
 Another package adds an engine by declaring, in its own setup.py:
     entry_points={"cloth_bench_ros.engines": ["myengine = my_pkg.module:MyCloth"]}

@@ -77,7 +77,8 @@ def check_divergence(
 
 
 class ClothEngine(abc.ABC):
-    """A cloth simulator for the benchmark scene: cloth, table, two point grasps.
+    """
+    A cloth simulator for the benchmark scene: cloth, table, two point grasps.
 
     Subclasses set `name` and `params`, build the scene, put the cloth in the task's initial
     state in `_reset` and advance it in `_step`. The task's set-up (grasped corners, the seeded
@@ -185,7 +186,8 @@ class ClothEngine(abc.ABC):
         return vertices
 
     def _check(self, vertices: np.ndarray, left: np.ndarray, right: np.ndarray) -> str | None:
-        """check_divergence, cheaply: two bounds computed in preallocated scratch arrays; the
+        """
+        check_divergence, cheaply: two bounds computed in preallocated scratch arrays; the
         exact reason only when a bound fails (NaN fails every comparison, so it gets there too).
         """
         if self._scratch is None or self._scratch.shape != vertices.shape:

@@ -1,4 +1,5 @@
-"""PyBullet cloth engine: a deformable-world soft body held by two kinematic point grasps.
+"""
+PyBullet cloth engine: a deformable-world soft body held by two kinematic point grasps.
 
 Two cloth models, chosen by the `model` parameter:
 
@@ -43,8 +44,10 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
 
 
 def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.ndarray]:
-    """Return the cloth as a slab: nodes (2n, 3), layer 0 at y = -t/2 then layer 1 at +t/2, and
-    positively oriented tetrahedra (6 per grid cell, Kuhn split, conforming across cells)."""
+    """
+    Return the cloth as a slab: nodes (2n, 3), layer 0 at y = -t/2 then layer 1 at +t/2, and
+    positively oriented tetrahedra (6 per grid cell, Kuhn split, conforming across cells).
+    """
     rest = grid.vertices()
     n = len(rest)
     half = np.array([0.0, thickness / 2, 0.0])
@@ -101,7 +104,8 @@ def match_nodes(loaded: np.ndarray, wanted: np.ndarray, tolerance: float = 1e-5)
 
 
 class BulletCloth(ClothEngine):
-    """PyBullet deformable cloth: mass-spring with bending springs, or Neo-Hookean FEM slab.
+    """
+    PyBullet deformable cloth: mass-spring with bending springs, or Neo-Hookean FEM slab.
 
     reset(seed) rebuilds the world (so one seed always gives bit-identical runs) and places the
     cloth in the task's seeded initial state (core/task.py); both layers of a FEM slab move together.

@@ -1,4 +1,5 @@
-"""MuJoCo cloth engine: a flex cloth held by two kinematic point grasps above a table.
+"""
+MuJoCo cloth engine: a flex cloth held by two kinematic point grasps above a table.
 
 Two cloth models, chosen by the `model` parameter:
 
@@ -63,7 +64,8 @@ def spring_edges(grid: ClothGrid) -> np.ndarray:
 
 
 class MujocoCloth(ClothEngine):
-    """MuJoCo flex cloth: shell bending with inextensible edges, or a mass-spring net.
+    """
+    MuJoCo flex cloth: shell bending with inextensible edges, or a mass-spring net.
 
     reset(seed) starts the cloth in the task's seeded initial state (core/task.py) at rest.
     """

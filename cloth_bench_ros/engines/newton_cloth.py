@@ -1,4 +1,5 @@
-"""Newton cloth engine (NVIDIA Warp, run on the CPU): XPBD or VBD cloth held by two point grasps.
+"""
+Newton cloth engine (NVIDIA Warp, run on the CPU): XPBD or VBD cloth held by two point grasps.
 
 Two cloth models, chosen by the `model` parameter:
 
@@ -58,7 +59,8 @@ def _move_grasps(
 
 
 class NewtonCloth(ClothEngine):
-    """Newton cloth: XPBD springs and bending, or VBD triangle elements and bending, on the CPU.
+    """
+    Newton cloth: XPBD springs and bending, or VBD triangle elements and bending, on the CPU.
 
     reset(seed) starts the cloth in the task's seeded initial state (core/task.py) at rest.
     """
@@ -290,7 +292,8 @@ class NewtonCloth(ClothEngine):
         return model
 
     def _edge_stiffness(self) -> float:
-        """Newton's per-edge bending stiffness that gives the cloth the flexural rigidity `bending`.
+        """
+        Newton's per-edge bending stiffness that gives the cloth the flexural rigidity `bending`.
 
         On a grid of spacing a (right triangles), a plate bent to curvature k has dihedral angles
         k 2a/3 across the straight edges and (k/2) a sqrt(2)/3 across the diagonals; VBD's energy

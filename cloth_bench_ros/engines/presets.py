@@ -1,4 +1,5 @@
-"""Cloth parameter presets per engine x cloth x task, from config/presets/<engine>.yaml.
+"""
+Cloth parameter presets per engine x cloth x task, from config/presets/<engine>.yaml.
 
 A preset file reads
     engine: mujoco
@@ -30,7 +31,8 @@ def config_dir() -> Path:
 
 
 def preset_file(engine: str, config_dir_: Path | None = None) -> Path:
-    """Return the preset file of an engine: <config>/presets/<engine>.yaml (or <dir>/<engine>.yaml).
+    """
+    Return the preset file of an engine: <config>/presets/<engine>.yaml (or <dir>/<engine>.yaml).
 
     A directory given by the user must exist (EngineError naming it), never falling back silently.
     """
@@ -91,7 +93,8 @@ def read_preset_file(path: Path) -> dict:
 
 
 def load_preset(engine: str, cloth: str, primitive: str, config_dir: Path | None = None) -> dict:
-    """Parameters of `engine` for `cloth` and `primitive`, checked against the engine's schema.
+    """
+    Parameters of `engine` for `cloth` and `primitive`, checked against the engine's schema.
 
     An engine without a preset file (e.g. one added by another package) gets {} (its defaults).
     """

@@ -31,7 +31,8 @@ _stop_requested = threading.Event()
 
 
 def publish_serialises(node) -> bool:
-    """Return True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
+    """
+    Return True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
     the embedded intra-process transport hands subscribers the object itself.
     """
     return not EMBEDDED or node.context.transport.name != 'intra'
@@ -63,7 +64,8 @@ def publishers_matched(node, subscription) -> int:
 
 
 def all_subscriptions_matched(node, publisher) -> bool:
-    """Return True once the publisher has matched every subscription of its topic that the graph lists.
+    """
+    Return True once the publisher has matched every subscription of its topic that the graph lists.
 
     Under DDS, discovery is asynchronous and pairwise: a reader another node has created is in the
     graph before this publisher's writer has matched it, and a reliable volatile writer delivers
@@ -78,7 +80,8 @@ def run_nodes(
     args: list[str] | None = None,
     transport: str | None = None,
 ) -> int:
-    """Spin nodes in one executor until all are `done`, SIGINT/SIGTERM or shutdown.
+    """
+    Spin nodes in one executor until all are `done`, SIGINT/SIGTERM or shutdown.
 
     In the embedded runtime the nodes talk over `transport` (default: CLOTH_BENCH_TRANSPORT, else
     intra: nodes composed in one process, as in a component container).
@@ -145,14 +148,15 @@ def run_nodes(
 
 
 def _no_rclpy_signal_handlers():
-    """rclpy's SignalHandlerOptions.NO (real rclpy only)."""
+    """Rclpy's SignalHandlerOptions.NO (real rclpy only)."""
     from rclpy.signals import SignalHandlerOptions
 
     return SignalHandlerOptions.NO
 
 
 def run_node(factory: Callable[[], object], args: list[str] | None = None) -> int:
-    """run_nodes for a single node: what `ros2 run cloth_bench_ros <node>` executes.
+    """
+    run_nodes for a single node: what `ros2 run cloth_bench_ros <node>` executes.
 
     In the embedded runtime it talks DDS unless CLOTH_BENCH_TRANSPORT=intra, so that console
     scripts in separate processes make one graph, as under `ros2 run`.

@@ -215,7 +215,8 @@ class Evaluator(Node):
         self.finish_if_complete()
 
     def finish_if_complete(self) -> None:
-        """Finish once every engine's last state and step and every announced real frame are in.
+        """
+        Finish once every engine's last state and step and every announced real frame are in.
 
         DDS gives no order across topics: they may arrive in any order.
         """

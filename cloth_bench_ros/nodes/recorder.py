@@ -1,4 +1,5 @@
-"""Replays a rosbag2 MCAP bag's PointCloud2 topic in simulation time, or records topics to a bag.
+"""
+Replays a rosbag2 MCAP bag's PointCloud2 topic in simulation time, or records topics to a bag.
 
 mode replay (default): the bag's cloud topic is read once (data.replay.plan_replay: transformed to
   world, cleaned, aligned, every frame accounted for); the trial message on real/trial announces
@@ -303,7 +304,8 @@ class Recorder(Node):
             self.stop_recording(exc, failed_write=True)
 
     def stop_recording(self, exc: OSError, failed_write: bool) -> None:
-        """End the recording on a full disk or write error: finalise what is on disk, then one error line.
+        """
+        End the recording on a full disk or write error: finalise what is on disk, then one error line.
 
         After a failed write the MCAP writer's state no longer matches the file, so the bag is
         kept as written (`BagWriter.abandon`) instead of finished over the gap.

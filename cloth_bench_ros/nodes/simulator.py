@@ -1,4 +1,5 @@
-"""Steps one cloth engine per target and publishes the mesh vertices as PointCloud2.
+"""
+Steps one cloth engine per target and publishes the mesh vertices as PointCloud2.
 
 The step path (`on_target`) is the critical path of hardware in the loop: its two outgoing
 messages are built once and filled in place, the gripper targets go into a preallocated array,
@@ -38,7 +39,8 @@ import numpy as np
 
 
 class StateMessages:
-    """The simulator's cloud and step status, built once; `fill` writes a step into them in place.
+    """
+    The simulator's cloud and step status, built once; `fill` writes a step into them in place.
 
     With a transport that passes message objects by reference (`in_place` False), fill builds
     fresh messages instead, so that states still queued for a subscriber keep their own data.
@@ -179,7 +181,8 @@ class Simulator(Node):
         self.get_logger().info(f'{self.engine_name} ready; ' + '; '.join(self.realtime.lines()))
 
     def warm_up(self) -> np.ndarray:
-        """Start-up work before the first deadline: the reset at the trajectory's first target, one
+        """
+        Start-up work before the first deadline: the reset at the trajectory's first target, one
         throwaway step (first-call costs), the reset again; its vertices answer target 0.
         """
         left, right = self.targets.left[0], self.targets.right[0]

@@ -111,7 +111,8 @@ class TrajectoryPublisher(Node):
         self.start_timer = self.create_timer(0.02, self.try_start)
 
     def graph_ready(self) -> bool:
-        """Who is there, by node, not how many subscribers.
+        """
+        Who is there, by node, not how many subscribers.
 
         For each engine a node that subscribes `targets` and publishes `<engine>/cloud`, matched
         both ways; the recorder (publishes real/cloud, follows /clock) with every /clock
@@ -210,7 +211,8 @@ class TrajectoryPublisher(Node):
     # --- realtime: targets on the wall-clock schedule, as a controller sends them --------------
 
     def send_preroll(self) -> None:
-        """Start-up handshake before the first deadline: target 0, again every PREROLL_RESEND_S
+        """
+        Start-up handshake before the first deadline: target 0, again every PREROLL_RESEND_S
         until each simulator has answered it (first samples on new DDS readers and writers take
         milliseconds; a simulator answers a repeated target with its state, without a step). The
         answer starts the schedule (on_state -> start_realtime).
@@ -223,7 +225,8 @@ class TrajectoryPublisher(Node):
             self.clock_pub.publish(Clock(clock=msg.header.stamp))
 
     def start_realtime(self) -> None:
-        """Anchor the schedule now, when target 0's state is in: target k is due k / rate from here.
+        """
+        Anchor the schedule now, when target 0's state is in: target k is due k / rate from here.
 
         Target 0 is the handshake's: sent, due and answered at the anchor (the initial state, not
         a deadline); target 1 goes out one period later.

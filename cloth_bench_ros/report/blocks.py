@@ -98,7 +98,8 @@ def write_document(
     csv_only: Sequence[Table] = (),
     names: tuple[str, str] = ('report.md', 'report.html'),
 ) -> tuple[Path, Path, list[Path]]:
-    """Draw the figures, write one CSV per table (and per `csv_only` table), report.md and report.html
+    """
+    Draw the figures, write one CSV per table (and per `csv_only` table), report.md and report.html
     (atomically) into out_dir.
     """
     from cloth_bench_ros.safe_io import atomic_write_text

@@ -1,4 +1,5 @@
-"""The report's section of qualitative comparisons: the figures and animations runs wrote.
+"""
+The report's section of qualitative comparisons: the figures and animations runs wrote.
 
 `cloth-bench run --figures` has the evaluator draw them (nodes/comparison.py).
 """
@@ -11,7 +12,8 @@ import shutil
 
 
 def comparison_section(results_dir: Path) -> list:
-    """Report blocks: each run directory with a qualitative figure (`cloth-bench run --figures`).
+    """
+    Report blocks: each run directory with a qualitative figure (`cloth-bench run --figures`).
 
     Run directories are results_dir or one level below; the figure and its animation are copied
     into the report directory when the report is written.

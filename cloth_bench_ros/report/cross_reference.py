@@ -1,4 +1,5 @@
-"""Cross-reference table: every engine's CD_d / CD_q against every synthetic reference.
+"""
+Cross-reference table: every engine's CD_d / CD_q against every synthetic reference.
 
 An engine of the reference's own family should win on its own reference, and by how much is the
 point (the cells are studies/cross_reference.py's).

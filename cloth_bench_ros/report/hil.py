@@ -1,4 +1,5 @@
-"""Hardware in the loop: the configuration chosen per rate and the report of real-time runs.
+"""
+Hardware in the loop: the configuration chosen per rate and the report of real-time runs.
 
 - `deadline_tables`: studies/recommend.py's criterion for every configuration of a settings sweep.
 - the recommendation file (config/hil_recommended.yaml): what `cloth-bench hil --config

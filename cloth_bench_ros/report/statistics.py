@@ -1,4 +1,5 @@
-"""Selections over results rows for the report: Pareto fronts, labels, number formats.
+"""
+Selections over results rows for the report: Pareto fronts, labels, number formats.
 
 Mean +- std per group is studies/aggregate.py's (a study's choice of configuration uses it too).
 """

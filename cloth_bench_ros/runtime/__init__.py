@@ -1,4 +1,5 @@
-"""The rclpy API the nodes are written against: real rclpy when it imports, else the embedded one.
+"""
+The rclpy API the nodes are written against: real rclpy when it imports, else the embedded one.
 
 Nodes import everything ROS from here, so the same node code runs under `ros2 run` with the real
 sensor_msgs/geometry_msgs classes and, without ROS 2, in the embedded runtime with rosbags' types.
@@ -93,7 +94,8 @@ def stamp_ns(stamp) -> int:
 
 
 def make_qos(depth: int, latched: bool = False, keep_all: bool = False) -> QoSProfile:
-    """Reliable, keep-last `depth`; latched = transient local (late joiners get the last ones).
+    """
+    Reliable, keep-last `depth`; latched = transient local (late joiners get the last ones).
 
     keep_all: keep every sample until taken (a reader that must lose nothing, whatever its pace).
     """
@@ -125,7 +127,8 @@ def is_user_error(exc: BaseException) -> bool:
 
 
 def declare_float(node, name: str, default: float) -> float:
-    """Return a double parameter that also takes an integer (`-p rate_hz:=1000`), in rclpy and embedded alike.
+    """
+    Return a double parameter that also takes an integer (`-p rate_hz:=1000`), in rclpy and embedded alike.
 
     rclpy refuses an INTEGER override for a parameter declared DOUBLE; declared with dynamic
     typing, any type is accepted and this is the one place that keeps numbers and refuses the rest.

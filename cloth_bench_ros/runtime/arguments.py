@@ -1,4 +1,5 @@
-"""The `--ros-args` command line as rcl parses it: parameters, parameter files, remap rules.
+"""
+The `--ros-args` command line as rcl parses it: parameters, parameter files, remap rules.
 
 Follows rcl/src/rcl/arguments.c (flags, order, unknown arguments), rcl/src/rcl/remap.c (first
 matching rule wins, node-specific rules, topic rules matched on fully qualified names) and

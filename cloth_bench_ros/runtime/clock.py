@@ -1,4 +1,5 @@
-"""Time as rclpy keeps it: Time, clocks (ROS, system, steady) and timers on a clock.
+"""
+Time as rclpy keeps it: Time, clocks (ROS, system, steady) and timers on a clock.
 
 Follows rclpy/time_source.py (a ROS clock under sim time reads the last /clock message, 0 before
 the first one), rclpy/node.py create_timer (timers on the node's clock unless one is given) and
@@ -42,7 +43,8 @@ class ClockType(enum.IntEnum):
 
 
 class Clock:
-    """rclpy's Clock: ROS time (system time, or the last /clock once sim time is active), system or steady.
+    """
+    rclpy's Clock: ROS time (system time, or the last /clock once sim time is active), system or steady.
 
     As rclpy's time source, a ROS clock with sim time active reads 0 until the first /clock message
     (rclpy/time_source.py: "Zero time is a special value that means time is uninitialized").
@@ -62,7 +64,8 @@ class Clock:
 
 
 class Timer:
-    """An rcl timer on a clock (the node's by default: sim time under use_sim_time).
+    """
+    An rcl timer on a clock (the node's by default: sim time under use_sim_time).
 
     The first call is due one period after creation; a call moves the next one by whole periods,
     skipping the ones missed (rcl/src/rcl/timer.c rcl_timer_call). On a sim clock it is due only
@@ -90,7 +93,7 @@ class Timer:
         return not self.cancelled and self.clock.now().nanoseconds >= self.next_ns
 
     def time_until_next_call(self) -> int | None:
-        """ns until the next call on this timer's clock; None once cancelled."""
+        """Ns until the next call on this timer's clock; None once cancelled."""
         return None if self.cancelled else self.next_ns - self.clock.now().nanoseconds
 
     @property

@@ -1,4 +1,5 @@
-"""An embedded stand-in for the subset of rclpy that the nodes use.
+"""
+An embedded stand-in for the subset of rclpy that the nodes use.
 
 Messages travel over the context's transport (runtime/transport.py): intra-process by default,
 or DDS (runtime/dds/: Cyclone DDS speaking ROS 2's wire protocol) between processes. In-process it

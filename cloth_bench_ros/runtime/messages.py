@@ -1,4 +1,5 @@
-"""ROS 2 message classes of the embedded runtime: rosbags' types, constructible with defaults.
+"""
+ROS 2 message classes of the embedded runtime: rosbags' types, constructible with defaults.
 
 rosbags' message classes are dataclasses whose every field is required; rclpy's take keyword
 arguments and default the rest. The classes here behave like rclpy's, serialise to the same CDR

@@ -1,4 +1,5 @@
-"""Parameters as rcl and rclpy handle them: types, parameter files, overrides and their order.
+"""
+Parameters as rcl and rclpy handle them: types, parameter files, overrides and their order.
 
 Follows rcl_yaml_param_parser/src/parse.c (node-name keys, scalar typing, what a file may hold),
 rcl/src/rcl/arguments.c (`-p`, `--params-file`, `-r` in command-line order) and rclpy's
@@ -278,7 +279,8 @@ class ParamsFileError(RCLInvalidROSArgsError):
 
 @dataclass
 class Overrides:
-    """Parameter overrides as rcl_params_t holds them: node keys in order of first appearance.
+    """
+    Parameter overrides as rcl_params_t holds them: node keys in order of first appearance.
 
     A key seen again (a later file, a `-p` rule under `/**`) keeps its place and its values are
     overwritten; rclpy then applies every key that matches a node in this order, so a later key

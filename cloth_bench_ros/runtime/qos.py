@@ -33,7 +33,7 @@ class QoSProfile:
 
 
 def as_profile(qos: QoSProfile | int) -> QoSProfile:
-    """rclpy's `qos_profile` argument: a profile, or a depth meaning keep-last of that depth."""
+    """Rclpy's `qos_profile` argument: a profile, or a depth meaning keep-last of that depth."""
     return QoSProfile(depth=qos) if isinstance(qos, int) else qos
 
 

@@ -1,4 +1,5 @@
-"""Process settings for a real-time critical path: CPU pinning, SCHED_FIFO, garbage collection.
+"""
+Process settings for a real-time critical path: CPU pinning, SCHED_FIFO, garbage collection.
 
 Each request reports what it got: Linux refuses SCHED_FIFO to a process without CAP_SYS_NICE
 (or an RLIMIT_RTPRIO above 0), and a core outside the process's allowed set cannot be pinned.
@@ -43,7 +44,8 @@ def threads() -> list[int]:
 
 
 def pin_to_cpu(cpu: int) -> str:
-    """Give the calling thread core `cpu` and move every other thread of the process off it (-1:
+    """
+    Give the calling thread core `cpu` and move every other thread of the process off it (-1:
     leave all); the outcome as a sentence.
 
     The calling thread is the step loop. The DDS threads (Cyclone's receive and event threads) go
@@ -75,7 +77,8 @@ def pin_to_cpu(cpu: int) -> str:
 
 
 def keep_off_cpu(cpu: int) -> str:
-    """Move every thread of this process off core `cpu` (-1: leave them), so that the simulator's
+    """
+    Move every thread of this process off core `cpu` (-1: leave them), so that the simulator's
     pinned step loop has its core to itself; the outcome as a sentence.
     """
     if cpu < 0 or not hasattr(os, 'sched_setaffinity'):
@@ -151,7 +154,8 @@ def request_fifo(priority: int) -> str:
 
 
 def poll_on_default_scheduler() -> str:
-    """Put the calling thread back on SCHED_OTHER for a loop that polls instead of sleeping.
+    """
+    Put the calling thread back on SCHED_OTHER for a loop that polls instead of sleeping.
 
     A SCHED_FIFO thread that never sleeps uses up the kernel's real-time budget
     (sched_rt_runtime_us of every sched_rt_period_us, 950 ms of 1 s by default) and is then
@@ -180,7 +184,8 @@ def _read_int(path: str) -> int | None:
 
 
 def freeze_heap() -> str:
-    """After start-up: move every live object out of the collector's reach, stop automatic runs.
+    """
+    After start-up: move every live object out of the collector's reach, stop automatic runs.
 
     From here on the step loop never pays for a collection it did not schedule; the caller runs
     `collect_young()` where a pause costs nothing (after a state has gone out).
@@ -198,7 +203,8 @@ YOUNG_THRESHOLD, MIDDLE_THRESHOLD = 700, 10  # gc's own default thresholds of ge
 
 
 def collect_young() -> None:
-    """Return the young generations' collection when due by gc's default thresholds (tens of microseconds).
+    """
+    Return the young generations' collection when due by gc's default thresholds (tens of microseconds).
 
     The oldest generation is left alone during a run: after `freeze_heap` it holds only what a
     run creates and keeps, and ordinary garbage is freed by reference counting anyway.

@@ -1,4 +1,5 @@
-"""How the embedded runtime moves messages: intra-process (the default) or DDS (runtime/dds/).
+"""
+How the embedded runtime moves messages: intra-process (the default) or DDS (runtime/dds/).
 
 A Context owns one transport. Publishers and subscriptions register with it; `publish` hands it a
 message; the executor calls `receive` to move arrived messages into the context's queue and `wait`

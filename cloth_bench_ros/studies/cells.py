@@ -1,4 +1,5 @@
-"""The cells of a study: one pipeline run each (engine, rate, cloth, task, trial bag, seed, configuration).
+"""
+The cells of a study: one pipeline run each (engine, rate, cloth, task, trial bag, seed, configuration).
 
 Two kinds of sweep build cells:
 
@@ -105,7 +106,8 @@ _BAG_NAME = r'^{cloth}(?:_(\d+))?_{primitive}$'
 
 
 def find_bags(bag_dir: Path | None, cloth: str, primitive: str) -> list[tuple[int, Path]]:
-    """(trial, path) of every bag for a cloth and task in `bag_dir` (default: the bundled bags).
+    """
+    (trial, path) of every bag for a cloth and task in `bag_dir` (default: the bundled bags).
 
     Names `<cloth>_<primitive>` (the bundled ones) and `<cloth>_<trial>_<primitive>` (the
     importer's) both count. ValueError if there is none.
@@ -160,7 +162,8 @@ def paper_cells(
     step_per_target: bool = False,
     keep_frames_seeds: Iterable[int] | None = None,
 ) -> list[Cell]:
-    """Return the cells of the paper's layout. step_per_target: internal time step = 1 / rate, one
+    """
+    Return the cells of the paper's layout. step_per_target: internal time step = 1 / rate, one
     engine step per target (the paper's frequency study), instead of the preset's time step.
     keep_frames_seeds: seeds whose per-frame scores are kept (default: the first seed).
     """
@@ -206,7 +209,8 @@ def settings_cells(
     axes: dict[str, list] | None = None,
     overrides: dict[str, dict] | None = None,
 ) -> list[Cell]:
-    """Factorial sweep over the settings that cost time, per engine, at one rate.
+    """
+    Factorial sweep over the settings that cost time, per engine, at one rate.
 
     axes: parameter -> values ("grid" -> [(nx, nz), ...]); None as a value means the preset's.
     An axis naming a parameter that an engine does not have is skipped for that engine.
@@ -260,7 +264,8 @@ def settings_cells(
 
 
 def estimated_cost(cell: Cell) -> float:
-    """Return a rough cost of a cell in seconds of one core: internal steps x a per-step cost, plus the
+    """
+    Return a rough cost of a cell in seconds of one core: internal steps x a per-step cost, plus the
     nodes' work per target (fitted to the default sweep's cells on 2 idle cores, 11 x 15 mesh:
     0.8 ms per MuJoCo internal step on the fling, 1.4x that with the cloth on the table).
     """

@@ -1,4 +1,5 @@
-"""Cross-reference cells: every engine against every synthetic reference, as a sweep mode.
+"""
+Cross-reference cells: every engine against every synthetic reference, as a sweep mode.
 
 The bundled bags are simulations, so a score on them says how much an engine behaves like the
 reference model. Scoring every engine against two references of different model families

@@ -1,4 +1,5 @@
-"""The one executor of the studies: Dask distributed.
+"""
+The one executor of the studies: Dask distributed.
 
 By default a LocalCluster of worker processes (one single-threaded worker per core) bound to
 127.0.0.1, without a dashboard; `--scheduler tcp://HOST:8786` uses an existing cluster instead
@@ -175,7 +176,8 @@ def run_tasks(
     args: tuple = (),
     in_flight: int | None = None,
 ) -> None:
-    """func(item, *args) for every item on the cluster, at most `in_flight` at a time (default:
+    """
+    func(item, *args) for every item on the cluster, at most `in_flight` at a time (default:
     twice the worker threads); on_result(item, result) in the client as each finishes.
 
     A worker that dies counts against every task it held, so a task beside the one that kills its

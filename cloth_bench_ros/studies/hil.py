@@ -1,4 +1,5 @@
-"""Hardware in the loop: the node graph with targets on the wall clock, laid out as a robot sees it.
+"""
+Hardware in the loop: the node graph with targets on the wall clock, laid out as a robot sees it.
 
 Three groups of nodes, each in its own OS process over DDS (`processes=True`, the default), on
 loopback only (interface lo, no multicast, peer 127.0.0.1) and on ROS_DOMAIN_ID or a random domain:
@@ -146,7 +147,8 @@ def _cpu_times() -> tuple[int, int, int] | None:
 
 
 class LoadMeter:
-    """The machine's CPU load over a span: busy share of all cores (/proc/stat), the share the
+    """
+    The machine's CPU load over a span: busy share of all cores (/proc/stat), the share the
     hypervisor took from a virtual machine (steal: the vCPU runnable but not running), load averages.
     """
 
@@ -258,7 +260,8 @@ def _make_nodes(config: HilConfig, group: str, run_dir: Path, context) -> list:
 
 
 def _finished(group: str, nodes: list) -> bool:
-    """Return the controller ends once its timeline is written, the observer once the evaluator reported;
+    """
+    Return the controller ends once its timeline is written, the observer once the evaluator reported;
     the simulator runs until it is told to stop.
     """
     if group == 'simulator':
@@ -570,7 +573,8 @@ def recommended(
     tol_abs: float = 0.002,
     budget: float = HIL_DEADLINE_BUDGET,
 ):
-    """Return the configuration `--config recommended` runs and where it comes from: the settings sweep's
+    """
+    Return the configuration `--config recommended` runs and where it comes from: the settings sweep's
     results if they hold this engine, task and rate, else the shipped config/hil_recommended.yaml.
     """
     from cloth_bench_ros.paths import share_dir

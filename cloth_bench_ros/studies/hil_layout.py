@@ -1,4 +1,5 @@
-"""The real-time layout of a hardware-in-the-loop run, chosen from what the machine allows.
+"""
+The real-time layout of a hardware-in-the-loop run, chosen from what the machine allows.
 
 Measured on 2 cores (docs/hil.md): MuJoCo at 1 kHz missed 13.5 %
 of its deadlines with no layout, 1.9 % with the step loop polling on a core of its own and the

@@ -1,4 +1,5 @@
-"""Parameter identification (`cloth-bench identify`): the paper's CMA-ES and Bayesian optimisation with Optuna.
+"""
+Parameter identification (`cloth-bench identify`): the paper's CMA-ES and Bayesian optimisation with Optuna.
 
 The study minimises the chosen metric (CD or HD of the task's window) of an engine against a bag
 over a set of the engine's parameters, with the seed held constant. Samplers: CMA-ES
@@ -82,7 +83,8 @@ def default_params(engine: str) -> list[str]:
 
 
 def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> dict[str, Any]:
-    """name -> Optuna distribution: the schema's range; where it spans decades (high >= 100 low, or
+    """
+    Name -> Optuna distribution: the schema's range; where it spans decades (high >= 100 low, or
     100 times the base value when low is 0), a log range within a factor `span` either side of the
     base (preset) value. ValueError for a parameter that cannot be fitted.
     """
@@ -112,7 +114,8 @@ def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> 
 
 
 def make_sampler(name: str, seed: int) -> Any:
-    """Return the Optuna sampler `name` (cmaes, tpe or gp), seeded. CMA-ES starts at the centre of the space,
+    """
+    Return the Optuna sampler `name` (cmaes, tpe or gp), seeded. CMA-ES starts at the centre of the space,
     which is the preset for the log-scale parameters (their ranges are a factor `span` either side).
     """
     import optuna
@@ -140,7 +143,8 @@ def samplers_of(choice: str) -> list[str]:
 
 
 def repair_journal(path: Path) -> int:
-    """Drop a torn last line (a crash mid-write) from an Optuna journal, with a warning; bytes dropped.
+    """
+    Drop a torn last line (a crash mid-write) from an Optuna journal, with a warning; bytes dropped.
 
     Every complete operation is kept. A bad line followed by good ones is damage, not a torn tail:
     ValueError naming the file and line.
@@ -177,7 +181,8 @@ def repair_journal(path: Path) -> int:
 
 
 def open_study(spec: IdentifySpec, sampler: str) -> Any:
-    """Return the sampler's study in the journal beside the results (created, or loaded to resume); trials
+    """
+    Return the sampler's study in the journal beside the results (created, or loaded to resume); trials
     left running by an interrupted identification are marked failed.
     """
     import optuna

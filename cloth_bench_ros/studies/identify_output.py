@@ -1,4 +1,5 @@
-"""What an identification leaves behind: its validation through the node graph, the preset file and
+"""
+What an identification leaves behind: its validation through the node graph, the preset file and
 identification.json (everything the report needs, so the report needs no Optuna).
 """
 
@@ -19,7 +20,8 @@ PRESETS_DIR = 'presets'
 
 
 def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
-    """Seeds other than the identification's, on its bag and the other trials' bags of the cloth and task,
+    """
+    Seeds other than the identification's, on its bag and the other trials' bags of the cloth and task,
     each with the engine's preset and with the identified parameters.
     """
     bags = {Path(spec.bag).resolve(): 0}

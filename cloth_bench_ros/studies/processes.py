@@ -1,4 +1,5 @@
-"""The node graph as one OS process per node over DDS on loopback: `cloth-bench run --processes`.
+"""
+The node graph as one OS process per node over DDS on loopback: `cloth-bench run --processes`.
 
 The same nodes and parameters as studies/pipeline.py's in-process run, each started as its console
 script's module (`python -m cloth_bench_ros.nodes.<node> --ros-args ...`) with one parameter file,

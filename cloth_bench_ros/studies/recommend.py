@@ -1,4 +1,5 @@
-"""The configuration to run an engine with: the settings sweep's choice, at one rate for hardware in the loop.
+"""
+The configuration to run an engine with: the settings sweep's choice, at one rate for hardware in the loop.
 
 - `recommend`: the most accurate configuration and the cheapest within a tolerance of it.
 - `recommend_for_rate`: the cheapest configuration both accurate enough (`recommend`'s rule) and
@@ -85,7 +86,8 @@ def settings_results(rows: Sequence[dict]) -> list[ConfigResult]:
 def recommend(
     results: Sequence[ConfigResult], tol_rel: float, tol_abs: float
 ) -> tuple[ConfigResult | None, ConfigResult | None, float]:
-    """(most accurate, cheapest within tolerance, tolerance in m) among stable configurations.
+    """
+    (most accurate, cheapest within tolerance, tolerance in m) among stable configurations.
 
     Within tolerance: mean CD <= best CD + max(tol_rel * best CD, tol_abs).
     """
@@ -156,7 +158,8 @@ def recommend_for_rate(
     tol_abs: float = 0.002,
     budget: float = DEADLINE_BUDGET,
 ) -> Recommendation | None:
-    """Return the cheapest configuration within tolerance of the most accurate whose step p99 < budget / rate.
+    """
+    Return the cheapest configuration within tolerance of the most accurate whose step p99 < budget / rate.
 
     Cheapest: the lowest median step time (p50), which other work on a shared machine inflates far
     less than the mean. If no accurate-enough configuration meets the deadline, the cheapest

@@ -1,4 +1,5 @@
-"""The results file of a study: typed rows, one key per cell, untrusted reading, one locked writer.
+"""
+The results file of a study: typed rows, one key per cell, untrusted reading, one locked writer.
 
 <dir>/results.jsonl holds one JSON object per finished cell. Rows are read as untrusted input:
 a line torn by an interrupted study is skipped (its cell runs again), but a line that is JSON and
@@ -109,7 +110,7 @@ def row_key(row: Mapping[str, Any]) -> tuple:
 
 
 def json_safe(value: Any) -> Any:
-    """value with every non-finite float as None (JSON has no NaN), recursively."""
+    """Value with every non-finite float as None (JSON has no NaN), recursively."""
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, dict):
@@ -206,7 +207,8 @@ def append_row(path: Path, row: Mapping[str, Any]) -> None:
 
 
 class ResultsLock:
-    """Exclusive lock of a results directory for one study: `with ResultsLock(dir, "sweep"):`.
+    """
+    Exclusive lock of a results directory for one study: `with ResultsLock(dir, "sweep"):`.
 
     A second study on a locked directory gets ResultsError naming who holds it. The lock is an
     flock(2) on <dir>/.results.lock: the kernel releases it when the holder exits or is killed.

@@ -1,4 +1,5 @@
-"""Stability on hard cases: a suite of scenes that break cloth simulators (`cloth-bench stress`).
+"""
+Stability on hard cases: a suite of scenes that break cloth simulators (`cloth-bench stress`).
 
 Each case drives one engine directly (make_engine + the primitive's full target trajectory,
 possibly transformed: time-compressed, pushed lower, a gripper jump) with parameter overrides on
@@ -487,7 +488,7 @@ def _scaled(value, scale: float):
 
 
 def verdict(rows: Sequence[dict]) -> dict[str, list[str]]:
-    """engine -> names of the cases that diverged."""
+    """Engine -> names of the cases that diverged."""
     out: dict[str, list[str]] = {}
     for r in rows:
         out.setdefault(r['engine'], [])

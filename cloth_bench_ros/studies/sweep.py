@@ -1,4 +1,5 @@
-"""Sweeps: many pipeline runs on the Dask executor, one JSON line per finished cell.
+"""
+Sweeps: many pipeline runs on the Dask executor, one JSON line per finished cell.
 
 A cell (cloth_bench_ros.studies.cells) is one `run_pipeline` call. Results go to
 <out>/results.jsonl, appended by the client as each cell finishes (so an interrupted sweep loses

@@ -1,4 +1,5 @@
-"""The DDS transport of the embedded runtime: Cyclone DDS with rmw_cyclonedds' conventions.
+"""
+The DDS transport of the embedded runtime: Cyclone DDS with rmw_cyclonedds' conventions.
 
 idl.py: the rosidl IDL types; qos.py: QoS and discovery settings; graph.py: ros_discovery_info
 and the node of every endpoint; transport.py: the transport a Context uses.

@@ -1,4 +1,5 @@
-"""The ROS graph over DDS, as rmw_cyclonedds and rmw_dds_common keep it.
+"""
+The ROS graph over DDS, as rmw_cyclonedds and rmw_dds_common keep it.
 
 DDS knows participants, writers and readers; ROS nodes exist only in `ros_discovery_info`: each
 participant publishes a ParticipantEntitiesInfo (its GID and, per node, namespace, name and the

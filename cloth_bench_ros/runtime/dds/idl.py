@@ -1,4 +1,5 @@
-"""DDS types of the ROS 2 messages the project exchanges, as rosidl's IDL maps their .msg files.
+"""
+DDS types of the ROS 2 messages the project exchanges, as rosidl's IDL maps their .msg files.
 
 rosidl turns `pkg/msg/Type.msg` into IDL (`byte` -> `octet`, `char` -> `uint8`, `float64` ->
 `double`, `T[]` -> `sequence<T>`, `T[N]` -> `T name[N]`, `string<=N` -> `string<N>`), and the DDS

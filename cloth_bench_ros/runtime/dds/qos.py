@@ -1,4 +1,5 @@
-"""ROS 2 QoS profiles and discovery settings as rmw_cyclonedds maps them onto Cyclone DDS.
+"""
+ROS 2 QoS profiles and discovery settings as rmw_cyclonedds maps them onto Cyclone DDS.
 
 `endpoint_qos` follows rmw_cyclonedds' create_readwrite_qos: history keep-last depth (or keep
 all), reliability, durability (transient local keeps `depth` samples through the durability

@@ -1,4 +1,5 @@
-"""The embedded runtime's DDS transport: Cyclone DDS speaking ROS 2's wire protocol.
+"""
+The embedded runtime's DDS transport: Cyclone DDS speaking ROS 2's wire protocol.
 
 One DomainParticipant per context (as rmw_cyclonedds since Galactic), one writer per publisher and
 one reader per subscription, on the DDS topic `rt` + the fully qualified ROS topic name, with the
