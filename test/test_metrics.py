@@ -104,3 +104,18 @@ def test_latency_stats():
         np.percentile(np.arange(1, 101) / 1000, 99)
     )
     assert np.isnan(latency_stats(np.array([])).mean)
+
+
+@pytest.mark.parametrize('frames_count', [1, 2, 3, 66, 67, 200])
+def test_stability_in_blocks_equals_the_formula_frame_by_frame(frames_count):
+    """The accumulator reduces frames in blocks; L_s equals the definition bit for bit."""
+    frames = np.random.default_rng(frames_count).normal(size=(frames_count, 165, 3)) * 0.3
+    acc = StabilityAccumulator()
+    for f in frames:
+        acc.add(f)
+    total = 0.0
+    for t in range(1, frames_count - 1):
+        filtered = (frames[t - 1] + frames[t] + frames[t + 1]) / 3.0
+        total += float(np.mean(np.abs(filtered - frames[t])))
+    assert acc.count == frames_count
+    assert acc.value == total / frames_count
