@@ -1,0 +1,27 @@
+"""What one run is: the bag, the engines, the rate, the task and the options of the graph."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+@dataclass
+class RunConfig:
+    bag: Path
+    engines: list[str] = field(default_factory=lambda: ['mujoco'])
+    rate_hz: float = 100.0
+    cloth: str = 'towel'
+    primitive: str = 'dynamic'
+    seed: int = 0
+    pacing: str = 'lockstep'
+    output_dir: Path | None = None
+    engine_params: dict[str, dict] = field(default_factory=dict)  # engine -> parameter overrides
+    grid: tuple[int, int] | None = None  # (nx, nz) vertices; None: the engine's default
+    presets_dir: Path | None = None  # directory of <engine>.yaml presets; None: config/presets
+    replay: dict = field(
+        default_factory=dict
+    )  # recorder parameters for plain bags (topic, start_time, ...)
+    change_of_phase_frame: int | None = None  # None: the bag's own
+    record_comparison: Path | None = None  # comparison MCAP bag to write
+    comparison_figures: bool = False  # qualitative figure and animation in output_dir
