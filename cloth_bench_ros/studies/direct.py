@@ -1,0 +1,176 @@
+"""
+A study cell at the physics limit: engine, trajectory and evaluator called directly.
+
+`run_direct` computes what `run_pipeline` (the node graph) computes for a lockstep run, with no
+nodes and no messages: the recorder's replay plan, each engine stepped through the same targets
+from the same start-up sequence as the simulator node, the states and real frames rounded to
+float32 as a PointCloud2 carries them, and the evaluator's scoring and summary. Its metrics equal
+the node graph's bit for bit (test/test_direct.py); step times are measured the same way, and a
+state's latency is its step's own wall time, there being no transport.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+import time
+from typing import Any
+
+from cloth_bench_ros import validation
+from cloth_bench_ros.core.evaluation import OnlineEvaluator
+from cloth_bench_ros.core.pointcloud2 import drop_nan
+from cloth_bench_ros.core.run_files import write_run_report
+from cloth_bench_ros.core.run_summary import run_summary
+from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
+from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, parse_primitive
+from cloth_bench_ros.data import BagReader
+from cloth_bench_ros.data.alignment import reference_motion
+from cloth_bench_ros.data.replay import plan_replay, ReplayOptions
+from cloth_bench_ros.data.trial import TrialInfo
+from cloth_bench_ros.engines import make_engine
+from cloth_bench_ros.engines.base import ClothEngine
+from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.studies.run_config import RunConfig
+import numpy as np
+import yaml
+
+
+def as_carried(points: np.ndarray) -> np.ndarray:
+    """Return points as a PointCloud2 of float32 x, y, z carries them, read back as float64."""
+    return np.asarray(points).astype(np.float32).reshape(-1, 3).astype(np.float64)
+
+
+def _engine(config: RunConfig, name: str) -> ClothEngine:
+    """Build an engine as the simulator node does: preset, then the overrides as YAML."""
+    overrides = validation.parameter_mapping(
+        yaml.safe_dump(config.engine_params.get(name, {})), f'simulator_{name}: engine_params'
+    )
+    preset = load_preset(name, config.cloth, config.primitive, config.presets_dir)
+    grid = ClothGrid(*config.grid) if config.grid else None
+    return make_engine(name, float(config.rate_hz), {**preset, **overrides}, grid)
+
+
+def _warm_up(engine: ClothEngine, targets: GripperTargets, seed: int) -> np.ndarray:
+    """Return the state at target 0 after the simulator node's warm-up (reset, step, reset)."""
+    left, right = targets.left[0], targets.right[0]
+    engine.reset(seed, left, right)
+    engine.step(left, right)
+    return engine.reset(seed, left, right)
+
+
+def _step_engines(
+    core: OnlineEvaluator, engines: dict[str, ClothEngine], targets: GripperTargets, seed: int
+) -> None:
+    """
+    Step every engine through the targets in lockstep, as the simulator nodes do.
+
+    The engines advance together so that the evaluator's bounded state buffers hold what the
+    pending real frames need, as in the node graph.
+    """
+    first = {name: _warm_up(engine, targets, seed) for name, engine in engines.items()}
+    clock = time.perf_counter
+    moves = zip(range(len(targets)), targets.left, targets.right)
+    for k, left, right in moves:
+        stamp = targets.stamp_ns(k)
+        for name, engine in engines.items():
+            start = clock()
+            vertices = engine.step(left, right) if k else first[name]
+            step_time = clock() - start
+            core.add_latency(name, step_time)
+            core.add_state(name, stamp, as_carried(vertices))
+            divergence = engine.divergence
+            reason = 'ok' if divergence is None else (
+                f'diverged at step {divergence.step}: {divergence.reason}'
+            )
+            core.add_step(name, stamp, k, step_time, divergence is not None, reason)
+
+
+_PLANS: dict[tuple, tuple[Any, str]] = {}  # a worker's replay plans, by bag and options
+_PLANS_KEPT = 4
+
+
+def _bag_identity(bag: Path) -> tuple:
+    """Return what tells a changed bag from the one planned: its path, sizes and times."""
+    files = sorted(bag.iterdir()) if bag.is_dir() else [bag]
+    return (str(bag.resolve()), *((f.name, f.stat().st_size, f.stat().st_mtime_ns) for f in files))
+
+
+def _replay(config: RunConfig, cut: int | None) -> tuple[Any, dict[str, Any]]:
+    """
+    Return the replay plan of the bag and its accounting, as the recorder sends them.
+
+    A worker plans a bag once for every cell on it (the plan depends on the bag and the options).
+    """
+    options = ReplayOptions(
+        cloth=config.cloth,
+        primitive=config.primitive,
+        change_of_phase_frame=cut,
+        rate_hz=float(config.rate_hz),
+        align_engine=config.engines[0],
+    )
+    key = (_bag_identity(Path(config.bag)), options, config.grid)
+    if key not in _PLANS:
+        nx, nz = config.grid or (0, 0)
+
+        def motion(seconds: float) -> Any:
+            engine = make_engine(
+                options.align_engine,
+                options.rate_hz,
+                load_preset(options.align_engine, options.cloth, options.primitive),
+                ClothGrid(nx, nz) if nx and nz else None,
+            )
+            try:
+                return reference_motion(engine, options.primitive, options.rate_hz, seconds)
+            finally:
+                engine.close()
+
+        plan = plan_replay(BagReader(config.bag), options, motion)
+        while len(_PLANS) >= _PLANS_KEPT:
+            _PLANS.pop(next(iter(_PLANS)))
+        _PLANS[key] = (plan, json.dumps(plan.accounting()))
+    plan, accounting = _PLANS[key]
+    return plan, json.loads(accounting)  # as the trial message carries it
+
+
+def run_direct(config: RunConfig) -> dict[str, Any]:
+    """Run one lockstep cell without the node graph; the evaluator's summary of it."""
+    if config.pacing != 'lockstep' or config.replay or config.record_comparison:
+        raise ValueError(
+            'the direct study path runs lockstep cells of bundled-style bags only: '
+            'realtime pacing, replay options and comparison outputs need the node graph'
+        )
+    primitive = parse_primitive(config.primitive)
+    rate_hz = validation.rate_hz(config.rate_hz)
+    cut = config.change_of_phase_frame
+    start = time.monotonic_ns()
+    plan, replay = _replay(config, cut)
+    trial = TrialInfo.from_strings(plan.trial.to_strings())
+    offset_ns = int(round(SETTLE_DURATION * 1e9))
+    core = OnlineEvaluator(list(config.engines), primitive, offset_ns, cut, REAL_FPS)
+    if core.change_of_phase_frame is None:
+        core.change_of_phase_frame = trial.change_of_phase_frame
+    targets = full_targets(primitive, rate_hz)
+    final_stamp = targets.stamp_ns(len(targets) - 1)
+    for t, points in plan.frames:  # pending until the engines' states reach them
+        if t + offset_ns <= final_stamp:
+            kept, dropped = drop_nan(as_carried(points))
+            core.add_real(t + offset_ns, kept, dropped)
+    engines = {name: _engine(config, name) for name in config.engines}
+    try:
+        _step_engines(core, engines, targets, int(config.seed))
+    finally:
+        for engine in engines.values():
+            engine.close()
+    wall_s = (time.monotonic_ns() - start) / 1e9
+    run = {
+        'primitive': primitive.value,
+        'rate_hz': rate_hz,
+        'engines': list(config.engines),
+        'cloth': config.cloth,
+        'seed': int(config.seed),
+        'trial': trial.to_dict(),
+    }
+    summary = run_summary(core, replay, run, 1.0 / rate_hz, wall_s, final_stamp)
+    if config.output_dir:
+        write_run_report(config.output_dir, summary, core.scores)
+    return summary
