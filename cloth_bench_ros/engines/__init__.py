@@ -9,6 +9,7 @@ where MyCloth subclasses `cloth_bench_ros.engines.base.ClothEngine`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from importlib.metadata import entry_points
 
 from cloth_bench_ros.engines.base import ClothEngine, EngineError
@@ -32,6 +33,7 @@ class EngineInfo:
     reason: str  # why it is unavailable, empty when available
 
 
+@lru_cache(maxsize=1)  # read once per process: a sweep's worker builds an engine per cell
 def _entry_points() -> dict:
     return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
 

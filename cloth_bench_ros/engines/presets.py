@@ -12,6 +12,7 @@ EngineError of one line naming the file.
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 from cloth_bench_ros import validation
@@ -92,6 +93,20 @@ def read_preset_file(path: Path) -> dict:
     return data
 
 
+_PRESET_FILES: dict[tuple, dict] = {}  # parsed preset files, by path, size and modification time
+
+
+def _read_preset_file_cached(path: Path) -> dict:
+    """Return `read_preset_file(path)`, parsed once per process while the file is unchanged."""
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if key not in _PRESET_FILES:
+        if len(_PRESET_FILES) >= 64:
+            _PRESET_FILES.clear()
+        _PRESET_FILES[key] = read_preset_file(path)
+    return copy.deepcopy(_PRESET_FILES[key])  # callers own what they get
+
+
 def load_preset(engine: str, cloth: str, primitive: str, config_dir: Path | None = None) -> dict:
     """
     Parameters of `engine` for `cloth` and `primitive`, checked against the engine's schema.
@@ -109,7 +124,7 @@ def load_preset(engine: str, cloth: str, primitive: str, config_dir: Path | None
                 f'presets directory {config_dir}: no {engine}.yaml (nor presets/{engine}.yaml)'
             )
         return {}
-    presets = read_preset_file(path)['presets']
+    presets = _read_preset_file_cached(path)['presets']
     try:
         values = dict(presets[cloth][primitive])
     except KeyError:

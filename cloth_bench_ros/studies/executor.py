@@ -72,10 +72,13 @@ class _WorkerSetup(WorkerPlugin):
         import warnings
 
         from cloth_bench_ros.core import metrics
+        import numpy as np
 
         for var in _THREAD_VARS:
             os.environ.setdefault(var, '1')  # the engines are single-threaded: one core per worker
         metrics.keep_trees(WORKER_TREE_CACHE_POINTS)
+        cloud = np.eye(3)
+        metrics.RealCloud(cloud).chamfer_hausdorff(cloud)  # load the compiled kernels now
         if self.local and self.log_path:
             # What the engines' C code prints goes to the log, not to the terminal of the progress bar.
             try:

@@ -1,7 +1,8 @@
 """
 Sweeps: many pipeline runs on the Dask executor, one JSON line per finished cell.
 
-A cell (cloth_bench_ros.studies.cells) is one `run_pipeline` call. Results go to
+A cell (cloth_bench_ros.studies.cells) is one run: `run_direct` for lockstep cells (the node
+graph's metrics without its nodes and messages), `run_pipeline` for realtime ones. Results go to
 <out>/results.jsonl, appended by the client as each cell finishes (so an interrupted sweep loses
 at most the cells in flight), under the directory's lock (one study writes a directory at a
 time; a second one refuses with one line). A new run over the same directory skips every cell
@@ -53,6 +54,7 @@ from cloth_bench_ros.studies.results import (  # noqa: F401
     ResultsLock,
     row_key,
 )
+from cloth_bench_ros.studies.run_config import RunConfig
 
 # -------------------------------------------------------------------------------------- rows
 
@@ -151,27 +153,35 @@ def error_row(cell: Cell, message: str, wall_s: float = math.nan) -> dict:
     }
 
 
+def cell_config(cell: Cell, output_dir: Path | None) -> RunConfig:
+    """Return the run a cell stands for."""
+    return RunConfig(
+        bag=Path(cell.bag),
+        engines=[cell.engine],
+        rate_hz=cell.rate_hz,
+        cloth=cell.cloth,
+        primitive=cell.primitive,
+        seed=cell.seed,
+        pacing=cell.pacing,
+        output_dir=output_dir,
+        engine_params={cell.engine: cell.params},
+        grid=cell.grid,
+    )
+
+
 def run_cell(cell: Cell, out_dir: str) -> dict:
     """Run one cell (in a worker process); never raises for a failure of the run itself."""
     start = time.perf_counter()
     frames_dir = Path(out_dir) / 'frames' / cell.ident() if cell.keep_frames else None
     try:
         from cloth_bench_ros.engines import engine_class
-        from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
+        from cloth_bench_ros.studies.direct import run_direct
+        from cloth_bench_ros.studies.pipeline import run_pipeline
 
-        config = RunConfig(
-            bag=Path(cell.bag),
-            engines=[cell.engine],
-            rate_hz=cell.rate_hz,
-            cloth=cell.cloth,
-            primitive=cell.primitive,
-            seed=cell.seed,
-            pacing=cell.pacing,
-            output_dir=frames_dir,
-            engine_params={cell.engine: cell.params},
-            grid=cell.grid,
-        )
-        summary = run_pipeline(config)
+        config = cell_config(cell, frames_dir)
+        # Lockstep cells run at the physics limit (engine, trajectory and evaluator called
+        # directly, metrics equal to the node graph's); realtime cells need the graph's clocks.
+        summary = run_direct(config) if cell.pacing == 'lockstep' else run_pipeline(config)
         if summary is None:
             raise RuntimeError('the pipeline ended without a summary')
         row = {**_cell_fields(cell), **summary_row(cell, summary)}
