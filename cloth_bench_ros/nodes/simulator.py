@@ -10,6 +10,7 @@ for SCHED_FIFO and freezes its start-up heap (`cpu`, `realtime_priority`, `freez
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 import time
 
@@ -68,12 +69,44 @@ class StateMessages:
         )
         return cloud, xyz, DiagnosticArray(header=header, status=[status])
 
+    def _fresh(self) -> tuple[PointCloud2, np.ndarray, DiagnosticArray]:
+        """Return new messages shaped as the first ones, every field given (the cheap way)."""
+        first, first_status = self.cloud, self.status.status[0]
+        header = Header(stamp=first.header.stamp, frame_id=first.header.frame_id)
+        fields = [
+            PointField(name=f.name, offset=f.offset, datatype=f.datatype, count=f.count)
+            for f in first.fields
+        ]
+        data = copy.copy(first.data)  # the array type the message class uses, zeroed below
+        xyz = np.frombuffer(data, dtype=np.float32).reshape(self.n_vertices, 3)
+        xyz[:] = 0.0
+        cloud = PointCloud2(
+            header=header,
+            height=1,
+            width=first.width,
+            fields=fields,
+            is_bigendian=first.is_bigendian,
+            point_step=first.point_step,
+            row_step=first.row_step,
+            data=data,
+            is_dense=True,
+        )
+        values = [KeyValue(key=k, value='') for k in self.STATUS_KEYS]
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.OK,
+            name=first_status.name,
+            message='ok',
+            hardware_id=first_status.hardware_id,
+            values=values,
+        )
+        return cloud, xyz, DiagnosticArray(header=header, status=[status])
+
     def fill(
         self, stamp, vertices: np.ndarray, step: int, step_time: float, divergence, skipped: int
     ) -> tuple[PointCloud2, DiagnosticArray]:
         """Return the two messages of one step (the vertex conversion to float32 is the one copy)."""
         cloud, xyz, status = (
-            (self.cloud, self.xyz, self.status) if self.in_place else self._build()
+            (self.cloud, self.xyz, self.status) if self.in_place else self._fresh()
         )
         cloud.header.stamp = stamp
         np.copyto(xyz, vertices, casting='same_kind')

@@ -42,8 +42,15 @@ def _factory(node: tuple) -> Callable[[], Any]:
             else False if name == 'bool' else 0.0 if name.startswith('float') else 0
         )
         return lambda: value
-    if kind == 2:  # nested message
-        return lambda: message_class(detail)()
+    if kind == 2:  # nested message; its class is looked up on first use (types may nest deeply)
+        nested: list[type] = []
+
+        def make_nested() -> Any:
+            if not nested:
+                nested.append(message_class(detail))
+            return nested[0]()
+
+        return make_nested
     (inner_kind, inner), length = detail
     numeric = int(inner_kind) == 1 and inner[0] in _NUMPY
     if kind == 3:  # fixed-size array
@@ -61,11 +68,13 @@ def message_class(typename: str) -> type:
     if typename not in _classes:
         base = TYPESTORE.types[typename]
         factories = [(name, _factory(node)) for name, node in TYPESTORE.fielddefs[typename][1]]
+        every_field = len(factories)
 
         def __init__(self: Any, **kwargs: Any) -> None:
-            for name, make in factories:
-                if name not in kwargs:
-                    kwargs[name] = make()
+            if len(kwargs) != every_field:  # a field not given gets its default
+                for name, make in factories:
+                    if name not in kwargs:
+                        kwargs[name] = make()
             base.__init__(self, **kwargs)
 
         _classes[typename] = type(typename.rsplit('/', 1)[-1], (base,), {'__init__': __init__})
