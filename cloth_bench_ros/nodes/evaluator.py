@@ -8,9 +8,10 @@ from pathlib import Path
 import time
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.evaluation import accounting_line, frame_accounting, OnlineEvaluator
+from cloth_bench_ros.core.evaluation import accounting_line, OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.core.run_files import write_run_report
+from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
 from cloth_bench_ros.data.trial import trial_from_message
@@ -248,24 +249,6 @@ class Evaluator(Node):
             )
             self.metrics_pub.publish(DiagnosticArray(status=[status]))
 
-    def _change_of_phase(self) -> dict:
-        """Return the scored window's end as used (frame, source: option, metadata, detected or none)."""
-        used = self.core.change_of_phase_frame
-        told = dict(self.replay.get('change_of_phase') or {})
-        if (
-            told.get('frame') != used
-        ):  # the evaluator's own parameter overrides the recorder's choice
-            told = {
-                'frame': used,
-                'source': 'option' if used is not None else 'none',
-                'reason': (
-                    'evaluator parameter change_of_phase_frame'
-                    if used is not None
-                    else 'not given'
-                ),
-            }
-        return told
-
     def finish(self) -> None:
         """Close the run: summary on `metrics`, report files, done."""
         if self.done:
@@ -274,36 +257,19 @@ class Evaluator(Node):
             self.destroy_timer(self.ready_timer)
             self.metrics_pub = self.create_publisher(DiagnosticArray, 'metrics', make_qos(100))
             self.publish_scores()
-        self.core.finish()
         wall_s = (
             (time.monotonic_ns() - self.first_target_ns) / 1e9 if self.first_target_ns else None
         )
-        engines = self.core.summary(self.period_s, wall_s, self.final_stamp / 1e9)
-        real = self.core.real_summary()
-        # NaN points and stamp intervals are counted by the recorder on every frame of the bag.
-        real['nan_points_dropped'] += int(self.replay.get('nan_points_dropped', 0))
-        real['irregular_intervals'] = int(
-            self.replay.get('irregular_intervals', real['irregular_intervals'])
+        run = {**self.run_info, 'trial': self.trial}
+        self.summary = run_summary(
+            self.core, self.replay, run, self.period_s, wall_s, self.final_stamp
         )
-        accounting = frame_accounting(self.replay, real)
+        accounting = self.summary['real']['accounting']
         if not accounting[
             'adds_up'
         ]:  # frames from another graph, or lost ones: the run is not valid
             self.exit_status = 1
             self.get_logger().error(accounting_line(accounting))
-        self.summary = {
-            'run': {**self.run_info, 'trial': self.trial, 'wall_time': wall_s},
-            'real': {
-                **real,
-                'accounting': accounting,
-                'alignment': self.replay.get('start'),
-                'frames_from': self.replay.get('frames'),
-                'cleaning': self.replay.get('cleaning'),
-                'topic': self.replay.get('topic'),
-                'change_of_phase': self._change_of_phase(),
-            },
-            'engines': engines,
-        }
         statuses = []
         for engine, m in self.summary['engines'].items():
             flat = {k: v for k, v in m.items() if not isinstance(v, dict)}
