@@ -1,4 +1,4 @@
-"""A target bag made by an engine itself with known parameters (the identification tests' ground truth)."""
+"""A bag made by an engine with known parameters (the identification tests' ground truth)."""
 
 from __future__ import annotations
 

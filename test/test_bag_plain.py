@@ -1,4 +1,4 @@
-"""Plain rosbag2 recordings: metadata versions 4-9, split files, hardening, tf, start times, Jazzy layout."""
+"""Plain rosbag2 recordings: metadata 4-9, split files, hardening, tf, start times, layouts."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ def _plain_bag(path: Path, frames: int = 4, first_ns: int = 10**18) -> Path:
 
 
 def _as_version(path: Path, version: int) -> None:
-    """Rewrite metadata.yaml in the layout rosbag2 writes at `version` (rosbag2_storage/yaml.hpp)."""
+    """Rewrite metadata.yaml in the layout rosbag2 writes at `version`."""
     doc = yaml.safe_load((path / 'metadata.yaml').read_text())
     info = doc['rosbag2_bagfile_information']
     info['version'] = version

@@ -1,4 +1,4 @@
-"""The change of phase of a dynamic trial found in the data (first table contact), and how runs use it."""
+"""The change of phase of a dynamic trial found in the data, and how runs use it."""
 
 from __future__ import annotations
 

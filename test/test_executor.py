@@ -231,7 +231,7 @@ def test_two_sweeps_on_one_directory_run_every_cell_once(bag_dir, tmp_path):
 
 
 def _python_children(parent: psutil.Process) -> list:
-    """Return the Python processes below parent; one that exits while being listed is not one of them."""
+    """Return the Python processes below parent (one that exits meanwhile is not counted)."""
     out = []
     for child in parent.children(recursive=True):
         try:

@@ -29,7 +29,7 @@ BUNDLED = REPO / 'bags' / 'towel_dynamic'
 
 
 def run_main(capsys, main, argv) -> tuple[int, str, str]:
-    """(status, stdout, stderr) of an in-process `main(argv)`; argparse's exit counts as a status."""
+    """Return (status, stdout, stderr) of an in-process `main(argv)`, argparse's exit included."""
     try:
         code = main(argv)
     except SystemExit as exc:

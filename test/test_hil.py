@@ -45,7 +45,7 @@ MS = 1_000_000
 
 @pytest.fixture
 def dds_loopback(monkeypatch) -> None:
-    """Cyclone on lo only, no multicast, peer 127.0.0.1, on a random domain; children inherit it."""
+    """Confine Cyclone to lo, no multicast, peer 127.0.0.1, a random domain; children inherit."""
     for key, value in loopback_environment(random.randint(1, 200)).items():
         monkeypatch.setenv(key, value)
     monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)

@@ -128,7 +128,7 @@ def test_two_in_process_runs_at_once_do_not_hear_each_other(tmp_path):
 
 
 def _embedded_python() -> list[str]:
-    """Return the project's own venv's Python (the embedded runtime), for the same case without ROS."""
+    """Return the project's own venv's Python (the embedded runtime), for the same case."""
     import sys
 
     return [sys.executable]

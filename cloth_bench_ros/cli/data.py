@@ -1,4 +1,4 @@
-"""`cloth-bench import`, `synth` and `bag`: making and inspecting the bags that runs score against."""
+"""`cloth-bench import`, `synth` and `bag`: making and inspecting the bags runs score against."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""`cloth-bench run`, `trajectory` and `engines`: one run of the node graph, and what it is made of."""
+"""`cloth-bench run`, `trajectory` and `engines`: one run of the node graph and its parts."""
 
 from __future__ import annotations
 
@@ -184,7 +184,7 @@ def _print_real(summary: dict) -> None:
 
 
 def window_line(summary: dict) -> str:
-    """Which frames CD_d/HD_d cover and why: the change of phase and its source (dynamic task only)."""
+    """Return which frames CD_d/HD_d cover and why (the change of phase and its source)."""
     if summary['run'].get('primitive') != 'dynamic':
         return ''
     cop = summary['real'].get('change_of_phase') or {}

@@ -68,7 +68,7 @@ def workspace_box(
 def scene_cleaning(
     primitives: tuple[str, ...] = ('dynamic', 'quasi_static'), voxel: float = 0.0
 ) -> CleaningConfig:
-    """Return the cleaning for the benchmark scene: the workspace box of the primitives' gripper paths."""
+    """Return the cleaning for the benchmark scene: the box of the primitives' gripper paths."""
     from cloth_bench_ros.core.trajectory import full_targets
 
     paths = [full_targets(p, 100.0) for p in primitives]

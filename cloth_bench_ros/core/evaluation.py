@@ -112,7 +112,7 @@ class OnlineEvaluator:
             e.diverged_reason = reason
 
     def add_latency(self, engine: str, latency_s: float) -> None:
-        """Wall time from a target leaving the trajectory publisher to the engine's state arriving."""
+        """Record the wall time from a target's sending to the engine's state arriving."""
         self.engines[engine].latencies.append(latency_s)
 
     def add_real(self, stamp_ns: int, points: np.ndarray, nan_dropped: int = 0) -> None:
@@ -200,7 +200,7 @@ class OnlineEvaluator:
         wall_s: float | None = None,
         sim_s: float | None = None,
     ) -> dict[str, dict]:
-        """Per engine: CD/HD over the window, L_s, step time, latency against the period, divergence."""
+        """Return per engine: CD/HD over the window, L_s, step time, latency, divergence."""
         out = {}
         suffix = 'd' if self.primitive is Primitive.DYNAMIC else 'q'
         for name, e in self.engines.items():

@@ -93,7 +93,7 @@ class TargetTimeline:
 
 @dataclass(frozen=True)
 class HilFigures:
-    """Item-4 figures of one real-time run, from the controller's timeline and the simulator's counts."""
+    """Return the item-4 figures of a real-time run (controller's timeline, simulator's counts)."""
 
     targets: int  # in the trajectory
     sent: int

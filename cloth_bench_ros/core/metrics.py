@@ -27,7 +27,7 @@ def _points(name: str, a: np.ndarray) -> np.ndarray:
 
 
 class RealCloud:
-    """A real point cloud P indexed once (a uniform grid, core/nearest.py) so that several meshes can be scored on it."""
+    """A real point cloud P indexed once (a uniform grid) to score several meshes on it."""
 
     def __init__(self, points: np.ndarray) -> None:
         self.points = _points('P', points)
@@ -87,7 +87,7 @@ def hausdorff_l1(V: np.ndarray, P: np.ndarray) -> float:
 
 
 def stability(frames: np.ndarray) -> float:
-    """L_s = (1/N) sum_{t=1}^{N-2} mean |(V_{t-1} + V_t + V_{t+1}) / 3 - V_t| over frames (N, n, 3)."""
+    """Return L_s of frames (N, n, 3): the mean distance of each frame to its 3-frame average."""
     frames = np.asarray(frames, dtype=np.float64)
     if frames.ndim != 3 or frames.shape[2] != 3:
         raise ValueError(f'frames must have shape (N, n, 3), got {frames.shape}')

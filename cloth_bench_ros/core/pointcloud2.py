@@ -40,7 +40,7 @@ def _cloud_data(cloud_type: type, raw: bytes) -> object:
 
 
 def create_cloud_xyz32(header: Any, points: np.ndarray, cloud_type: type, field_type: type) -> Any:
-    """Return a dense-or-not PointCloud2 of x, y, z float32 (point_step 12), one row, native byte order."""
+    """Return a PointCloud2 of x, y, z float32 (point_step 12), one row, native byte order."""
     pts = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
     fields = [
         field_type(name=name, offset=4 * i, datatype=FLOAT32, count=1)

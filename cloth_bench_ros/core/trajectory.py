@@ -134,7 +134,7 @@ def _deg(seg: QuinticSegment) -> QuinticSegment:
 
 
 def quintic_part(primitive: Primitive | str) -> PrimitiveTrajectory:
-    """Return the quintic part of a primitive, exactly as docs/benchmark.md section 2 tabulates it."""
+    """Return the quintic part of a primitive, as docs/benchmark.md section 2 tabulates it."""
     primitive = parse_primitive(primitive) if isinstance(primitive, str) else primitive
     y0 = float(scene.PREGRASP_LEFT[1])
     z0 = float(scene.PREGRASP_LEFT[2])
@@ -188,7 +188,7 @@ def quintic_part(primitive: Primitive | str) -> PrimitiveTrajectory:
 
 
 def sample_times(duration: float, rate_hz: float) -> np.ndarray:
-    """T = k / rate for k = 0 .. floor(duration * rate), the end included when it falls on a step."""
+    """Return t = k / rate for k = 0 .. floor(duration * rate), the end included on a step."""
     rate_hz = validation.rate_hz(rate_hz)  # bounded before anything is allocated
     n = int(math.floor(duration * rate_hz + 1e-9)) + 1
     return np.arange(n) / rate_hz
@@ -221,7 +221,7 @@ class GripperTargets:
 
 
 def sample_quintic(primitive: Primitive | str, rate_hz: float) -> GripperTargets:
-    """Return the quintic part alone, t from 0 at its start (what `cloth-bench trajectory` prints)."""
+    """Return the quintic part alone, t from 0 at its start (`cloth-bench trajectory`)."""
     traj = quintic_part(primitive)
     t = sample_times(traj.duration, rate_hz)
     y, _, _ = traj.y.evaluate(t)

@@ -267,7 +267,7 @@ class BagReader:
         self.close()
 
     def close(self) -> None:
-        """Remove what a file-compressed bag was decompressed into (other bags keep nothing open)."""
+        """Remove what a file-compressed bag was decompressed into."""
         if self._rosbags is not None:
             self._rosbags.close()
 
@@ -278,7 +278,7 @@ class BagReader:
 
     @property
     def storage(self) -> str:
-        """The storage and its compression, e.g. `mcap, chunk compression zstd` or `sqlite3, file:zstd`."""
+        """Return the storage and its compression, e.g. `mcap, chunk compression zstd`."""
         if self._rosbags is not None:
             compression = self._rosbags.compression
             return f'{self._rosbags.kind}, ' + (
@@ -358,7 +358,7 @@ class BagReader:
         return sorted(t for t, m in self.topics.items() if m == POINTCLOUD2)
 
     def cloud_topic(self, chosen: str | None = None) -> str:
-        """Return the PointCloud2 topic to score: `chosen`, else CLOUD_TOPIC if present, else the only one."""
+        """Return the PointCloud2 topic to score: `chosen`, else CLOUD_TOPIC, else the only one."""
         clouds = self.cloud_topics
         if chosen:
             if chosen not in clouds:
@@ -394,7 +394,7 @@ class BagReader:
     def logged_messages(
         self, topics: Iterable[str] | str | None = None
     ) -> Iterator[tuple[str, str, int, bytes]]:
-        """(topic, msgtype, log_time_ns, cdr) in record order: the MCAP log time, not the header stamp."""
+        """Yield (topic, msgtype, log_time_ns, cdr) in record order, by MCAP log time."""
         wanted = (
             {topics} if isinstance(topics, str) else (set(topics) if topics is not None else None)
         )

@@ -49,7 +49,7 @@ def default_message(msgtype: str, **values: Any) -> Any:
 
 
 def grid_for(vertex_count: int) -> ClothGrid:
-    """Return the cloth grid of an engine's vertex count: the default one, or the nx x nz closest to its shape."""
+    """Return the cloth grid of an engine's vertex count: the default, or the closest nx x nz."""
     default = ClothGrid()
     if vertex_count == default.nx * default.nz:
         return default

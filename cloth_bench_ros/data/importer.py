@@ -277,7 +277,7 @@ class DatasetTrial:
 
 
 def find_trials(root: Path) -> list[DatasetTrial]:
-    """Return the trial folders under root with their frame files; ValueError if none or malformed."""
+    """Return the trial folders under root with their frame files; ValueError if none."""
     root = Path(root)
     if not root.is_dir():
         raise ValueError(f'dataset root {root} is not a directory')
@@ -408,7 +408,7 @@ def _frame_points(path: Path, t: np.ndarray | None, cleaning: CleaningConfig | N
 def _check_change_of_phase(
     bag: Path, info: TrialInfo, found: ContactSearch, table_removed: bool
 ) -> None:
-    """Warn when the recorded change of phase and the first table contact in the clouds disagree."""
+    """Warn when the recorded change of phase and the first table contact disagree."""
     if info.primitive != 'dynamic' or not table_removed:  # else the table is in every frame
         return
     if (

@@ -55,7 +55,7 @@ class ReplayOptions:
 
 @dataclass
 class ReplayPlan:
-    """Frames to send (t_ns from the start of the quintic part, world points) and the accounting."""
+    """Frames to send (t_ns from the quintic part's start, world points) and the accounting."""
 
     trial: TrialInfo
     topic: str
@@ -102,7 +102,7 @@ def _trial(reader: BagReader, options: ReplayOptions, topic: str) -> TrialInfo:
 
 
 def _to_world(reader: BagReader, options: ReplayOptions) -> tuple[Any, str]:
-    """Return a function (frame_id, stamp_ns) -> 4x4 into world, and a sentence saying where it comes from."""
+    """Return a function (frame_id, stamp_ns) -> 4x4 into world, and where it comes from."""
     if options.transform is not None:
         fixed = np.asarray(options.transform, dtype=float).reshape(4, 4)
         return (lambda frame, stamp: fixed), '--transform matrix applied to every cloud'
@@ -141,7 +141,7 @@ def _decode(
 
 
 def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig | None:
-    """Return the cleaning of a replay, or None when off (project bags are cleaned when written)."""
+    """Return the cleaning of a replay, or None when off (project bags are cleaned already)."""
     if options.clean not in CLEAN_MODES:
         raise ValueError(f'clean mode {options.clean!r} is not one of {", ".join(CLEAN_MODES)}')
     if options.clean == 'off' or (options.clean == 'auto' and project_bag):

@@ -43,7 +43,7 @@ DEFAULT_REFERENCE = 'mujoco'
 
 
 def config_path(reference: str = DEFAULT_REFERENCE) -> Path:
-    """config/synth.yaml (or the file of another reference) of the source tree or installed package."""
+    """Return config/synth.yaml (or another reference's file) of the source tree or package."""
     if reference not in REFERENCES:
         raise SynthError(
             f'unknown synthetic reference {reference!r} (valid: {", ".join(REFERENCES)})'
@@ -192,7 +192,7 @@ class DepthNoise:
 
 @dataclass(frozen=True)
 class Sensor:
-    """Camera, noise and the clean-up of the real data: crop, statistical outlier removal, budget."""
+    """Camera, noise and the clean-up of the real data: crop, outlier removal, point budget."""
 
     camera: Camera = Camera()
     noise: DepthNoise = DepthNoise()
@@ -448,7 +448,7 @@ def synthetic_frames(config: SynthConfig) -> Iterator[tuple[int, np.ndarray, np.
 
 
 def render_frames(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
-    """(stamp_ns, points (n, 3)) of every synthetic frame, stamps from the start of the quintic part."""
+    """Return (stamp_ns, points (n, 3)) of every synthetic frame, from the quintic part's start."""
     for k, _, points in synthetic_frames(config):
         yield frame_stamp_ns(k, config.fps), points
 
@@ -513,6 +513,6 @@ def synth_command(
     progress: bool = True,
     reference: str = DEFAULT_REFERENCE,
 ) -> Path:
-    """`cloth-bench synth`: the synthetic bag of a cloth and primitive from a reference's config."""
+    """`cloth-bench synth`: the synthetic bag of a cloth and primitive from a reference."""
     config = reference_config(cloth, primitive, seed, reference=reference)
     return write_synthetic_bag(config, Path(out), overwrite, progress)

@@ -138,7 +138,7 @@ class ClothEngine(abc.ABC):
 
     @classmethod
     def warm(cls) -> None:
-        """Do once what would make an engine's first run slow (e.g. compiling kernels into a cache)."""
+        """Do once what would make an engine's first run slow (e.g. compiling kernels)."""
 
     @property
     def dt(self) -> float:
@@ -157,7 +157,7 @@ class ClothEngine(abc.ABC):
         return self.grid.faces()
 
     def reset(self, seed: int, left_xyz: np.ndarray, right_xyz: np.ndarray) -> np.ndarray:
-        """Build the scene with the grasped corners at the grippers; the seed perturbs the cloth."""
+        """Build the scene, grasped corners at the grippers; the seed perturbs the cloth."""
         self.divergence = None
         self.steps = 0
         left, right = np.asarray(left_xyz, float), np.asarray(right_xyz, float)
@@ -210,7 +210,7 @@ class ClothEngine(abc.ABC):
 
     @abc.abstractmethod
     def _reset(self, displacement: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
-        """Cloth at rest shape + `displacement` (n, 3), at rest, grippers at `left` and `right`; its vertices."""
+        """Return the cloth's vertices at rest + `displacement`, grippers at left and right."""
 
     @abc.abstractmethod
     def _step(self, left: np.ndarray, right: np.ndarray) -> np.ndarray: ...

@@ -76,7 +76,7 @@ def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.n
 
 
 def write_vtk(path: Path, nodes: np.ndarray, tets: np.ndarray) -> None:
-    """Return a tetrahedral mesh as legacy ASCII VTK (unstructured grid), the format Bullet loads."""
+    """Return a tetrahedral mesh as legacy ASCII VTK (unstructured grid), as Bullet loads it."""
     lines = [
         '# vtk DataFile Version 2.0',
         'cloth slab',
@@ -93,7 +93,7 @@ def write_vtk(path: Path, nodes: np.ndarray, tets: np.ndarray) -> None:
 
 
 def match_nodes(loaded: np.ndarray, wanted: np.ndarray, tolerance: float = 1e-5) -> np.ndarray:
-    """Index into `loaded` of the node at each `wanted` position; RuntimeError if one is missing."""
+    """Return the index into `loaded` of each `wanted` node; RuntimeError if one is missing."""
     d2 = ((wanted[:, None, :] - loaded[None, :, :]) ** 2).sum(axis=2)
     index = d2.argmin(axis=1)
     if np.sqrt(d2[np.arange(len(wanted)), index]).max() > tolerance or len(set(index)) != len(
@@ -196,7 +196,7 @@ class BulletCloth(ClothEngine):
     # -- world --------------------------------------------------------------------------------
 
     def _build(self) -> None:
-        """Return a fresh deformable world: gravity, table, cloth, kinematic grippers and anchors."""
+        """Return a fresh deformable world: gravity, table, cloth, kinematic grippers, anchors."""
         c, cid = self.config, self._client
         pb.resetSimulation(pb.RESET_USE_DEFORMABLE_WORLD, physicsClientId=cid)
         pb.setGravity(0.0, 0.0, scene.GRAVITY, physicsClientId=cid)

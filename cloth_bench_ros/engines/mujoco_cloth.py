@@ -236,7 +236,7 @@ class MujocoCloth(ClothEngine):
 </mujoco>"""
 
     def _index_model(self) -> None:
-        """Map grid vertices to their slide joints (checking the order); make the corners kinematic."""
+        """Map grid vertices to their slide joints (order checked); make the corners kinematic."""
         m, d = self.model, self.data
         mujoco.mj_forward(m, d)
         n = len(self._rest)

@@ -194,7 +194,7 @@ class NewtonCloth(ClothEngine):
 
     @classmethod
     def warm(cls) -> None:
-        """Compile every kernel both models use (with and without self-collision) into Warp's cache."""
+        """Compile every kernel of both models (with and without self-collision) into the cache."""
         grid = ClothGrid(3, 3)
         left, right = grid.vertices()[grid.left_corner], grid.vertices()[grid.right_corner]
         for model in MODELS:

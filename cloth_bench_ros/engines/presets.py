@@ -119,7 +119,7 @@ def load_preset(engine: str, cloth: str, primitive: str, config_dir: Path | None
 
 
 def _check_against_engine(engine: str, values: dict, path: Path, where: str) -> None:
-    """EngineError naming the file if the engine's schema rejects a value (skipped if not installed)."""
+    """Raise EngineError naming the file if the engine's schema rejects a value."""
     from cloth_bench_ros.engines import engine_class  # late: the registry imports engines
 
     try:

@@ -19,7 +19,7 @@ REPLAY_STATUS_NAME = 'cloth_bench/recorder/replay'
 
 
 def replay_stamps(msg) -> list[int] | None:
-    """Return the stamps (ns) announced in a real/trial DiagnosticArray, or None without an announcement."""
+    """Return the stamps (ns) announced in a real/trial DiagnosticArray, or None."""
     for status in msg.status:
         if status.name == REPLAY_STATUS_NAME:
             text = {kv.key: kv.value for kv in status.values}.get('stamps_ns', '')
@@ -58,7 +58,7 @@ def node_keys(infos: Iterable) -> set[tuple[str, str]]:
 
 
 def publishers_matched(node, subscription) -> int:
-    """Return publishers matched with a subscription (rclpy >= Iron), else those in the graph (Humble)."""
+    """Return publishers matched with a subscription (rclpy >= Iron), else those in the graph."""
     count = getattr(subscription, 'get_publisher_count', None)
     return count() if count is not None else node.count_publishers(subscription.topic_name)
 

@@ -68,7 +68,7 @@ def qualitative_figure(pairs: list, primitive: str, path: Path) -> tuple[int, in
 
 
 def animation(pairs: list, path: Path) -> tuple[Path, int]:
-    """Sim against real over the trial, one panel per engine: MP4 with ffmpeg, else GIF (PillowWriter)."""
+    """Animate sim against real over the trial, a panel per engine: MP4 with ffmpeg, else GIF."""
     import matplotlib
 
     matplotlib.use('Agg')

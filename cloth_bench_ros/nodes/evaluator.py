@@ -249,7 +249,7 @@ class Evaluator(Node):
             self.metrics_pub.publish(DiagnosticArray(status=[status]))
 
     def _change_of_phase(self) -> dict:
-        """Return the scored window's end as used (frame, source: option, metadata, detected or none)."""
+        """Return the scored window's end as used: frame, and source (option, metadata, ...)."""
         used = self.core.change_of_phase_frame
         told = dict(self.replay.get('change_of_phase') or {})
         if (

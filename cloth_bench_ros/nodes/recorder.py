@@ -174,7 +174,7 @@ class Recorder(Node):
 
     @staticmethod
     def reference_motion(options: ReplayOptions, nx: int, nz: int, seconds: float):
-        """Return the reference simulation the automatic alignment compares the bag with (the run's engine and grid)."""
+        """Return the reference simulation the automatic alignment compares the bag with."""
         preset = load_preset(options.align_engine, options.cloth, options.primitive)
         engine = make_engine(
             options.align_engine, options.rate_hz, preset, ClothGrid(nx, nz) if nx and nz else None
@@ -197,7 +197,7 @@ class Recorder(Node):
         self.done = self.next_frame is None
 
     def trial_message(self) -> DiagnosticArray:
-        """Return the trial (cloth, primitive, change of phase, ...) and the replay's frame accounting."""
+        """Return the trial (cloth, primitive, change of phase) and the replay's accounting."""
         info = self.plan.trial.to_strings()
         info['replay'] = json.dumps(self.plan.accounting())
         info['frames_to_send'] = str(
@@ -214,7 +214,7 @@ class Recorder(Node):
         return DiagnosticArray(status=[status])
 
     def replay_status(self) -> DiagnosticStatus:
-        """Return the run-time stamps of every frame the sim-clock replay will send (common.REPLAY_STATUS_NAME)."""
+        """Return the run-time stamps of every frame the sim-clock replay will send."""
         stamps = [t + self.offset_ns for t, _ in self.plan.frames if t >= self.start_offset_ns]
         return DiagnosticStatus(
             level=DiagnosticStatus.OK,
@@ -228,7 +228,7 @@ class Recorder(Node):
         )
 
     def publish_until(self, t_ns: int, restamp_offset_ns: int) -> None:
-        """Publish every frame at or before t_ns (from the motion's start), restamped by the offset."""
+        """Publish every frame at or before t_ns (from the motion's start), restamped."""
         while self.next_frame is not None:
             frame_t, points = self.next_frame
             if frame_t > t_ns:

@@ -71,7 +71,7 @@ class StateMessages:
     def fill(
         self, stamp, vertices: np.ndarray, step: int, step_time: float, divergence, skipped: int
     ) -> tuple[PointCloud2, DiagnosticArray]:
-        """Return the two messages of one step (the vertex conversion to float32 is the one copy)."""
+        """Return the two messages of one step (the float32 conversion is the one copy)."""
         cloud, xyz, status = (
             (self.cloud, self.xyz, self.status) if self.in_place else self._build()
         )
@@ -197,7 +197,7 @@ class Simulator(Node):
         return vertices
 
     def on_target(self, msg: PoseArray) -> None:
-        """Step to this target; targets the transport dropped while the engine was busy are skipped."""
+        """Step to this target; targets dropped while the engine was busy are skipped."""
         p, g = msg.poses, self.grippers
         g[0, 0], g[0, 1], g[0, 2] = p[0].position.x, p[0].position.y, p[0].position.z
         g[1, 0], g[1, 1], g[1, 2] = p[1].position.x, p[1].position.y, p[1].position.z
@@ -234,7 +234,7 @@ class Simulator(Node):
             self.get_logger().error(f'{self.engine_name} diverged at step {d.step}: {d.reason}')
 
     def first_state(self) -> np.ndarray:
-        """Return the state at the first target: prepared by warm_up when the target is the trajectory's own."""
+        """Return the state at the first target (prepared by warm_up for the trajectory's own)."""
         if self.prepared is not None and np.array_equal(
             self.grippers, [self.targets.left[0], self.targets.right[0]]
         ):

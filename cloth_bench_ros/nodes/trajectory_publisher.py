@@ -155,7 +155,7 @@ class TrajectoryPublisher(Node):
         )
 
     def resend_if_stalled(self) -> None:
-        """Lockstep: send target k (and /clock) again when no progress was made for LOCKSTEP_RESEND_S."""
+        """Lockstep: send target k and /clock again when nothing moved for LOCKSTEP_RESEND_S."""
         if self.done:
             self.destroy_timer(self.resend_timer)
             return
@@ -243,7 +243,7 @@ class TrajectoryPublisher(Node):
         self.publish_due()
 
     def publish_due(self) -> None:
-        """Send every target due by now, in order (a late tick catches up); then wait for the last states."""
+        """Send every target due by now, in order (a late tick catches up); then await states."""
         last = self.n_targets - 1
         if self.k < last:
             due = min(

@@ -14,7 +14,7 @@ Block = tuple  # ("h", level, text) | ("p", text) | ("table", Table) | ("figure"
 
 @dataclass
 class Figure:
-    """A figure to draw when the report is written: draw(path) saves it there (None: nothing to show)."""
+    """A figure drawn when the report is written: draw(path) saves it (None: nothing to show)."""
 
     name: str  # file name in the report directory
     caption: str
@@ -39,7 +39,7 @@ def figure_block(name: str, caption: str, draw: Callable[[Path], 'Path | None'])
 
 @dataclass
 class Document:
-    """A report as a list of blocks; section builders return blocks, `write_document` writes the files."""
+    """A report as a list of blocks, which section builders return and `write_document` writes."""
 
     title: str
     blocks: list = field(default_factory=list)

@@ -108,7 +108,7 @@ def overview_section(rows: Sequence[dict]) -> list[Block]:
 
 
 def paper_configs(rows: Sequence[dict]) -> list[str]:
-    """Return configurations of the lockstep paper sweep, the Table II one first (the presets if present)."""
+    """Return the configurations of the lockstep paper sweep, Table II's (the presets) first."""
     counts = Counter(
         r.get('config', 'preset')
         for r in rows
@@ -295,7 +295,7 @@ def stability_section(rows: Sequence[dict]) -> list[Block]:
 def settings_section(
     rows: Sequence[dict], tol_rel: float, tol_abs: float, recs: list[dict]
 ) -> list[Block]:
-    """Return settings sweep: every configuration against error, and the recommendation (appended to `recs`)."""
+    """Return the settings sweep section: each configuration against error, and the choice."""
     settings = [r for r in rows if r.get('mode') == 'settings']
     if not settings:
         return []
@@ -391,7 +391,7 @@ def render_report(
     title: str = 'cloth_bench_ros: speed against error',
     identifications: Sequence[dict] = (),
 ) -> ReportOutcome:
-    """Render every table and figure of the rows into out_dir (report.md, report.html, *.png, *.csv)."""
+    """Render every table and figure of the rows into out_dir (report.md, .html, .png, .csv)."""
     from cloth_bench_ros.report.comparison import comparison_section
     from cloth_bench_ros.report.identification import identification_section
 

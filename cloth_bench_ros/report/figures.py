@@ -344,7 +344,7 @@ def plot_settings(
 
 
 def frames_file(results_dir: Path, row: dict) -> Path | None:
-    """Return the row's frames.csv if it is a file inside results_dir (a row's path is untrusted)."""
+    """Return the row's frames.csv if it is a file inside results_dir (rows are untrusted)."""
     from cloth_bench_ros.safe_io import confined_path, UnsafeInputError
 
     name = row.get('frames_csv')

@@ -115,7 +115,7 @@ def deadline_tables(
 
 
 def recommendation_yaml(recs: Sequence[Recommendation], provenance: dict) -> str:
-    """Return the shipped recommendation file: provenance, then one entry per engine, task and rate."""
+    """Return the recommendation file: provenance, then one entry per engine, task and rate."""
     import yaml
 
     return yaml.safe_dump(
@@ -146,7 +146,7 @@ def all_recommendations(
 def provenance(
     rows: Sequence[dict], tol_rel: float, tol_abs: float, budget: float, note: str = ''
 ) -> dict:
-    """Where a recommendation file's numbers come from: the sweep's size, engines, machine load, rule."""
+    """Return where a recommendation file's numbers come from: sweep size, engines, load, rule."""
     from datetime import datetime, timezone
 
     settings = [r for r in rows if r.get('mode') == 'settings']
@@ -257,7 +257,7 @@ def text_table(table: Table) -> str:
 
 
 def plot_run(timeline, period_s: float, path: Path, title: str) -> Path:
-    """Latency over the run (left) and its histogram (right), deadline in red, skipped targets marked."""
+    """Plot latency over the run and its histogram, the deadline in red, skipped targets marked."""
     import matplotlib
 
     matplotlib.use('Agg')

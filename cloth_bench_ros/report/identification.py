@@ -37,7 +37,7 @@ REQUIRED = {
 
 
 def load_identification(path: Path) -> dict:
-    """Return an identification.json, checked; ResultsError (one line naming the file) if it is not usable."""
+    """Return an identification.json, checked; ResultsError naming the file if it is not usable."""
     from cloth_bench_ros.safe_io import read_text_bounded, safe_name, UnsafeInputError
     from cloth_bench_ros.studies.results import ResultsError
 
@@ -111,7 +111,7 @@ def params_table(ident: dict, suffix: str) -> Table:
 
 
 def before_after_table(ident: dict, suffix: str) -> Table:
-    """Return the objective before (preset) and after (identified): on the fitted seed, then on held-out seeds per bag."""
+    """Return the objective before and after identification, on the fitted and held-out seeds."""
     metric = str(ident['objective']).upper()
     rows = [
         [

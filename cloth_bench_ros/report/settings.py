@@ -1,4 +1,4 @@
-"""Settings sweep: per configuration speed and error, and the cheapest within a tolerance of the best."""
+"""Settings sweep: speed and error per configuration, and the cheapest near the best."""
 
 from __future__ import annotations
 

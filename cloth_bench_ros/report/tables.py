@@ -1,4 +1,4 @@
-"""The report's tables: the paper's Table II layout, the numbers behind Fig. 5, timing, stability."""
+"""The report's tables: the paper's Table II layout, Fig. 5's numbers, timing, stability."""
 
 from __future__ import annotations
 
@@ -106,7 +106,7 @@ PAPER_FIG5 = (
 
 
 def table2(rows: Sequence[dict], rate: float) -> Table:
-    """Paper Table II layout: cloth x metric rows; ours per engine, then the paper's four engines."""
+    """Return the paper's Table II layout: cloth x metric rows; ours, then the paper's."""
     sel = [r for r in rows if float(r['rate_hz']) == rate]
     engines = engines_of(sel)
     headers = (
@@ -144,7 +144,7 @@ def table2(rows: Sequence[dict], rate: float) -> Table:
 
 
 def fig5_table(rows: Sequence[dict], cloth: str, name: str = 'fig5') -> Table:
-    """Return the numbers behind Fig. 5: per engine and rate, step time, L_s, CD_d, CD_q, divergences."""
+    """Return Fig. 5's numbers per engine and rate: step time, L_s, CD_d, CD_q, divergences."""
     sel = [r for r in rows if r['cloth'] == cloth]
     headers = [
         'engine',

@@ -87,7 +87,7 @@ from cloth_bench_ros.runtime.transport import IntraProcessTransport, transport_c
 
 
 def make_transport(context: 'Context', name: str, domain_id: int | None = None) -> Any:
-    """Return the transport `name` ('intra' or 'dds') for a context; DDS loads Cyclone only when chosen."""
+    """Return the transport `name` ('intra' or 'dds'); DDS loads Cyclone only when chosen."""
     if name == 'dds':
         from cloth_bench_ros.runtime.dds.transport import DdsTransport
 
@@ -98,7 +98,7 @@ def make_transport(context: 'Context', name: str, domain_id: int | None = None) 
 
 
 class Context:
-    """One graph: its transport (intra-process or DDS), the delivery queue and the shutdown flag."""
+    """One graph: its transport (intra-process or DDS), delivery queue and shutdown flag."""
 
     def __init__(self) -> None:
         self.args = RosArguments()
@@ -116,7 +116,7 @@ class Context:
         domain_id: int | None = None,
         transport: str | None = None,
     ) -> None:
-        """Parse the ROS arguments and open the transport (None: CLOTH_BENCH_TRANSPORT, else intra)."""
+        """Parse the ROS arguments and open the transport (default: CLOTH_BENCH_TRANSPORT)."""
         self.args = parse_ros_args(args)
         self.transport = make_transport(self, transport or transport_choice('intra'), domain_id)
         self._ok = True
@@ -359,7 +359,7 @@ class Node:
         clock: Clock | None = None,
         **_: Any,
     ) -> Timer:
-        """Return a timer on `clock`, by default the node's (sim time under use_sim_time, as rclpy)."""
+        """Return a timer on `clock`, by default the node's (sim time under use_sim_time)."""
         timer = Timer(timer_period_sec, callback, clock or self._clock)
         self._timers.append(timer)
         return timer
@@ -379,14 +379,14 @@ class Node:
     def get_publishers_info_by_topic(
         self, topic_name: str, no_mangle: bool = False
     ) -> list[TopicEndpointInfo]:
-        """Every publisher of the topic in the graph, with its node (rclpy; the name is expanded)."""
+        """Return every publisher of the topic in the graph, with its node (the name expanded)."""
         topic = topic_name if no_mangle else self.resolve_topic_name(topic_name, only_expand=True)
         return self.context.transport.endpoints(topic, TopicEndpointTypeEnum.PUBLISHER)
 
     def get_subscriptions_info_by_topic(
         self, topic_name: str, no_mangle: bool = False
     ) -> list[TopicEndpointInfo]:
-        """Every subscription of the topic in the graph, with its node (rclpy; the name is expanded)."""
+        """Return every subscription of the topic in the graph, with its node."""
         topic = topic_name if no_mangle else self.resolve_topic_name(topic_name, only_expand=True)
         return self.context.transport.endpoints(topic, TopicEndpointTypeEnum.SUBSCRIPTION)
 

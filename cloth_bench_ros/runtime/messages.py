@@ -57,7 +57,7 @@ def _factory(node: tuple) -> Callable[[], Any]:
 
 
 def message_class(typename: str) -> type:
-    """Return a subclass of rosbags' class for `typename` whose constructor defaults every field."""
+    """Return a subclass of rosbags' class for `typename` whose constructor defaults each field."""
     if typename not in _classes:
         base = TYPESTORE.types[typename]
         factories = [(name, _factory(node)) for name, node in TYPESTORE.fielddefs[typename][1]]

@@ -41,7 +41,7 @@ class ParameterType(enum.IntEnum):
 
     @classmethod
     def from_parameter_value(cls, value: Any) -> 'ParameterType':
-        """Return the type rclpy infers from a Python value (an empty list is a BYTE_ARRAY, as there)."""
+        """Return the type rclpy infers from a Python value (an empty list is a BYTE_ARRAY)."""
         if value is None:
             return cls.NOT_SET
         for py_type, scalar in (
@@ -68,7 +68,7 @@ class ParameterType(enum.IntEnum):
         raise TypeError(f"The given value is not one of the allowed types '{value}'.")
 
     def check(self, value: Any) -> bool:
-        """Return True if `value` is of this type, with rclpy's isinstance rules (bool is an int)."""
+        """Return True if `value` is of this type, by rclpy's isinstance rules (bool is an int)."""
         scalar = {
             ParameterType.BOOL: bool,
             ParameterType.INTEGER: int,
@@ -211,7 +211,7 @@ _NAME_TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 
 
 def rcl_scalar(text: str, quoted: bool, str_tag: bool) -> Any:
-    """Return the value rcl gives a YAML scalar: bool, int (int64, C strtoll), float (strtod), else str."""
+    """Return the value rcl gives a YAML scalar: bool, int (strtoll), float (strtod), else str."""
     if str_tag or quoted:
         return text
     if text in _BOOL_TRUE or text in _BOOL_FALSE:
@@ -303,7 +303,7 @@ class Overrides:
 
 
 def _events_tree(events: list, path: str) -> list:
-    """Return the mapping/sequence/scalar tree of each YAML document; aliases refused as rcl refuses them."""
+    """Return each YAML document's tree of mappings, sequences and scalars; aliases refused."""
     stack: list[list] = []
     roots: list = []
     for event in events:
@@ -336,7 +336,7 @@ def _line(event: Any) -> int:
 
 
 def _value(node: Any, where: str) -> Any:
-    """Return a parameter value: a scalar, or a sequence of scalars of one type (parse.c parse_value)."""
+    """Return a parameter value: a scalar, or a sequence of scalars of one type (parse_value)."""
     if node[0] == 'scalar':
         event = node[1]
         if event.style not in ("'", '"') and event.value == '':

@@ -93,7 +93,7 @@ def keep_off_cpu(cpu: int) -> str:
 
 
 def lower_priority(niceness: int = 19) -> str:
-    """Run this process's threads at `niceness` (work off the critical path yields the CPU to it)."""
+    """Run this process's threads at `niceness` (work off the critical path yields the CPU)."""
     if not hasattr(os, 'setpriority'):
         return 'priority unchanged: os.setpriority is not available on this system'
     for tid in threads():
@@ -127,7 +127,7 @@ def _allowed() -> str:
 
 
 def request_fifo(priority: int) -> str:
-    """Ask for SCHED_FIFO at `priority` (0: stay on the default scheduler); the outcome as a sentence."""
+    """Ask for SCHED_FIFO at `priority` (0: the default scheduler); the outcome as a sentence."""
     if priority <= 0:
         return 'default scheduler (SCHED_OTHER), no real-time priority requested'
     if not hasattr(os, 'sched_setscheduler'):

@@ -33,7 +33,7 @@ class Endpoint(Protocol):
 
 
 def transport_choice(default: str) -> str:
-    """CLOTH_BENCH_TRANSPORT if set (intra or dds), else `default`; ValueError for another value."""
+    """Return CLOTH_BENCH_TRANSPORT if set (intra or dds), else `default`."""
     choice = os.environ.get('CLOTH_BENCH_TRANSPORT', '').strip().lower() or default
     if choice not in TRANSPORTS:
         raise ValueError(

@@ -61,7 +61,7 @@ class Cell:
     keep_frames: bool = False  # write summary.json + frames.csv of this run (per-frame plots)
 
     def key(self) -> tuple:
-        """Return what makes a cell unique in a results file (resume compares these with row_key)."""
+        """Return what makes a cell unique in a results file (resume compares it with row_key)."""
         return result_key({name: getattr(self, name) for name in KEY_FIELDS})
 
     def ident(self) -> str:
@@ -79,7 +79,7 @@ class Cell:
 
     @property
     def reference(self) -> str | None:
-        """The synthetic reference a cross-reference cell is scored against (its config's first entry)."""
+        """The synthetic reference a cross-reference cell is scored against."""
         if self.mode != CROSS_REFERENCE:
             return None
         return self.config.split(',')[0].removeprefix('reference=')

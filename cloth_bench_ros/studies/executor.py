@@ -37,7 +37,7 @@ _THREAD_VARS = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS')
 
 @contextlib.contextmanager
 def quiet_shutdown() -> Iterator[None]:
-    """On an interrupt, take the cluster down without Dask's noise and without a second interrupt."""
+    """On an interrupt, take the cluster down quietly and without a second interrupt."""
     try:
         yield
     except KeyboardInterrupt:
@@ -60,7 +60,7 @@ def default_workers() -> int:
 
 
 class _WorkerSetup(WorkerPlugin):
-    """Worker plugin: quiet output (to the study's log file), one thread for numpy, the tree cache."""
+    """Worker plugin: quiet output (to the study's log), one numpy thread, the tree cache."""
 
     name = 'cloth-bench-setup'
 
@@ -103,7 +103,7 @@ def check_scheduler_address(address: str) -> str:
 def open_client(
     scheduler: str | None = None, workers: int | None = None, log_path: Path | None = None
 ) -> Iterator[Any]:
-    """Return a Dask client: of a new LocalCluster on 127.0.0.1 (`workers` processes), or of `scheduler`."""
+    """Return a Dask client of a new LocalCluster on 127.0.0.1, or of `scheduler`."""
     for var in _THREAD_VARS:
         os.environ.setdefault(var, '1')
     logging.getLogger('distributed').setLevel(logging.ERROR)

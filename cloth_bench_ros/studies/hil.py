@@ -78,7 +78,7 @@ class HilConfig:
     duration: float = 0.0  # s of the trajectory to run (0: all of it, scored by the observer)
 
     def ident(self) -> str:
-        """Return the run's directory name: engine, rate, task, seed and configuration, file-system safe."""
+        """Return the run's directory name (engine, rate, task, seed, configuration), file-safe."""
         text = f'{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}_s{self.seed}_{self.config}'
         return re.sub(r'[^A-Za-z0-9_.+-]+', '-', text)
 
@@ -299,7 +299,7 @@ def _write_simulator_file(run_dir: Path, nodes: list, notes: list[str] = ()) -> 
 
 
 def _waited(config: HilConfig) -> list[str]:
-    """Return the groups whose end ends the run: a shortened run is not scored, so only the controller."""
+    """Return the groups whose end ends the run (a shortened run is not scored)."""
     return ['controller'] if config.duration else ['controller', 'observer']
 
 
@@ -337,7 +337,7 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
 
 
 def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
-    """One group in this process over DDS until it finishes or gets SIGTERM (a child process's work)."""
+    """Run one group in this process over DDS until it finishes or gets SIGTERM."""
     from cloth_bench_ros.nodes.common import close_nodes
     from cloth_bench_ros.runtime import rclpy, realtime, SingleThreadedExecutor
 
@@ -376,7 +376,7 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
 
 
 def _warm_up_messages() -> None:
-    """Return the controller's serialisers (targets out, states in) generated before the first deadline."""
+    """Return the controller's serialisers (targets out, states in), made before any deadline."""
     from cloth_bench_ros.runtime import (
         deserialize_message,
         PointCloud2,
@@ -407,7 +407,7 @@ def _config_from_json(text: str) -> HilConfig:
 
 
 def _run_processes(config: HilConfig, run_dir: Path) -> None:
-    """Return the three groups as three OS processes; the simulator is stopped once the others are done."""
+    """Run the three groups as OS processes; the simulator is stopped once the others are done."""
     from cloth_bench_ros.runtime.dds import loopback_environment
 
     # As `cloth-bench run --processes`: DDS on loopback only, on ROS_DOMAIN_ID or a random domain.
@@ -485,7 +485,7 @@ def run_hil(config: HilConfig, out_dir: Path, lockstep: bool = True) -> HilResul
 
 
 def collect(config: HilConfig, run_dir: Path, load: dict) -> HilResult:
-    """Read what the processes wrote: the controller's timeline, the simulator's counts, the summary."""
+    """Read what the processes wrote: the controller's timeline, simulator's counts, summary."""
     timeline_file = run_dir / TIMELINE.format(engine=config.engine)
     if not timeline_file.is_file() or not (run_dir / SIMULATOR_FILE).is_file():
         raise RuntimeError(f'HIL {config.ident()}: no timeline or simulator counts in {run_dir}')

@@ -65,7 +65,7 @@ class IdentifySpec:
 
 
 def default_params(engine: str) -> list[str]:
-    """Return the parameters fitted by default: the reference's set, else every ranged number of the schema."""
+    """Return the parameters fitted by default: the reference's set, else every ranged number."""
     from cloth_bench_ros.engines import engine_class
 
     schema = engine_class(engine).params
@@ -229,7 +229,7 @@ def trial_of(spec: IdentifySpec, params: dict, number: int, sampler: str) -> Tri
 def run_sampler(
     client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool
 ) -> Any:
-    """Ask and tell until the study holds `spec.trials` finished trials, a batch in flight on the cluster."""
+    """Ask and tell until the study holds `spec.trials` finished trials, a batch in flight."""
     from cloth_bench_ros.studies.executor import worker_slots
     from distributed import as_completed
     from optuna.trial import TrialState
@@ -347,7 +347,7 @@ def identify(
     workers: int | None = None,
     progress: bool = True,
 ) -> IdentifyOutcome:
-    """Run the identification of `spec` and its validation; write the preset and identification.json."""
+    """Run the identification of `spec` and its validation; write the preset and its JSON."""
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.executor import open_client
@@ -400,7 +400,7 @@ def summarise(
     best: str,
     validation: list,
 ) -> dict:
-    """Everything identification.json keeps: the problem, each sampler's result, the kept one, validation."""
+    """Return what identification.json keeps: problem, samplers' results, choice, validation."""
     return {
         'engine': spec.engine,
         'cloth': spec.cloth,

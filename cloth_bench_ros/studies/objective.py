@@ -26,7 +26,7 @@ _BAG_CACHE_SIZE = 4
 
 @dataclass(frozen=True)
 class Trial:
-    """One simulation of an identification: the parameters to try and what to score them against."""
+    """One simulation of an identification: the parameters and what to score them against."""
 
     engine: str
     cloth: str
@@ -43,7 +43,7 @@ class Trial:
 
 
 def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
-    """(change-of-phase frame, [(bag stamp ns, points, NaN points dropped)]) of a bag, decoded once per process."""
+    """Return a bag's change-of-phase frame and (stamp ns, points, NaN dropped), decoded once."""
     from cloth_bench_ros.core.phase import first_table_contact
     from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
     from cloth_bench_ros.data import BagReader

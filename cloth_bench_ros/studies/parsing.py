@@ -1,4 +1,4 @@
-"""Settings axes of `cloth-bench sweep --mode settings`; grids and values through the validation layer."""
+"""Settings axes of `cloth-bench sweep --mode settings`, checked by the validation layer."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The node graph (README, "The node graph") composed in one process: what `cloth-bench run` executes."""
+"""The node graph composed in one process: what `cloth-bench run` executes."""
 
 from __future__ import annotations
 
@@ -98,7 +98,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
 
 
 def isolated_domain() -> int:
-    """Return a ROS domain for one in-process run under real rclpy: random in 1-101, not ROS_DOMAIN_ID's."""
+    """Return a ROS domain for one in-process run under real rclpy: random in 1-101."""
     taken = os.environ.get('ROS_DOMAIN_ID', '0')
     choices = [d for d in range(1, 102) if str(d) != taken]
     return random.SystemRandom().choice(choices)

@@ -42,7 +42,7 @@ DEADLINE_BUDGET = 0.5
 
 @dataclass
 class ConfigResult:
-    """One configuration of a settings sweep at one engine, task and rate: its error, cost and stability."""
+    """One settings-sweep configuration at one engine, task and rate: error, cost, stability."""
 
     engine: str
     cloth: str
@@ -57,7 +57,7 @@ class ConfigResult:
 
 
 def settings_results(rows: Sequence[dict]) -> list[ConfigResult]:
-    """One ConfigResult per engine, cloth, task, rate and configuration of the settings-sweep rows."""
+    """Return a ConfigResult per engine, cloth, task, rate and configuration of the rows."""
     sel = [r for r in rows if r.get('mode') == 'settings']
     out = []
     for (e, cloth, prim, rate, config), g in group(
@@ -128,7 +128,7 @@ class Recommendation:
 
 
 def step_ms_by_config(rows: Sequence[dict], key: str) -> dict[str, float]:
-    """Median over seeds of a step-time statistic (step_time_p50, step_time_p99) per configuration, in ms."""
+    """Return the median over seeds of a step-time statistic per configuration, in ms."""
     by: dict[str, list] = {}
     for r in rows:
         if r.get('status') == 'ok':
@@ -212,7 +212,7 @@ def recommend_for_rate(
 
 
 def load_recommendations(path: Path) -> list[Recommendation]:
-    """Return the entries of a recommendation file; ValueError naming the file on a malformed one."""
+    """Return the entries of a recommendation file; ValueError naming the file if malformed."""
     from cloth_bench_ros.safe_io import load_yaml_file
 
     data = load_yaml_file(path)

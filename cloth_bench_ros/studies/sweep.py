@@ -211,7 +211,7 @@ class SweepOutcome:
 def cells_to_run(
     cells: Sequence[Cell], existing: Sequence[dict], retry_errors: bool = False
 ) -> list[Cell]:
-    """Return the cells not yet in `existing` (each once), seed by seed, the longest first within a seed."""
+    """Return the cells not yet in `existing`, seed by seed, the longest first within a seed."""
     done = {row_key(r) for r in existing if not retry_errors or r.get('status') != 'error'}
     todo: dict[tuple, Cell] = {}
     for cell in cells:
@@ -230,7 +230,7 @@ def run_sweep(
     desc: str = 'sweep',
     scheduler: str | None = None,
 ) -> SweepOutcome:
-    """Run every cell not yet in <out_dir>/results.jsonl on the executor, appending rows as they finish."""
+    """Run every cell not yet in <out_dir>/results.jsonl on the executor, appending its row."""
     from cloth_bench_ros.safe_io import check_output_dir
     from tqdm import tqdm
 

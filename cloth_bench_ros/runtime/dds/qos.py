@@ -89,7 +89,7 @@ def discovery_range(environ: Mapping[str, str] = os.environ) -> str:
 
 
 def domain_config(environ: Mapping[str, str] = os.environ) -> str:
-    """Return the Cyclone configuration of the domain: the discovery fragment, then CYCLONEDDS_URI."""
+    """Return the domain's Cyclone configuration: the discovery fragment, then CYCLONEDDS_URI."""
     scope = discovery_range(environ)
     peers = [p.strip() for p in environ.get('ROS_STATIC_PEERS', '').split(';') if p.strip()]
     config = ''
@@ -131,7 +131,7 @@ LOOPBACK_URI = (
 
 
 def loopback_environment(domain: int) -> dict[str, str]:
-    """Environment entries for a DDS graph confined to loopback on `domain` (tests, --processes)."""
+    """Return the environment of a DDS graph confined to loopback on `domain`."""
     return {
         'CYCLONEDDS_URI': LOOPBACK_URI,
         'ROS_LOCALHOST_ONLY': '1',
