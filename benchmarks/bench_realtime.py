@@ -1,6 +1,8 @@
 """
-Hardware in the loop: MuJoCo and PyBullet at 100 and 1000 Hz, controller, simulator and observer
-in three processes over DDS on loopback, with the preset and the recommended configuration.
+Hardware in the loop: MuJoCo and PyBullet at 100 and 1000 Hz, over DDS on loopback.
+
+Controller, simulator and observer run in three processes, with the preset and the recommended
+configuration.
 
 For each engine, rate and configuration it prints latency p50 / p99 / p99.9 / max (target due on
 the controller's wall-clock schedule -> state back at the controller), deadline misses

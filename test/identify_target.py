@@ -26,8 +26,9 @@ def write_engine_target_bag(
     primitive: str = 'dynamic',
 ) -> Path:
     """
-    Return the engine's own vertices at 30 Hz (linear between steps, as the evaluator pairs them): a bag
-    whose noise floor is 0 for the same engine, seed and parameters.
+    Return the engine's own vertices at 30 Hz (linear between steps, as the evaluator pairs).
+
+    A bag whose noise floor is 0 for the same engine, seed and parameters.
     """
     targets = full_targets(primitive, rate_hz)
     sim = make_engine(

@@ -99,8 +99,9 @@ def downgrade_database(database: Path, schema: int) -> None:
 
 def write_split(out: Path, storage: str, parts: int = 2) -> Path:
     """
-    Return the source's messages in `parts` storage files of one bag, named and listed as
-    `ros2 bag record --max-bag-size` splits them (`<bag>_0`, `<bag>_1`, ...).
+    Return the source's messages in `parts` storage files of one bag.
+
+    Named and listed as `ros2 bag record --max-bag-size` splits them (`<bag>_0`, `<bag>_1`, ...).
     """
     messages = list(BagReader(SOURCE).logged_messages())
     suffix = '.db3' if storage == 'sqlite3' else '.mcap'

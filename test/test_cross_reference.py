@@ -1,6 +1,7 @@
 """
-The second synthetic reference (Newton VBD) and the cross-reference table: real engines scored
-against short real bags of both references (coarse grids, 0.2 s of the fling).
+The second synthetic reference (Newton VBD) and the cross-reference table.
+
+Real engines scored against short real bags of both references (coarse grids, 0.2 s of the fling).
 """
 
 from __future__ import annotations

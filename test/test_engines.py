@@ -1,6 +1,7 @@
 """
-Conformance suite: every available cloth engine, in each of its cloth models, obeys the
-ClothEngine contract in the benchmark scene. Real engines, coarse 6 x 8 grid, 100 Hz fling.
+Conformance suite: every available cloth engine and model obeys the ClothEngine contract.
+
+In the benchmark scene; real engines, coarse 6 x 8 grid, 100 Hz fling.
 
 Tolerances:
 - grasped corners within CORNER_TOLERANCE = 1 mm of the targets after every step;

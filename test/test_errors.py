@@ -1,6 +1,8 @@
 """
-One root for the user-facing errors: every error class of the package (outside the rclpy-compatible
-runtime, whose classes mirror rclpy's) derives from ClothBenchError, and the CLI reports one in one line.
+One root for the user-facing errors, reported by the CLI in one line.
+
+Every error class of the package (outside the rclpy-compatible runtime, whose classes mirror
+rclpy's) derives from ClothBenchError.
 """
 
 from __future__ import annotations

@@ -1,6 +1,8 @@
 """
-The Dask executor with real processes on loopback: an external scheduler and two workers (one killed
-mid-run), two sweeps on one directory, and a client killed with SIGKILL leaving no worker behind.
+The Dask executor with real processes on loopback.
+
+An external scheduler and two workers (one killed mid-run), two sweeps on one directory, and a
+client killed with SIGKILL leaving no worker behind.
 """
 
 from __future__ import annotations

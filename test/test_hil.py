@@ -1,7 +1,9 @@
 """
-Hardware in the loop: a short real-time run in three processes over DDS (loopback, own domain),
-the controller's timeline and its bookkeeping, keep-last skipping, the lean step path, process
-settings, and the configuration recommended for a rate; real engines, real Cyclone DDS.
+Hardware in the loop: a short real-time run in three processes over DDS.
+
+On loopback, own domain: the controller's timeline and its bookkeeping, keep-last skipping, the
+lean step path, process settings, and the configuration recommended for a rate; real engines, real
+Cyclone DDS.
 """
 
 from __future__ import annotations

@@ -1,6 +1,8 @@
 """
-Parameter identification: recovery of known parameters (both samplers), resume, failed trials, the preset
-file, the report section and user errors; real MuJoCo and PyBullet, real Optuna, a real Dask LocalCluster.
+Parameter identification: recovery, resume, failures, preset file, report and errors.
+
+Recovery of known parameters (both samplers), resume, failed trials, the preset file, the report
+section and user errors; real MuJoCo and PyBullet, real Optuna, a real Dask LocalCluster.
 """
 
 from __future__ import annotations

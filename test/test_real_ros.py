@@ -1,5 +1,7 @@
 """
-Real ROS 2 (rclpy Jazzy over Fast DDS) runs the project's nodes: the defects found against it stay fixed.
+Real ROS 2 (rclpy Jazzy over Fast DDS) runs the project's nodes.
+
+The defects found against it stay fixed.
 
 Each case runs real rclpy in its own loopback-only network namespace (test/real_ros.py) and is
 compared with what the embedded runtime does for the same input.
@@ -136,8 +138,10 @@ def _embedded_python() -> list[str]:
 
 def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(tmp_path):
     """
-    The docs' node-by-node `ros2 run` commands (as the installed console scripts run them), one
-    real-rclpy process per node over Fast DDS, in any start order: the embedded in-process run's numbers.
+    Run the docs' node-by-node `ros2 run` commands on real rclpy over Fast DDS.
+
+    As the installed console scripts run them, one process per node, in any start order: the
+    embedded in-process run's numbers.
     """
     bag = ROOT / 'bags' / 'towel_dynamic'
     grid = '-p grid_nx:=6 -p grid_nz:=8'

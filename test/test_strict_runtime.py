@@ -181,8 +181,10 @@ def test_keys_match_as_rclpy_matches_them(tmp_path, context):
 
 def test_a_later_key_wins_and_a_key_keeps_the_place_it_first_appeared(tmp_path, context):
     """
-    Rcl parse.c find_node keeps one entry per key in order of first appearance (over all files and -p
-    rules, arguments.c); rclpy node.cpp applies matching entries in that order, the last one winning.
+    As rcl's parse.c find_node and rclpy's node.cpp: parameter entries in order, last wins.
+
+    find_node keeps one entry per key in order of first appearance (over all files and -p rules,
+    arguments.c); rclpy applies matching entries in that order, the last one winning.
     """
     first = _params_file(
         tmp_path,

@@ -1,6 +1,8 @@
 """
-Synthetic reference bags: z-buffer visibility, sensor noise, outlier removal, the bag, and the
-acceptance ordering (the reference model scores at the noise floor, wrong models clearly worse).
+Synthetic reference bags: visibility, noise, outlier removal, the bag, acceptance order.
+
+Z-buffer visibility, sensor noise, outlier removal, the bag, and the acceptance ordering (the
+reference model scores at the noise floor, wrong models clearly worse).
 """
 
 from __future__ import annotations

@@ -52,7 +52,7 @@ def workspace_box(
     gripper_positions: np.ndarray, margin: float = WORKSPACE_MARGIN
 ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """
-    Return a box holding the cloth wherever the grippers (k, 3) take it, bounded below by the table.
+    Return a box holding the cloth wherever the grippers (k, 3) take it, above the table.
 
     The cloth hangs at most its length from the grippers and swings at most that far sideways.
     """

@@ -253,7 +253,9 @@ FRAME_FATES = (
 
 def frame_accounting(replay: dict, real: dict) -> dict:
     """
-    Return what became of every frame on the bag's topic: the recorder's sorting plus the evaluator's.
+    Return what became of every frame on the bag's topic.
+
+    The recorder's sorting plus the evaluator's.
 
     replay: the recorder's counts (frames_in_bag, before_start, after_trajectory,
     empty_after_cleaning, to_send, ...); real: `OnlineEvaluator.real_summary()`. The fates add up

@@ -67,8 +67,9 @@ _TREE_CACHE_LIMIT = 0
 
 def keep_trees(max_points: int) -> None:
     """
-    Keep the k-d trees of the clouds scored in this process (up to `max_points` points in all):
-    a study's worker that scores the same bag again finds its trees built (0 turns the cache off).
+    Keep the k-d trees of the clouds scored in this process (up to `max_points` points).
+
+    A study's worker that scores the same bag again finds its trees built (0 turns the cache off).
     """
     global _TREE_CACHE_LIMIT, _TREE_CACHE_POINTS
     _TREE_CACHE_LIMIT = int(max_points)

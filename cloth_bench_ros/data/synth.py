@@ -258,7 +258,7 @@ def observe(
     background: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """
-    Return the point cloud (n, 3) the sensor makes of the cloth `triangles` in front of `background`.
+    Return the point cloud (n, 3) the sensor makes of the cloth in front of `background`.
 
     `background` is a (depth, ids) z-buffer of the static scene from `rasterize` (none: empty).
     """
@@ -363,9 +363,10 @@ def reference_config(
     **overrides: Any,
 ) -> SynthConfig:
     """
-    Return the reference model of `cloth` and `primitive` from the reference's config file (config/synth.yaml
-    for MuJoCo); SynthError if unknown. `overrides` replace SynthConfig fields (e.g. a coarser grid
-    or a shorter duration for tests).
+    Return the reference model of `cloth` and `primitive` from the reference's config file.
+
+    The file is config/synth.yaml for MuJoCo; SynthError if unknown. `overrides` replace
+    SynthConfig fields (e.g. a coarser grid or a shorter duration for tests).
     """
     primitive = parse_primitive(primitive).value
     path = path or config_path(reference)
@@ -455,7 +456,9 @@ def render_frames(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
 
 def trial_info(config: SynthConfig, clouds: list[np.ndarray] | None = None) -> TrialInfo:
     """
-    Trial 0 of the cloth; a dynamic trial's change of phase is the first table contact in its clouds.
+    Return trial 0 of the cloth.
+
+    A dynamic trial's change of phase is the first table contact in its clouds.
 
     None if the clouds never touch the table (a shortened trial): its runs then say so and score every frame.
     """

@@ -187,8 +187,10 @@ class ClothEngine(abc.ABC):
 
     def _check(self, vertices: np.ndarray, left: np.ndarray, right: np.ndarray) -> str | None:
         """
-        check_divergence, cheaply: two bounds computed in preallocated scratch arrays; the
-        exact reason only when a bound fails (NaN fails every comparison, so it gets there too).
+        Return check_divergence's reason, cheaply (None when the state is sound).
+
+        Two bounds are computed in preallocated scratch arrays; the exact reason only when a bound
+        fails (NaN fails every comparison, so it gets there too).
         """
         if self._scratch is None or self._scratch.shape != vertices.shape:
             self._scratch, self._row = (

@@ -45,8 +45,10 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
 
 def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.ndarray]:
     """
-    Return the cloth as a slab: nodes (2n, 3), layer 0 at y = -t/2 then layer 1 at +t/2, and
-    positively oriented tetrahedra (6 per grid cell, Kuhn split, conforming across cells).
+    Return the cloth as a slab: nodes (2n, 3) and positively oriented tetrahedra.
+
+    Layer 0 is at y = -t/2, then layer 1 at +t/2; 6 tetrahedra per grid cell (Kuhn split,
+    conforming across cells).
     """
     rest = grid.vertices()
     n = len(rest)

@@ -32,8 +32,10 @@ _stop_requested = threading.Event()
 
 def publish_serialises(node) -> bool:
     """
-    Return True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
-    the embedded intra-process transport hands subscribers the object itself.
+    Return True when publish() serialises the message (rclpy, DDS).
+
+    Such a message may be refilled right after; the embedded intra-process transport hands
+    subscribers the object itself.
     """
     return not EMBEDDED or node.context.transport.name != 'intra'
 
@@ -65,7 +67,7 @@ def publishers_matched(node, subscription) -> int:
 
 def all_subscriptions_matched(node, publisher) -> bool:
     """
-    Return True once the publisher has matched every subscription of its topic that the graph lists.
+    Return True once the publisher has matched every subscription of its topic in the graph.
 
     Under DDS, discovery is asynchronous and pairwise: a reader another node has created is in the
     graph before this publisher's writer has matched it, and a reliable volatile writer delivers

@@ -1,5 +1,5 @@
 """
-The evaluator's comparison outputs: the comparison bag, the paper's qualitative figure, an animation.
+The evaluator's comparison outputs: comparison bag, qualitative figure, animation.
 
 Input is what the evaluator kept of each scored real frame: its `FrameScore`, the real points and
 the engine's vertices at that time. The figure puts the mesh (red) over the real cloud (black) at

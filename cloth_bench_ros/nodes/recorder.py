@@ -305,7 +305,9 @@ class Recorder(Node):
 
     def stop_recording(self, exc: OSError, failed_write: bool) -> None:
         """
-        End the recording on a full disk or write error: finalise what is on disk, then one error line.
+        End the recording on a full disk or write error.
+
+        What is on disk is finalised, then one error line.
 
         After a failed write the MCAP writer's state no longer matches the file, so the bag is
         kept as written (`BagWriter.abandon`) instead of finished over the gap.

@@ -182,8 +182,10 @@ class Simulator(Node):
 
     def warm_up(self) -> np.ndarray:
         """
-        Start-up work before the first deadline: the reset at the trajectory's first target, one
-        throwaway step (first-call costs), the reset again; its vertices answer target 0.
+        Do the start-up work before the first deadline; the vertices answer target 0.
+
+        The reset at the trajectory's first target, one throwaway step (first-call costs), the
+        reset again.
         """
         left, right = self.targets.left[0], self.targets.right[0]
         self.engine.reset(self.seed, left, right)

@@ -212,10 +212,11 @@ class TrajectoryPublisher(Node):
 
     def send_preroll(self) -> None:
         """
-        Start-up handshake before the first deadline: target 0, again every PREROLL_RESEND_S
-        until each simulator has answered it (first samples on new DDS readers and writers take
-        milliseconds; a simulator answers a repeated target with its state, without a step). The
-        answer starts the schedule (on_state -> start_realtime).
+        Start-up handshake before the first deadline: target 0 until each simulator answers it.
+
+        Target 0 is sent again every PREROLL_RESEND_S (first samples on new DDS readers and writers
+        take milliseconds; a simulator answers a repeated target with its state, without a step).
+        The answer starts the schedule (on_state -> start_realtime).
         """
         now = time.monotonic_ns()
         if self.preroll_sent_ns is None or now - self.preroll_sent_ns > PREROLL_RESEND_S * 1e9:

@@ -99,8 +99,9 @@ def write_document(
     names: tuple[str, str] = ('report.md', 'report.html'),
 ) -> tuple[Path, Path, list[Path]]:
     """
-    Draw the figures, write one CSV per table (and per `csv_only` table), report.md and report.html
-    (atomically) into out_dir.
+    Draw the figures, write the CSV tables, report.md and report.html into out_dir.
+
+    One CSV per table (and per `csv_only` table); the documents are written atomically.
     """
     from cloth_bench_ros.safe_io import atomic_write_text
 

@@ -1,5 +1,5 @@
 """
-The report of a study (`cloth-bench report RESULTS`): Markdown and HTML with PNG figures and CSV tables.
+The report of a study (`cloth-bench report RESULTS`): Markdown and HTML, PNG and CSV.
 
 `render_report` composes the document from section builders, each a short function of the rows
 that returns blocks (headings, paragraphs, tables, figures to draw); `write_document` does every
@@ -435,8 +435,10 @@ def report_directory(
     tol_abs: float = 0.002,
 ) -> ReportOutcome:
     """
-    `cloth-bench report`: the report of a results.jsonl (or its directory), with the stress suite and the
-    identifications found beside it; ValueError (one line) when there is nothing usable to report.
+    `cloth-bench report`: the report of a results.jsonl (or its directory).
+
+    With the stress suite and the identifications found beside it; ValueError (one line) when there
+    is nothing usable to report.
     """
     from cloth_bench_ros.report.identification import find_identifications
     from cloth_bench_ros.studies.results import load_rows, RESULTS_FILE

@@ -1,5 +1,5 @@
 """
-Parameter identification in the report: before/after tables, convergence per sampler, parameter importance.
+Parameter identification in the report: before/after, convergence, importance.
 
 Reads the identification.json that `cloth-bench identify` writes (in the results directory or a
 directory below it) as untrusted input: a file that is not such an object is a ResultsError.

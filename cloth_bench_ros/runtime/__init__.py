@@ -128,7 +128,9 @@ def is_user_error(exc: BaseException) -> bool:
 
 def declare_float(node, name: str, default: float) -> float:
     """
-    Return a double parameter that also takes an integer (`-p rate_hz:=1000`), in rclpy and embedded alike.
+    Return a double parameter that also takes an integer (`-p rate_hz:=1000`).
+
+    In rclpy and the embedded runtime alike.
 
     rclpy refuses an INTEGER override for a parameter declared DOUBLE; declared with dynamic
     typing, any type is accepted and this is the one place that keeps numbers and refuses the rest.

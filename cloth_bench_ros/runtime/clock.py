@@ -44,7 +44,9 @@ class ClockType(enum.IntEnum):
 
 class Clock:
     """
-    rclpy's Clock: ROS time (system time, or the last /clock once sim time is active), system or steady.
+    rclpy's Clock: ROS time, system time or steady time.
+
+    ROS time is system time, or the last /clock once sim time is active.
 
     As rclpy's time source, a ROS clock with sim time active reads 0 until the first /clock message
     (rclpy/time_source.py: "Zero time is a special value that means time is uninitialized").

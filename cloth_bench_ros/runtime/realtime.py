@@ -45,8 +45,9 @@ def threads() -> list[int]:
 
 def pin_to_cpu(cpu: int) -> str:
     """
-    Give the calling thread core `cpu` and move every other thread of the process off it (-1:
-    leave all); the outcome as a sentence.
+    Give the calling thread core `cpu`; move every other thread of the process off it.
+
+    -1 leaves all; the outcome as a sentence.
 
     The calling thread is the step loop. The DDS threads (Cyclone's receive and event threads) go
     to the other allowed cores: on the loop's core they would preempt a step, and a loop that
@@ -78,8 +79,9 @@ def pin_to_cpu(cpu: int) -> str:
 
 def keep_off_cpu(cpu: int) -> str:
     """
-    Move every thread of this process off core `cpu` (-1: leave them), so that the simulator's
-    pinned step loop has its core to itself; the outcome as a sentence.
+    Move every thread of this process off core `cpu` (-1: leave them).
+
+    The simulator's pinned step loop then has its core to itself; the outcome as a sentence.
     """
     if cpu < 0 or not hasattr(os, 'sched_setaffinity'):
         return f'not pinned (allowed cores {_allowed()})'
@@ -204,7 +206,9 @@ YOUNG_THRESHOLD, MIDDLE_THRESHOLD = 700, 10  # gc's own default thresholds of ge
 
 def collect_young() -> None:
     """
-    Return the young generations' collection when due by gc's default thresholds (tens of microseconds).
+    Run the young generations' collection when due by gc's default thresholds.
+
+    It takes tens of microseconds.
 
     The oldest generation is left alone during a run: after `freeze_heap` it holds only what a
     run creates and keeps, and ordinary garbage is freed by reference counting anyway.

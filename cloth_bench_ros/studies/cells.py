@@ -1,5 +1,5 @@
 """
-The cells of a study: one pipeline run each (engine, rate, cloth, task, trial bag, seed, configuration).
+The cells of a study: one run each (engine, rate, cloth, task, bag, seed, configuration).
 
 Two kinds of sweep build cells:
 
@@ -163,9 +163,11 @@ def paper_cells(
     keep_frames_seeds: Iterable[int] | None = None,
 ) -> list[Cell]:
     """
-    Return the cells of the paper's layout. step_per_target: internal time step = 1 / rate, one
-    engine step per target (the paper's frequency study), instead of the preset's time step.
-    keep_frames_seeds: seeds whose per-frame scores are kept (default: the first seed).
+    Return the cells of the paper's layout.
+
+    step_per_target: internal time step = 1 / rate, one engine step per target (the paper's
+    frequency study), instead of the preset's time step. keep_frames_seeds: seeds whose per-frame
+    scores are kept (default: the first seed).
     """
     overrides = overrides or {}
     _check_engines(engines, overrides)
@@ -265,9 +267,11 @@ def settings_cells(
 
 def estimated_cost(cell: Cell) -> float:
     """
-    Return a rough cost of a cell in seconds of one core: internal steps x a per-step cost, plus the
-    nodes' work per target (fitted to the default sweep's cells on 2 idle cores, 11 x 15 mesh:
-    0.8 ms per MuJoCo internal step on the fling, 1.4x that with the cloth on the table).
+    Return a rough cost of a cell in seconds of one core.
+
+    Internal steps x a per-step cost, plus the nodes' work per target (fitted to the default
+    sweep's cells on 2 idle cores, 11 x 15 mesh: 0.8 ms per MuJoCo internal step on the fling, 1.4x
+    that with the cloth on the table).
     """
     duration = 7.4 if cell.primitive == 'dynamic' else 17.0  # settle phase + quintic part, s
     params = cell.params

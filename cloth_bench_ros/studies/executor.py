@@ -177,8 +177,10 @@ def run_tasks(
     in_flight: int | None = None,
 ) -> None:
     """
-    func(item, *args) for every item on the cluster, at most `in_flight` at a time (default:
-    twice the worker threads); on_result(item, result) in the client as each finishes.
+    Run func(item, *args) for every item on the cluster, at most `in_flight` at a time.
+
+    The default is twice the worker threads; on_result(item, result) runs in the client as each
+    finishes.
 
     A worker that dies counts against every task it held, so a task beside the one that kills its
     workers can be declared killed too. Killed tasks run again at the end, one at a time: an

@@ -148,8 +148,10 @@ def _cpu_times() -> tuple[int, int, int] | None:
 
 class LoadMeter:
     """
-    The machine's CPU load over a span: busy share of all cores (/proc/stat), the share the
-    hypervisor took from a virtual machine (steal: the vCPU runnable but not running), load averages.
+    The machine's CPU load over a span: busy share, steal and load averages.
+
+    Busy share of all cores (/proc/stat), the share the hypervisor took from a virtual machine
+    (steal: the vCPU runnable but not running), load averages.
     """
 
     def __enter__(self) -> 'LoadMeter':
@@ -261,8 +263,9 @@ def _make_nodes(config: HilConfig, group: str, run_dir: Path, context) -> list:
 
 def _finished(group: str, nodes: list) -> bool:
     """
-    Return the controller ends once its timeline is written, the observer once the evaluator reported;
-    the simulator runs until it is told to stop.
+    Return the groups' ends: controller once its timeline is written, observer once scored.
+
+    The observer ends once the evaluator reported; the simulator runs until it is told to stop.
     """
     if group == 'simulator':
         return False
@@ -574,8 +577,10 @@ def recommended(
     budget: float = HIL_DEADLINE_BUDGET,
 ):
     """
-    Return the configuration `--config recommended` runs and where it comes from: the settings sweep's
-    results if they hold this engine, task and rate, else the shipped config/hil_recommended.yaml.
+    Return the configuration `--config recommended` runs and where it comes from.
+
+    The settings sweep's results if they hold this engine, task and rate, else the shipped
+    config/hil_recommended.yaml.
     """
     from cloth_bench_ros.paths import share_dir
     from cloth_bench_ros.studies.recommend import load_recommendations, recommend_for_rate

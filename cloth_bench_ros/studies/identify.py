@@ -1,5 +1,7 @@
 """
-Parameter identification (`cloth-bench identify`): the paper's CMA-ES and Bayesian optimisation with Optuna.
+Parameter identification (`cloth-bench identify`): CMA-ES and Bayesian optimisation.
+
+The paper's samplers, with Optuna.
 
 The study minimises the chosen metric (CD or HD of the task's window) of an engine against a bag
 over a set of the engine's parameters, with the seed held constant. Samplers: CMA-ES
@@ -84,9 +86,11 @@ def default_params(engine: str) -> list[str]:
 
 def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> dict[str, Any]:
     """
-    Name -> Optuna distribution: the schema's range; where it spans decades (high >= 100 low, or
-    100 times the base value when low is 0), a log range within a factor `span` either side of the
-    base (preset) value. ValueError for a parameter that cannot be fitted.
+    Return name -> Optuna distribution: the schema's range, or a log range around the preset.
+
+    Where a range spans decades (high >= 100 low, or 100 times the base value when low is 0), a log
+    range within a factor `span` either side of the base (preset) value. ValueError for a parameter
+    that cannot be fitted.
     """
     from cloth_bench_ros.engines import engine_class
     from optuna.distributions import FloatDistribution
@@ -115,8 +119,10 @@ def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> 
 
 def make_sampler(name: str, seed: int) -> Any:
     """
-    Return the Optuna sampler `name` (cmaes, tpe or gp), seeded. CMA-ES starts at the centre of the space,
-    which is the preset for the log-scale parameters (their ranges are a factor `span` either side).
+    Return the Optuna sampler `name` (cmaes, tpe or gp), seeded.
+
+    CMA-ES starts at the centre of the space, which is the preset for the log-scale parameters
+    (their ranges are a factor `span` either side).
     """
     import optuna
 
@@ -144,7 +150,9 @@ def samplers_of(choice: str) -> list[str]:
 
 def repair_journal(path: Path) -> int:
     """
-    Drop a torn last line (a crash mid-write) from an Optuna journal, with a warning; bytes dropped.
+    Drop a torn last line (a crash mid-write) from an Optuna journal, with a warning.
+
+    Returns the bytes dropped.
 
     Every complete operation is kept. A bad line followed by good ones is damage, not a torn tail:
     ValueError naming the file and line.
@@ -182,8 +190,9 @@ def repair_journal(path: Path) -> int:
 
 def open_study(spec: IdentifySpec, sampler: str) -> Any:
     """
-    Return the sampler's study in the journal beside the results (created, or loaded to resume); trials
-    left running by an interrupted identification are marked failed.
+    Return the sampler's study in the journal beside the results (created, or loaded).
+
+    Trials left running by an interrupted identification are marked failed.
     """
     import optuna
     from optuna.storages import JournalStorage

@@ -1,6 +1,8 @@
 """
-What an identification leaves behind: its validation through the node graph, the preset file and
-identification.json (everything the report needs, so the report needs no Optuna).
+What an identification leaves behind: validation, preset file and identification.json.
+
+The validation runs through the node graph; identification.json holds everything the report needs,
+so the report needs no Optuna.
 """
 
 from __future__ import annotations
@@ -21,8 +23,10 @@ PRESETS_DIR = 'presets'
 
 def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
     """
-    Seeds other than the identification's, on its bag and the other trials' bags of the cloth and task,
-    each with the engine's preset and with the identified parameters.
+    Return the validation cells: seeds other than the identification's, preset and identified.
+
+    On its bag and the other trials' bags of the cloth and task, each with the engine's preset and
+    with the identified parameters.
     """
     bags = {Path(spec.bag).resolve(): 0}
     try:

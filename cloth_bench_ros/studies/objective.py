@@ -1,5 +1,5 @@
 """
-The objective of parameter identification: one simulation of a trial's parameters, scored against a bag.
+The objective of parameter identification: one scored simulation of a trial's parameters.
 
 A trial drives the engine directly along the primitive's targets (settle phase included) and
 scores it with the evaluator's core (core.evaluation.OnlineEvaluator: the same pairing and the

@@ -1,5 +1,7 @@
 """
-The configuration to run an engine with: the settings sweep's choice, at one rate for hardware in the loop.
+The configuration to run an engine with: the settings sweep's choice at one rate.
+
+For hardware in the loop.
 
 - `recommend`: the most accurate configuration and the cheapest within a tolerance of it.
 - `recommend_for_rate`: the cheapest configuration both accurate enough (`recommend`'s rule) and
@@ -159,7 +161,9 @@ def recommend_for_rate(
     budget: float = DEADLINE_BUDGET,
 ) -> Recommendation | None:
     """
-    Return the cheapest configuration within tolerance of the most accurate whose step p99 < budget / rate.
+    Return the cheapest configuration within tolerance of the most accurate.
+
+    Only configurations whose step p99 < budget / rate count.
 
     Cheapest: the lowest median step time (p50), which other work on a shared machine inflates far
     less than the mean. If no accurate-enough configuration meets the deadline, the cheapest
