@@ -12,7 +12,8 @@ in lockstep; then the recommended configuration's CD against the preset's (the a
 for speed). The baseline of each row is the engine's own step time (step p99 against latency p99).
 
     .venv/bin/python benchmarks/bench_realtime.py [--engines mujoco bullet] [--rates 100 1000]
-        [--configs preset recommended] [--cpu N] [--fifo 50] [--no-busy-wait] [--deadline-budget 0.5]
+        [--configs preset recommended] [--cpu N] [--fifo 50] [--no-busy-wait]
+        [--deadline-budget 0.5]
         [--repeats 1] [--output results/bench_realtime]
 
 By default the real-time layout of docs/hil.md: the simulator's step loop pinned to the last core
@@ -77,7 +78,8 @@ def main() -> None:
     parser.add_argument('--output', type=Path, default=Path('results') / 'bench_realtime')
     args = parser.parse_args()
 
-    # DDS on loopback only, on a domain of its own (the project's network rule: docs/development.md); the children inherit it.
+    # DDS on loopback only, on a domain of its own (the project's network rule:
+    # docs/development.md); the children inherit it.
     os.environ.update(loopback_environment(random.randint(1, 200)))
     bag = bundled_bag(args.cloth, args.primitive)
     load = os.getloadavg()

@@ -178,8 +178,10 @@ def test_written_bag_looks_like_jazzy(tmp_path):
 
 
 def test_type_hash_is_rihs01_as_jazzy_computes_it():
-    # rosbag2 (jazzy) rosbag2_tests/resources/mcap/bag_with_topics_and_service_events/metadata.yaml, recorded
-    # 2023-11-07 by Jazzy's rosbag2 when rosbag2_interfaces/msg/WriteSplitEvent held these two fields.
+    # rosbag2 (jazzy)
+    # rosbag2_tests/resources/mcap/bag_with_topics_and_service_events/metadata.yaml, recorded
+    # 2023-11-07 by Jazzy's rosbag2 when rosbag2_interfaces/msg/WriteSplitEvent held these two
+    # fields.
     from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
     store = get_typestore(Stores.EMPTY)

@@ -111,7 +111,7 @@ def write_split(out: Path, storage: str, parts: int = 2) -> Path:
         part = write_with_rosbags(
             out.parent / f'{out.name}_part{i}',
             storage,
-            messages=messages[bounds[i] : bounds[i + 1]],
+            messages=messages[bounds[i]:bounds[i + 1]],
         )
         name = f'{out.name}_{i}{suffix}'
         out.mkdir(exist_ok=True)

@@ -23,7 +23,7 @@ NOT_ERRORS = {('cloth_bench_ros.studies.errors', 'StudyInterrupted')}
 
 
 def error_classes() -> list[tuple[str, str]]:
-    """(module, class) of every class outside runtime/ whose base is an exception type."""
+    """Return (module, class) of every class outside runtime/ derived from an exception."""
     found = []
     for path in sorted(PACKAGE.rglob('*.py')):
         rel = path.relative_to(PACKAGE.parent).with_suffix('')

@@ -127,11 +127,11 @@ def corrupt_bag(
     elif kind == 'swap_chunks':
         i, j = sorted(rng.choice(len(chunks), 2, replace=False))
         (a, la), (b, lb) = chunks[i], chunks[j]
-        data[a : b + lb] = data[b : b + lb] + data[a + la : b] + data[a : a + la]
+        data[a:b + lb] = data[b:b + lb] + data[a + la:b] + data[a:a + la]
         what = f'chunks {i} and {j} swapped'
     elif kind == 'zero_block':
         start, size = int(rng.integers(0, len(data))), int(rng.integers(1, 4096))
-        data[start : start + size] = bytes(len(data[start : start + size]))
+        data[start:start + size] = bytes(len(data[start:start + size]))
         what = f'{size} bytes zeroed at {start}'
     elif kind == 'meta_flip':
         n = int(rng.integers(1, 9))

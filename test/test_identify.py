@@ -78,9 +78,9 @@ def test_identification_recovers_known_parameters_with_both_samplers_and_resumes
     assert s['preset_value'] > 1e-5
     for sampler in ('cmaes', 'tpe'):
         result = s['per_sampler'][sampler]
-        # Tolerances: within 50 trials (batches of 2 in flight, so the order of results varies), each
-        # sampler brings CD below 40 % of the preset's and within 40 % of each true parameter (the
-        # preset is 200 % off); the kept result is the better of the two and within 20 %.
+        # Tolerances: within 50 trials (batches of 2 in flight, so the order of results varies),
+        # each sampler brings CD below 40 % of the preset's and within 40 % of each true parameter
+        # (the preset is 200 % off); the kept result is the better of the two and within 20 %.
         assert result['value'] < 0.4 * s['preset_value'], (sampler, result)
         for name, truth in TRUTH.items():
             assert abs(result['params'][name] / truth - 1) < 0.4, (sampler, name, result['params'])
@@ -89,7 +89,8 @@ def test_identification_recovers_known_parameters_with_both_samplers_and_resumes
     assert all(abs(s['params'][name] / truth - 1) < 0.2 for name, truth in TRUTH.items()), s[
         'params'
     ]
-    # The preset file is in config/presets format, with provenance, and loads as `run --presets` loads it.
+    # The preset file is in config/presets format, with provenance, and loads as `run --presets`
+    # loads it.
     preset = load_preset('mujoco', 'towel', 'dynamic', tmp_path)
     assert (
         preset['damping'] == pytest.approx(s['params']['damping']) and preset['timestep'] == 0.01

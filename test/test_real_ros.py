@@ -157,12 +157,14 @@ def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(tm
         f' {tmp_path / node}.status)'
         for node, args in nodes.items()
     ]
-    # the evaluator ends the run; the simulator and the recorder are stopped as a user would, with SIGINT
+    # the evaluator ends the run; the simulator and the recorder are stopped as a user would, with
+    # SIGINT
     script = (
         ' & '.join(launches)
         + f' & while [ ! -f {tmp_path / "evaluator.status"} ]; do sleep 0.2; done; '
         + ' '.join(
-            f"pkill -INT -f '^{ROS_PYTHON} -m cloth_bench_ros.nodes.{node} ';"  # the node, not this shell
+            # the node, not this shell
+            f"pkill -INT -f '^{ROS_PYTHON} -m cloth_bench_ros.nodes.{node} ';"
             for node in ('simulator', 'recorder')
         )
         + ' wait'

@@ -110,7 +110,8 @@ def test_partial_wildcards_are_refused_with_one_line_naming_file_and_key(tmp_pat
     [
         '/foo:\n  /*:\n    ros__parameters:\n      id: 10\n',  # wildcards_node_slash.yaml
         'ns//node:\n  ros__parameters:\n    id: 10\n',  # empty_name_in_ns.yaml
-        'node:\n  ros__parameters:\n    name: x\nros__parameters:\n  id: 10\n',  # params_with_no_node.yaml
+        # params_with_no_node.yaml
+        'node:\n  ros__parameters:\n    name: x\nros__parameters:\n  id: 10\n',
         'ns:\n  node:\n    ros__parameters:\n      id:\n',  # no_value1.yaml
         'node:\n  ros__parameters:\n    - driver: front\n',  # seq_map1.yaml
         'node:\n  ros__parameters:\n    name: &FL x\n    spec: *FL\n',  # no_alias_support.yaml
@@ -145,7 +146,7 @@ def test_scalars_are_typed_as_rcl_types_them_not_as_yaml_does(tmp_path):
         _params_file(
             tmp_path,
             "n:\n  ros__parameters:\n    a: !!str 5\n    b: '7'\n"
-            "    c: 1e3\n    d: [1, 2]\n    g:\n      h: true\n",
+            '    c: 1e3\n    d: [1, 2]\n    g:\n      h: true\n',
         )
     )
     assert overrides.entries['n'] == {'a': '5', 'b': '7', 'c': 1000.0, 'd': [1, 2], 'g.h': True}

@@ -101,7 +101,9 @@ def executor_options() -> argparse.ArgumentParser:
     return parent
 
 
-def engine_override_option(parser: argparse.ArgumentParser, help: str) -> None:
+def engine_override_option(
+    parser: argparse.ArgumentParser, help: str  # noqa: A002  (argparse's own keyword)
+) -> None:
     """--set ENGINE.PARAM=VALUE (repeatable)."""
     parser.add_argument('--set', action='append', metavar='ENGINE.PARAM=VALUE', help=help)
 

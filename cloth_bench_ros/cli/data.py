@@ -72,7 +72,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         'rewrite',
         help=(
             "copy a bag into the current writer's layout (rosbag2 Jazzy, "
-            "metadata version 9, type hashes); messages and trial unchanged"
+            'metadata version 9, type hashes); messages and trial unchanged'
         ),
     )
     rewrite.add_argument('src', help='bag to read')

@@ -208,9 +208,9 @@ def cmd_hil(args: argparse.Namespace) -> int:
     print(text_table(hil_table(rows)))
     print(
         "latency: target due on the controller's wall-clock schedule -> state back at the"
-        " controller; miss: latency > 1 / rate; skipped: targets the simulator never stepped (a"
-        " newer one was waiting); RTF: simulated / wall time; CPU busy: all cores, any process,"
-        " during the run"
+        ' controller; miss: latency > 1 / rate; skipped: targets the simulator never stepped (a'
+        ' newer one was waiting); RTF: simulated / wall time; CPU busy: all cores, any process,'
+        ' during the run'
     )
     report = write_hil_report(rows, out, out / 'report')
     print(

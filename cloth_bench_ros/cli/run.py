@@ -74,7 +74,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         choices=('auto', 'on', 'off'),
         help=(
             "crop, table plane, outliers (default auto: on for bags without the project's"
-            " metadata)"
+            ' metadata)'
         ),
     )
     scoring.add_argument(
@@ -140,7 +140,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 
 def _replay_params(args: argparse.Namespace) -> dict:
-    """Recorder parameters for bags that do not say everything (plain `ros2 bag record` output)."""
+    """Return the recorder parameters for bags that do not say everything (plain recordings)."""
     params = {
         'topic': args.topic or '',
         'start_time': args.start_time or '',

@@ -236,7 +236,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     )
     print(
         f'cloth-bench sweep ({args.mode}): {len(engines)} engines x'
-        f' {len(set(c.rate_hz for c in cells))} rates x {len({c.cloth for c in cells})} cloths x'
+        f' {len({c.rate_hz for c in cells})} rates x {len({c.cloth for c in cells})} cloths x'
         f' {len({c.primitive for c in cells})} tasks x {len(plan.seeds())} seeds'
         + (f' x {len({c.config for c in cells})} configurations' if settings else '')
         + f' = {len(cells)} cells -> {out / sw.RESULTS_FILE} on {where}',

@@ -128,7 +128,7 @@ class LatencyStats:
     mean: float
     p50: float
     p99: float
-    max: float
+    max: float  # noqa: A003  (a statistic's name, as in the summary's keys)
 
     def as_dict(self) -> dict[str, float]:
         return {

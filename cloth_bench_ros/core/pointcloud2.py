@@ -108,7 +108,7 @@ def read_xyz(cloud: Any) -> np.ndarray:
         dtype = np.dtype(order + _NUMPY_TYPES[f.datatype])
         if f.offset + dtype.itemsize > point_step:
             raise PointCloudError(f'PointCloud2 field {c} lies outside point_step {point_step}')
-        out[:, i] = packed[:, f.offset : f.offset + dtype.itemsize].copy().view(dtype).ravel()
+        out[:, i] = packed[:, f.offset:f.offset + dtype.itemsize].copy().view(dtype).ravel()
     return out
 
 

@@ -87,7 +87,7 @@ class QuinticChain:
 
     @property
     def breakpoints(self) -> np.ndarray:
-        """Times at which segments end, from the start of the chain."""
+        """Return the times at which segments end, from the start of the chain."""
         return np.cumsum([s.duration for s in self.segments])
 
     def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -291,6 +291,7 @@ def to_csv(targets: GripperTargets) -> str:
         rx, ry, rz = targets.right[k]
         r = targets.roll[k]
         rows.append(
-            f'{targets.t[k]:.6f},{lx:.9f},{ly:.9f},{lz:.9f},{r:.9f},{rx:.9f},{ry:.9f},{rz:.9f},{r:.9f}'
+            f'{targets.t[k]:.6f},{lx:.9f},{ly:.9f},{lz:.9f},{r:.9f},'
+            f'{rx:.9f},{ry:.9f},{rz:.9f},{r:.9f}'
         )
     return '\n'.join(rows) + '\n'

@@ -273,7 +273,7 @@ class BagReader:
 
     @property
     def files(self) -> list[Path]:
-        """The bag's storage files."""
+        """Return the bag's storage files."""
         return self._rosbags.files if self._rosbags is not None else [f.path for f in self._files]
 
     @property
@@ -288,7 +288,7 @@ class BagReader:
 
     @property
     def complete(self) -> bool:
-        """False if a file had no readable summary (truncated recording)."""
+        """Return False if a file had no readable summary (a truncated recording)."""
         return all(f.complete for f in self._files)
 
     @property
@@ -327,7 +327,7 @@ class BagReader:
 
     @property
     def trial(self) -> TrialInfo | None:
-        """The trial: metadata.yaml custom_data, else the MCAP record, else TRIAL_TOPIC."""
+        """Return the trial: metadata.yaml custom_data, else the MCAP record, else TRIAL_TOPIC."""
         if self._trial is False:
             self._trial = self._find_trial()
         return self._trial  # type: ignore[return-value]
@@ -336,7 +336,7 @@ class BagReader:
         try:
             custom = self.custom_data
             keys = {
-                k[len(CUSTOM_DATA_PREFIX) :]: str(v)
+                k[len(CUSTOM_DATA_PREFIX):]: str(v)
                 for k, v in custom.items()
                 if k.startswith(CUSTOM_DATA_PREFIX)
             }

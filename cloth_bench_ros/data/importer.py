@@ -1,9 +1,11 @@
 """
 Import the published dataset (PLY/PCD folders) into one rosbag2 MCAP bag per trial.
 
-Layout (docs/benchmark.md, section 5): `<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`.
-Frame NNNNN is stamped NNNNN / 30 s; points are kept exactly (NaN included; the reader drops
-and counts them), optionally moved by a 4x4 transform, and stored as float32 x/y/z; `--clean` runs them through core.cleaning first.
+Layout (docs/benchmark.md, section 5):
+`<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`. Frame NNNNN is stamped
+NNNNN / 30 s; points are kept exactly (NaN included; the reader drops and counts them),
+optionally moved by a 4x4 transform, and stored as float32 x/y/z; `--clean` runs them through
+core.cleaning first.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ from tqdm import tqdm
 CLOTH_NAMES = {'chequered': 'chequered', 'cotton': 'towel', 'linen': 'linen'}  # folder -> ours
 PRIMITIVES = ('dynamic', 'quasi_static')
 
-# Change of phase (first contact) of the dynamic trials, real frame index (docs/benchmark.md, section 4).
+# Change of phase (first contact) of the dynamic trials, real frame index (docs/benchmark.md,
+# section 4).
 CHANGE_OF_PHASE = {
     ('chequered', 0): 95, ('chequered', 1): 95, ('chequered', 2): 99,
     ('towel', 0): 99, ('towel', 1): 98, ('towel', 2): 99,
@@ -123,7 +126,7 @@ def read_ply(path: Path) -> np.ndarray:
                 rows = (
                     data[offset:]
                     .decode('ascii', errors='replace')
-                    .splitlines()[skip : skip + count]
+                    .splitlines()[skip:skip + count]
                 )
                 if len(rows) < count:
                     raise CloudFileError(f'{path}: truncated, {len(rows)} of {count} vertices')
@@ -154,8 +157,11 @@ def read_ply(path: Path) -> np.ndarray:
     raise CloudFileError(f'{path}: no vertex element')
 
 
-_PCD_TYPES = {('F', 4): 'f4', ('F', 8): 'f8', ('I', 1): 'i1', ('I', 2): 'i2', ('I', 4): 'i4',
-              ('I', 8): 'i8', ('U', 1): 'u1', ('U', 2): 'u2', ('U', 4): 'u4', ('U', 8): 'u8'}  # fmt: skip
+_PCD_TYPES = {  # fmt: skip
+    ('F', 4): 'f4', ('F', 8): 'f8',
+    ('I', 1): 'i1', ('I', 2): 'i2', ('I', 4): 'i4', ('I', 8): 'i8',
+    ('U', 1): 'u1', ('U', 2): 'u2', ('U', 4): 'u4', ('U', 8): 'u8',
+}
 
 
 def _int(word: str) -> int:
@@ -416,9 +422,13 @@ def _check_change_of_phase(
         or info.change_of_phase_frame is None
         or abs(found.index - info.change_of_phase_frame) > 1
     ):
+        seen = (
+            f'first table contact at frame {found.index}'
+            if found.index is not None
+            else found.reason
+        )
         warnings.warn(
             f'bag {bag}: change of phase at frame {info.change_of_phase_frame}, but the clouds '
-            'show'
-            f' {"first table contact at frame " + str(found.index) if found.index is not None else found.reason}',
+            f'show {seen}',
             stacklevel=3,
         )

@@ -26,7 +26,7 @@ class MessageTypeError(ClothBenchError, ValueError):
 
 
 def msg_class(msgtype: str) -> type:
-    """Return the rosbags dataclass of a message type, e.g. `msg_class("std_msgs/msg/Header")`."""
+    """Return the rosbags dataclass of a message type name such as "std_msgs/msg/Header"."""
     try:
         return TYPESTORE.types[msgtype]
     except KeyError:

@@ -43,11 +43,8 @@ class ReplayOptions:
     transform: tuple | None = None  # 16 numbers, row-major: replaces tf for every cloud
     clean: str = 'auto'  # auto: on for bags without project metadata
     voxel: float = 0.0
-    table_plane: (
-        str
-    ) = (  # remove, keep, or auto: remove for dynamic (scored before contact), keep for quasi_static
-        'auto'
-    )
+    # remove, keep, or auto: remove for dynamic (scored before contact), keep for quasi_static
+    table_plane: str = 'auto'
     rate_hz: float = 100.0
     align_engine: str = 'mujoco'
     search: alignment.SearchSettings = alignment.SearchSettings()
@@ -150,7 +147,8 @@ def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig
         raise ValueError(
             f'table plane mode {options.table_plane!r} is not one of {", ".join(TABLE_MODES)}'
         )
-    # Removing the plane also removes cloth lying flat on the table, which the quasi-static drag scores.
+    # Removing the plane also removes cloth lying flat on the table, which the quasi-static drag
+    # scores.
     remove = options.table_plane == 'remove' or (
         options.table_plane == 'auto' and options.primitive == 'dynamic'
     )

@@ -3,9 +3,9 @@ Synthetic reference bags: a high-resolution reference cloth seen by a virtual Az
 
 A reference simulation (config/synth.yaml: finer grid and another integrator than the models
 under test) runs along the full trajectory; at every 30 fps frame its mesh is rasterised into a
-z-buffer by a pinhole camera placed as docs/benchmark.md section 1 says, so that only the surfaces the
-camera sees survive. The depth image gets Azure-Kinect-like noise and flying pixels at the
-silhouette, is back-projected to the world frame, cropped to the cloth above the table, cleaned
+z-buffer by a pinhole camera placed as docs/benchmark.md section 1 says, so that only the
+surfaces the camera sees survive. The depth image gets Azure-Kinect-like noise and flying
+pixels at the silhouette, is back-projected to the world frame, cropped to the cloth above the table, cleaned
 by statistical outlier removal (open3d) and randomly subsampled to a point budget: partial,
 noisy clouds, far denser than the simulated mesh, like the real ones.
 """
@@ -37,7 +37,8 @@ class SynthError(ClothBenchError, ValueError):
     """A synthetic reference that cannot be made (bad config/synth.yaml, diverged reference)."""
 
 
-# Reference models (`cloth-bench synth --reference`): name -> file under config/. MuJoCo is the default.
+# Reference models (`cloth-bench synth --reference`): name -> file under config/. MuJoCo is the
+# default.
 REFERENCES = {'mujoco': 'synth.yaml', 'newton-vbd': 'synth_newton_vbd.yaml'}
 DEFAULT_REFERENCE = 'mujoco'
 
@@ -156,7 +157,7 @@ def _quad(p0, p1, p2, p3) -> np.ndarray:
 
 
 def background_triangles() -> np.ndarray:
-    """Static scene behind the cloth: table top, table front face and a wall at WALL_Y."""
+    """Return the static scene behind the cloth: table top, table front face, a wall at WALL_Y."""
     (x0, x1), (y0, y1), zt = scene.TABLE_X, scene.TABLE_Y, scene.TABLE_TOP_Z
     zb = zt - scene.TABLE_THICKNESS
     top = _quad((x0, y0, zt), (x1, y0, zt), (x1, y1, zt), (x0, y1, zt))
@@ -209,7 +210,7 @@ class Sensor:
 
     @property
     def cleaning(self) -> cleaning.CleaningConfig:
-        """The crop (above the table top) and outlier removal of the one cleaning pipeline."""
+        """Return the crop (above the table) and outlier removal of the one cleaning pipeline."""
         return cleaning.CleaningConfig(
             self.crop_min,
             self.crop_max,
@@ -460,7 +461,8 @@ def trial_info(config: SynthConfig, clouds: list[np.ndarray] | None = None) -> T
 
     A dynamic trial's change of phase is the first table contact in its clouds.
 
-    None if the clouds never touch the table (a shortened trial): its runs then say so and score every frame.
+    None if the clouds never touch the table (a shortened trial): its runs then say so and
+    score every frame.
     """
     cop = None
     if config.primitive == 'dynamic':

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import abc
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import math
 from typing import ClassVar, Mapping
 
@@ -145,7 +145,7 @@ class ClothEngine(abc.ABC):
         return 1.0 / self.rate_hz
 
     def internal_steps(self, timestep: float, least: int) -> int:
-        """Internal steps per engine step: at least `least`, and none longer than `timestep`."""
+        """Return the internal steps per step: at least `least`, none longer than `timestep`."""
         return max(least, math.ceil(self.dt / timestep - 1e-9))
 
     @property

@@ -28,9 +28,9 @@ import numpy as np
 with quiet_c_output():  # pybullet prints its build time on import
     import pybullet as pb
 
-from cloth_bench_ros.core import scene
+from cloth_bench_ros.core import scene  # noqa: I100  (after pybullet's quiet import)
 from cloth_bench_ros.core.scene import ClothGrid
-from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
+from cloth_bench_ros.engines.base import ClothEngine, Param
 
 MODELS = ('mass_spring', 'neo_hookean')
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -110,7 +110,8 @@ class BulletCloth(ClothEngine):
     PyBullet deformable cloth: mass-spring with bending springs, or Neo-Hookean FEM slab.
 
     reset(seed) rebuilds the world (so one seed always gives bit-identical runs) and places the
-    cloth in the task's seeded initial state (core/task.py); both layers of a FEM slab move together.
+    cloth in the task's seeded initial state (core/task.py); both layers of a FEM slab move
+    together.
     """
 
     name: ClassVar[str] = 'bullet'
@@ -222,17 +223,17 @@ class BulletCloth(ClothEngine):
             physicsClientId=cid,
         )
         pb.changeDynamics(table, -1, lateralFriction=1.0, physicsClientId=cid)
-        common = dict(
-            basePosition=[0.0, 0.0, 0.0],
-            baseOrientation=list(_IDENTITY),
-            scale=1.0,
-            mass=float(c['mass']),
-            collisionMargin=float(c['collision_margin']),
-            frictionCoeff=float(c['friction']),
-            useSelfCollision=int(c['self_collision']),
-            useFaceContact=1,
-            physicsClientId=cid,
-        )
+        common = {
+            'basePosition': [0.0, 0.0, 0.0],
+            'baseOrientation': list(_IDENTITY),
+            'scale': 1.0,
+            'mass': float(c['mass']),
+            'collisionMargin': float(c['collision_margin']),
+            'frictionCoeff': float(c['friction']),
+            'useSelfCollision': int(c['self_collision']),
+            'useFaceContact': 1,
+            'physicsClientId': cid,
+        }
         with quiet_c_output():
             self._cloth = self._load_cloth(common)
         if self._cloth < 0:

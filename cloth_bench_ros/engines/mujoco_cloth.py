@@ -225,7 +225,8 @@ class MujocoCloth(ClothEngine):
   <option timestep="{self.h:.12g}" gravity="0 0 {scene.GRAVITY}" integrator="{c['integrator']}"
           solver="{c['solver']}" iterations="{c['solver_iterations']}"/>
   <worldbody>
-    <geom name="table" type="box" friction="{friction}" condim="{c['condim']}" size="{(x1 - x0) / 2} {(y1 - y0) / 2} {half}"
+    <geom name="table" type="box" friction="{friction}" condim="{c['condim']}"
+          size="{(x1 - x0) / 2} {(y1 - y0) / 2} {half}"
           pos="{(x0 + x1) / 2} {(y0 + y1) / 2} {scene.TABLE_TOP_Z - half}"/>
     <flexcomp name="cloth" type="direct" dim="{dim}" point="{points}" element="{element}"
               mass="{c['mass']:.9g}" radius="{c['radius']:.9g}">

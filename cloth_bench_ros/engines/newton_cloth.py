@@ -8,8 +8,8 @@ Two cloth models, chosen by the `model` parameter:
   shear and bending springs of stiffness `spring_stiffness`) plus dihedral-angle bending
   constraints (`bending`), solved by SolverXPBD.
 - "vbd" (vertex block descent, implicit Euler with Neo-Hookean-like triangle elements, close to
-  SOFA's FEM in the paper): membrane stiffness `tri_stiffness` (shear, Lame mu), `tri_area_stiffness`
-  (Lame lambda), dihedral bending `bending`, solved by SolverVBD.
+  SOFA's FEM in the paper): membrane stiffness `tri_stiffness` (shear, Lame mu),
+  `tri_area_stiffness` (Lame lambda), dihedral bending `bending`, solved by SolverVBD.
 
 Grasp: each grasped corner is a kinematic particle (mass 0, not ACTIVE): Newton's solvers leave
 its position alone, so it is written before every substep at the point of the straight line from
@@ -34,7 +34,7 @@ import warp as wp
 wp.config.log_level = wp.LOG_ERROR  # no banner and no line per compiled module
 with quiet_c_output():  # Warp's C++ init warns on stderr that there is no CUDA driver
     wp.init()
-from cloth_bench_ros.core import scene  # noqa: E402  (after Warp's quiet init)
+from cloth_bench_ros.core import scene  # noqa: E402, I100  (after Warp's quiet init)
 from cloth_bench_ros.core.scene import ClothGrid  # noqa: E402
 from cloth_bench_ros.engines.base import ClothEngine, Param  # noqa: E402
 import newton  # noqa: E402

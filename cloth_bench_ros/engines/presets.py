@@ -5,7 +5,7 @@ A preset file reads
     engine: mujoco
     engine_version: "4.0.0"
     provenance: "<where the numbers come from; what was changed for this engine version>"
-    presets: {towel: {dynamic: {param: value, ...}, quasi_static: {...}}, chequered: ..., linen: ...}
+    presets: {towel: {dynamic: {param: value, ...}, quasi_static: {...}}, chequered: ...}
 Every problem with a file (missing keys, wrong types, unknown or out-of-range parameters) is an
 EngineError of one line naming the file.
 """

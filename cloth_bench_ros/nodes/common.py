@@ -99,7 +99,8 @@ def run_nodes(
     starting = True
     try:
         # a bad --ros-args (or CLOTH_BENCH_TRANSPORT) fails here; real rclpy installs no signal
-        # handler of its own (it would end spin_once in ExternalShutdownException), ours stops the loop
+        # handler of its own (it would end spin_once in ExternalShutdownException), ours stops the
+        # loop
         init_options = (
             {'transport': transport or transport_choice('intra')}
             if EMBEDDED

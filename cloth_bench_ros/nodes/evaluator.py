@@ -112,8 +112,9 @@ class Evaluator(Node):
                     DiagnosticArray, f'{engine}/step_time', partial(self.on_step, engine), data_qos
                 )
             )
-        # Ready (the `metrics` publisher appears, which the trajectory publisher waits for) once every
-        # input is matched with a publisher and the recorder's trial (and replay) announcement is in.
+        # Ready (the `metrics` publisher appears, which the trajectory publisher waits for) once
+        # every input is matched with a publisher and the recorder's trial (and replay)
+        # announcement is in.
         self.metrics_pub = None
         self.trial_received = False
         self.expected_real: set[int] | None = None  # announced stamps up to the last target
@@ -227,7 +228,7 @@ class Evaluator(Node):
     def publish_scores(self) -> None:
         if self.metrics_pub is None:  # not ready yet: published once it is
             return
-        new = self.core.scores[self.published_scores :]
+        new = self.core.scores[self.published_scores:]
         self.published_scores = len(self.core.scores)
         for s in new:
             status = DiagnosticStatus(

@@ -82,7 +82,8 @@ class Recorder(Node):
         path = self.declare_parameter('bag', '').value
         if not path:
             raise ValueError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
-        # Frames are stamped from the start of the quintic part; the run starts with the settle phase.
+        # Frames are stamped from the start of the quintic part; the run starts with the settle
+        # phase.
         declare_float(self, 'time_offset', SETTLE_DURATION)
         clock = self.declare_parameter('clock', 'sim').value
         declare_float(self, 'rate_factor', 1.0)
@@ -296,7 +297,8 @@ class Recorder(Node):
                     OSError(errno.ENOSPC, f'disk nearly full, {free} bytes left'), False
                 )
         try:
-            # As rosbag2 records: log time is the receive time, the header stamp stays in the message.
+            # As rosbag2 records: log time is the receive time, the header stamp stays in the
+            # message.
             self.writer.write(
                 topic, typename, 0, cdr, log_time_ns=self.get_clock().now().nanoseconds
             )

@@ -174,9 +174,10 @@ class Simulator(Node):
             int(self.declare_parameter('realtime_priority', 0).value),
             bool(self.declare_parameter('freeze_gc', False).value),
         )
-        # Subscribed last, once start-up is done, so the first target finds the engine ready. Keep-last 1,
-        # as a controller's command topic: a simulator that falls behind steps to the newest target and
-        # counts the ones it never saw (under transports that drop old samples: DDS and rclpy).
+        # Subscribed last, once start-up is done, so the first target finds the engine ready.
+        # Keep-last 1, as a controller's command topic: a simulator that falls behind steps to the
+        # newest target and counts the ones it never saw (under transports that drop old samples:
+        # DDS and rclpy).
         self.create_subscription(PoseArray, 'targets', self.on_target, make_qos(1))
         self.get_logger().info(f'{self.engine_name} ready; ' + '; '.join(self.realtime.lines()))
 
@@ -207,7 +208,8 @@ class Simulator(Node):
         k = int(np.searchsorted(self.stamps, stamp))
         known = k < len(self.stamps) and self.stamps[k] == stamp
         if known and k == self.last_k and self.last_cloud is not None:
-            # The newest target again (a controller's start-up handshake): its state again, no step.
+            # The newest target again (a controller's start-up handshake): its state again, no
+            # step.
             self.cloud_pub.publish(self.last_cloud)
             return
         if known and k > self.last_k:

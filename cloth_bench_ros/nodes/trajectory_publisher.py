@@ -98,8 +98,8 @@ class TrajectoryPublisher(Node):
         )
         self.timelines = {engine: TargetTimeline(stamps) for engine in self.engines}
         self.period_ns = round(1e9 / rate_hz)
-        # Real time: one target message filled in place before each send where publish serialises it
-        # (the embedded intra-process transport hands subscribers the object itself).
+        # Real time: one target message filled in place before each send where publish serialises
+        # it (the embedded intra-process transport hands subscribers the object itself).
         self.fill_in_place = self.pacing == 'realtime' and publish_serialises(self)
         self.target_msg = self._new_target_msg()
         self.wait_until_ns: int | None = None
@@ -232,7 +232,8 @@ class TrajectoryPublisher(Node):
         Target 0 is the handshake's: sent, due and answered at the anchor (the initial state, not
         a deadline); target 1 goes out one period later.
         """
-        # On the steady clock, as the schedule: a step of the system clock must not move a deadline.
+        # On the steady clock, as the schedule: a step of the system clock must not move a
+        # deadline.
         self.pace_timer = self.create_timer(
             1.0 / self.targets.rate_hz, self.publish_due, clock=steady_clock()
         )
@@ -284,7 +285,8 @@ class TrajectoryPublisher(Node):
         if self.pacing == 'realtime' and self.k < 0:
             if all(self.reported.get(e) == self.targets.stamp_ns(0) for e in self.engines):
                 self.destroy_timer(self.start_timer)
-                self.start_realtime()  # every simulator answered the handshake: the schedule starts
+                # every simulator answered the handshake: the schedule starts
+                self.start_realtime()
             return
         if self.pacing == 'realtime':
             self.timelines[engine].mark_received(self.reported[engine], time.monotonic_ns())

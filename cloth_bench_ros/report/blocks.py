@@ -9,7 +9,8 @@ from typing import Callable, Sequence
 
 from cloth_bench_ros.core.table import inline_html, Table
 
-Block = tuple  # ("h", level, text) | ("p", text) | ("table", Table) | ("figure", Figure) | ("img", file, caption)
+# ("h", level, text) | ("p", text) | ("table", Table) | ("figure", Figure) | ("img", file, caption)
+Block = tuple
 
 
 @dataclass

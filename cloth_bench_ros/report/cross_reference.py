@@ -11,7 +11,7 @@ import math
 from typing import Sequence
 
 from cloth_bench_ros.report.blocks import Table
-from cloth_bench_ros.report.statistics import engine_label
+from cloth_bench_ros.report.selections import engine_label
 from cloth_bench_ros.studies.aggregate import group, stat
 from cloth_bench_ros.studies.cross_reference import DEFAULT_ENTRANTS, MODE, REFERENCES
 

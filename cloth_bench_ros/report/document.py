@@ -28,8 +28,7 @@ from cloth_bench_ros.report.blocks import (
     table_block,
     write_document,
 )
-from cloth_bench_ros.report.settings import settings_tables
-from cloth_bench_ros.report.statistics import (
+from cloth_bench_ros.report.selections import (
     cloths_of,
     engine_label,
     engines_of,
@@ -38,6 +37,7 @@ from cloth_bench_ros.report.statistics import (
     paper_rows,
     table_rate,
 )
+from cloth_bench_ros.report.settings import settings_tables
 from cloth_bench_ros.report.tables import (
     errors_table,
     fig5_table,
@@ -131,7 +131,7 @@ def table2_section(paper: Sequence[dict], config: str, wanted_rate: float) -> li
             f'Columns marked (ours): this system, {what}, lockstep pacing, {rate:g} Hz, over'
             f' {combos} seed x trial '
             f"combinations per cell; bold = best of ours. Columns marked (paper) are the paper's"
-            f" Table II "
+            f' Table II '
             f'(docs/benchmark.md, section 6: real rags, 3 trials x 20 seeds, MuJoCo 3.1.1, Bullet'
             f' 3.26, Flex 1.2, '
             f'SOFA 23.06; bold = best in the paper). The paper scores real clouds; ours are scored'
@@ -307,7 +307,7 @@ def settings_section(
             f'Factorial sweep over the settings that cost time. Tolerance: a configuration is'
             f' within tolerance '
             f"when its mean CD is at most the best stable configuration's plus max({tol_rel:.0%}"
-            " of it, "
+            ' of it, '
             f'{tol_abs * 1e3:g} mm); the recommendation is the cheapest (mean step time) within'
             ' tolerance. '
             f'A configuration with any diverged seed is unstable and never recommended. Table'

@@ -11,10 +11,7 @@ import math
 from pathlib import Path
 from typing import Sequence
 
-import matplotlib
-
-matplotlib.use('Agg')
-from cloth_bench_ros.report.statistics import (  # noqa: E402
+from cloth_bench_ros.report.selections import (
     ENGINE_COLOR,
     engine_label,
     engines_of,
@@ -28,7 +25,10 @@ from cloth_bench_ros.studies.aggregate import (
     finite,
     group,
     stat,
-)  # noqa: E402
+)
+import matplotlib
+
+matplotlib.use('Agg')  # no display: figures are files
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 

@@ -20,7 +20,7 @@ from cloth_bench_ros.report.blocks import (
     Table,
     table_block,
 )
-from cloth_bench_ros.report.statistics import engine_label, fmt_sig
+from cloth_bench_ros.report.selections import engine_label, fmt_sig
 
 SUMMARY_FILE = 'identification.json'
 REQUIRED = {
@@ -243,7 +243,7 @@ def identification_section(ident: dict, rows: Sequence[dict] = ()) -> list[Block
         paragraph(
             "Parameter importance: PED-ANOVA over each sampler's trials (Optuna; no extra"
             " dependency), the share of the objective's variation among the better trials that"
-            " each parameter explains."
+            ' each parameter explains.'
         ),
         table_block(importance_table(ident, suffix)),
     ]

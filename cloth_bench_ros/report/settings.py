@@ -7,7 +7,7 @@ import math
 from typing import Sequence
 
 from cloth_bench_ros.report.blocks import Table
-from cloth_bench_ros.report.statistics import (
+from cloth_bench_ros.report.selections import (
     engine_label,
     engines_of,
     fmt_fixed,
@@ -110,7 +110,8 @@ def settings_tables(
                 'tolerance_m': tol,
             }
         )
-    # One configuration for every task and cloth of an engine: within tolerance everywhere, cheapest in total.
+    # One configuration for every task and cloth of an engine: within tolerance everywhere,
+    # cheapest in total.
     for e in engines_of([r for r in rows if r.get('mode') == 'settings']):
         keys = [k for k in by if k[0] == e]
         if len(keys) < 2:

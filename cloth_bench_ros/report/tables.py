@@ -8,7 +8,7 @@ import re
 from typing import Sequence
 
 from cloth_bench_ros.report.blocks import Table
-from cloth_bench_ros.report.statistics import (
+from cloth_bench_ros.report.selections import (
     cloths_of,
     engine_label,
     engines_of,
@@ -21,7 +21,8 @@ from cloth_bench_ros.report.statistics import (
 from cloth_bench_ros.studies.aggregate import finite, group, stat
 import numpy as np
 
-# docs/benchmark.md section 6, Table II: (mean, std, bold in the paper) per cloth, metric and engine.
+# docs/benchmark.md section 6, Table II: (mean, std, bold in the paper) per cloth, metric and
+# engine.
 PAPER_TABLE2: dict[tuple[str, str], dict[str, tuple[float, float, bool]]] = {
     ('towel', 'CD_d'): {
         'mujoco': (0.079, 0.031, False),

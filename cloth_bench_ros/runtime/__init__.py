@@ -64,6 +64,42 @@ else:
     from sensor_msgs.msg import PointCloud2, PointField
     from std_msgs.msg import Header
 
+__all__ = [  # the API the nodes are written against, under either runtime
+    'Clock',
+    'declare_float',
+    'deserialize_message',
+    'DiagnosticArray',
+    'DiagnosticStatus',
+    'DurabilityPolicy',
+    'EMBEDDED',
+    'Header',
+    'HistoryPolicy',
+    'is_user_error',
+    'KeyValue',
+    'make_qos',
+    'message_type',
+    'MESSAGE_TYPES',
+    'Node',
+    'Parameter',
+    'ParameterDescriptor',
+    'Point',
+    'PointCloud2',
+    'PointField',
+    'Pose',
+    'PoseArray',
+    'QoSProfile',
+    'Quaternion',
+    'rclpy',
+    'ReliabilityPolicy',
+    'serialize_message',
+    'SingleThreadedExecutor',
+    'stamp_ns',
+    'steady_clock',
+    'Time',
+    'typename',
+    'USER_ERROR_CLASSES',
+]
+
 MESSAGE_TYPES = {
     'sensor_msgs/msg/PointCloud2': PointCloud2,
     'geometry_msgs/msg/PoseArray': PoseArray,

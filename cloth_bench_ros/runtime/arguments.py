@@ -60,7 +60,7 @@ def _remap_rule(text: str) -> RemapRule:
             raise RCLInvalidROSArgsError(
                 f"remap rule '-r {text}': the embedded runtime has no services"
             )
-        head = head[len('rostopic://') :]
+        head = head[len('rostopic://'):]
     node, colon, match = head.rpartition(':')
     if colon and not re.fullmatch(_TOKEN, node):
         raise bad

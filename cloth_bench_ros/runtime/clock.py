@@ -100,7 +100,7 @@ class Timer:
 
     @property
     def follows_wall_time(self) -> bool:
-        """False for a timer on an active sim clock: only /clock messages make it due."""
+        """Return False for a timer on an active sim clock: only /clock makes it due."""
         return not (self.clock.clock_type == ClockType.ROS_TIME and self.clock.ros_time_is_active)
 
     def call(self) -> None:

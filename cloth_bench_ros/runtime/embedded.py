@@ -9,7 +9,8 @@ published (one FIFO for the whole context), timers fire on the node's clock (run
 and a node with use_sim_time follows /clock. What it provides (and nothing more; docs/runtimes.md,
 "Without ROS 2", lists it in full):
 
-- rclpy.init(args, domain_id=, transport=), ok(), shutdown(), spin(node), spin_once(node, timeout_sec)
+- rclpy.init(args, domain_id=, transport=), ok(), shutdown(), spin(node),
+  spin_once(node, timeout_sec)
 - graph queries: Node.get_publishers_info_by_topic, get_subscriptions_info_by_topic,
   get_node_names_and_namespaces; Subscription.get_publisher_count
 - rclpy.node.Node(name, namespace=, parameter_overrides=, context=, cli_args=): create_publisher,

@@ -124,7 +124,7 @@ class ParameterDescriptor:
     """rcl_interfaces/msg/ParameterDescriptor, the fields declare_parameter reads."""
 
     name: str = ''
-    type: int = 0
+    type: int = 0  # noqa: A003  (rcl_interfaces' field name)
     description: str = ''
     read_only: bool = False
     dynamic_typing: bool = False
@@ -237,7 +237,7 @@ def rcl_scalar(text: str, quoted: bool, str_tag: bool) -> Any:
         overflow = math.isinf(value) and not stripped.lower().startswith('inf')
         underflow = value == 0.0 and any(
             c in '123456789'
-            for c in re.split(r'[eEpP]', stripped)[0][2 * (stripped[:2].lower() == '0x') :]
+            for c in re.split(r'[eEpP]', stripped)[0][2 * (stripped[:2].lower() == '0x'):]
         )
         if not (overflow or underflow):  # strtod sets ERANGE: rcl then keeps the text
             return value
@@ -289,7 +289,7 @@ class Overrides:
 
     entries: dict[str, dict[str, Any]] = field(default_factory=dict)
 
-    def set(self, node_key: str, name: str, value: Any) -> None:
+    def set(self, node_key: str, name: str, value: Any) -> None:  # noqa: A003  (a store's verb)
         self.entries.setdefault(node_key, {})[name] = value
 
     def for_node(self, fully_qualified_name: str) -> dict[str, Parameter]:
@@ -424,7 +424,7 @@ def load_params_file(path: str | Path, into: Overrides | None = None) -> Overrid
 
 
 def parse_param_rule(rule: str, into: Overrides) -> None:
-    """`-p [node:]name:=value` as rcl's _rcl_parse_param_rule (node key `/**` by default)."""
+    """Parse a `-p [node:]name:=value` rule as rcl does; the node key is `/**` by default."""
     head, sep, text = rule.partition(':=')
     node_key, colon, name = head.rpartition(':')
     node_key = node_key if colon else '/**'

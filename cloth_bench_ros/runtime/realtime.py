@@ -173,7 +173,7 @@ def poll_on_default_scheduler() -> str:
     )
     return (
         "step loop polls on SCHED_OTHER (SCHED_FIFO would be throttled by the kernel's real-time"
-        f" budget, {budget[0]} of every {budget[1]} us), the other threads keep SCHED_FIFO"
+        f' budget, {budget[0]} of every {budget[1]} us), the other threads keep SCHED_FIFO'
     )
 
 

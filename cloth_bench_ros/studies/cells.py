@@ -67,19 +67,20 @@ class Cell:
     def ident(self) -> str:
         """Return a file-system-safe name of the cell."""
         text = (
-            f'{self.mode}_{self.config}_{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}'
+            f'{self.mode}_{self.config}_{self.engine}_{self.rate_hz:g}hz_{self.cloth}'
+            f'_{self.primitive}'
             f'_t{self.trial}_s{self.seed}_{self.pacing}'
         )
         return re.sub(r'[^A-Za-z0-9_.=-]+', '-', text)
 
     @property
     def params(self) -> dict:
-        """The parameter overrides on top of the preset."""
+        """Return the parameter overrides on top of the preset."""
         return dict(self.overrides)
 
     @property
     def reference(self) -> str | None:
-        """The synthetic reference a cross-reference cell is scored against."""
+        """Return the synthetic reference a cross-reference cell is scored against."""
         if self.mode != CROSS_REFERENCE:
             return None
         return self.config.split(',')[0].removeprefix('reference=')
@@ -141,7 +142,7 @@ def _bag_trial(path: Path) -> int:
 
 
 def _check_engines(engines: Iterable[str], overrides: dict[str, dict]) -> None:
-    """EngineError (a ValueError) on an unknown engine or a bad override, before any work."""
+    """Raise EngineError (a ValueError) on an unknown engine or a bad override, before any work."""
     from cloth_bench_ros.engines import engine_class
 
     for name in engines:

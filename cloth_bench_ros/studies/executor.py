@@ -77,7 +77,8 @@ class _WorkerSetup(WorkerPlugin):
             os.environ.setdefault(var, '1')  # the engines are single-threaded: one core per worker
         metrics.keep_trees(WORKER_TREE_CACHE_POINTS)
         if self.local and self.log_path:
-            # What the engines' C code prints goes to the log, not to the terminal of the progress bar.
+            # What the engines' C code prints goes to the log, not to the terminal of the progress
+            # bar.
             try:
                 fd = os.open(self.log_path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
                 os.dup2(fd, 1)

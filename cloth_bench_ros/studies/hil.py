@@ -79,7 +79,10 @@ class HilConfig:
 
     def ident(self) -> str:
         """Return the run's directory name (engine, rate, task, seed, configuration), file-safe."""
-        text = f'{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}_s{self.seed}_{self.config}'
+        text = (
+            f'{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}'
+            f'_s{self.seed}_{self.config}'
+        )
         return re.sub(r'[^A-Za-z0-9_.+-]+', '-', text)
 
 
@@ -104,7 +107,7 @@ class HilResult:
     run_dir: Path | None = None
 
     def row(self) -> dict:
-        """Return a flat JSON-safe row (hil.jsonl)."""
+        """Return the run as a flat JSON-safe row of hil.jsonl."""
         c = self.config
         return {
             'engine': c.engine,
@@ -199,7 +202,8 @@ def _parameters(config: HilConfig, group: str, run_dir: Path) -> list[tuple[str,
         ]
     if group == 'simulator':
         nx, nz = config.grid or (0, 0)
-        # No /clock: the simulator never reads time, and a 1 kHz /clock would sit on its critical path.
+        # No /clock: the simulator never reads time, and a 1 kHz /clock would sit on its critical
+        # path.
         return [
             (
                 'simulator',
@@ -278,7 +282,7 @@ def _write_simulator_file(run_dir: Path, nodes: list, notes: list[str] = ()) -> 
 
     for node in nodes:
         if isinstance(node, Simulator):
-            times = node.step_times[1 : node.step + 1]  # step 0 is the reset
+            times = node.step_times[1:node.step + 1]  # step 0 is the reset
             times = times[np.isfinite(times)]
             step_time = (
                 {
@@ -353,8 +357,10 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
         nodes = _make_nodes(config, group, run_dir, context)
         if group == 'controller':  # it starts sending once its graph is complete (graph_ready)
             _warm_up_messages()
-            gc.freeze()  # start-up objects out of the collector's way (the simulator also stops it)
-            # The controller is the robot's real-time loop: the same scheduling request as the simulator.
+            # start-up objects out of the collector's way (the simulator also stops it)
+            gc.freeze()
+            # The controller is the robot's real-time loop: the same scheduling request as the
+            # simulator.
             print(f'controller: {realtime.request_fifo(config.realtime_priority)}', flush=True)
         if group == 'observer':
             print(f'observer: {realtime.lower_priority()}', flush=True)
@@ -421,7 +427,8 @@ def _run_processes(config: HilConfig, run_dir: Path) -> None:
     )
     # One thread per BLAS / OpenMP library: their pools spin between calls, on a core that the
     # controller (SCHED_FIFO) or the step loop needs.
-    env = {**os.environ, **loopback_environment(domain), **{k: '1' for k in SINGLE_THREADED_MATH}}
+    single_threaded = dict.fromkeys(SINGLE_THREADED_MATH, '1')
+    env = {**os.environ, **loopback_environment(domain), **single_threaded}
     procs: dict[str, subprocess.Popen] = {}
     deadline = time.monotonic() + _time_budget(config)
     try:

@@ -34,7 +34,8 @@ DEFAULT_SPAN = 10.0
 JOURNAL_FILE = 'study.journal'
 TRIALS_FILE = 'trials.jsonl'
 SUMMARY_FILE = 'identification.json'
-# What the reference identified per engine (docs/benchmark.md, section 7); others: every ranged number.
+# What the reference identified per engine (docs/benchmark.md, section 7); others: every ranged
+# number.
 DEFAULT_PARAMS = {
     'mujoco': ('mass', 'young', 'poisson', 'thickness', 'damping'),
     'bullet': ('mass', 'elastic', 'damping', 'bending'),
@@ -315,7 +316,7 @@ def _finite_or_inf(value: float) -> float:
 
 
 def convergence(study: Any) -> list[list]:
-    """[number, value or None, best so far or None] per finished trial, in trial order."""
+    """Return [number, value or None, best so far or None] per finished trial, in order."""
     from optuna.trial import TrialState
 
     out, best = [], math.inf
@@ -330,7 +331,7 @@ def convergence(study: Any) -> list[list]:
 
 
 def importance(study: Any) -> dict[str, float]:
-    """Parameter importance (PED-ANOVA: no extra dependency); {} with too few finished trials."""
+    """Return how much each parameter explains (PED-ANOVA); {} with too few trials."""
     import optuna
 
     try:

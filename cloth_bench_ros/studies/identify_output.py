@@ -110,6 +110,8 @@ def _key(row: dict) -> tuple:
 def provenance_text(spec: Any, summary: dict, version: str) -> str:
     """Return the preset file's provenance: what was fitted against what, how, when and where."""
     params = ', '.join(f'{k} = {v:.6g}' for k, v in summary['params'].items())
+    fixed = ', '.join(f'{k} = {v}' for k, v in spec.fixed.items())
+    fixed = f'fixed {fixed}; ' if spec.fixed else ''
     return (
         f'Identified by cloth-bench identify against bag {spec.bag} ({spec.cloth},'
         f' {spec.primitive}): '
@@ -120,7 +122,7 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
         f'{spec.rate_hz:g} Hz, grid {"x".join(map(str, spec.grid)) if spec.grid else "default"}'
         f'{", first " + str(spec.max_frames) + " frames" if spec.max_frames else ""}); fitted'
         f' {params}; '
-        f'{"fixed " + ", ".join(f"{k} = {v}" for k, v in spec.fixed.items()) + "; " if spec.fixed else ""}'
+        f'{fixed}'
         f"the other values are the preset's. Engine version {version}; "
         f'{datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")} on {platform.node()} '
         f'({platform.machine()}, {platform.python_implementation()} {platform.python_version()}).'

@@ -37,8 +37,9 @@ RECOMMENDATION_KEYS = (
 )
 
 
-# The step's share of the period: the rest is the round trip (two DDS hops, the messages in Python),
-# 0.4-0.5 ms on a 2-core machine, so at 1 kHz a configuration must step in half the period.
+# The step's share of the period: the rest is the round trip (two DDS hops, the messages in
+# Python), 0.4-0.5 ms on a 2-core machine, so at 1 kHz a configuration must step in half the
+# period.
 DEADLINE_BUDGET = 0.5
 
 

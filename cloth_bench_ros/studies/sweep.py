@@ -21,7 +21,8 @@ import time
 import traceback
 from typing import Sequence
 
-from cloth_bench_ros.studies.cells import (  # noqa: F401  (re-exported: the studies' one vocabulary)
+# re-exported: the studies' one vocabulary
+from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
     config_label,
     DEFAULT_CLOTHS,
@@ -38,12 +39,12 @@ from cloth_bench_ros.studies.cells import (  # noqa: F401  (re-exported: the stu
     SETTINGS_SEEDS,
 )
 from cloth_bench_ros.studies.executor import default_workers, open_client, run_tasks  # noqa: F401
-from cloth_bench_ros.studies.parsing import (
+from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
     parse_grid,
     parse_overrides,
     parse_settings_axes,
     parse_value,
-)  # noqa: F401
+)
 from cloth_bench_ros.studies.results import (  # noqa: F401
     append_row,
     json_safe,
@@ -118,7 +119,7 @@ def _cell_fields(cell: Cell) -> dict:
 
 
 def _substeps(cell: Cell) -> int | None:
-    """Internal steps per target of engines with `timestep` and `substeps` parameters."""
+    """Return the internal steps per target of engines with `timestep` and `substeps`."""
     try:
         from cloth_bench_ros.engines import engine_class
         from cloth_bench_ros.engines.presets import load_preset

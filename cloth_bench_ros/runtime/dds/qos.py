@@ -124,7 +124,9 @@ def domain_config(environ: Mapping[str, str] = os.environ) -> str:
 
 LOOPBACK_URI = (
     '<CycloneDDS><Domain><General><Interfaces><NetworkInterface'
-    ' name="lo"/></Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer'
+    ' name="lo"/></Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery>'
+    '<ParticipantIndex>auto</ParticipantIndex>'
+    '<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer'
     ' address="127.0.0.1"/></Peers></Discovery></Domain></CycloneDDS>'
 )
 """CYCLONEDDS_URI that keeps Cyclone on loopback: interface lo, no multicast, peer 127.0.0.1."""
