@@ -1,13 +1,13 @@
 """
 Synthetic reference bags: a high-resolution reference cloth seen by a virtual Azure Kinect.
 
-A reference simulation (config/synth.yaml: finer grid and another integrator than the models
-under test) runs along the full trajectory; at every 30 fps frame its mesh is rasterised into a
-z-buffer by a pinhole camera placed as docs/benchmark.md section 1 says, so that only the
-surfaces the camera sees survive. The depth image gets Azure-Kinect-like noise and flying
-pixels at the silhouette, is back-projected to the world frame, cropped to the cloth above the table, cleaned
-by statistical outlier removal (open3d) and randomly subsampled to a point budget: partial,
-noisy clouds, far denser than the simulated mesh, like the real ones.
+A reference simulation (config/synth.yaml: finer grid and another integrator than the models under
+test) runs along the full trajectory; at every 30 fps frame its mesh is rasterised into a z-buffer
+by a pinhole camera placed as docs/benchmark.md section 1 says, so that only the surfaces the
+camera sees survive. The depth image gets Azure-Kinect-like noise and flying pixels at the
+silhouette, is back-projected to the world frame, cropped to the cloth above the table, cleaned by
+statistical outlier removal (open3d) and randomly subsampled to a point budget: partial, noisy
+clouds, far denser than the simulated mesh, like the real ones.
 """
 
 from __future__ import annotations
