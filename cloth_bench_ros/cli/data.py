@@ -146,14 +146,11 @@ def cmd_bag_rewrite(args: argparse.Namespace) -> int:
     from cloth_bench_ros.data.bag_rewrite import rewrite_bag
 
     counts = rewrite_bag(Path(args.src), Path(args.dst), args.change_of_phase_frame)
-    changed = (
-        ''
-        if args.change_of_phase_frame is None
-        else (
-            '; change of phase set to frame'
-            f' {BagReader(Path(args.dst)).trial.change_of_phase_frame}'
-        )
-    )
+    changed = ''
+    if args.change_of_phase_frame is not None:
+        trial = BagReader(Path(args.dst)).trial
+        frame = trial.change_of_phase_frame if trial is not None else None
+        changed = f'; change of phase set to frame {frame}'
     print(
         f'rewrote {args.src} -> {args.dst}: {sum(counts.values())} messages, unchanged'
         f' (checked){changed}'

@@ -201,7 +201,7 @@ def window_line(summary: dict) -> str:
     }
     return (
         f'CD_d/HD_d over frames 0-{frame - 1}: change of phase at frame {frame}, '
-        f'{source.get(cop.get("source"), cop.get("reason", ""))}'
+        f'{source.get(str(cop.get("source")), cop.get("reason", ""))}'
     )
 
 
@@ -270,6 +270,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 f'comparison bag {config.record_comparison} already exists (not empty)'
             )
         _checked_output(config.record_comparison, '--record-comparison')
+    summary: dict | None
     if args.processes:
         from cloth_bench_ros.studies.processes import ProcessRunError, run_processes
 
@@ -279,6 +280,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise UserError(f'run --processes: {exc}') from None
     else:
         summary = run_pipeline(config)
+    if summary is None:
+        raise RuntimeError('the node graph ended before the evaluator finished')
     print(
         f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
         f' bag {bag}'

@@ -62,7 +62,7 @@ def workspace_box(
     hi = p.max(axis=0) + reach
     lo[2] = max(lo[2], scene.TABLE_TOP_Z - margin)
     hi[2] = p[:, 2].max() + margin
-    return tuple(float(v) for v in lo), tuple(float(v) for v in hi)
+    return (float(lo[0]), float(lo[1]), float(lo[2])), (float(hi[0]), float(hi[1]), float(hi[2]))
 
 
 def scene_cleaning(

@@ -61,7 +61,7 @@ class OnlineEvaluator:
         self.change_of_phase_frame = change_of_phase_frame
         self.fps = fps
         self.engines = {name: _EngineState() for name in engines}
-        self._pending: deque[tuple[int, RealCloud | None]] = deque()
+        self._pending: deque[tuple[int, RealCloud]] = deque()
         self.scores: list[FrameScore] = []
         self.real_frames = 0
         self.empty_frames = 0

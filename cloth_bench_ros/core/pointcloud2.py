@@ -76,8 +76,8 @@ def read_xyz(cloud: Any) -> np.ndarray:
     by_name = {f.name: f for f in cloud.fields}
     missing = [c for c in 'xyz' if c not in by_name]
     if missing:
-        names = ', '.join(sorted(by_name)) or 'none'
-        raise PointCloudError(f'PointCloud2 has no {"/".join(missing)} field (fields: {names})')
+        known = ', '.join(sorted(by_name)) or 'none'
+        raise PointCloudError(f'PointCloud2 has no {"/".join(missing)} field (fields: {known})')
     n = int(cloud.width) * int(cloud.height)
     if n == 0:
         return np.zeros((0, 3))
@@ -98,7 +98,7 @@ def read_xyz(cloud: Any) -> np.ndarray:
         # The layout create_cloud_xyz32 writes: one flat read, no per-field copies.
         return np.frombuffer(raw, dtype=order + 'f4', count=3 * n).reshape(n, 3).astype(np.float64)
     # Drop the padding at the end of each row so that points are evenly spaced.
-    rows = raw[: row_step * int(cloud.height)].reshape(int(cloud.height), row_step)
+    rows = np.asarray(raw)[: row_step * int(cloud.height)].reshape(int(cloud.height), row_step)
     packed = np.ascontiguousarray(rows[:, : point_step * int(cloud.width)]).reshape(n, point_step)
     out = np.empty((n, 3))
     for i, c in enumerate('xyz'):

@@ -129,7 +129,8 @@ class PrimitiveTrajectory:
 def _deg(seg: QuinticSegment) -> QuinticSegment:
     r = math.radians
     return QuinticSegment(
-        seg.duration, tuple(r(x) for x in seg.start), tuple(r(x) for x in seg.end)
+        seg.duration, (r(seg.start[0]), r(seg.start[1]), r(seg.start[2])),
+        (r(seg.end[0]), r(seg.end[1]), r(seg.end[2])),
     )
 
 

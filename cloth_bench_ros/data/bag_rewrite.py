@@ -90,14 +90,14 @@ def rewrite_bag(
         )
         if frame is None:
             raise BagError(f'bag {src_path}: no table contact found in its clouds')
-        trial = replace(trial, change_of_phase_frame=frame)
+        trial = replace(trial, change_of_phase_frame=int(frame))
     created = not dst_path.exists()
     writer = BagWriter(dst_path, trial)
     try:
         # BagWriter writes the trial message itself, first; the source's must be that very message.
         expected_first = (
             None
-            if trial is None
+            if trial is None or source_trial is None
             else (TRIAL_TOPIC, DIAGNOSTIC_ARRAY, 0, serialize(trial_message(source_trial)))
         )
         for topic, msgtype, log_ns, cdr in reader.logged_messages():

@@ -236,7 +236,7 @@ def read_pcd(path: Path) -> np.ndarray:
             raise CloudFileError(f'{path}: truncated, {len(rows)} of {n} points')
         width = sum(counts)
         try:
-            values = np.array(
+            table = np.array(
                 [[float(v) for v in r[:width]] for r in rows[:n]], dtype=np.float64
             ).reshape(n, width)
         except ValueError as exc:
@@ -247,7 +247,7 @@ def read_pcd(path: Path) -> np.ndarray:
             raise CloudFileError(
                 f'{path}: no {"/".join(missing)} field (fields: {", ".join(fields)})'
             )
-        return values[:, [column[c] for c in 'xyz']]
+        return table[:, [column[c] for c in 'xyz']]
     raise CloudFileError(f'{path}: unsupported PCD DATA {mode!r} (ascii and binary are supported)')
 
 

@@ -81,7 +81,10 @@ class ReplayPlan:
             'cleaning': (
                 None
                 if self.cleaning is None
-                else {**self.cleaning.as_dict(), 'settings': asdict(self.cleaning_config)}
+                else {
+                    **self.cleaning.as_dict(),
+                    'settings': asdict(self.cleaning_config) if self.cleaning_config else None,
+                }
             ),
         }
 
@@ -222,7 +225,8 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     trial.change_of_phase_frame = plan.change_of_phase['frame']
     period = 1e9 / trial.fps
     steps = np.diff(np.asarray(stamps, dtype=np.int64))
-    plan.irregular_intervals = int(np.sum(np.abs(steps - period) > IRREGULAR_TOLERANCE * period))
+    off = np.abs(steps.astype(np.float64) - period)
+    plan.irregular_intervals = int(np.sum(off > IRREGULAR_TOLERANCE * period))
     return plan
 
 

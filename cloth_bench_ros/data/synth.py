@@ -62,7 +62,7 @@ class Camera:
     width: int = scene.CAMERA_WIDTH_PX
     height: int = scene.CAMERA_HEIGHT_PX
     hfov_deg: float = scene.CAMERA_HFOV_DEG
-    position: tuple[float, float, float] = tuple(float(x) for x in scene.CAMERA_POSITION)
+    position: tuple[float, ...] = tuple(float(x) for x in scene.CAMERA_POSITION)
 
     @property
     def focal(self) -> float:
@@ -416,7 +416,7 @@ def simulate_reference(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
                 if engine.diverged:
                     raise SynthError(
                         f'synthetic reference {config.cloth} {config.primitive} diverged at step'
-                        f' {i}: {engine.divergence.reason}'
+                        f' {i}: {engine.divergence.reason if engine.divergence else ""}'
                     )
                 yield (i - start) // per_frame, vertices
     finally:

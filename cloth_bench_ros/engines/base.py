@@ -5,7 +5,7 @@ from __future__ import annotations
 import abc
 from dataclasses import dataclass
 import math
-from typing import ClassVar, Mapping
+from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.scene import ClothGrid
@@ -91,7 +91,7 @@ class ClothEngine(abc.ABC):
     def __init__(
         self,
         rate_hz: float,
-        params: Mapping[str, object] | None = None,
+        params: Mapping[str, Any] | None = None,
         grid: ClothGrid | None = None,
     ) -> None:
         try:
@@ -119,7 +119,7 @@ class ClothEngine(abc.ABC):
             self.h = self.dt / self.substeps
 
     @classmethod
-    def validate_params(cls, params: Mapping[str, object]) -> dict[str, object]:
+    def validate_params(cls, params: Mapping[str, Any]) -> dict[str, Any]:
         """Defaults overlaid with `params`; EngineError on unknown names or bad values."""
         schema = {p.name: p for p in cls.params}
         unknown = sorted(set(params) - set(schema))
@@ -127,7 +127,7 @@ class ClothEngine(abc.ABC):
             raise EngineError(
                 f'unknown {cls.name} parameter {", ".join(unknown)} (known: {", ".join(schema)})'
             )
-        config = {p.name: p.default for p in cls.params}
+        config: dict[str, Any] = {p.name: p.default for p in cls.params}
         config.update({k: schema[k].validate(v) for k, v in params.items()})
         return config
 
@@ -203,6 +203,7 @@ class ClothEngine(abc.ABC):
         np.subtract(vertices, mid, out=buf)
         np.abs(buf, out=buf)
         reach = buf.max()
+        assert self._vertices is not None  # step() checked it
         np.subtract(vertices, self._vertices, out=buf)
         np.multiply(buf, buf, out=buf)
         travel2 = buf.sum(axis=1, out=self._row).max()

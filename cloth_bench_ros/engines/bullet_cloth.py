@@ -20,7 +20,7 @@ from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as package_version
 from pathlib import Path
 import tempfile
-from typing import ClassVar, Mapping
+from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros.engines.quiet import quiet_c_output
 import numpy as np
@@ -69,7 +69,7 @@ def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.n
                     step[axis] = 1
                     path.append(step)
                 path.append([1, 1, 1])
-                tet = [corner(tuple(p)) for p in path]
+                tet = [corner((p[0], p[1], p[2])) for p in path]
                 p0, p1, p2, p3 = nodes[tet]
                 if np.dot(np.cross(p1 - p0, p2 - p0), p3 - p0) < 0:
                     tet[1], tet[2] = tet[2], tet[1]
@@ -172,7 +172,7 @@ class BulletCloth(ClothEngine):
     def __init__(
         self,
         rate_hz: float,
-        params: Mapping[str, object] | None = None,
+        params: Mapping[str, Any] | None = None,
         grid: ClothGrid | None = None,
     ) -> None:
         super().__init__(rate_hz, params, grid)

@@ -22,7 +22,7 @@ millimetres during the fling.
 
 from __future__ import annotations
 
-from typing import ClassVar, Mapping
+from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros.core import scene
 from cloth_bench_ros.core.scene import ClothGrid
@@ -150,7 +150,7 @@ class MujocoCloth(ClothEngine):
         return mujoco.__version__
 
     @classmethod
-    def validate_params(cls, params: Mapping[str, object]) -> dict[str, object]:
+    def validate_params(cls, params: Mapping[str, Any]) -> dict[str, Any]:
         config = super().validate_params(params)
         if config['condim'] == 2:
             raise EngineError(
@@ -172,7 +172,7 @@ class MujocoCloth(ClothEngine):
     def __init__(
         self,
         rate_hz: float,
-        params: Mapping[str, object] | None = None,
+        params: Mapping[str, Any] | None = None,
         grid: ClothGrid | None = None,
     ) -> None:
         super().__init__(rate_hz, params, grid)

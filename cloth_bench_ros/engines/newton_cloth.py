@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as package_version
-from typing import ClassVar, Mapping
+from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros.engines.quiet import quiet_c_output
 import numpy as np
@@ -207,7 +207,7 @@ class NewtonCloth(ClothEngine):
     def __init__(
         self,
         rate_hz: float,
-        params: Mapping[str, object] | None = None,
+        params: Mapping[str, Any] | None = None,
         grid: ClothGrid | None = None,
     ) -> None:
         super().__init__(rate_hz, params, grid)

@@ -6,6 +6,7 @@ from functools import partial
 import json
 from pathlib import Path
 import time
+from typing import Any
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.evaluation import accounting_line, frame_accounting, OnlineEvaluator
@@ -115,7 +116,7 @@ class Evaluator(Node):
         # Ready (the `metrics` publisher appears, which the trajectory publisher waits for) once
         # every input is matched with a publisher and the recorder's trial (and replay)
         # announcement is in.
-        self.metrics_pub = None
+        self.metrics_pub: Any = None  # a Publisher once the inputs are matched
         self.trial_received = False
         self.expected_real: set[int] | None = None  # announced stamps up to the last target
         self.received_real: set[int] = set()

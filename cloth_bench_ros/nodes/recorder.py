@@ -288,10 +288,12 @@ class Recorder(Node):
         if self.stopped:
             return  # counted as received, not written
         cdr = serialize_message(msg)
+        writer = self.writer
+        assert writer is not None  # on_record is subscribed only when recording
         self.unchecked_bytes += len(cdr)
         if self.unchecked_bytes >= DISK_CHECK_EVERY_BYTES:
             self.unchecked_bytes = 0
-            free = shutil.disk_usage(self.writer.path).free
+            free = shutil.disk_usage(writer.path).free
             if free < DISK_MARGIN_BYTES:  # stop while the bag can still be finished cleanly
                 self.stop_recording(
                     OSError(errno.ENOSPC, f'disk nearly full, {free} bytes left'), False
@@ -299,7 +301,7 @@ class Recorder(Node):
         try:
             # As rosbag2 records: log time is the receive time, the header stamp stays in the
             # message.
-            self.writer.write(
+            writer.write(
                 topic, typename, 0, cdr, log_time_ns=self.get_clock().now().nanoseconds
             )
         except OSError as exc:
@@ -316,23 +318,27 @@ class Recorder(Node):
         """
         self.stopped = True
         self.reserve.unlink(missing_ok=True)
+        writer = self.writer
+        assert writer is not None  # stopped only while recording
         if failed_write:
-            self.writer.abandon()
+            writer.abandon()
         else:
             self.close_writer()
         reason = exc.strerror or str(exc)
         raise RecordingStopped(
-            f'recorder: bag {self.writer.path}: {reason}; recording stopped, the bag keeps '
-            f'the {self.writer.written} messages written before'
+            f'recorder: bag {writer.path}: {reason}; recording stopped, the bag keeps '
+            f'the {writer.written} messages written before'
         )
 
     def close_writer(self) -> None:
         """Finalise the bag; if finishing it fails (disk full), keep what is on disk."""
-        if not self.writer.closed:
+        writer = self.writer
+        assert writer is not None  # closed only when recording
+        if not writer.closed:
             try:
-                self.writer.close()
+                writer.close()
             except OSError:
-                self.writer.abandon()
+                writer.abandon()
         self.reserve.unlink(missing_ok=True)
 
     def close(self) -> None:

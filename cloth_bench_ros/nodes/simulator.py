@@ -168,7 +168,7 @@ class Simulator(Node):
         self.messages = StateMessages(
             self.engine_name, len(self.engine.grid.vertices()), publish_serialises(self)
         )
-        self.prepared = self.warm_up()
+        self.prepared: np.ndarray | None = self.warm_up()
         self.realtime = realtime.apply(
             int(self.declare_parameter('cpu', -1).value),
             int(self.declare_parameter('realtime_priority', 0).value),
@@ -232,9 +232,9 @@ class Simulator(Node):
         self.last_cloud = cloud
         if self.realtime.frozen:
             realtime.collect_young()  # after the state went out: off this step's deadline
-        if self.engine.diverged and not self.reported_divergence:
+        d = self.engine.divergence
+        if d is not None and not self.reported_divergence:
             self.reported_divergence = True
-            d = self.engine.divergence
             self.get_logger().error(f'{self.engine_name} diverged at step {d.step}: {d.reason}')
 
     def first_state(self) -> np.ndarray:

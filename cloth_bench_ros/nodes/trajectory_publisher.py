@@ -5,6 +5,7 @@ from __future__ import annotations
 from functools import partial
 from pathlib import Path
 import time
+from typing import Any
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.hil_timing import TargetTimeline
@@ -91,7 +92,7 @@ class TrajectoryPublisher(Node):
         self.k = -1
         self.reported: dict[str, int] = {}
         self.done = False
-        self.pace_timer = None
+        self.pace_timer: Any = None  # a Timer while the real-time schedule runs
         # Realtime: the controller's view of each target (due, sent, state received), per engine.
         stamps = np.array(
             [self.targets.stamp_ns(k) for k in range(self.n_targets)], dtype=np.int64
@@ -107,7 +108,7 @@ class TrajectoryPublisher(Node):
             None  # real time: when the start-up handshake's target 0 went out
         )
         self.sent_ns = 0  # lockstep: when the newest target went out (steady clock)
-        self.resend_timer = None
+        self.resend_timer: Any = None  # a Timer in lockstep
         self.start_timer = self.create_timer(0.02, self.try_start)
 
     def graph_ready(self) -> bool:
@@ -259,7 +260,8 @@ class TrajectoryPublisher(Node):
             if self.k == last:
                 # The last states may take a while to come back; a state that never does is lost.
                 self.wait_until_ns = time.monotonic_ns() + max(1_000_000_000, 100 * self.period_ns)
-        if self.k == last and (self.all_states_back() or time.monotonic_ns() > self.wait_until_ns):
+        waited = self.wait_until_ns is not None and time.monotonic_ns() > self.wait_until_ns
+        if self.k == last and (self.all_states_back() or waited):
             self.finish_realtime()
 
     def all_states_back(self) -> bool:

@@ -65,7 +65,7 @@ def cross_reference_table(rows: Sequence[dict], digits: int = 3) -> Table | None
     for engine, model in entrants:
         line = [entrant_name(engine, {'model': model} if model else {})]
         for col in columns:
-            s = stats[(engine, model, *col)]
+            s = stats[(engine, model) + tuple(col)]
             text = s.text(digits, show_n=False)
             line.append(
                 f'**{text}**' if s.used and s.mean == best[col] and len(entrants) > 1 else text

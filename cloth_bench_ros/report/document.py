@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 from datetime import datetime, timezone
+from functools import partial
 from pathlib import Path
 import re
 from typing import Sequence
@@ -139,7 +140,7 @@ def table2_section(paper: Sequence[dict], config: str, wanted_rate: float) -> li
             f'bags given to the sweep, so the columns compare layouts and magnitudes, not the same'
             f' data.'
         ),
-        table_block(table2(paper, rate)),
+        table_block(table2(paper, rate if rate is not None else wanted_rate)),
     ]
 
 
@@ -194,7 +195,7 @@ def speed_error_section(
     cloth = (
         wanted_cloth
         if any(r['cloth'] == wanted_cloth for r in lockstep)
-        else (cloths_of(lockstep) or [None])[0]
+        else (cloths_of(lockstep) or [''])[0]
     )
     sel = [r for r in lockstep if r['cloth'] == cloth]  # one cloth: every configuration has it
     if not sel:
@@ -235,6 +236,16 @@ def speed_error_section(
     ]
 
 
+def _plot_frames(rows: Sequence[dict], results_dir: Path, cloth: str, path: Path) -> Path | None:
+    """Draw the per-frame figure of `cloth` into `path` (a figure block's draw function)."""
+    return figures.plot_frames(rows, results_dir, cloth, path)
+
+
+def _plot_settings(rows: Sequence[dict], title: str, chosen: list, path: Path) -> Path | None:
+    """Draw one engine's settings figure into `path` (a figure block's draw function)."""
+    return figures.plot_settings(rows, path, title, chosen)
+
+
 def frames_section(paper: Sequence[dict], results_dir: Path) -> list[Block]:
     """Per-frame CD and HD over time, first seed, per cloth."""
     blocks = [heading(2, 'Per-frame CD and HD over time')]
@@ -244,7 +255,7 @@ def frames_section(paper: Sequence[dict], results_dir: Path) -> list[Block]:
             figure_block(
                 f'frames_{cloth}.png',
                 f'{cloth}: per-frame CD and HD, first seed; red: change of phase (ours)',
-                lambda path, cloth=cloth: figures.plot_frames(kept, results_dir, cloth, path),
+                partial(_plot_frames, kept, results_dir, cloth),
             )
         )
     if not kept:
@@ -324,9 +335,7 @@ def settings_section(
                 f'settings_{e}.png',
                 f'{engine_label(e)}: speed against error per configuration, Pareto front dashed, '
                 'recommended starred (ours)',
-                lambda path, sel=sel, title=title, chosen=chosen: figures.plot_settings(
-                    sel, path, title, chosen
-                ),
+                partial(_plot_settings, sel, title, chosen),
             )
         )
     blocks += [

@@ -75,7 +75,10 @@ def plot_fig5(rows: Sequence[dict], cloth: str, path: Path, title: str) -> Path:
     ]
     for ax, (key, prim, scale, label) in zip(axes.ravel(), panels):
         for e in engines_of(sel):
-            xs, ys, es, div = [], [], [], []
+            xs: list[float] = []
+            ys: list[float] = []
+            es: list[float] = []
+            div: list[tuple[float, float | None, str]] = []
             for rate in rates_of(sel):
                 g = [
                     r
@@ -385,7 +388,7 @@ def plot_frames(rows: Sequence[dict], results_dir: Path, cloth: str, path: Path)
     styles = ['-', '--', ':', '-.']
     for row_axes, prim in zip(axes, prims):
         g = [r for r in sel if r['primitive'] == prim]
-        first = {}
+        first: dict = {}
         for r in sorted(g, key=lambda r: (r.get('trial', 0), r['seed'])):
             first.setdefault((r['engine'], float(r['rate_hz'])), r)
         rates = sorted({k[1] for k in first})

@@ -81,12 +81,12 @@ def _num(value: object) -> float:
 
 def params_table(ident: dict, suffix: str) -> Table:
     """Per fitted parameter: the preset's value, the identified one, the search range."""
-    space = ident.get('space') if isinstance(ident.get('space'), dict) else {}
+    space: dict = ident['space'] if isinstance(ident.get('space'), dict) else {}
     rows = []
     for name, value in ident['params'].items():
         r = (
-            space.get(name)
-            if isinstance(space.get(name), list) and len(space.get(name)) == 3
+            space[name]
+            if isinstance(space.get(name), list) and len(space[name]) == 3
             else None
         )
         rng = (

@@ -29,7 +29,7 @@ def settings_tables(
         by[(r.engine, r.cloth, r.primitive, r.rate)].append(r)
     for key in sorted(by, key=lambda k: (engines_of(rows).index(k[0]), k[1], k[2], k[3])):
         group_results = by[key]
-        best, cheap, tol = recommend(group_results, tol_rel, tol_abs)
+        best, cheap, tol = recommend(group_results, tol_rel, tol_abs)  # both None or neither
         front = pareto_front(
             [(r.step_ms, r.cd.mean) if r.stable else (math.nan, math.nan) for r in group_results]
         )
@@ -82,7 +82,7 @@ def settings_tables(
                 'lrrrrll',
             )
         )
-        if best is None:
+        if best is None or cheap is None:
             notes.append(
                 f'{engine_label(e)}, {cloth} {prim} at {rate:g} Hz: no stable configuration.'
             )
@@ -116,16 +116,16 @@ def settings_tables(
         keys = [k for k in by if k[0] == e]
         if len(keys) < 2:
             continue
-        ok_everywhere = None
-        cost = defaultdict(float)
+        ok_everywhere: set[str] | None = None
+        cost: defaultdict[str, float] = defaultdict(float)
         for k in keys:
             best, _, tol = recommend(by[k], tol_rel, tol_abs)
-            within = {
+            near_best = {
                 r.config
                 for r in by[k]
                 if best is not None and r.stable and r.cd.mean <= best.cd.mean + tol
             }
-            ok_everywhere = within if ok_everywhere is None else ok_everywhere & within
+            ok_everywhere = near_best if ok_everywhere is None else ok_everywhere & near_best
             for r in by[k]:
                 cost[r.config] += r.step_ms if math.isfinite(r.step_ms) else math.inf
         if ok_everywhere:

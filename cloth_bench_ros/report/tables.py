@@ -168,7 +168,7 @@ def fig5_table(rows: Sequence[dict], cloth: str, name: str = 'fig5') -> Table:
             ok = [r for r in g if r.get('status') == 'ok']
             st = finite(r.get('step_time_mean') for r in ok) * 1e3
             p99 = finite(r.get('step_time_p99') for r in ok) * 1e3
-            subs = {r.get('substeps') for r in g if r.get('substeps')}
+            subs = {int(r['substeps']) for r in g if r.get('substeps')}
             dyn = stat([r for r in g if r['primitive'] == 'dynamic'], 'CD')
             qs = stat([r for r in g if r['primitive'] == 'quasi_static'], 'CD')
             ls = stat(g, 'L_s')
@@ -225,7 +225,7 @@ def timing_table(rows: Sequence[dict]) -> Table:
         miss_txt = '-'
         if misses:
             m = sum(x or 0 for x, _ in misses)
-            n = sum(c for _, c in misses)
+            n = sum(c or 0 for _, c in misses)
             miss_txt = f'{m / len(misses):.0f} / {n / len(misses):.0f} ({100 * m / n:.1f} %)'
         rtf = finite(r.get('real_time_factor') for r in ok)
         out.append(

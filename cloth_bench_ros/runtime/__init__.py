@@ -9,15 +9,16 @@ Set CLOTH_BENCH_EMBEDDED=1 to use the embedded runtime even where rclpy is insta
 from __future__ import annotations
 
 import os
+from typing import TYPE_CHECKING
 
 EMBEDDED = bool(os.environ.get('CLOTH_BENCH_EMBEDDED'))
-if not EMBEDDED:
+if not EMBEDDED and not TYPE_CHECKING:
     try:
         import rclpy
     except ImportError:
         EMBEDDED = True
 
-if EMBEDDED:
+if EMBEDDED or TYPE_CHECKING:  # the type checker reads the embedded runtime's API
     from cloth_bench_ros.runtime import embedded as rclpy  # noqa: F811
     from cloth_bench_ros.runtime.embedded import Clock as _RosClock
     from cloth_bench_ros.runtime.embedded import ClockType as _ClockType

@@ -157,7 +157,7 @@ def shutdown(context: Context | None = None) -> None:
 
 
 class Publisher:
-    def __init__(self, node: 'Node', msg_type: type, topic: str, qos: QoSProfile) -> None:
+    def __init__(self, node: 'Node', msg_type: Any, topic: str, qos: QoSProfile) -> None:
         self.node, self.msg_type, self.topic_name, self.qos = node, msg_type, topic, qos
         self._history: deque = deque(maxlen=max(1, qos.depth))
 
@@ -186,7 +186,7 @@ class Publisher:
 
 class Subscription:
     def __init__(
-        self, node: 'Node', msg_type: type, topic: str, callback: Callable, qos: QoSProfile
+        self, node: 'Node', msg_type: Any, topic: str, callback: Callable, qos: QoSProfile
     ) -> None:
         self.node, self.msg_type, self.topic_name, self.callback, self.qos = (
             node,
@@ -335,7 +335,7 @@ class Node:
 
     # graph
     def create_publisher(
-        self, msg_type: type, topic: str, qos_profile: QoSProfile | int
+        self, msg_type: Any, topic: str, qos_profile: QoSProfile | int
     ) -> Publisher:
         pub = Publisher(self, msg_type, self.resolve_topic_name(topic), as_profile(qos_profile))
         self._publishers.append(pub)
@@ -343,7 +343,7 @@ class Node:
         return pub
 
     def create_subscription(
-        self, msg_type: type, topic: str, callback: Callable, qos_profile: QoSProfile | int
+        self, msg_type: Any, topic: str, callback: Callable, qos_profile: QoSProfile | int
     ) -> Subscription:
         sub = Subscription(
             self, msg_type, self.resolve_topic_name(topic), callback, as_profile(qos_profile)
@@ -489,7 +489,7 @@ class SingleThreadedExecutor:
                         timeout_sec if transport.name == 'dds' else min(timeout_sec, 0.01)
                     )
                 return
-            wait = min(waits) / 1e9
+            wait = min(w for w in waits if w is not None) / 1e9
             if timeout_sec is not None and wait > timeout_sec:
                 transport.wait(timeout_sec)
                 return
@@ -536,5 +536,5 @@ def serialize_message(msg: Any) -> bytes:
     return cdr.serialize(msg)
 
 
-def deserialize_message(data: bytes, msg_type: type) -> Any:
+def deserialize_message(data: bytes, msg_type: Any) -> Any:
     return cdr.deserialize(data, msg_type.__msgtype__)

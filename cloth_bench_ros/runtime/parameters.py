@@ -53,14 +53,15 @@ class ParameterType(enum.IntEnum):
             if isinstance(value, py_type):
                 return scalar
         if isinstance(value, (list, tuple)):
-            for py_type, array in (
+            arrays: tuple[tuple[type, ParameterType], ...] = (
                 (bytes, cls.BYTE_ARRAY),
                 (bool, cls.BOOL_ARRAY),
                 (int, cls.INTEGER_ARRAY),
                 (float, cls.DOUBLE_ARRAY),
                 (str, cls.STRING_ARRAY),
-            ):
-                if all(isinstance(v, py_type) for v in value):
+            )
+            for element_type, array in arrays:
+                if all(isinstance(v, element_type) for v in value):
                     return array
             raise TypeError(
                 f"The given value is not a list of one of the allowed types '{value}'."
@@ -233,14 +234,14 @@ def rcl_scalar(text: str, quoted: bool, str_tag: bool) -> Any:
     if _STRTOD.fullmatch(text):
         body = text.strip()
         stripped = body.lstrip('+-')
-        value = float.fromhex(body) if stripped[:2].lower() == '0x' else float(body)
-        overflow = math.isinf(value) and not stripped.lower().startswith('inf')
-        underflow = value == 0.0 and any(
+        number = float.fromhex(body) if stripped[:2].lower() == '0x' else float(body)
+        overflow = math.isinf(number) and not stripped.lower().startswith('inf')
+        underflow = number == 0.0 and any(
             c in '123456789'
             for c in re.split(r'[eEpP]', stripped)[0][2 * (stripped[:2].lower() == '0x'):]
         )
         if not (overflow or underflow):  # strtod sets ERANGE: rcl then keeps the text
-            return value
+            return number
     return text
 
 

@@ -27,7 +27,7 @@ class Endpoint(Protocol):
     """What a transport uses of a publisher or subscription of runtime/embedded.py."""
 
     node: Any
-    msg_type: type
+    msg_type: Any  # a message class (rclpy-like, with __msgtype__)
     topic_name: str
     qos: QoSProfile
 

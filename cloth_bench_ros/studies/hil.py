@@ -31,6 +31,7 @@ import signal
 import subprocess
 import sys
 import time
+from typing import Sequence
 
 from cloth_bench_ros.core.hil_timing import (
     check_bookkeeping,
@@ -276,7 +277,7 @@ def _finished(group: str, nodes: list) -> bool:
     return all(getattr(n, 'done', True) for n in nodes)
 
 
-def _write_simulator_file(run_dir: Path, nodes: list, notes: list[str] = ()) -> None:
+def _write_simulator_file(run_dir: Path, nodes: list, notes: Sequence[str] = ()) -> None:
     from cloth_bench_ros.nodes.simulator import Simulator
     from cloth_bench_ros.safe_io import atomic_write_text
 
@@ -546,6 +547,8 @@ def lockstep_cd(config: HilConfig) -> float:
             grid=config.grid,
         )
     )
+    if summary is None:
+        raise RuntimeError('the node graph ended before the evaluator finished')
     return _cd(summary['engines'][config.engine], config.primitive)
 
 

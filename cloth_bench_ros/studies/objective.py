@@ -15,6 +15,7 @@ import math
 import os
 from pathlib import Path
 import time
+from typing import Any
 
 import numpy as np
 
@@ -72,7 +73,7 @@ def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]
 def evaluate(trial: Trial) -> dict:
     """Run one trial; never raises. status ok (value finite), diverged (reason, step) or error."""
     start, cpu_start = time.perf_counter(), time.process_time()
-    out = {
+    out: dict[str, Any] = {
         'number': trial.number,
         'sampler': trial.sampler,
         'params': dict(trial.params),
@@ -87,6 +88,7 @@ def evaluate(trial: Trial) -> dict:
     engine = None
     try:
         from cloth_bench_ros.core.evaluation import OnlineEvaluator
+        from cloth_bench_ros.core.trajectory import Primitive
         from cloth_bench_ros.core.scene import ClothGrid, SETTLE_DURATION
         from cloth_bench_ros.core.trajectory import full_targets
         from cloth_bench_ros.engines import make_engine
@@ -94,7 +96,7 @@ def evaluate(trial: Trial) -> dict:
 
         cut, frames = bag_clouds(trial.bag)
         offset = int(round(SETTLE_DURATION * 1e9))
-        core = OnlineEvaluator([trial.engine], trial.primitive, offset, cut, FPS)
+        core = OnlineEvaluator([trial.engine], Primitive(trial.primitive), offset, cut, FPS)
         used = [
             f
             for f in frames

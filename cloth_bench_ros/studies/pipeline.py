@@ -12,7 +12,7 @@ from cloth_bench_ros.nodes.evaluator import Evaluator
 from cloth_bench_ros.nodes.recorder import Recorder
 from cloth_bench_ros.nodes.simulator import Simulator
 from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
-from cloth_bench_ros.runtime import EMBEDDED, Parameter, rclpy, SingleThreadedExecutor
+from cloth_bench_ros.runtime import EMBEDDED, Node, Parameter, rclpy, SingleThreadedExecutor
 import yaml
 
 
@@ -104,7 +104,7 @@ def isolated_domain() -> int:
     return random.SystemRandom().choice(choices)
 
 
-def run_pipeline(config: RunConfig) -> dict:
+def run_pipeline(config: RunConfig) -> dict | None:
     """Run trajectory publisher, one simulator per engine, recorder and evaluator to the end."""
     context = rclpy.Context()
     # Composed in one process on the intra-process transport, whatever CLOTH_BENCH_TRANSPORT says
@@ -117,7 +117,7 @@ def run_pipeline(config: RunConfig) -> dict:
         **({'transport': 'intra'} if EMBEDDED else {'domain_id': isolated_domain()}),
     )
     params = node_parameters(config)
-    nodes = []
+    nodes: list[Node] = []
     try:
         nodes.append(
             TrajectoryPublisher(

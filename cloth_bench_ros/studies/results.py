@@ -120,7 +120,7 @@ def json_safe(value: Any) -> Any:
     return value
 
 
-def check_row(row: Any, base: Path, where: str) -> ResultRow:
+def check_row(row: Any, base: Path, where: str) -> dict[str, Any]:
     """Return the row if it is a usable results row, else ResultsError naming `where`."""
     if not isinstance(row, dict):
         raise ResultsError(
@@ -169,7 +169,7 @@ def results_path(path: Path) -> Path:
     return path / RESULTS_FILE if path.is_dir() else path
 
 
-def load_rows(path: Path) -> list[ResultRow]:
+def load_rows(path: Path) -> list[dict[str, Any]]:
     """Return the rows of a results.jsonl; a torn line is skipped, a bad row refused."""
     path = results_path(path)
     if not path.exists():

@@ -302,8 +302,8 @@ def run_case(case: StressCase) -> dict:
                     f' {len(left) - 1}'
                 )
                 break
-        if engine.diverged:
-            d = engine.divergence
+        d = engine.divergence
+        if d is not None:
             row.update(
                 status='diverged',
                 diverged=True,
