@@ -84,7 +84,7 @@ def round_trips(kind: str, msg: object, count: int, env: dict[str, str]) -> np.n
 
 
 def baseline_echo(kind: str) -> None:
-    """Child of the baseline: Cyclone's own typed DataReader/DataWriter (element-by-element CDR)."""
+    """Child of the baseline: Cyclone's own typed reader and writer (element-by-element CDR)."""
     from cloth_bench_ros.runtime.dds.idl import dds_type
     from cloth_bench_ros.runtime.dds.qos import domain_id, endpoint_qos
     from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet

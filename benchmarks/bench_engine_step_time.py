@@ -3,9 +3,10 @@ Step time of each available cloth engine at 10, 100 and 1000 Hz with the towel p
 
 Runs the full trajectory (settle phase + quintic part) of a primitive on the default 11 x 15
 grid, timing every engine.step() with perf_counter, and prints per engine and rate the
-internal substeps, the median and 95th-percentile step time (up to a divergence), the real-time factor (dt over
-the mean step time), the mean step time as a multiple of MuJoCo's at the same rate (measured in this
-process, so the machine's load affects both alike) and whether the engine diverged. Newton runs in
+internal substeps, the median and 95th-percentile step time (up to a divergence), the
+real-time factor (dt over the mean step time), the mean step time as a multiple of MuJoCo's at
+the same rate (measured in this process, so the machine's load affects both alike) and whether
+the engine diverged. Newton runs in
 both of its cloth models (vbd, its preset's, and xpbd).
 
     .venv/bin/python benchmarks/bench_engine_step_time.py [--primitive dynamic] [--cloth towel]

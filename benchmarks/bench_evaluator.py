@@ -27,7 +27,7 @@ GOALS_MS = {50_000: 1.0, 307_200: 5.0}
 def brute_force(V: np.ndarray, P: np.ndarray) -> tuple[float, float]:
     d = np.empty(len(V))
     for i in range(0, len(V), 16):  # blocks of vertices keep memory bounded
-        d[i : i + 16] = np.abs(V[i : i + 16, None, :] - P[None, :, :]).sum(axis=2).min(axis=1)
+        d[i:i + 16] = np.abs(V[i:i + 16, None, :] - P[None, :, :]).sum(axis=2).min(axis=1)
     return float(d.mean()), float(d.max())
 
 

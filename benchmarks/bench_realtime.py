@@ -1,6 +1,8 @@
 """
-Hardware in the loop: MuJoCo and PyBullet at 100 and 1000 Hz, controller, simulator and observer
-in three processes over DDS on loopback, with the preset and the recommended configuration.
+Hardware in the loop: MuJoCo and PyBullet at 100 and 1000 Hz, over DDS on loopback.
+
+Controller, simulator and observer run in three processes, with the preset and the recommended
+configuration.
 
 For each engine, rate and configuration it prints latency p50 / p99 / p99.9 / max (target due on
 the controller's wall-clock schedule -> state back at the controller), deadline misses
@@ -10,7 +12,8 @@ in lockstep; then the recommended configuration's CD against the preset's (the a
 for speed). The baseline of each row is the engine's own step time (step p99 against latency p99).
 
     .venv/bin/python benchmarks/bench_realtime.py [--engines mujoco bullet] [--rates 100 1000]
-        [--configs preset recommended] [--cpu N] [--fifo 50] [--no-busy-wait] [--deadline-budget 0.5]
+        [--configs preset recommended] [--cpu N] [--fifo 50] [--no-busy-wait]
+        [--deadline-budget 0.5]
         [--repeats 1] [--output results/bench_realtime]
 
 By default the real-time layout of docs/hil.md: the simulator's step loop pinned to the last core
@@ -75,7 +78,8 @@ def main() -> None:
     parser.add_argument('--output', type=Path, default=Path('results') / 'bench_realtime')
     args = parser.parse_args()
 
-    # DDS on loopback only, on a domain of its own (the project's network rule: docs/development.md); the children inherit it.
+    # DDS on loopback only, on a domain of its own (the project's network rule:
+    # docs/development.md); the children inherit it.
     os.environ.update(loopback_environment(random.randint(1, 200)))
     bag = bundled_bag(args.cloth, args.primitive)
     load = os.getloadavg()

@@ -64,7 +64,12 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as out:
         for rate in args.rates:
             cell = Cell(
-                engine=args.engine, rate_hz=rate, cloth='towel', primitive='dynamic', bag=bag, seed=0
+                engine=args.engine,
+                rate_hz=rate,
+                cloth='towel',
+                primitive='dynamic',
+                bag=bag,
+                seed=0,
             )
             ratios: dict[bool, list[float]] = {False: [], True: []}
             for _ in range(args.repeats + 1):

@@ -1,4 +1,4 @@
-"""Where the package's config/ and bags/ are: the source tree, or share/cloth_bench_ros when installed."""
+"""Where the package's config/ and bags/ are: the source tree, or share/ when installed."""
 
 from __future__ import annotations
 

@@ -83,7 +83,7 @@ def load_yaml_file(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> Any:
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write beside `path`, flush to disk, then rename over it: readers see the old or the new file."""
+    """Write beside `path`, flush, then rename over it: readers see the old or the new file."""
     path = Path(path)
     try:
         mode = stat.S_IMODE(os.stat(path).st_mode)
@@ -108,7 +108,7 @@ def atomic_write_text(path: str | Path, text: str) -> None:
 
 
 def check_output_dir(path: str | Path) -> Path:
-    """Create `path` if needed and check that files can be written there, before any work starts."""
+    """Create `path` if needed and check that files can be written there, before any work."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise UnsafeInputError(f'{path}: exists and is not a directory')
@@ -153,7 +153,7 @@ def staged_directory(final: str | Path, overwrite: bool = False) -> Iterator[Pat
 
 
 def safe_name(text: Any, what: str = 'name') -> str:
-    """`text` if it is usable as one file-name part (letters, digits, _ . + -), else one-line error."""
+    """Return `text` if it is usable as one file-name part, else raise a one-line error."""
     name = str(text)
     if not _SAFE_NAME.match(name) or name in ('.', '..'):
         raise UnsafeInputError(f'{what} {name!r} is not a safe file name part')

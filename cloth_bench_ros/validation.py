@@ -48,7 +48,7 @@ def number(
     low_open: bool = False,
     unit: str = '',
 ) -> float:
-    """Return a finite real number in [low, high] (or (low, high] with low_open); bools and text refused."""
+    """Return a finite real number in [low, high] (or (low, high]); bools and text refused."""
     if not _is_number(value):
         raise InputError(f'{name}: {value!r} is not a number')
     x = float(value)  # type: ignore[arg-type]
@@ -63,7 +63,7 @@ def number(
 
 
 def integer(value: object, name: str, low: int | None = None, high: int | None = None) -> int:
-    """Return an integer in [low, high]; an integral float (3.0) is accepted, 2.7 and bools are refused."""
+    """Return an integer in [low, high]; an integral float is accepted, 2.7 and bools refused."""
     if isinstance(value, bool) or not (isinstance(value, numbers.Integral) or _is_number(value)):
         raise InputError(f'{name}: {value!r} is not an integer')
     if not isinstance(value, numbers.Integral):
@@ -112,7 +112,7 @@ def non_negative(value: object, name: str, high: float | None = None) -> float:
 
 
 def time_offset(value: object, name: str) -> float:
-    """Return a duration in seconds added to or skipped from stamps: finite, in [0, MAX_TIME_OFFSET_S]."""
+    """Return a duration in seconds added to or skipped from stamps, in [0, MAX_TIME_OFFSET_S]."""
     return number(value, name, 0.0, MAX_TIME_OFFSET_S, unit='s')
 
 
@@ -129,7 +129,7 @@ def frame_index(value: object, name: str, unset: int | None = None) -> int | Non
 
 
 def grid(nx: object, nz: object, name: str = 'grid') -> tuple[int, int]:
-    """Return a cloth mesh size: 2..MAX_GRID_SIDE vertices per side and at most MAX_GRID_VERTICES in all."""
+    """Return a cloth mesh size: 2..MAX_GRID_SIDE per side, MAX_GRID_VERTICES in all."""
     x = integer(nx, f'{name} nx', 2, MAX_GRID_SIDE)
     z = integer(nz, f'{name} nz', 2, MAX_GRID_SIDE)
     if x * z > MAX_GRID_VERTICES:
@@ -190,7 +190,7 @@ def parse_grid(text: str, name: str = 'grid') -> tuple[int, int]:
 
 
 def parse_value(text: str) -> bool | int | float | str:
-    """Return a parameter value from the command line: bool (true/on/yes, false/off/no), int, float or string."""
+    """Return a command-line parameter value: bool (true/on/yes, false/off/no), int, float, str."""
     low = text.strip().lower()
     if low in ('true', 'on', 'yes', 'false', 'off', 'no'):
         return low in ('true', 'on', 'yes')
@@ -205,7 +205,7 @@ def parse_value(text: str) -> bool | int | float | str:
 
 
 def parse_overrides(specs: Sequence[str] | None) -> dict[str, dict[str, Any]]:
-    """{"engine": {"param": value}} from "engine.param=value" strings; a parameter set twice is refused."""
+    """Return {"engine": {"param": value}} from "engine.param=value" strings; no repeats."""
     out: dict[str, dict[str, Any]] = {}
     for spec in specs or ():
         lhs, sep, value = spec.partition('=')
@@ -223,7 +223,7 @@ def parse_overrides(specs: Sequence[str] | None) -> dict[str, dict[str, Any]]:
 
 
 def parameter_mapping(text: object, name: str) -> dict[str, Any]:
-    """Return a YAML mapping of parameter name -> scalar (a node's `engine_params`), read bounded."""
+    """Return a YAML mapping of parameter name -> scalar (a node's `engine_params`)."""
     if not isinstance(text, str):
         raise InputError(f'{name}: {text!r} is not a YAML string')
     if len(text.encode('utf-8')) > MAX_ENGINE_PARAMS_BYTES:

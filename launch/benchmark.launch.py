@@ -1,10 +1,13 @@
 """
-ros2 launch cloth_bench_ros benchmark.launch.py [engines:=mujoco,bullet] [rate_hz:=100.0] [bag:=PATH] ...
+Launch the benchmark's node graph.
 
-The node graph (README, "The node graph"), one process per node, output on the screen; the launch ends when
-the evaluator has written its report. Launch arguments win over config/benchmark.yaml: every
-node has a name and a namespace, so launch_ros writes its dict parameters under the node's full
-name into a params file passed after benchmark.yaml, and rclpy applies that key last.
+ros2 launch cloth_bench_ros benchmark.launch.py [engines:=mujoco,bullet] [rate_hz:=100.0]
+[bag:=PATH] ...
+
+The node graph (README, "The node graph"), one process per node, output on the screen; the launch
+ends when the evaluator has written its report. Launch arguments win over config/benchmark.yaml:
+every node has a name and a namespace, so launch_ros writes its dict parameters under the node's
+full name into a params file passed after benchmark.yaml, and rclpy applies that key last.
 """
 
 import os

@@ -1,4 +1,4 @@
-"""Small real MCAP bags made on the spot, shared by the tests (conftest.py's fixtures use them too)."""
+"""Small real MCAP bags made on the spot, shared by the tests and conftest.py's fixtures."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def write_hanging_cloth_bag(
     primitive: str = 'dynamic',
     change_of_phase_frame: int | None = 99,
 ) -> Path:
-    """Return a bag of a flat cloth hanging at rest (0.5 x 0.7 m, x-z plane), with 1 mm noise, at 30 Hz."""
+    """Return a bag of a flat cloth hanging at rest (0.5 x 0.7 m), 1 mm noise, at 30 Hz."""
     rng = np.random.default_rng(seed)
     grid = ClothGrid(points_per_side, points_per_side).vertices()
     trial = TrialInfo(

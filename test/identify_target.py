@@ -1,4 +1,4 @@
-"""A target bag made by an engine itself with known parameters (the identification tests' ground truth)."""
+"""A bag made by an engine with known parameters (the identification tests' ground truth)."""
 
 from __future__ import annotations
 
@@ -26,8 +26,9 @@ def write_engine_target_bag(
     primitive: str = 'dynamic',
 ) -> Path:
     """
-    Return the engine's own vertices at 30 Hz (linear between steps, as the evaluator pairs them): a bag
-    whose noise floor is 0 for the same engine, seed and parameters.
+    Return the engine's own vertices at 30 Hz (linear between steps, as the evaluator pairs).
+
+    A bag whose noise floor is 0 for the same engine, seed and parameters.
     """
     targets = full_targets(primitive, rate_hz)
     sim = make_engine(

@@ -51,7 +51,7 @@ def require_real_ros() -> None:
 
 
 def ros_env(**extra: str) -> dict[str, str]:
-    """Return the environment of a real-rclpy process: this checkout first on the path, no embedded switch."""
+    """Return the environment of a real-rclpy process: this checkout first, no embedded switch."""
     dropped = (
         'CLOTH_BENCH_EMBEDDED',
         'CLOTH_BENCH_TRANSPORT',
@@ -70,7 +70,7 @@ def in_namespace(*argv: str) -> list[str]:
 
 
 def ros_script(script: str) -> list[str]:
-    """Return a shell script (several processes of one graph) inside one loopback-only network namespace."""
+    """Return a shell script running one graph's processes in a loopback-only namespace."""
     return [
         'unshare',
         '-n',

@@ -88,7 +88,8 @@ def test_plain_bag_at_7_hz_with_a_given_start(tmp_path):
     )
     real = json.loads((out / 'summary.json').read_text())['real']
     acc = real['accounting']
-    # frames 0-6 come before the start; frames at 0 .. 30/7 s of the motion are scored; 31/7 s > 4.4 s
+    # frames 0-6 come before the start; frames at 0 .. 30/7 s of the motion are scored; 31/7 s >
+    # 4.4 s
     assert (acc['before_start'], acc['scored'], acc['after_trajectory']) == (7, 31, 12) and acc[
         'adds_up'
     ]

@@ -35,9 +35,13 @@ def stamp(k: int, fps: float = 30.0) -> int:
 
 
 def make_trial(**kw) -> TrialInfo:
-    base = dict(
-        cloth='towel', trial=1, primitive='dynamic', change_of_phase_frame=98, source='test'
-    )
+    base = {
+        'cloth': 'towel',
+        'trial': 1,
+        'primitive': 'dynamic',
+        'change_of_phase_frame': 98,
+        'source': 'test',
+    }
     base.update(kw)
     return TrialInfo(**base)
 
@@ -184,7 +188,7 @@ def test_corrupt_chunk(tmp_path: Path) -> None:
     mcap = bag / 'corrupt_0.mcap'
     data = bytearray(mcap.read_bytes())
     middle = len(data) // 2
-    data[middle : middle + 64] = bytes(64)  # zero out part of a compressed chunk
+    data[middle:middle + 64] = bytes(64)  # zero out part of a compressed chunk
     mcap.write_bytes(bytes(data))
     reader = BagReader(bag)  # the summary is intact
     with pytest.raises(BagError) as exc:

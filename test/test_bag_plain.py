@@ -1,4 +1,4 @@
-"""Plain rosbag2 recordings: metadata versions 4-9, split files, hardening, tf, start times, Jazzy layout."""
+"""Plain rosbag2 recordings: metadata 4-9, split files, hardening, tf, start times, layouts."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ def _plain_bag(path: Path, frames: int = 4, first_ns: int = 10**18) -> Path:
 
 
 def _as_version(path: Path, version: int) -> None:
-    """Rewrite metadata.yaml in the layout rosbag2 writes at `version` (rosbag2_storage/yaml.hpp)."""
+    """Rewrite metadata.yaml in the layout rosbag2 writes at `version`."""
     doc = yaml.safe_load((path / 'metadata.yaml').read_text())
     info = doc['rosbag2_bagfile_information']
     info['version'] = version
@@ -178,8 +178,10 @@ def test_written_bag_looks_like_jazzy(tmp_path):
 
 
 def test_type_hash_is_rihs01_as_jazzy_computes_it():
-    # rosbag2 (jazzy) rosbag2_tests/resources/mcap/bag_with_topics_and_service_events/metadata.yaml, recorded
-    # 2023-11-07 by Jazzy's rosbag2 when rosbag2_interfaces/msg/WriteSplitEvent held these two fields.
+    # rosbag2 (jazzy)
+    # rosbag2_tests/resources/mcap/bag_with_topics_and_service_events/metadata.yaml, recorded
+    # 2023-11-07 by Jazzy's rosbag2 when rosbag2_interfaces/msg/WriteSplitEvent held these two
+    # fields.
     from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
     store = get_typestore(Stores.EMPTY)

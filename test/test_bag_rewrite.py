@@ -74,7 +74,7 @@ def info_type(info: dict, topic: str) -> str:
 
 
 def write_old_layout(src: Path, dst: Path) -> Path:
-    """Src's messages in the older layout: metadata version 8/humble, QoS as a string, no channel hash."""
+    """Write src's messages in the older layout: metadata 8/humble, QoS as a string, no hash."""
     dst.mkdir()
     with next(src.glob('*.mcap')).open('rb') as f, (dst / f'{dst.name}_0.mcap').open('wb') as out:
         reader = make_reader(f)
@@ -111,7 +111,7 @@ def write_old_layout(src: Path, dst: Path) -> Path:
 
 @pytest.fixture
 def recorded_bag(tmp_path) -> Path:
-    """Return a small bag whose log times are receive times, not header stamps, with two data topics."""
+    """Return a small bag whose log times are receive times, not stamps, with two data topics."""
     trial = TrialInfo(
         cloth='linen', trial=2, primitive='dynamic', change_of_phase_frame=90, source='test'
     )

@@ -34,7 +34,7 @@ def write_with_rosbags(
     version: int = 9,
     messages: list | None = None,
 ) -> Path:
-    """Return the source bag's messages written by rosbags' Writer, custom_data (the trial) included."""
+    """Return the source bag's messages written by rosbags' Writer, custom_data included."""
     reader = BagReader(SOURCE)
     plugin = StoragePlugin.SQLITE3 if storage == 'sqlite3' else StoragePlugin.MCAP
     writer = Writer(out, version=version, storage_plugin=plugin)
@@ -77,7 +77,7 @@ DATABASE_SCHEMA = {4: 2, 5: 3, 6: 3, 7: 4, 8: 4, 9: 4}
 
 
 def downgrade_database(database: Path, schema: int) -> None:
-    """Return a schema-4 .db3 rewritten in an older rosbag2 sqlite3 schema (its messages untouched)."""
+    """Return a schema-4 .db3 rewritten in an older rosbag2 sqlite3 schema."""
     import sqlite3
 
     with sqlite3.connect(database) as db:
@@ -99,8 +99,9 @@ def downgrade_database(database: Path, schema: int) -> None:
 
 def write_split(out: Path, storage: str, parts: int = 2) -> Path:
     """
-    Return the source's messages in `parts` storage files of one bag, named and listed as
-    `ros2 bag record --max-bag-size` splits them (`<bag>_0`, `<bag>_1`, ...).
+    Return the source's messages in `parts` storage files of one bag.
+
+    Named and listed as `ros2 bag record --max-bag-size` splits them (`<bag>_0`, `<bag>_1`, ...).
     """
     messages = list(BagReader(SOURCE).logged_messages())
     suffix = '.db3' if storage == 'sqlite3' else '.mcap'
@@ -110,7 +111,7 @@ def write_split(out: Path, storage: str, parts: int = 2) -> Path:
         part = write_with_rosbags(
             out.parent / f'{out.name}_part{i}',
             storage,
-            messages=messages[bounds[i] : bounds[i + 1]],
+            messages=messages[bounds[i]:bounds[i + 1]],
         )
         name = f'{out.name}_{i}{suffix}'
         out.mkdir(exist_ok=True)
@@ -142,7 +143,7 @@ def write_split(out: Path, storage: str, parts: int = 2) -> Path:
 
 
 def write_bare_mcap(out: Path) -> Path:
-    """Return a single .mcap written by the mcap library's own writer (lz4 chunks), no metadata.yaml."""
+    """Return a single .mcap written by the mcap library's own writer (lz4 chunks)."""
     from cloth_bench_ros.data.messages import msgdef
     from mcap.writer import CompressionType
     from mcap.writer import Writer as McapWriter

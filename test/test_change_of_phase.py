@@ -1,4 +1,4 @@
-"""The change of phase of a dynamic trial found in the data (first table contact), and how runs use it."""
+"""The change of phase of a dynamic trial found in the data, and how runs use it."""
 
 from __future__ import annotations
 
@@ -202,7 +202,8 @@ def test_quasi_static_is_scored_over_its_whole_length(tmp_path, capsys):
 def test_the_same_recording_in_another_storage_scores_exactly_alike(
     storage, compression, tmp_path
 ):
-    # Lossless variants of one camera-like recording (rosbags' Writer): same detected frame, same digits.
+    # Lossless variants of one camera-like recording (rosbags' Writer): same detected frame, same
+    # digits.
     source = bundled_bag('towel', 'dynamic')
     summaries = []
     for name, kind, mode in (('mcap', 'mcap', 'none'), ('variant', storage, compression)):

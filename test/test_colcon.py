@@ -1,4 +1,4 @@
-"""`colcon build` produces the install layout that `ros2 run` and `ros2 launch` use, and it runs."""
+"""`colcon build` makes the install layout `ros2 run` and `ros2 launch` use, and it runs."""
 
 import os
 from pathlib import Path

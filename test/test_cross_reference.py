@@ -1,6 +1,7 @@
 """
-The second synthetic reference (Newton VBD) and the cross-reference table: real engines scored
-against short real bags of both references (coarse grids, 0.2 s of the fling).
+The second synthetic reference (Newton VBD) and the cross-reference table.
+
+Real engines scored against short real bags of both references (coarse grids, 0.2 s of the fling).
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ def test_reference_bags_are_named_after_their_reference():
 
 @pytest.fixture(scope='module')
 def short_bags(tmp_path_factory) -> dict[str, str]:
-    """0.2 s of the towel's fling from each reference, on a coarse 6 x 8 reference grid at 150 Hz."""
+    """Make 0.2 s of the towel's fling from each reference, on a 6 x 8 grid at 150 Hz."""
     out = tmp_path_factory.mktemp('xref')
     bags = {}
     for reference in xr.REFERENCES:

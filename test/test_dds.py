@@ -1,6 +1,7 @@
 """
-The DDS transport over real Cyclone DDS, confined to loopback (interface lo, no multicast,
-peer 127.0.0.1) on a random domain per test, so parallel runs do not hear each other.
+The DDS transport over real Cyclone DDS, confined to loopback on a random domain per test.
+
+Interface lo, no multicast, peer 127.0.0.1, so parallel runs do not hear each other.
 """
 
 from __future__ import annotations

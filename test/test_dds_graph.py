@@ -248,7 +248,7 @@ def test_a_plain_dds_reader_receives_the_graph_and_its_bytes_are_rosbags_cdr(gra
         for payload in payloads[topic][:3] + payloads[topic][-3:]:
             sample = cls.deserialize(payload)
             reference = bytes(ROSBAGS.serialize_cdr(_to_rosbags(sample, msgtype), msgtype))
-            padding = payload[len(reference) :]
+            padding = payload[len(reference):]
             assert payload[: len(reference)] == reference and padding == bytes(len(padding)), topic
             assert len(payload) % 4 == 0 and len(padding) < 4
             assert payload == sample.serialize().ljust(

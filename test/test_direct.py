@@ -30,15 +30,20 @@ def _frames(path):
 
 
 CELLS = {
-    'mujoco-100hz-hanging': dict(engines=['mujoco'], rate_hz=100.0),
-    'bullet-10hz-towel-drag': dict(
-        engines=['bullet'], rate_hz=10.0, primitive='quasi_static', bag='towel_quasi_static'
-    ),
-    'newton-1khz-hanging': dict(engines=['newton'], rate_hz=1000.0, seed=3),
-    'mujoco-newton-1khz': dict(engines=['mujoco', 'newton'], rate_hz=1000.0),
-    'two-engines-overrides': dict(
-        engines=['mujoco', 'bullet'], rate_hz=100.0, engine_params={'mujoco': {'damping': 0.5}}
-    ),
+    'mujoco-100hz-hanging': {'engines': ['mujoco'], 'rate_hz': 100.0},
+    'bullet-10hz-towel-drag': {
+        'engines': ['bullet'],
+        'rate_hz': 10.0,
+        'primitive': 'quasi_static',
+        'bag': 'towel_quasi_static',
+    },
+    'newton-1khz-hanging': {'engines': ['newton'], 'rate_hz': 1000.0, 'seed': 3},
+    'mujoco-newton-1khz': {'engines': ['mujoco', 'newton'], 'rate_hz': 1000.0},
+    'two-engines-overrides': {
+        'engines': ['mujoco', 'bullet'],
+        'rate_hz': 100.0,
+        'engine_params': {'mujoco': {'damping': 0.5}},
+    },
 }
 
 
@@ -64,7 +69,8 @@ def test_direct_cell_equals_the_node_graph(name, hanging_bag, tmp_path):
         {k: v for k, v in direct['run'].items() if k != 'wall_time'},
         'run',
     )
-    assert _frames(tmp_path / 'graph' / 'frames.csv') == _frames(tmp_path / 'direct' / 'frames.csv')
+    frames = _frames(tmp_path / 'graph' / 'frames.csv')
+    assert frames == _frames(tmp_path / 'direct' / 'frames.csv')
 
 
 def test_the_direct_path_refuses_what_needs_the_node_graph(hanging_bag):

@@ -1,10 +1,12 @@
 """
-Conformance suite: every available cloth engine, in each of its cloth models, obeys the
-ClothEngine contract in the benchmark scene. Real engines, coarse 6 x 8 grid, 100 Hz fling.
+Conformance suite: every available cloth engine and model obeys the ClothEngine contract.
+
+In the benchmark scene; real engines, coarse 6 x 8 grid, 100 Hz fling.
 
 Tolerances:
 - grasped corners within CORNER_TOLERANCE = 1 mm of the targets after every step;
-- at the end of the settle phase the lowest vertex hangs HANG = 0.70 m +- 0.07 m below the grippers;
+- at the end of the settle phase the lowest vertex hangs HANG = 0.70 m +- 0.07 m below the
+  grippers;
 - no vertex above the table footprint more than TABLE_PENETRATION = 1 cm below the table top;
 - the seeded initial perturbation has a standard deviation within 0.3-0.7 mm and no vertex
   is displaced more than 3 mm;
@@ -128,7 +130,7 @@ def test_cloth_hangs_about_0_7_m_after_settling(fling):
 
 def test_cloth_follows_the_fling(fling):
     """The cloth moves with the grippers: its mean y swings both ways during the fling."""
-    mean_y = fling.vertices[fling.settle_end :, :, 1].mean(axis=1)
+    mean_y = fling.vertices[fling.settle_end:, :, 1].mean(axis=1)
     assert mean_y.min() < -0.1 and mean_y.max() > 0.1
 
 

@@ -1,6 +1,8 @@
 """
-One root for the user-facing errors: every error class of the package (outside the rclpy-compatible
-runtime, whose classes mirror rclpy's) derives from ClothBenchError, and the CLI reports one in one line.
+One root for the user-facing errors, reported by the CLI in one line.
+
+Every error class of the package (outside the rclpy-compatible runtime, whose classes mirror
+rclpy's) derives from ClothBenchError.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ NOT_ERRORS = {('cloth_bench_ros.studies.errors', 'StudyInterrupted')}
 
 
 def error_classes() -> list[tuple[str, str]]:
-    """(module, class) of every class outside runtime/ whose base is an exception type."""
+    """Return (module, class) of every class outside runtime/ derived from an exception."""
     found = []
     for path in sorted(PACKAGE.rglob('*.py')):
         rel = path.relative_to(PACKAGE.parent).with_suffix('')

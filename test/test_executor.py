@@ -1,6 +1,8 @@
 """
-The Dask executor with real processes on loopback: an external scheduler and two workers (one killed
-mid-run), two sweeps on one directory, and a client killed with SIGKILL leaving no worker behind.
+The Dask executor with real processes on loopback.
+
+An external scheduler and two workers (one killed mid-run), two sweeps on one directory, and a
+client killed with SIGKILL leaving no worker behind.
 """
 
 from __future__ import annotations
@@ -231,7 +233,7 @@ def test_two_sweeps_on_one_directory_run_every_cell_once(bag_dir, tmp_path):
 
 
 def _python_children(parent: psutil.Process) -> list:
-    """Return the Python processes below parent; one that exits while being listed is not one of them."""
+    """Return the Python processes below parent (one that exits meanwhile is not counted)."""
     out = []
     for child in parent.children(recursive=True):
         try:

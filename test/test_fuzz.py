@@ -39,7 +39,7 @@ KNOWN: dict[tuple[str, int], str] = {}
 
 
 class Hung(BaseException):
-    """Raised by the alarm in a case that ran past its time limit (not an Exception: nothing catches it)."""
+    """Raised by the alarm when a case runs past its time limit (not an Exception)."""
 
 
 def _alarm(signum, frame):
@@ -48,7 +48,7 @@ def _alarm(signum, frame):
 
 @pytest.fixture(scope='module')
 def base_bag(tmp_path_factory) -> tuple[Path, list[tuple[int, int]]]:
-    """Return the bundled towel bag's trial and first FRAMES clouds; and its chunks' (offset, length)."""
+    """Return the bundled towel bag's trial, first FRAMES clouds and chunks' (offset, length)."""
     bag = tmp_path_factory.mktemp('fuzz_base') / 'towel_dynamic'
     with warnings.catch_warnings():
         warnings.simplefilter('ignore')
@@ -70,7 +70,7 @@ def base_bag(tmp_path_factory) -> tuple[Path, list[tuple[int, int]]]:
 
 @pytest.fixture(scope='module')
 def base_results(base_bag, tmp_path_factory) -> Path:
-    """results.jsonl of two real cells (MuJoCo, 10 Hz, 4x4) on the base bag, one with frames kept."""
+    """Write results.jsonl of two real cells (MuJoCo, 10 Hz, 4x4), one with frames kept."""
     bag, _ = base_bag
     out = tmp_path_factory.mktemp('fuzz_results')
     cells = sw.paper_cells(
@@ -127,11 +127,11 @@ def corrupt_bag(
     elif kind == 'swap_chunks':
         i, j = sorted(rng.choice(len(chunks), 2, replace=False))
         (a, la), (b, lb) = chunks[i], chunks[j]
-        data[a : b + lb] = data[b : b + lb] + data[a + la : b] + data[a : a + la]
+        data[a:b + lb] = data[b:b + lb] + data[a + la:b] + data[a:a + la]
         what = f'chunks {i} and {j} swapped'
     elif kind == 'zero_block':
         start, size = int(rng.integers(0, len(data))), int(rng.integers(1, 4096))
-        data[start : start + size] = bytes(len(data[start : start + size]))
+        data[start:start + size] = bytes(len(data[start:start + size]))
         what = f'{size} bytes zeroed at {start}'
     elif kind == 'meta_flip':
         n = int(rng.integers(1, 9))
@@ -198,7 +198,7 @@ ESCAPE_KEYS = ['cloth', 'engine', 'primitive', 'config', 'mode', 'frames_csv']
 def corrupt_results(
     base: Path, rng: np.random.Generator, dest: Path, escape_key: str | None = None
 ) -> str:
-    """Copy results.jsonl to dest/results.jsonl with one random corruption (or escape_key's); its description."""
+    """Copy results.jsonl to dest with one random corruption; return its description."""
     dest.mkdir(parents=True)
     lines = base.read_text().splitlines()
     rows = [json.loads(line) for line in lines]

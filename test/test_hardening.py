@@ -29,7 +29,7 @@ BUNDLED = REPO / 'bags' / 'towel_dynamic'
 
 
 def run_main(capsys, main, argv) -> tuple[int, str, str]:
-    """(status, stdout, stderr) of an in-process `main(argv)`; argparse's exit counts as a status."""
+    """Return (status, stdout, stderr) of an in-process `main(argv)`, argparse's exit included."""
     try:
         code = main(argv)
     except SystemExit as exc:
@@ -436,7 +436,8 @@ class Flood(Node):
     def tick(self):
         for _ in range(10):
             header = Header(stamp=Time(nanoseconds=1000 + self.k).to_msg(), frame_id="world")
-            self.pub.publish(create_cloud_xyz32(header, self.rng.normal(size=(500, 3)), PointCloud2, PointField))
+            points = self.rng.normal(size=(500, 3))
+            self.pub.publish(create_cloud_xyz32(header, points, PointCloud2, PointField))
             self.k += 1
             if self.k > 20000:
                 raise SystemExit("the disk never filled")

@@ -1,7 +1,9 @@
 """
-Hardware in the loop: a short real-time run in three processes over DDS (loopback, own domain),
-the controller's timeline and its bookkeeping, keep-last skipping, the lean step path, process
-settings, and the configuration recommended for a rate; real engines, real Cyclone DDS.
+Hardware in the loop: a short real-time run in three processes over DDS.
+
+On loopback, own domain: the controller's timeline and its bookkeeping, keep-last skipping, the
+lean step path, process settings, and the configuration recommended for a rate; real engines, real
+Cyclone DDS.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ MS = 1_000_000
 
 @pytest.fixture
 def dds_loopback(monkeypatch) -> None:
-    """Cyclone on lo only, no multicast, peer 127.0.0.1, on a random domain; children inherit it."""
+    """Confine Cyclone to lo, no multicast, peer 127.0.0.1, a random domain; children inherit."""
     for key, value in loopback_environment(random.randint(1, 200)).items():
         monkeypatch.setenv(key, value)
     monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
@@ -72,7 +74,8 @@ def test_short_realtime_run_in_three_processes_accounts_for_every_target(
     assert f.targets == f.sent == len(timeline) == 81
     assert result.stepped + result.skipped == f.sent and f.states == result.stepped and f.lost == 0
     assert result.stepped >= 1
-    # The schedule: target k due k / rate after the first; none sent before half a period ahead of it.
+    # The schedule: target k due k / rate after the first; none sent before half a period ahead of
+    # it.
     period = round(1e9 / rate)
     assert np.all(np.diff(timeline.due) == period)
     assert np.all(timeline.sent >= timeline.due - period // 2)
@@ -80,7 +83,8 @@ def test_short_realtime_run_in_three_processes_accounts_for_every_target(
     assert got[-1] and np.all(
         timeline.received[got][1:] > timeline.sent[got][1:]
     )  # keep-last: the last is stepped
-    # Target 0 is the start-up handshake's: answered before the schedule, which starts at its answer.
+    # Target 0 is the start-up handshake's: answered before the schedule, which starts at its
+    # answer.
     assert timeline.sent[0] == timeline.due[0] == timeline.received[0]
     # Latencies and misses are the timestamps' own: received - due, missed when over one period.
     latency = (timeline.received[got] - timeline.due[got]) / 1e9
@@ -174,7 +178,8 @@ def test_a_late_simulator_steps_to_the_newest_target_and_counts_the_skipped_ones
         executor = embedded.SingleThreadedExecutor(context=context)
         executor.add_node(sim)
         # Target 0 twice (the controller's start-up handshake, then the schedule's first target):
-        # answered twice, stepped once; then the transport kept only the newest: 2, 3, 5-8 never arrived.
+        # answered twice, stepped once; then the transport kept only the newest: 2, 3, 5-8 never
+        # arrived.
         for k in (0, 0, 1, 4, 9):
             sim.on_target(_target(targets, k))
             while context.queue:

@@ -1,4 +1,4 @@
-"""The hardware-in-the-loop layout: the measured best the machine allows, by default, said in one line."""
+"""The hardware-in-the-loop layout: the machine's measured best by default, in one line."""
 
 from __future__ import annotations
 

@@ -1,6 +1,8 @@
 """
-Parameter identification: recovery of known parameters (both samplers), resume, failed trials, the preset
-file, the report section and user errors; real MuJoCo and PyBullet, real Optuna, a real Dask LocalCluster.
+Parameter identification: recovery, resume, failures, preset file, report and errors.
+
+Recovery of known parameters (both samplers), resume, failed trials, the preset file, the report
+section and user errors; real MuJoCo and PyBullet, real Optuna, a real Dask LocalCluster.
 """
 
 from __future__ import annotations
@@ -76,9 +78,9 @@ def test_identification_recovers_known_parameters_with_both_samplers_and_resumes
     assert s['preset_value'] > 1e-5
     for sampler in ('cmaes', 'tpe'):
         result = s['per_sampler'][sampler]
-        # Tolerances: within 50 trials (batches of 2 in flight, so the order of results varies), each
-        # sampler brings CD below 40 % of the preset's and within 40 % of each true parameter (the
-        # preset is 200 % off); the kept result is the better of the two and within 20 %.
+        # Tolerances: within 50 trials (batches of 2 in flight, so the order of results varies),
+        # each sampler brings CD below 40 % of the preset's and within 40 % of each true parameter
+        # (the preset is 200 % off); the kept result is the better of the two and within 20 %.
         assert result['value'] < 0.4 * s['preset_value'], (sampler, result)
         for name, truth in TRUTH.items():
             assert abs(result['params'][name] / truth - 1) < 0.4, (sampler, name, result['params'])
@@ -87,7 +89,8 @@ def test_identification_recovers_known_parameters_with_both_samplers_and_resumes
     assert all(abs(s['params'][name] / truth - 1) < 0.2 for name, truth in TRUTH.items()), s[
         'params'
     ]
-    # The preset file is in config/presets format, with provenance, and loads as `run --presets` loads it.
+    # The preset file is in config/presets format, with provenance, and loads as `run --presets`
+    # loads it.
     preset = load_preset('mujoco', 'towel', 'dynamic', tmp_path)
     assert (
         preset['damping'] == pytest.approx(s['params']['damping']) and preset['timestep'] == 0.01

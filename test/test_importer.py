@@ -35,15 +35,15 @@ def write_ply(path: Path, pts: np.ndarray, xyz_type: str = 'float', extra: bool 
     path.write_bytes(header.encode() + table.tobytes())
 
 
-def write_pcd(path: Path, pts: np.ndarray, ascii: bool) -> None:
+def write_pcd(path: Path, pts: np.ndarray, as_text: bool) -> None:
     """PCD v0.7 with x y z rgb, DATA ascii or binary."""
     rgb = np.arange(len(pts), dtype=np.uint32)
     header = (
         '# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z rgb\nSIZE 4 4 4 4\n'
         f'TYPE F F F U\nCOUNT 1 1 1 1\nWIDTH {len(pts)}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n'
-        f'POINTS {len(pts)}\nDATA {"ascii" if ascii else "binary"}\n'
+        f'POINTS {len(pts)}\nDATA {"ascii" if as_text else "binary"}\n'
     )
-    if ascii:
+    if as_text:
         body = ''.join(
             f'{x!r} {y!r} {z!r} {c}\n'
             for (x, y, z), c in zip(pts.astype(np.float32).tolist(), rgb)
@@ -81,7 +81,7 @@ def make_tree(root: Path) -> dict[tuple[str, str], list[np.ndarray]]:
             if kind == 'ply':
                 write_ply(cloud / f'{k:05d}.ply', pts, xyz_type='double' if k % 2 else 'float')
             else:
-                write_pcd(cloud / f'{k:05d}.pcd', pts, ascii=kind == 'pcd-ascii')
+                write_pcd(cloud / f'{k:05d}.pcd', pts, as_text=kind == 'pcd-ascii')
             frames.append(pts)
         made[(folder, primitive)] = frames
     (root / 'README.txt').write_text('not a trial')
@@ -205,7 +205,7 @@ def test_duplicate_frame_formats(tmp_path: Path) -> None:
     cloud = tmp_path / 'linen_rag_0' / 'dynamic' / 'cloud'
     cloud.mkdir(parents=True)
     write_ply(cloud / '00000.ply', np.zeros((1, 3)))
-    write_pcd(cloud / '00000.pcd', np.zeros((1, 3)), ascii=True)
+    write_pcd(cloud / '00000.pcd', np.zeros((1, 3)), as_text=True)
     with pytest.raises(ValueError, match='both'):
         find_trials(tmp_path)
 

@@ -31,7 +31,7 @@ def _lines(path: Path) -> int:
 def interrupt_after_first_row(
     argv: list[str], rows: Path, timeout: float = 240.0
 ) -> tuple[int, str]:
-    """Run argv in a new session, Ctrl-C its process group once `rows` has a line; (status, stderr)."""
+    """Run argv in a new session, Ctrl-C its group once `rows` has a line; (status, stderr)."""
     proc = subprocess.Popen(
         argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
     )

@@ -35,7 +35,7 @@ def _holds_ros_parameters(node) -> bool:
 
 @pytest.mark.parametrize('path', _yaml_files(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_every_parameter_file_under_config_follows_rcl(path):
-    """rcl_yaml_param_parser/src/parse.c: node keys, values and structure (runtime/parameters.py)."""
+    """As rcl_yaml_param_parser's parse.c: node keys, values and structure."""
     doc = yaml.safe_load(path.read_text())
     if not _holds_ros_parameters(doc):
         assert PARAMS_KEY not in path.read_text(), f'{path} mentions {PARAMS_KEY} but holds none'
@@ -130,7 +130,7 @@ def _launched_nodes(monkeypatch, launch_args: dict) -> list:
 
 
 def _evaluated(value):
-    """launch_ros evaluate_parameter_dict: strings are read as YAML ('' stays ''), lists become tuples."""
+    """As launch_ros evaluate_parameter_dict: strings read as YAML, lists become tuples."""
     if isinstance(value, str):
         return yaml.safe_load(value or "''")
     if isinstance(value, (list, tuple)):
@@ -139,7 +139,7 @@ def _evaluated(value):
 
 
 def _command_line(node, tmp_path) -> list[str]:
-    """Return the --ros-args launch_ros's Node gives the executable (launch_ros/actions/node.py)."""
+    """Return the --ros-args launch_ros's Node gives the executable (launch_ros node.py)."""
     kw = node.kwargs
     assert kw.get('output') == 'screen', f'{kw["executable"]}: node output not shown'
     name, namespace = (
@@ -184,7 +184,7 @@ def _start(node, tmp_path):
 
 
 def test_every_launch_argument_reaches_its_node(monkeypatch, tmp_path):
-    """The launch arguments beat config/benchmark.yaml under rclpy's order (rclpy src/rclpy/node.cpp)."""
+    """The launch arguments beat config/benchmark.yaml under rclpy's order (node.cpp)."""
     bag = ROOT / 'bags' / 'towel_dynamic'
     args = {
         'engines': 'mujoco,bullet',
@@ -237,7 +237,7 @@ def test_the_default_launch_replays_the_bundled_bag_of_the_task(monkeypatch, tmp
 
 
 def test_ros2_run_with_the_params_file_lets_the_command_line_win(tmp_path):
-    """`--params-file config/benchmark.yaml -p bag:=...`: the -p rule lands in the file's `/**` entry."""
+    """Check that `-p bag:=...` after a params file lands in the file's `/**` entry."""
     from cloth_bench_ros.nodes.recorder import Recorder
     from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
 

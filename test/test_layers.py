@@ -29,7 +29,7 @@ def all_modules() -> dict[str, Path]:
 
 
 def layer(module: str) -> str:
-    """Return the layer of a module of the package: its subpackage, cli, or core for the top-level modules."""
+    """Return a module's layer: its subpackage, cli, or core for the top-level modules."""
     parts = module.split('.')
     if len(parts) > 1 and parts[1] in LAYERS:
         return parts[1]
@@ -37,7 +37,7 @@ def layer(module: str) -> str:
 
 
 def imports_of(module: str, path: Path, modules: dict[str, Path]) -> dict[str, int]:
-    """Return the package's modules `module` imports (most specific name that is a module) -> line."""
+    """Return the package's modules that `module` imports, with their lines."""
     package = module if path.name == '__init__.py' else module.rpartition('.')[0]
     found: dict[str, int] = {}
 

@@ -1,4 +1,4 @@
-"""The grid search of core/nearest.py equals brute force exactly, on ordinary and adversarial clouds."""
+"""The grid search of core/nearest.py equals brute force, on ordinary and adversarial clouds."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The four nodes, composed in one process, run a whole benchmark on a real engine and a real bag."""
+"""The four nodes in one process run a whole benchmark on a real engine and a real bag."""
 
 import json
 

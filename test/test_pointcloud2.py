@@ -67,7 +67,7 @@ def _custom_cloud(points, dtype, offsets, point_step, bigendian, height=1, row_p
     rows = rec.tobytes()
     row_bytes = point_step * width
     data = b''.join(
-        rows[r * row_bytes : (r + 1) * row_bytes] + b'\0' * row_pad for r in range(height)
+        rows[r * row_bytes:(r + 1) * row_bytes] + b'\0' * row_pad for r in range(height)
     )
     datatype = FLOAT32 if dtype == 'f4' else FLOAT64
     fields = [

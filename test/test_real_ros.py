@@ -1,5 +1,7 @@
 """
-Real ROS 2 (rclpy Jazzy over Fast DDS) runs the project's nodes: the defects found against it stay fixed.
+Real ROS 2 (rclpy Jazzy over Fast DDS) runs the project's nodes.
+
+The defects found against it stay fixed.
 
 Each case runs real rclpy in its own loopback-only network namespace (test/real_ros.py) and is
 compared with what the embedded runtime does for the same input.
@@ -128,7 +130,7 @@ def test_two_in_process_runs_at_once_do_not_hear_each_other(tmp_path):
 
 
 def _embedded_python() -> list[str]:
-    """Return the project's own venv's Python (the embedded runtime), for the same case without ROS."""
+    """Return the project's own venv's Python (the embedded runtime), for the same case."""
     import sys
 
     return [sys.executable]
@@ -136,8 +138,10 @@ def _embedded_python() -> list[str]:
 
 def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(tmp_path):
     """
-    The docs' node-by-node `ros2 run` commands (as the installed console scripts run them), one
-    real-rclpy process per node over Fast DDS, in any start order: the embedded in-process run's numbers.
+    Run the docs' node-by-node `ros2 run` commands on real rclpy over Fast DDS.
+
+    As the installed console scripts run them, one process per node, in any start order: the
+    embedded in-process run's numbers.
     """
     bag = ROOT / 'bags' / 'towel_dynamic'
     grid = '-p grid_nx:=6 -p grid_nz:=8'
@@ -153,12 +157,14 @@ def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(tm
         f' {tmp_path / node}.status)'
         for node, args in nodes.items()
     ]
-    # the evaluator ends the run; the simulator and the recorder are stopped as a user would, with SIGINT
+    # the evaluator ends the run; the simulator and the recorder are stopped as a user would, with
+    # SIGINT
     script = (
         ' & '.join(launches)
         + f' & while [ ! -f {tmp_path / "evaluator.status"} ]; do sleep 0.2; done; '
         + ' '.join(
-            f"pkill -INT -f '^{ROS_PYTHON} -m cloth_bench_ros.nodes.{node} ';"  # the node, not this shell
+            # the node, not this shell
+            f"pkill -INT -f '^{ROS_PYTHON} -m cloth_bench_ros.nodes.{node} ';"
             for node in ('simulator', 'recorder')
         )
         + ' wait'

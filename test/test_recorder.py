@@ -12,7 +12,6 @@ from cloth_bench_ros.nodes.recorder import Recorder
 from cloth_bench_ros.runtime import embedded as rclpy
 from cloth_bench_ros.runtime import make_qos, Node, PointCloud2, SingleThreadedExecutor, stamp_ns
 from cloth_bench_ros.runtime.embedded import Parameter
-import numpy as np
 import pytest
 
 BURST = textwrap.dedent('''
@@ -80,7 +79,7 @@ def _record(tmp_path, total, wait_for, sig):
     proc.send_signal(sig)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0, stderr
-    report = [l for l in stdout.splitlines() if l.startswith('recorder:')]
+    report = [line for line in stdout.splitlines() if line.startswith('recorder:')]
     assert len(report) == 1, stdout + stderr
     received, written = (int(w) for w in report[0].replace(',', '').split() if w.isdigit())
     return out, received, written

@@ -53,7 +53,7 @@ def test_parameters_from_ros_args_and_params_file(tmp_path, context):
 
 
 def test_override_of_the_wrong_type_is_refused(context):
-    """As rclpy: a string for a double, and an integer for a double, raise (see test_strict_runtime.py)."""
+    """As rclpy: a string for a double, and an integer for a double, raise."""
     rclpy.init(args=[], context=context)
     node = Node(
         'n',

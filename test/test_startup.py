@@ -77,7 +77,8 @@ def test_lockstep_starts_when_every_named_simulator_is_there_not_when_enough_sub
         [('targets', M.PoseArray)],
         [('mujoco/cloud', M.PointCloud2)],
     )
-    # three `targets` subscriptions for two engines, and a bullet cloud from a node that gets no targets
+    # three `targets` subscriptions for two engines, and a bullet cloud from a node that gets no
+    # targets
     _member(context, executor, 'bullet_replayer', [], [('bullet/cloud', M.PointCloud2)])
     _spin(executor, 1.5)
     assert tp.k == -1 and not tp.graph_ready()

@@ -67,7 +67,7 @@ ACCEPTED_KEYS = [
 
 @pytest.mark.parametrize('key', ACCEPTED_KEYS)
 def test_wildcard_keys_that_rcl_accepts(tmp_path, key):
-    """Rcl parse.c _validate_name: `*` and `**` as whole tokens (rcl test/wildcards.yaml is accepted)."""
+    """As rcl's parse.c _validate_name: `*` and `**` as whole tokens."""
     nested = key == '/'  # root_ns.yaml: "/" then the node name one level down
     text = (
         f"'{key}':\n  my_node:\n    ros__parameters:\n      id: 10\n"
@@ -110,7 +110,8 @@ def test_partial_wildcards_are_refused_with_one_line_naming_file_and_key(tmp_pat
     [
         '/foo:\n  /*:\n    ros__parameters:\n      id: 10\n',  # wildcards_node_slash.yaml
         'ns//node:\n  ros__parameters:\n    id: 10\n',  # empty_name_in_ns.yaml
-        'node:\n  ros__parameters:\n    name: x\nros__parameters:\n  id: 10\n',  # params_with_no_node.yaml
+        # params_with_no_node.yaml
+        'node:\n  ros__parameters:\n    name: x\nros__parameters:\n  id: 10\n',
         'ns:\n  node:\n    ros__parameters:\n      id:\n',  # no_value1.yaml
         'node:\n  ros__parameters:\n    - driver: front\n',  # seq_map1.yaml
         'node:\n  ros__parameters:\n    name: &FL x\n    spec: *FL\n',  # no_alias_support.yaml
@@ -126,7 +127,7 @@ def test_structures_rcl_refuses(tmp_path, text):
 
 
 def test_scalars_are_typed_as_rcl_types_them_not_as_yaml_does(tmp_path):
-    """Rcl parse.c get_value: bool words, strtoll (base 0), strtod, else string; quotes and !!str keep text."""
+    """As rcl's parse.c get_value: bool words, strtoll, strtod, else string; quotes keep text."""
     assert rcl_scalar('1000', False, False) == 1000 and isinstance(
         rcl_scalar('1000', False, False), int
     )
@@ -145,7 +146,7 @@ def test_scalars_are_typed_as_rcl_types_them_not_as_yaml_does(tmp_path):
         _params_file(
             tmp_path,
             "n:\n  ros__parameters:\n    a: !!str 5\n    b: '7'\n"
-            "    c: 1e3\n    d: [1, 2]\n    g:\n      h: true\n",
+            '    c: 1e3\n    d: [1, 2]\n    g:\n      h: true\n',
         )
     )
     assert overrides.entries['n'] == {'a': '5', 'b': '7', 'c': 1000.0, 'd': [1, 2], 'g.h': True}
@@ -155,7 +156,7 @@ def test_scalars_are_typed_as_rcl_types_them_not_as_yaml_does(tmp_path):
 
 
 def test_keys_match_as_rclpy_matches_them(tmp_path, context):
-    """Rclpy src/rclpy/node.cpp: '/' prepended, then "/*" -> "(/\\w+)" ("/**" -> "(/\\w+)*"), full match."""
+    """As rclpy's node.cpp: '/' prepended, then "/*" and "/**" as patterns, full match."""
     path = _params_file(
         tmp_path,
         '/*/n:\n  ros__parameters:\n    one_token: 1\n'
@@ -181,8 +182,10 @@ def test_keys_match_as_rclpy_matches_them(tmp_path, context):
 
 def test_a_later_key_wins_and_a_key_keeps_the_place_it_first_appeared(tmp_path, context):
     """
-    Rcl parse.c find_node keeps one entry per key in order of first appearance (over all files and -p
-    rules, arguments.c); rclpy node.cpp applies matching entries in that order, the last one winning.
+    As rcl's parse.c find_node and rclpy's node.cpp: parameter entries in order, last wins.
+
+    find_node keeps one entry per key in order of first appearance (over all files and -p rules,
+    arguments.c); rclpy applies matching entries in that order, the last one winning.
     """
     first = _params_file(
         tmp_path,
@@ -254,7 +257,7 @@ def test_declare_float_takes_an_integer_and_refuses_a_string(context):
 
 
 def test_declared_types_undeclared_and_uninitialised(context):
-    """Rclpy node.py: static type from the default, ParameterNotDeclared/AlreadyDeclared/Uninitialized."""
+    """As rclpy's node.py: static type from the default, and its declaration errors."""
     rclpy.init(args=[], context=context)
     node = Node('n', context=context)
     assert node.declare_parameter('engines', ['mujoco']).type_ == ParameterType.STRING_ARRAY
@@ -340,7 +343,7 @@ def test_timers_run_on_sim_time_under_use_sim_time(context):
 
 
 def test_remaps_are_applied_as_rcl_applies_them(context):
-    """Rcl remap.c: first matching rule, node-specific rules only for that node, names expanded first."""
+    """As rcl's remap.c: first matching rule, node rules for that node only, names expanded."""
     rclpy.init(
         args=[
             'prog',
@@ -382,7 +385,7 @@ def test_remaps_are_applied_as_rcl_applies_them(context):
     ],
 )
 def test_arguments_rcl_refuses_are_refused(context, args, error):
-    """Rcl arguments.c: invalid rules are RCL_RET_INVALID_ROS_ARGS; rclpy raises on unknown ROS args."""
+    """As rcl's arguments.c: invalid rules are refused; rclpy raises on unknown ROS args."""
     with pytest.raises(error):
         rclpy.init(args=['prog', '--ros-args', *args], context=context)
 
@@ -400,7 +403,7 @@ def test_publishing_a_message_of_another_type_raises_type_error(context):
 
 
 def test_rclpy_exception_classes_count_as_user_errors():
-    """nodes/common.py matches rclpy's classes by name (rclpy/exceptions.py, _rclpy_pybind11.cpp)."""
+    """Check that nodes/common.py matches rclpy's exception classes by name."""
     base = type('ParameterException', (Exception,), {})
     assert is_user_error(type('InvalidParameterTypeException', (base,), {})())
     assert is_user_error(type('RCLInvalidROSArgsError', (RuntimeError,), {})())
@@ -416,7 +419,7 @@ def test_rclpy_exception_classes_count_as_user_errors():
     ],
 )
 def test_a_node_with_a_bad_argument_prints_one_line_and_exits_2(tmp_path, args, expected):
-    """A user error is one line and exit 2, for rcl/rclpy's errors too (arguments.c, parse.c, node.py)."""
+    """Check that a user error is one line and exit 2, for rcl/rclpy's errors too."""
     bad = _params_file(tmp_path, '/**/simulator*:\n  ros__parameters:\n    seed: 1\n')
     args = [a.replace('{bad}', str(bad)) for a in args]
     env = {**os.environ, 'CLOTH_BENCH_EMBEDDED': '1'}
@@ -442,7 +445,7 @@ def test_the_readme_rate_hz_1000_works(context):
 
 
 def test_the_recorders_wall_clock_replay_runs_under_use_sim_time(context):
-    """Its timer is on a steady clock: on the node's sim clock (rclpy's default) it would never fire."""
+    """Check that its timer is on a steady clock (on the sim clock it would never fire)."""
     from pathlib import Path
 
     from cloth_bench_ros.nodes.recorder import Recorder

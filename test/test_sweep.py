@@ -1,4 +1,4 @@
-"""Sweeps: cells, parallel workers, resume, diverged and failed cells, settings mode; real engines (hil: test_hil.py)."""
+"""Sweeps: cells, workers, resume, diverged and failed cells, settings mode; real engines."""
 
 from __future__ import annotations
 

@@ -1,6 +1,8 @@
 """
-Synthetic reference bags: z-buffer visibility, sensor noise, outlier removal, the bag, and the
-acceptance ordering (the reference model scores at the noise floor, wrong models clearly worse).
+Synthetic reference bags: visibility, noise, outlier removal, the bag, acceptance order.
+
+Z-buffer visibility, sensor noise, outlier removal, the bag, and the acceptance ordering (the
+reference model scores at the noise floor, wrong models clearly worse).
 """
 
 from __future__ import annotations
@@ -264,7 +266,8 @@ def test_bundled_bags_are_complete_and_within_budget():
             assert reader.complete and reader.stats.nan_points_dropped == 0
             trial = reader.trial
             assert (trial.cloth, trial.trial, trial.primitive) == (cloth, 0, primitive)
-            # The first table contact in the clouds (test_change_of_phase.py checks it on every dynamic bag).
+            # The first table contact in the clouds (test_change_of_phase.py checks it on every
+            # dynamic bag).
             assert (trial.change_of_phase_frame is None) == (primitive == 'quasi_static')
             assert trial.source.startswith(
                 'synthetic: reference mujoco shell cloth 31x43, integrator discrete'

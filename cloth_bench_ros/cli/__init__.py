@@ -1,4 +1,4 @@
-"""`cloth-bench`: the command-line front door; one module per command group, the work in the studies."""
+"""`cloth-bench`: the command-line front door, one module per command group."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""What every command shares: the one-line parser, option types, parent parsers, bag and override checks."""
+"""What every command shares: parsers, option types, parent parsers, bag and override checks."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ def option(check: Callable[[str, str], Any], name: str) -> Callable[[str], Any]:
 
 
 def number(check: Callable[..., float], name: str) -> Callable[[str], float]:
-    """Return an argparse type for a number checked by `check(value, name)` (validation.positive, ...)."""
+    """Return an argparse type for a number checked by `check(value, name)`."""
     return option(lambda t, n: check(validation.parse_number(t, n), n), name)
 
 
@@ -87,7 +87,7 @@ def scene_options(primitive: bool = True) -> argparse.ArgumentParser:
 
 
 def executor_options() -> argparse.ArgumentParser:
-    """Parent parser: where a study's cells run (local workers or a Dask scheduler) and its progress bar."""
+    """Parent parser: where a study's cells run (local workers or Dask) and its progress bar."""
     parent = argparse.ArgumentParser(add_help=False)
     parent.add_argument(
         '--workers', type=workers, help='local worker processes (default: all cores)'
@@ -101,13 +101,15 @@ def executor_options() -> argparse.ArgumentParser:
     return parent
 
 
-def engine_override_option(parser: argparse.ArgumentParser, help: str) -> None:
+def engine_override_option(
+    parser: argparse.ArgumentParser, help: str  # noqa: A002  (argparse's own keyword)
+) -> None:
     """--set ENGINE.PARAM=VALUE (repeatable)."""
     parser.add_argument('--set', action='append', metavar='ENGINE.PARAM=VALUE', help=help)
 
 
 def check_bag(bag: Path, topic: str | None = None) -> None:
-    """Fail early, with one line naming the bag, unless the chosen cloud topic's first frame decodes."""
+    """Fail early, in one line naming the bag, unless the cloud topic's first frame decodes."""
     from cloth_bench_ros.core.pointcloud2 import read_xyz
     from cloth_bench_ros.data import BagReader
     from cloth_bench_ros.data.messages import deserialize
@@ -134,7 +136,7 @@ def check_bag(bag: Path, topic: str | None = None) -> None:
 
 
 def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) -> dict[str, dict]:
-    """--set engine.param=value (repeatable) -> {engine: {param: value}}, checked against the schemas."""
+    """Return --set engine.param=value as {engine: {param: value}}, checked against the schemas."""
     from cloth_bench_ros.engines import engine_class
 
     overrides = validation.parse_overrides(specs)
@@ -158,7 +160,7 @@ def available_engines() -> list[str]:
 
 
 def read_transform(path: str):
-    """Return a 4x4 matrix from a .npy file or a text file of 16 numbers (spaces, commas or newlines)."""
+    """Return a 4x4 matrix from a .npy file or a text file of 16 numbers."""
     import numpy as np
 
     try:

@@ -1,4 +1,4 @@
-"""`cloth-bench import`, `synth` and `bag`: making and inspecting the bags that runs score against."""
+"""`cloth-bench import`, `synth` and `bag`: making and inspecting the bags runs score against."""
 
 from __future__ import annotations
 
@@ -72,7 +72,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         'rewrite',
         help=(
             "copy a bag into the current writer's layout (rosbag2 Jazzy, "
-            "metadata version 9, type hashes); messages and trial unchanged"
+            'metadata version 9, type hashes); messages and trial unchanged'
         ),
     )
     rewrite.add_argument('src', help='bag to read')
@@ -146,14 +146,11 @@ def cmd_bag_rewrite(args: argparse.Namespace) -> int:
     from cloth_bench_ros.data.bag_rewrite import rewrite_bag
 
     counts = rewrite_bag(Path(args.src), Path(args.dst), args.change_of_phase_frame)
-    changed = (
-        ''
-        if args.change_of_phase_frame is None
-        else (
-            '; change of phase set to frame'
-            f' {BagReader(Path(args.dst)).trial.change_of_phase_frame}'
-        )
-    )
+    changed = ''
+    if args.change_of_phase_frame is not None:
+        trial = BagReader(Path(args.dst)).trial
+        frame = trial.change_of_phase_frame if trial is not None else None
+        changed = f'; change of phase set to frame {frame}'
     print(
         f'rewrote {args.src} -> {args.dst}: {sum(counts.values())} messages, unchanged'
         f' (checked){changed}'

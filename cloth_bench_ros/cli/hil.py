@@ -1,4 +1,4 @@
-"""`cloth-bench hil`: hardware in the loop, targets on the wall clock and the simulator in its own process."""
+"""`cloth-bench hil`: hardware in the loop, the simulator in its own process."""
 
 from __future__ import annotations
 
@@ -208,9 +208,9 @@ def cmd_hil(args: argparse.Namespace) -> int:
     print(text_table(hil_table(rows)))
     print(
         "latency: target due on the controller's wall-clock schedule -> state back at the"
-        " controller; miss: latency > 1 / rate; skipped: targets the simulator never stepped (a"
-        " newer one was waiting); RTF: simulated / wall time; CPU busy: all cores, any process,"
-        " during the run"
+        ' controller; miss: latency > 1 / rate; skipped: targets the simulator never stepped (a'
+        ' newer one was waiting); RTF: simulated / wall time; CPU busy: all cores, any process,'
+        ' during the run'
     )
     report = write_hil_report(rows, out, out / 'report')
     print(
@@ -220,7 +220,7 @@ def cmd_hil(args: argparse.Namespace) -> int:
 
 
 def _export_recommended(args: argparse.Namespace) -> int:
-    """Hil --export-recommended FILE: the settings sweep's recommendation per engine, task and rate."""
+    """Export the settings sweep's recommendation per engine, task and rate."""
     from cloth_bench_ros.report.hil import all_recommendations, provenance, recommendation_yaml
     from cloth_bench_ros.safe_io import atomic_write_text
     from cloth_bench_ros.studies.sweep import load_rows

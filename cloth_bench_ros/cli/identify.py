@@ -1,4 +1,4 @@
-"""`cloth-bench identify`: fit an engine's cloth parameters to a bag (CMA-ES and Bayesian optimisation)."""
+"""`cloth-bench identify`: fit an engine's cloth parameters to a bag."""
 
 from __future__ import annotations
 

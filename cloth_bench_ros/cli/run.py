@@ -1,4 +1,4 @@
-"""`cloth-bench run`, `trajectory` and `engines`: one run of the node graph, and what it is made of."""
+"""`cloth-bench run`, `trajectory` and `engines`: one run of the node graph and its parts."""
 
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         choices=('auto', 'on', 'off'),
         help=(
             "crop, table plane, outliers (default auto: on for bags without the project's"
-            " metadata)"
+            ' metadata)'
         ),
     )
     scoring.add_argument(
@@ -140,7 +140,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 
 def _replay_params(args: argparse.Namespace) -> dict:
-    """Recorder parameters for bags that do not say everything (plain `ros2 bag record` output)."""
+    """Return the recorder parameters for bags that do not say everything (plain recordings)."""
     params = {
         'topic': args.topic or '',
         'start_time': args.start_time or '',
@@ -184,7 +184,7 @@ def _print_real(summary: dict) -> None:
 
 
 def window_line(summary: dict) -> str:
-    """Which frames CD_d/HD_d cover and why: the change of phase and its source (dynamic task only)."""
+    """Return which frames CD_d/HD_d cover and why (the change of phase and its source)."""
     if summary['run'].get('primitive') != 'dynamic':
         return ''
     cop = summary['real'].get('change_of_phase') or {}
@@ -201,7 +201,7 @@ def window_line(summary: dict) -> str:
     }
     return (
         f'CD_d/HD_d over frames 0-{frame - 1}: change of phase at frame {frame}, '
-        f'{source.get(cop.get("source"), cop.get("reason", ""))}'
+        f'{source.get(str(cop.get("source")), cop.get("reason", ""))}'
     )
 
 
@@ -270,6 +270,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 f'comparison bag {config.record_comparison} already exists (not empty)'
             )
         _checked_output(config.record_comparison, '--record-comparison')
+    summary: dict | None
     if args.processes:
         from cloth_bench_ros.studies.processes import ProcessRunError, run_processes
 
@@ -279,6 +280,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise UserError(f'run --processes: {exc}') from None
     else:
         summary = run_pipeline(config)
+    if summary is None:
+        raise RuntimeError('the node graph ended before the evaluator finished')
     print(
         f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
         f' bag {bag}'

@@ -1,4 +1,4 @@
-"""`cloth-bench sweep`, `report`, `stress` and `cross-reference`: many runs, and the report on them."""
+"""`cloth-bench sweep`, `report`, `stress` and `cross-reference`: many runs and their report."""
 
 from __future__ import annotations
 
@@ -236,7 +236,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     )
     print(
         f'cloth-bench sweep ({args.mode}): {len(engines)} engines x'
-        f' {len(set(c.rate_hz for c in cells))} rates x {len({c.cloth for c in cells})} cloths x'
+        f' {len({c.rate_hz for c in cells})} rates x {len({c.cloth for c in cells})} cloths x'
         f' {len({c.primitive for c in cells})} tasks x {len(plan.seeds())} seeds'
         + (f' x {len({c.config for c in cells})} configurations' if settings else '')
         + f' = {len(cells)} cells -> {out / sw.RESULTS_FILE} on {where}',
@@ -342,7 +342,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
 
 def cmd_cross_reference(args: argparse.Namespace) -> int:
-    """Score every engine against both synthetic references on the executor (resumable); print the table."""
+    """Score every engine against both synthetic references on the executor; print the table."""
     from cloth_bench_ros.report.cross_reference import cross_reference_table
     from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
     from cloth_bench_ros.studies import sweep as sw

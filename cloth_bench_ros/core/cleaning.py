@@ -52,7 +52,7 @@ def workspace_box(
     gripper_positions: np.ndarray, margin: float = WORKSPACE_MARGIN
 ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """
-    Return a box holding the cloth wherever the grippers (k, 3) take it, bounded below by the table.
+    Return a box holding the cloth wherever the grippers (k, 3) take it, above the table.
 
     The cloth hangs at most its length from the grippers and swings at most that far sideways.
     """
@@ -62,13 +62,13 @@ def workspace_box(
     hi = p.max(axis=0) + reach
     lo[2] = max(lo[2], scene.TABLE_TOP_Z - margin)
     hi[2] = p[:, 2].max() + margin
-    return tuple(float(v) for v in lo), tuple(float(v) for v in hi)
+    return (float(lo[0]), float(lo[1]), float(lo[2])), (float(hi[0]), float(hi[1]), float(hi[2]))
 
 
 def scene_cleaning(
     primitives: tuple[str, ...] = ('dynamic', 'quasi_static'), voxel: float = 0.0
 ) -> CleaningConfig:
-    """Return the cleaning for the benchmark scene: the workspace box of the primitives' gripper paths."""
+    """Return the cleaning for the benchmark scene: the box of the primitives' gripper paths."""
     from cloth_bench_ros.core.trajectory import full_targets
 
     paths = [full_targets(p, 100.0) for p in primitives]

@@ -61,7 +61,7 @@ class OnlineEvaluator:
         self.change_of_phase_frame = change_of_phase_frame
         self.fps = fps
         self.engines = {name: _EngineState() for name in engines}
-        self._pending: deque[tuple[int, RealCloud | None]] = deque()
+        self._pending: deque[tuple[int, RealCloud]] = deque()
         self.scores: list[FrameScore] = []
         self.real_frames = 0
         self.empty_frames = 0
@@ -112,7 +112,7 @@ class OnlineEvaluator:
             e.diverged_reason = reason
 
     def add_latency(self, engine: str, latency_s: float) -> None:
-        """Wall time from a target leaving the trajectory publisher to the engine's state arriving."""
+        """Record the wall time from a target's sending to the engine's state arriving."""
         self.engines[engine].latencies.append(latency_s)
 
     def add_real(self, stamp_ns: int, points: np.ndarray, nan_dropped: int = 0) -> None:
@@ -200,7 +200,7 @@ class OnlineEvaluator:
         wall_s: float | None = None,
         sim_s: float | None = None,
     ) -> dict[str, dict]:
-        """Per engine: CD/HD over the window, L_s, step time, latency against the period, divergence."""
+        """Return per engine: CD/HD over the window, L_s, step time, latency, divergence."""
         out = {}
         suffix = 'd' if self.primitive is Primitive.DYNAMIC else 'q'
         for name, e in self.engines.items():
@@ -253,7 +253,9 @@ FRAME_FATES = (
 
 def frame_accounting(replay: dict, real: dict) -> dict:
     """
-    Return what became of every frame on the bag's topic: the recorder's sorting plus the evaluator's.
+    Return what became of every frame on the bag's topic.
+
+    The recorder's sorting plus the evaluator's.
 
     replay: the recorder's counts (frames_in_bag, before_start, after_trajectory,
     empty_after_cleaning, to_send, ...); real: `OnlineEvaluator.real_summary()`. The fates add up

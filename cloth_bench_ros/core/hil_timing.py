@@ -42,8 +42,9 @@ class TargetTimeline:
 
     def due_through(self, now_ns: int, period_ns: int) -> int:
         """
-        Index of the last target due by now, rounding to the nearest schedule point (a tick
-        that fires a little before its due time still sends its target).
+        Return the index of the last target due by now, rounding to the nearest schedule point.
+
+        A tick that fires a little before its due time still sends its target.
         """
         return int(np.searchsorted(self.due, now_ns + period_ns // 2, side='right')) - 1
 
@@ -93,7 +94,7 @@ class TargetTimeline:
 
 @dataclass(frozen=True)
 class HilFigures:
-    """Item-4 figures of one real-time run, from the controller's timeline and the simulator's counts."""
+    """Return the item-4 figures of a real-time run (controller's timeline, simulator's counts)."""
 
     targets: int  # in the trajectory
     sent: int
@@ -155,7 +156,9 @@ def hil_figures(timeline: TargetTimeline, skipped: int, period_s: float) -> HilF
 
 def check_bookkeeping(timeline: TargetTimeline, stepped: int, skipped: int) -> list[str]:
     """
-    Return what does not add up between the controller's timeline and the simulator's counts (empty: all does).
+    Return what does not add up between the controller's timeline and the simulator's counts.
+
+    Empty when all does.
 
     Every target is sent, in order, no earlier than half a period before it is due; every sent
     target is either stepped or skipped by the simulator; a state never arrives before its

@@ -27,7 +27,7 @@ def _points(name: str, a: np.ndarray) -> np.ndarray:
 
 
 class RealCloud:
-    """A real point cloud P indexed once (a uniform grid, core/nearest.py) so that several meshes can be scored on it."""
+    """A real point cloud P indexed once (a uniform grid) to score several meshes on it."""
 
     def __init__(self, points: np.ndarray) -> None:
         self.points = _points('P', points)
@@ -67,8 +67,9 @@ _TREE_CACHE_LIMIT = 0
 
 def keep_trees(max_points: int) -> None:
     """
-    Keep the k-d trees of the clouds scored in this process (up to `max_points` points in all):
-    a study's worker that scores the same bag again finds its trees built (0 turns the cache off).
+    Keep the k-d trees of the clouds scored in this process (up to `max_points` points).
+
+    A study's worker that scores the same bag again finds its trees built (0 turns the cache off).
     """
     global _TREE_CACHE_LIMIT, _TREE_CACHE_POINTS
     _TREE_CACHE_LIMIT = int(max_points)
@@ -87,7 +88,7 @@ def hausdorff_l1(V: np.ndarray, P: np.ndarray) -> float:
 
 
 def stability(frames: np.ndarray) -> float:
-    """L_s = (1/N) sum_{t=1}^{N-2} mean |(V_{t-1} + V_t + V_{t+1}) / 3 - V_t| over frames (N, n, 3)."""
+    """Return L_s of frames (N, n, 3): the mean distance of each frame to its 3-frame average."""
     frames = np.asarray(frames, dtype=np.float64)
     if frames.ndim != 3 or frames.shape[2] != 3:
         raise ValueError(f'frames must have shape (N, n, 3), got {frames.shape}')
@@ -154,7 +155,7 @@ class LatencyStats:
     mean: float
     p50: float
     p99: float
-    max: float
+    max: float  # noqa: A003  (a statistic's name, as in the summary's keys)
 
     def as_dict(self) -> dict[str, float]:
         return {

@@ -62,7 +62,7 @@ def _bounds(points):
 
 @njit(cache=True)
 def _bucket(points, lo, inv, dims):
-    """Return the points' indices ordered by cell (counting sort) and each cell's start in that order."""
+    """Return the points' indices ordered by cell and each cell's start in that order."""
     n = points.shape[0]
     ncell = dims[0] * dims[1] * dims[2]
     ids = np.empty(n, dtype=np.int32)

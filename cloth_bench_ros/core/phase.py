@@ -34,7 +34,7 @@ class ContactSearch:
 def contact_points(
     points: np.ndarray, table_z: float = TABLE_TOP_Z, margin: float = CONTACT_MARGIN
 ) -> int:
-    """Points of one frame (n, 3) within `margin` above the table top (below it too: they touch)."""
+    """Return the points of a frame (n, 3) within `margin` above the table top (or below it)."""
     z = np.asarray(points, dtype=np.float64).reshape(-1, 3)[:, 2]
     return int(np.count_nonzero(z <= table_z + margin))
 
@@ -51,12 +51,12 @@ def in_contact(
 def first_table_contact(
     frames: Iterable[np.ndarray], table_z: float = TABLE_TOP_Z, margin: float = CONTACT_MARGIN
 ) -> ContactSearch:
-    """Return the first of `frames` (world-frame clouds in time order) in which the cloth touches the table."""
+    """Return the first of `frames` (world clouds in order) where the cloth touches the table."""
     return first_contact(in_contact(points, table_z, margin) for points in frames)
 
 
 def first_contact(flags: Iterable[bool]) -> ContactSearch:
-    """Return the first True of per-frame `in_contact` flags, unless the very first frame is one."""
+    """Return the first True of per-frame `in_contact` flags, unless the first frame is one."""
     seen = 0
     for i, touching in enumerate(flags):
         seen += 1

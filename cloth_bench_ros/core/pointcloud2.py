@@ -40,7 +40,7 @@ def _cloud_data(cloud_type: type, raw: bytes) -> object:
 
 
 def create_cloud_xyz32(header: Any, points: np.ndarray, cloud_type: type, field_type: type) -> Any:
-    """Return a dense-or-not PointCloud2 of x, y, z float32 (point_step 12), one row, native byte order."""
+    """Return a PointCloud2 of x, y, z float32 (point_step 12), one row, native byte order."""
     pts = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
     fields = [
         field_type(name=name, offset=4 * i, datatype=FLOAT32, count=1)
@@ -76,8 +76,8 @@ def read_xyz(cloud: Any) -> np.ndarray:
     by_name = {f.name: f for f in cloud.fields}
     missing = [c for c in 'xyz' if c not in by_name]
     if missing:
-        names = ', '.join(sorted(by_name)) or 'none'
-        raise PointCloudError(f'PointCloud2 has no {"/".join(missing)} field (fields: {names})')
+        known = ', '.join(sorted(by_name)) or 'none'
+        raise PointCloudError(f'PointCloud2 has no {"/".join(missing)} field (fields: {known})')
     n = int(cloud.width) * int(cloud.height)
     if n == 0:
         return np.zeros((0, 3))
@@ -98,7 +98,7 @@ def read_xyz(cloud: Any) -> np.ndarray:
         # The layout create_cloud_xyz32 writes: one flat read, no per-field copies.
         return np.frombuffer(raw, dtype=order + 'f4', count=3 * n).reshape(n, 3).astype(np.float64)
     # Drop the padding at the end of each row so that points are evenly spaced.
-    rows = raw[: row_step * int(cloud.height)].reshape(int(cloud.height), row_step)
+    rows = np.asarray(raw)[: row_step * int(cloud.height)].reshape(int(cloud.height), row_step)
     packed = np.ascontiguousarray(rows[:, : point_step * int(cloud.width)]).reshape(n, point_step)
     out = np.empty((n, 3))
     for i, c in enumerate('xyz'):
@@ -108,7 +108,7 @@ def read_xyz(cloud: Any) -> np.ndarray:
         dtype = np.dtype(order + _NUMPY_TYPES[f.datatype])
         if f.offset + dtype.itemsize > point_step:
             raise PointCloudError(f'PointCloud2 field {c} lies outside point_step {point_step}')
-        out[:, i] = packed[:, f.offset : f.offset + dtype.itemsize].copy().view(dtype).ravel()
+        out[:, i] = packed[:, f.offset:f.offset + dtype.itemsize].copy().view(dtype).ravel()
     return out
 
 

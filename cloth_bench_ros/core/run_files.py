@@ -1,4 +1,4 @@
-"""The result files of one run: summary.json (NaN written as null) and frames.csv (one row per frame)."""
+"""The result files of one run: summary.json (NaN as null) and frames.csv (a row per frame)."""
 
 from __future__ import annotations
 

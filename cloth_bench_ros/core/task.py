@@ -1,5 +1,5 @@
 """
-The task's episode set-up that every engine starts from: the grasped corners and the seeded initial state.
+The task's episode set-up every engine starts from: grasped corners, seeded initial state.
 
 The cloth starts at rest in its grid shape with the grasped corners at the grippers (each column
 of the grid shifted by the linear blend of the two corners' shifts), then every vertex except the
@@ -25,8 +25,10 @@ def initial_displacement(
     grid: ClothGrid, seed: int, left: np.ndarray, right: np.ndarray
 ) -> np.ndarray:
     """
-    Per vertex (n, 3), the initial state minus the rest shape: the grasped corners at `left`
-    and `right`, every other vertex also perturbed by the seeded noise.
+    Return per vertex (n, 3) the initial state minus the rest shape.
+
+    The grasped corners are at `left` and `right`, every other vertex is also perturbed by the
+    seeded noise.
     """
     rest = grid.vertices()
     corners = grasped_corners(grid)

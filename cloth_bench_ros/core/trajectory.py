@@ -87,7 +87,7 @@ class QuinticChain:
 
     @property
     def breakpoints(self) -> np.ndarray:
-        """Times at which segments end, from the start of the chain."""
+        """Return the times at which segments end, from the start of the chain."""
         return np.cumsum([s.duration for s in self.segments])
 
     def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -129,12 +129,13 @@ class PrimitiveTrajectory:
 def _deg(seg: QuinticSegment) -> QuinticSegment:
     r = math.radians
     return QuinticSegment(
-        seg.duration, tuple(r(x) for x in seg.start), tuple(r(x) for x in seg.end)
+        seg.duration, (r(seg.start[0]), r(seg.start[1]), r(seg.start[2])),
+        (r(seg.end[0]), r(seg.end[1]), r(seg.end[2])),
     )
 
 
 def quintic_part(primitive: Primitive | str) -> PrimitiveTrajectory:
-    """Return the quintic part of a primitive, exactly as docs/benchmark.md section 2 tabulates it."""
+    """Return the quintic part of a primitive, as docs/benchmark.md section 2 tabulates it."""
     primitive = parse_primitive(primitive) if isinstance(primitive, str) else primitive
     y0 = float(scene.PREGRASP_LEFT[1])
     z0 = float(scene.PREGRASP_LEFT[2])
@@ -188,7 +189,7 @@ def quintic_part(primitive: Primitive | str) -> PrimitiveTrajectory:
 
 
 def sample_times(duration: float, rate_hz: float) -> np.ndarray:
-    """T = k / rate for k = 0 .. floor(duration * rate), the end included when it falls on a step."""
+    """Return t = k / rate for k = 0 .. floor(duration * rate), the end included on a step."""
     rate_hz = validation.rate_hz(rate_hz)  # bounded before anything is allocated
     n = int(math.floor(duration * rate_hz + 1e-9)) + 1
     return np.arange(n) / rate_hz
@@ -221,7 +222,7 @@ class GripperTargets:
 
 
 def sample_quintic(primitive: Primitive | str, rate_hz: float) -> GripperTargets:
-    """Return the quintic part alone, t from 0 at its start (what `cloth-bench trajectory` prints)."""
+    """Return the quintic part alone, t from 0 at its start (`cloth-bench trajectory`)."""
     traj = quintic_part(primitive)
     t = sample_times(traj.duration, rate_hz)
     y, _, _ = traj.y.evaluate(t)
@@ -291,6 +292,7 @@ def to_csv(targets: GripperTargets) -> str:
         rx, ry, rz = targets.right[k]
         r = targets.roll[k]
         rows.append(
-            f'{targets.t[k]:.6f},{lx:.9f},{ly:.9f},{lz:.9f},{r:.9f},{rx:.9f},{ry:.9f},{rz:.9f},{r:.9f}'
+            f'{targets.t[k]:.6f},{lx:.9f},{ly:.9f},{lz:.9f},{r:.9f},'
+            f'{rx:.9f},{ry:.9f},{rz:.9f},{r:.9f}'
         )
     return '\n'.join(rows) + '\n'

@@ -131,7 +131,7 @@ def search_start(
     states: np.ndarray,
     settings: SearchSettings = SearchSettings(),
 ) -> StartTime:
-    """Return the bag time at which the real frames best match the reference motion (see module doc)."""
+    """Return the bag time at which the real frames best match the reference motion."""
     usable = [(st, c) for st, c in zip(stamps_ns, clouds) if len(c)]
     if len(usable) < 2:
         raise AlignmentError('automatic alignment needs at least two non-empty frames')

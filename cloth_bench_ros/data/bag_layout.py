@@ -21,7 +21,7 @@ _UNCOMPRESSED = ('', 'none', 'NONE')
 
 @dataclass
 class BagLayout:
-    """A located bag: its path, its metadata (None without metadata.yaml) and who reads which files."""
+    """A located bag: its path, metadata (None without metadata.yaml) and who reads its files."""
 
     path: Path  # the bag directory, or the one storage file given
     metadata: BagMetadata | None = None
@@ -58,7 +58,7 @@ def raw_storage_files(directory: Path, suffix: str) -> list[Path]:
 
 
 def _in_compressed_bag(path: Path) -> bool:
-    """Return True if path is a storage file of a file- or message-compressed bag: only its metadata says how to read it."""
+    """Return True if path is a storage file of a compressed bag (read through its metadata)."""
     meta = path.parent / 'metadata.yaml'
     if not meta.is_file():
         return False
@@ -97,7 +97,7 @@ def _without_metadata(path: Path) -> BagLayout:
 
 
 def locate(path: Path) -> BagLayout:
-    """Return the layout of the bag at `path` (see module doc); BagError naming it if there is none."""
+    """Return the layout of the bag at `path`; BagError naming it if there is none."""
     if not path.exists():
         raise BagError(f'bag {path} does not exist')
     if path.is_file() and (

@@ -267,18 +267,18 @@ class BagReader:
         self.close()
 
     def close(self) -> None:
-        """Remove what a file-compressed bag was decompressed into (other bags keep nothing open)."""
+        """Remove what a file-compressed bag was decompressed into."""
         if self._rosbags is not None:
             self._rosbags.close()
 
     @property
     def files(self) -> list[Path]:
-        """The bag's storage files."""
+        """Return the bag's storage files."""
         return self._rosbags.files if self._rosbags is not None else [f.path for f in self._files]
 
     @property
     def storage(self) -> str:
-        """The storage and its compression, e.g. `mcap, chunk compression zstd` or `sqlite3, file:zstd`."""
+        """Return the storage and its compression, e.g. `mcap, chunk compression zstd`."""
         if self._rosbags is not None:
             compression = self._rosbags.compression
             return f'{self._rosbags.kind}, ' + (
@@ -288,7 +288,7 @@ class BagReader:
 
     @property
     def complete(self) -> bool:
-        """False if a file had no readable summary (truncated recording)."""
+        """Return False if a file had no readable summary (a truncated recording)."""
         return all(f.complete for f in self._files)
 
     @property
@@ -327,7 +327,7 @@ class BagReader:
 
     @property
     def trial(self) -> TrialInfo | None:
-        """The trial: metadata.yaml custom_data, else the MCAP record, else TRIAL_TOPIC."""
+        """Return the trial: metadata.yaml custom_data, else the MCAP record, else TRIAL_TOPIC."""
         if self._trial is False:
             self._trial = self._find_trial()
         return self._trial  # type: ignore[return-value]
@@ -336,7 +336,7 @@ class BagReader:
         try:
             custom = self.custom_data
             keys = {
-                k[len(CUSTOM_DATA_PREFIX) :]: str(v)
+                k[len(CUSTOM_DATA_PREFIX):]: str(v)
                 for k, v in custom.items()
                 if k.startswith(CUSTOM_DATA_PREFIX)
             }
@@ -358,7 +358,7 @@ class BagReader:
         return sorted(t for t, m in self.topics.items() if m == POINTCLOUD2)
 
     def cloud_topic(self, chosen: str | None = None) -> str:
-        """Return the PointCloud2 topic to score: `chosen`, else CLOUD_TOPIC if present, else the only one."""
+        """Return the PointCloud2 topic to score: `chosen`, else CLOUD_TOPIC, else the only one."""
         clouds = self.cloud_topics
         if chosen:
             if chosen not in clouds:
@@ -394,7 +394,7 @@ class BagReader:
     def logged_messages(
         self, topics: Iterable[str] | str | None = None
     ) -> Iterator[tuple[str, str, int, bytes]]:
-        """(topic, msgtype, log_time_ns, cdr) in record order: the MCAP log time, not the header stamp."""
+        """Yield (topic, msgtype, log_time_ns, cdr) in record order, by MCAP log time."""
         wanted = (
             {topics} if isinstance(topics, str) else (set(topics) if topics is not None else None)
         )

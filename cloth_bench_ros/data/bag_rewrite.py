@@ -25,7 +25,7 @@ def _custom_data(trial_strings: dict[str, str] | None) -> dict[str, str]:
 
 
 def _check_same(src: BagReader, dst: BagReader, trial: TrialInfo | None) -> None:
-    """BagError unless dst holds src's messages (topic, type, log time, bytes, order) and `trial`."""
+    """Raise BagError unless dst holds src's messages (topic, type, time, bytes) and `trial`."""
     if dst.trial != trial or dst.custom_data != _custom_data(
         trial.to_strings() if trial else None
     ):
@@ -45,7 +45,7 @@ def _check_same(src: BagReader, dst: BagReader, trial: TrialInfo | None) -> None
 
 
 def detected_change_of_phase(reader: BagReader) -> int | None:
-    """Return the first table contact in a project bag's clouds (stamped from the start of the motion)."""
+    """Return the first table contact in a project bag's clouds (stamped from the motion)."""
     frames = list(reader.clouds())
     found = first_table_contact(points for _, points in frames)
     if found.index is None:
@@ -90,14 +90,14 @@ def rewrite_bag(
         )
         if frame is None:
             raise BagError(f'bag {src_path}: no table contact found in its clouds')
-        trial = replace(trial, change_of_phase_frame=frame)
+        trial = replace(trial, change_of_phase_frame=int(frame))
     created = not dst_path.exists()
     writer = BagWriter(dst_path, trial)
     try:
         # BagWriter writes the trial message itself, first; the source's must be that very message.
         expected_first = (
             None
-            if trial is None
+            if trial is None or source_trial is None
             else (TRIAL_TOPIC, DIAGNOSTIC_ARRAY, 0, serialize(trial_message(source_trial)))
         )
         for topic, msgtype, log_ns, cdr in reader.logged_messages():

@@ -35,7 +35,9 @@ class RosbagsStorage:
     _decompressed: dict[tuple[Path, int], Reader] = field(default_factory=dict, repr=False)
 
     @classmethod
-    def open(cls, path: Path, kind: str, sources: list[Path]) -> RosbagsStorage:
+    def open(  # noqa: A003  (a storage plugin's open, as rosbag2 names it)
+        cls, path: Path, kind: str, sources: list[Path]
+    ) -> RosbagsStorage:
         """Read every source's connections and time range; BagError if rosbags cannot."""
         storage = cls(path, kind, sources)
         for source in sources:
@@ -56,7 +58,8 @@ class RosbagsStorage:
     @contextmanager
     def _reader(self, source: Path) -> Iterator[Reader]:
         # rosbags decompresses a file-compressed bag into a temporary copy at each open: that copy
-        # is kept until `close` (per thread: sqlite3 connections stay in theirs), other bags reopen.
+        # is kept until `close` (per thread: sqlite3 connections stay in theirs), other bags
+        # reopen.
         key = (source, threading.get_ident())
         if key in self._decompressed:
             yield self._decompressed[key]
@@ -84,7 +87,7 @@ class RosbagsStorage:
 
     @property
     def files(self) -> list[Path]:
-        """The storage files on disk."""
+        """Return the storage files on disk."""
         out: list[Path] = []
         for source in self.sources:
             out += (

@@ -33,8 +33,8 @@ def default_message(msgtype: str, **values: Any) -> Any:
     for name, (kind, detail) in fields:
         if name in values:
             kwargs[name] = values[name]
-        elif kind == 2:  # nested message
-            kwargs[name] = default_message(detail)
+        elif kind == 2:  # nested message: `detail` is its type name
+            kwargs[name] = default_message(str(detail))
         elif kind == 1:  # base type
             kwargs[name] = '' if detail[0] == 'string' else False if detail[0] == 'bool' else 0
         elif kind == 4 and detail[0][0] == 1:  # sequence of a base type
@@ -49,7 +49,7 @@ def default_message(msgtype: str, **values: Any) -> Any:
 
 
 def grid_for(vertex_count: int) -> ClothGrid:
-    """Return the cloth grid of an engine's vertex count: the default one, or the nx x nz closest to its shape."""
+    """Return the cloth grid of an engine's vertex count: the default, or the closest nx x nz."""
     default = ClothGrid()
     if vertex_count == default.nx * default.nz:
         return default

@@ -1,9 +1,11 @@
 """
 Import the published dataset (PLY/PCD folders) into one rosbag2 MCAP bag per trial.
 
-Layout (docs/benchmark.md, section 5): `<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`.
-Frame NNNNN is stamped NNNNN / 30 s; points are kept exactly (NaN included; the reader drops
-and counts them), optionally moved by a 4x4 transform, and stored as float32 x/y/z; `--clean` runs them through core.cleaning first.
+Layout (docs/benchmark.md, section 5):
+`<root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd`. Frame NNNNN is stamped
+NNNNN / 30 s; points are kept exactly (NaN included; the reader drops and counts them),
+optionally moved by a 4x4 transform, and stored as float32 x/y/z; `--clean` runs them through
+core.cleaning first.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ from tqdm import tqdm
 CLOTH_NAMES = {'chequered': 'chequered', 'cotton': 'towel', 'linen': 'linen'}  # folder -> ours
 PRIMITIVES = ('dynamic', 'quasi_static')
 
-# Change of phase (first contact) of the dynamic trials, real frame index (docs/benchmark.md, section 4).
+# Change of phase (first contact) of the dynamic trials, real frame index (docs/benchmark.md,
+# section 4).
 CHANGE_OF_PHASE = {
     ('chequered', 0): 95, ('chequered', 1): 95, ('chequered', 2): 99,
     ('towel', 0): 99, ('towel', 1): 98, ('towel', 2): 99,
@@ -123,7 +126,7 @@ def read_ply(path: Path) -> np.ndarray:
                 rows = (
                     data[offset:]
                     .decode('ascii', errors='replace')
-                    .splitlines()[skip : skip + count]
+                    .splitlines()[skip:skip + count]
                 )
                 if len(rows) < count:
                     raise CloudFileError(f'{path}: truncated, {len(rows)} of {count} vertices')
@@ -154,8 +157,11 @@ def read_ply(path: Path) -> np.ndarray:
     raise CloudFileError(f'{path}: no vertex element')
 
 
-_PCD_TYPES = {('F', 4): 'f4', ('F', 8): 'f8', ('I', 1): 'i1', ('I', 2): 'i2', ('I', 4): 'i4',
-              ('I', 8): 'i8', ('U', 1): 'u1', ('U', 2): 'u2', ('U', 4): 'u4', ('U', 8): 'u8'}  # fmt: skip
+_PCD_TYPES = {  # fmt: skip
+    ('F', 4): 'f4', ('F', 8): 'f8',
+    ('I', 1): 'i1', ('I', 2): 'i2', ('I', 4): 'i4', ('I', 8): 'i8',
+    ('U', 1): 'u1', ('U', 2): 'u2', ('U', 4): 'u4', ('U', 8): 'u8',
+}
 
 
 def _int(word: str) -> int:
@@ -230,7 +236,7 @@ def read_pcd(path: Path) -> np.ndarray:
             raise CloudFileError(f'{path}: truncated, {len(rows)} of {n} points')
         width = sum(counts)
         try:
-            values = np.array(
+            table = np.array(
                 [[float(v) for v in r[:width]] for r in rows[:n]], dtype=np.float64
             ).reshape(n, width)
         except ValueError as exc:
@@ -241,7 +247,7 @@ def read_pcd(path: Path) -> np.ndarray:
             raise CloudFileError(
                 f'{path}: no {"/".join(missing)} field (fields: {", ".join(fields)})'
             )
-        return values[:, [column[c] for c in 'xyz']]
+        return table[:, [column[c] for c in 'xyz']]
     raise CloudFileError(f'{path}: unsupported PCD DATA {mode!r} (ascii and binary are supported)')
 
 
@@ -277,7 +283,7 @@ class DatasetTrial:
 
 
 def find_trials(root: Path) -> list[DatasetTrial]:
-    """Return the trial folders under root with their frame files; ValueError if none or malformed."""
+    """Return the trial folders under root with their frame files; ValueError if none."""
     root = Path(root)
     if not root.is_dir():
         raise ValueError(f'dataset root {root} is not a directory')
@@ -408,7 +414,7 @@ def _frame_points(path: Path, t: np.ndarray | None, cleaning: CleaningConfig | N
 def _check_change_of_phase(
     bag: Path, info: TrialInfo, found: ContactSearch, table_removed: bool
 ) -> None:
-    """Warn when the recorded change of phase and the first table contact in the clouds disagree."""
+    """Warn when the recorded change of phase and the first table contact disagree."""
     if info.primitive != 'dynamic' or not table_removed:  # else the table is in every frame
         return
     if (
@@ -416,9 +422,13 @@ def _check_change_of_phase(
         or info.change_of_phase_frame is None
         or abs(found.index - info.change_of_phase_frame) > 1
     ):
+        seen = (
+            f'first table contact at frame {found.index}'
+            if found.index is not None
+            else found.reason
+        )
         warnings.warn(
             f'bag {bag}: change of phase at frame {info.change_of_phase_frame}, but the clouds '
-            'show'
-            f' {"first table contact at frame " + str(found.index) if found.index is not None else found.reason}',
+            f'show {seen}',
             stacklevel=3,
         )

@@ -26,7 +26,7 @@ class MessageTypeError(ClothBenchError, ValueError):
 
 
 def msg_class(msgtype: str) -> type:
-    """Return the rosbags dataclass of a message type, e.g. `msg_class("std_msgs/msg/Header")`."""
+    """Return the rosbags dataclass of a message type name such as "std_msgs/msg/Header"."""
     try:
         return TYPESTORE.types[msgtype]
     except KeyError:
@@ -48,7 +48,7 @@ def deserialize(cdr: bytes | memoryview, msgtype: str) -> Any:
 
 @lru_cache(maxsize=None)
 def msgdef(msgtype: str) -> str:
-    """Return the `ros2msg` definition text of a type, with its dependencies, as MCAP schemas carry it."""
+    """Return a type's `ros2msg` definition with its dependencies, as MCAP schemas carry it."""
     msg_class(msgtype)
     text, _ = TYPESTORE.generate_msgdef(msgtype, ros_version=2)
     return text
@@ -63,7 +63,7 @@ def type_hash(msgtype: str) -> str:
 
 @lru_cache(maxsize=None)
 def has_header(msgtype: str) -> bool:
-    """Return True if the type's first field is a std_msgs/Header (its stamp opens the CDR payload)."""
+    """Return True if the type's first field is a std_msgs/Header (its stamp opens the payload)."""
     msg_class(msgtype)
     _, fields = TYPESTORE.fielddefs[msgtype]
     if not fields:

@@ -20,7 +20,7 @@ MIN_VERSION, MAX_VERSION = 4, 9
 
 class TopicInfo(TypedDict):
     name: str
-    type: str
+    type: str  # noqa: A003  (rosbag2's metadata key)
     message_count: int
 
 

@@ -43,11 +43,8 @@ class ReplayOptions:
     transform: tuple | None = None  # 16 numbers, row-major: replaces tf for every cloud
     clean: str = 'auto'  # auto: on for bags without project metadata
     voxel: float = 0.0
-    table_plane: (
-        str
-    ) = (  # remove, keep, or auto: remove for dynamic (scored before contact), keep for quasi_static
-        'auto'
-    )
+    # remove, keep, or auto: remove for dynamic (scored before contact), keep for quasi_static
+    table_plane: str = 'auto'
     rate_hz: float = 100.0
     align_engine: str = 'mujoco'
     search: alignment.SearchSettings = alignment.SearchSettings()
@@ -55,7 +52,7 @@ class ReplayOptions:
 
 @dataclass
 class ReplayPlan:
-    """Frames to send (t_ns from the start of the quintic part, world points) and the accounting."""
+    """Frames to send (t_ns from the quintic part's start, world points) and the accounting."""
 
     trial: TrialInfo
     topic: str
@@ -84,7 +81,10 @@ class ReplayPlan:
             'cleaning': (
                 None
                 if self.cleaning is None
-                else {**self.cleaning.as_dict(), 'settings': asdict(self.cleaning_config)}
+                else {
+                    **self.cleaning.as_dict(),
+                    'settings': asdict(self.cleaning_config) if self.cleaning_config else None,
+                }
             ),
         }
 
@@ -102,7 +102,7 @@ def _trial(reader: BagReader, options: ReplayOptions, topic: str) -> TrialInfo:
 
 
 def _to_world(reader: BagReader, options: ReplayOptions) -> tuple[Any, str]:
-    """Return a function (frame_id, stamp_ns) -> 4x4 into world, and a sentence saying where it comes from."""
+    """Return a function (frame_id, stamp_ns) -> 4x4 into world, and where it comes from."""
     if options.transform is not None:
         fixed = np.asarray(options.transform, dtype=float).reshape(4, 4)
         return (lambda frame, stamp: fixed), '--transform matrix applied to every cloud'
@@ -141,7 +141,7 @@ def _decode(
 
 
 def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig | None:
-    """Return the cleaning of a replay, or None when off (project bags are cleaned when written)."""
+    """Return the cleaning of a replay, or None when off (project bags are cleaned already)."""
     if options.clean not in CLEAN_MODES:
         raise ValueError(f'clean mode {options.clean!r} is not one of {", ".join(CLEAN_MODES)}')
     if options.clean == 'off' or (options.clean == 'auto' and project_bag):
@@ -150,7 +150,8 @@ def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig
         raise ValueError(
             f'table plane mode {options.table_plane!r} is not one of {", ".join(TABLE_MODES)}'
         )
-    # Removing the plane also removes cloth lying flat on the table, which the quasi-static drag scores.
+    # Removing the plane also removes cloth lying flat on the table, which the quasi-static drag
+    # scores.
     remove = options.table_plane == 'remove' or (
         options.table_plane == 'auto' and options.primitive == 'dynamic'
     )
@@ -224,7 +225,8 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     trial.change_of_phase_frame = plan.change_of_phase['frame']
     period = 1e9 / trial.fps
     steps = np.diff(np.asarray(stamps, dtype=np.int64))
-    plan.irregular_intervals = int(np.sum(np.abs(steps - period) > IRREGULAR_TOLERANCE * period))
+    off = np.abs(steps.astype(np.float64) - period)
+    plan.irregular_intervals = int(np.sum(off > IRREGULAR_TOLERANCE * period))
     return plan
 
 

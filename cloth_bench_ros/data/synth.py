@@ -1,13 +1,13 @@
 """
 Synthetic reference bags: a high-resolution reference cloth seen by a virtual Azure Kinect.
 
-A reference simulation (config/synth.yaml: finer grid and another integrator than the models
-under test) runs along the full trajectory; at every 30 fps frame its mesh is rasterised into a
-z-buffer by a pinhole camera placed as docs/benchmark.md section 1 says, so that only the surfaces the
+A reference simulation (config/synth.yaml: finer grid and another integrator than the models under
+test) runs along the full trajectory; at every 30 fps frame its mesh is rasterised into a z-buffer
+by a pinhole camera placed as docs/benchmark.md section 1 says, so that only the surfaces the
 camera sees survive. The depth image gets Azure-Kinect-like noise and flying pixels at the
-silhouette, is back-projected to the world frame, cropped to the cloth above the table, cleaned
-by statistical outlier removal (open3d) and randomly subsampled to a point budget: partial,
-noisy clouds, far denser than the simulated mesh, like the real ones.
+silhouette, is back-projected to the world frame, cropped to the cloth above the table, cleaned by
+statistical outlier removal (open3d) and randomly subsampled to a point budget: partial, noisy
+clouds, far denser than the simulated mesh, like the real ones.
 """
 
 from __future__ import annotations
@@ -37,13 +37,14 @@ class SynthError(ClothBenchError, ValueError):
     """A synthetic reference that cannot be made (bad config/synth.yaml, diverged reference)."""
 
 
-# Reference models (`cloth-bench synth --reference`): name -> file under config/. MuJoCo is the default.
+# Reference models (`cloth-bench synth --reference`): name -> file under config/. MuJoCo is the
+# default.
 REFERENCES = {'mujoco': 'synth.yaml', 'newton-vbd': 'synth_newton_vbd.yaml'}
 DEFAULT_REFERENCE = 'mujoco'
 
 
 def config_path(reference: str = DEFAULT_REFERENCE) -> Path:
-    """config/synth.yaml (or the file of another reference) of the source tree or installed package."""
+    """Return config/synth.yaml (or another reference's file) of the source tree or package."""
     if reference not in REFERENCES:
         raise SynthError(
             f'unknown synthetic reference {reference!r} (valid: {", ".join(REFERENCES)})'
@@ -61,7 +62,7 @@ class Camera:
     width: int = scene.CAMERA_WIDTH_PX
     height: int = scene.CAMERA_HEIGHT_PX
     hfov_deg: float = scene.CAMERA_HFOV_DEG
-    position: tuple[float, float, float] = tuple(float(x) for x in scene.CAMERA_POSITION)
+    position: tuple[float, ...] = tuple(float(x) for x in scene.CAMERA_POSITION)
 
     @property
     def focal(self) -> float:
@@ -156,7 +157,7 @@ def _quad(p0, p1, p2, p3) -> np.ndarray:
 
 
 def background_triangles() -> np.ndarray:
-    """Static scene behind the cloth: table top, table front face and a wall at WALL_Y."""
+    """Return the static scene behind the cloth: table top, table front face, a wall at WALL_Y."""
     (x0, x1), (y0, y1), zt = scene.TABLE_X, scene.TABLE_Y, scene.TABLE_TOP_Z
     zb = zt - scene.TABLE_THICKNESS
     top = _quad((x0, y0, zt), (x1, y0, zt), (x1, y1, zt), (x0, y1, zt))
@@ -192,7 +193,7 @@ class DepthNoise:
 
 @dataclass(frozen=True)
 class Sensor:
-    """Camera, noise and the clean-up of the real data: crop, statistical outlier removal, budget."""
+    """Camera, noise and the clean-up of the real data: crop, outlier removal, point budget."""
 
     camera: Camera = Camera()
     noise: DepthNoise = DepthNoise()
@@ -209,7 +210,7 @@ class Sensor:
 
     @property
     def cleaning(self) -> cleaning.CleaningConfig:
-        """The crop (above the table top) and outlier removal of the one cleaning pipeline."""
+        """Return the crop (above the table) and outlier removal of the one cleaning pipeline."""
         return cleaning.CleaningConfig(
             self.crop_min,
             self.crop_max,
@@ -258,7 +259,7 @@ def observe(
     background: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """
-    Return the point cloud (n, 3) the sensor makes of the cloth `triangles` in front of `background`.
+    Return the point cloud (n, 3) the sensor makes of the cloth in front of `background`.
 
     `background` is a (depth, ids) z-buffer of the static scene from `rasterize` (none: empty).
     """
@@ -363,9 +364,10 @@ def reference_config(
     **overrides: Any,
 ) -> SynthConfig:
     """
-    Return the reference model of `cloth` and `primitive` from the reference's config file (config/synth.yaml
-    for MuJoCo); SynthError if unknown. `overrides` replace SynthConfig fields (e.g. a coarser grid
-    or a shorter duration for tests).
+    Return the reference model of `cloth` and `primitive` from the reference's config file.
+
+    The file is config/synth.yaml for MuJoCo; SynthError if unknown. `overrides` replace
+    SynthConfig fields (e.g. a coarser grid or a shorter duration for tests).
     """
     primitive = parse_primitive(primitive).value
     path = path or config_path(reference)
@@ -414,7 +416,7 @@ def simulate_reference(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
                 if engine.diverged:
                     raise SynthError(
                         f'synthetic reference {config.cloth} {config.primitive} diverged at step'
-                        f' {i}: {engine.divergence.reason}'
+                        f' {i}: {engine.divergence.reason if engine.divergence else ""}'
                     )
                 yield (i - start) // per_frame, vertices
     finally:
@@ -448,16 +450,19 @@ def synthetic_frames(config: SynthConfig) -> Iterator[tuple[int, np.ndarray, np.
 
 
 def render_frames(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
-    """(stamp_ns, points (n, 3)) of every synthetic frame, stamps from the start of the quintic part."""
+    """Return (stamp_ns, points (n, 3)) of every synthetic frame, from the quintic part's start."""
     for k, _, points in synthetic_frames(config):
         yield frame_stamp_ns(k, config.fps), points
 
 
 def trial_info(config: SynthConfig, clouds: list[np.ndarray] | None = None) -> TrialInfo:
     """
-    Trial 0 of the cloth; a dynamic trial's change of phase is the first table contact in its clouds.
+    Return trial 0 of the cloth.
 
-    None if the clouds never touch the table (a shortened trial): its runs then say so and score every frame.
+    A dynamic trial's change of phase is the first table contact in its clouds.
+
+    None if the clouds never touch the table (a shortened trial): its runs then say so and
+    score every frame.
     """
     cop = None
     if config.primitive == 'dynamic':
@@ -513,6 +518,6 @@ def synth_command(
     progress: bool = True,
     reference: str = DEFAULT_REFERENCE,
 ) -> Path:
-    """`cloth-bench synth`: the synthetic bag of a cloth and primitive from a reference's config."""
+    """`cloth-bench synth`: the synthetic bag of a cloth and primitive from a reference."""
     config = reference_config(cloth, primitive, seed, reference=reference)
     return write_synthetic_bag(config, Path(out), overwrite, progress)

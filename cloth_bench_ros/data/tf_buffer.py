@@ -64,7 +64,7 @@ def _matrix(t: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 class TfBuffer:
-    """Parent links and their transforms; `lookup(target, source, stamp)` gives source -> target."""
+    """Parent links and their transforms; `lookup(target, source, stamp)` maps source to target."""
 
     def __init__(self) -> None:
         self._parent: dict[str, str] = {}
@@ -123,7 +123,7 @@ class TfBuffer:
         return chain
 
     def lookup(self, target: str, source: str, stamp: int = 0) -> np.ndarray:
-        """4x4 matrix taking points in `source` to `target` at `stamp` ns; TransformError if none."""
+        """Return the 4x4 matrix from `source` to `target` at `stamp`; TransformError if none."""
         target, source = _strip(target), _strip(source)
         if not source:
             raise TransformError('a cloud has an empty frame_id')

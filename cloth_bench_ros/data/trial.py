@@ -70,7 +70,7 @@ class TrialInfo:
         return cls(**kwargs)
 
     def to_strings(self) -> dict[str, str]:
-        """Return the string key/values carried by custom_data, MCAP metadata and DiagnosticArray."""
+        """Return the string key/values of custom_data, MCAP metadata and DiagnosticArray."""
         d = self.to_dict()
         out = {k: str(v) for k, v in d.items() if k not in ('transform', 'change_of_phase_frame')}
         out['fps'] = repr(self.fps)

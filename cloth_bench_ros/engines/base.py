@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import abc
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import math
-from typing import ClassVar, Mapping
+from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.scene import ClothGrid
@@ -91,7 +91,7 @@ class ClothEngine(abc.ABC):
     def __init__(
         self,
         rate_hz: float,
-        params: Mapping[str, object] | None = None,
+        params: Mapping[str, Any] | None = None,
         grid: ClothGrid | None = None,
     ) -> None:
         try:
@@ -119,7 +119,7 @@ class ClothEngine(abc.ABC):
             self.h = self.dt / self.substeps
 
     @classmethod
-    def validate_params(cls, params: Mapping[str, object]) -> dict[str, object]:
+    def validate_params(cls, params: Mapping[str, Any]) -> dict[str, Any]:
         """Defaults overlaid with `params`; EngineError on unknown names or bad values."""
         schema = {p.name: p for p in cls.params}
         unknown = sorted(set(params) - set(schema))
@@ -127,7 +127,7 @@ class ClothEngine(abc.ABC):
             raise EngineError(
                 f'unknown {cls.name} parameter {", ".join(unknown)} (known: {", ".join(schema)})'
             )
-        config = {p.name: p.default for p in cls.params}
+        config: dict[str, Any] = {p.name: p.default for p in cls.params}
         config.update({k: schema[k].validate(v) for k, v in params.items()})
         return config
 
@@ -138,14 +138,14 @@ class ClothEngine(abc.ABC):
 
     @classmethod
     def warm(cls) -> None:
-        """Do once what would make an engine's first run slow (e.g. compiling kernels into a cache)."""
+        """Do once what would make an engine's first run slow (e.g. compiling kernels)."""
 
     @property
     def dt(self) -> float:
         return 1.0 / self.rate_hz
 
     def internal_steps(self, timestep: float, least: int) -> int:
-        """Internal steps per engine step: at least `least`, and none longer than `timestep`."""
+        """Return the internal steps per step: at least `least`, none longer than `timestep`."""
         return max(least, math.ceil(self.dt / timestep - 1e-9))
 
     @property
@@ -157,7 +157,7 @@ class ClothEngine(abc.ABC):
         return self.grid.faces()
 
     def reset(self, seed: int, left_xyz: np.ndarray, right_xyz: np.ndarray) -> np.ndarray:
-        """Build the scene with the grasped corners at the grippers; the seed perturbs the cloth."""
+        """Build the scene, grasped corners at the grippers; the seed perturbs the cloth."""
         self.divergence = None
         self.steps = 0
         left, right = np.asarray(left_xyz, float), np.asarray(right_xyz, float)
@@ -187,8 +187,10 @@ class ClothEngine(abc.ABC):
 
     def _check(self, vertices: np.ndarray, left: np.ndarray, right: np.ndarray) -> str | None:
         """
-        check_divergence, cheaply: two bounds computed in preallocated scratch arrays; the
-        exact reason only when a bound fails (NaN fails every comparison, so it gets there too).
+        Return check_divergence's reason, cheaply (None when the state is sound).
+
+        Two bounds are computed in preallocated scratch arrays; the exact reason only when a bound
+        fails (NaN fails every comparison, so it gets there too).
         """
         if self._scratch is None or self._scratch.shape != vertices.shape:
             self._scratch, self._row = (
@@ -201,6 +203,7 @@ class ClothEngine(abc.ABC):
         np.subtract(vertices, mid, out=buf)
         np.abs(buf, out=buf)
         reach = buf.max()
+        assert self._vertices is not None  # step() checked it
         np.subtract(vertices, self._vertices, out=buf)
         np.multiply(buf, buf, out=buf)
         travel2 = buf.sum(axis=1, out=self._row).max()
@@ -210,7 +213,7 @@ class ClothEngine(abc.ABC):
 
     @abc.abstractmethod
     def _reset(self, displacement: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
-        """Cloth at rest shape + `displacement` (n, 3), at rest, grippers at `left` and `right`; its vertices."""
+        """Return the cloth's vertices at rest + `displacement`, grippers at left and right."""
 
     @abc.abstractmethod
     def _step(self, left: np.ndarray, right: np.ndarray) -> np.ndarray: ...

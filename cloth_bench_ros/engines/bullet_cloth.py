@@ -20,7 +20,7 @@ from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as package_version
 from pathlib import Path
 import tempfile
-from typing import ClassVar, Mapping
+from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros.engines.quiet import quiet_c_output
 import numpy as np
@@ -28,9 +28,9 @@ import numpy as np
 with quiet_c_output():  # pybullet prints its build time on import
     import pybullet as pb
 
-from cloth_bench_ros.core import scene
+from cloth_bench_ros.core import scene  # noqa: I100  (after pybullet's quiet import)
 from cloth_bench_ros.core.scene import ClothGrid
-from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
+from cloth_bench_ros.engines.base import ClothEngine, Param
 
 MODELS = ('mass_spring', 'neo_hookean')
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -45,8 +45,10 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
 
 def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.ndarray]:
     """
-    Return the cloth as a slab: nodes (2n, 3), layer 0 at y = -t/2 then layer 1 at +t/2, and
-    positively oriented tetrahedra (6 per grid cell, Kuhn split, conforming across cells).
+    Return the cloth as a slab: nodes (2n, 3) and positively oriented tetrahedra.
+
+    Layer 0 is at y = -t/2, then layer 1 at +t/2; 6 tetrahedra per grid cell (Kuhn split,
+    conforming across cells).
     """
     rest = grid.vertices()
     n = len(rest)
@@ -67,7 +69,7 @@ def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.n
                     step[axis] = 1
                     path.append(step)
                 path.append([1, 1, 1])
-                tet = [corner(tuple(p)) for p in path]
+                tet = [corner((p[0], p[1], p[2])) for p in path]
                 p0, p1, p2, p3 = nodes[tet]
                 if np.dot(np.cross(p1 - p0, p2 - p0), p3 - p0) < 0:
                     tet[1], tet[2] = tet[2], tet[1]
@@ -76,7 +78,7 @@ def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.n
 
 
 def write_vtk(path: Path, nodes: np.ndarray, tets: np.ndarray) -> None:
-    """Return a tetrahedral mesh as legacy ASCII VTK (unstructured grid), the format Bullet loads."""
+    """Return a tetrahedral mesh as legacy ASCII VTK (unstructured grid), as Bullet loads it."""
     lines = [
         '# vtk DataFile Version 2.0',
         'cloth slab',
@@ -93,7 +95,7 @@ def write_vtk(path: Path, nodes: np.ndarray, tets: np.ndarray) -> None:
 
 
 def match_nodes(loaded: np.ndarray, wanted: np.ndarray, tolerance: float = 1e-5) -> np.ndarray:
-    """Index into `loaded` of the node at each `wanted` position; RuntimeError if one is missing."""
+    """Return the index into `loaded` of each `wanted` node; RuntimeError if one is missing."""
     d2 = ((wanted[:, None, :] - loaded[None, :, :]) ** 2).sum(axis=2)
     index = d2.argmin(axis=1)
     if np.sqrt(d2[np.arange(len(wanted)), index]).max() > tolerance or len(set(index)) != len(
@@ -108,7 +110,8 @@ class BulletCloth(ClothEngine):
     PyBullet deformable cloth: mass-spring with bending springs, or Neo-Hookean FEM slab.
 
     reset(seed) rebuilds the world (so one seed always gives bit-identical runs) and places the
-    cloth in the task's seeded initial state (core/task.py); both layers of a FEM slab move together.
+    cloth in the task's seeded initial state (core/task.py); both layers of a FEM slab move
+    together.
     """
 
     name: ClassVar[str] = 'bullet'
@@ -169,7 +172,7 @@ class BulletCloth(ClothEngine):
     def __init__(
         self,
         rate_hz: float,
-        params: Mapping[str, object] | None = None,
+        params: Mapping[str, Any] | None = None,
         grid: ClothGrid | None = None,
     ) -> None:
         super().__init__(rate_hz, params, grid)
@@ -196,7 +199,7 @@ class BulletCloth(ClothEngine):
     # -- world --------------------------------------------------------------------------------
 
     def _build(self) -> None:
-        """Return a fresh deformable world: gravity, table, cloth, kinematic grippers and anchors."""
+        """Return a fresh deformable world: gravity, table, cloth, kinematic grippers, anchors."""
         c, cid = self.config, self._client
         pb.resetSimulation(pb.RESET_USE_DEFORMABLE_WORLD, physicsClientId=cid)
         pb.setGravity(0.0, 0.0, scene.GRAVITY, physicsClientId=cid)
@@ -220,17 +223,17 @@ class BulletCloth(ClothEngine):
             physicsClientId=cid,
         )
         pb.changeDynamics(table, -1, lateralFriction=1.0, physicsClientId=cid)
-        common = dict(
-            basePosition=[0.0, 0.0, 0.0],
-            baseOrientation=list(_IDENTITY),
-            scale=1.0,
-            mass=float(c['mass']),
-            collisionMargin=float(c['collision_margin']),
-            frictionCoeff=float(c['friction']),
-            useSelfCollision=int(c['self_collision']),
-            useFaceContact=1,
-            physicsClientId=cid,
-        )
+        common = {
+            'basePosition': [0.0, 0.0, 0.0],
+            'baseOrientation': list(_IDENTITY),
+            'scale': 1.0,
+            'mass': float(c['mass']),
+            'collisionMargin': float(c['collision_margin']),
+            'frictionCoeff': float(c['friction']),
+            'useSelfCollision': int(c['self_collision']),
+            'useFaceContact': 1,
+            'physicsClientId': cid,
+        }
         with quiet_c_output():
             self._cloth = self._load_cloth(common)
         if self._cloth < 0:

@@ -22,7 +22,7 @@ millimetres during the fling.
 
 from __future__ import annotations
 
-from typing import ClassVar, Mapping
+from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros.core import scene
 from cloth_bench_ros.core.scene import ClothGrid
@@ -150,7 +150,7 @@ class MujocoCloth(ClothEngine):
         return mujoco.__version__
 
     @classmethod
-    def validate_params(cls, params: Mapping[str, object]) -> dict[str, object]:
+    def validate_params(cls, params: Mapping[str, Any]) -> dict[str, Any]:
         config = super().validate_params(params)
         if config['condim'] == 2:
             raise EngineError(
@@ -172,7 +172,7 @@ class MujocoCloth(ClothEngine):
     def __init__(
         self,
         rate_hz: float,
-        params: Mapping[str, object] | None = None,
+        params: Mapping[str, Any] | None = None,
         grid: ClothGrid | None = None,
     ) -> None:
         super().__init__(rate_hz, params, grid)
@@ -225,7 +225,8 @@ class MujocoCloth(ClothEngine):
   <option timestep="{self.h:.12g}" gravity="0 0 {scene.GRAVITY}" integrator="{c['integrator']}"
           solver="{c['solver']}" iterations="{c['solver_iterations']}"/>
   <worldbody>
-    <geom name="table" type="box" friction="{friction}" condim="{c['condim']}" size="{(x1 - x0) / 2} {(y1 - y0) / 2} {half}"
+    <geom name="table" type="box" friction="{friction}" condim="{c['condim']}"
+          size="{(x1 - x0) / 2} {(y1 - y0) / 2} {half}"
           pos="{(x0 + x1) / 2} {(y0 + y1) / 2} {scene.TABLE_TOP_Z - half}"/>
     <flexcomp name="cloth" type="direct" dim="{dim}" point="{points}" element="{element}"
               mass="{c['mass']:.9g}" radius="{c['radius']:.9g}">
@@ -236,7 +237,7 @@ class MujocoCloth(ClothEngine):
 </mujoco>"""
 
     def _index_model(self) -> None:
-        """Map grid vertices to their slide joints (checking the order); make the corners kinematic."""
+        """Map grid vertices to their slide joints (order checked); make the corners kinematic."""
         m, d = self.model, self.data
         mujoco.mj_forward(m, d)
         n = len(self._rest)

@@ -8,8 +8,8 @@ Two cloth models, chosen by the `model` parameter:
   shear and bending springs of stiffness `spring_stiffness`) plus dihedral-angle bending
   constraints (`bending`), solved by SolverXPBD.
 - "vbd" (vertex block descent, implicit Euler with Neo-Hookean-like triangle elements, close to
-  SOFA's FEM in the paper): membrane stiffness `tri_stiffness` (shear, Lame mu), `tri_area_stiffness`
-  (Lame lambda), dihedral bending `bending`, solved by SolverVBD.
+  SOFA's FEM in the paper): membrane stiffness `tri_stiffness` (shear, Lame mu),
+  `tri_area_stiffness` (Lame lambda), dihedral bending `bending`, solved by SolverVBD.
 
 Grasp: each grasped corner is a kinematic particle (mass 0, not ACTIVE): Newton's solvers leave
 its position alone, so it is written before every substep at the point of the straight line from
@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as package_version
-from typing import ClassVar, Mapping
+from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros.engines.quiet import quiet_c_output
 import numpy as np
@@ -34,7 +34,7 @@ import warp as wp
 wp.config.log_level = wp.LOG_ERROR  # no banner and no line per compiled module
 with quiet_c_output():  # Warp's C++ init warns on stderr that there is no CUDA driver
     wp.init()
-from cloth_bench_ros.core import scene  # noqa: E402  (after Warp's quiet init)
+from cloth_bench_ros.core import scene  # noqa: E402, I100  (after Warp's quiet init)
 from cloth_bench_ros.core.scene import ClothGrid  # noqa: E402
 from cloth_bench_ros.engines.base import ClothEngine, Param  # noqa: E402
 import newton  # noqa: E402
@@ -194,7 +194,7 @@ class NewtonCloth(ClothEngine):
 
     @classmethod
     def warm(cls) -> None:
-        """Compile every kernel both models use (with and without self-collision) into Warp's cache."""
+        """Compile every kernel of both models (with and without self-collision) into the cache."""
         grid = ClothGrid(3, 3)
         left, right = grid.vertices()[grid.left_corner], grid.vertices()[grid.right_corner]
         for model in MODELS:
@@ -207,7 +207,7 @@ class NewtonCloth(ClothEngine):
     def __init__(
         self,
         rate_hz: float,
-        params: Mapping[str, object] | None = None,
+        params: Mapping[str, Any] | None = None,
         grid: ClothGrid | None = None,
     ) -> None:
         super().__init__(rate_hz, params, grid)

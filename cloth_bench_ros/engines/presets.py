@@ -5,7 +5,7 @@ A preset file reads
     engine: mujoco
     engine_version: "4.0.0"
     provenance: "<where the numbers come from; what was changed for this engine version>"
-    presets: {towel: {dynamic: {param: value, ...}, quasi_static: {...}}, chequered: ..., linen: ...}
+    presets: {towel: {dynamic: {param: value, ...}, quasi_static: {...}}, chequered: ...}
 Every problem with a file (missing keys, wrong types, unknown or out-of-range parameters) is an
 EngineError of one line naming the file.
 """
@@ -134,7 +134,7 @@ def load_preset(engine: str, cloth: str, primitive: str, config_dir: Path | None
 
 
 def _check_against_engine(engine: str, values: dict, path: Path, where: str) -> None:
-    """EngineError naming the file if the engine's schema rejects a value (skipped if not installed)."""
+    """Raise EngineError naming the file if the engine's schema rejects a value."""
     from cloth_bench_ros.engines import engine_class  # late: the registry imports engines
 
     try:

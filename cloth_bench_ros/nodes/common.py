@@ -19,7 +19,7 @@ REPLAY_STATUS_NAME = 'cloth_bench/recorder/replay'
 
 
 def replay_stamps(msg) -> list[int] | None:
-    """Return the stamps (ns) announced in a real/trial DiagnosticArray, or None without an announcement."""
+    """Return the stamps (ns) announced in a real/trial DiagnosticArray, or None."""
     for status in msg.status:
         if status.name == REPLAY_STATUS_NAME:
             text = {kv.key: kv.value for kv in status.values}.get('stamps_ns', '')
@@ -32,8 +32,10 @@ _stop_requested = threading.Event()
 
 def publish_serialises(node) -> bool:
     """
-    Return True when publish() serialises the message (rclpy, DDS), so it may be refilled right after;
-    the embedded intra-process transport hands subscribers the object itself.
+    Return True when publish() serialises the message (rclpy, DDS).
+
+    Such a message may be refilled right after; the embedded intra-process transport hands
+    subscribers the object itself.
     """
     return not EMBEDDED or node.context.transport.name != 'intra'
 
@@ -58,14 +60,14 @@ def node_keys(infos: Iterable) -> set[tuple[str, str]]:
 
 
 def publishers_matched(node, subscription) -> int:
-    """Return publishers matched with a subscription (rclpy >= Iron), else those in the graph (Humble)."""
+    """Return publishers matched with a subscription (rclpy >= Iron), else those in the graph."""
     count = getattr(subscription, 'get_publisher_count', None)
     return count() if count is not None else node.count_publishers(subscription.topic_name)
 
 
 def all_subscriptions_matched(node, publisher) -> bool:
     """
-    Return True once the publisher has matched every subscription of its topic that the graph lists.
+    Return True once the publisher has matched every subscription of its topic in the graph.
 
     Under DDS, discovery is asynchronous and pairwise: a reader another node has created is in the
     graph before this publisher's writer has matched it, and a reliable volatile writer delivers
@@ -97,7 +99,8 @@ def run_nodes(
     starting = True
     try:
         # a bad --ros-args (or CLOTH_BENCH_TRANSPORT) fails here; real rclpy installs no signal
-        # handler of its own (it would end spin_once in ExternalShutdownException), ours stops the loop
+        # handler of its own (it would end spin_once in ExternalShutdownException), ours stops the
+        # loop
         init_options = (
             {'transport': transport or transport_choice('intra')}
             if EMBEDDED

@@ -1,5 +1,5 @@
 """
-The evaluator's comparison outputs: the comparison bag, the paper's qualitative figure, an animation.
+The evaluator's comparison outputs: comparison bag, qualitative figure, animation.
 
 Input is what the evaluator kept of each scored real frame: its `FrameScore`, the real points and
 the engine's vertices at that time. The figure puts the mesh (red) over the real cloud (black) at
@@ -68,7 +68,7 @@ def qualitative_figure(pairs: list, primitive: str, path: Path) -> tuple[int, in
 
 
 def animation(pairs: list, path: Path) -> tuple[Path, int]:
-    """Sim against real over the trial, one panel per engine: MP4 with ffmpeg, else GIF (PillowWriter)."""
+    """Animate sim against real over the trial, a panel per engine: MP4 with ffmpeg, else GIF."""
     import matplotlib
 
     matplotlib.use('Agg')

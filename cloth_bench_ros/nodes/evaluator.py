@@ -6,6 +6,7 @@ from functools import partial
 import json
 from pathlib import Path
 import time
+from typing import Any
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.evaluation import accounting_line, OnlineEvaluator
@@ -113,9 +114,10 @@ class Evaluator(Node):
                     DiagnosticArray, f'{engine}/step_time', partial(self.on_step, engine), data_qos
                 )
             )
-        # Ready (the `metrics` publisher appears, which the trajectory publisher waits for) once every
-        # input is matched with a publisher and the recorder's trial (and replay) announcement is in.
-        self.metrics_pub = None
+        # Ready (the `metrics` publisher appears, which the trajectory publisher waits for) once
+        # every input is matched with a publisher and the recorder's trial (and replay)
+        # announcement is in.
+        self.metrics_pub: Any = None  # a Publisher once the inputs are matched
         self.trial_received = False
         self.expected_real: set[int] | None = None  # announced stamps up to the last target
         self.received_real: set[int] = set()
@@ -228,7 +230,7 @@ class Evaluator(Node):
     def publish_scores(self) -> None:
         if self.metrics_pub is None:  # not ready yet: published once it is
             return
-        new = self.core.scores[self.published_scores :]
+        new = self.core.scores[self.published_scores:]
         self.published_scores = len(self.core.scores)
         for s in new:
             status = DiagnosticStatus(

@@ -82,7 +82,8 @@ class Recorder(Node):
         path = self.declare_parameter('bag', '').value
         if not path:
             raise ValueError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
-        # Frames are stamped from the start of the quintic part; the run starts with the settle phase.
+        # Frames are stamped from the start of the quintic part; the run starts with the settle
+        # phase.
         declare_float(self, 'time_offset', SETTLE_DURATION)
         clock = self.declare_parameter('clock', 'sim').value
         declare_float(self, 'rate_factor', 1.0)
@@ -174,7 +175,7 @@ class Recorder(Node):
 
     @staticmethod
     def reference_motion(options: ReplayOptions, nx: int, nz: int, seconds: float):
-        """Return the reference simulation the automatic alignment compares the bag with (the run's engine and grid)."""
+        """Return the reference simulation the automatic alignment compares the bag with."""
         preset = load_preset(options.align_engine, options.cloth, options.primitive)
         engine = make_engine(
             options.align_engine, options.rate_hz, preset, ClothGrid(nx, nz) if nx and nz else None
@@ -197,7 +198,7 @@ class Recorder(Node):
         self.done = self.next_frame is None
 
     def trial_message(self) -> DiagnosticArray:
-        """Return the trial (cloth, primitive, change of phase, ...) and the replay's frame accounting."""
+        """Return the trial (cloth, primitive, change of phase) and the replay's accounting."""
         info = self.plan.trial.to_strings()
         info['replay'] = json.dumps(self.plan.accounting())
         info['frames_to_send'] = str(
@@ -214,7 +215,7 @@ class Recorder(Node):
         return DiagnosticArray(status=[status])
 
     def replay_status(self) -> DiagnosticStatus:
-        """Return the run-time stamps of every frame the sim-clock replay will send (common.REPLAY_STATUS_NAME)."""
+        """Return the run-time stamps of every frame the sim-clock replay will send."""
         stamps = [t + self.offset_ns for t, _ in self.plan.frames if t >= self.start_offset_ns]
         return DiagnosticStatus(
             level=DiagnosticStatus.OK,
@@ -228,7 +229,7 @@ class Recorder(Node):
         )
 
     def publish_until(self, t_ns: int, restamp_offset_ns: int) -> None:
-        """Publish every frame at or before t_ns (from the motion's start), restamped by the offset."""
+        """Publish every frame at or before t_ns (from the motion's start), restamped."""
         while self.next_frame is not None:
             frame_t, points = self.next_frame
             if frame_t > t_ns:
@@ -287,17 +288,20 @@ class Recorder(Node):
         if self.stopped:
             return  # counted as received, not written
         cdr = serialize_message(msg)
+        writer = self.writer
+        assert writer is not None  # on_record is subscribed only when recording
         self.unchecked_bytes += len(cdr)
         if self.unchecked_bytes >= DISK_CHECK_EVERY_BYTES:
             self.unchecked_bytes = 0
-            free = shutil.disk_usage(self.writer.path).free
+            free = shutil.disk_usage(writer.path).free
             if free < DISK_MARGIN_BYTES:  # stop while the bag can still be finished cleanly
                 self.stop_recording(
                     OSError(errno.ENOSPC, f'disk nearly full, {free} bytes left'), False
                 )
         try:
-            # As rosbag2 records: log time is the receive time, the header stamp stays in the message.
-            self.writer.write(
+            # As rosbag2 records: log time is the receive time, the header stamp stays in the
+            # message.
+            writer.write(
                 topic, typename, 0, cdr, log_time_ns=self.get_clock().now().nanoseconds
             )
         except OSError as exc:
@@ -305,30 +309,36 @@ class Recorder(Node):
 
     def stop_recording(self, exc: OSError, failed_write: bool) -> None:
         """
-        End the recording on a full disk or write error: finalise what is on disk, then one error line.
+        End the recording on a full disk or write error.
+
+        What is on disk is finalised, then one error line.
 
         After a failed write the MCAP writer's state no longer matches the file, so the bag is
         kept as written (`BagWriter.abandon`) instead of finished over the gap.
         """
         self.stopped = True
         self.reserve.unlink(missing_ok=True)
+        writer = self.writer
+        assert writer is not None  # stopped only while recording
         if failed_write:
-            self.writer.abandon()
+            writer.abandon()
         else:
             self.close_writer()
         reason = exc.strerror or str(exc)
         raise RecordingStopped(
-            f'recorder: bag {self.writer.path}: {reason}; recording stopped, the bag keeps '
-            f'the {self.writer.written} messages written before'
+            f'recorder: bag {writer.path}: {reason}; recording stopped, the bag keeps '
+            f'the {writer.written} messages written before'
         )
 
     def close_writer(self) -> None:
         """Finalise the bag; if finishing it fails (disk full), keep what is on disk."""
-        if not self.writer.closed:
+        writer = self.writer
+        assert writer is not None  # closed only when recording
+        if not writer.closed:
             try:
-                self.writer.close()
+                writer.close()
             except OSError:
-                self.writer.abandon()
+                writer.abandon()
         self.reserve.unlink(missing_ok=True)
 
     def close(self) -> None:

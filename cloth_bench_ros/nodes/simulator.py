@@ -104,7 +104,7 @@ class StateMessages:
     def fill(
         self, stamp, vertices: np.ndarray, step: int, step_time: float, divergence, skipped: int
     ) -> tuple[PointCloud2, DiagnosticArray]:
-        """Return the two messages of one step (the vertex conversion to float32 is the one copy)."""
+        """Return the two messages of one step (the float32 conversion is the one copy)."""
         cloud, xyz, status = (
             (self.cloud, self.xyz, self.status) if self.in_place else self._fresh()
         )
@@ -201,22 +201,25 @@ class Simulator(Node):
         self.messages = StateMessages(
             self.engine_name, len(self.engine.grid.vertices()), publish_serialises(self)
         )
-        self.prepared = self.warm_up()
+        self.prepared: np.ndarray | None = self.warm_up()
         self.realtime = realtime.apply(
             int(self.declare_parameter('cpu', -1).value),
             int(self.declare_parameter('realtime_priority', 0).value),
             bool(self.declare_parameter('freeze_gc', False).value),
         )
-        # Subscribed last, once start-up is done, so the first target finds the engine ready. Keep-last 1,
-        # as a controller's command topic: a simulator that falls behind steps to the newest target and
-        # counts the ones it never saw (under transports that drop old samples: DDS and rclpy).
+        # Subscribed last, once start-up is done, so the first target finds the engine ready.
+        # Keep-last 1, as a controller's command topic: a simulator that falls behind steps to the
+        # newest target and counts the ones it never saw (under transports that drop old samples:
+        # DDS and rclpy).
         self.create_subscription(PoseArray, 'targets', self.on_target, make_qos(1))
         self.get_logger().info(f'{self.engine_name} ready; ' + '; '.join(self.realtime.lines()))
 
     def warm_up(self) -> np.ndarray:
         """
-        Start-up work before the first deadline: the reset at the trajectory's first target, one
-        throwaway step (first-call costs), the reset again; its vertices answer target 0.
+        Do the start-up work before the first deadline; the vertices answer target 0.
+
+        The reset at the trajectory's first target, one throwaway step (first-call costs), the
+        reset again.
         """
         left, right = self.targets.left[0], self.targets.right[0]
         self.engine.reset(self.seed, left, right)
@@ -230,7 +233,7 @@ class Simulator(Node):
         return vertices
 
     def on_target(self, msg: PoseArray) -> None:
-        """Step to this target; targets the transport dropped while the engine was busy are skipped."""
+        """Step to this target; targets dropped while the engine was busy are skipped."""
         p, g = msg.poses, self.grippers
         g[0, 0], g[0, 1], g[0, 2] = p[0].position.x, p[0].position.y, p[0].position.z
         g[1, 0], g[1, 1], g[1, 2] = p[1].position.x, p[1].position.y, p[1].position.z
@@ -238,7 +241,8 @@ class Simulator(Node):
         k = int(np.searchsorted(self.stamps, stamp))
         known = k < len(self.stamps) and self.stamps[k] == stamp
         if known and k == self.last_k and self.last_cloud is not None:
-            # The newest target again (a controller's start-up handshake): its state again, no step.
+            # The newest target again (a controller's start-up handshake): its state again, no
+            # step.
             self.cloud_pub.publish(self.last_cloud)
             return
         if known and k > self.last_k:
@@ -261,13 +265,13 @@ class Simulator(Node):
         self.last_cloud = cloud
         if self.realtime.frozen:
             realtime.collect_young()  # after the state went out: off this step's deadline
-        if self.engine.diverged and not self.reported_divergence:
+        d = self.engine.divergence
+        if d is not None and not self.reported_divergence:
             self.reported_divergence = True
-            d = self.engine.divergence
             self.get_logger().error(f'{self.engine_name} diverged at step {d.step}: {d.reason}')
 
     def first_state(self) -> np.ndarray:
-        """Return the state at the first target: prepared by warm_up when the target is the trajectory's own."""
+        """Return the state at the first target (prepared by warm_up for the trajectory's own)."""
         if self.prepared is not None and np.array_equal(
             self.grippers, [self.targets.left[0], self.targets.right[0]]
         ):

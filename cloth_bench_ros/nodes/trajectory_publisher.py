@@ -5,6 +5,7 @@ from __future__ import annotations
 from functools import partial
 from pathlib import Path
 import time
+from typing import Any
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.hil_timing import TargetTimeline
@@ -91,15 +92,15 @@ class TrajectoryPublisher(Node):
         self.k = -1
         self.reported: dict[str, int] = {}
         self.done = False
-        self.pace_timer = None
+        self.pace_timer: Any = None  # a Timer while the real-time schedule runs
         # Realtime: the controller's view of each target (due, sent, state received), per engine.
         stamps = np.array(
             [self.targets.stamp_ns(k) for k in range(self.n_targets)], dtype=np.int64
         )
         self.timelines = {engine: TargetTimeline(stamps) for engine in self.engines}
         self.period_ns = round(1e9 / rate_hz)
-        # Real time: one target message filled in place before each send where publish serialises it
-        # (the embedded intra-process transport hands subscribers the object itself).
+        # Real time: one target message filled in place before each send where publish serialises
+        # it (the embedded intra-process transport hands subscribers the object itself).
         self.fill_in_place = self.pacing == 'realtime' and publish_serialises(self)
         self.target_msg = self._new_target_msg()
         self.wait_until_ns: int | None = None
@@ -107,7 +108,7 @@ class TrajectoryPublisher(Node):
             None  # real time: when the start-up handshake's target 0 went out
         )
         self.sent_ns = 0  # lockstep: when the newest target went out (steady clock)
-        self.resend_timer = None
+        self.resend_timer: Any = None  # a Timer in lockstep
         self.start_timer = self.create_timer(0.02, self.try_start)
 
     def graph_ready(self) -> bool:
@@ -155,7 +156,7 @@ class TrajectoryPublisher(Node):
         )
 
     def resend_if_stalled(self) -> None:
-        """Lockstep: send target k (and /clock) again when no progress was made for LOCKSTEP_RESEND_S."""
+        """Lockstep: send target k and /clock again when nothing moved for LOCKSTEP_RESEND_S."""
         if self.done:
             self.destroy_timer(self.resend_timer)
             return
@@ -212,10 +213,11 @@ class TrajectoryPublisher(Node):
 
     def send_preroll(self) -> None:
         """
-        Start-up handshake before the first deadline: target 0, again every PREROLL_RESEND_S
-        until each simulator has answered it (first samples on new DDS readers and writers take
-        milliseconds; a simulator answers a repeated target with its state, without a step). The
-        answer starts the schedule (on_state -> start_realtime).
+        Start-up handshake before the first deadline: target 0 until each simulator answers it.
+
+        Target 0 is sent again every PREROLL_RESEND_S (first samples on new DDS readers and writers
+        take milliseconds; a simulator answers a repeated target with its state, without a step).
+        The answer starts the schedule (on_state -> start_realtime).
         """
         now = time.monotonic_ns()
         if self.preroll_sent_ns is None or now - self.preroll_sent_ns > PREROLL_RESEND_S * 1e9:
@@ -231,7 +233,8 @@ class TrajectoryPublisher(Node):
         Target 0 is the handshake's: sent, due and answered at the anchor (the initial state, not
         a deadline); target 1 goes out one period later.
         """
-        # On the steady clock, as the schedule: a step of the system clock must not move a deadline.
+        # On the steady clock, as the schedule: a step of the system clock must not move a
+        # deadline.
         self.pace_timer = self.create_timer(
             1.0 / self.targets.rate_hz, self.publish_due, clock=steady_clock()
         )
@@ -243,7 +246,7 @@ class TrajectoryPublisher(Node):
         self.publish_due()
 
     def publish_due(self) -> None:
-        """Send every target due by now, in order (a late tick catches up); then wait for the last states."""
+        """Send every target due by now, in order (a late tick catches up); then await states."""
         last = self.n_targets - 1
         if self.k < last:
             due = min(
@@ -257,7 +260,8 @@ class TrajectoryPublisher(Node):
             if self.k == last:
                 # The last states may take a while to come back; a state that never does is lost.
                 self.wait_until_ns = time.monotonic_ns() + max(1_000_000_000, 100 * self.period_ns)
-        if self.k == last and (self.all_states_back() or time.monotonic_ns() > self.wait_until_ns):
+        waited = self.wait_until_ns is not None and time.monotonic_ns() > self.wait_until_ns
+        if self.k == last and (self.all_states_back() or waited):
             self.finish_realtime()
 
     def all_states_back(self) -> bool:
@@ -283,7 +287,8 @@ class TrajectoryPublisher(Node):
         if self.pacing == 'realtime' and self.k < 0:
             if all(self.reported.get(e) == self.targets.stamp_ns(0) for e in self.engines):
                 self.destroy_timer(self.start_timer)
-                self.start_realtime()  # every simulator answered the handshake: the schedule starts
+                # every simulator answered the handshake: the schedule starts
+                self.start_realtime()
             return
         if self.pacing == 'realtime':
             self.timelines[engine].mark_received(self.reported[engine], time.monotonic_ns())

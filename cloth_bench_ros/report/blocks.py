@@ -9,12 +9,13 @@ from typing import Callable, Sequence
 
 from cloth_bench_ros.core.table import inline_html, Table
 
-Block = tuple  # ("h", level, text) | ("p", text) | ("table", Table) | ("figure", Figure) | ("img", file, caption)
+# ("h", level, text) | ("p", text) | ("table", Table) | ("figure", Figure) | ("img", file, caption)
+Block = tuple
 
 
 @dataclass
 class Figure:
-    """A figure to draw when the report is written: draw(path) saves it there (None: nothing to show)."""
+    """A figure drawn when the report is written: draw(path) saves it (None: nothing to show)."""
 
     name: str  # file name in the report directory
     caption: str
@@ -39,7 +40,7 @@ def figure_block(name: str, caption: str, draw: Callable[[Path], 'Path | None'])
 
 @dataclass
 class Document:
-    """A report as a list of blocks; section builders return blocks, `write_document` writes the files."""
+    """A report as a list of blocks, which section builders return and `write_document` writes."""
 
     title: str
     blocks: list = field(default_factory=list)
@@ -99,8 +100,9 @@ def write_document(
     names: tuple[str, str] = ('report.md', 'report.html'),
 ) -> tuple[Path, Path, list[Path]]:
     """
-    Draw the figures, write one CSV per table (and per `csv_only` table), report.md and report.html
-    (atomically) into out_dir.
+    Draw the figures, write the CSV tables, report.md and report.html into out_dir.
+
+    One CSV per table (and per `csv_only` table); the documents are written atomically.
     """
     from cloth_bench_ros.safe_io import atomic_write_text
 

@@ -27,7 +27,7 @@ def comparison_section(results_dir: Path) -> list:
         heading(2, "Qualitative comparison (the paper's Fig. 4)"),
         paragraph(
             "Simulated mesh in red over the real cloud in black at the paper's time steps, CD/HD"
-            " (m) under each panel, one row per engine; the animation shows the whole trial."
+            ' (m) under each panel, one row per engine; the animation shows the whole trial.'
         ),
     ]
     for figure in found:

@@ -11,7 +11,7 @@ import math
 from typing import Sequence
 
 from cloth_bench_ros.report.blocks import Table
-from cloth_bench_ros.report.statistics import engine_label
+from cloth_bench_ros.report.selections import engine_label
 from cloth_bench_ros.studies.aggregate import group, stat
 from cloth_bench_ros.studies.cross_reference import DEFAULT_ENTRANTS, MODE, REFERENCES
 
@@ -27,13 +27,13 @@ NOTE = (
 
 
 def entrant_name(engine: str, overrides: dict) -> str:
-    """Return an entrant's name: "newton (vbd)" for an engine with a model override, else the engine's label."""
+    """Return an entrant's name: "newton (vbd)" for a model override, else the engine's label."""
     model = overrides.get('model')
     return f'{engine_label(engine)} ({model})' if model else engine_label(engine)
 
 
 def cross_reference_table(rows: Sequence[dict], digits: int = 3) -> Table | None:
-    """Entrants x (reference, task) of CD_d / CD_q; None when `rows` has no cross-reference rows."""
+    """Return entrants x (reference, task) of CD_d / CD_q; None without cross-reference rows."""
     sel = [r for r in rows if r.get('mode') == MODE and r.get('reference') in REFERENCES]
     if not sel:
         return None
@@ -65,7 +65,7 @@ def cross_reference_table(rows: Sequence[dict], digits: int = 3) -> Table | None
     for engine, model in entrants:
         line = [entrant_name(engine, {'model': model} if model else {})]
         for col in columns:
-            s = stats[(engine, model, *col)]
+            s = stats[(engine, model) + tuple(col)]
             text = s.text(digits, show_n=False)
             line.append(
                 f'**{text}**' if s.used and s.mean == best[col] and len(entrants) > 1 else text
@@ -78,7 +78,7 @@ def cross_reference_table(rows: Sequence[dict], digits: int = 3) -> Table | None
 
 
 def cross_reference_section(rows: Sequence[dict]) -> tuple[str, str, Table] | None:
-    """(heading, note, table) of the report's cross-reference section, or None without such rows."""
+    """Return (heading, note, table) of the cross-reference section, or None without such rows."""
     table = cross_reference_table(rows)
     if table is None:
         return None

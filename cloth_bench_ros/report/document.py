@@ -1,5 +1,5 @@
 """
-The report of a study (`cloth-bench report RESULTS`): Markdown and HTML with PNG figures and CSV tables.
+The report of a study (`cloth-bench report RESULTS`): Markdown and HTML, PNG and CSV.
 
 `render_report` composes the document from section builders, each a short function of the rows
 that returns blocks (headings, paragraphs, tables, figures to draw); `write_document` does every
@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 from datetime import datetime, timezone
+from functools import partial
 from pathlib import Path
 import re
 from typing import Sequence
@@ -28,8 +29,7 @@ from cloth_bench_ros.report.blocks import (
     table_block,
     write_document,
 )
-from cloth_bench_ros.report.settings import settings_tables
-from cloth_bench_ros.report.statistics import (
+from cloth_bench_ros.report.selections import (
     cloths_of,
     engine_label,
     engines_of,
@@ -38,6 +38,7 @@ from cloth_bench_ros.report.statistics import (
     paper_rows,
     table_rate,
 )
+from cloth_bench_ros.report.settings import settings_tables
 from cloth_bench_ros.report.tables import (
     errors_table,
     fig5_table,
@@ -108,7 +109,7 @@ def overview_section(rows: Sequence[dict]) -> list[Block]:
 
 
 def paper_configs(rows: Sequence[dict]) -> list[str]:
-    """Return configurations of the lockstep paper sweep, the Table II one first (the presets if present)."""
+    """Return the configurations of the lockstep paper sweep, Table II's (the presets) first."""
     counts = Counter(
         r.get('config', 'preset')
         for r in rows
@@ -131,7 +132,7 @@ def table2_section(paper: Sequence[dict], config: str, wanted_rate: float) -> li
             f'Columns marked (ours): this system, {what}, lockstep pacing, {rate:g} Hz, over'
             f' {combos} seed x trial '
             f"combinations per cell; bold = best of ours. Columns marked (paper) are the paper's"
-            f" Table II "
+            f' Table II '
             f'(docs/benchmark.md, section 6: real rags, 3 trials x 20 seeds, MuJoCo 3.1.1, Bullet'
             f' 3.26, Flex 1.2, '
             f'SOFA 23.06; bold = best in the paper). The paper scores real clouds; ours are scored'
@@ -139,7 +140,7 @@ def table2_section(paper: Sequence[dict], config: str, wanted_rate: float) -> li
             f'bags given to the sweep, so the columns compare layouts and magnitudes, not the same'
             f' data.'
         ),
-        table_block(table2(paper, rate)),
+        table_block(table2(paper, rate if rate is not None else wanted_rate)),
     ]
 
 
@@ -194,7 +195,7 @@ def speed_error_section(
     cloth = (
         wanted_cloth
         if any(r['cloth'] == wanted_cloth for r in lockstep)
-        else (cloths_of(lockstep) or [None])[0]
+        else (cloths_of(lockstep) or [''])[0]
     )
     sel = [r for r in lockstep if r['cloth'] == cloth]  # one cloth: every configuration has it
     if not sel:
@@ -235,6 +236,16 @@ def speed_error_section(
     ]
 
 
+def _plot_frames(rows: Sequence[dict], results_dir: Path, cloth: str, path: Path) -> Path | None:
+    """Draw the per-frame figure of `cloth` into `path` (a figure block's draw function)."""
+    return figures.plot_frames(rows, results_dir, cloth, path)
+
+
+def _plot_settings(rows: Sequence[dict], title: str, chosen: list, path: Path) -> Path | None:
+    """Draw one engine's settings figure into `path` (a figure block's draw function)."""
+    return figures.plot_settings(rows, path, title, chosen)
+
+
 def frames_section(paper: Sequence[dict], results_dir: Path) -> list[Block]:
     """Per-frame CD and HD over time, first seed, per cloth."""
     blocks = [heading(2, 'Per-frame CD and HD over time')]
@@ -244,7 +255,7 @@ def frames_section(paper: Sequence[dict], results_dir: Path) -> list[Block]:
             figure_block(
                 f'frames_{cloth}.png',
                 f'{cloth}: per-frame CD and HD, first seed; red: change of phase (ours)',
-                lambda path, cloth=cloth: figures.plot_frames(kept, results_dir, cloth, path),
+                partial(_plot_frames, kept, results_dir, cloth),
             )
         )
     if not kept:
@@ -295,7 +306,7 @@ def stability_section(rows: Sequence[dict]) -> list[Block]:
 def settings_section(
     rows: Sequence[dict], tol_rel: float, tol_abs: float, recs: list[dict]
 ) -> list[Block]:
-    """Return settings sweep: every configuration against error, and the recommendation (appended to `recs`)."""
+    """Return the settings sweep section: each configuration against error, and the choice."""
     settings = [r for r in rows if r.get('mode') == 'settings']
     if not settings:
         return []
@@ -307,7 +318,7 @@ def settings_section(
             f'Factorial sweep over the settings that cost time. Tolerance: a configuration is'
             f' within tolerance '
             f"when its mean CD is at most the best stable configuration's plus max({tol_rel:.0%}"
-            " of it, "
+            ' of it, '
             f'{tol_abs * 1e3:g} mm); the recommendation is the cheapest (mean step time) within'
             ' tolerance. '
             f'A configuration with any diverged seed is unstable and never recommended. Table'
@@ -324,9 +335,7 @@ def settings_section(
                 f'settings_{e}.png',
                 f'{engine_label(e)}: speed against error per configuration, Pareto front dashed, '
                 'recommended starred (ours)',
-                lambda path, sel=sel, title=title, chosen=chosen: figures.plot_settings(
-                    sel, path, title, chosen
-                ),
+                partial(_plot_settings, sel, title, chosen),
             )
         )
     blocks += [
@@ -391,7 +400,7 @@ def render_report(
     title: str = 'cloth_bench_ros: speed against error',
     identifications: Sequence[dict] = (),
 ) -> ReportOutcome:
-    """Render every table and figure of the rows into out_dir (report.md, report.html, *.png, *.csv)."""
+    """Render every table and figure of the rows into out_dir (report.md, .html, .png, .csv)."""
     from cloth_bench_ros.report.comparison import comparison_section
     from cloth_bench_ros.report.identification import identification_section
 
@@ -435,8 +444,10 @@ def report_directory(
     tol_abs: float = 0.002,
 ) -> ReportOutcome:
     """
-    `cloth-bench report`: the report of a results.jsonl (or its directory), with the stress suite and the
-    identifications found beside it; ValueError (one line) when there is nothing usable to report.
+    `cloth-bench report`: the report of a results.jsonl (or its directory).
+
+    With the stress suite and the identifications found beside it; ValueError (one line) when there
+    is nothing usable to report.
     """
     from cloth_bench_ros.report.identification import find_identifications
     from cloth_bench_ros.studies.results import load_rows, RESULTS_FILE

@@ -1,6 +1,7 @@
 """
-The report's figures (matplotlib, Agg backend: no display): Fig. 5 layout, speed against error,
-settings, per-frame scores, latency.
+The report's figures (matplotlib, Agg backend: no display).
+
+Fig. 5 layout, speed against error, settings, per-frame scores, latency.
 """
 
 from __future__ import annotations
@@ -10,10 +11,7 @@ import math
 from pathlib import Path
 from typing import Sequence
 
-import matplotlib
-
-matplotlib.use('Agg')
-from cloth_bench_ros.report.statistics import (  # noqa: E402
+from cloth_bench_ros.report.selections import (
     ENGINE_COLOR,
     engine_label,
     engines_of,
@@ -27,7 +25,10 @@ from cloth_bench_ros.studies.aggregate import (
     finite,
     group,
     stat,
-)  # noqa: E402
+)
+import matplotlib
+
+matplotlib.use('Agg')  # no display: figures are files
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -60,7 +61,8 @@ def save_figure(fig, path: Path) -> Path:
 
 def plot_fig5(rows: Sequence[dict], cloth: str, path: Path, title: str) -> Path:
     """
-    Step time, L_s, CD_d and CD_q against rate per engine (log-log), mean +- std over seeds.
+    Plot step time, L_s, CD_d and CD_q against rate per engine (log-log), mean +- std.
+
     Rates at which some runs diverged are marked with an open marker and their count.
     """
     sel = [r for r in rows if r['cloth'] == cloth]
@@ -73,7 +75,10 @@ def plot_fig5(rows: Sequence[dict], cloth: str, path: Path, title: str) -> Path:
     ]
     for ax, (key, prim, scale, label) in zip(axes.ravel(), panels):
         for e in engines_of(sel):
-            xs, ys, es, div = [], [], [], []
+            xs: list[float] = []
+            ys: list[float] = []
+            es: list[float] = []
+            div: list[tuple[float, float | None, str]] = []
             for rate in rates_of(sel):
                 g = [
                     r
@@ -176,8 +181,10 @@ def plot_speed_error(
     rows: Sequence[dict], path: Path, title: str, label_key: str = 'rate'
 ) -> tuple[Path, list]:
     """
-    CD against compute per simulated second, one point per engine x rate (x config), with the
-    Pareto front (minimal compute and CD) per task. Returns the path and the front points.
+    Plot CD against compute per simulated second, with the Pareto front per task.
+
+    One point per engine x rate (x config); the front is minimal compute and CD. Returns the path
+    and the front points.
     """
     fig, axes = plt.subplots(1, 2, figsize=(12, 5))
     fronts = []
@@ -251,9 +258,10 @@ def plot_settings(
     rows: Sequence[dict], path: Path, title: str, recommended: Sequence[str] = ()
 ) -> Path:
     """
-    One engine's settings sweep: CD against compute per configuration and task. Colour: mesh;
-    marker: internal time step; open marker: self-collision on; the Pareto front dashed and
-    labelled; the recommended configuration starred.
+    Plot one engine's settings sweep: CD against compute per configuration and task.
+
+    Colour: mesh; marker: internal time step; open marker: self-collision on; the Pareto front
+    dashed and labelled; the recommended configuration starred.
     """
     from matplotlib.lines import Line2D
 
@@ -344,7 +352,7 @@ def plot_settings(
 
 
 def frames_file(results_dir: Path, row: dict) -> Path | None:
-    """Return the row's frames.csv if it is a file inside results_dir (a row's path is untrusted)."""
+    """Return the row's frames.csv if it is a file inside results_dir (rows are untrusted)."""
     from cloth_bench_ros.safe_io import confined_path, UnsafeInputError
 
     name = row.get('frames_csv')
@@ -368,8 +376,9 @@ def _read_frames(path: Path) -> dict[str, np.ndarray]:
 
 def plot_frames(rows: Sequence[dict], results_dir: Path, cloth: str, path: Path) -> Path | None:
     """
-    Per-frame CD and HD over time for each task, engine and rate (first seed and trial),
-    with the change of phase of the dynamic trial marked.
+    Plot per-frame CD and HD over time for each task, engine and rate.
+
+    The first seed and trial, with the change of phase of the dynamic trial marked.
     """
     sel = [r for r in rows if r['cloth'] == cloth and r.get('frames_csv')]
     prims = [p for p in ('dynamic', 'quasi_static') if any(r['primitive'] == p for r in sel)]
@@ -379,7 +388,7 @@ def plot_frames(rows: Sequence[dict], results_dir: Path, cloth: str, path: Path)
     styles = ['-', '--', ':', '-.']
     for row_axes, prim in zip(axes, prims):
         g = [r for r in sel if r['primitive'] == prim]
-        first = {}
+        first: dict = {}
         for r in sorted(g, key=lambda r: (r.get('trial', 0), r['seed'])):
             first.setdefault((r['engine'], float(r['rate_hz'])), r)
         rates = sorted({k[1] for k in first})

@@ -11,6 +11,7 @@ Hardware in the loop: the configuration chosen per rate and the report of real-t
 
 from __future__ import annotations
 
+from functools import partial
 import math
 from pathlib import Path
 from typing import Sequence
@@ -23,8 +24,8 @@ from cloth_bench_ros.report.blocks import (
     table_block,
     write_document,
 )
-from cloth_bench_ros.report.statistics import engine_label, metric_name
-from cloth_bench_ros.report.statistics import fmt_fixed as _fmt
+from cloth_bench_ros.report.selections import engine_label, metric_name
+from cloth_bench_ros.report.selections import fmt_fixed as _fmt
 from cloth_bench_ros.studies.aggregate import finite
 from cloth_bench_ros.studies.recommend import (
     DEADLINE_BUDGET,
@@ -115,7 +116,7 @@ def deadline_tables(
 
 
 def recommendation_yaml(recs: Sequence[Recommendation], provenance: dict) -> str:
-    """Return the shipped recommendation file: provenance, then one entry per engine, task and rate."""
+    """Return the recommendation file: provenance, then one entry per engine, task and rate."""
     import yaml
 
     return yaml.safe_dump(
@@ -146,7 +147,7 @@ def all_recommendations(
 def provenance(
     rows: Sequence[dict], tol_rel: float, tol_abs: float, budget: float, note: str = ''
 ) -> dict:
-    """Where a recommendation file's numbers come from: the sweep's size, engines, machine load, rule."""
+    """Return where a recommendation file's numbers come from: sweep size, engines, load, rule."""
     from datetime import datetime, timezone
 
     settings = [r for r in rows if r.get('mode') == 'settings']
@@ -257,7 +258,7 @@ def text_table(table: Table) -> str:
 
 
 def plot_run(timeline, period_s: float, path: Path, title: str) -> Path:
-    """Latency over the run (left) and its histogram (right), deadline in red, skipped targets marked."""
+    """Plot latency over the run and its histogram, the deadline in red, skipped targets marked."""
     import matplotlib
 
     matplotlib.use('Agg')
@@ -298,6 +299,11 @@ def plot_run(timeline, period_s: float, path: Path, title: str) -> Path:
     return path
 
 
+def _draw_run(timeline, period_s: float, title: str, path: Path) -> Path:
+    """Draw one run's latency figure into `path` (a figure block's draw function)."""
+    return plot_run(timeline, period_s, path, title) or path
+
+
 def write_hil_report(rows: Sequence[dict], results_dir: Path, out_dir: Path) -> Path:
     """hil.md and hil.html (table + per-run plots) and hil.csv in out_dir; the Markdown's path."""
     from cloth_bench_ros.core.hil_timing import TargetTimeline
@@ -310,14 +316,14 @@ def write_hil_report(rows: Sequence[dict], results_dir: Path, out_dir: Path) -> 
             paragraph(
                 "Latency: from the target's due time on the controller's wall-clock schedule"
                 " (first target + k / rate) to the state's arrival back at the controller (the"
-                " trajectory publisher), so a late send and a simulator that falls behind both"
-                " count. A miss is a state later than one period; a skipped target is one the"
-                " simulator never stepped because a newer one was waiting (keep-last), counted"
-                " beside the misses. RTF: simulated over wall time. CPU busy: share of all cores"
-                " busy during the run (/proc/stat), any process; CPU steal: share the hypervisor"
-                " of a virtual machine ran something else on our cores (the vCPU was runnable but"
-                " stopped; no setting inside the machine prevents it); load: 1-minute load average"
-                " at the end. CD lockstep: the same configuration run in lockstep."
+                ' trajectory publisher), so a late send and a simulator that falls behind both'
+                ' count. A miss is a state later than one period; a skipped target is one the'
+                ' simulator never stepped because a newer one was waiting (keep-last), counted'
+                ' beside the misses. RTF: simulated over wall time. CPU busy: share of all cores'
+                ' busy during the run (/proc/stat), any process; CPU steal: share the hypervisor'
+                ' of a virtual machine ran something else on our cores (the vCPU was runnable but'
+                ' stopped; no setting inside the machine prevents it); load: 1-minute load average'
+                ' at the end. CD lockstep: the same configuration run in lockstep.'
             )
         ]
     )
@@ -328,9 +334,8 @@ def write_hil_report(rows: Sequence[dict], results_dir: Path, out_dir: Path) -> 
         csv = run_dir / f'timeline_{r["engine"]}.csv'
         if r.get('run_dir') and csv.is_file():
             title = f'{engine_label(r["engine"])} at {r["rate_hz"]:g} Hz, {r["config"]}'
-            draw = lambda path, timeline=TargetTimeline.from_csv(csv.read_text()), period=1.0 / r[
-                'rate_hz'
-            ], title=title: (plot_run(timeline, period, path, title) or path)
+            timeline = TargetTimeline.from_csv(csv.read_text())
+            draw = partial(_draw_run, timeline, 1.0 / r['rate_hz'], title)
             doc.extend(
                 [
                     figure_block(

@@ -1,5 +1,5 @@
 """
-Parameter identification in the report: before/after tables, convergence per sampler, parameter importance.
+Parameter identification in the report: before/after, convergence, importance.
 
 Reads the identification.json that `cloth-bench identify` writes (in the results directory or a
 directory below it) as untrusted input: a file that is not such an object is a ResultsError.
@@ -20,7 +20,7 @@ from cloth_bench_ros.report.blocks import (
     Table,
     table_block,
 )
-from cloth_bench_ros.report.statistics import engine_label, fmt_sig
+from cloth_bench_ros.report.selections import engine_label, fmt_sig
 
 SUMMARY_FILE = 'identification.json'
 REQUIRED = {
@@ -37,7 +37,7 @@ REQUIRED = {
 
 
 def load_identification(path: Path) -> dict:
-    """Return an identification.json, checked; ResultsError (one line naming the file) if it is not usable."""
+    """Return an identification.json, checked; ResultsError naming the file if it is not usable."""
     from cloth_bench_ros.safe_io import read_text_bounded, safe_name, UnsafeInputError
     from cloth_bench_ros.studies.results import ResultsError
 
@@ -81,12 +81,12 @@ def _num(value: object) -> float:
 
 def params_table(ident: dict, suffix: str) -> Table:
     """Per fitted parameter: the preset's value, the identified one, the search range."""
-    space = ident.get('space') if isinstance(ident.get('space'), dict) else {}
+    space: dict = ident['space'] if isinstance(ident.get('space'), dict) else {}
     rows = []
     for name, value in ident['params'].items():
         r = (
-            space.get(name)
-            if isinstance(space.get(name), list) and len(space.get(name)) == 3
+            space[name]
+            if isinstance(space.get(name), list) and len(space[name]) == 3
             else None
         )
         rng = (
@@ -111,7 +111,7 @@ def params_table(ident: dict, suffix: str) -> Table:
 
 
 def before_after_table(ident: dict, suffix: str) -> Table:
-    """Return the objective before (preset) and after (identified): on the fitted seed, then on held-out seeds per bag."""
+    """Return the objective before and after identification, on the fitted and held-out seeds."""
     metric = str(ident['objective']).upper()
     rows = [
         [
@@ -243,7 +243,7 @@ def identification_section(ident: dict, rows: Sequence[dict] = ()) -> list[Block
         paragraph(
             "Parameter importance: PED-ANOVA over each sampler's trials (Optuna; no extra"
             " dependency), the share of the objective's variation among the better trials that"
-            " each parameter explains."
+            ' each parameter explains.'
         ),
         table_block(importance_table(ident, suffix)),
     ]

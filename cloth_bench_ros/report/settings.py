@@ -1,4 +1,4 @@
-"""Settings sweep: per configuration speed and error, and the cheapest within a tolerance of the best."""
+"""Settings sweep: speed and error per configuration, and the cheapest near the best."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 from typing import Sequence
 
 from cloth_bench_ros.report.blocks import Table
-from cloth_bench_ros.report.statistics import (
+from cloth_bench_ros.report.selections import (
     engine_label,
     engines_of,
     fmt_fixed,
@@ -29,7 +29,7 @@ def settings_tables(
         by[(r.engine, r.cloth, r.primitive, r.rate)].append(r)
     for key in sorted(by, key=lambda k: (engines_of(rows).index(k[0]), k[1], k[2], k[3])):
         group_results = by[key]
-        best, cheap, tol = recommend(group_results, tol_rel, tol_abs)
+        best, cheap, tol = recommend(group_results, tol_rel, tol_abs)  # both None or neither
         front = pareto_front(
             [(r.step_ms, r.cd.mean) if r.stable else (math.nan, math.nan) for r in group_results]
         )
@@ -82,7 +82,7 @@ def settings_tables(
                 'lrrrrll',
             )
         )
-        if best is None:
+        if best is None or cheap is None:
             notes.append(
                 f'{engine_label(e)}, {cloth} {prim} at {rate:g} Hz: no stable configuration.'
             )
@@ -110,21 +110,22 @@ def settings_tables(
                 'tolerance_m': tol,
             }
         )
-    # One configuration for every task and cloth of an engine: within tolerance everywhere, cheapest in total.
+    # One configuration for every task and cloth of an engine: within tolerance everywhere,
+    # cheapest in total.
     for e in engines_of([r for r in rows if r.get('mode') == 'settings']):
         keys = [k for k in by if k[0] == e]
         if len(keys) < 2:
             continue
-        ok_everywhere = None
-        cost = defaultdict(float)
+        ok_everywhere: set[str] | None = None
+        cost: defaultdict[str, float] = defaultdict(float)
         for k in keys:
             best, _, tol = recommend(by[k], tol_rel, tol_abs)
-            within = {
+            near_best = {
                 r.config
                 for r in by[k]
                 if best is not None and r.stable and r.cd.mean <= best.cd.mean + tol
             }
-            ok_everywhere = within if ok_everywhere is None else ok_everywhere & within
+            ok_everywhere = near_best if ok_everywhere is None else ok_everywhere & near_best
             for r in by[k]:
                 cost[r.config] += r.step_ms if math.isfinite(r.step_ms) else math.inf
         if ok_everywhere:

@@ -1,4 +1,4 @@
-"""The report's tables: the paper's Table II layout, the numbers behind Fig. 5, timing, stability."""
+"""The report's tables: the paper's Table II layout, Fig. 5's numbers, timing, stability."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import re
 from typing import Sequence
 
 from cloth_bench_ros.report.blocks import Table
-from cloth_bench_ros.report.statistics import (
+from cloth_bench_ros.report.selections import (
     cloths_of,
     engine_label,
     engines_of,
@@ -21,7 +21,8 @@ from cloth_bench_ros.report.statistics import (
 from cloth_bench_ros.studies.aggregate import finite, group, stat
 import numpy as np
 
-# docs/benchmark.md section 6, Table II: (mean, std, bold in the paper) per cloth, metric and engine.
+# docs/benchmark.md section 6, Table II: (mean, std, bold in the paper) per cloth, metric and
+# engine.
 PAPER_TABLE2: dict[tuple[str, str], dict[str, tuple[float, float, bool]]] = {
     ('towel', 'CD_d'): {
         'mujoco': (0.079, 0.031, False),
@@ -106,7 +107,7 @@ PAPER_FIG5 = (
 
 
 def table2(rows: Sequence[dict], rate: float) -> Table:
-    """Paper Table II layout: cloth x metric rows; ours per engine, then the paper's four engines."""
+    """Return the paper's Table II layout: cloth x metric rows; ours, then the paper's."""
     sel = [r for r in rows if float(r['rate_hz']) == rate]
     engines = engines_of(sel)
     headers = (
@@ -144,7 +145,7 @@ def table2(rows: Sequence[dict], rate: float) -> Table:
 
 
 def fig5_table(rows: Sequence[dict], cloth: str, name: str = 'fig5') -> Table:
-    """Return the numbers behind Fig. 5: per engine and rate, step time, L_s, CD_d, CD_q, divergences."""
+    """Return Fig. 5's numbers per engine and rate: step time, L_s, CD_d, CD_q, divergences."""
     sel = [r for r in rows if r['cloth'] == cloth]
     headers = [
         'engine',
@@ -167,7 +168,7 @@ def fig5_table(rows: Sequence[dict], cloth: str, name: str = 'fig5') -> Table:
             ok = [r for r in g if r.get('status') == 'ok']
             st = finite(r.get('step_time_mean') for r in ok) * 1e3
             p99 = finite(r.get('step_time_p99') for r in ok) * 1e3
-            subs = {r.get('substeps') for r in g if r.get('substeps')}
+            subs = {int(r['substeps']) for r in g if r.get('substeps')}
             dyn = stat([r for r in g if r['primitive'] == 'dynamic'], 'CD')
             qs = stat([r for r in g if r['primitive'] == 'quasi_static'], 'CD')
             ls = stat(g, 'L_s')
@@ -224,7 +225,7 @@ def timing_table(rows: Sequence[dict]) -> Table:
         miss_txt = '-'
         if misses:
             m = sum(x or 0 for x, _ in misses)
-            n = sum(c for _, c in misses)
+            n = sum(c or 0 for _, c in misses)
             miss_txt = f'{m / len(misses):.0f} / {n / len(misses):.0f} ({100 * m / n:.1f} %)'
         rtf = finite(r.get('real_time_factor') for r in ok)
         out.append(

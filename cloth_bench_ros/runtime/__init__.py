@@ -9,15 +9,16 @@ Set CLOTH_BENCH_EMBEDDED=1 to use the embedded runtime even where rclpy is insta
 from __future__ import annotations
 
 import os
+from typing import TYPE_CHECKING
 
 EMBEDDED = bool(os.environ.get('CLOTH_BENCH_EMBEDDED'))
-if not EMBEDDED:
+if not EMBEDDED and not TYPE_CHECKING:
     try:
         import rclpy
     except ImportError:
         EMBEDDED = True
 
-if EMBEDDED:
+if EMBEDDED or TYPE_CHECKING:  # the type checker reads the embedded runtime's API
     from cloth_bench_ros.runtime import embedded as rclpy  # noqa: F811
     from cloth_bench_ros.runtime.embedded import Clock as _RosClock
     from cloth_bench_ros.runtime.embedded import ClockType as _ClockType
@@ -63,6 +64,42 @@ else:
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import PointCloud2, PointField
     from std_msgs.msg import Header
+
+__all__ = [  # the API the nodes are written against, under either runtime
+    'Clock',
+    'declare_float',
+    'deserialize_message',
+    'DiagnosticArray',
+    'DiagnosticStatus',
+    'DurabilityPolicy',
+    'EMBEDDED',
+    'Header',
+    'HistoryPolicy',
+    'is_user_error',
+    'KeyValue',
+    'make_qos',
+    'message_type',
+    'MESSAGE_TYPES',
+    'Node',
+    'Parameter',
+    'ParameterDescriptor',
+    'Point',
+    'PointCloud2',
+    'PointField',
+    'Pose',
+    'PoseArray',
+    'QoSProfile',
+    'Quaternion',
+    'rclpy',
+    'ReliabilityPolicy',
+    'serialize_message',
+    'SingleThreadedExecutor',
+    'stamp_ns',
+    'steady_clock',
+    'Time',
+    'typename',
+    'USER_ERROR_CLASSES',
+]
 
 MESSAGE_TYPES = {
     'sensor_msgs/msg/PointCloud2': PointCloud2,
@@ -128,7 +165,9 @@ def is_user_error(exc: BaseException) -> bool:
 
 def declare_float(node, name: str, default: float) -> float:
     """
-    Return a double parameter that also takes an integer (`-p rate_hz:=1000`), in rclpy and embedded alike.
+    Return a double parameter that also takes an integer (`-p rate_hz:=1000`).
+
+    In rclpy and the embedded runtime alike.
 
     rclpy refuses an INTEGER override for a parameter declared DOUBLE; declared with dynamic
     typing, any type is accepted and this is the one place that keeps numbers and refuses the rest.

@@ -60,7 +60,7 @@ def _remap_rule(text: str) -> RemapRule:
             raise RCLInvalidROSArgsError(
                 f"remap rule '-r {text}': the embedded runtime has no services"
             )
-        head = head[len('rostopic://') :]
+        head = head[len('rostopic://'):]
     node, colon, match = head.rpartition(':')
     if colon and not re.fullmatch(_TOKEN, node):
         raise bad
@@ -143,7 +143,7 @@ def remap_node_name(rules: list[RemapRule], node_name: str) -> str:
 
 
 def remap_namespace(rules: list[RemapRule], node_name: str, namespace: str) -> str:
-    """Return the namespace after the first `__ns` rule for this node (rcl_remap_node_namespace)."""
+    """Return the namespace after the node's first `__ns` rule (rcl_remap_node_namespace)."""
     rule = _first(rules, '__ns', node_name)
     return rule.replacement if rule else namespace
 

@@ -44,7 +44,9 @@ class ClockType(enum.IntEnum):
 
 class Clock:
     """
-    rclpy's Clock: ROS time (system time, or the last /clock once sim time is active), system or steady.
+    rclpy's Clock: ROS time, system time or steady time.
+
+    ROS time is system time, or the last /clock once sim time is active.
 
     As rclpy's time source, a ROS clock with sim time active reads 0 until the first /clock message
     (rclpy/time_source.py: "Zero time is a special value that means time is uninitialized").
@@ -98,7 +100,7 @@ class Timer:
 
     @property
     def follows_wall_time(self) -> bool:
-        """False for a timer on an active sim clock: only /clock messages make it due."""
+        """Return False for a timer on an active sim clock: only /clock makes it due."""
         return not (self.clock.clock_type == ClockType.ROS_TIME and self.clock.ros_time_is_active)
 
     def call(self) -> None:

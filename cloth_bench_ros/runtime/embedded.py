@@ -9,7 +9,8 @@ published (one FIFO for the whole context), timers fire on the node's clock (run
 and a node with use_sim_time follows /clock. What it provides (and nothing more; docs/runtimes.md,
 "Without ROS 2", lists it in full):
 
-- rclpy.init(args, domain_id=, transport=), ok(), shutdown(), spin(node), spin_once(node, timeout_sec)
+- rclpy.init(args, domain_id=, transport=), ok(), shutdown(), spin(node),
+  spin_once(node, timeout_sec)
 - graph queries: Node.get_publishers_info_by_topic, get_subscriptions_info_by_topic,
   get_node_names_and_namespaces; Subscription.get_publisher_count
 - rclpy.node.Node(name, namespace=, parameter_overrides=, context=, cli_args=): create_publisher,
@@ -87,7 +88,7 @@ from cloth_bench_ros.runtime.transport import IntraProcessTransport, transport_c
 
 
 def make_transport(context: 'Context', name: str, domain_id: int | None = None) -> Any:
-    """Return the transport `name` ('intra' or 'dds') for a context; DDS loads Cyclone only when chosen."""
+    """Return the transport `name` ('intra' or 'dds'); DDS loads Cyclone only when chosen."""
     if name == 'dds':
         from cloth_bench_ros.runtime.dds.transport import DdsTransport
 
@@ -98,7 +99,7 @@ def make_transport(context: 'Context', name: str, domain_id: int | None = None) 
 
 
 class Context:
-    """One graph: its transport (intra-process or DDS), the delivery queue and the shutdown flag."""
+    """One graph: its transport (intra-process or DDS), delivery queue and shutdown flag."""
 
     def __init__(self) -> None:
         self.args = RosArguments()
@@ -116,7 +117,7 @@ class Context:
         domain_id: int | None = None,
         transport: str | None = None,
     ) -> None:
-        """Parse the ROS arguments and open the transport (None: CLOTH_BENCH_TRANSPORT, else intra)."""
+        """Parse the ROS arguments and open the transport (default: CLOTH_BENCH_TRANSPORT)."""
         self.args = parse_ros_args(args)
         self.transport = make_transport(self, transport or transport_choice('intra'), domain_id)
         self._ok = True
@@ -156,7 +157,7 @@ def shutdown(context: Context | None = None) -> None:
 
 
 class Publisher:
-    def __init__(self, node: 'Node', msg_type: type, topic: str, qos: QoSProfile) -> None:
+    def __init__(self, node: 'Node', msg_type: Any, topic: str, qos: QoSProfile) -> None:
         self.node, self.msg_type, self.topic_name, self.qos = node, msg_type, topic, qos
         self._history: deque = deque(maxlen=max(1, qos.depth))
 
@@ -185,7 +186,7 @@ class Publisher:
 
 class Subscription:
     def __init__(
-        self, node: 'Node', msg_type: type, topic: str, callback: Callable, qos: QoSProfile
+        self, node: 'Node', msg_type: Any, topic: str, callback: Callable, qos: QoSProfile
     ) -> None:
         self.node, self.msg_type, self.topic_name, self.callback, self.qos = (
             node,
@@ -334,7 +335,7 @@ class Node:
 
     # graph
     def create_publisher(
-        self, msg_type: type, topic: str, qos_profile: QoSProfile | int
+        self, msg_type: Any, topic: str, qos_profile: QoSProfile | int
     ) -> Publisher:
         pub = Publisher(self, msg_type, self.resolve_topic_name(topic), as_profile(qos_profile))
         self._publishers.append(pub)
@@ -342,7 +343,7 @@ class Node:
         return pub
 
     def create_subscription(
-        self, msg_type: type, topic: str, callback: Callable, qos_profile: QoSProfile | int
+        self, msg_type: Any, topic: str, callback: Callable, qos_profile: QoSProfile | int
     ) -> Subscription:
         sub = Subscription(
             self, msg_type, self.resolve_topic_name(topic), callback, as_profile(qos_profile)
@@ -359,7 +360,7 @@ class Node:
         clock: Clock | None = None,
         **_: Any,
     ) -> Timer:
-        """Return a timer on `clock`, by default the node's (sim time under use_sim_time, as rclpy)."""
+        """Return a timer on `clock`, by default the node's (sim time under use_sim_time)."""
         timer = Timer(timer_period_sec, callback, clock or self._clock)
         self._timers.append(timer)
         return timer
@@ -379,14 +380,14 @@ class Node:
     def get_publishers_info_by_topic(
         self, topic_name: str, no_mangle: bool = False
     ) -> list[TopicEndpointInfo]:
-        """Every publisher of the topic in the graph, with its node (rclpy; the name is expanded)."""
+        """Return every publisher of the topic in the graph, with its node (the name expanded)."""
         topic = topic_name if no_mangle else self.resolve_topic_name(topic_name, only_expand=True)
         return self.context.transport.endpoints(topic, TopicEndpointTypeEnum.PUBLISHER)
 
     def get_subscriptions_info_by_topic(
         self, topic_name: str, no_mangle: bool = False
     ) -> list[TopicEndpointInfo]:
-        """Every subscription of the topic in the graph, with its node (rclpy; the name is expanded)."""
+        """Return every subscription of the topic in the graph, with its node."""
         topic = topic_name if no_mangle else self.resolve_topic_name(topic_name, only_expand=True)
         return self.context.transport.endpoints(topic, TopicEndpointTypeEnum.SUBSCRIPTION)
 
@@ -488,7 +489,7 @@ class SingleThreadedExecutor:
                         timeout_sec if transport.name == 'dds' else min(timeout_sec, 0.01)
                     )
                 return
-            wait = min(waits) / 1e9
+            wait = min(w for w in waits if w is not None) / 1e9
             if timeout_sec is not None and wait > timeout_sec:
                 transport.wait(timeout_sec)
                 return
@@ -535,5 +536,5 @@ def serialize_message(msg: Any) -> bytes:
     return cdr.serialize(msg)
 
 
-def deserialize_message(data: bytes, msg_type: type) -> Any:
+def deserialize_message(data: bytes, msg_type: Any) -> Any:
     return cdr.deserialize(data, msg_type.__msgtype__)

@@ -8,10 +8,11 @@ bytes (through rosbags) and are what `cloth_bench_ros.runtime` exports when rclp
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any, Callable, TYPE_CHECKING
 
 from cloth_bench_ros.data.messages import TYPESTORE
 import numpy as np
+from rosbags.typesys.stores import ros2_humble as _store  # the type stubs' bases
 
 _NUMPY = {
     'bool': np.bool_,
@@ -64,7 +65,7 @@ def _factory(node: tuple) -> Callable[[], Any]:
 
 
 def message_class(typename: str) -> type:
-    """Return a subclass of rosbags' class for `typename` whose constructor defaults every field."""
+    """Return a subclass of rosbags' class for `typename` whose constructor defaults each field."""
     if typename not in _classes:
         base = TYPESTORE.types[typename]
         factories = [(name, _factory(node)) for name, node in TYPESTORE.fielddefs[typename][1]]
@@ -81,16 +82,62 @@ def message_class(typename: str) -> type:
     return _classes[typename]
 
 
-Time = message_class('builtin_interfaces/msg/Time')
-Header = message_class('std_msgs/msg/Header')
-String = message_class('std_msgs/msg/String')
-Clock = message_class('rosgraph_msgs/msg/Clock')
-Point = message_class('geometry_msgs/msg/Point')
-Quaternion = message_class('geometry_msgs/msg/Quaternion')
-Pose = message_class('geometry_msgs/msg/Pose')
-PoseArray = message_class('geometry_msgs/msg/PoseArray')
-PointField = message_class('sensor_msgs/msg/PointField')
-PointCloud2 = message_class('sensor_msgs/msg/PointCloud2')
-KeyValue = message_class('diagnostic_msgs/msg/KeyValue')
-DiagnosticStatus = message_class('diagnostic_msgs/msg/DiagnosticStatus')
-DiagnosticArray = message_class('diagnostic_msgs/msg/DiagnosticArray')
+if TYPE_CHECKING:  # what the type checker reads: rosbags' classes, rclpy's keyword constructor
+
+    class _Keywords:
+        def __init__(self, **kwargs: Any) -> None:
+            pass
+
+    class Time(_Keywords, _store.builtin_interfaces__msg__Time):
+        pass
+
+    class Header(_Keywords, _store.std_msgs__msg__Header):
+        pass
+
+    class String(_Keywords, _store.std_msgs__msg__String):
+        pass
+
+    class Clock(_Keywords, _store.rosgraph_msgs__msg__Clock):
+        pass
+
+    class Point(_Keywords, _store.geometry_msgs__msg__Point):
+        pass
+
+    class Quaternion(_Keywords, _store.geometry_msgs__msg__Quaternion):
+        pass
+
+    class Pose(_Keywords, _store.geometry_msgs__msg__Pose):
+        pass
+
+    class PoseArray(_Keywords, _store.geometry_msgs__msg__PoseArray):
+        pass
+
+    class PointField(_Keywords, _store.sensor_msgs__msg__PointField):
+        pass
+
+    class PointCloud2(_Keywords, _store.sensor_msgs__msg__PointCloud2):
+        pass
+
+    class KeyValue(_Keywords, _store.diagnostic_msgs__msg__KeyValue):
+        pass
+
+    class DiagnosticStatus(_Keywords, _store.diagnostic_msgs__msg__DiagnosticStatus):
+        pass
+
+    class DiagnosticArray(_Keywords, _store.diagnostic_msgs__msg__DiagnosticArray):
+        pass
+
+else:
+    Time = message_class('builtin_interfaces/msg/Time')
+    Header = message_class('std_msgs/msg/Header')
+    String = message_class('std_msgs/msg/String')
+    Clock = message_class('rosgraph_msgs/msg/Clock')
+    Point = message_class('geometry_msgs/msg/Point')
+    Quaternion = message_class('geometry_msgs/msg/Quaternion')
+    Pose = message_class('geometry_msgs/msg/Pose')
+    PoseArray = message_class('geometry_msgs/msg/PoseArray')
+    PointField = message_class('sensor_msgs/msg/PointField')
+    PointCloud2 = message_class('sensor_msgs/msg/PointCloud2')
+    KeyValue = message_class('diagnostic_msgs/msg/KeyValue')
+    DiagnosticStatus = message_class('diagnostic_msgs/msg/DiagnosticStatus')
+    DiagnosticArray = message_class('diagnostic_msgs/msg/DiagnosticArray')

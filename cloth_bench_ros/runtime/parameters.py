@@ -41,7 +41,7 @@ class ParameterType(enum.IntEnum):
 
     @classmethod
     def from_parameter_value(cls, value: Any) -> 'ParameterType':
-        """Return the type rclpy infers from a Python value (an empty list is a BYTE_ARRAY, as there)."""
+        """Return the type rclpy infers from a Python value (an empty list is a BYTE_ARRAY)."""
         if value is None:
             return cls.NOT_SET
         for py_type, scalar in (
@@ -53,14 +53,15 @@ class ParameterType(enum.IntEnum):
             if isinstance(value, py_type):
                 return scalar
         if isinstance(value, (list, tuple)):
-            for py_type, array in (
+            arrays: tuple[tuple[type, ParameterType], ...] = (
                 (bytes, cls.BYTE_ARRAY),
                 (bool, cls.BOOL_ARRAY),
                 (int, cls.INTEGER_ARRAY),
                 (float, cls.DOUBLE_ARRAY),
                 (str, cls.STRING_ARRAY),
-            ):
-                if all(isinstance(v, py_type) for v in value):
+            )
+            for element_type, array in arrays:
+                if all(isinstance(v, element_type) for v in value):
                     return array
             raise TypeError(
                 f"The given value is not a list of one of the allowed types '{value}'."
@@ -68,7 +69,7 @@ class ParameterType(enum.IntEnum):
         raise TypeError(f"The given value is not one of the allowed types '{value}'.")
 
     def check(self, value: Any) -> bool:
-        """Return True if `value` is of this type, with rclpy's isinstance rules (bool is an int)."""
+        """Return True if `value` is of this type, by rclpy's isinstance rules (bool is an int)."""
         scalar = {
             ParameterType.BOOL: bool,
             ParameterType.INTEGER: int,
@@ -124,7 +125,7 @@ class ParameterDescriptor:
     """rcl_interfaces/msg/ParameterDescriptor, the fields declare_parameter reads."""
 
     name: str = ''
-    type: int = 0
+    type: int = 0  # noqa: A003  (rcl_interfaces' field name)
     description: str = ''
     read_only: bool = False
     dynamic_typing: bool = False
@@ -211,7 +212,7 @@ _NAME_TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 
 
 def rcl_scalar(text: str, quoted: bool, str_tag: bool) -> Any:
-    """Return the value rcl gives a YAML scalar: bool, int (int64, C strtoll), float (strtod), else str."""
+    """Return the value rcl gives a YAML scalar: bool, int (strtoll), float (strtod), else str."""
     if str_tag or quoted:
         return text
     if text in _BOOL_TRUE or text in _BOOL_FALSE:
@@ -233,14 +234,14 @@ def rcl_scalar(text: str, quoted: bool, str_tag: bool) -> Any:
     if _STRTOD.fullmatch(text):
         body = text.strip()
         stripped = body.lstrip('+-')
-        value = float.fromhex(body) if stripped[:2].lower() == '0x' else float(body)
-        overflow = math.isinf(value) and not stripped.lower().startswith('inf')
-        underflow = value == 0.0 and any(
+        number = float.fromhex(body) if stripped[:2].lower() == '0x' else float(body)
+        overflow = math.isinf(number) and not stripped.lower().startswith('inf')
+        underflow = number == 0.0 and any(
             c in '123456789'
-            for c in re.split(r'[eEpP]', stripped)[0][2 * (stripped[:2].lower() == '0x') :]
+            for c in re.split(r'[eEpP]', stripped)[0][2 * (stripped[:2].lower() == '0x'):]
         )
         if not (overflow or underflow):  # strtod sets ERANGE: rcl then keeps the text
-            return value
+            return number
     return text
 
 
@@ -289,7 +290,7 @@ class Overrides:
 
     entries: dict[str, dict[str, Any]] = field(default_factory=dict)
 
-    def set(self, node_key: str, name: str, value: Any) -> None:
+    def set(self, node_key: str, name: str, value: Any) -> None:  # noqa: A003  (a store's verb)
         self.entries.setdefault(node_key, {})[name] = value
 
     def for_node(self, fully_qualified_name: str) -> dict[str, Parameter]:
@@ -303,7 +304,7 @@ class Overrides:
 
 
 def _events_tree(events: list, path: str) -> list:
-    """Return the mapping/sequence/scalar tree of each YAML document; aliases refused as rcl refuses them."""
+    """Return each YAML document's tree of mappings, sequences and scalars; aliases refused."""
     stack: list[list] = []
     roots: list = []
     for event in events:
@@ -336,7 +337,7 @@ def _line(event: Any) -> int:
 
 
 def _value(node: Any, where: str) -> Any:
-    """Return a parameter value: a scalar, or a sequence of scalars of one type (parse.c parse_value)."""
+    """Return a parameter value: a scalar, or a sequence of scalars of one type (parse_value)."""
     if node[0] == 'scalar':
         event = node[1]
         if event.style not in ("'", '"') and event.value == '':
@@ -424,7 +425,7 @@ def load_params_file(path: str | Path, into: Overrides | None = None) -> Overrid
 
 
 def parse_param_rule(rule: str, into: Overrides) -> None:
-    """`-p [node:]name:=value` as rcl's _rcl_parse_param_rule (node key `/**` by default)."""
+    """Parse a `-p [node:]name:=value` rule as rcl does; the node key is `/**` by default."""
     head, sep, text = rule.partition(':=')
     node_key, colon, name = head.rpartition(':')
     node_key = node_key if colon else '/**'

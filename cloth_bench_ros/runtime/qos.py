@@ -38,5 +38,5 @@ def as_profile(qos: QoSProfile | int) -> QoSProfile:
 
 
 def time_source_qos() -> QoSProfile:
-    """Return the /clock subscription of rclpy's TimeSource: depth 1, best effort (time_source.py)."""
+    """Return the /clock subscription QoS of rclpy's TimeSource: depth 1, best effort."""
     return QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)

@@ -45,8 +45,9 @@ def threads() -> list[int]:
 
 def pin_to_cpu(cpu: int) -> str:
     """
-    Give the calling thread core `cpu` and move every other thread of the process off it (-1:
-    leave all); the outcome as a sentence.
+    Give the calling thread core `cpu`; move every other thread of the process off it.
+
+    -1 leaves all; the outcome as a sentence.
 
     The calling thread is the step loop. The DDS threads (Cyclone's receive and event threads) go
     to the other allowed cores: on the loop's core they would preempt a step, and a loop that
@@ -78,8 +79,9 @@ def pin_to_cpu(cpu: int) -> str:
 
 def keep_off_cpu(cpu: int) -> str:
     """
-    Move every thread of this process off core `cpu` (-1: leave them), so that the simulator's
-    pinned step loop has its core to itself; the outcome as a sentence.
+    Move every thread of this process off core `cpu` (-1: leave them).
+
+    The simulator's pinned step loop then has its core to itself; the outcome as a sentence.
     """
     if cpu < 0 or not hasattr(os, 'sched_setaffinity'):
         return f'not pinned (allowed cores {_allowed()})'
@@ -93,7 +95,7 @@ def keep_off_cpu(cpu: int) -> str:
 
 
 def lower_priority(niceness: int = 19) -> str:
-    """Run this process's threads at `niceness` (work off the critical path yields the CPU to it)."""
+    """Run this process's threads at `niceness` (work off the critical path yields the CPU)."""
     if not hasattr(os, 'setpriority'):
         return 'priority unchanged: os.setpriority is not available on this system'
     for tid in threads():
@@ -127,7 +129,7 @@ def _allowed() -> str:
 
 
 def request_fifo(priority: int) -> str:
-    """Ask for SCHED_FIFO at `priority` (0: stay on the default scheduler); the outcome as a sentence."""
+    """Ask for SCHED_FIFO at `priority` (0: the default scheduler); the outcome as a sentence."""
     if priority <= 0:
         return 'default scheduler (SCHED_OTHER), no real-time priority requested'
     if not hasattr(os, 'sched_setscheduler'):
@@ -171,7 +173,7 @@ def poll_on_default_scheduler() -> str:
     )
     return (
         "step loop polls on SCHED_OTHER (SCHED_FIFO would be throttled by the kernel's real-time"
-        f" budget, {budget[0]} of every {budget[1]} us), the other threads keep SCHED_FIFO"
+        f' budget, {budget[0]} of every {budget[1]} us), the other threads keep SCHED_FIFO'
     )
 
 
@@ -204,7 +206,9 @@ YOUNG_THRESHOLD, MIDDLE_THRESHOLD = 700, 10  # gc's own default thresholds of ge
 
 def collect_young() -> None:
     """
-    Return the young generations' collection when due by gc's default thresholds (tens of microseconds).
+    Run the young generations' collection when due by gc's default thresholds.
+
+    It takes tens of microseconds.
 
     The oldest generation is left alone during a run: after `freeze_heap` it holds only what a
     run creates and keeps, and ordinary garbage is freed by reference counting anyway.

@@ -1,4 +1,4 @@
-"""rclpy.topic_endpoint_info for the embedded runtime: who publishes or subscribes a topic (a leaf module)."""
+"""rclpy.topic_endpoint_info for the embedded runtime (a leaf module)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ class TopicEndpointTypeEnum(enum.IntEnum):
 
 @dataclass(frozen=True)
 class TopicEndpointInfo:
-    """rclpy.topic_endpoint_info.TopicEndpointInfo: who publishes or subscribes a topic, and how."""
+    """rclpy.topic_endpoint_info.TopicEndpointInfo: who publishes or subscribes, and how."""
 
     node_name: str
     node_namespace: str

@@ -27,13 +27,13 @@ class Endpoint(Protocol):
     """What a transport uses of a publisher or subscription of runtime/embedded.py."""
 
     node: Any
-    msg_type: type
+    msg_type: Any  # a message class (rclpy-like, with __msgtype__)
     topic_name: str
     qos: QoSProfile
 
 
 def transport_choice(default: str) -> str:
-    """CLOTH_BENCH_TRANSPORT if set (intra or dds), else `default`; ValueError for another value."""
+    """Return CLOTH_BENCH_TRANSPORT if set (intra or dds), else `default`."""
     choice = os.environ.get('CLOTH_BENCH_TRANSPORT', '').strip().lower() or default
     if choice not in TRANSPORTS:
         raise ValueError(

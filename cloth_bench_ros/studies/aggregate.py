@@ -1,4 +1,4 @@
-"""Mean +- std of result rows per group, the cells that diverged or failed counted, not averaged."""
+"""Mean +- std of result rows per group; diverged or failed cells counted, not averaged."""
 
 from __future__ import annotations
 
@@ -64,7 +64,7 @@ def group(rows: Iterable[dict], *keys: str) -> dict[tuple, list[dict]]:
 
 
 def compute_per_sim_second(row: dict) -> float:
-    """Engine compute time per simulated second (s/s): mean step time x rate; < 1 is faster than real time."""
+    """Return engine compute time per simulated second (mean step time x rate); < 1 is faster."""
     st = row.get('step_time_mean')
     if st is None or not math.isfinite(st):
         return math.nan

@@ -1,5 +1,5 @@
 """
-The cells of a study: one pipeline run each (engine, rate, cloth, task, trial bag, seed, configuration).
+The cells of a study: one run each (engine, rate, cloth, task, bag, seed, configuration).
 
 Two kinds of sweep build cells:
 
@@ -61,25 +61,26 @@ class Cell:
     keep_frames: bool = False  # write summary.json + frames.csv of this run (per-frame plots)
 
     def key(self) -> tuple:
-        """Return what makes a cell unique in a results file (resume compares these with row_key)."""
+        """Return what makes a cell unique in a results file (resume compares it with row_key)."""
         return result_key({name: getattr(self, name) for name in KEY_FIELDS})
 
     def ident(self) -> str:
         """Return a file-system-safe name of the cell."""
         text = (
-            f'{self.mode}_{self.config}_{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}'
+            f'{self.mode}_{self.config}_{self.engine}_{self.rate_hz:g}hz_{self.cloth}'
+            f'_{self.primitive}'
             f'_t{self.trial}_s{self.seed}_{self.pacing}'
         )
         return re.sub(r'[^A-Za-z0-9_.=-]+', '-', text)
 
     @property
     def params(self) -> dict:
-        """The parameter overrides on top of the preset."""
+        """Return the parameter overrides on top of the preset."""
         return dict(self.overrides)
 
     @property
     def reference(self) -> str | None:
-        """The synthetic reference a cross-reference cell is scored against (its config's first entry)."""
+        """Return the synthetic reference a cross-reference cell is scored against."""
         if self.mode != CROSS_REFERENCE:
             return None
         return self.config.split(',')[0].removeprefix('reference=')
@@ -141,7 +142,7 @@ def _bag_trial(path: Path) -> int:
 
 
 def _check_engines(engines: Iterable[str], overrides: dict[str, dict]) -> None:
-    """EngineError (a ValueError) on an unknown engine or a bad override, before any work."""
+    """Raise EngineError (a ValueError) on an unknown engine or a bad override, before any work."""
     from cloth_bench_ros.engines import engine_class
 
     for name in engines:
@@ -163,9 +164,11 @@ def paper_cells(
     keep_frames_seeds: Iterable[int] | None = None,
 ) -> list[Cell]:
     """
-    Return the cells of the paper's layout. step_per_target: internal time step = 1 / rate, one
-    engine step per target (the paper's frequency study), instead of the preset's time step.
-    keep_frames_seeds: seeds whose per-frame scores are kept (default: the first seed).
+    Return the cells of the paper's layout.
+
+    step_per_target: internal time step = 1 / rate, one engine step per target (the paper's
+    frequency study), instead of the preset's time step. keep_frames_seeds: seeds whose per-frame
+    scores are kept (default: the first seed).
     """
     overrides = overrides or {}
     _check_engines(engines, overrides)
@@ -265,9 +268,11 @@ def settings_cells(
 
 def estimated_cost(cell: Cell) -> float:
     """
-    Return a rough cost of a cell in seconds of one core: internal steps x a per-step cost, plus the
-    nodes' work per target (fitted to the default sweep's cells on 2 idle cores, 11 x 15 mesh:
-    0.8 ms per MuJoCo internal step on the fling, 1.4x that with the cloth on the table).
+    Return a rough cost of a cell in seconds of one core.
+
+    Internal steps x a per-step cost, plus the nodes' work per target (fitted to the default
+    sweep's cells on 2 idle cores, 11 x 15 mesh: 0.8 ms per MuJoCo internal step on the fling, 1.4x
+    that with the cloth on the table).
     """
     duration = 7.4 if cell.primitive == 'dynamic' else 17.0  # settle phase + quintic part, s
     params = cell.params

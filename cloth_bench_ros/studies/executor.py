@@ -37,7 +37,7 @@ _THREAD_VARS = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS')
 
 @contextlib.contextmanager
 def quiet_shutdown() -> Iterator[None]:
-    """On an interrupt, take the cluster down without Dask's noise and without a second interrupt."""
+    """On an interrupt, take the cluster down quietly and without a second interrupt."""
     try:
         yield
     except KeyboardInterrupt:
@@ -60,7 +60,7 @@ def default_workers() -> int:
 
 
 class _WorkerSetup(WorkerPlugin):
-    """Worker plugin: quiet output (to the study's log file), one thread for numpy, the tree cache."""
+    """Worker plugin: quiet output (to the study's log), one numpy thread, the tree cache."""
 
     name = 'cloth-bench-setup'
 
@@ -80,7 +80,8 @@ class _WorkerSetup(WorkerPlugin):
         cloud = np.eye(3)
         metrics.RealCloud(cloud).chamfer_hausdorff(cloud)  # load the compiled kernels now
         if self.local and self.log_path:
-            # What the engines' C code prints goes to the log, not to the terminal of the progress bar.
+            # What the engines' C code prints goes to the log, not to the terminal of the progress
+            # bar.
             try:
                 fd = os.open(self.log_path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
                 os.dup2(fd, 1)
@@ -106,7 +107,7 @@ def check_scheduler_address(address: str) -> str:
 def open_client(
     scheduler: str | None = None, workers: int | None = None, log_path: Path | None = None
 ) -> Iterator[Any]:
-    """Return a Dask client: of a new LocalCluster on 127.0.0.1 (`workers` processes), or of `scheduler`."""
+    """Return a Dask client of a new LocalCluster on 127.0.0.1, or of `scheduler`."""
     for var in _THREAD_VARS:
         os.environ.setdefault(var, '1')
     logging.getLogger('distributed').setLevel(logging.ERROR)
@@ -180,8 +181,10 @@ def run_tasks(
     in_flight: int | None = None,
 ) -> None:
     """
-    func(item, *args) for every item on the cluster, at most `in_flight` at a time (default:
-    twice the worker threads); on_result(item, result) in the client as each finishes.
+    Run func(item, *args) for every item on the cluster, at most `in_flight` at a time.
+
+    The default is twice the worker threads; on_result(item, result) runs in the client as each
+    finishes.
 
     A worker that dies counts against every task it held, so a task beside the one that kills its
     workers can be declared killed too. Killed tasks run again at the end, one at a time: an

@@ -31,6 +31,7 @@ import signal
 import subprocess
 import sys
 import time
+from typing import Sequence
 
 from cloth_bench_ros.core.hil_timing import (
     check_bookkeeping,
@@ -78,8 +79,11 @@ class HilConfig:
     duration: float = 0.0  # s of the trajectory to run (0: all of it, scored by the observer)
 
     def ident(self) -> str:
-        """Return the run's directory name: engine, rate, task, seed and configuration, file-system safe."""
-        text = f'{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}_s{self.seed}_{self.config}'
+        """Return the run's directory name (engine, rate, task, seed, configuration), file-safe."""
+        text = (
+            f'{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}'
+            f'_s{self.seed}_{self.config}'
+        )
         return re.sub(r'[^A-Za-z0-9_.+-]+', '-', text)
 
 
@@ -104,7 +108,7 @@ class HilResult:
     run_dir: Path | None = None
 
     def row(self) -> dict:
-        """Return a flat JSON-safe row (hil.jsonl)."""
+        """Return the run as a flat JSON-safe row of hil.jsonl."""
         c = self.config
         return {
             'engine': c.engine,
@@ -148,8 +152,10 @@ def _cpu_times() -> tuple[int, int, int] | None:
 
 class LoadMeter:
     """
-    The machine's CPU load over a span: busy share of all cores (/proc/stat), the share the
-    hypervisor took from a virtual machine (steal: the vCPU runnable but not running), load averages.
+    The machine's CPU load over a span: busy share, steal and load averages.
+
+    Busy share of all cores (/proc/stat), the share the hypervisor took from a virtual machine
+    (steal: the vCPU runnable but not running), load averages.
     """
 
     def __enter__(self) -> 'LoadMeter':
@@ -197,7 +203,8 @@ def _parameters(config: HilConfig, group: str, run_dir: Path) -> list[tuple[str,
         ]
     if group == 'simulator':
         nx, nz = config.grid or (0, 0)
-        # No /clock: the simulator never reads time, and a 1 kHz /clock would sit on its critical path.
+        # No /clock: the simulator never reads time, and a 1 kHz /clock would sit on its critical
+        # path.
         return [
             (
                 'simulator',
@@ -261,21 +268,22 @@ def _make_nodes(config: HilConfig, group: str, run_dir: Path, context) -> list:
 
 def _finished(group: str, nodes: list) -> bool:
     """
-    Return the controller ends once its timeline is written, the observer once the evaluator reported;
-    the simulator runs until it is told to stop.
+    Return the groups' ends: controller once its timeline is written, observer once scored.
+
+    The observer ends once the evaluator reported; the simulator runs until it is told to stop.
     """
     if group == 'simulator':
         return False
     return all(getattr(n, 'done', True) for n in nodes)
 
 
-def _write_simulator_file(run_dir: Path, nodes: list, notes: list[str] = ()) -> None:
+def _write_simulator_file(run_dir: Path, nodes: list, notes: Sequence[str] = ()) -> None:
     from cloth_bench_ros.nodes.simulator import Simulator
     from cloth_bench_ros.safe_io import atomic_write_text
 
     for node in nodes:
         if isinstance(node, Simulator):
-            times = node.step_times[1 : node.step + 1]  # step 0 is the reset
+            times = node.step_times[1:node.step + 1]  # step 0 is the reset
             times = times[np.isfinite(times)]
             step_time = (
                 {
@@ -299,7 +307,7 @@ def _write_simulator_file(run_dir: Path, nodes: list, notes: list[str] = ()) -> 
 
 
 def _waited(config: HilConfig) -> list[str]:
-    """Return the groups whose end ends the run: a shortened run is not scored, so only the controller."""
+    """Return the groups whose end ends the run (a shortened run is not scored)."""
     return ['controller'] if config.duration else ['controller', 'observer']
 
 
@@ -337,7 +345,7 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
 
 
 def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
-    """One group in this process over DDS until it finishes or gets SIGTERM (a child process's work)."""
+    """Run one group in this process over DDS until it finishes or gets SIGTERM."""
     from cloth_bench_ros.nodes.common import close_nodes
     from cloth_bench_ros.runtime import rclpy, realtime, SingleThreadedExecutor
 
@@ -350,8 +358,10 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
         nodes = _make_nodes(config, group, run_dir, context)
         if group == 'controller':  # it starts sending once its graph is complete (graph_ready)
             _warm_up_messages()
-            gc.freeze()  # start-up objects out of the collector's way (the simulator also stops it)
-            # The controller is the robot's real-time loop: the same scheduling request as the simulator.
+            # start-up objects out of the collector's way (the simulator also stops it)
+            gc.freeze()
+            # The controller is the robot's real-time loop: the same scheduling request as the
+            # simulator.
             print(f'controller: {realtime.request_fifo(config.realtime_priority)}', flush=True)
         if group == 'observer':
             print(f'observer: {realtime.lower_priority()}', flush=True)
@@ -376,7 +386,7 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
 
 
 def _warm_up_messages() -> None:
-    """Return the controller's serialisers (targets out, states in) generated before the first deadline."""
+    """Return the controller's serialisers (targets out, states in), made before any deadline."""
     from cloth_bench_ros.runtime import (
         deserialize_message,
         PointCloud2,
@@ -407,7 +417,7 @@ def _config_from_json(text: str) -> HilConfig:
 
 
 def _run_processes(config: HilConfig, run_dir: Path) -> None:
-    """Return the three groups as three OS processes; the simulator is stopped once the others are done."""
+    """Run the three groups as OS processes; the simulator is stopped once the others are done."""
     from cloth_bench_ros.runtime.dds import loopback_environment
 
     # As `cloth-bench run --processes`: DDS on loopback only, on ROS_DOMAIN_ID or a random domain.
@@ -418,7 +428,8 @@ def _run_processes(config: HilConfig, run_dir: Path) -> None:
     )
     # One thread per BLAS / OpenMP library: their pools spin between calls, on a core that the
     # controller (SCHED_FIFO) or the step loop needs.
-    env = {**os.environ, **loopback_environment(domain), **{k: '1' for k in SINGLE_THREADED_MATH}}
+    single_threaded = dict.fromkeys(SINGLE_THREADED_MATH, '1')
+    env = {**os.environ, **loopback_environment(domain), **single_threaded}
     procs: dict[str, subprocess.Popen] = {}
     deadline = time.monotonic() + _time_budget(config)
     try:
@@ -485,7 +496,7 @@ def run_hil(config: HilConfig, out_dir: Path, lockstep: bool = True) -> HilResul
 
 
 def collect(config: HilConfig, run_dir: Path, load: dict) -> HilResult:
-    """Read what the processes wrote: the controller's timeline, the simulator's counts, the summary."""
+    """Read what the processes wrote: the controller's timeline, simulator's counts, summary."""
     timeline_file = run_dir / TIMELINE.format(engine=config.engine)
     if not timeline_file.is_file() or not (run_dir / SIMULATOR_FILE).is_file():
         raise RuntimeError(f'HIL {config.ident()}: no timeline or simulator counts in {run_dir}')
@@ -536,6 +547,8 @@ def lockstep_cd(config: HilConfig) -> float:
             grid=config.grid,
         )
     )
+    if summary is None:
+        raise RuntimeError('the node graph ended before the evaluator finished')
     return _cd(summary['engines'][config.engine], config.primitive)
 
 
@@ -574,8 +587,10 @@ def recommended(
     budget: float = HIL_DEADLINE_BUDGET,
 ):
     """
-    Return the configuration `--config recommended` runs and where it comes from: the settings sweep's
-    results if they hold this engine, task and rate, else the shipped config/hil_recommended.yaml.
+    Return the configuration `--config recommended` runs and where it comes from.
+
+    The settings sweep's results if they hold this engine, task and rate, else the shipped
+    config/hil_recommended.yaml.
     """
     from cloth_bench_ros.paths import share_dir
     from cloth_bench_ros.studies.recommend import load_recommendations, recommend_for_rate

@@ -43,7 +43,7 @@ def usable_cpus() -> list[int]:
 
 
 def fifo_permitted(priority: int = FIFO_PRIORITY) -> bool:
-    """Return True if this process may put a thread on SCHED_FIFO at `priority` (tried and undone at once)."""
+    """Return True if this process may put a thread on SCHED_FIFO at `priority` (tried, undone)."""
     if not hasattr(os, 'sched_setscheduler'):
         return False
     try:
@@ -56,7 +56,7 @@ def fifo_permitted(priority: int = FIFO_PRIORITY) -> bool:
 
 
 def choose_layout(cpus: list[int], fifo_ok: bool) -> Layout:
-    """Return the measured best layout on a machine with `cpus` usable cores and FIFO permitted or not."""
+    """Return the measured best layout for `cpus` usable cores, FIFO permitted or not."""
     fifo = FIFO_PRIORITY if fifo_ok else 0
     scheduler = (
         f'controller on SCHED_FIFO {fifo}'
@@ -86,7 +86,7 @@ def choose_layout(cpus: list[int], fifo_ok: bool) -> Layout:
 
 
 def resolve_layout(name: str, cpu: int | None, fifo: int | None, busy_wait: bool | None) -> Layout:
-    """Return the layout of a run: `auto` (this machine's best), `none`, with any explicit flag on top."""
+    """Return the layout of a run: `auto` (the machine's best) or `none`, flags on top."""
     if name not in LAYOUTS:
         raise ValueError(f'--layout {name!r} is not one of {", ".join(LAYOUTS)}')
     if name == 'none':

@@ -1,5 +1,7 @@
 """
-Parameter identification (`cloth-bench identify`): the paper's CMA-ES and Bayesian optimisation with Optuna.
+Parameter identification (`cloth-bench identify`): CMA-ES and Bayesian optimisation.
+
+The paper's samplers, with Optuna.
 
 The study minimises the chosen metric (CD or HD of the task's window) of an engine against a bag
 over a set of the engine's parameters, with the seed held constant. Samplers: CMA-ES
@@ -32,7 +34,8 @@ DEFAULT_SPAN = 10.0
 JOURNAL_FILE = 'study.journal'
 TRIALS_FILE = 'trials.jsonl'
 SUMMARY_FILE = 'identification.json'
-# What the reference identified per engine (docs/benchmark.md, section 7); others: every ranged number.
+# What the reference identified per engine (docs/benchmark.md, section 7); others: every ranged
+# number.
 DEFAULT_PARAMS = {
     'mujoco': ('mass', 'young', 'poisson', 'thickness', 'damping'),
     'bullet': ('mass', 'elastic', 'damping', 'bending'),
@@ -65,7 +68,7 @@ class IdentifySpec:
 
 
 def default_params(engine: str) -> list[str]:
-    """Return the parameters fitted by default: the reference's set, else every ranged number of the schema."""
+    """Return the parameters fitted by default: the reference's set, else every ranged number."""
     from cloth_bench_ros.engines import engine_class
 
     schema = engine_class(engine).params
@@ -84,9 +87,11 @@ def default_params(engine: str) -> list[str]:
 
 def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> dict[str, Any]:
     """
-    Name -> Optuna distribution: the schema's range; where it spans decades (high >= 100 low, or
-    100 times the base value when low is 0), a log range within a factor `span` either side of the
-    base (preset) value. ValueError for a parameter that cannot be fitted.
+    Return name -> Optuna distribution: the schema's range, or a log range around the preset.
+
+    Where a range spans decades (high >= 100 low, or 100 times the base value when low is 0), a log
+    range within a factor `span` either side of the base (preset) value. ValueError for a parameter
+    that cannot be fitted.
     """
     from cloth_bench_ros.engines import engine_class
     from optuna.distributions import FloatDistribution
@@ -115,8 +120,10 @@ def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> 
 
 def make_sampler(name: str, seed: int) -> Any:
     """
-    Return the Optuna sampler `name` (cmaes, tpe or gp), seeded. CMA-ES starts at the centre of the space,
-    which is the preset for the log-scale parameters (their ranges are a factor `span` either side).
+    Return the Optuna sampler `name` (cmaes, tpe or gp), seeded.
+
+    CMA-ES starts at the centre of the space, which is the preset for the log-scale parameters
+    (their ranges are a factor `span` either side).
     """
     import optuna
 
@@ -144,7 +151,9 @@ def samplers_of(choice: str) -> list[str]:
 
 def repair_journal(path: Path) -> int:
     """
-    Drop a torn last line (a crash mid-write) from an Optuna journal, with a warning; bytes dropped.
+    Drop a torn last line (a crash mid-write) from an Optuna journal, with a warning.
+
+    Returns the bytes dropped.
 
     Every complete operation is kept. A bad line followed by good ones is damage, not a torn tail:
     ValueError naming the file and line.
@@ -182,8 +191,9 @@ def repair_journal(path: Path) -> int:
 
 def open_study(spec: IdentifySpec, sampler: str) -> Any:
     """
-    Return the sampler's study in the journal beside the results (created, or loaded to resume); trials
-    left running by an interrupted identification are marked failed.
+    Return the sampler's study in the journal beside the results (created, or loaded).
+
+    Trials left running by an interrupted identification are marked failed.
     """
     import optuna
     from optuna.storages import JournalStorage
@@ -229,7 +239,7 @@ def trial_of(spec: IdentifySpec, params: dict, number: int, sampler: str) -> Tri
 def run_sampler(
     client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool
 ) -> Any:
-    """Ask and tell until the study holds `spec.trials` finished trials, a batch in flight on the cluster."""
+    """Ask and tell until the study holds `spec.trials` finished trials, a batch in flight."""
     from cloth_bench_ros.studies.executor import worker_slots
     from distributed import as_completed
     from optuna.trial import TrialState
@@ -306,7 +316,7 @@ def _finite_or_inf(value: float) -> float:
 
 
 def convergence(study: Any) -> list[list]:
-    """[number, value or None, best so far or None] per finished trial, in trial order."""
+    """Return [number, value or None, best so far or None] per finished trial, in order."""
     from optuna.trial import TrialState
 
     out, best = [], math.inf
@@ -321,7 +331,7 @@ def convergence(study: Any) -> list[list]:
 
 
 def importance(study: Any) -> dict[str, float]:
-    """Parameter importance (PED-ANOVA: no extra dependency); {} with too few finished trials."""
+    """Return how much each parameter explains (PED-ANOVA); {} with too few trials."""
     import optuna
 
     try:
@@ -347,7 +357,7 @@ def identify(
     workers: int | None = None,
     progress: bool = True,
 ) -> IdentifyOutcome:
-    """Run the identification of `spec` and its validation; write the preset and identification.json."""
+    """Run the identification of `spec` and its validation; write the preset and its JSON."""
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.executor import open_client
@@ -400,7 +410,7 @@ def summarise(
     best: str,
     validation: list,
 ) -> dict:
-    """Everything identification.json keeps: the problem, each sampler's result, the kept one, validation."""
+    """Return what identification.json keeps: problem, samplers' results, choice, validation."""
     return {
         'engine': spec.engine,
         'cloth': spec.cloth,

@@ -1,6 +1,8 @@
 """
-What an identification leaves behind: its validation through the node graph, the preset file and
-identification.json (everything the report needs, so the report needs no Optuna).
+What an identification leaves behind: validation, preset file and identification.json.
+
+The validation runs through the node graph; identification.json holds everything the report needs,
+so the report needs no Optuna.
 """
 
 from __future__ import annotations
@@ -21,8 +23,10 @@ PRESETS_DIR = 'presets'
 
 def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
     """
-    Seeds other than the identification's, on its bag and the other trials' bags of the cloth and task,
-    each with the engine's preset and with the identified parameters.
+    Return the validation cells: seeds other than the identification's, preset and identified.
+
+    On its bag and the other trials' bags of the cloth and task, each with the engine's preset and
+    with the identified parameters.
     """
     bags = {Path(spec.bag).resolve(): 0}
     try:
@@ -56,7 +60,7 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
 
 
 def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]:
-    """Run the validation cells (resumable, into <output>/results.jsonl); per bag: preset against identified."""
+    """Run the validation cells (resumable): per bag, preset against identified parameters."""
     from cloth_bench_ros.studies.executor import run_tasks
     from cloth_bench_ros.studies.sweep import cells_to_run, error_row, run_cell
 
@@ -106,6 +110,8 @@ def _key(row: dict) -> tuple:
 def provenance_text(spec: Any, summary: dict, version: str) -> str:
     """Return the preset file's provenance: what was fitted against what, how, when and where."""
     params = ', '.join(f'{k} = {v:.6g}' for k, v in summary['params'].items())
+    fixed = ', '.join(f'{k} = {v}' for k, v in spec.fixed.items())
+    fixed = f'fixed {fixed}; ' if spec.fixed else ''
     return (
         f'Identified by cloth-bench identify against bag {spec.bag} ({spec.cloth},'
         f' {spec.primitive}): '
@@ -116,7 +122,7 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
         f'{spec.rate_hz:g} Hz, grid {"x".join(map(str, spec.grid)) if spec.grid else "default"}'
         f'{", first " + str(spec.max_frames) + " frames" if spec.max_frames else ""}); fitted'
         f' {params}; '
-        f'{"fixed " + ", ".join(f"{k} = {v}" for k, v in spec.fixed.items()) + "; " if spec.fixed else ""}'
+        f'{fixed}'
         f"the other values are the preset's. Engine version {version}; "
         f'{datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")} on {platform.node()} '
         f'({platform.machine()}, {platform.python_implementation()} {platform.python_version()}).'

@@ -1,5 +1,5 @@
 """
-The objective of parameter identification: one simulation of a trial's parameters, scored against a bag.
+The objective of parameter identification: one scored simulation of a trial's parameters.
 
 A trial drives the engine directly along the primitive's targets (settle phase included) and
 scores it with the evaluator's core (core.evaluation.OnlineEvaluator: the same pairing and the
@@ -15,6 +15,7 @@ import math
 import os
 from pathlib import Path
 import time
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ _BAG_CACHE_SIZE = 4
 
 @dataclass(frozen=True)
 class Trial:
-    """One simulation of an identification: the parameters to try and what to score them against."""
+    """One simulation of an identification: the parameters and what to score them against."""
 
     engine: str
     cloth: str
@@ -43,7 +44,7 @@ class Trial:
 
 
 def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
-    """(change-of-phase frame, [(bag stamp ns, points, NaN points dropped)]) of a bag, decoded once per process."""
+    """Return a bag's change-of-phase frame and (stamp ns, points, NaN dropped), decoded once."""
     from cloth_bench_ros.core.phase import first_table_contact
     from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
     from cloth_bench_ros.data import BagReader
@@ -72,7 +73,7 @@ def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]
 def evaluate(trial: Trial) -> dict:
     """Run one trial; never raises. status ok (value finite), diverged (reason, step) or error."""
     start, cpu_start = time.perf_counter(), time.process_time()
-    out = {
+    out: dict[str, Any] = {
         'number': trial.number,
         'sampler': trial.sampler,
         'params': dict(trial.params),
@@ -87,6 +88,7 @@ def evaluate(trial: Trial) -> dict:
     engine = None
     try:
         from cloth_bench_ros.core.evaluation import OnlineEvaluator
+        from cloth_bench_ros.core.trajectory import Primitive
         from cloth_bench_ros.core.scene import ClothGrid, SETTLE_DURATION
         from cloth_bench_ros.core.trajectory import full_targets
         from cloth_bench_ros.engines import make_engine
@@ -94,7 +96,7 @@ def evaluate(trial: Trial) -> dict:
 
         cut, frames = bag_clouds(trial.bag)
         offset = int(round(SETTLE_DURATION * 1e9))
-        core = OnlineEvaluator([trial.engine], trial.primitive, offset, cut, FPS)
+        core = OnlineEvaluator([trial.engine], Primitive(trial.primitive), offset, cut, FPS)
         used = [
             f
             for f in frames

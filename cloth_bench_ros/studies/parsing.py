@@ -1,4 +1,4 @@
-"""Settings axes of `cloth-bench sweep --mode settings`; grids and values through the validation layer."""
+"""Settings axes of `cloth-bench sweep --mode settings`, checked by the validation layer."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ def parse_settings_axes(specs: Sequence[str]) -> dict[str, list]:
         name, sep, values = spec.partition('=')
         if not sep or not name or not values:
             raise ValueError(f'settings axis {spec!r} is not name=value1,value2,...')
-        parsed = []
+        parsed: list = []
         for text in values.split(','):
             text = text.strip()
             if name == 'grid':

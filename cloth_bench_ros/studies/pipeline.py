@@ -1,4 +1,4 @@
-"""The node graph (README, "The node graph") composed in one process: what `cloth-bench run` executes."""
+"""The node graph composed in one process: what `cloth-bench run` executes."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from cloth_bench_ros.nodes.evaluator import Evaluator
 from cloth_bench_ros.nodes.recorder import Recorder
 from cloth_bench_ros.nodes.simulator import Simulator
 from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
-from cloth_bench_ros.runtime import EMBEDDED, Parameter, rclpy, SingleThreadedExecutor
+from cloth_bench_ros.runtime import EMBEDDED, Node, Parameter, rclpy, SingleThreadedExecutor
 from cloth_bench_ros.studies.run_config import RunConfig
 import yaml
 
@@ -77,13 +77,13 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
 
 
 def isolated_domain() -> int:
-    """Return a ROS domain for one in-process run under real rclpy: random in 1-101, not ROS_DOMAIN_ID's."""
+    """Return a ROS domain for one in-process run under real rclpy: random in 1-101."""
     taken = os.environ.get('ROS_DOMAIN_ID', '0')
     choices = [d for d in range(1, 102) if str(d) != taken]
     return random.SystemRandom().choice(choices)
 
 
-def run_pipeline(config: RunConfig) -> dict:
+def run_pipeline(config: RunConfig) -> dict | None:
     """Run trajectory publisher, one simulator per engine, recorder and evaluator to the end."""
     context = rclpy.Context()
     # Composed in one process on the intra-process transport, whatever CLOTH_BENCH_TRANSPORT says
@@ -96,7 +96,7 @@ def run_pipeline(config: RunConfig) -> dict:
         **({'transport': 'intra'} if EMBEDDED else {'domain_id': isolated_domain()}),
     )
     params = node_parameters(config)
-    nodes = []
+    nodes: list[Node] = []
     try:
         nodes.append(
             TrajectoryPublisher(

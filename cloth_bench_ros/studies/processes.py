@@ -28,7 +28,7 @@ import yaml
 
 
 class ProcessRunError(ClothBenchError, RuntimeError):
-    """A node process failed or the run did not end in time; str() names the node and its last line."""
+    """A node process failed or the run did not end in time; str() names the node and its line."""
 
 
 def _command(name: str, params_file: Path) -> list[str]:
@@ -53,7 +53,7 @@ def _last_line(path: Path) -> str:
 
 
 def run_processes(config: RunConfig, timeout_s: float = 900.0) -> dict:
-    """Run the graph of `config` with one process per node until the evaluator ends; its summary."""
+    """Run the graph of `config`, one process per node, until the evaluator ends; its summary."""
     domain = (
         int(os.environ['ROS_DOMAIN_ID'])
         if os.environ.get('ROS_DOMAIN_ID')

@@ -1,5 +1,7 @@
 """
-The configuration to run an engine with: the settings sweep's choice, at one rate for hardware in the loop.
+The configuration to run an engine with: the settings sweep's choice at one rate.
+
+For hardware in the loop.
 
 - `recommend`: the most accurate configuration and the cheapest within a tolerance of it.
 - `recommend_for_rate`: the cheapest configuration both accurate enough (`recommend`'s rule) and
@@ -35,14 +37,15 @@ RECOMMENDATION_KEYS = (
 )
 
 
-# The step's share of the period: the rest is the round trip (two DDS hops, the messages in Python),
-# 0.4-0.5 ms on a 2-core machine, so at 1 kHz a configuration must step in half the period.
+# The step's share of the period: the rest is the round trip (two DDS hops, the messages in
+# Python), 0.4-0.5 ms on a 2-core machine, so at 1 kHz a configuration must step in half the
+# period.
 DEADLINE_BUDGET = 0.5
 
 
 @dataclass
 class ConfigResult:
-    """One configuration of a settings sweep at one engine, task and rate: its error, cost and stability."""
+    """One settings-sweep configuration at one engine, task and rate: error, cost, stability."""
 
     engine: str
     cloth: str
@@ -57,7 +60,7 @@ class ConfigResult:
 
 
 def settings_results(rows: Sequence[dict]) -> list[ConfigResult]:
-    """One ConfigResult per engine, cloth, task, rate and configuration of the settings-sweep rows."""
+    """Return a ConfigResult per engine, cloth, task, rate and configuration of the rows."""
     sel = [r for r in rows if r.get('mode') == 'settings']
     out = []
     for (e, cloth, prim, rate, config), g in group(
@@ -128,7 +131,7 @@ class Recommendation:
 
 
 def step_ms_by_config(rows: Sequence[dict], key: str) -> dict[str, float]:
-    """Median over seeds of a step-time statistic (step_time_p50, step_time_p99) per configuration, in ms."""
+    """Return the median over seeds of a step-time statistic per configuration, in ms."""
     by: dict[str, list] = {}
     for r in rows:
         if r.get('status') == 'ok':
@@ -159,7 +162,9 @@ def recommend_for_rate(
     budget: float = DEADLINE_BUDGET,
 ) -> Recommendation | None:
     """
-    Return the cheapest configuration within tolerance of the most accurate whose step p99 < budget / rate.
+    Return the cheapest configuration within tolerance of the most accurate.
+
+    Only configurations whose step p99 < budget / rate count.
 
     Cheapest: the lowest median step time (p50), which other work on a shared machine inflates far
     less than the mean. If no accurate-enough configuration meets the deadline, the cheapest
@@ -212,7 +217,7 @@ def recommend_for_rate(
 
 
 def load_recommendations(path: Path) -> list[Recommendation]:
-    """Return the entries of a recommendation file; ValueError naming the file on a malformed one."""
+    """Return the entries of a recommendation file; ValueError naming the file if malformed."""
     from cloth_bench_ros.safe_io import load_yaml_file
 
     data = load_yaml_file(path)

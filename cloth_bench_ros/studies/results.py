@@ -58,11 +58,11 @@ NUMERIC_FIELDS = (
 
 
 class ResultsError(ClothBenchError, ValueError):
-    """A results file or directory that cannot be used; str() is one line naming it and the problem."""
+    """A results file or directory that cannot be used; str() is one line naming it."""
 
 
 class ResultRow(TypedDict, total=False):
-    """One line of results.jsonl: the cell, then what its run measured (NaN where it has no value)."""
+    """One line of results.jsonl: the cell, then what its run measured (NaN for no value)."""
 
     mode: str
     config: str
@@ -90,7 +90,7 @@ class ResultRow(TypedDict, total=False):
 
 
 def result_key(fields: Mapping[str, Any]) -> tuple:
-    """Return the unique key of a cell from its fields (a Cell's or a row's); missing fields take their default."""
+    """Return the unique key of a cell from a Cell's or a row's fields (missing: the default)."""
     values = []
     for name, default in KEY_FIELDS.items():
         value = fields.get(name, default)
@@ -120,7 +120,7 @@ def json_safe(value: Any) -> Any:
     return value
 
 
-def check_row(row: Any, base: Path, where: str) -> ResultRow:
+def check_row(row: Any, base: Path, where: str) -> dict[str, Any]:
     """Return the row if it is a usable results row, else ResultsError naming `where`."""
     if not isinstance(row, dict):
         raise ResultsError(
@@ -169,8 +169,8 @@ def results_path(path: Path) -> Path:
     return path / RESULTS_FILE if path.is_dir() else path
 
 
-def load_rows(path: Path) -> list[ResultRow]:
-    """Rows of a results.jsonl (null metrics back to NaN); a torn line is skipped, a bad row refused."""
+def load_rows(path: Path) -> list[dict[str, Any]]:
+    """Return the rows of a results.jsonl; a torn line is skipped, a bad row refused."""
     path = results_path(path)
     if not path.exists():
         return []
@@ -192,7 +192,7 @@ def load_rows(path: Path) -> list[ResultRow]:
 
 
 def append_row(path: Path, row: Mapping[str, Any]) -> None:
-    """One JSON line, flushed to disk; after a line torn by an interrupted study, on a line of its own."""
+    """Append one JSON line, flushed; after a torn line, on a line of its own."""
     path = Path(path)
     data = (json.dumps(json_safe(dict(row)), sort_keys=True) + '\n').encode()
     with path.open('ab') as f:

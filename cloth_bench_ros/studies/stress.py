@@ -56,7 +56,7 @@ def _one_step(rate: float) -> dict:
 
 
 def default_cases(engines: Sequence[str] = ('mujoco', 'bullet', 'newton')) -> list[StressCase]:
-    """Return the suite: the hard cases of issue 5 and some more, with each engine's own parameter names."""
+    """Return the suite: the hard cases and more, with each engine's own parameter names."""
     cases: list[StressCase] = []
     for e in engines:
         stiff = (
@@ -194,7 +194,7 @@ def default_cases(engines: Sequence[str] = ('mujoco', 'bullet', 'newton')) -> li
 def select_cases(
     engines: Sequence[str], names: Sequence[str] | None = None, max_wall_s: float | None = None
 ) -> list[StressCase]:
-    """Return the suite for `engines`, only the cases `names` if given, with another wall-time budget if given."""
+    """Return the suite for `engines`, optionally only `names` and another wall-time budget."""
     from dataclasses import replace
 
     from cloth_bench_ros.engines import engine_class
@@ -302,8 +302,8 @@ def run_case(case: StressCase) -> dict:
                     f' {len(left) - 1}'
                 )
                 break
-        if engine.diverged:
-            d = engine.divergence
+        d = engine.divergence
+        if d is not None:
             row.update(
                 status='diverged',
                 diverged=True,
@@ -362,7 +362,7 @@ def run_suite(
     progress: bool = True,
     scheduler: str | None = None,
 ) -> list[dict]:
-    """Run every case on the executor; rows in the order of `cases` (and to stress.jsonl, stress.md)."""
+    """Run every case on the executor; rows in the order of `cases` (also to stress.jsonl, .md)."""
     from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
     from cloth_bench_ros.studies.executor import default_workers, open_client, run_tasks
     from cloth_bench_ros.studies.results import json_safe
@@ -405,7 +405,7 @@ def run_suite(
 
 
 def load_stress(path: Path) -> list[dict]:
-    """Rows of a stress.jsonl, checked as untrusted input (ValueError of one line naming the file)."""
+    """Return the rows of a stress.jsonl, checked as untrusted input."""
     from cloth_bench_ros.safe_io import read_text_bounded, safe_name, UnsafeInputError
 
     path = Path(path)

@@ -22,7 +22,8 @@ import time
 import traceback
 from typing import Sequence
 
-from cloth_bench_ros.studies.cells import (  # noqa: F401  (re-exported: the studies' one vocabulary)
+# re-exported: the studies' one vocabulary
+from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
     config_label,
     DEFAULT_CLOTHS,
@@ -39,12 +40,12 @@ from cloth_bench_ros.studies.cells import (  # noqa: F401  (re-exported: the stu
     SETTINGS_SEEDS,
 )
 from cloth_bench_ros.studies.executor import default_workers, open_client, run_tasks  # noqa: F401
-from cloth_bench_ros.studies.parsing import (
+from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
     parse_grid,
     parse_overrides,
     parse_settings_axes,
     parse_value,
-)  # noqa: F401
+)
 from cloth_bench_ros.studies.results import (  # noqa: F401
     append_row,
     json_safe,
@@ -120,7 +121,7 @@ def _cell_fields(cell: Cell) -> dict:
 
 
 def _substeps(cell: Cell) -> int | None:
-    """Internal steps per target of engines with `timestep` and `substeps` parameters."""
+    """Return the internal steps per target of engines with `timestep` and `substeps`."""
     try:
         from cloth_bench_ros.engines import engine_class
         from cloth_bench_ros.engines.presets import load_preset
@@ -221,7 +222,7 @@ class SweepOutcome:
 def cells_to_run(
     cells: Sequence[Cell], existing: Sequence[dict], retry_errors: bool = False
 ) -> list[Cell]:
-    """Return the cells not yet in `existing` (each once), seed by seed, the longest first within a seed."""
+    """Return the cells not yet in `existing`, seed by seed, the longest first within a seed."""
     done = {row_key(r) for r in existing if not retry_errors or r.get('status') != 'error'}
     todo: dict[tuple, Cell] = {}
     for cell in cells:
@@ -240,7 +241,7 @@ def run_sweep(
     desc: str = 'sweep',
     scheduler: str | None = None,
 ) -> SweepOutcome:
-    """Run every cell not yet in <out_dir>/results.jsonl on the executor, appending rows as they finish."""
+    """Run every cell not yet in <out_dir>/results.jsonl on the executor, appending its row."""
     from cloth_bench_ros.safe_io import check_output_dir
     from tqdm import tqdm
 

@@ -46,7 +46,7 @@ UNKNOWN_NODE = ('_NODE_NAME_UNKNOWN_', '_NODE_NAMESPACE_UNKNOWN_')  # rmw_dds_co
 
 
 def _discovery_profile(history: HistoryPolicy) -> QoSProfile:
-    """Return the QoS of rmw_cyclonedds' discovery endpoints (rmw_node.cpp, rmw_context_impl_s::init)."""
+    """Return the QoS of rmw_cyclonedds' discovery endpoints (rmw_node.cpp)."""
     return QoSProfile(
         depth=1,
         history=history,
@@ -95,7 +95,7 @@ class Graph:
 
     # this participant's nodes
     def update_node(self, node: Any, readers: list[uuid.UUID], writers: list[uuid.UUID]) -> None:
-        """Record a node's endpoints (GUIDs) and publish the participant's ParticipantEntitiesInfo."""
+        """Record a node's endpoints (GUIDs) and publish the participant's entities info."""
         self.local[node] = NodeEntitiesInfo_(
             node_namespace=node.get_namespace(),
             node_name=node.get_name(),
@@ -149,7 +149,7 @@ class Graph:
         return UNKNOWN_NODE
 
     def endpoints(self, dds_topic: str, kind: TopicEndpointTypeEnum) -> list[TopicEndpointInfo]:
-        """Every writer or reader of a DDS topic in the domain, with its node's name and namespace."""
+        """Every writer or reader of a DDS topic in the domain, with its node's name."""
         self._refresh()
         out = []
         for endpoint in self.endpoint_cache[kind].values():

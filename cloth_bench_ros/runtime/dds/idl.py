@@ -175,7 +175,7 @@ DDS_TYPES: dict[str, type] = {
 
 
 def dds_type(ros_type: str) -> type:
-    """Return the DDS type class of a ROS type name; ValueError for a type the transport does not carry."""
+    """Return the DDS type class of a ROS type name; ValueError for a type not carried."""
     try:
         return DDS_TYPES[ros_type]
     except KeyError:

@@ -89,7 +89,7 @@ def discovery_range(environ: Mapping[str, str] = os.environ) -> str:
 
 
 def domain_config(environ: Mapping[str, str] = os.environ) -> str:
-    """Return the Cyclone configuration of the domain: the discovery fragment, then CYCLONEDDS_URI."""
+    """Return the domain's Cyclone configuration: the discovery fragment, then CYCLONEDDS_URI."""
     scope = discovery_range(environ)
     peers = [p.strip() for p in environ.get('ROS_STATIC_PEERS', '').split(';') if p.strip()]
     config = ''
@@ -124,14 +124,16 @@ def domain_config(environ: Mapping[str, str] = os.environ) -> str:
 
 LOOPBACK_URI = (
     '<CycloneDDS><Domain><General><Interfaces><NetworkInterface'
-    ' name="lo"/></Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer'
+    ' name="lo"/></Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery>'
+    '<ParticipantIndex>auto</ParticipantIndex>'
+    '<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer'
     ' address="127.0.0.1"/></Peers></Discovery></Domain></CycloneDDS>'
 )
 """CYCLONEDDS_URI that keeps Cyclone on loopback: interface lo, no multicast, peer 127.0.0.1."""
 
 
 def loopback_environment(domain: int) -> dict[str, str]:
-    """Environment entries for a DDS graph confined to loopback on `domain` (tests, --processes)."""
+    """Return the environment of a DDS graph confined to loopback on `domain`."""
     return {
         'CYCLONEDDS_URI': LOOPBACK_URI,
         'ROS_LOCALHOST_ONLY': '1',

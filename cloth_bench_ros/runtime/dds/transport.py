@@ -50,7 +50,7 @@ def dds_topic_name(ros_topic: str) -> str:
 
 
 def padded(payload: bytes) -> bytes:
-    """Return a serialized sample padded with zeros to a multiple of 4 bytes, as Cyclone sends it."""
+    """Return a serialized sample zero-padded to a multiple of 4 bytes, as Cyclone sends it."""
     return payload + b'\0' * (-len(payload) % 4)
 
 
@@ -62,7 +62,7 @@ def _dispose(entity: Any) -> None:
 
 
 def _participant(domain: int) -> DomainParticipant:
-    """Return a participant on `domain`, its Cyclone domain configured from the ROS environment first."""
+    """Return a participant on `domain`, its Cyclone domain configured from the ROS environment."""
     if domain not in _domains:
         config = domain_config()
         if config:

@@ -78,7 +78,7 @@ def paper_rows(
 
 
 def _ordered(values: Iterable, order: Sequence = ()) -> list:
-    values = set(v for v in values if v is not None)
+    values = {v for v in values if v is not None}
     first = [v for v in order if v in values]
     return first + sorted(values - set(first), key=str)
 
