@@ -77,7 +77,7 @@ DATABASE_SCHEMA = {4: 2, 5: 3, 6: 3, 7: 4, 8: 4, 9: 4}
 
 
 def downgrade_database(database: Path, schema: int) -> None:
-    """Return a schema-4 .db3 rewritten in an older rosbag2 sqlite3 schema."""
+    """Rewrite a schema-4 .db3 in an older rosbag2 sqlite3 schema."""
     import sqlite3
 
     with sqlite3.connect(database) as db:

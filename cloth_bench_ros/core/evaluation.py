@@ -78,7 +78,7 @@ class OnlineEvaluator:
 
     # inputs
     def add_state(self, engine: str, stamp_ns: int, vertices: np.ndarray) -> None:
-        """Return a simulated state; states before the quintic part only advance the stamp."""
+        """Take a simulated state; states before the quintic part only advance the stamp."""
         e = self.engines[engine]
         if (
             stamp_ns <= e.last_stamp
@@ -101,7 +101,7 @@ class OnlineEvaluator:
         diverged: bool,
         reason: str = '',
     ) -> None:
-        """Return the simulator's report of one step: compute time and divergence."""
+        """Take the simulator's report of one step: compute time and divergence."""
         e = self.engines[engine]
         e.last_step_stamp = stamp_ns
         if step > 0:
@@ -116,7 +116,7 @@ class OnlineEvaluator:
         self.engines[engine].latencies.append(latency_s)
 
     def add_real(self, stamp_ns: int, points: np.ndarray, nan_dropped: int = 0) -> None:
-        """Return a real frame (stamp in run time); an empty cloud is counted and skipped."""
+        """Take a real frame (stamp in run time); an empty cloud is counted and skipped."""
         self.real_frames += 1
         self.nan_points_dropped += nan_dropped
         if self._last_real_ns is not None:

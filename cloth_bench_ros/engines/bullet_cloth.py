@@ -37,7 +37,7 @@ _IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 
 def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
-    """Return a triangle mesh as Wavefront OBJ (1-based face indices)."""
+    """Write a triangle mesh as Wavefront OBJ (1-based face indices)."""
     lines = [f'v {x:.9f} {y:.9f} {z:.9f}' for x, y, z in vertices]
     lines += [f'f {a + 1} {b + 1} {c + 1}' for a, b, c in faces]
     path.write_text('\n'.join(lines) + '\n')
@@ -78,7 +78,7 @@ def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.n
 
 
 def write_vtk(path: Path, nodes: np.ndarray, tets: np.ndarray) -> None:
-    """Return a tetrahedral mesh as legacy ASCII VTK (unstructured grid), as Bullet loads it."""
+    """Write a tetrahedral mesh as legacy ASCII VTK (unstructured grid), as Bullet loads it."""
     lines = [
         '# vtk DataFile Version 2.0',
         'cloth slab',
@@ -199,7 +199,7 @@ class BulletCloth(ClothEngine):
     # -- world --------------------------------------------------------------------------------
 
     def _build(self) -> None:
-        """Return a fresh deformable world: gravity, table, cloth, kinematic grippers, anchors."""
+        """Build a fresh deformable world: gravity, table, cloth, kinematic grippers, anchors."""
         c, cid = self.config, self._client
         pb.resetSimulation(pb.RESET_USE_DEFORMABLE_WORLD, physicsClientId=cid)
         pb.setGravity(0.0, 0.0, scene.GRAVITY, physicsClientId=cid)

@@ -386,7 +386,7 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
 
 
 def _warm_up_messages() -> None:
-    """Return the controller's serialisers (targets out, states in), made before any deadline."""
+    """Make the controller's serialisers (targets out, states in) before any deadline."""
     from cloth_bench_ros.runtime import (
         deserialize_message,
         PointCloud2,
