@@ -5,6 +5,7 @@ import math
 
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.studies.direct import run_direct
+from cloth_bench_ros.studies.objective import evaluate, Trial
 from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
 import pytest
 
@@ -76,3 +77,22 @@ def test_direct_cell_equals_the_node_graph(name, hanging_bag, tmp_path):
 def test_the_direct_path_refuses_what_needs_the_node_graph(hanging_bag):
     with pytest.raises(ValueError, match='realtime pacing'):
         run_direct(RunConfig(bag=hanging_bag, grid=GRID, pacing='realtime'))
+
+
+def test_an_identification_trial_scores_as_a_run(hanging_bag):
+    """Identification's objective starts, rounds and scores a trial as the run of its cell."""
+    params = {'damping': 0.5}
+    trial = Trial(
+        engine='mujoco',
+        cloth='towel',
+        primitive='dynamic',
+        bag=str(hanging_bag),
+        params=tuple(sorted(params.items())),
+        rate_hz=100.0,
+        grid=GRID,
+    )
+    scored = evaluate(trial)
+    run = run_direct(RunConfig(bag=hanging_bag, grid=GRID, engine_params={'mujoco': params}))
+    metrics = run['engines']['mujoco']
+    assert scored['status'] == 'ok' and scored['frames'] == metrics['frames_in_window'] > 0
+    assert (scored['CD'], scored['HD']) == (metrics['CD_d'], metrics['HD_d'])

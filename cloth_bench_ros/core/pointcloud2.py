@@ -112,6 +112,11 @@ def read_xyz(cloud: Any) -> np.ndarray:
     return out
 
 
+def as_carried(points: np.ndarray) -> np.ndarray:
+    """Return points as a PointCloud2 of float32 x, y, z carries them, read back as float64."""
+    return np.asarray(points).astype(np.float32).reshape(-1, 3).astype(np.float64)
+
+
 def drop_nan(points: np.ndarray) -> tuple[np.ndarray, int]:
     """Points whose three coordinates are finite, and how many were dropped."""
     keep = np.isfinite(points).all(axis=1)

@@ -166,6 +166,18 @@ class ClothEngine(abc.ABC):
         )
         return self._vertices
 
+    def start(self, seed: int, left_xyz: np.ndarray, right_xyz: np.ndarray) -> np.ndarray:
+        """
+        Reset, take one throwaway step, reset again; return the state at the first target.
+
+        Every run starts this way (the simulator node, the direct study path, identification):
+        the step pays an engine's first-call costs before any deadline, and all of them start
+        from the same state.
+        """
+        self.reset(seed, left_xyz, right_xyz)
+        self.step(left_xyz, right_xyz)
+        return self.reset(seed, left_xyz, right_xyz)
+
     def step(self, left_xyz: np.ndarray, right_xyz: np.ndarray) -> np.ndarray:
         """Advance dt with the grippers moved to the targets; the vertices (n, 3) after it."""
         if self._vertices is None:

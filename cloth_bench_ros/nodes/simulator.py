@@ -221,10 +221,7 @@ class Simulator(Node):
         The reset at the trajectory's first target, one throwaway step (first-call costs), the
         reset again.
         """
-        left, right = self.targets.left[0], self.targets.right[0]
-        self.engine.reset(self.seed, left, right)
-        self.engine.step(left, right)
-        vertices = self.engine.reset(self.seed, left, right)
+        vertices = self.engine.start(self.seed, self.targets.left[0], self.targets.right[0])
         cloud, status = self.messages.fill(
             self.messages.cloud.header.stamp, vertices, 0, 0.0, None, 0
         )

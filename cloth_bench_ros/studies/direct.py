@@ -18,7 +18,7 @@ from typing import Any
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
-from cloth_bench_ros.core.pointcloud2 import drop_nan
+from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
@@ -31,13 +31,7 @@ from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.base import ClothEngine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.studies.run_config import RunConfig
-import numpy as np
 import yaml
-
-
-def as_carried(points: np.ndarray) -> np.ndarray:
-    """Return points as a PointCloud2 of float32 x, y, z carries them, read back as float64."""
-    return np.asarray(points).astype(np.float32).reshape(-1, 3).astype(np.float64)
 
 
 def _engine(config: RunConfig, name: str) -> ClothEngine:
@@ -50,14 +44,6 @@ def _engine(config: RunConfig, name: str) -> ClothEngine:
     return make_engine(name, float(config.rate_hz), {**preset, **overrides}, grid)
 
 
-def _warm_up(engine: ClothEngine, targets: GripperTargets, seed: int) -> np.ndarray:
-    """Return the state at target 0 after the simulator node's warm-up (reset, step, reset)."""
-    left, right = targets.left[0], targets.right[0]
-    engine.reset(seed, left, right)
-    engine.step(left, right)
-    return engine.reset(seed, left, right)
-
-
 def _step_engines(
     core: OnlineEvaluator, engines: dict[str, ClothEngine], targets: GripperTargets, seed: int
 ) -> None:
@@ -67,7 +53,8 @@ def _step_engines(
     The engines advance together so that the evaluator's bounded state buffers hold what the
     pending real frames need, as in the node graph.
     """
-    first = {name: _warm_up(engine, targets, seed) for name, engine in engines.items()}
+    left, right = targets.left[0], targets.right[0]
+    first = {name: engine.start(seed, left, right) for name, engine in engines.items()}
     clock = time.perf_counter
     moves = zip(range(len(targets)), targets.left, targets.right)
     for k, left, right in moves:

@@ -88,6 +88,7 @@ def evaluate(trial: Trial) -> dict:
     engine = None
     try:
         from cloth_bench_ros.core.evaluation import OnlineEvaluator
+        from cloth_bench_ros.core.pointcloud2 import as_carried
         from cloth_bench_ros.core.trajectory import Primitive
         from cloth_bench_ros.core.scene import ClothGrid, SETTLE_DURATION
         from cloth_bench_ros.core.trajectory import full_targets
@@ -116,7 +117,7 @@ def evaluate(trial: Trial) -> dict:
         for k in range(len(targets)):
             t0 = time.perf_counter()
             if k == 0:
-                vertices = engine.reset(trial.seed, targets.left[0], targets.right[0])
+                vertices = engine.start(trial.seed, targets.left[0], targets.right[0])
             else:
                 vertices = engine.step(targets.left[k], targets.right[k])
             stamp = targets.stamp_ns(k)
@@ -129,7 +130,7 @@ def evaluate(trial: Trial) -> dict:
                 d is not None,
                 d.reason if d else '',
             )
-            core.add_state(trial.engine, stamp, np.array(vertices, dtype=float))
+            core.add_state(trial.engine, stamp, as_carried(vertices))  # as a run carries it
             if d is not None or stamp >= last:
                 break
         core.finish()
