@@ -344,7 +344,7 @@ def _dataset(root: Path, folder: str = 'cotton_rag_0', primitive: str = 'quasi_s
 def test_import_refuses_malformed_cloud_headers(capsys, tmp_path, name, edit, words):
     cloud = _dataset(tmp_path / 'data')
     pts = np.arange(9, dtype=float).reshape(3, 3)
-    (write_ply if name.endswith('.ply') else lambda p, x: write_pcd(p, x, ascii=False))(
+    (write_ply if name.endswith('.ply') else lambda p, x: write_pcd(p, x, as_text=False))(
         cloud / name, pts
     )
     (cloud / name).write_bytes(edit((cloud / name).read_bytes()))
