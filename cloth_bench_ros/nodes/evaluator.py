@@ -251,6 +251,32 @@ class Evaluator(Node):
             )
             self.metrics_pub.publish(DiagnosticArray(status=[status]))
 
+    def waiting_for(self) -> list[str]:
+        """Return what the run still waits for before it can end (empty once it can)."""
+        missing = []
+        if not self.trial_received:
+            missing.append("the recorder's trial announcement")
+        elif self.expected_real is not None and not self.expected_real <= self.received_real:
+            lost = self.expected_real - self.received_real
+            missing.append(
+                f'{len(lost)} of {len(self.expected_real)} announced real frames'
+                f' (the first at {min(lost) / 1e9:.3f} s)'
+            )
+        for name, e in self.core.engines.items():
+            if min(e.last_stamp, e.last_step_stamp) < self.final_stamp:
+                missing.append(
+                    f"{name}'s state and step at the last target (so far"
+                    f' {max(e.last_stamp, 0) / 1e9:.3f} s and'
+                    f' {max(e.last_step_stamp, 0) / 1e9:.3f} s of {self.final_stamp / 1e9:.3f} s)'
+                )
+        return missing
+
+    def close(self) -> None:
+        """Say what the run was waiting for when it is stopped before its end (signal or hang)."""
+        if not self.done:
+            waiting = '; '.join(self.waiting_for()) or 'nothing more'
+            self.get_logger().warning(f'stopped before the run ended, waiting for {waiting}')
+
     def finish(self) -> None:
         """Close the run: summary on `metrics`, report files, done."""
         if self.done:

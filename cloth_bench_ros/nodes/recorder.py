@@ -114,7 +114,11 @@ class Recorder(Node):
         self.plan = plan_replay(self.bag, options, partial(self.reference_motion, options, nx, nz))
         self.topic = self.plan.topic
         self.published = 0
-        self.cloud_pub = self.create_publisher(PointCloud2, 'real/cloud', make_qos(10))
+        # Keep-all, as the evaluator's reader: a keep-last writer drops the frames a slow reader
+        # has not acknowledged yet (DDS), and the evaluator waits for every announced frame.
+        self.cloud_pub = self.create_publisher(
+            PointCloud2, 'real/cloud', make_qos(100, keep_all=True)
+        )
         self.trial_pub = self.create_publisher(
             DiagnosticArray, 'real/trial', make_qos(1, latched=True)
         )
