@@ -269,8 +269,10 @@ def test_declared_types_undeclared_and_uninitialised(context):
     node.declare_parameter('typed', ParameterType.DOUBLE)
     with pytest.raises(ParameterUninitializedException):
         node.get_parameter('typed')
-    with pytest.raises(ValueError, match='NOT_SET'):
-        node.declare_parameter('no_default')
+    with pytest.warns(UserWarning, match='only providing its name is deprecated'):
+        declared = node.declare_parameter('no_default')  # Jazzy: dynamic typing, a warning
+    assert declared.type_ == ParameterType.NOT_SET
+    assert node.get_parameter('no_default').value is None
     assert (
         node.declare_parameter('anything', None, ParameterDescriptor(dynamic_typing=True)).value
         is None
@@ -372,7 +374,9 @@ def test_remaps_are_applied_as_rcl_applies_them(context):
 @pytest.mark.parametrize(
     'args, error',
     [
-        (['-r', 'rosservice://a:=b'], RCLInvalidROSArgsError),
+        (['-r', '/a//b:=c'], RCLInvalidROSArgsError),
+        (['--log-level', 'bogus'], RCLInvalidROSArgsError),
+        (['--log-level', ':=warn'], RCLInvalidROSArgsError),
         (['-r', '/a/*:=/b'], RCLInvalidROSArgsError),
         (['-r', 'no_separator'], RCLInvalidROSArgsError),
         (['-r', '__ns:=relative'], RCLInvalidROSArgsError),

@@ -209,8 +209,7 @@ class Simulator(Node):
         )
         # Subscribed last, once start-up is done, so the first target finds the engine ready.
         # Keep-last 1, as a controller's command topic: a simulator that falls behind steps to the
-        # newest target and counts the ones it never saw (under transports that drop old samples:
-        # DDS and rclpy).
+        # newest target and counts the ones it never saw (every transport keeps only the newest).
         self.create_subscription(PoseArray, 'targets', self.on_target, make_qos(1))
         self.get_logger().info(f'{self.engine_name} ready; ' + '; '.join(self.realtime.lines()))
 

@@ -3,8 +3,8 @@ The `--ros-args` command line as rcl parses it: parameters, parameter files, rem
 
 Follows rcl/src/rcl/arguments.c (flags, order, unknown arguments), rcl/src/rcl/remap.c (first
 matching rule wins, node-specific rules, topic rules matched on fully qualified names) and
-rcl/src/rcl/expand_topic_name.c. What the embedded runtime cannot honour (service remaps,
-wildcards in a remap) is refused with one line rather than ignored.
+rcl/src/rcl/expand_topic_name.c and validate_topic_name.c. A service remap is accepted (the
+embedded runtime has no services for it to apply to); wildcards in a remap are refused, as in rcl.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ _TOPIC = re.compile(
     rf'(~|~/{_TOKEN}(/{_TOKEN})*|/?({_TOKEN}|\{{node\}})(/({_TOKEN}|\{{node\}}))*|/)'
 )
 _FLAGS_WITH_VALUE = {'--log-level', '--log-file-name', '--log-config-file', '--enclave', '-e'}
+_LOG_SEVERITIES = {'UNSET': 0, 'DEBUG': 10, 'INFO': 20, 'WARN': 30, 'ERROR': 40, 'FATAL': 50}
 _LOG_SWITCHES = {
     f'--{state}-{what}-logs'
     for state in ('enable', 'disable')
@@ -35,11 +36,12 @@ _LOG_SWITCHES = {
 
 @dataclass
 class RemapRule:
-    """`[node:]match:=replacement`; match is `__ns`, `__node` or a topic name."""
+    """`[node:][rostopic://|rosservice://]match:=replacement`; match: `__ns`, `__node`, a name."""
 
     node: str | None
     match: str
     replacement: str
+    applies_to: str = 'any'  # 'topic' or 'service' with the URL prefix, else both
 
 
 @dataclass
@@ -48,6 +50,23 @@ class RosArguments:
 
     overrides: Overrides = field(default_factory=Overrides)
     remaps: list[RemapRule] = field(default_factory=list)
+    log_levels: dict[str, int] = field(default_factory=dict)  # logger ('' for all) -> level
+
+
+def _log_level(text: str, levels: dict[str, int]) -> None:
+    """`--log-level [logger:=]severity` as rcl's arguments.c parses it (severity in any case)."""
+    name, sep, severity = text.rpartition(':=')
+    if sep and not name:
+        raise RCLInvalidROSArgsError(
+            f"Couldn't parse log level: '--log-level {text}'. "
+            'Error: Argument has an invalid logger item that name is empty'
+        )
+    if severity.upper() not in _LOG_SEVERITIES:
+        raise RCLInvalidROSArgsError(
+            f"Couldn't parse log level: '--log-level {text}'. "
+            'Error: Argument does not use a valid severity level'
+        )
+    levels[name] = _LOG_SEVERITIES[severity.upper()]
 
 
 def _remap_rule(text: str) -> RemapRule:
@@ -55,15 +74,11 @@ def _remap_rule(text: str) -> RemapRule:
     head, sep, replacement = text.partition(':=')
     if not sep:
         raise bad
-    if head.startswith('rosservice://') or head.startswith('rostopic://'):
-        if head.startswith('rosservice://'):
-            raise RCLInvalidROSArgsError(
-                f"remap rule '-r {text}': the embedded runtime has no services"
-            )
-        head = head[len('rostopic://'):]
-    node, colon, match = head.rpartition(':')
-    if colon and not re.fullmatch(_TOKEN, node):
+    parts = re.fullmatch(rf'(?:({_TOKEN}):(?!//))?(?:(rostopic|rosservice)://)?(.*)', head)
+    if parts is None:
         raise bad
+    node, scheme, match = parts.groups()
+    applies_to = {'rostopic': 'topic', 'rosservice': 'service', None: 'any'}[scheme]
     if '*' in match:
         raise RCLInvalidROSArgsError(
             f"remap rule '-r {text}': wildcards in remap rules are not supported"
@@ -77,7 +92,7 @@ def _remap_rule(text: str) -> RemapRule:
             raise bad
     elif not (_TOPIC.fullmatch(match) and _TOPIC.fullmatch(replacement)):
         raise bad
-    return RemapRule(node or None, match, replacement)
+    return RemapRule(node or None, match, replacement, applies_to)
 
 
 def parse_ros_args(args: list[str] | None) -> RosArguments:
@@ -108,6 +123,8 @@ def parse_ros_args(args: list[str] | None) -> RosArguments:
                 parsed.remaps.append(_remap_rule(value))
             elif arg == '--params-file':
                 load_params_file(value, parsed.overrides)
+            elif arg == '--log-level':
+                _log_level(value, parsed.log_levels)
             i += 2
         elif arg in _LOG_SWITCHES:
             i += 1
@@ -121,15 +138,70 @@ def parse_ros_args(args: list[str] | None) -> RosArguments:
 
 def expand_topic_name(name: str, node_name: str, namespace: str) -> str:
     """Return a topic name made fully qualified as rcl_expand_topic_name does."""
-    name = name.replace('{node}', node_name)
     base = namespace.rstrip('/')
-    if name == '~':
-        return f'{base}/{node_name}'
-    if name.startswith('~/'):
-        return f'{base}/{node_name}/{name[2:]}'
-    if name.startswith('/'):
-        return name
-    return f'{base}/{name}'
+    if name.startswith('~'):
+        name = f'{base}/{node_name}' + name[1:]
+
+    def substitute(match: re.Match) -> str:
+        key = match.group(1)
+        if key == 'node':
+            return node_name
+        if key in ('ns', 'namespace'):
+            return base
+        raise ValueError(f"topic name '{name}' is invalid: unknown substitution: {{{key}}}")
+
+    name = re.sub(r'\{([^{}]*)\}', substitute, name)
+    return name if name.startswith('/') else f'{base}/{name}'
+
+
+class NameValidationException(Exception):
+    """rclpy.exceptions.NameValidationException: an invalid node name, namespace or topic."""
+
+
+class InvalidTopicNameException(NameValidationException):
+    """A topic name rcl_validate_topic_name or rmw_validate_full_topic_name refuses."""
+
+    def __init__(self, name: str, reason: str, index: int) -> None:
+        caret = ' ' * index + '^'
+        super().__init__(f"Invalid topic name: topic name {reason}:\n  '{name}'\n   {caret}")
+
+
+def _topic_name_problem(name: str, extra: str) -> tuple[str, int] | None:
+    """Return (why, where) the first rule a topic name breaks, chars `extra` allowed too."""
+    if not name:
+        return 'must not be empty string', 0
+    if name.endswith('/') and name != '/':
+        return 'must not end with a forward slash', len(name) - 1
+    allowed = set(extra) | {'_', '/'}
+    shown = ', '.join(f"'{c}'" for c in ('_', *extra)) if extra else "'_'"
+    for index, char in enumerate(name):
+        if not (char.isascii() and char.isalnum()) and char not in allowed:
+            return f'must not contain characters other than alphanumerics, {shown}', index
+    if '~' in name[1:]:
+        return "must not have tilde '~' unless it is the first character", name.index('~', 1)
+    if '//' in name:
+        return "must not contain repeated '/'", name.index('//') + 1
+    for match in re.finditer(r'(?:^|/)(\d)', name):
+        return 'token must not start with a number', match.start(1)
+    return None
+
+
+def validate_topic_name(name: str) -> None:
+    """rcl_validate_topic_name's rules for a name as given (rclpy: InvalidTopicNameException)."""
+    problem = _topic_name_problem(name, '~{}')
+    if problem is None and name.count('{') != name.count('}'):
+        problem = 'must not have unmatched curly braces', name.find('{')
+    if problem is not None:
+        raise InvalidTopicNameException(name, *problem)
+
+
+def validate_full_topic_name(name: str) -> None:
+    """rmw_validate_full_topic_name's rules for an expanded name (absolute, tokens only)."""
+    problem = _topic_name_problem(name, '')
+    if problem is None and not name.startswith('/'):
+        problem = 'must be absolute, it must lead with a forward slash', 0
+    if problem is not None:
+        raise InvalidTopicNameException(name, *problem)
 
 
 def _first(rules: list[RemapRule], match: str, node: str) -> RemapRule | None:
@@ -153,13 +225,11 @@ def remap_topic_name(rules: list[RemapRule], topic: str, node_name: str, namespa
     for rule in rules:
         if rule.match in ('__node', '__ns') or rule.node not in (None, node_name):
             continue
+        if rule.applies_to == 'service':
+            continue
         if expand_topic_name(rule.match, node_name, namespace) == topic:
             return expand_topic_name(rule.replacement, node_name, namespace)
     return topic
-
-
-class NameValidationException(Exception):
-    """rclpy.exceptions.NameValidationException: an invalid node name or namespace."""
 
 
 class InvalidNodeNameException(NameValidationException):

@@ -26,8 +26,8 @@ and a node with use_sim_time follows /clock. What it provides (and nothing more;
 - rclpy.serialization.serialize_message / deserialize_message (CDR through rosbags)
 - the --ros-args command line as rcl parses it: -p, --params-file, -r remaps (runtime/arguments.py)
 
-Queues are unbounded (intra-process delivery loses nothing); QoS depth only bounds the
-transient-local history.
+QoS as DDS applies it, on either transport: incompatible writers and readers do not match, a
+keep-last reader keeps its newest `depth` messages, a keep-all reader loses nothing.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from collections import deque
 import dataclasses
 import logging
 from typing import Any, Callable
+import warnings
 
 from cloth_bench_ros.data import messages as cdr
 from cloth_bench_ros.runtime import messages
@@ -46,8 +47,10 @@ from cloth_bench_ros.runtime.arguments import (
     remap_node_name,
     remap_topic_name,
     RosArguments,
+    validate_full_topic_name,
     validate_namespace,
     validate_node_name,
+    validate_topic_name,
 )
 from cloth_bench_ros.runtime.clock import (
     Clock,
@@ -109,6 +112,7 @@ class Context:
         self.queue: deque[tuple['Subscription', Any]] = deque()
         self.nodes: list['Node'] = []
         self.transport: Any = IntraProcessTransport(self)
+        self.topic_types: dict[str, tuple[str, int]] = {}  # topic -> (type, endpoints using it)
 
     def init(
         self,
@@ -125,9 +129,36 @@ class Context:
     def ok(self) -> bool:
         return self._ok
 
+    def claim_topic(self, topic: str, msg_type: Any, kind: str) -> None:
+        """Count an endpoint on `topic`; a second type is refused, as rmw refuses it."""
+        typename = msg_type.__msgtype__
+        known, count = self.topic_types.get(topic, (typename, 0))
+        if known != typename:
+            raise RCLError(
+                f'Failed to create {kind}: create_{kind}() called for existing topic name '
+                f'{topic} with incompatible type {typename} (the topic has {known})'
+            )
+        self.topic_types[topic] = (typename, count + 1)
+
+    def release_topic(self, topic: str) -> None:
+        typename, count = self.topic_types.get(topic, ('', 1))
+        if count > 1:
+            self.topic_types[topic] = (typename, count - 1)
+        else:
+            self.topic_types.pop(topic, None)
+
+    def enqueue(self, sub: 'Subscription', msg: Any) -> None:
+        """Queue a message for `sub`; a keep-last reader keeps only its newest `depth` ones."""
+        if sub.qos.history == HistoryPolicy.KEEP_LAST and sub._queued >= max(1, sub.qos.depth):
+            sub._dropped += 1  # the oldest one still queued for it is skipped when reached
+        else:
+            sub._queued += 1
+        self.queue.append((sub, msg))
+
     def shutdown(self) -> None:
         self._ok = False
         self.queue.clear()
+        self.topic_types.clear()
         self.transport.shutdown()
         self.transport = IntraProcessTransport(self)
 
@@ -143,6 +174,11 @@ def init(
 ) -> None:
     """rclpy.init; `transport` ('intra' or 'dds') is the embedded runtime's own addition."""
     (context or _default_context).init(args, domain_id=domain_id, transport=transport)
+
+
+def create_node(node_name: str, *, context: Context | None = None, **kwargs: Any) -> 'Node':
+    """rclpy.create_node."""
+    return Node(node_name, context=context, **kwargs)
 
 
 def ok(context: Context | None = None) -> bool:
@@ -182,6 +218,7 @@ class Publisher:
 
     def destroy(self) -> None:
         self.node.context.transport.remove_publisher(self)
+        self.node.context.release_topic(self.topic_name)
 
 
 class Subscription:
@@ -195,6 +232,8 @@ class Subscription:
             callback,
             qos,
         )
+        self._queued = 0  # its messages in the context's queue
+        self._dropped = 0  # of those, how many a keep-last depth has pushed out
 
     def get_publisher_count(self) -> int:
         """Return publishers matched with this subscription (rmw: the reader's matched writers)."""
@@ -202,6 +241,7 @@ class Subscription:
 
     def destroy(self) -> None:
         self.node.context.transport.remove_subscription(self)
+        self.node.context.release_topic(self.topic_name)
 
 
 class Node:
@@ -244,6 +284,11 @@ class Node:
         self._publishers: list[Publisher] = []
         self._clock = Clock(clock_type=ClockType.ROS_TIME)
         self._logger = _Logger(logging.getLogger(f'cloth_bench_ros.{self._name}'), self._name)
+        rcl_logger = full.lstrip('/').replace('/', '.')
+        levels = {**global_args.log_levels, **local.log_levels}
+        level = levels.get(rcl_logger, levels.get(''))
+        if level is not None:  # --log-level [logger:=]severity, as rcl sets a node's logger
+            self._logger._logger.setLevel(level)
         self.context.nodes.append(self)
         self.context.transport.graph_changed(self)
         # rclpy's TimeSource: use_sim_time declared as a bool; when true, /clock drives the clock.
@@ -266,7 +311,9 @@ class Node:
 
     def resolve_topic_name(self, topic: str, *, only_expand: bool = False) -> str:
         """Return the topic expanded and, unless only_expand, remapped (rcl_node_resolve_name)."""
+        validate_topic_name(topic)
         full = expand_topic_name(topic, self._name, self._namespace)
+        validate_full_topic_name(full)
         return (
             full
             if only_expand
@@ -297,6 +344,16 @@ class Node:
                     '`dynamic_typing=True` is not allowed when the parameter type is provided'
                 )
             descriptor.type, value = int(value), None
+        elif value is None and not descriptor.dynamic_typing:
+            warnings.warn(  # rclpy (Jazzy): deprecated, declared with dynamic typing
+                f"when declaring parameter named '{name}', declaring a parameter only providing "
+                'its name is deprecated. You have to either:\n\t- Pass a name and a default '
+                'value different to "PARAMETER NOT SET" (and optionally a descriptor).\n\t- Pass '
+                'a name and a parameter type.\n\t- Pass a name and a descriptor with '
+                '`dynamic_typing=True',
+                stacklevel=2,
+            )
+            descriptor.dynamic_typing = True
         elif not descriptor.dynamic_typing:
             descriptor.type = int(ParameterType.from_parameter_value(value))
             if descriptor.type == ParameterType.NOT_SET:
@@ -338,6 +395,7 @@ class Node:
         self, msg_type: Any, topic: str, qos_profile: QoSProfile | int
     ) -> Publisher:
         pub = Publisher(self, msg_type, self.resolve_topic_name(topic), as_profile(qos_profile))
+        self.context.claim_topic(pub.topic_name, msg_type, 'publisher')
         self._publishers.append(pub)
         self.context.transport.add_publisher(pub)
         return pub
@@ -348,6 +406,7 @@ class Node:
         sub = Subscription(
             self, msg_type, self.resolve_topic_name(topic), callback, as_profile(qos_profile)
         )
+        self.context.claim_topic(sub.topic_name, msg_type, 'subscription')
         self._subscriptions.append(sub)
         self.context.transport.add_subscription(sub)
         return sub
@@ -466,6 +525,10 @@ class SingleThreadedExecutor:
         for _ in range(len(queue)):
             sub, msg = queue.popleft()
             if sub.node in self.nodes:
+                if sub._dropped:  # pushed out by newer ones (keep-last depth)
+                    sub._dropped -= 1
+                    continue
+                sub._queued -= 1
                 sub.callback(msg)
                 return True
             if sub.node in self.context.nodes:

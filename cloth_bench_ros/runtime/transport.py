@@ -17,7 +17,7 @@ import os
 import time
 from typing import Any, Protocol
 
-from cloth_bench_ros.runtime.qos import DurabilityPolicy, QoSProfile
+from cloth_bench_ros.runtime.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 
 TRANSPORTS = ('intra', 'dds')
@@ -42,8 +42,27 @@ def transport_choice(default: str) -> str:
     return choice
 
 
+def compatible(writer: QoSProfile, reader: QoSProfile) -> bool:
+    """Return whether DDS matches a writer and a reader (the reader asks no more than offered)."""
+    return not (
+        (
+            writer.reliability == ReliabilityPolicy.BEST_EFFORT
+            and reader.reliability == ReliabilityPolicy.RELIABLE
+        )
+        or (
+            writer.durability == DurabilityPolicy.VOLATILE
+            and reader.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        )
+    )
+
+
 class IntraProcessTransport:
-    """Nodes of one context in one process: one FIFO, callbacks in publish order, nothing lost."""
+    """
+    Nodes of one context in one process: one FIFO, callbacks in publish order.
+
+    QoS as DDS applies it: a writer reaches only the readers it is compatible with, and a
+    keep-last reader keeps its newest `depth` messages (keep-all readers lose nothing).
+    """
 
     name = 'intra'
 
@@ -62,8 +81,9 @@ class IntraProcessTransport:
         self.context.subscriptions.setdefault(sub.topic_name, []).append(sub)
         if sub.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:  # late joiners get the history
             for pub in self.context.publishers.get(sub.topic_name, ()):
-                for msg in pub._history:
-                    self.context.queue.append((sub, msg))
+                if compatible(pub.qos, sub.qos):
+                    for msg in pub._history:
+                        self.context.enqueue(sub, msg)
 
     def remove_subscription(self, sub: Endpoint) -> None:
         subs = self.context.subscriptions.get(sub.topic_name, [])
@@ -74,13 +94,16 @@ class IntraProcessTransport:
         if pub.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:
             pub._history.append(msg)
         for sub in self.context.subscriptions.get(pub.topic_name, ()):
-            self.context.queue.append((sub, msg))
+            if compatible(pub.qos, sub.qos):
+                self.context.enqueue(sub, msg)
 
     def matched_subscriptions(self, pub: Endpoint) -> int:
-        return len(self.context.subscriptions.get(pub.topic_name, ()))
+        subs = self.context.subscriptions.get(pub.topic_name, ())
+        return sum(compatible(pub.qos, sub.qos) for sub in subs)
 
     def matched_publications(self, sub: Endpoint) -> int:
-        return len(self.context.publishers.get(sub.topic_name, ()))
+        pubs = self.context.publishers.get(sub.topic_name, ())
+        return sum(compatible(pub.qos, sub.qos) for pub in pubs)
 
     def endpoints(self, topic: str, kind: TopicEndpointTypeEnum) -> list[TopicEndpointInfo]:
         table = (

@@ -153,7 +153,7 @@ class DdsTransport:
         """Take every sample that arrived, in subscription order, into the context's queue."""
         if not self.waitset.wait(0):  # one call answers "anything at all?"
             return
-        queue = self.context.queue
+        enqueue = self.context.enqueue
         for sub, (reader, _) in list(self.readers.items()):
             ros_type = sub.msg_type.__msgtype__
             while True:
@@ -162,7 +162,7 @@ class DdsTransport:
                     raise DDSException(samples, f'taking from {sub.topic_name}')
                 for payload, info in samples:
                     if info.valid_data:
-                        queue.append((sub, cdr.deserialize(payload, ros_type)))
+                        enqueue(sub, cdr.deserialize(payload, ros_type))
                 if len(samples) < _TAKE_BATCH:
                     break
 

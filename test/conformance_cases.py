@@ -1,0 +1,348 @@
+"""
+Strictness cases run the same way under real rclpy and the embedded runtime; prints their outcomes.
+
+`python test/conformance_cases.py` prints one JSON object: case name -> outcome (a value, or
+`error: <class>` with rclpy's exception class). test_conformance.py runs it under each runtime
+and compares. Written only against the API the nodes use (cloth_bench_ros.runtime), so the same
+code runs on either runtime.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from typing import Any, Callable
+import warnings
+
+from cloth_bench_ros.runtime import (
+    DiagnosticArray,
+    DurabilityPolicy,
+    EMBEDDED,
+    HistoryPolicy,
+    Parameter,
+    ParameterDescriptor,
+    PoseArray,
+    QoSProfile,
+    rclpy,
+    ReliabilityPolicy,
+    SingleThreadedExecutor,
+)
+
+# Exception classes compared by name, most specific first (rclpy's and the embedded runtime's).
+_CLASSES = (
+    'InvalidTopicNameException',
+    'InvalidNodeNameException',
+    'InvalidNamespaceException',
+    'ParameterUninitializedException',
+    'ParameterNotDeclaredException',
+    'ParameterAlreadyDeclaredException',
+    'InvalidParameterTypeException',
+    'InvalidParameterException',
+    'UnknownROSArgsError',
+    'RCLError',
+    'TypeError',
+    'ValueError',
+    'RuntimeError',
+)
+CASES: dict[str, Callable[[], Any]] = {}
+
+
+def case(name: str) -> Callable:
+    def register(function: Callable[[], Any]) -> Callable[[], Any]:
+        CASES[name] = function
+        return function
+
+    return register
+
+
+def _error(exc: BaseException) -> str:
+    names = [cls.__name__ for cls in type(exc).__mro__]
+    return 'error: ' + next((n for n in _CLASSES if n in names), names[0])
+
+
+class _Graph:
+    """One context with one node, shut down on exit."""
+
+    def __init__(self, args: list[str] | None = None, name: str = 'probe') -> None:
+        self.context = rclpy.Context()
+        rclpy.init(args=['prog', '--ros-args', *(args or [])], context=self.context)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_for(self, seconds: float, until: Callable[[], bool] = lambda: False) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end and not until():
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def __enter__(self) -> '_Graph':
+        return self
+
+    def __exit__(self, *_: Any) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+# --- names: rcl_validate_topic_name, rcl_expand_topic_name, rmw_validate_full_topic_name ----
+
+TOPIC_NAMES = [
+    '1abc',
+    '/a//b',
+    '/a/',
+    'a b',
+    '',
+    '~',
+    '~/x',
+    '~x',
+    '{node}/x',
+    '/{node}',
+    'a/1b',
+    '/_a',
+    'a__b',
+    '{bad}',
+    '/a/~',
+    'a/{node}',
+    'a-b',
+    'ns/{node}/x',
+]
+
+for _topic in TOPIC_NAMES:
+
+    @case(f'topic name {_topic!r}')
+    def _publisher_topic(topic: str = _topic) -> str:
+        with _Graph(name='probe') as graph:
+            return graph.node.create_publisher(PoseArray, topic, 10).topic_name
+
+
+@case('subscription topic name 1abc')
+def _subscription_topic() -> str:
+    with _Graph() as graph:
+        return graph.node.create_subscription(PoseArray, '1abc', lambda m: None, 10).topic_name
+
+
+# --- the --ros-args command line: rcl's arguments.c --------------------------------------------
+
+ROS_ARGS = [
+    ['--log-level', 'bogus'],
+    ['--log-level', 'DEBUG'],
+    ['--log-level', 'debug'],
+    ['--log-level', 'Warning'],
+    ['--log-level', 'unset'],
+    ['--log-level', 'probe:=warn'],
+    ['--log-level', 'probe:=bogus'],
+    ['--log-level', ':=warn'],
+    ['--log-level', 'a.b:=info'],
+    ['--log-level'],
+    ['-r', 'rosservice://a:=b'],
+    ['-r', 'rostopic://a:=b'],
+    ['-r', 'probe:a:=b'],
+    ['-r', '/a//b:=c'],
+    ['-r', '1a:=b'],
+    ['-r', 'a:=/b/'],
+    ['-r', '~/a:=b'],
+    ['-r', 'a/*:=b'],
+    ['-r', 'no_separator'],
+    ['-r', '__ns:=relative'],
+    ['-p', 'name:='],
+    ['-p', 'p:={a: 1}'],
+    ['-p', 'p:=[1, a]'],
+    ['--params-file', '/nonexistent/params.yaml'],
+    ['--unknown-flag'],
+    ['--log-file-name', 'x'],
+    ['--enclave', '/x'],
+    ['--enable-rosout-logs'],
+    ['--disable-stdout-logs'],
+]
+
+for _args in ROS_ARGS:
+
+    @case(f'arguments {" ".join(_args)}')
+    def _arguments(args: list[str] = _args) -> str:
+        with _Graph(args):
+            return 'ok'
+
+
+# --- one type per topic in a context (rmw refuses a second type for a topic name) ----------
+
+
+@case('two types on one topic, one node')
+def _two_types_one_node() -> str:
+    with _Graph() as graph:
+        graph.node.create_publisher(PoseArray, '/same', 10)
+        graph.node.create_publisher(DiagnosticArray, '/same', 10)
+        return 'ok'
+
+
+@case('two types on one topic, subscription first, two nodes')
+def _two_types_two_nodes() -> str:
+    with _Graph() as graph:
+        other = rclpy.create_node('other', context=graph.context)
+        other.create_subscription(DiagnosticArray, '/same', lambda m: None, 10)
+        try:
+            graph.node.create_publisher(PoseArray, '/same', 10)
+        finally:
+            other.destroy_node()
+        return 'ok'
+
+
+@case('the same type on one topic twice')
+def _same_type_twice() -> int:
+    with _Graph() as graph:
+        graph.node.create_publisher(PoseArray, '/same', 10)
+        graph.node.create_subscription(PoseArray, '/same', lambda m: None, 10)
+        return graph.node.count_publishers('/same')
+
+
+# --- parameters: rclpy's declare_parameter ---------------------------------------------------
+
+
+@case('declare_parameter without a default')
+def _declare_without_default() -> list:
+    with _Graph() as graph, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter('always')
+        declared = graph.node.declare_parameter('no_default')
+        got = graph.node.get_parameter('no_default')
+        return [
+            declared.type_.name,
+            got.value,
+            graph.node.describe_parameter('no_default').dynamic_typing,
+            sorted({w.category.__name__ for w in caught}),
+        ]
+
+
+@case('declare_parameter without a default, overridden')
+def _declare_without_default_overridden() -> list:
+    with _Graph(['-p', 'no_default:=3']) as graph, warnings.catch_warnings():
+        warnings.simplefilter('ignore')
+        declared = graph.node.declare_parameter('no_default')
+        return [declared.type_.name, declared.value]
+
+
+@case('declare_parameter with a type only, then get')
+def _declare_type_only() -> Any:
+    with _Graph() as graph:
+        graph.node.declare_parameter('typed', Parameter.Type.DOUBLE)
+        return graph.node.get_parameter('typed').value
+
+
+@case('declare_parameter dynamic typing with no value')
+def _declare_dynamic_none() -> Any:
+    with _Graph() as graph:
+        return graph.node.declare_parameter(
+            'anything', None, ParameterDescriptor(dynamic_typing=True)
+        ).value
+
+
+@case('declare_parameter integer override for a double')
+def _integer_for_double() -> Any:
+    with _Graph(['-p', 'rate_hz:=1000']) as graph:
+        return graph.node.declare_parameter('rate_hz', 100.0).value
+
+
+@case('use_sim_time override not a bool')
+def _use_sim_time_int() -> str:
+    with _Graph(['-p', 'use_sim_time:=1']):
+        return 'ok'
+
+
+# --- QoS: matching and what a reader keeps ---------------------------------------------------
+
+
+def _qos(
+    reliability: Any = ReliabilityPolicy.RELIABLE,
+    durability: Any = DurabilityPolicy.VOLATILE,
+    depth: int = 10,
+    history: Any = HistoryPolicy.KEEP_LAST,
+) -> Any:
+    return QoSProfile(depth=depth, reliability=reliability, durability=durability, history=history)
+
+
+def _delivery(writer: Any, reader: Any, published_before_reader: bool = False) -> dict:
+    """Five messages through one writer/reader pair: matched counts and what the reader got."""
+    with _Graph() as graph:
+        got: list[int] = []
+        pub = graph.node.create_publisher(PoseArray, '/qos', writer)
+
+        def send() -> None:
+            for i in range(5):
+                msg = PoseArray()
+                msg.header.frame_id = str(i)
+                pub.publish(msg)
+
+        if published_before_reader:
+            send()
+        sub = graph.node.create_subscription(
+            PoseArray, '/qos', lambda m: got.append(int(m.header.frame_id)), reader
+        )
+        graph.spin_for(1.0, until=lambda: pub.get_subscription_count() > 0)
+        if published_before_reader:
+            graph.spin_for(0.2)  # let a late joiner's history arrive (DDS)
+        matched = [pub.get_subscription_count(), sub.get_publisher_count()]
+        if not published_before_reader:
+            send()
+        graph.spin_for(1.0, until=lambda: len(got) == 5)
+        graph.spin_for(0.2)
+        in_graph = graph.node.count_subscribers('/qos')
+        return {'matched': matched, 'received': got, 'in graph': in_graph}
+
+
+QOS_CASES = {
+    'best effort writer, reliable reader': (_qos(ReliabilityPolicy.BEST_EFFORT), _qos(), False),
+    'reliable writer, best effort reader': (_qos(), _qos(ReliabilityPolicy.BEST_EFFORT), False),
+    'volatile writer, transient local reader': (
+        _qos(),
+        _qos(durability=DurabilityPolicy.TRANSIENT_LOCAL),
+        False,
+    ),
+    'transient local writer, volatile reader': (
+        _qos(durability=DurabilityPolicy.TRANSIENT_LOCAL),
+        _qos(),
+        False,
+    ),
+    'keep last 1 reader, five sent before a spin': (_qos(), _qos(depth=1), False),
+    'keep all reader of depth 1': (
+        _qos(history=HistoryPolicy.KEEP_ALL),
+        _qos(history=HistoryPolicy.KEEP_ALL, depth=1),
+        False,
+    ),
+    'late transient local reader, writer depth 3': (
+        _qos(durability=DurabilityPolicy.TRANSIENT_LOCAL, depth=3),
+        _qos(durability=DurabilityPolicy.TRANSIENT_LOCAL),
+        True,
+    ),
+    'late transient local reader of depth 1': (
+        _qos(durability=DurabilityPolicy.TRANSIENT_LOCAL, depth=3),
+        _qos(durability=DurabilityPolicy.TRANSIENT_LOCAL, depth=1),
+        True,
+    ),
+    'late volatile reader of a transient local writer': (
+        _qos(durability=DurabilityPolicy.TRANSIENT_LOCAL, depth=3),
+        _qos(),
+        True,
+    ),
+}
+
+for _label, (_writer, _reader, _late) in QOS_CASES.items():
+
+    @case(f'qos {_label}')
+    def _qos_case(writer: Any = _writer, reader: Any = _reader, late: bool = _late) -> dict:
+        return _delivery(writer, reader, late)
+
+
+def run(selected: list[str] | None = None) -> dict[str, Any]:
+    """Return every case's outcome (or those named in `selected`)."""
+    outcomes: dict[str, Any] = {'_runtime': 'embedded' if EMBEDDED else 'rclpy'}
+    for name, function in CASES.items():
+        if selected and name not in selected:
+            continue
+        try:
+            outcomes[name] = function()
+        except Exception as exc:  # noqa: B902 (every outcome is recorded, errors included)
+            outcomes[name] = _error(exc)
+    return outcomes
+
+
+if __name__ == '__main__':
+    print(json.dumps(run(sys.argv[1:] or None)))
