@@ -12,12 +12,18 @@ import time
 
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.nodes.common import node_keys
 from cloth_bench_ros.nodes.evaluator import Evaluator
 from cloth_bench_ros.nodes.recorder import Recorder
 from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
 from cloth_bench_ros.runtime import embedded as rclpy
 from cloth_bench_ros.runtime import make_qos
 from cloth_bench_ros.runtime import messages as M
+from cloth_bench_ros.runtime.topic_endpoint_info import (
+    TopicEndpointInfo,
+    TopicEndpointTypeEnum,
+    UNKNOWN_NODE,
+)
 import numpy as np
 import pytest
 
@@ -91,6 +97,27 @@ def test_lockstep_starts_when_every_named_simulator_is_there_not_when_enough_sub
     )
     _spin(executor, 20.0, until=lambda: tp.k == 0)
     assert tp.k == 0  # target 0 is out; the next waits for both engines' state 0
+
+
+def test_endpoints_of_nodes_not_known_yet_never_make_a_node_that_has_both():
+    """
+    An endpoint whose graph message has not come is `_NODE_NAME_UNKNOWN_` (rmw_dds_common).
+
+    A `targets` reader and a `mujoco/cloud` writer both unknown may belong to two different
+    nodes (or to a real node and a stranger): they must not count as one simulator.
+    """
+    kinds = TopicEndpointTypeEnum
+
+    def unknown(kind, topic_type):
+        return TopicEndpointInfo(*UNKNOWN_NODE, topic_type, kind)
+
+    readers = [unknown(kinds.SUBSCRIPTION, 'geometry_msgs/msg/PoseArray')]
+    writers = [
+        unknown(kinds.PUBLISHER, 'sensor_msgs/msg/PointCloud2'),
+        TopicEndpointInfo('simulator_mujoco', '/cloth_bench', 'sensor_msgs/msg/PointCloud2', 1),
+    ]
+    assert node_keys(readers) & node_keys(writers) == set()
+    assert node_keys(writers) == {('/cloth_bench', 'simulator_mujoco')}
 
 
 def _cloud(stamp_ns: int, points: np.ndarray):

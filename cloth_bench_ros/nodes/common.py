@@ -9,6 +9,7 @@ from typing import Callable, Iterable, Sequence
 
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.runtime import EMBEDDED, is_user_error, rclpy, SingleThreadedExecutor
+from cloth_bench_ros.runtime.topic_endpoint_info import UNKNOWN_NODE
 from cloth_bench_ros.runtime.transport import transport_choice
 
 NAMESPACE = 'cloth_bench'
@@ -55,8 +56,17 @@ def close_nodes(nodes: Sequence) -> None:
 
 
 def node_keys(infos: Iterable) -> set[tuple[str, str]]:
-    """(namespace, name) of the nodes behind a get_*_info_by_topic answer."""
-    return {(info.node_namespace, info.node_name) for info in infos}
+    """
+    Return (namespace, name) of the nodes behind a get_*_info_by_topic answer.
+
+    Endpoints whose node is not known yet (rmw's `_NODE_NAME_UNKNOWN_`) are left out: two of them
+    may belong to different nodes, so they never prove that one node has both.
+    """
+    return {
+        (info.node_namespace, info.node_name)
+        for info in infos
+        if (info.node_name, info.node_namespace) != UNKNOWN_NODE
+    }
 
 
 def publishers_matched(node, subscription) -> int:

@@ -7,6 +7,9 @@ import enum
 
 from cloth_bench_ros.runtime.qos import QoSProfile
 
+# What rmw_dds_common's graph cache (and so rclpy) names an endpoint whose node is not known yet.
+UNKNOWN_NODE = ('_NODE_NAME_UNKNOWN_', '_NODE_NAMESPACE_UNKNOWN_')
+
 
 class TopicEndpointTypeEnum(enum.IntEnum):
     """rclpy.topic_endpoint_info.TopicEndpointTypeEnum."""

@@ -27,7 +27,11 @@ from cloth_bench_ros.runtime.qos import (
     QoSProfile,
     ReliabilityPolicy,
 )
-from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
+from cloth_bench_ros.runtime.topic_endpoint_info import (
+    TopicEndpointInfo,
+    TopicEndpointTypeEnum,
+    UNKNOWN_NODE,
+)
 from cyclonedds.builtin import (
     BuiltinDataReader,
     BuiltinTopicDcpsParticipant,
@@ -42,7 +46,6 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
 DISCOVERY_TOPIC = 'ros_discovery_info'
-UNKNOWN_NODE = ('_NODE_NAME_UNKNOWN_', '_NODE_NAMESPACE_UNKNOWN_')  # rmw_dds_common's placeholders
 
 
 def _discovery_profile(history: HistoryPolicy) -> QoSProfile:
