@@ -26,6 +26,7 @@ from cloth_bench_ros.runtime import (
     QoSProfile,
     rclpy,
     ReliabilityPolicy,
+    SetParametersResult,
     SingleThreadedExecutor,
 )
 
@@ -38,6 +39,7 @@ _CLASSES = (
     'ParameterNotDeclaredException',
     'ParameterAlreadyDeclaredException',
     'InvalidParameterTypeException',
+    'InvalidParameterValueException',
     'InvalidParameterException',
     'UnknownROSArgsError',
     'RCLError',
@@ -245,6 +247,83 @@ def _integer_for_double() -> Any:
 def _use_sim_time_int() -> str:
     with _Graph(['-p', 'use_sim_time:=1']):
         return 'ok'
+
+
+# --- changing parameters: rclpy's set_parameters, its checks and callbacks --------------------
+
+
+def _results(results: list) -> list[bool]:
+    return [r.successful for r in results]
+
+
+@case('set_parameters on an undeclared parameter')
+def _set_undeclared() -> Any:
+    with _Graph() as graph:
+        return _results(graph.node.set_parameters([Parameter('missing', value=1)]))
+
+
+@case('set_parameters: another type, read-only, a good value')
+def _set_checks() -> list:
+    with _Graph() as graph:
+        node = graph.node
+        node.declare_parameter('rate', 1.0)
+        node.declare_parameter('fixed', 'a', ParameterDescriptor(read_only=True))
+        node.declare_parameter('free', 1, ParameterDescriptor(dynamic_typing=True))
+        results = node.set_parameters(
+            [
+                Parameter('rate', value='fast'),
+                Parameter('fixed', value='b'),
+                Parameter('rate', value=2.0),
+                Parameter('free', value='any'),
+            ]
+        )
+        values = [node.get_parameter(n).value for n in ('rate', 'fixed', 'free')]
+        return [_results(results), values]
+
+
+@case('set_parameters_atomically with one bad value changes nothing')
+def _set_atomically() -> list:
+    with _Graph() as graph:
+        node = graph.node
+        node.declare_parameter('a', 1)
+        node.declare_parameter('b', 1)
+        result = node.set_parameters_atomically(
+            [Parameter('a', value=2), Parameter('b', value='x')]
+        )
+        return [result.successful, node.get_parameter('a').value, node.get_parameter('b').value]
+
+
+@case('a set-parameters callback refuses a declaration and a change')
+def _callback_refuses() -> list:
+    with _Graph() as graph:
+        node = graph.node
+        node.declare_parameter('kept', 1)
+        node.add_on_set_parameters_callback(
+            lambda ps: SetParametersResult(successful=all(p.value != 13 for p in ps), reason='13')
+        )
+        changed = _results(node.set_parameters([Parameter('kept', value=13)]))
+        try:
+            node.declare_parameter('unlucky', 13)
+            declared = 'ok'
+        except Exception as exc:  # noqa: B902 (the outcome is the class)
+            declared = _error(exc)
+        return [changed, node.get_parameter('kept').value, declared]
+
+
+@case('the trajectory publisher refuses changes on a running node')
+def _node_refuses_changes() -> list:
+    from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
+
+    with _Graph() as graph:
+        node = TrajectoryPublisher(context=graph.context)
+        try:
+            refused = node.set_parameters(
+                [Parameter('rate_hz', value='fast'), Parameter('rate_hz', value=1000.0)]
+            )
+            sim_time = node.set_parameters([Parameter('use_sim_time', value=False)])
+            return [_results(refused), node.get_parameter('rate_hz').value, _results(sim_time)]
+        finally:
+            node.destroy_node()
 
 
 # --- QoS: matching and what a reader keeps ---------------------------------------------------

@@ -16,7 +16,13 @@ from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
 from cloth_bench_ros.data.trial import trial_from_message
-from cloth_bench_ros.nodes.common import NAMESPACE, publishers_matched, replay_stamps, run_node
+from cloth_bench_ros.nodes.common import (
+    NAMESPACE,
+    parameters_fixed_at_start,
+    publishers_matched,
+    replay_stamps,
+    run_node,
+)
 from cloth_bench_ros.nodes.comparison import write_comparison
 from cloth_bench_ros.runtime import (
     declare_float,
@@ -42,6 +48,7 @@ class Evaluator(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('evaluator', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
+        parameters_fixed_at_start(self)
         self.declare_parameter('engines', ['mujoco'])
         self.primitive = parse_primitive(self.declare_parameter('primitive', 'dynamic').value)
         declare_float(self, 'rate_hz', 100.0)

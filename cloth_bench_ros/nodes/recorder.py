@@ -30,7 +30,12 @@ from cloth_bench_ros.data.trial import TRIAL_STATUS_NAME
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.errors import ClothBenchError
-from cloth_bench_ros.nodes.common import NAMESPACE, REPLAY_STATUS_NAME, run_node
+from cloth_bench_ros.nodes.common import (
+    NAMESPACE,
+    parameters_fixed_at_start,
+    REPLAY_STATUS_NAME,
+    run_node,
+)
 from cloth_bench_ros.runtime import (
     Clock,
     declare_float,
@@ -66,6 +71,7 @@ class RecordingStopped(ClothBenchError, ValueError):
 class Recorder(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('recorder', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
+        parameters_fixed_at_start(self)
         self.mode = self.declare_parameter('mode', 'replay').value
         self.done = False
         self.writer: BagWriter | None = None

@@ -20,7 +20,12 @@ from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
-from cloth_bench_ros.nodes.common import NAMESPACE, publish_serialises, run_node
+from cloth_bench_ros.nodes.common import (
+    NAMESPACE,
+    parameters_fixed_at_start,
+    publish_serialises,
+    run_node,
+)
 from cloth_bench_ros.runtime import (
     declare_float,
     DiagnosticArray,
@@ -146,6 +151,7 @@ class Simulator(Node):
             namespace=kwargs.pop('namespace', NAMESPACE),
             **kwargs,
         )
+        parameters_fixed_at_start(self)
         self.engine_name = self.declare_parameter('engine', 'mujoco').value
         rate_hz = declare_float(self, 'rate_hz', 100.0)
         cloth = self.declare_parameter('cloth', 'towel').value

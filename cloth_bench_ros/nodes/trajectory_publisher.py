@@ -14,6 +14,7 @@ from cloth_bench_ros.nodes.common import (
     all_subscriptions_matched,
     NAMESPACE,
     node_keys,
+    parameters_fixed_at_start,
     publish_serialises,
     publishers_matched,
     run_node,
@@ -49,6 +50,7 @@ class TrajectoryPublisher(Node):
         super().__init__(
             'trajectory_publisher', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs
         )
+        parameters_fixed_at_start(self)
         primitive = parse_primitive(self.declare_parameter('primitive', 'dynamic').value)
         declare_float(self, 'rate_hz', 100.0)
         self.pacing = self.declare_parameter('pacing', 'lockstep').value

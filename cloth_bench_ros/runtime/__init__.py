@@ -32,6 +32,7 @@ if EMBEDDED or TYPE_CHECKING:  # the type checker reads the embedded runtime's A
         QoSProfile,
         ReliabilityPolicy,
         serialize_message,
+        SetParametersResult,
         SingleThreadedExecutor,
         Time,
     )
@@ -52,7 +53,7 @@ else:
     from builtin_interfaces.msg import Time as _TimeMsg  # noqa: F401
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion
-    from rcl_interfaces.msg import ParameterDescriptor
+    from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
     from rclpy.clock import Clock as _RosClock
     from rclpy.clock_type import ClockType as _ClockType
     from rclpy.executors import SingleThreadedExecutor
@@ -93,6 +94,7 @@ __all__ = [  # the API the nodes are written against, under either runtime
     'rclpy',
     'ReliabilityPolicy',
     'serialize_message',
+    'SetParametersResult',
     'SingleThreadedExecutor',
     'stamp_ns',
     'steady_clock',

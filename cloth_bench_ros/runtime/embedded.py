@@ -61,6 +61,7 @@ from cloth_bench_ros.runtime.clock import (
 from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
     InvalidParameterException,
     InvalidParameterTypeException,
+    InvalidParameterValueException,
     load_params_file,
     Parameter,
     ParameterAlreadyDeclaredException,
@@ -71,6 +72,7 @@ from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as r
     ParameterUninitializedException,
     RCLError,
     RCLInvalidROSArgsError,
+    SetParametersResult,
     UnknownROSArgsError,
 )
 from cloth_bench_ros.runtime.qos import (  # noqa: F401 (re-exported as rclpy's names)
@@ -279,6 +281,7 @@ class Node:
         self._overrides.update({p.name: p for p in parameter_overrides or []})
         self._parameters: dict[str, Parameter] = {}
         self._descriptors: dict[str, ParameterDescriptor] = {}
+        self._on_set_callbacks: list[Callable[[list[Parameter]], SetParametersResult]] = []
         self._timers: list[Timer] = []
         self._subscriptions: list[Subscription] = []
         self._publishers: list[Publisher] = []
@@ -371,6 +374,10 @@ class Node:
         elif parameter.type_ != ParameterType.NOT_SET and parameter.type_ != descriptor.type:
             raise InvalidParameterTypeException(parameter, ParameterType(descriptor.type).name)
         descriptor.name = name
+        for callback in self._on_set_callbacks:  # rclpy runs them on a declaration too
+            result = callback([parameter])
+            if not result.successful:
+                raise InvalidParameterValueException(name, parameter.value, result.reason)
         self._parameters[name], self._descriptors[name] = parameter, descriptor
         return parameter
 
@@ -384,6 +391,48 @@ class Node:
         if parameter.type_ == ParameterType.NOT_SET and not self._descriptors[name].dynamic_typing:
             raise ParameterUninitializedException(name)
         return parameter
+
+    def add_on_set_parameters_callback(
+        self, callback: Callable[[list[Parameter]], SetParametersResult]
+    ) -> None:
+        """Run `callback` before a change is applied; it may refuse it (rclpy: newest first)."""
+        self._on_set_callbacks.insert(0, callback)
+
+    def remove_on_set_parameters_callback(self, callback: Callable) -> None:
+        self._on_set_callbacks.remove(callback)
+
+    def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
+        """Set each parameter on its own, as rclpy does: a result per parameter."""
+        for parameter in parameter_list:
+            if parameter.name not in self._parameters:
+                raise ParameterNotDeclaredException(parameter.name)
+        return [self.set_parameters_atomically([p]) for p in parameter_list]
+
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """Set all or none: read-only and type checks, then the node's callbacks (rclpy)."""
+        for parameter in parameter_list:
+            if parameter.name not in self._parameters:
+                raise ParameterNotDeclaredException(parameter.name)
+            descriptor = self._descriptors[parameter.name]
+            if descriptor.read_only:
+                return SetParametersResult(
+                    False, f'Trying to set a read-only parameter: {parameter.name}.'
+                )
+            if not descriptor.dynamic_typing and parameter.type_ != descriptor.type:
+                return SetParametersResult(
+                    False,
+                    f"Wrong parameter type, expected 'Type.{ParameterType(descriptor.type).name}'"
+                    f" got 'Type.{parameter.type_.name}'",
+                )
+        for callback in self._on_set_callbacks:
+            result = callback(parameter_list)
+            if not result.successful:
+                return result
+        for parameter in parameter_list:
+            self._parameters[parameter.name] = parameter
+            if self._descriptors[parameter.name].dynamic_typing:
+                self._descriptors[parameter.name].type = int(parameter.type_)
+        return SetParametersResult(True)
 
     def describe_parameter(self, name: str) -> ParameterDescriptor:
         if name not in self._descriptors:

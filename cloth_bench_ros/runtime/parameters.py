@@ -131,6 +131,14 @@ class ParameterDescriptor:
     dynamic_typing: bool = False
 
 
+@dataclass
+class SetParametersResult:
+    """rcl_interfaces/msg/SetParametersResult: whether a change was taken, and why not."""
+
+    successful: bool = False
+    reason: str = ''
+
+
 # --- exceptions (rclpy/exceptions.py; same names and messages, not ValueErrors) ----------------
 
 
@@ -180,6 +188,15 @@ class ParameterUninitializedException(ParameterException):
     def __init__(self, parameter_name: str) -> None:
         ParameterException.__init__(
             self, f"The parameter '{parameter_name}' is not initialized", parameter_name
+        )
+
+
+class InvalidParameterValueException(ParameterException):
+    """A value a set-parameters callback refused while the parameter was declared."""
+
+    def __init__(self, parameter: str, value: Any, reason: str) -> None:
+        Exception.__init__(
+            self, f'Invalid parameter value ({value}) for parameter. Reason: {reason}', parameter
         )
 
 
