@@ -48,6 +48,9 @@ _CLASSES = (
     'RuntimeError',
 )
 CASES: dict[str, Callable[[], Any]] = {}
+# Cases run each in a process of its own: rcl configures logging once per process, so log levels
+# set by earlier cases would leak into them (as they would into any later node of that process).
+ISOLATED: list[str] = []
 
 
 def case(name: str) -> Callable:
@@ -326,6 +329,68 @@ def _node_refuses_changes() -> list:
             node.destroy_node()
 
 
+# --- what every node publishes: /rosout (rcl) and /parameter_events (rclpy) -----------------
+
+if EMBEDDED:
+    from cloth_bench_ros.runtime.rosout import Log, ParameterEvent
+else:
+    from rcl_interfaces.msg import Log, ParameterEvent
+
+
+def _heard(args: list[str], act: Callable[[Any], None], topic: str, msg_type: Any) -> list:
+    """Return what a listener hears on `topic` from a node /ns/talker while `act(talker)` runs."""
+    with _Graph(args, name='listener') as graph:
+        heard: list = []
+        sub = graph.node.create_subscription(msg_type, topic, heard.append, 100)
+        talker = rclpy.create_node('talker', namespace='ns', context=graph.context)
+        try:
+            graph.spin_for(1.0, until=lambda: sub.get_publisher_count() >= 2)
+            act(talker)
+            graph.spin_for(0.5)
+        finally:
+            talker.destroy_node()
+        return heard
+
+
+def _rosout(args: list[str]) -> list:
+    def talk(node: Any) -> None:  # one call site per severity: rclpy refuses a change of it
+        node.get_logger().debug('d')
+        node.get_logger().info('i')
+        node.get_logger().warning('w')
+
+    heard = _heard(args, talk, '/rosout', Log)
+    return [[m.level, m.name, m.msg] for m in heard if m.name == 'ns.talker']
+
+
+for _args in ([], ['--log-level', 'debug'], ['--log-level', 'ns.talker:=warn'],
+              ['--disable-rosout-logs']):
+
+    @case(f'rosout with {" ".join(_args) or "the defaults"}')
+    def _rosout_case(args: list[str] = _args) -> list:
+        return _rosout(args)
+
+    ISOLATED.append(f'rosout with {" ".join(_args) or "the defaults"}')
+
+
+@case('parameter events of declarations and a change')
+def _parameter_events() -> list:
+    def change(node: Any) -> None:
+        node.declare_parameter('a', 1)
+        node.declare_parameter('names', ['x', 'y'])
+        node.set_parameters([Parameter('a', value=2)])
+
+    heard = _heard([], change, '/parameter_events', ParameterEvent)
+    return [
+        [
+            [(p.name, p.value.type) for p in m.new_parameters],
+            [(p.name, p.value.type, p.value.integer_value) for p in m.changed_parameters],
+            list(m.new_parameters[0].value.string_array_value) if m.new_parameters else [],
+        ]
+        for m in heard
+        if m.node == '/ns/talker'
+    ]
+
+
 # --- QoS: matching and what a reader keeps ---------------------------------------------------
 
 
@@ -411,10 +476,10 @@ for _label, (_writer, _reader, _late) in QOS_CASES.items():
 
 
 def run(selected: list[str] | None = None) -> dict[str, Any]:
-    """Return every case's outcome (or those named in `selected`)."""
+    """Return the outcomes of the cases named in `selected`, or of all but the isolated ones."""
     outcomes: dict[str, Any] = {'_runtime': 'embedded' if EMBEDDED else 'rclpy'}
     for name, function in CASES.items():
-        if selected and name not in selected:
+        if (selected and name not in selected) or (not selected and name in ISOLATED):
             continue
         try:
             outcomes[name] = function()

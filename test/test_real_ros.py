@@ -10,10 +10,13 @@ compared with what the embedded runtime does for the same input.
 from __future__ import annotations
 
 import json
+import random
+import shlex
 import signal
 import subprocess
 import time
 
+from cloth_bench_ros.runtime.dds import loopback_environment
 import pytest
 from real_ros import in_namespace, require_real_ros, ROOT, ros_env, ROS_PYTHON, ros_script
 
@@ -196,3 +199,59 @@ def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(tm
     assert ros['real']['accounting']['adds_up'] and ros['real']['accounting']['scored'] == 132
     for key in ('CD_d', 'HD_d', 'L_s', 'frames_in_window'):
         assert ros['engines']['mujoco'][key] == reference['engines']['mujoco'][key], key
+
+
+_EMBEDDED_TALKER = """
+import time
+from cloth_bench_ros.runtime import embedded as rclpy
+rclpy.init(args=[], transport='dds')
+node = rclpy.create_node('talker', namespace='cloth_bench')
+node.declare_parameter('count', 0)
+for k in range(1, 150):
+    node.get_logger().info(f'hello {k}')
+    node.set_parameters([rclpy.Parameter('count', value=k)])
+    time.sleep(0.2)
+"""
+_REAL_LISTENER = """
+import json, time, rclpy
+from rcl_interfaces.msg import Log, ParameterEvent
+rclpy.init()
+node = rclpy.create_node('listener')
+logs, events = [], []
+node.create_subscription(Log, '/rosout', logs.append, 100)
+node.create_subscription(ParameterEvent, '/parameter_events', events.append, 100)
+end = time.monotonic() + 25
+mine, changes = [], []
+while time.monotonic() < end and (len(mine) < 3 or len(changes) < 3):
+    rclpy.spin_once(node, timeout_sec=0.1)
+    mine = [m for m in logs if m.name == 'cloth_bench.talker']
+    changes = [p for m in events if m.node == '/cloth_bench/talker' for p in m.changed_parameters]
+print(json.dumps({
+    'logs': [[m.level, m.msg] for m in mine[:3]],
+    'changed': [[p.name, p.value.type] for p in changes[:3]],
+    'nodes': sorted(node.get_node_names_and_namespaces()),
+}))
+"""
+
+
+def test_a_real_rclpy_node_reads_the_embedded_nodes_rosout_and_parameter_events(tmp_path):
+    """An embedded node on Cyclone DDS, a real rclpy node on Fast DDS: logs, events, names."""
+    domain = random.randint(1, 101)
+    loopback = ' '.join(f'{k}={shlex.quote(v)}' for k, v in loopback_environment(domain).items())
+    (tmp_path / 'talker.py').write_text(_EMBEDDED_TALKER)
+    (tmp_path / 'listener.py').write_text(_REAL_LISTENER)
+    script = (
+        f'(env {loopback} CLOTH_BENCH_EMBEDDED=1 timeout 60 {_embedded_python()[0]}'
+        f' {tmp_path / "talker.py"} > {tmp_path / "talker.log"} 2>&1 &) ;'
+        f' ROS_DOMAIN_ID={domain} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST timeout 60'
+        f' {ROS_PYTHON} {tmp_path / "listener.py"};'
+        f" pkill -f '{tmp_path / 'talker.py'}'"
+    )
+    out = subprocess.run(
+        ros_script(script), capture_output=True, text=True, env=ros_env(), timeout=120
+    )
+    heard = json.loads(out.stdout.strip().splitlines()[-1])
+    assert [level for level, _ in heard['logs']] == [20, 20, 20], out.stderr
+    assert all(msg.startswith('hello ') for _, msg in heard['logs'])
+    assert heard['changed'] == [['count', 2]] * 3  # INTEGER
+    assert ['talker', '/cloth_bench'] in heard['nodes']

@@ -51,6 +51,7 @@ class RosArguments:
     overrides: Overrides = field(default_factory=Overrides)
     remaps: list[RemapRule] = field(default_factory=list)
     log_levels: dict[str, int] = field(default_factory=dict)  # logger ('' for all) -> level
+    rosout: bool = True  # --disable-rosout-logs: no /rosout publisher
 
 
 def _log_level(text: str, levels: dict[str, int]) -> None:
@@ -127,6 +128,8 @@ def parse_ros_args(args: list[str] | None) -> RosArguments:
                 _log_level(value, parsed.log_levels)
             i += 2
         elif arg in _LOG_SWITCHES:
+            if arg.endswith('-rosout-logs'):
+                parsed.rosout = arg.startswith('--enable')
             i += 1
         else:
             unknown.append(arg)

@@ -132,6 +132,49 @@ class DiagnosticArray_(IdlStruct, typename='diagnostic_msgs::msg::dds_::Diagnost
     status: t.sequence[DiagnosticStatus_] = field(default_factory=list)
 
 
+# rcl_interfaces: what every node publishes (/rosout, /parameter_events)
+
+
+@dataclass
+class Log_(IdlStruct, typename='rcl_interfaces::msg::dds_::Log_'):
+    stamp: Time_ = field(default_factory=Time_)
+    level: t.uint8 = 0
+    name: str = ''
+    msg: str = ''
+    file: str = ''
+    function: str = ''
+    line: t.uint32 = 0
+
+
+@dataclass
+class ParameterValue_(IdlStruct, typename='rcl_interfaces::msg::dds_::ParameterValue_'):
+    type: t.uint8 = 0  # noqa: A003 (the .msg's field name)
+    bool_value: bool = False
+    integer_value: t.int64 = 0
+    double_value: t.float64 = 0.0
+    string_value: str = ''
+    byte_array_value: t.sequence[t.byte] = field(default_factory=list)
+    bool_array_value: t.sequence[bool] = field(default_factory=list)
+    integer_array_value: t.sequence[t.int64] = field(default_factory=list)
+    double_array_value: t.sequence[t.float64] = field(default_factory=list)
+    string_array_value: t.sequence[str] = field(default_factory=list)
+
+
+@dataclass
+class Parameter_(IdlStruct, typename='rcl_interfaces::msg::dds_::Parameter_'):
+    name: str = ''
+    value: ParameterValue_ = field(default_factory=ParameterValue_)
+
+
+@dataclass
+class ParameterEvent_(IdlStruct, typename='rcl_interfaces::msg::dds_::ParameterEvent_'):
+    stamp: Time_ = field(default_factory=Time_)
+    node: str = ''
+    new_parameters: t.sequence[Parameter_] = field(default_factory=list)
+    changed_parameters: t.sequence[Parameter_] = field(default_factory=list)
+    deleted_parameters: t.sequence[Parameter_] = field(default_factory=list)
+
+
 # rmw_dds_common: the graph information of ros_discovery_info (Gid is `char[16] data`)
 
 
@@ -170,6 +213,10 @@ DDS_TYPES: dict[str, type] = {
     'diagnostic_msgs/msg/KeyValue': KeyValue_,
     'diagnostic_msgs/msg/DiagnosticStatus': DiagnosticStatus_,
     'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray_,
+    'rcl_interfaces/msg/Log': Log_,
+    'rcl_interfaces/msg/ParameterValue': ParameterValue_,
+    'rcl_interfaces/msg/Parameter': Parameter_,
+    'rcl_interfaces/msg/ParameterEvent': ParameterEvent_,
     'rmw_dds_common/msg/ParticipantEntitiesInfo': ParticipantEntitiesInfo_,
 }
 
