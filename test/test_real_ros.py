@@ -139,12 +139,29 @@ def _embedded_python() -> list[str]:
     return [sys.executable]
 
 
-def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(tmp_path):
-    """
-    Run the docs' node-by-node `ros2 run` commands on real rclpy over Fast DDS.
+@pytest.fixture(scope='module')
+def embedded_reference(tmp_path_factory) -> dict:
+    """Return the embedded in-process run's summary (6x8 MuJoCo towel fling, bundled bag)."""
+    out_dir = tmp_path_factory.mktemp('embedded')
+    embedded = subprocess.run(
+        [*_embedded_python(), '-m', 'cloth_bench_ros.cli', 'run', '--grid', '6x8', '--output',
+         str(out_dir)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**ros_env(), 'CLOTH_BENCH_EMBEDDED': '1'},
+    )
+    assert embedded.returncode == 0, embedded.stderr
+    return json.loads((out_dir / 'summary.json').read_text())
 
-    As the installed console scripts run them, one process per node, in any start order: the
-    embedded in-process run's numbers.
+
+def _node_graph(tmp_path, real: set[str]) -> dict:
+    """
+    Run the four nodes as `ros2 run` starts them, one process each, in one network namespace.
+
+    The nodes in `real` run on real rclpy over Fast DDS, the others on the embedded runtime over
+    Cyclone DDS (loopback); the evaluator ends the run, the simulator and recorder are stopped with
+    SIGINT as a user would. Return the evaluator's summary.
     """
     bag = ROOT / 'bags' / 'towel_dynamic'
     grid = '-p grid_nx:=6 -p grid_nz:=8'
@@ -154,51 +171,68 @@ def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(tm
         'recorder': f'-p use_sim_time:=true -p bag:={bag} {grid}',
         'trajectory_publisher': '',
     }
+    domain = random.randint(1, 101)
+    embedded_env = ' '.join(
+        f'{k}={shlex.quote(v)}' for k, v in loopback_environment(domain).items()
+    )
+    pythons = {
+        node: f'{ROS_PYTHON}' if node in real else f'env {embedded_env} {_embedded_python()[0]}'
+        for node in nodes
+    }
     launches = [
-        f'(timeout 300 {ROS_PYTHON} -m cloth_bench_ros.nodes.{node} --ros-args -r'
+        f'(timeout 300 {pythons[node]} -m cloth_bench_ros.nodes.{node} --ros-args -r'
         f' __ns:=/cloth_bench {args} > {tmp_path / node}.log 2>&1; echo $? >'
         f' {tmp_path / node}.status)'
         for node, args in nodes.items()
     ]
-    # the evaluator ends the run; the simulator and the recorder are stopped as a user would, with
-    # SIGINT
+    either_python = f'({ROS_PYTHON}|{_embedded_python()[0]})'
     script = (
         ' & '.join(launches)
         + f' & while [ ! -f {tmp_path / "evaluator.status"} ]; do sleep 0.2; done; '
         + ' '.join(
-            # the node, not this shell
-            f"pkill -INT -f '^{ROS_PYTHON} -m cloth_bench_ros.nodes.{node} ';"
+            # the node, not this shell nor `timeout`
+            f"pkill -INT -f '^{either_python} -m cloth_bench_ros.nodes.{node} ';"
             for node in ('simulator', 'recorder')
         )
         + ' wait'
     )
-    subprocess.run(ros_script(script), env=ros_env(), timeout=600)
+    env = ros_env(ROS_DOMAIN_ID=str(domain))
+    if len(real) < len(nodes):  # Fast DDS meets Cyclone's unicast discovery on loopback
+        env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    subprocess.run(ros_script(script), env=env, timeout=600)
     for node in nodes:
         assert (tmp_path / f'{node}.status').read_text().strip() == '0', (
             tmp_path / f'{node}.log'
         ).read_text()
-    embedded = subprocess.run(
-        [
-            *_embedded_python(),
-            '-m',
-            'cloth_bench_ros.cli',
-            'run',
-            '--grid',
-            '6x8',
-            '--output',
-            str(tmp_path / 'embedded'),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env={**ros_env(), 'CLOTH_BENCH_EMBEDDED': '1'},
-    )
-    assert embedded.returncode == 0, embedded.stderr
-    ros = json.loads((tmp_path / 'ros' / 'summary.json').read_text())
-    reference = json.loads((tmp_path / 'embedded' / 'summary.json').read_text())
-    assert ros['real']['accounting']['adds_up'] and ros['real']['accounting']['scored'] == 132
+    return json.loads((tmp_path / 'ros' / 'summary.json').read_text())
+
+
+def _assert_same_metrics(summary: dict, reference: dict) -> None:
+    assert summary['real']['accounting']['adds_up']
+    assert summary['real']['accounting']['scored'] == 132
     for key in ('CD_d', 'HD_d', 'L_s', 'frames_in_window'):
-        assert ros['engines']['mujoco'][key] == reference['engines']['mujoco'][key], key
+        assert summary['engines']['mujoco'][key] == reference['engines']['mujoco'][key], key
+
+
+def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(
+    tmp_path, embedded_reference
+):
+    """
+    Run the docs' node-by-node `ros2 run` commands on real rclpy over Fast DDS.
+
+    As the installed console scripts run them, one process per node, in any start order: the
+    embedded in-process run's numbers.
+    """
+    real = {'evaluator', 'simulator', 'recorder', 'trajectory_publisher'}
+    _assert_same_metrics(_node_graph(tmp_path, real), embedded_reference)
+
+
+@pytest.mark.parametrize('real', [{'evaluator'}, {'simulator'}, {'trajectory_publisher'}])
+def test_mixed_graphs_of_real_and_embedded_nodes_give_the_embedded_metrics(
+    tmp_path, embedded_reference, real
+):
+    """One node on real rclpy (Fast DDS), three embedded (Cyclone DDS): the same numbers."""
+    _assert_same_metrics(_node_graph(tmp_path, real), embedded_reference)
 
 
 _EMBEDDED_TALKER = """
