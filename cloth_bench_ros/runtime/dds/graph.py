@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import Any
 import uuid
 
+from cloth_bench_ros.runtime.dds.discovery_info import parse_participant_entities
 from cloth_bench_ros.runtime.dds.idl import (
     Gid_,
     NodeEntitiesInfo_,
@@ -32,13 +33,14 @@ from cloth_bench_ros.runtime.topic_endpoint_info import (
     TopicEndpointTypeEnum,
     UNKNOWN_NODE,
 )
+from cyclonedds._clayer import ddspy_take
 from cyclonedds.builtin import (
     BuiltinDataReader,
     BuiltinTopicDcpsParticipant,
     BuiltinTopicDcpsPublication,
     BuiltinTopicDcpsSubscription,
 )
-from cyclonedds.core import InstanceState
+from cyclonedds.core import InstanceState, SampleState, ViewState
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.qos import Policy
@@ -46,6 +48,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
 DISCOVERY_TOPIC = 'ros_discovery_info'
+_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 
 
 def _discovery_profile(history: HistoryPolicy) -> QoSProfile:
@@ -120,9 +123,15 @@ class Graph:
 
     # everyone's
     def _refresh(self) -> None:
-        for sample in self.reader.take(N=1000):
-            if isinstance(sample, ParticipantEntitiesInfo_):  # the latest of each participant wins
-                self.remote[_key(sample.gid)] = list(sample.node_entities_info_seq)
+        samples = ddspy_take(self.reader._ref, _ANY, 1000)  # raw: Humble's GIDs are 24 bytes
+        for payload, info in samples if not isinstance(samples, int) else ():
+            if not info.valid_data:
+                continue
+            try:
+                sample = parse_participant_entities(payload)
+            except ValueError:  # not a ROS participant's graph message: nothing to learn
+                continue
+            self.remote[_key(sample.gid)] = list(sample.node_entities_info_seq)  # latest wins
         for sample in self.participants.take(
             N=1000
         ):  # a participant that left takes its nodes along
