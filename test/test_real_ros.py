@@ -289,3 +289,58 @@ def test_a_real_rclpy_node_reads_the_embedded_nodes_rosout_and_parameter_events(
     assert all(msg.startswith('hello ') for _, msg in heard['logs'])
     assert heard['changed'] == [['count', 2]] * 3  # INTEGER
     assert ['talker', '/cloth_bench'] in heard['nodes']
+
+
+_INTROSPECTION = """
+import json, sys, time
+from cloth_bench_ros.runtime import (
+    DurabilityPolicy, EMBEDDED, PoseArray, QoSProfile, rclpy, ReliabilityPolicy,
+)
+if EMBEDDED:
+    rclpy.init(args=[], transport='dds')
+else:
+    rclpy.init(args=[])
+mine, theirs, theirs_node = sys.argv[1:4]
+node = rclpy.create_node(mine, namespace='probe')
+qos = QoSProfile(
+    depth=7,
+    reliability=ReliabilityPolicy.BEST_EFFORT if EMBEDDED else ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE if EMBEDDED else DurabilityPolicy.TRANSIENT_LOCAL,
+)
+node.create_publisher(PoseArray, f'/from_{mine}', qos)
+seen, end = [], time.monotonic() + 30
+while time.monotonic() < end and not seen:
+    rclpy.spin_once(node, timeout_sec=0.1)
+    seen = [i for i in node.get_publishers_info_by_topic(f'/from_{theirs}')
+            if i.node_name == theirs_node]
+names = node.get_node_names_and_namespaces()
+end = time.monotonic() + 3  # stay for the other side
+while time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.1)
+print(json.dumps([[i.node_name, i.node_namespace, i.topic_type, int(i.qos_profile.reliability),
+                   int(i.qos_profile.durability)] for i in seen]
+                 + [sorted([list(n) for n in names])]))
+"""
+
+
+def test_graph_introspection_both_ways_between_real_and_embedded_nodes(tmp_path):
+    """Each side names the other's node, its topic's type and its QoS (Fast DDS <-> Cyclone)."""
+    domain = random.randint(1, 101)
+    loopback = ' '.join(f'{k}={shlex.quote(v)}' for k, v in loopback_environment(domain).items())
+    script_file = tmp_path / 'introspect.py'
+    script_file.write_text(_INTROSPECTION)
+    script = (
+        f'(env {loopback} PYTHONPATH={ROOT} timeout 60 {_embedded_python()[0]} {script_file}'
+        f' embedded real real > {tmp_path / "embedded.json"} 2> {tmp_path / "embedded.log"} &) ;'
+        f' ROS_DOMAIN_ID={domain} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST timeout 60'
+        f' {ROS_PYTHON} {script_file} real embedded embedded > {tmp_path / "real.json"};'
+        ' sleep 4'
+    )
+    subprocess.run(ros_script(script), env=ros_env(), timeout=120)
+    real_saw = json.loads((tmp_path / 'real.json').read_text())
+    embedded_saw = json.loads((tmp_path / 'embedded.json').read_text() or 'null')
+    assert embedded_saw, (tmp_path / 'embedded.log').read_text()
+    # reliability 1 reliable, 2 best effort; durability 1 transient local, 2 volatile
+    assert real_saw[0] == ['embedded', '/probe', 'geometry_msgs/msg/PoseArray', 2, 2]
+    assert embedded_saw[0] == ['real', '/probe', 'geometry_msgs/msg/PoseArray', 1, 1]
+    assert ['embedded', '/probe'] in real_saw[-1] and ['real', '/probe'] in embedded_saw[-1]
