@@ -8,6 +8,12 @@ cluster of `--workers` processes. Prints both wall times, the ratio, and the ful
 the estimated cost of the 720. Goal of issue 13: the full sweep under 30 minutes on 2 idle cores.
 
     .venv/bin/python benchmarks/bench_sweep.py [--workers 2] [--seeds 2]
+
+With `--results DIR` it runs nothing and reads a finished sweep's results.jsonl instead: the
+cells' wall time (core-minutes: each cell runs on one core) against the engines' own stepping
+(step count x mean step time, as each cell reports it), overall, per rate and per engine.
+
+    .venv/bin/python benchmarks/bench_sweep.py --results results/sweep
 """
 
 from __future__ import annotations
@@ -19,13 +25,33 @@ import tempfile
 import time
 
 from cloth_bench_ros.studies import sweep as sw
+from cloth_bench_ros.studies.results import load_rows
+
+
+def overhead(results_dir: Path) -> None:
+    """Print a finished sweep's cell time against its engines' stepping."""
+    rows = [r for r in load_rows(results_dir) if r.get('status') == 'ok']
+    groups: dict[str, list[dict]] = {'all': rows}
+    for row in rows:
+        groups.setdefault(f'{row["rate_hz"]:g} Hz', []).append(row)
+        groups.setdefault(row['engine'], []).append(row)
+    for name, members in groups.items():
+        wall = sum(r['cell_wall_s'] for r in members)
+        stepping = sum(r['step_count'] * r['step_time_mean'] for r in members)
+        print(
+            f'{name:>8}: {len(members):4d} cells, {wall / 60:7.1f} core-minutes in cells, '
+            f'{stepping / 60:7.1f} of engine stepping, ratio {wall / stepping:.3f}'
+        )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--workers', type=int, default=2)
     parser.add_argument('--seeds', type=int, default=2)
+    parser.add_argument('--results', type=Path, help='a finished sweep directory: report only')
     args = parser.parse_args()
+    if args.results:
+        return overhead(args.results)
     cells = sw.paper_cells(
         ['mujoco', 'bullet'],
         [100.0],
