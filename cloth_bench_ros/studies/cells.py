@@ -270,9 +270,10 @@ def estimated_cost(cell: Cell) -> float:
     """
     Return a rough cost of a cell in seconds of one core.
 
-    Internal steps x a per-step cost, plus the nodes' work per target (fitted to the default
-    sweep's cells on 2 idle cores, 11 x 15 mesh: 0.8 ms per MuJoCo internal step on the fling, 1.4x
-    that with the cloth on the table).
+    Internal steps x a per-step cost, plus the work per target and per cell, fitted to the
+    default 720-cell sweep on the direct study path (2 cores, 11 x 15 mesh): 0.66 ms per MuJoCo
+    internal step on the fling, 1.4x that with the cloth on the table, 1.5x for PyBullet;
+    0.09 ms per target and 0.4 s per cell. Realtime cells run the node graph: 0.5 ms per target.
     """
     duration = 7.4 if cell.primitive == 'dynamic' else 17.0  # settle phase + quintic part, s
     params = cell.params
@@ -280,9 +281,10 @@ def estimated_cost(cell: Cell) -> float:
     timestep = float(params.get('timestep', 0.002 if cell.engine == 'mujoco' else 0.0025))
     internal_steps = duration * max(cell.rate_hz, 1.0 / timestep)
     per_internal_step = (
-        0.8e-3
+        0.66e-3
         * (nx * nz / 165.0)
         * {'bullet': 1.5, 'newton': 5.0}.get(cell.engine, 1.0)
         * (1.4 if cell.primitive == 'quasi_static' else 1.0)
     )
-    return internal_steps * per_internal_step + duration * cell.rate_hz * 0.5e-3 + 1.0
+    per_target = 0.5e-3 if cell.pacing == 'realtime' else 0.09e-3
+    return internal_steps * per_internal_step + duration * cell.rate_hz * per_target + 0.4
