@@ -10,6 +10,7 @@ compared with what the embedded runtime does for the same input.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import random
 import shlex
 import signal
@@ -155,35 +156,40 @@ def embedded_reference(tmp_path_factory) -> dict:
     return json.loads((out_dir / 'summary.json').read_text())
 
 
-def _node_graph(tmp_path, real: set[str]) -> dict:
-    """
-    Run the four nodes as `ros2 run` starts them, one process each, in one network namespace.
-
-    The nodes in `real` run on real rclpy over Fast DDS, the others on the embedded runtime over
-    Cyclone DDS (loopback); the evaluator ends the run, the simulator and recorder are stopped with
-    SIGINT as a user would. Return the evaluator's summary.
-    """
+def _ros2_run_nodes(output: Path) -> dict[str, tuple[str, str]]:
+    """Return the docs' node-by-node `ros2 run` lines: name -> (executable, its arguments)."""
     bag = ROOT / 'bags' / 'towel_dynamic'
     grid = '-p grid_nx:=6 -p grid_nz:=8'
-    nodes = {
-        'evaluator': f'-p use_sim_time:=true -p output_dir:={tmp_path / "ros"}',
-        'simulator': f'-p use_sim_time:=true -p engine:=mujoco {grid}',
-        'recorder': f'-p use_sim_time:=true -p bag:={bag} {grid}',
-        'trajectory_publisher': '',
+    common = '--ros-args -r __ns:=/cloth_bench'
+    return {
+        'evaluator': ('evaluator', f'{common} -p use_sim_time:=true -p output_dir:={output}'),
+        'simulator': ('simulator', f'{common} -p use_sim_time:=true -p engine:=mujoco {grid}'),
+        'recorder': ('recorder', f'{common} -p use_sim_time:=true -p bag:={bag} {grid}'),
+        'trajectory_publisher': ('trajectory_publisher', common),
     }
+
+
+def _node_graph(tmp_path, real: set[str], nodes: dict[str, tuple[str, str]]) -> None:
+    """
+    Run nodes one process each, as `ros2 run` or `ros2 launch` starts them, in one namespace.
+
+    `nodes`: name -> (executable, its command-line arguments). The nodes named in `real` run on
+    real rclpy over Fast DDS, the others on the embedded runtime over Cyclone DDS (loopback); the
+    evaluator ends the run, the others are then stopped with SIGINT (as the launch file's
+    OnProcessExit or a user would). Every process must exit 0.
+    """
     domain = random.randint(1, 101)
     embedded_env = ' '.join(
         f'{k}={shlex.quote(v)}' for k, v in loopback_environment(domain).items()
     )
     pythons = {
-        node: f'{ROS_PYTHON}' if node in real else f'env {embedded_env} {_embedded_python()[0]}'
-        for node in nodes
+        name: f'{ROS_PYTHON}' if name in real else f'env {embedded_env} {_embedded_python()[0]}'
+        for name in nodes
     }
     launches = [
-        f'(timeout 300 {pythons[node]} -m cloth_bench_ros.nodes.{node} --ros-args -r'
-        f' __ns:=/cloth_bench {args} > {tmp_path / node}.log 2>&1; echo $? >'
-        f' {tmp_path / node}.status)'
-        for node, args in nodes.items()
+        f'(timeout 300 {pythons[name]} -m cloth_bench_ros.nodes.{executable} {args}'
+        f' > {tmp_path / name}.log 2>&1; echo $? > {tmp_path / name}.status)'
+        for name, (executable, args) in nodes.items()
     ]
     either_python = f'({ROS_PYTHON}|{_embedded_python()[0]})'
     script = (
@@ -191,8 +197,8 @@ def _node_graph(tmp_path, real: set[str]) -> dict:
         + f' & while [ ! -f {tmp_path / "evaluator.status"} ]; do sleep 0.2; done; '
         + ' '.join(
             # the node, not this shell nor `timeout`
-            f"pkill -INT -f '^{either_python} -m cloth_bench_ros.nodes.{node} ';"
-            for node in ('simulator', 'recorder')
+            f"pkill -INT -f '^{either_python} -m cloth_bench_ros.nodes.{executable} ';"
+            for executable in sorted({e for e, _ in nodes.values()} - {'evaluator'})
         )
         + ' wait'
     )
@@ -200,11 +206,10 @@ def _node_graph(tmp_path, real: set[str]) -> dict:
     if len(real) < len(nodes):  # Fast DDS meets Cyclone's unicast discovery on loopback
         env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     subprocess.run(ros_script(script), env=env, timeout=600)
-    for node in nodes:
-        assert (tmp_path / f'{node}.status').read_text().strip() == '0', (
-            tmp_path / f'{node}.log'
+    for name in nodes:
+        assert (tmp_path / f'{name}.status').read_text().strip() == '0', (
+            tmp_path / f'{name}.log'
         ).read_text()
-    return json.loads((tmp_path / 'ros' / 'summary.json').read_text())
 
 
 def _assert_same_metrics(summary: dict, reference: dict) -> None:
@@ -223,8 +228,9 @@ def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(
     As the installed console scripts run them, one process per node, in any start order: the
     embedded in-process run's numbers.
     """
-    real = {'evaluator', 'simulator', 'recorder', 'trajectory_publisher'}
-    _assert_same_metrics(_node_graph(tmp_path, real), embedded_reference)
+    nodes = _ros2_run_nodes(tmp_path / 'ros')
+    _node_graph(tmp_path, set(nodes), nodes)
+    _assert_same_metrics(_summary(tmp_path / 'ros'), embedded_reference)
 
 
 @pytest.mark.parametrize('real', [{'evaluator'}, {'simulator'}, {'trajectory_publisher'}])
@@ -232,7 +238,43 @@ def test_mixed_graphs_of_real_and_embedded_nodes_give_the_embedded_metrics(
     tmp_path, embedded_reference, real
 ):
     """One node on real rclpy (Fast DDS), three embedded (Cyclone DDS): the same numbers."""
-    _assert_same_metrics(_node_graph(tmp_path, real), embedded_reference)
+    _node_graph(tmp_path, real, _ros2_run_nodes(tmp_path / 'ros'))
+    _assert_same_metrics(_summary(tmp_path / 'ros'), embedded_reference)
+
+
+def test_the_launch_files_command_lines_give_the_same_metrics_on_both_runtimes(
+    monkeypatch, tmp_path
+):
+    """
+    The launch file's nodes, with the command lines launch_ros builds, on real rclpy and embedded.
+
+    The launch file is loaded against the stand-in of the launch API (test_launch_config.py); its
+    command lines (remaps, the config file, the launch arguments as a params file) run once with
+    every node on real rclpy over Fast DDS and once on the embedded runtime over Cyclone DDS.
+    """
+    from test_launch_config import _command_line, _launched_nodes
+
+    summaries = []
+    for runtime in ('real', 'embedded'):
+        out = tmp_path / runtime
+        out.mkdir()
+        nodes = {}
+        for node in _launched_nodes(monkeypatch, {'output_dir': str(out / 'results')}):
+            executable, *args = _command_line(node, out)
+            nodes[node.kwargs['name']] = (executable, shlex.join(args))
+        assert set(nodes) >= {'trajectory_publisher', 'recorder', 'evaluator'}
+        _node_graph(out, set(nodes) if runtime == 'real' else set(), nodes)
+        summaries.append(_summary(out / 'results'))
+    real, embedded = summaries
+    assert real['real']['accounting']['adds_up'], real['real']['accounting']
+    assert set(real['engines']) == set(embedded['engines'])
+    for engine in real['engines']:
+        for key in ('CD_d', 'HD_d', 'L_s', 'frames_in_window'):
+            assert real['engines'][engine][key] == embedded['engines'][engine][key], key
+
+
+def _summary(output: Path) -> dict:
+    return json.loads((output / 'summary.json').read_text())
 
 
 _EMBEDDED_TALKER = """
