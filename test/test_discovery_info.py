@@ -77,7 +77,7 @@ def test_a_sample_of_another_shape_is_refused():
 
 
 def test_an_embedded_node_sees_the_name_of_a_humble_node_over_dds():
-    """A plain participant announces `humble_talker` with 24-byte GIDs; its writer gets the name."""
+    """A plain participant announces `humble_talker` with 24-byte GIDs; its writer is named."""
     context = rclpy.Context()
     rclpy.init(args=[], context=context, transport='dds')
     try:
