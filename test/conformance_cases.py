@@ -16,16 +16,24 @@ from typing import Any, Callable
 import warnings
 
 from cloth_bench_ros.runtime import (
+    DescribeParameters,
     DiagnosticArray,
     DurabilityPolicy,
     EMBEDDED,
+    GetParameters,
+    GetParameterTypes,
     HistoryPolicy,
+    ListParameters,
     Parameter,
     ParameterDescriptor,
+    ParameterMsg,
+    ParameterValue,
     PoseArray,
     QoSProfile,
     rclpy,
     ReliabilityPolicy,
+    SetParameters,
+    SetParametersAtomically,
     SetParametersResult,
     SingleThreadedExecutor,
 )
@@ -389,6 +397,205 @@ def _parameter_events() -> list:
         for m in heard
         if m.node == '/ns/talker'
     ]
+
+
+# --- services: every node's parameter services (rclpy/parameter_service.py), and one's own -----
+
+
+def _call(graph: _Graph, node: Any, srv_type: Any, name: str, request: Any) -> Any:
+    """Call a service from the graph's node; 'not ready' or 'no answer' if it does not come."""
+    client = graph.node.create_client(srv_type, name)
+    try:
+        if not client.wait_for_service(timeout_sec=3.0):
+            return 'not ready'
+        future = client.call_async(request)
+        graph.executor.spin_until_future_complete(future, timeout_sec=3.0)
+        return future.result() if future.done() else 'no answer'
+    finally:
+        graph.node.destroy_client(client)
+
+
+def _value(value: Any) -> list:
+    """Return a ParameterValue as [type, the field that type uses]."""
+    fields = [None, 'bool_value', 'integer_value', 'double_value', 'string_value',
+              'byte_array_value', 'bool_array_value', 'integer_array_value',
+              'double_array_value', 'string_array_value']
+    field = fields[value.type]
+    data = getattr(value, field) if field else None
+    if field == 'byte_array_value':
+        data = [b[0] if isinstance(b, bytes) else int(b) for b in data]
+    elif field and field.endswith('_array_value'):
+        data = [x.item() if hasattr(x, 'item') else x for x in data]
+    return [int(value.type), data]
+
+
+def _plain(value: Any) -> Any:
+    """Return a parameter value as JSON holds it (rclpy keeps numeric arrays as array.array)."""
+    return value if isinstance(value, (str, bool, int, float)) else list(value)
+
+
+def _talker(graph: _Graph) -> Any:
+    """Return a node /ns/talker with parameters of several kinds, spun by the graph's executor."""
+    talker = rclpy.create_node('talker', namespace='ns', context=graph.context)
+    talker.declare_parameter('rate_hz', 100.0)
+    talker.declare_parameter('mesh.rows', 9)
+    talker.declare_parameter('mesh.cols', 12)
+    talker.declare_parameter('mesh.solver.iterations', 5)
+    talker.declare_parameter('names', ['a', 'b'])
+    talker.declare_parameter('gains', [1.5, 2.5])
+    read_only = ParameterDescriptor(read_only=True, description='d')
+    talker.declare_parameter('engine', 'mujoco', read_only)
+    talker.declare_parameter('anything', 1, ParameterDescriptor(dynamic_typing=True))
+    graph.executor.add_node(talker)
+    return talker
+
+
+def _msg(name: str, **value: Any) -> Any:
+    return ParameterMsg(name=name, value=ParameterValue(**value))
+
+
+@case('parameter services: list, get, types, describe')
+def _parameter_services_read() -> dict:
+    with _Graph(name='caller') as graph:
+        talker = _talker(graph)
+        try:
+            names = ['rate_hz', 'mesh.rows', 'names', 'gains', 'engine', 'use_sim_time']
+            listed = _call(graph, talker, ListParameters, '/ns/talker/list_parameters',
+                           ListParameters.Request())
+            got = _call(graph, talker, GetParameters, '/ns/talker/get_parameters',
+                        GetParameters.Request(names=names))
+            types = _call(graph, talker, GetParameterTypes, '/ns/talker/get_parameter_types',
+                          GetParameterTypes.Request(names=names))
+            described = _call(graph, talker, DescribeParameters,
+                              '/ns/talker/describe_parameters',
+                              DescribeParameters.Request(names=['engine', 'anything', 'gains']))
+            return {
+                'list': [sorted(listed.result.names), sorted(listed.result.prefixes)],
+                'get': [_value(v) for v in got.values],
+                'types': [int(x) for x in types.types],
+                'describe': [
+                    [d.name, int(d.type), d.description, d.read_only, d.dynamic_typing]
+                    for d in described.descriptors
+                ],
+            }
+        finally:
+            talker.destroy_node()
+
+
+@case('parameter services: an undeclared name empties the answer')
+def _parameter_services_undeclared() -> list:
+    with _Graph(name='caller') as graph:
+        talker = _talker(graph)
+        try:
+            names = ['rate_hz', 'nope']
+            got = _call(graph, talker, GetParameters, '/ns/talker/get_parameters',
+                        GetParameters.Request(names=names))
+            types = _call(graph, talker, GetParameterTypes, '/ns/talker/get_parameter_types',
+                          GetParameterTypes.Request(names=names))
+            described = _call(graph, talker, DescribeParameters,
+                              '/ns/talker/describe_parameters',
+                              DescribeParameters.Request(names=names))
+            return [len(got.values), len(types.types), len(described.descriptors)]
+        finally:
+            talker.destroy_node()
+
+
+for _prefixes, _depth in (([], 1), ([], 2), (['mesh'], 0), (['mesh'], 1), (['mesh', 'rate_hz'], 2),
+                          (['mes'], 0)):
+
+    @case(f'parameter services: list prefixes {_prefixes} depth {_depth}')
+    def _parameter_services_list(prefixes: list = _prefixes, depth: int = _depth) -> list:
+        with _Graph(name='caller') as graph:
+            talker = _talker(graph)
+            try:
+                listed = _call(graph, talker, ListParameters, '/ns/talker/list_parameters',
+                               ListParameters.Request(prefixes=prefixes, depth=depth))
+                return [sorted(listed.result.names), sorted(listed.result.prefixes)]
+            finally:
+                talker.destroy_node()
+
+
+@case('parameter services: set and set atomically')
+def _parameter_services_set() -> dict:
+    with _Graph(name='caller') as graph:
+        talker = _talker(graph)
+        try:
+            results = _call(graph, talker, SetParameters, '/ns/talker/set_parameters',
+                            SetParameters.Request(parameters=[
+                                _msg('rate_hz', type=4, string_value='fast'),
+                                _msg('rate_hz', type=3, double_value=250.0),
+                                _msg('mesh.rows', type=3, double_value=9.5),
+                                _msg('engine', type=4, string_value='bullet'),
+                                _msg('nope', type=2, integer_value=1),
+                                _msg('anything', type=4, string_value='now a string'),
+                                _msg('names', type=9, string_array_value=['c']),
+                            ]))
+            atomic_bad = _call(graph, talker, SetParametersAtomically,
+                               '/ns/talker/set_parameters_atomically',
+                               SetParametersAtomically.Request(parameters=[
+                                   _msg('mesh.cols', type=2, integer_value=20),
+                                   _msg('mesh.rows', type=4, string_value='x'),
+                               ]))
+            atomic_good = _call(graph, talker, SetParametersAtomically,
+                                '/ns/talker/set_parameters_atomically',
+                                SetParametersAtomically.Request(parameters=[
+                                    _msg('mesh.cols', type=2, integer_value=20),
+                                    _msg('gains', type=8, double_array_value=[0.5]),
+                                ]))
+            names = ['rate_hz', 'mesh.rows', 'mesh.cols', 'engine', 'anything', 'names', 'gains']
+            return {
+                'set': [r.successful for r in results.results],
+                'reasons given': [bool(r.reason) for r in results.results],
+                'atomically, one bad': atomic_bad.result.successful,
+                'atomically, all good': atomic_good.result.successful,
+                'values': [_plain(talker.get_parameter(n).value) for n in names],
+            }
+        finally:
+            talker.destroy_node()
+
+
+@case('the trajectory publisher refuses a change through its set_parameters service')
+def _node_refuses_through_service() -> list:
+    from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
+
+    with _Graph(name='caller') as graph:
+        node = TrajectoryPublisher(context=graph.context)
+        graph.executor.add_node(node)
+        try:
+            name = node.get_fully_qualified_name() + '/set_parameters'
+            results = _call(graph, node, SetParameters, name, SetParameters.Request(parameters=[
+                _msg('rate_hz', type=3, double_value=10.0),
+                _msg('use_sim_time', type=1, bool_value=False),
+            ]))
+            return [[r.successful for r in results.results], node.get_parameter('rate_hz').value]
+        finally:
+            node.destroy_node()
+
+
+@case('a service of its own: names, remaps, readiness and a call')
+def _own_service() -> dict:
+    args = ['-r', 'rosservice://renamed:=/elsewhere', '-r', 'rostopic://plain:=/moved']
+    with _Graph(args, name='server') as graph:
+        def answer(request: Any, response: Any) -> Any:
+            response.types = [len(n) for n in request.names]
+            return response
+
+        services = [
+            graph.node.create_service(GetParameterTypes, name, answer)
+            for name in ('~/private', 'renamed', 'plain')
+        ]
+        missing = graph.node.create_client(GetParameterTypes, '/nobody/here')
+        try:
+            reply = _call(graph, graph.node, GetParameterTypes, '/elsewhere',
+                          GetParameterTypes.Request(names=['ab', 'cde']))
+            return {
+                'names': [[s.srv_name, s.service_name] for s in services],
+                'ready without a server': [missing.service_is_ready(),
+                                           missing.wait_for_service(timeout_sec=0.2)],
+                'reply': [int(x) for x in reply.types],
+            }
+        finally:
+            graph.node.destroy_client(missing)
 
 
 # --- QoS: matching and what a reader keeps ---------------------------------------------------

@@ -302,10 +302,24 @@ while time.monotonic() < end and (len(mine) < 3 or len(changes) < 3):
     rclpy.spin_once(node, timeout_sec=0.1)
     mine = [m for m in logs if m.name == 'cloth_bench.talker']
     changes = [p for m in events if m.node == '/cloth_bench/talker' for p in m.changed_parameters]
+services = node.get_service_names_and_types_by_node('talker', '/cloth_bench')
+# A Fast DDS client of a Cyclone service: rmw_fastrtps and rmw_cyclonedds carry the request id
+# differently (inline QoS / a payload header), so no answer is expected; the talker must live on.
+from rcl_interfaces.srv import ListParameters
+client = node.create_client(ListParameters, '/cloth_bench/talker/list_parameters')
+future = client.call_async(ListParameters.Request())
+rclpy.spin_until_future_complete(node, future, timeout_sec=2.0)
+logs_before = len([m for m in logs if m.name == 'cloth_bench.talker'])
+end = time.monotonic() + 3
+while time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.1)
 print(json.dumps({
     'logs': [[m.level, m.msg] for m in mine[:3]],
     'changed': [[p.name, p.value.type] for p in changes[:3]],
     'nodes': sorted(node.get_node_names_and_namespaces()),
+    'services': sorted([name, types] for name, types in services),
+    'answered': future.done(),
+    'talker logs on': len([m for m in logs if m.name == 'cloth_bench.talker']) > logs_before,
 }))
 """
 
@@ -331,6 +345,38 @@ def test_a_real_rclpy_node_reads_the_embedded_nodes_rosout_and_parameter_events(
     assert all(msg.startswith('hello ') for _, msg in heard['logs'])
     assert heard['changed'] == [['count', 2]] * 3  # INTEGER
     assert ['talker', '/cloth_bench'] in heard['nodes']
+    # the parameter services, as `ros2 service list -t` would show them
+    expected = {
+        f'/cloth_bench/talker/{name}': [f'rcl_interfaces/srv/{kind}']
+        for name, kind in (
+            ('describe_parameters', 'DescribeParameters'),
+            ('get_parameter_types', 'GetParameterTypes'),
+            ('get_parameters', 'GetParameters'),
+            ('list_parameters', 'ListParameters'),
+            ('set_parameters', 'SetParameters'),
+            ('set_parameters_atomically', 'SetParametersAtomically'),
+        )
+    }
+    assert dict(heard['services']) == expected
+    print(f"a real Fast DDS client's call answered: {heard['answered']}")
+    assert heard['talker logs on'], 'the embedded node stopped after a Fast DDS request'
+
+
+def test_the_service_types_hash_as_the_installed_rcl_interfaces_says():
+    """The RIHS01 hashes the service endpoints announce equal those of the installed .json."""
+    from cloth_bench_ros.data.messages import type_hash
+    from cloth_bench_ros.runtime import services  # noqa: F401 (registers the srv types)
+
+    share = ROS_PYTHON.parent.parent / 'share' / 'rcl_interfaces' / 'srv'
+    compared = 0
+    for srv in services.SERVICE_DEFINITIONS:
+        name = srv.rsplit('/', 1)[1]
+        hashes = json.loads((share / f'{name}.json').read_text())['type_hashes']
+        installed = {h['type_name']: h['hash_string'] for h in hashes}
+        for part in ('_Request', '_Response'):
+            assert type_hash(srv + part) == installed[srv + part]
+            compared += 1
+    assert compared == 12
 
 
 _INTROSPECTION = """

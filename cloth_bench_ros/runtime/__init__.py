@@ -36,6 +36,14 @@ if EMBEDDED or TYPE_CHECKING:  # the type checker reads the embedded runtime's A
         SingleThreadedExecutor,
         Time,
     )
+    from cloth_bench_ros.runtime.embedded import (
+        DescribeParameters,
+        GetParameters,
+        GetParameterTypes,
+        ListParameters,
+        SetParameters,
+        SetParametersAtomically,
+    )
     from cloth_bench_ros.runtime.messages import (
         Clock,
         DiagnosticArray,
@@ -49,11 +57,21 @@ if EMBEDDED or TYPE_CHECKING:  # the type checker reads the embedded runtime's A
         PoseArray,
         Quaternion,
     )
+    from cloth_bench_ros.runtime.rosout import ParameterMsg, ParameterValue
 else:
     from builtin_interfaces.msg import Time as _TimeMsg  # noqa: F401
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion
-    from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import ParameterDescriptor, ParameterValue, SetParametersResult
+    from rcl_interfaces.srv import (
+        DescribeParameters,
+        GetParameters,
+        GetParameterTypes,
+        ListParameters,
+        SetParameters,
+        SetParametersAtomically,
+    )
     from rclpy.clock import Clock as _RosClock
     from rclpy.clock_type import ClockType as _ClockType
     from rclpy.executors import SingleThreadedExecutor
@@ -70,20 +88,26 @@ __all__ = [  # the API the nodes are written against, under either runtime
     'Clock',
     'declare_float',
     'deserialize_message',
+    'DescribeParameters',
     'DiagnosticArray',
     'DiagnosticStatus',
     'DurabilityPolicy',
     'EMBEDDED',
+    'GetParameters',
+    'GetParameterTypes',
     'Header',
     'HistoryPolicy',
     'is_user_error',
     'KeyValue',
+    'ListParameters',
     'make_qos',
     'message_type',
     'MESSAGE_TYPES',
     'Node',
     'Parameter',
     'ParameterDescriptor',
+    'ParameterMsg',
+    'ParameterValue',
     'Point',
     'PointCloud2',
     'PointField',
@@ -94,6 +118,8 @@ __all__ = [  # the API the nodes are written against, under either runtime
     'rclpy',
     'ReliabilityPolicy',
     'serialize_message',
+    'SetParameters',
+    'SetParametersAtomically',
     'SetParametersResult',
     'SingleThreadedExecutor',
     'stamp_ns',

@@ -223,12 +223,14 @@ def remap_namespace(rules: list[RemapRule], node_name: str, namespace: str) -> s
     return rule.replacement if rule else namespace
 
 
-def remap_topic_name(rules: list[RemapRule], topic: str, node_name: str, namespace: str) -> str:
-    """Return a fully qualified topic after the first rule whose expanded match equals it."""
+def remap_topic_name(
+    rules: list[RemapRule], topic: str, node_name: str, namespace: str, kind: str = 'topic'
+) -> str:
+    """Return a full topic (or service) name after the first rule that matches it, expanded."""
     for rule in rules:
         if rule.match in ('__node', '__ns') or rule.node not in (None, node_name):
             continue
-        if rule.applies_to == 'service':
+        if rule.applies_to not in ('any', kind):
             continue
         if expand_topic_name(rule.match, node_name, namespace) == topic:
             return expand_topic_name(rule.replacement, node_name, namespace)

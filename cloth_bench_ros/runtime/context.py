@@ -32,6 +32,8 @@ class Context:
         # Publishers, subscriptions and nodes of runtime/node.py (which imports this module).
         self.subscriptions: dict[str, list[Any]] = {}
         self.publishers: dict[str, list[Any]] = {}
+        self.services: dict[str, list[Any]] = {}  # services and clients of runtime/services.py
+        self.clients: dict[str, list[Any]] = {}
         self.queue: deque[tuple[Any, Any]] = deque()
         self.nodes: list[Any] = []
         self.transport: Any = IntraProcessTransport(self)

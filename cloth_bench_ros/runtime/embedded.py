@@ -10,7 +10,11 @@ and a node with use_sim_time follows /clock. What it provides (and nothing more;
 "Without ROS 2", lists it in full):
 
 - rclpy.init(args, domain_id=, transport=), ok(), shutdown(), spin(node),
-  spin_once(node, timeout_sec)
+  spin_once(node, timeout_sec), spin_until_future_complete(node, future, timeout_sec=)
+- services: Node.create_service / create_client, Client.call_async (a Future),
+  wait_for_service, service_is_ready; every node's parameter services
+  (runtime/parameter_service.py)
+  with rcl_interfaces/srv's six types, carried over DDS as rmw_cyclonedds carries them
 - graph queries: Node.get_publishers_info_by_topic, get_subscriptions_info_by_topic,
   get_node_names_and_namespaces; Subscription.get_publisher_count
 - rclpy.node.Node(name, namespace=, parameter_overrides=, context=, cli_args=): create_publisher,
@@ -49,6 +53,7 @@ from cloth_bench_ros.runtime.executors import (  # noqa: F401 (rclpy's names)
     SingleThreadedExecutor,
     spin,
     spin_once,
+    spin_until_future_complete,
 )
 from cloth_bench_ros.runtime.node import Node, Publisher, Subscription  # noqa: F401
 from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
@@ -78,6 +83,17 @@ from cloth_bench_ros.runtime.rosout import Log, ParameterEvent  # noqa: F401
 from cloth_bench_ros.runtime.serialization import (  # noqa: F401 (rclpy's names)
     deserialize_message,
     serialize_message,
+)
+from cloth_bench_ros.runtime.services import (  # noqa: F401 (rclpy's names)
+    Client,
+    DescribeParameters,
+    Future,
+    GetParameters,
+    GetParameterTypes,
+    ListParameters,
+    Service,
+    SetParameters,
+    SetParametersAtomically,
 )
 from cloth_bench_ros.runtime.topic_endpoint_info import (  # noqa: F401
     TopicEndpointInfo,

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import time
+
 from cloth_bench_ros.runtime.clock import Timer
 from cloth_bench_ros.runtime.context import Context, default_context
 from cloth_bench_ros.runtime.node import Node
+from cloth_bench_ros.runtime.services import Future
 
 
 class SingleThreadedExecutor:
@@ -36,7 +39,7 @@ class SingleThreadedExecutor:
                     sub._dropped -= 1
                     continue
                 sub._queued -= 1
-                sub.callback(msg)
+                sub.handle(msg)
                 return True
             if sub.node in self.context.nodes:
                 queue.append((sub, msg))  # for a node of another executor
@@ -80,6 +83,14 @@ class SingleThreadedExecutor:
         ):
             self.spin_once(0.1)
 
+    def spin_until_future_complete(self, future: Future, timeout_sec: float | None = None) -> None:
+        """Spin until the future is done, or timeout_sec passed (None: no limit)."""
+        end = None if timeout_sec is None else time.monotonic() + timeout_sec
+        while self.context.ok() and not future.done():
+            if end is not None and time.monotonic() >= end:
+                return
+            self.spin_once(0.01 if end is None else max(0.0, min(0.01, end - time.monotonic())))
+
     def shutdown(self, timeout_sec: float | None = None) -> bool:
         self.nodes.clear()
         return True
@@ -91,6 +102,17 @@ def spin_once(
     ex = executor or SingleThreadedExecutor(node.context)
     ex.add_node(node)
     ex.spin_once(timeout_sec)
+
+
+def spin_until_future_complete(
+    node: Node,
+    future: Future,
+    executor: SingleThreadedExecutor | None = None,
+    timeout_sec: float | None = None,
+) -> None:
+    ex = executor or SingleThreadedExecutor(node.context)
+    ex.add_node(node)
+    ex.spin_until_future_complete(future, timeout_sec)
 
 
 def spin(node: Node, executor: SingleThreadedExecutor | None = None) -> None:

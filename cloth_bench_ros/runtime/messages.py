@@ -82,6 +82,29 @@ def message_class(typename: str) -> type:
     return _classes[typename]
 
 
+def with_numpy_arrays(msg: Any, typename: str) -> Any:
+    """
+    Make every numeric array field of `msg` a numpy array, as rosbags' CDR codec wants.
+
+    rclpy accepts lists (and bytes objects in byte arrays); a message built that way is fixed up
+    here before it is serialised.
+    """
+    fields: Any = TYPESTORE.fielddefs[typename][1]  # rosbags' node tuples, read as in _factory
+    for name, (kind, detail) in fields:
+        value = getattr(msg, name)
+        if int(kind) == 2:
+            with_numpy_arrays(value, detail)
+        elif int(kind) in (3, 4):
+            (inner_kind, inner), _ = detail
+            if int(inner_kind) == 2:
+                for item in value:
+                    with_numpy_arrays(item, inner)
+            elif int(inner_kind) == 1 and inner[0] in _NUMPY and not isinstance(value, np.ndarray):
+                items = [v[0] if isinstance(v, bytes) else v for v in value]
+                setattr(msg, name, np.asarray(items, dtype=_NUMPY[inner[0]]))
+    return msg
+
+
 if TYPE_CHECKING:  # what the type checker reads: rosbags' classes, rclpy's keyword constructor
 
     class _Keywords:

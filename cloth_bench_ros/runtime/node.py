@@ -1,12 +1,10 @@
-"""rclpy.node for the embedded runtime: Node, Publisher and Subscription (the nodes' subset)."""
+"""rclpy.node for the embedded runtime: Node, Publisher, Subscription (parameters: mixed in)."""
 
 from __future__ import annotations
 
 from collections import deque
-import dataclasses
 import logging
-from typing import Any, Callable, Sequence
-import warnings
+from typing import Any, Callable
 
 from cloth_bench_ros.runtime import messages
 from cloth_bench_ros.runtime.arguments import (
@@ -23,22 +21,12 @@ from cloth_bench_ros.runtime.arguments import (
 )
 from cloth_bench_ros.runtime.clock import Clock, ClockType, Time, Timer
 from cloth_bench_ros.runtime.context import Context, default_context
-from cloth_bench_ros.runtime.parameters import (
-    InvalidParameterException,
-    InvalidParameterTypeException,
-    InvalidParameterValueException,
-    Parameter,
-    ParameterAlreadyDeclaredException,
-    ParameterDescriptor,
-    ParameterNotDeclaredException,
-    ParameterType,
-    ParameterUninitializedException,
-    SetParametersResult,
-)
+from cloth_bench_ros.runtime.node_parameters import NodeParameters
+from cloth_bench_ros.runtime.parameter_service import ParameterService
+from cloth_bench_ros.runtime.parameters import Parameter, ParameterDescriptor, SetParametersResult
 from cloth_bench_ros.runtime.qos import as_profile, QoSProfile, time_source_qos
 from cloth_bench_ros.runtime.rosout import (
     Log,
-    parameter_event,
     parameter_events_qos,
     PARAMETER_EVENTS_TOPIC,
     ParameterEvent,
@@ -49,6 +37,7 @@ from cloth_bench_ros.runtime.rosout import (
     ROSOUT_TOPIC,
 )
 from cloth_bench_ros.runtime.serialization import deserialize_message
+from cloth_bench_ros.runtime.services import Client, Service, services_qos
 from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 
 
@@ -92,6 +81,7 @@ class Subscription:
             callback,
             qos,
         )
+        self.handle = callback  # what the executor calls (services and clients have theirs)
         self._queued = 0  # its messages in the context's queue
         self._dropped = 0  # of those, how many a keep-last depth has pushed out
 
@@ -104,7 +94,7 @@ class Subscription:
         self.node.context.release_topic(self.topic_name)
 
 
-class Node:
+class Node(NodeParameters):
     """The rclpy.node.Node subset listed in this module's docstring."""
 
     def __init__(
@@ -116,6 +106,7 @@ class Node:
         context: Context | None = None,
         cli_args: list[str] | None = None,
         use_global_arguments: bool = True,
+        start_parameter_services: bool = True,
         **_: Any,
     ) -> None:
         self.context = context or default_context
@@ -143,6 +134,8 @@ class Node:
         self._timers: list[Timer] = []
         self._subscriptions: list[Subscription] = []
         self._publishers: list[Publisher] = []
+        self._services: list[Service] = []
+        self._clients: list[Client] = []
         self._clock = Clock(clock_type=ClockType.ROS_TIME)
         self.context.nodes.append(self)
         # What every node publishes (runtime/rosout.py): parameter events (rclpy), /rosout (rcl).
@@ -162,6 +155,8 @@ class Node:
         level = levels.get(rcl_logger) or levels.get('')  # unset: the default's (rcutils)
         if level:  # --log-level [logger:=]severity, as rcl sets a node's logger
             self._logger.set_level(level)
+        if start_parameter_services:  # rclpy's ParameterService
+            ParameterService(self)
         self.context.transport.graph_changed(self)
         # rclpy's TimeSource: use_sim_time declared as a bool; when true, /clock drives the clock.
         if self.declare_parameter('use_sim_time', False).value:
@@ -192,140 +187,21 @@ class Node:
 
     def resolve_topic_name(self, topic: str, *, only_expand: bool = False) -> str:
         """Return the topic expanded and, unless only_expand, remapped (rcl_node_resolve_name)."""
-        validate_topic_name(topic)
-        full = expand_topic_name(topic, self._name, self._namespace)
+        return self._resolve(topic, only_expand, 'topic')
+
+    def resolve_service_name(self, service: str, *, only_expand: bool = False) -> str:
+        """Return the service name expanded and, unless only_expand, remapped (rosservice://)."""
+        return self._resolve(service, only_expand, 'service')
+
+    def _resolve(self, name: str, only_expand: bool, kind: str) -> str:
+        validate_topic_name(name)
+        full = expand_topic_name(name, self._name, self._namespace)
         validate_full_topic_name(full)
         return (
             full
             if only_expand
-            else remap_topic_name(self._remaps, full, self._name, self._namespace)
+            else remap_topic_name(self._remaps, full, self._name, self._namespace, kind)
         )
-
-    # parameters (rclpy/node.py declare_parameters, _apply_descriptor, get_parameter)
-    def declare_parameter(
-        self,
-        name: str,
-        value: Any = None,
-        descriptor: ParameterDescriptor | None = None,
-        ignore_override: bool = False,
-    ) -> Parameter:
-        if not name:
-            raise InvalidParameterException(name)
-        descriptor = (
-            dataclasses.replace(descriptor) if descriptor is not None else ParameterDescriptor()
-        )
-        if isinstance(value, ParameterType):
-            if value == ParameterType.NOT_SET:
-                raise ValueError(
-                    f'Cannot declare parameter {{{name}}} as statically typed of type NOT_SET'
-                )
-            if descriptor.dynamic_typing:
-                raise ValueError(
-                    f'When declaring parameter {{{name}}} passing a descriptor with'
-                    '`dynamic_typing=True` is not allowed when the parameter type is provided'
-                )
-            descriptor.type, value = int(value), None
-        elif value is None and not descriptor.dynamic_typing:
-            warnings.warn(  # rclpy (Jazzy): deprecated, declared with dynamic typing
-                f"when declaring parameter named '{name}', declaring a parameter only providing "
-                'its name is deprecated. You have to either:\n\t- Pass a name and a default '
-                'value different to "PARAMETER NOT SET" (and optionally a descriptor).\n\t- Pass '
-                'a name and a parameter type.\n\t- Pass a name and a descriptor with '
-                '`dynamic_typing=True',
-                stacklevel=2,
-            )
-            descriptor.dynamic_typing = True
-        elif not descriptor.dynamic_typing:
-            descriptor.type = int(ParameterType.from_parameter_value(value))
-            if descriptor.type == ParameterType.NOT_SET:
-                raise ValueError(
-                    'Cannot declare a statically typed parameter with default value '
-                    'of type PARAMETER_NOT_SET'
-                )
-        if not ignore_override and name in self._overrides:
-            value = self._overrides[name].value
-        parameter = Parameter(name, value=value)
-        if name in self._parameters:
-            raise ParameterAlreadyDeclaredException([name])
-        if descriptor.dynamic_typing:
-            descriptor.type = int(parameter.type_)
-        elif parameter.type_ != ParameterType.NOT_SET and parameter.type_ != descriptor.type:
-            raise InvalidParameterTypeException(parameter, ParameterType(descriptor.type).name)
-        descriptor.name = name
-        for callback in self._on_set_callbacks:  # rclpy runs them on a declaration too
-            result = callback([parameter])
-            if not result.successful:
-                raise InvalidParameterValueException(name, parameter.value, result.reason)
-        self._parameters[name], self._descriptors[name] = parameter, descriptor
-        self._publish_parameter_event(new=[parameter])
-        return parameter
-
-    def has_parameter(self, name: str) -> bool:
-        return name in self._parameters
-
-    def get_parameter(self, name: str) -> Parameter:
-        if name not in self._parameters:
-            raise ParameterNotDeclaredException(name)
-        parameter = self._parameters[name]
-        if parameter.type_ == ParameterType.NOT_SET and not self._descriptors[name].dynamic_typing:
-            raise ParameterUninitializedException(name)
-        return parameter
-
-    def add_on_set_parameters_callback(
-        self, callback: Callable[[list[Parameter]], SetParametersResult]
-    ) -> None:
-        """Run `callback` before a change is applied; it may refuse it (rclpy: newest first)."""
-        self._on_set_callbacks.insert(0, callback)
-
-    def remove_on_set_parameters_callback(self, callback: Callable) -> None:
-        self._on_set_callbacks.remove(callback)
-
-    def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
-        """Set each parameter on its own, as rclpy does: a result per parameter."""
-        for parameter in parameter_list:
-            if parameter.name not in self._parameters:
-                raise ParameterNotDeclaredException(parameter.name)
-        return [self.set_parameters_atomically([p]) for p in parameter_list]
-
-    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
-        """Set all or none: read-only and type checks, then the node's callbacks (rclpy)."""
-        for parameter in parameter_list:
-            if parameter.name not in self._parameters:
-                raise ParameterNotDeclaredException(parameter.name)
-            descriptor = self._descriptors[parameter.name]
-            if descriptor.read_only:
-                return SetParametersResult(
-                    False, f'Trying to set a read-only parameter: {parameter.name}.'
-                )
-            if not descriptor.dynamic_typing and parameter.type_ != descriptor.type:
-                return SetParametersResult(
-                    False,
-                    f"Wrong parameter type, expected 'Type.{ParameterType(descriptor.type).name}'"
-                    f" got 'Type.{parameter.type_.name}'",
-                )
-        for callback in self._on_set_callbacks:
-            result = callback(parameter_list)
-            if not result.successful:
-                return result
-        for parameter in parameter_list:
-            self._parameters[parameter.name] = parameter
-            if self._descriptors[parameter.name].dynamic_typing:
-                self._descriptors[parameter.name].type = int(parameter.type_)
-        self._publish_parameter_event(changed=parameter_list)
-        return SetParametersResult(True)
-
-    def _publish_parameter_event(
-        self, new: Sequence[Parameter] = (), changed: Sequence[Parameter] = ()
-    ) -> None:
-        stamp = self._clock.now().to_msg()
-        self._parameter_events.publish(
-            parameter_event(self.get_fully_qualified_name(), stamp, new, changed)
-        )
-
-    def describe_parameter(self, name: str) -> ParameterDescriptor:
-        if name not in self._descriptors:
-            raise ParameterNotDeclaredException(name)
-        return self._descriptors[name]
 
     # graph
     def create_publisher(
@@ -347,6 +223,43 @@ class Node:
         self._subscriptions.append(sub)
         self.context.transport.add_subscription(sub)
         return sub
+
+    def create_service(
+        self,
+        srv_type: Any,
+        srv_name: str,
+        callback: Callable[[Any, Any], Any],
+        *,
+        qos_profile: QoSProfile | None = None,
+        **_: Any,
+    ) -> Service:
+        """Return a service: `callback(request, response)` fills and returns the response."""
+        name = self.resolve_service_name(srv_name)
+        srv = Service(self, srv_type, srv_name, name, callback, qos_profile or services_qos())
+        self._services.append(srv)
+        self.context.transport.add_service(srv)
+        return srv
+
+    def create_client(
+        self, srv_type: Any, srv_name: str, *, qos_profile: QoSProfile | None = None, **_: Any
+    ) -> Client:
+        name = self.resolve_service_name(srv_name)
+        client = Client(self, srv_type, srv_name, name, qos_profile or services_qos())
+        self._clients.append(client)
+        self.context.transport.add_client(client)
+        return client
+
+    def destroy_service(self, service: Service) -> bool:
+        if service in self._services:
+            self._services.remove(service)
+            service.destroy()
+        return True
+
+    def destroy_client(self, client: Client) -> bool:
+        if client in self._clients:
+            self._clients.remove(client)
+            client.destroy()
+        return True
 
     def create_timer(
         self,
@@ -397,6 +310,10 @@ class Node:
         return self._logger
 
     def destroy_node(self) -> None:
+        for srv in self._services:
+            srv.destroy()
+        for client in self._clients:
+            client.destroy()
         for sub in self._subscriptions:
             sub.destroy()
         for pub in self._publishers:

@@ -24,8 +24,8 @@ PARAMETER_EVENTS_TOPIC = '/parameter_events'
 Log = message_class('rcl_interfaces/msg/Log')
 ParameterEvent = message_class('rcl_interfaces/msg/ParameterEvent')
 _Time = message_class('builtin_interfaces/msg/Time')
-_Parameter = message_class('rcl_interfaces/msg/Parameter')
-_ParameterValue = message_class('rcl_interfaces/msg/ParameterValue')
+ParameterMsg = message_class('rcl_interfaces/msg/Parameter')
+ParameterValue = message_class('rcl_interfaces/msg/ParameterValue')
 
 # rcl_interfaces/msg/Log severities, as rcutils numbers them (and Python's logging does).
 _SEVERITY = {
@@ -35,7 +35,7 @@ _SEVERITY = {
     logging.ERROR: 40,
     logging.CRITICAL: 50,
 }
-_VALUE_FIELD = {
+VALUE_FIELDS = {
     ParameterType.BOOL: 'bool_value',
     ParameterType.INTEGER: 'integer_value',
     ParameterType.DOUBLE: 'double_value',
@@ -69,8 +69,8 @@ def rcl_logger_name(namespace: str, name: str) -> str:
 
 def parameter_message(parameter: Parameter) -> Any:
     """Return rcl_interfaces/msg/Parameter of a parameter (type and the one field it uses)."""
-    value = _ParameterValue(type=int(parameter.type_))
-    field = _VALUE_FIELD.get(parameter.type_)
+    value = ParameterValue(type=int(parameter.type_))
+    field = VALUE_FIELDS.get(parameter.type_)
     if field is None:  # NOT_SET: the type says it all
         pass
     elif isinstance(getattr(value, field), np.ndarray):  # numeric arrays, as the CDR codec wants
@@ -79,7 +79,7 @@ def parameter_message(parameter: Parameter) -> Any:
     else:
         as_list = field == 'string_array_value'
         setattr(value, field, list(parameter.value) if as_list else parameter.value)
-    return _Parameter(name=parameter.name, value=value)
+    return ParameterMsg(name=parameter.name, value=value)
 
 
 def parameter_event(

@@ -97,6 +97,37 @@ class IntraProcessTransport:
             if compatible(pub.qos, sub.qos):
                 self.context.enqueue(sub, msg)
 
+    # services: a request goes to every server of the name and type, the reply to its client
+    def add_service(self, srv: Any) -> None:
+        self.context.services.setdefault(srv.service_name, []).append(srv)
+
+    def remove_service(self, srv: Any) -> None:
+        if srv in self.context.services.get(srv.service_name, ()):
+            self.context.services[srv.service_name].remove(srv)
+
+    def add_client(self, client: Any) -> None:
+        self.context.clients.setdefault(client.service_name, []).append(client)
+
+    def remove_client(self, client: Any) -> None:
+        if client in self.context.clients.get(client.service_name, ()):
+            self.context.clients[client.service_name].remove(client)
+
+    def _servers(self, client: Any) -> list[Any]:
+        servers = self.context.services.get(client.service_name, ())
+        return [s for s in servers if s.srv_type.__srvtype__ == client.srv_type.__srvtype__]
+
+    def send_request(self, client: Any, sequence: int, request: Any) -> None:
+        for srv in self._servers(client):
+            self.context.enqueue(srv, ((client, sequence), request))
+
+    def send_response(self, srv: Any, request_id: Any, response: Any) -> None:
+        client, sequence = request_id
+        if client in self.context.clients.get(srv.service_name, ()):  # a destroyed client: dropped
+            self.context.enqueue(client, (sequence, response))
+
+    def service_is_ready(self, client: Any) -> bool:
+        return bool(self._servers(client))
+
     def matched_subscriptions(self, pub: Endpoint) -> int:
         subs = self.context.subscriptions.get(pub.topic_name, ())
         return sum(compatible(pub.qos, sub.qos) for sub in subs)

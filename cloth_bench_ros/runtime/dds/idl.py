@@ -175,6 +175,161 @@ class ParameterEvent_(IdlStruct, typename='rcl_interfaces::msg::dds_::ParameterE
     deleted_parameters: t.sequence[Parameter_] = field(default_factory=list)
 
 
+@dataclass
+class FloatingPointRange_(IdlStruct, typename='rcl_interfaces::msg::dds_::FloatingPointRange_'):
+    from_value: t.float64 = 0.0
+    to_value: t.float64 = 0.0
+    step: t.float64 = 0.0
+
+
+@dataclass
+class IntegerRange_(IdlStruct, typename='rcl_interfaces::msg::dds_::IntegerRange_'):
+    from_value: t.int64 = 0
+    to_value: t.int64 = 0
+    step: t.uint64 = 0
+
+
+@dataclass
+class ParameterDescriptor_(
+    IdlStruct, typename='rcl_interfaces::msg::dds_::ParameterDescriptor_'
+):
+    name: str = ''
+    type: t.uint8 = 0  # noqa: A003 (the .msg's field name)
+    description: str = ''
+    additional_constraints: str = ''
+    read_only: bool = False
+    dynamic_typing: bool = False
+    floating_point_range: t.sequence[FloatingPointRange_, 1] = field(default_factory=list)
+    integer_range: t.sequence[IntegerRange_, 1] = field(default_factory=list)
+
+
+@dataclass
+class ListParametersResult_(
+    IdlStruct, typename='rcl_interfaces::msg::dds_::ListParametersResult_'
+):
+    names: t.sequence[str] = field(default_factory=list)
+    prefixes: t.sequence[str] = field(default_factory=list)
+
+
+@dataclass
+class SetParametersResult_(IdlStruct, typename='rcl_interfaces::msg::dds_::SetParametersResult_'):
+    successful: bool = False
+    reason: str = ''
+
+
+# rcl_interfaces/srv: the parameter services. rmw_cyclonedds writes a request header (the client's
+# request writer instance handle and a sequence number) before the fields; these types say so.
+
+
+@dataclass
+class DescribeParameters_Request_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::DescribeParameters_Request_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    names: t.sequence[str] = field(default_factory=list)
+
+
+@dataclass
+class DescribeParameters_Response_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::DescribeParameters_Response_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    descriptors: t.sequence[ParameterDescriptor_] = field(default_factory=list)
+
+
+@dataclass
+class GetParameters_Request_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::GetParameters_Request_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    names: t.sequence[str] = field(default_factory=list)
+
+
+@dataclass
+class GetParameters_Response_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::GetParameters_Response_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    values: t.sequence[ParameterValue_] = field(default_factory=list)
+
+
+@dataclass
+class GetParameterTypes_Request_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::GetParameterTypes_Request_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    names: t.sequence[str] = field(default_factory=list)
+
+
+@dataclass
+class GetParameterTypes_Response_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::GetParameterTypes_Response_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    types: t.sequence[t.uint8] = field(default_factory=list)
+
+
+@dataclass
+class ListParameters_Request_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::ListParameters_Request_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    prefixes: t.sequence[str] = field(default_factory=list)
+    depth: t.uint64 = 0
+
+
+@dataclass
+class ListParameters_Response_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::ListParameters_Response_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    result: ListParametersResult_ = field(default_factory=ListParametersResult_)
+
+
+@dataclass
+class SetParameters_Request_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::SetParameters_Request_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    parameters: t.sequence[Parameter_] = field(default_factory=list)
+
+
+@dataclass
+class SetParameters_Response_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::SetParameters_Response_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    results: t.sequence[SetParametersResult_] = field(default_factory=list)
+
+
+@dataclass
+class SetParametersAtomically_Request_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::SetParametersAtomically_Request_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    parameters: t.sequence[Parameter_] = field(default_factory=list)
+
+
+@dataclass
+class SetParametersAtomically_Response_(
+    IdlStruct, typename='rcl_interfaces::srv::dds_::SetParametersAtomically_Response_'
+):
+    client_guid: t.uint64 = 0
+    sequence_number: t.int64 = 0
+    result: SetParametersResult_ = field(default_factory=SetParametersResult_)
+
+
 # rmw_dds_common: the graph information of ros_discovery_info (Gid is `char[16] data`)
 
 
@@ -218,6 +373,18 @@ DDS_TYPES: dict[str, type] = {
     'rcl_interfaces/msg/Parameter': Parameter_,
     'rcl_interfaces/msg/ParameterEvent': ParameterEvent_,
     'rmw_dds_common/msg/ParticipantEntitiesInfo': ParticipantEntitiesInfo_,
+    'rcl_interfaces/srv/DescribeParameters_Request': DescribeParameters_Request_,
+    'rcl_interfaces/srv/DescribeParameters_Response': DescribeParameters_Response_,
+    'rcl_interfaces/srv/GetParameters_Request': GetParameters_Request_,
+    'rcl_interfaces/srv/GetParameters_Response': GetParameters_Response_,
+    'rcl_interfaces/srv/GetParameterTypes_Request': GetParameterTypes_Request_,
+    'rcl_interfaces/srv/GetParameterTypes_Response': GetParameterTypes_Response_,
+    'rcl_interfaces/srv/ListParameters_Request': ListParameters_Request_,
+    'rcl_interfaces/srv/ListParameters_Response': ListParameters_Response_,
+    'rcl_interfaces/srv/SetParameters_Request': SetParameters_Request_,
+    'rcl_interfaces/srv/SetParameters_Response': SetParameters_Response_,
+    'rcl_interfaces/srv/SetParametersAtomically_Request': SetParametersAtomically_Request_,
+    'rcl_interfaces/srv/SetParametersAtomically_Response': SetParametersAtomically_Response_,
 }
 
 

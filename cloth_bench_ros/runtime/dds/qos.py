@@ -28,9 +28,17 @@ _INFINITY = 0x7FFFFFFFFFFFFFFF  # DDS_INFINITY, ns
 
 
 def endpoint_qos(
-    profile: QoSProfile, ros_type: str | None = None, *, ignore_local: bool = False
+    profile: QoSProfile,
+    ros_type: str | None = None,
+    *,
+    ignore_local: bool = False,
+    user_data: str = '',
 ) -> Qos:
-    """Return the Cyclone QoS of a writer or reader created from a rclpy-style QoSProfile."""
+    """
+    Return the Cyclone QoS of a writer or reader created from a rclpy-style QoSProfile.
+
+    USER_DATA is `user_data` (a service's `serviceid=...;`) and the type's `typehash=...;`.
+    """
     depth = int(profile.depth)
     if int(profile.history) == HistoryPolicy.KEEP_ALL:
         history = Policy.History.KeepAll
@@ -64,7 +72,9 @@ def endpoint_qos(
     if ignore_local:
         policies.append(Policy.IgnoreLocal.Participant)
     if ros_type is not None:
-        policies.append(Policy.Userdata(data=f'typehash={type_hash(ros_type)};'.encode()))
+        user_data += f'typehash={type_hash(ros_type)};'
+    if user_data:
+        policies.append(Policy.Userdata(data=user_data.encode()))
     return Qos(*policies)
 
 

@@ -19,6 +19,7 @@ from cloth_bench_ros.data import messages as cdr
 from cloth_bench_ros.runtime.dds.graph import Graph
 from cloth_bench_ros.runtime.dds.idl import dds_type
 from cloth_bench_ros.runtime.dds.qos import domain_config, domain_id, endpoint_qos
+from cloth_bench_ros.runtime.dds.services import DdsServices
 from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 from cloth_bench_ros.runtime.transport import Endpoint
 from cyclonedds._clayer import ddspy_take, ddspy_write
@@ -87,19 +88,24 @@ class DdsTransport:
         self.writers: dict[Endpoint, DataWriter] = {}
         self.readers: dict[Endpoint, tuple[DataReader, ReadCondition]] = {}
         self.graph = Graph(self.participant)
+        self.services = DdsServices(self)
 
-    def _topic(self, ros_topic: str, ros_type: str) -> Topic:
-        name = dds_topic_name(ros_topic)
+    def topic(self, name: str, ros_type: str) -> Topic:
+        """Return the DDS topic `name` (e.g. `rt/clock`) of a ROS type, created on first use."""
         if name not in self.topics:
             self.topics[name] = Topic(self.participant, name, dds_type(ros_type))
         return self.topics[name]
+
+    @staticmethod
+    def dispose(entity: Any) -> None:
+        _dispose(entity)
 
     # endpoints
     def add_publisher(self, pub: Endpoint) -> None:
         ros_type = pub.msg_type.__msgtype__
         self.writers[pub] = DataWriter(
             self.participant,
-            self._topic(pub.topic_name, ros_type),
+            self.topic(dds_topic_name(pub.topic_name), ros_type),
             qos=endpoint_qos(pub.qos, ros_type),
         )
         self.graph_changed(pub.node)
@@ -114,7 +120,7 @@ class DdsTransport:
         ros_type = sub.msg_type.__msgtype__
         reader = DataReader(
             self.participant,
-            self._topic(sub.topic_name, ros_type),
+            self.topic(dds_topic_name(sub.topic_name), ros_type),
             qos=endpoint_qos(sub.qos, ros_type),
         )
         condition = ReadCondition(reader, _ANY)
@@ -138,7 +144,30 @@ class DdsTransport:
             return
         readers = [r.get_guid() for s, (r, _) in self.readers.items() if s.node is node]
         writers = [w.get_guid() for p, w in self.writers.items() if p.node is node]
-        self.graph.update_node(node, readers, writers)
+        service_readers, service_writers = self.services.guids(node)
+        self.graph.update_node(node, readers + service_readers, writers + service_writers)
+
+    # services (runtime/dds/services.py)
+    def add_service(self, srv: Any) -> None:
+        self.services.add(srv, is_service=True)
+
+    def add_client(self, client: Any) -> None:
+        self.services.add(client, is_service=False)
+
+    def remove_service(self, srv: Any) -> None:
+        self.services.remove(srv)
+
+    def remove_client(self, client: Any) -> None:
+        self.services.remove(client)
+
+    def send_request(self, client: Any, sequence: int, request: Any) -> None:
+        self.services.send_request(client, sequence, request)
+
+    def send_response(self, srv: Any, request_id: Any, response: Any) -> None:
+        self.services.send_response(srv, request_id, response)
+
+    def service_is_ready(self, client: Any) -> bool:
+        return self.services.service_is_ready(client)
 
     # data
     def publish(self, pub: Endpoint, msg: Any) -> None:
@@ -165,6 +194,7 @@ class DdsTransport:
                         enqueue(sub, cdr.deserialize(payload, ros_type))
                 if len(samples) < _TAKE_BATCH:
                     break
+        self.services.receive()
 
     def wait(self, timeout_sec: float | None) -> bool:
         """Block until a sample arrives (True) or timeout_sec passes (False; None: no limit)."""
@@ -205,5 +235,6 @@ class DdsTransport:
         """Delete the participant and every entity under it; remote nodes see them leave."""
         self.readers.clear()
         self.writers.clear()
+        self.services.pairs.clear()
         self.topics.clear()
         _dispose(self.participant)

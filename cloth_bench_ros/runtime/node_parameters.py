@@ -1,0 +1,186 @@
+"""
+The parameter API of the embedded Node (rclpy/node.py): declare, get, set, describe, list.
+
+A mixin of runtime/node.py's Node, which holds the state it works on: `_parameters`,
+`_descriptors`, `_overrides` (from the command line and parameter files), `_on_set_callbacks`
+and the `/parameter_events` publisher.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, Sequence
+import warnings
+
+from cloth_bench_ros.runtime.parameter_service import list_parameters
+from cloth_bench_ros.runtime.parameters import (
+    InvalidParameterException,
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    Parameter,
+    ParameterAlreadyDeclaredException,
+    ParameterDescriptor,
+    ParameterNotDeclaredException,
+    ParameterType,
+    ParameterUninitializedException,
+    SetParametersResult,
+)
+from cloth_bench_ros.runtime.rosout import parameter_event
+
+
+class NodeParameters:
+    """Node's parameter methods, with rclpy's checks, exceptions and parameter events."""
+
+    _parameters: dict[str, Parameter]
+    _descriptors: dict[str, ParameterDescriptor]
+    _overrides: dict[str, Parameter]
+    _on_set_callbacks: list[Callable[[list[Parameter]], SetParametersResult]]
+    _parameter_events: Any
+    _clock: Any
+
+    def get_fully_qualified_name(self) -> str:
+        raise NotImplementedError
+
+    def declare_parameter(
+        self,
+        name: str,
+        value: Any = None,
+        descriptor: ParameterDescriptor | None = None,
+        ignore_override: bool = False,
+    ) -> Parameter:
+        if not name:
+            raise InvalidParameterException(name)
+        descriptor = (
+            dataclasses.replace(descriptor) if descriptor is not None else ParameterDescriptor()
+        )
+        if isinstance(value, ParameterType):
+            if value == ParameterType.NOT_SET:
+                raise ValueError(
+                    f'Cannot declare parameter {{{name}}} as statically typed of type NOT_SET'
+                )
+            if descriptor.dynamic_typing:
+                raise ValueError(
+                    f'When declaring parameter {{{name}}} passing a descriptor with'
+                    '`dynamic_typing=True` is not allowed when the parameter type is provided'
+                )
+            descriptor.type, value = int(value), None
+        elif value is None and not descriptor.dynamic_typing:
+            warnings.warn(  # rclpy (Jazzy): deprecated, declared with dynamic typing
+                f"when declaring parameter named '{name}', declaring a parameter only providing "
+                'its name is deprecated. You have to either:\n\t- Pass a name and a default '
+                'value different to "PARAMETER NOT SET" (and optionally a descriptor).\n\t- Pass '
+                'a name and a parameter type.\n\t- Pass a name and a descriptor with '
+                '`dynamic_typing=True',
+                stacklevel=2,
+            )
+            descriptor.dynamic_typing = True
+        elif not descriptor.dynamic_typing:
+            descriptor.type = int(ParameterType.from_parameter_value(value))
+            if descriptor.type == ParameterType.NOT_SET:
+                raise ValueError(
+                    'Cannot declare a statically typed parameter with default value '
+                    'of type PARAMETER_NOT_SET'
+                )
+        if not ignore_override and name in self._overrides:
+            value = self._overrides[name].value
+        parameter = Parameter(name, value=value)
+        if name in self._parameters:
+            raise ParameterAlreadyDeclaredException([name])
+        if descriptor.dynamic_typing:
+            descriptor.type = int(parameter.type_)
+        elif parameter.type_ != ParameterType.NOT_SET and parameter.type_ != descriptor.type:
+            raise InvalidParameterTypeException(parameter, ParameterType(descriptor.type).name)
+        descriptor.name = name
+        for callback in self._on_set_callbacks:  # rclpy runs them on a declaration too
+            result = callback([parameter])
+            if not result.successful:
+                raise InvalidParameterValueException(name, parameter.value, result.reason)
+        self._parameters[name], self._descriptors[name] = parameter, descriptor
+        self._publish_parameter_event(new=[parameter])
+        return parameter
+
+    def has_parameter(self, name: str) -> bool:
+        return name in self._parameters
+
+    def get_parameter(self, name: str) -> Parameter:
+        if name not in self._parameters:
+            raise ParameterNotDeclaredException(name)
+        parameter = self._parameters[name]
+        if parameter.type_ == ParameterType.NOT_SET and not self._descriptors[name].dynamic_typing:
+            raise ParameterUninitializedException(name)
+        return parameter
+
+    def add_on_set_parameters_callback(
+        self, callback: Callable[[list[Parameter]], SetParametersResult]
+    ) -> None:
+        """Run `callback` before a change is applied; it may refuse it (rclpy: newest first)."""
+        self._on_set_callbacks.insert(0, callback)
+
+    def remove_on_set_parameters_callback(self, callback: Callable) -> None:
+        self._on_set_callbacks.remove(callback)
+
+    def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
+        """Set each parameter on its own, as rclpy does: a result per parameter."""
+        for parameter in parameter_list:
+            if parameter.name not in self._parameters:
+                raise ParameterNotDeclaredException(parameter.name)
+        return [self.set_parameters_atomically([p]) for p in parameter_list]
+
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """Set all or none: read-only and type checks, then the node's callbacks (rclpy)."""
+        for parameter in parameter_list:
+            if parameter.name not in self._parameters:
+                raise ParameterNotDeclaredException(parameter.name)
+            descriptor = self._descriptors[parameter.name]
+            if descriptor.read_only:
+                return SetParametersResult(
+                    False, f'Trying to set a read-only parameter: {parameter.name}.'
+                )
+            if not descriptor.dynamic_typing and parameter.type_ != descriptor.type:
+                return SetParametersResult(
+                    False,
+                    f"Wrong parameter type, expected 'Type.{ParameterType(descriptor.type).name}'"
+                    f" got 'Type.{parameter.type_.name}'",
+                )
+        for callback in self._on_set_callbacks:
+            result = callback(parameter_list)
+            if not result.successful:
+                return result
+        for parameter in parameter_list:
+            self._parameters[parameter.name] = parameter
+            if self._descriptors[parameter.name].dynamic_typing:
+                self._descriptors[parameter.name].type = int(parameter.type_)
+        self._publish_parameter_event(changed=parameter_list)
+        return SetParametersResult(True)
+
+    def _publish_parameter_event(
+        self, new: Sequence[Parameter] = (), changed: Sequence[Parameter] = ()
+    ) -> None:
+        stamp = self._clock.now().to_msg()
+        self._parameter_events.publish(
+            parameter_event(self.get_fully_qualified_name(), stamp, new, changed)
+        )
+
+    def describe_parameter(self, name: str) -> ParameterDescriptor:
+        if name not in self._descriptors:
+            raise ParameterNotDeclaredException(name)
+        return self._descriptors[name]
+
+    def get_parameters(self, names: list[str]) -> list[Parameter]:
+        return [self.get_parameter(name) for name in names]
+
+    def get_parameter_type(self, name: str) -> ParameterType:
+        if name not in self._parameters:
+            raise ParameterNotDeclaredException(name)
+        return self._parameters[name].type_
+
+    def describe_parameters(self, names: list[str]) -> list[ParameterDescriptor]:
+        return [self.describe_parameter(name) for name in names]
+
+    def list_parameters(self, prefixes: list[str], depth: int) -> Any:
+        """Return rcl_interfaces/msg/ListParametersResult of the declared parameters."""
+        if not isinstance(prefixes, list) or not all(isinstance(p, str) for p in prefixes):
+            raise TypeError('The prefixes argument must be a list of str')
+        if not isinstance(depth, int) or depth < 0:
+            raise ValueError('The depth must be an integer greater than or equal to zero')
+        return list_parameters(list(self._parameters), prefixes, depth)
