@@ -10,7 +10,7 @@ from cloth_bench_ros.cli import common
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
-    """Register import, synth and bag (info, rewrite)."""
+    """Register import, synth, converge and bag (info, rewrite)."""
     imp = sub.add_parser(
         'import', help='turn the published dataset (PLY/PCD per frame) into one bag per trial'
     )
@@ -62,6 +62,32 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     synth.add_argument('--overwrite', action='store_true', help='replace the bag if it exists')
     synth.add_argument('--quiet', action='store_true', help='no progress bar')
     synth.set_defaults(func=cmd_synth)
+
+    converge = sub.add_parser(
+        'converge',
+        parents=[common.scene_options(), common.executor_options()],
+        help="a synthetic reference's convergence in iterations, step rate and mesh resolution",
+    )
+    converge.add_argument(
+        '--reference', default='mujoco', choices=('mujoco', 'newton-vbd'), help='default mujoco'
+    )
+    converge.add_argument(
+        '--axis', action='append', choices=('iterations', 'rate', 'grid'),
+        help='setting to refine (repeatable; default all three)',
+    )
+    converge.add_argument(
+        '--levels', type=common.integer('--levels', 1), default=1,
+        help='refinements per axis: iterations and rate x2 each, grid spacing /1.5 (default 1)',
+    )
+    converge.add_argument(
+        '--duration', type=common.number(validation.positive, '--duration'), metavar='S',
+        help='seconds of the quintic part (default: the whole trial)',
+    )
+    converge.add_argument(
+        '--output', help='directory: one .npz per run (reused) and convergence.json'
+        ' (default results/convergence/<reference>_<cloth>_<primitive>)',
+    )
+    converge.set_defaults(func=cmd_converge)
 
     bag = sub.add_parser('bag', help='bag tools')
     bag_sub = bag.add_subparsers(dest='bag_command', required=True, parser_class=common.Parser)
@@ -130,6 +156,32 @@ def cmd_synth(args: argparse.Namespace) -> int:
     )
     print(f'synthetic bag written: {bag}')
     return 0
+
+
+def cmd_converge(args: argparse.Namespace) -> int:
+    """Run a reference's convergence study on the executor; print and save its table."""
+    from cloth_bench_ros.safe_io import check_output_dir
+    from cloth_bench_ros.studies import reference_convergence as rc
+    from cloth_bench_ros.studies.executor import open_client, run_tasks
+
+    study = rc.ConvergenceStudy(
+        args.reference,
+        args.cloth,
+        args.primitive,
+        axes=tuple(args.axis or rc.AXES),
+        levels=args.levels,
+        duration=args.duration,
+    )
+    name = f'{args.reference.replace("-", "_")}_{args.cloth}_{args.primitive}'
+    out = check_output_dir(args.output or f'results/convergence/{name}')
+    runs = study.variants()
+    print(f'cloth-bench converge: {len(runs)} runs of the {args.reference} reference -> {out}')
+    with open_client(args.scheduler, args.workers) as client:
+        study.run(out, lambda *a: run_tasks(client, *a))
+    rows = study.rows()
+    rc.save(rows, study, out / 'convergence.json')
+    print(rc.format_rows(rows))
+    return 0 if all(not r.get('error') for r in rows) else 1
 
 
 def cmd_bag_info(args: argparse.Namespace) -> int:

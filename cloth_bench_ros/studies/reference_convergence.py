@@ -1,0 +1,250 @@
+"""
+How converged a synthetic reference is: its trajectory under refined numerical settings.
+
+A reference model (config/synth.yaml: MuJoCo shell; config/synth_newton_vbd.yaml: Newton VBD)
+has settings that should not change the cloth it makes: solver iterations, the step rate and the
+mesh resolution. Each is refined in turn from the shipped setting (iterations x2, x4, ...; rate
+x2, ...; a finer grid), the reference run through the whole trial (its vertices at every 30 fps
+frame, no camera), and each run compared with the one before it on its axis:
+
+- trajectory change: per frame, the one-sided L1 Chamfer distance from one run's vertices to the
+  other's cloth surface (its grid upsampled bilinearly, so that meshes of different resolution
+  compare as surfaces), both ways, the larger; the mean over the frames and the largest frame;
+- hanging length: the cloth's vertical extent at frame 0, after the settle.
+
+An axis has converged when a refinement changes the trajectory by less than TOLERANCE_M on
+average and the hanging length by less than HANG_TOLERANCE_M.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+import json
+from pathlib import Path
+import time
+from typing import Any, Callable
+
+from cloth_bench_ros.core.metrics import chamfer_l1
+from cloth_bench_ros.data.synth import reference_config, simulate_reference, SynthConfig
+import numpy as np
+
+TOLERANCE_M = 0.002  # mean trajectory change between successive refinements
+HANG_TOLERANCE_M = 0.005
+AXES = ('iterations', 'rate', 'grid')
+_SURFACE_UPSAMPLING = 10  # samples per grid spacing: about 1.7 mm on the 31 x 43 references
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One run of the study: the reference with one setting refined `level` times."""
+
+    axis: str  # '' for the shipped settings
+    level: int
+    config: SynthConfig = field(compare=False)
+
+    @property
+    def label(self) -> str:
+        return label(self.axis, self.level)
+
+    def describe(self) -> str:
+        p = self.config.params
+        return (
+            f'{self.config.grid[0]}x{self.config.grid[1]}, {self.config.rate_hz:g} Hz,'
+            f' {p.get("solver_iterations")} iterations'
+        )
+
+
+def label(axis: str, level: int) -> str:
+    """Return a run's name: `shipped`, or the axis and how many times it was refined."""
+    return 'shipped' if not axis or not level else f'{axis}+{level}'
+
+
+def refined(config: SynthConfig, axis: str, level: int) -> SynthConfig:
+    """
+    Return `config` with one setting refined `level` times.
+
+    Iterations x2 each; the rate x2 with the longest internal step /2 (so the step the engine
+    takes halves too); the grid's spacing /1.5.
+    """
+    if axis == 'iterations':
+        iterations = int(config.params['solver_iterations']) * 2**level
+        return replace(config, params={**config.params, 'solver_iterations': iterations})
+    if axis == 'rate':
+        params = dict(config.params)
+        if 'timestep' in params:
+            params['timestep'] = float(params['timestep']) / 2**level
+        return replace(config, rate_hz=config.rate_hz * 2**level, params=params)
+    if axis == 'grid':
+        nx, nz = config.grid
+        scale = 1.5**level  # 31 x 43 -> 46 x 64 -> 68 x 95: spacing 1.7 -> 1.1 -> 0.7 cm
+        return replace(config, grid=(round((nx - 1) * scale) + 1, round((nz - 1) * scale) + 1))
+    raise ValueError(f'unknown axis {axis!r} (valid: {", ".join(AXES)})')
+
+
+def variants(base: SynthConfig, axes: tuple[str, ...], levels: int) -> list[Variant]:
+    """Return the shipped run and `levels` refinements along each axis."""
+    runs = [Variant('', 0, base)]
+    for axis in axes:
+        runs += [Variant(axis, n, refined(base, axis, n)) for n in range(1, levels + 1)]
+    return runs
+
+
+def trajectory(variant: Variant) -> tuple[np.ndarray, float]:
+    """Run the reference; return its vertices at every frame (frames, n, 3) and the seconds."""
+    start = time.perf_counter()
+    frames = [v.astype(np.float32) for _, v in simulate_reference(variant.config)]
+    return np.stack(frames), time.perf_counter() - start
+
+
+def surface(vertices: np.ndarray, grid: tuple[int, int]) -> np.ndarray:
+    """Return points on the cloth surface: the vertex grid upsampled bilinearly."""
+    nx, nz = grid
+    mesh = vertices.reshape(nz, nx, 3).astype(np.float64)
+    u = np.linspace(0, nx - 1, (nx - 1) * _SURFACE_UPSAMPLING + 1)
+    w = np.linspace(0, nz - 1, (nz - 1) * _SURFACE_UPSAMPLING + 1)
+    i0 = np.minimum(np.floor(u).astype(int), nx - 2)
+    j0 = np.minimum(np.floor(w).astype(int), nz - 2)
+    fu, fw = (u - i0)[None, :, None], (w - j0)[:, None, None]
+    corner = mesh[j0][:, i0]
+    right = mesh[j0][:, i0 + 1]
+    below = mesh[j0 + 1][:, i0]
+    diagonal = mesh[j0 + 1][:, i0 + 1]
+    top = corner * (1 - fu) + right * fu
+    bottom = below * (1 - fu) + diagonal * fu
+    return (top * (1 - fw) + bottom * fw).reshape(-1, 3)
+
+
+def trajectory_change(
+    a: np.ndarray, grid_a: tuple[int, int], b: np.ndarray, grid_b: tuple[int, int]
+) -> np.ndarray:
+    """Per frame: one run's vertices to the other's surface (one-sided L1 CD), the larger way."""
+    return np.array(
+        [
+            max(
+                chamfer_l1(va.astype(np.float64), surface(vb, grid_b)),
+                chamfer_l1(vb.astype(np.float64), surface(va, grid_a)),
+            )
+            for va, vb in zip(a, b)
+        ]
+    )
+
+
+def hanging_length(frames: np.ndarray) -> float:
+    """Return the cloth's vertical extent at frame 0 (it hangs from the grippers, settled)."""
+    return float(np.ptp(frames[0][:, 2]))
+
+
+def _simulate(variant: Variant, out_dir: str) -> dict:
+    """Run one variant on a worker and keep its trajectory in out_dir (a rerun reuses it)."""
+    path = Path(out_dir) / f'{variant.label}.npz'
+    if path.exists():
+        saved = np.load(path)
+        return {'path': str(path), 'seconds': float(saved['seconds'])}
+    frames, seconds = trajectory(variant)
+    tmp = path.with_suffix('.tmp.npz')
+    np.savez(tmp, frames=frames, seconds=seconds)
+    tmp.replace(path)
+    return {'path': str(path), 'seconds': seconds}
+
+
+@dataclass
+class ConvergenceStudy:
+    """The study of one reference, cloth and task; rows() is its table."""
+
+    reference: str
+    cloth: str
+    primitive: str
+    axes: tuple[str, ...] = AXES
+    levels: int = 1
+    duration: float | None = None  # s of the quintic part (None: the whole trial)
+    overrides: dict[str, Any] = field(default_factory=dict)  # of the base (tests: a coarse grid)
+    runs: dict[str, dict] = field(default_factory=dict)
+
+    def variants(self) -> list[Variant]:
+        base = reference_config(
+            self.cloth,
+            self.primitive,
+            reference=self.reference,
+            duration=self.duration,
+            **self.overrides,
+        )
+        return variants(base, self.axes, self.levels)
+
+    def run(self, out_dir: Path, executor: Callable[..., None]) -> None:
+        """Simulate every variant through `executor(func, items, on_result, on_crash, args)`."""
+        out_dir.mkdir(parents=True, exist_ok=True)
+        todo = self.variants()
+
+        def on_result(variant: Variant, result: dict) -> None:
+            self.runs[variant.label] = result
+
+        def on_crash(variant: Variant, message: str) -> None:
+            self.runs[variant.label] = {'error': message}
+
+        executor(_simulate, todo, on_result, on_crash, (str(out_dir),))
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One row per run: its settings, wall time, hanging length and change from the last."""
+        by_label = {v.label: v for v in self.variants()}
+        frames = {
+            label: np.load(run['path'])['frames']
+            for label, run in self.runs.items()
+            if 'path' in run
+        }
+        rows = []
+        for variant in by_label.values():
+            row: dict[str, Any] = {
+                'run': variant.label,
+                'settings': variant.describe(),
+                'seconds': self.runs.get(variant.label, {}).get('seconds'),
+                'error': self.runs.get(variant.label, {}).get('error'),
+            }
+            if variant.label in frames:
+                row['hanging_length_m'] = hanging_length(frames[variant.label])
+            previous = by_label[label(variant.axis, variant.level - 1)] if variant.axis else None
+            if previous is not None and {variant.label, previous.label} <= set(frames):
+                change = trajectory_change(
+                    frames[previous.label], previous.config.grid,
+                    frames[variant.label], variant.config.grid,
+                )
+                hang = abs(row['hanging_length_m'] - hanging_length(frames[previous.label]))
+                row.update(
+                    compared_with=previous.label,
+                    change_mean_m=float(change.mean()),
+                    change_max_m=float(change.max()),
+                    hang_change_m=hang,
+                    converged=bool(change.mean() < TOLERANCE_M and hang < HANG_TOLERANCE_M),
+                )
+            rows.append(row)
+        return rows
+
+
+def format_rows(rows: list[dict[str, Any]]) -> str:
+    """Return the study's table as text (mm)."""
+    lines = [
+        f'{"run":<14} {"settings":<34} {"s":>7} {"hang mm":>8} {"vs":<14}'
+        f' {"mean mm":>8} {"max mm":>7} {"d hang":>7}  converged'
+    ]
+    for r in rows:
+        mm = (lambda key: f'{1000 * r[key]:.1f}' if r.get(key) is not None else '-')  # noqa: E731
+        seconds = f'{r["seconds"]:.0f}' if r.get('seconds') is not None else '-'
+        lines.append(
+            f'{r["run"]:<14} {r["settings"]:<34} {seconds:>7} {mm("hanging_length_m"):>8}'
+            f' {r.get("compared_with", ""):<14} {mm("change_mean_m"):>8} {mm("change_max_m"):>7}'
+            f' {mm("hang_change_m"):>7}  {"error" if r.get("error") else r.get("converged", "")}'
+        )
+    return '\n'.join(lines)
+
+
+def save(rows: list[dict[str, Any]], study: ConvergenceStudy, path: Path) -> None:
+    """Write the study's rows and what it was, as JSON."""
+    doc = {
+        'reference': study.reference,
+        'cloth': study.cloth,
+        'primitive': study.primitive,
+        'duration': study.duration,
+        'tolerance_m': TOLERANCE_M,
+        'hang_tolerance_m': HANG_TOLERANCE_M,
+        'rows': rows,
+    }
+    path.write_text(json.dumps(doc, indent=1) + '\n', encoding='utf-8')

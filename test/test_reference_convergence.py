@@ -1,0 +1,79 @@
+"""The reference convergence study (`cloth-bench converge`) on a coarse, short reference."""
+
+from pathlib import Path
+
+from cloth_bench_ros.data.synth import reference_config
+from cloth_bench_ros.studies import reference_convergence as rc
+import numpy as np
+import pytest
+
+COARSE = {'grid': (7, 9), 'rate_hz': 90.0}
+
+
+def _serial(func, items, on_result, on_crash, args):
+    for item in items:
+        on_result(item, func(item, *args))
+
+
+def test_each_axis_refines_one_setting():
+    base = reference_config('towel', 'dynamic', reference='mujoco')
+    iterations = rc.refined(base, 'iterations', 2)
+    assert iterations.params['solver_iterations'] == 4 * base.params['solver_iterations']
+    assert (iterations.rate_hz, iterations.grid) == (base.rate_hz, base.grid)
+    rate = rc.refined(base, 'rate', 1)
+    assert rate.rate_hz == 2 * base.rate_hz
+    assert rate.params['timestep'] == base.params['timestep'] / 2  # the internal step halves
+    assert rc.refined(base, 'grid', 1).grid == (46, 64)  # spacing 1.7 cm -> 1.1 cm
+    with pytest.raises(ValueError):
+        rc.refined(base, 'colour', 1)
+    labels = [v.label for v in rc.variants(base, rc.AXES, 2)]
+    assert labels == [
+        'shipped', 'iterations+1', 'iterations+2', 'rate+1', 'rate+2', 'grid+1', 'grid+2'
+    ]
+
+
+def test_the_surface_passes_through_the_vertices_and_between_them():
+    grid = (4, 3)
+    x, z = np.meshgrid(np.arange(4) * 0.1, np.arange(3) * 0.2)
+    vertices = np.stack([x, np.zeros_like(x), z], axis=-1).reshape(-1, 3)
+    samples = rc.surface(vertices, grid)
+    assert len(samples) == (3 * 10 + 1) * (2 * 10 + 1)
+    assert {tuple(np.round(v, 9)) for v in vertices} <= {tuple(np.round(s, 9)) for s in samples}
+    assert np.allclose(samples.min(axis=0), [0, 0, 0])
+    assert np.allclose(samples.max(axis=0), [0.3, 0, 0.4])
+    # the same cloth on another grid is the same surface: nothing between them
+    fine_x, fine_z = np.meshgrid(np.linspace(0, 0.3, 7), np.linspace(0, 0.4, 5))
+    fine = np.stack([fine_x, np.zeros_like(fine_x), fine_z], axis=-1).reshape(-1, 3)
+    change = rc.trajectory_change(vertices[None], grid, fine[None], (7, 5))
+    assert change[0] < 1e-12
+    moved = fine + [0, 0.01, 0]  # 1 cm off the plane
+    change = rc.trajectory_change(vertices[None], grid, moved[None], (7, 5))
+    assert change[0] == pytest.approx(0.01)
+
+
+def test_a_study_on_a_coarse_reference_compares_each_run_with_the_one_before(tmp_path: Path):
+    study = rc.ConvergenceStudy(
+        'mujoco', 'towel', 'dynamic', axes=('iterations', 'rate'), levels=1, duration=0.1,
+        overrides=COARSE,
+    )
+    study.run(tmp_path, _serial)
+    rows = {r['run']: r for r in study.rows()}
+    assert set(rows) == {'shipped', 'iterations+1', 'rate+1'}
+    assert all(r['hanging_length_m'] > 0.6 for r in rows.values())  # a 0.70 m cloth, hanging
+    assert rows['rate+1']['compared_with'] == 'shipped'
+    assert rows['rate+1']['change_mean_m'] > 0  # a finer internal step moves the cloth
+    for r in rows.values():
+        if 'converged' in r:
+            assert r['converged'] == (
+                r['change_mean_m'] < rc.TOLERANCE_M and r['hang_change_m'] < rc.HANG_TOLERANCE_M
+            )
+    # a rerun reuses the trajectories it kept
+    again = rc.ConvergenceStudy(
+        'mujoco', 'towel', 'dynamic', axes=('iterations', 'rate'), levels=1, duration=0.1,
+        overrides=COARSE,
+    )
+    again.run(tmp_path, _serial)
+    assert again.rows() == study.rows()
+    rc.save(study.rows(), study, tmp_path / 'convergence.json')
+    assert 'rate+1' in (tmp_path / 'convergence.json').read_text()
+    assert 'shipped' in rc.format_rows(study.rows())
