@@ -73,7 +73,9 @@ def test_realtime_pacing_reports_latency_deadline_misses_and_real_time_factor(
     summary = _run(hanging_bag, tmp_path, 'rt', rate_hz=100.0, pacing='realtime')
     m = summary['engines']['mujoco']
     assert m['frames_scored'] == 132
-    assert m['latency']['count'] == 741
+    # one state per target (741), less any a simulator skipped when it fell behind on a loaded
+    # machine (keep-last 1 targets: it steps to the newest)
+    assert 700 <= m['latency']['count'] <= 741
     assert 0 < m['latency']['p50'] <= m['latency']['p99'] <= m['latency']['max']
     assert 0 <= m['deadline_misses'] <= 741
     assert 0.5 < m['real_time_factor'] <= 1.05  # paced by the wall clock: about real time
