@@ -9,10 +9,11 @@ code runs on either runtime.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 import warnings
 
 from cloth_bench_ros.runtime import (
@@ -402,7 +403,7 @@ def _parameter_events() -> list:
 # --- services: every node's parameter services (rclpy/parameter_service.py), and one's own -----
 
 
-def _call(graph: _Graph, node: Any, srv_type: Any, name: str, request: Any) -> Any:
+def _call(graph: _Graph, srv_type: Any, name: str, request: Any) -> Any:
     """Call a service from the graph's node; 'not ready' or 'no answer' if it does not come."""
     client = graph.node.create_client(srv_type, name)
     try:
@@ -434,8 +435,9 @@ def _plain(value: Any) -> Any:
     return value if isinstance(value, (str, bool, int, float)) else list(value)
 
 
-def _talker(graph: _Graph) -> Any:
-    """Return a node /ns/talker with parameters of several kinds, spun by the graph's executor."""
+@contextlib.contextmanager
+def _talker(graph: _Graph) -> Iterator[Any]:
+    """Yield a node /ns/talker with parameters of several kinds, spun by the graph's executor."""
     talker = rclpy.create_node('talker', namespace='ns', context=graph.context)
     talker.declare_parameter('rate_hz', 100.0)
     talker.declare_parameter('mesh.rows', 9)
@@ -447,7 +449,10 @@ def _talker(graph: _Graph) -> Any:
     talker.declare_parameter('engine', 'mujoco', read_only)
     talker.declare_parameter('anything', 1, ParameterDescriptor(dynamic_typing=True))
     graph.executor.add_node(talker)
-    return talker
+    try:
+        yield talker
+    finally:
+        talker.destroy_node()
 
 
 def _msg(name: str, **value: Any) -> Any:
@@ -457,16 +462,15 @@ def _msg(name: str, **value: Any) -> Any:
 @case('parameter services: list, get, types, describe')
 def _parameter_services_read() -> dict:
     with _Graph(name='caller') as graph:
-        talker = _talker(graph)
-        try:
+        with _talker(graph):
             names = ['rate_hz', 'mesh.rows', 'names', 'gains', 'engine', 'use_sim_time']
-            listed = _call(graph, talker, ListParameters, '/ns/talker/list_parameters',
+            listed = _call(graph, ListParameters, '/ns/talker/list_parameters',
                            ListParameters.Request())
-            got = _call(graph, talker, GetParameters, '/ns/talker/get_parameters',
+            got = _call(graph, GetParameters, '/ns/talker/get_parameters',
                         GetParameters.Request(names=names))
-            types = _call(graph, talker, GetParameterTypes, '/ns/talker/get_parameter_types',
+            types = _call(graph, GetParameterTypes, '/ns/talker/get_parameter_types',
                           GetParameterTypes.Request(names=names))
-            described = _call(graph, talker, DescribeParameters,
+            described = _call(graph, DescribeParameters,
                               '/ns/talker/describe_parameters',
                               DescribeParameters.Request(names=['engine', 'anything', 'gains']))
             return {
@@ -478,26 +482,21 @@ def _parameter_services_read() -> dict:
                     for d in described.descriptors
                 ],
             }
-        finally:
-            talker.destroy_node()
 
 
 @case('parameter services: an undeclared name empties the answer')
 def _parameter_services_undeclared() -> list:
     with _Graph(name='caller') as graph:
-        talker = _talker(graph)
-        try:
+        with _talker(graph):
             names = ['rate_hz', 'nope']
-            got = _call(graph, talker, GetParameters, '/ns/talker/get_parameters',
+            got = _call(graph, GetParameters, '/ns/talker/get_parameters',
                         GetParameters.Request(names=names))
-            types = _call(graph, talker, GetParameterTypes, '/ns/talker/get_parameter_types',
+            types = _call(graph, GetParameterTypes, '/ns/talker/get_parameter_types',
                           GetParameterTypes.Request(names=names))
-            described = _call(graph, talker, DescribeParameters,
+            described = _call(graph, DescribeParameters,
                               '/ns/talker/describe_parameters',
                               DescribeParameters.Request(names=names))
             return [len(got.values), len(types.types), len(described.descriptors)]
-        finally:
-            talker.destroy_node()
 
 
 for _prefixes, _depth in (([], 1), ([], 2), (['mesh'], 0), (['mesh'], 1), (['mesh', 'rate_hz'], 2),
@@ -506,21 +505,17 @@ for _prefixes, _depth in (([], 1), ([], 2), (['mesh'], 0), (['mesh'], 1), (['mes
     @case(f'parameter services: list prefixes {_prefixes} depth {_depth}')
     def _parameter_services_list(prefixes: list = _prefixes, depth: int = _depth) -> list:
         with _Graph(name='caller') as graph:
-            talker = _talker(graph)
-            try:
-                listed = _call(graph, talker, ListParameters, '/ns/talker/list_parameters',
+            with _talker(graph):
+                listed = _call(graph, ListParameters, '/ns/talker/list_parameters',
                                ListParameters.Request(prefixes=prefixes, depth=depth))
                 return [sorted(listed.result.names), sorted(listed.result.prefixes)]
-            finally:
-                talker.destroy_node()
 
 
 @case('parameter services: set and set atomically')
 def _parameter_services_set() -> dict:
     with _Graph(name='caller') as graph:
-        talker = _talker(graph)
-        try:
-            results = _call(graph, talker, SetParameters, '/ns/talker/set_parameters',
+        with _talker(graph) as talker:
+            results = _call(graph, SetParameters, '/ns/talker/set_parameters',
                             SetParameters.Request(parameters=[
                                 _msg('rate_hz', type=4, string_value='fast'),
                                 _msg('rate_hz', type=3, double_value=250.0),
@@ -530,13 +525,13 @@ def _parameter_services_set() -> dict:
                                 _msg('anything', type=4, string_value='now a string'),
                                 _msg('names', type=9, string_array_value=['c']),
                             ]))
-            atomic_bad = _call(graph, talker, SetParametersAtomically,
+            atomic_bad = _call(graph, SetParametersAtomically,
                                '/ns/talker/set_parameters_atomically',
                                SetParametersAtomically.Request(parameters=[
                                    _msg('mesh.cols', type=2, integer_value=20),
                                    _msg('mesh.rows', type=4, string_value='x'),
                                ]))
-            atomic_good = _call(graph, talker, SetParametersAtomically,
+            atomic_good = _call(graph, SetParametersAtomically,
                                 '/ns/talker/set_parameters_atomically',
                                 SetParametersAtomically.Request(parameters=[
                                     _msg('mesh.cols', type=2, integer_value=20),
@@ -550,8 +545,6 @@ def _parameter_services_set() -> dict:
                 'atomically, all good': atomic_good.result.successful,
                 'values': [_plain(talker.get_parameter(n).value) for n in names],
             }
-        finally:
-            talker.destroy_node()
 
 
 @case('the trajectory publisher refuses a change through its set_parameters service')
@@ -563,7 +556,7 @@ def _node_refuses_through_service() -> list:
         graph.executor.add_node(node)
         try:
             name = node.get_fully_qualified_name() + '/set_parameters'
-            results = _call(graph, node, SetParameters, name, SetParameters.Request(parameters=[
+            results = _call(graph, SetParameters, name, SetParameters.Request(parameters=[
                 _msg('rate_hz', type=3, double_value=10.0),
                 _msg('use_sim_time', type=1, bool_value=False),
             ]))
@@ -586,7 +579,7 @@ def _own_service() -> dict:
         ]
         missing = graph.node.create_client(GetParameterTypes, '/nobody/here')
         try:
-            reply = _call(graph, graph.node, GetParameterTypes, '/elsewhere',
+            reply = _call(graph, GetParameterTypes, '/elsewhere',
                           GetParameterTypes.Request(names=['ab', 'cde']))
             return {
                 'names': [[s.srv_name, s.service_name] for s in services],

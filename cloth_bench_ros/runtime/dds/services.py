@@ -92,6 +92,7 @@ class _Pair:
     handle: int  # the writer's instance handle: a client's id in the request header
     in_type: str  # ROS type of what the reader takes
     out_type: str
+    is_service: bool
 
 
 class DdsServices:
@@ -136,7 +137,13 @@ class DdsServices:
         self.transport.waitset.attach(condition)
         self.waitset.attach(condition)
         self.pairs[entity] = _Pair(
-            reader, condition, writer, writer.get_instance_handle() % 2**64, in_type, out_type
+            reader,
+            condition,
+            writer,
+            writer.get_instance_handle() % 2**64,
+            in_type,
+            out_type,
+            is_service,
         )
         self.transport.graph_changed(entity.node)
 
@@ -176,11 +183,10 @@ class DdsServices:
                         '%s: dropped a sample that does not parse (%s)', entity.service_name, exc
                     )
                     continue
-                if hasattr(entity, 'call_async'):  # a client: only replies to its own requests
-                    if guid == pair.handle:
-                        enqueue(entity, (sequence, message))
-                else:
+                if pair.is_service:
                     enqueue(entity, ((guid, sequence, info.publication_handle), message))
+                elif guid == pair.handle:  # a client keeps only the replies to its own requests
+                    enqueue(entity, (sequence, message))
 
     def send_request(self, client: Any, sequence: int, request: Any) -> None:
         pair = self.pairs[client]
