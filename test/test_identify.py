@@ -12,7 +12,7 @@ import math
 
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines.presets import load_preset
-from cloth_bench_ros.studies.identify import identify, IdentifySpec, search_space
+from cloth_bench_ros.studies.identify import budget_reached, identify, IdentifySpec, search_space
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from identify_target import write_engine_target_bag
 import pytest
@@ -218,3 +218,46 @@ def test_report_refuses_a_malformed_identification_in_one_line(tmp_path, capsys,
     assert main(['report', str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_automatic_budget_stops_at_the_first_doubling_worth_less_than_2_percent():
+    curve = [[k, v, None] for k, v in enumerate([5.0, 4.0, 3.0, 2.9, 2.0, 1.99, 1.98, 1.97])]
+    # best after 2 = 4.0, after 4 = 2.9 (27.5 % better), after 8 = 1.97 (32 % better)
+    assert budget_reached(curve, 4) == (False, pytest.approx(0.275))
+    assert budget_reached(curve, 8) == (False, pytest.approx(1 - 1.97 / 2.9))
+    flat = [[k, v, None] for k, v in enumerate([3.0, 2.0, 2.0, 1.99])]
+    assert budget_reached(flat, 4) == (True, pytest.approx(0.005))
+    failed = [[0, None, None], [1, None, None], [2, 2.0, None], [3, None, None]]
+    assert budget_reached(failed, 4) == (False, 1.0)  # nothing finished in the first half
+
+
+def test_an_automatic_budget_doubles_until_the_curve_flattens(target, tmp_path, monkeypatch):
+    import cloth_bench_ros.studies.identify as identify_module
+
+    monkeypatch.setattr(identify_module, 'AUTO_FIRST', 4)
+    monkeypatch.setattr(identify_module, 'AUTO_MAX_TRIALS', 32)
+    spec = IdentifySpec(
+        'mujoco',
+        'towel',
+        'dynamic',
+        target,
+        tmp_path,
+        'cmaes',
+        identify_module.AUTO,
+        'cd',
+        ['damping'],
+        grid=GRID,
+        fixed=dict(FIXED),
+        span=5.0,
+        batch=1,
+        validate_seeds=0,
+    )
+    s = identify(spec, workers=1, progress=False).summary['per_sampler']['cmaes']
+    budget, curve = s['budget'], s['convergence']
+    assert len(curve) == budget['trials'] == budget['doublings'][-1][1] and budget['trials'] >= 8
+    for before, after, gain in budget['doublings']:
+        assert after == 2 * before and gain == pytest.approx(budget_reached(curve, after)[1])
+    # It stopped at the first flat doubling, or at the cap with every doubling still gaining.
+    gains = [g for _, _, g in budget['doublings']]
+    assert budget['reached'] == (gains[-1] < 0.02) and all(g >= 0.02 for g in gains[:-1])
+    assert budget['reached'] or budget['trials'] == 32

@@ -9,6 +9,13 @@ from cloth_bench_ros.cli import common
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 
+def _trials(text: str) -> int:
+    """--trials: a count >= 1, or auto (the study's AUTO)."""
+    from cloth_bench_ros.studies.identify import AUTO
+
+    return AUTO if text.strip().lower() == 'auto' else common.integer('--trials', 1)(text)
+
+
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register identify."""
     ident = sub.add_parser(
@@ -29,9 +36,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     ident.add_argument(
         '--trials',
-        type=common.integer('--trials', 1),
+        type=_trials,
         default=500,
-        help='trials per sampler (default 500, as the paper)',
+        help=(
+            'trials per sampler (default 500, as the paper), or auto: 16, then doubling while a '
+            'doubling improves the best by 2 %% or more (at most 512)'
+        ),
     )
     ident.add_argument(
         '--objective',
@@ -79,6 +89,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     ident.set_defaults(func=cmd_identify)
 
 
+def _budget_text(budget: dict) -> str:
+    """How an automatic budget ended, e.g. ' (budget: the doubling 32 -> 64 improved 1.2 %)'."""
+    if not budget.get('doublings'):
+        return ''
+    before, after, gain = budget['doublings'][-1]
+    verdict = '' if budget['reached'] else '; cap reached, not converged'
+    return f' (budget: the doubling {before} -> {after} improved {gain:.1%}{verdict})'
+
+
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, validate on held-out seeds, write the preset and print the outcome."""
     from cloth_bench_ros.paths import bundled_bag
@@ -114,7 +133,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     )
     print(
         f'cloth-bench identify: {args.engine}, {args.cloth} {args.primitive},'
-        f' {args.objective.upper()}, sampler {args.sampler}, {args.trials} trials each; bag {bag};'
+        f' {args.objective.upper()}, sampler {args.sampler},'
+        f' {args.trials or "auto (doubling)"} trials each; bag {bag};'
         f' output {out}',
         flush=True,
     )
@@ -135,7 +155,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for name, result in s['per_sampler'].items():
         print(
             f'{name:<6} best {args.objective.upper()} {result["value"]:.5f} m after'
-            f' {result["trials"]} trials'
+            f' {result["trials"]} trials' + _budget_text(result.get('budget', {}))
         )
     print(
         f'identified ({s["best_sampler"]}): '

@@ -17,7 +17,7 @@ seeds (and the other trials' bags) against the engine's preset through the full 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import json
 import math
 from pathlib import Path
@@ -30,6 +30,10 @@ from cloth_bench_ros.studies.objective import evaluate, Trial
 
 SAMPLERS = ('cmaes', 'tpe', 'gp', 'both')
 DEFAULT_TRIALS = 500
+# The trial budget chosen from the convergence curve (`trials=AUTO`): run 16 trials, then double
+# while a doubling still improves the best value by at least 2 %, up to AUTO_MAX_TRIALS.
+AUTO = 0
+AUTO_FIRST, AUTO_MAX_TRIALS, AUTO_TOLERANCE = 16, 512, 0.02
 DEFAULT_SPAN = 10.0
 JOURNAL_FILE = 'study.journal'
 TRIALS_FILE = 'trials.jsonl'
@@ -39,6 +43,9 @@ SUMMARY_FILE = 'identification.json'
 DEFAULT_PARAMS = {
     'mujoco': ('mass', 'young', 'poisson', 'thickness', 'damping'),
     'bullet': ('mass', 'elastic', 'damping', 'bending'),
+    # Newton per model: mass, membrane (springs or triangles), its damping, bending, friction.
+    'newton:xpbd': ('mass', 'spring_stiffness', 'spring_damping', 'bending', 'friction'),
+    'newton:vbd': ('mass', 'tri_stiffness', 'tri_damping', 'bending', 'friction'),
 }
 NOT_FITTED = ('timestep', 'substeps', 'solver_iterations')
 
@@ -53,7 +60,7 @@ class IdentifySpec:
     bag: Path
     output: Path
     sampler: str = 'both'
-    trials: int = DEFAULT_TRIALS  # per sampler
+    trials: int = DEFAULT_TRIALS  # per sampler; AUTO: chosen by doubling (see budget_reached)
     objective: str = 'cd'
     params: Sequence[str] = ()
     seed: int = 0
@@ -67,13 +74,14 @@ class IdentifySpec:
     bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
 
 
-def default_params(engine: str) -> list[str]:
+def default_params(engine: str, model: str | None = None) -> list[str]:
     """Return the parameters fitted by default: the reference's set, else every ranged number."""
     from cloth_bench_ros.engines import engine_class
 
     schema = engine_class(engine).params
-    if engine in DEFAULT_PARAMS:
-        return list(DEFAULT_PARAMS[engine])
+    for key in (f'{engine}:{model}', engine):
+        if key in DEFAULT_PARAMS:
+            return list(DEFAULT_PARAMS[key])
     return [
         p.name
         for p in schema
@@ -304,6 +312,51 @@ def run_sampler(
     return study
 
 
+def best_after(curve: Sequence[Sequence], n: int) -> float:
+    """Return the best value among a convergence curve's first n trials (inf if none finished)."""
+    values = [row[1] for row in curve[:n] if row[1] is not None]
+    return min(values) if values else math.inf
+
+
+def budget_reached(curve: Sequence[Sequence], n: int) -> tuple[bool, float]:
+    """
+    Whether n trials are enough: the doubling from n / 2 to n improved the best by < 2 %.
+
+    Returns (enough, relative improvement of the last doubling).
+    """
+    before, after = best_after(curve, n // 2), best_after(curve, n)
+    if not math.isfinite(after):
+        return False, math.nan
+    gain = 1.0 if not math.isfinite(before) else (before - after) / before
+    return gain < AUTO_TOLERANCE, gain
+
+
+def run_budgeted(
+    client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool
+) -> tuple[Any, dict]:
+    """Run a sampler to spec.trials, or (AUTO) doubling from AUTO_FIRST until budget_reached."""
+    if spec.trials != AUTO:
+        return run_sampler(client, spec, sampler, space, record, progress), {'rule': 'fixed'}
+    n, steps = AUTO_FIRST, []
+    while True:
+        study = run_sampler(client, replace(spec, trials=n), sampler, space, record, progress)
+        if n == AUTO_FIRST:
+            n *= 2
+            continue
+        enough, gain = budget_reached(convergence(study), n)
+        steps.append([n // 2, n, gain])
+        if enough or n >= AUTO_MAX_TRIALS:
+            break
+        n *= 2
+    return study, {
+        'rule': f'double from {AUTO_FIRST} until a doubling improves the best by less than '
+        f'{AUTO_TOLERANCE:.0%} (at most {AUTO_MAX_TRIALS})',
+        'doublings': steps,
+        'trials': n,
+        'reached': bool(enough),
+    }
+
+
 def _best_value(study: Any) -> float:
     try:
         return float(study.best_value)
@@ -367,7 +420,7 @@ def identify(
     start = time.perf_counter()
     spec.output = check_output_dir(spec.output)
     base = {**load_preset(spec.engine, spec.cloth, spec.primitive), **spec.fixed}
-    names = list(spec.params) or default_params(spec.engine)
+    names = list(spec.params) or default_params(spec.engine, base.get('model'))
     space = search_space(spec.engine, names, base, spec.span)
     samplers = samplers_of(spec.sampler)
     for s in samplers:
@@ -377,8 +430,8 @@ def identify(
         open_client(scheduler, workers, spec.output / 'workers.log') as client,
     ):
         before = client.submit(evaluate, trial_of(spec, {}, -1, 'preset'), pure=False).result()
-        studies = {
-            s: run_sampler(
+        budgets = {
+            s: run_budgeted(
                 client,
                 spec,
                 s,
@@ -388,6 +441,7 @@ def identify(
             )
             for s in samplers
         }
+        studies = {s: study for s, (study, _) in budgets.items()}
         best = min(studies, key=lambda s: _finite_or_inf(_best_value(studies[s])))
         if not math.isfinite(_best_value(studies[best])):
             raise ValueError(
@@ -396,6 +450,8 @@ def identify(
             )
         validation = validate(client, spec, {**spec.fixed, **studies[best].best_params}, progress)
         summary = summarise(spec, space, base, before, studies, best, validation)
+        for s, (_, budget) in budgets.items():
+            summary['per_sampler'][s]['budget'] = budget
         summary['wall_s'] = time.perf_counter() - start
         preset = write_outputs(spec, base, summary)
     return IdentifyOutcome(summary, preset, summary['wall_s'])

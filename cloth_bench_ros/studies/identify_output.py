@@ -112,18 +112,24 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
     params = ', '.join(f'{k} = {v:.6g}' for k, v in summary['params'].items())
     fixed = ', '.join(f'{k} = {v}' for k, v in spec.fixed.items())
     fixed = f'fixed {fixed}; ' if spec.fixed else ''
+    trials = ', '.join(f'{s} {r["trials"]}' for s, r in summary['per_sampler'].items())
+    held_out = '; '.join(
+        f'{Path(v["bag"]).name}: preset {v["preset"]["mean"]:.4f} m, identified'
+        f' {v["identified"]["mean"]:.4f} m ({v["identified"]["ok"]} seeds)'
+        for v in summary.get('validation', [])
+    )
+    held_out = f'Held-out seeds ({spec.objective.upper()}): {held_out}. ' if held_out else ''
     return (
         f'Identified by cloth-bench identify against bag {spec.bag} ({spec.cloth},'
         f' {spec.primitive}): '
         f'minimised {spec.objective.upper()} of the task window to {summary["value"]:.6g} m '
         f'(the preset: {summary["preset_value"]:.6g} m) with {summary["best_sampler"]} '
-        f'(samplers {", ".join(summary["samplers"])}, {spec.trials} trials each, seed'
-        f' {spec.seed}, '
+        f'(trials: {trials}; seed {spec.seed}, '
         f'{spec.rate_hz:g} Hz, grid {"x".join(map(str, spec.grid)) if spec.grid else "default"}'
         f'{", first " + str(spec.max_frames) + " frames" if spec.max_frames else ""}); fitted'
         f' {params}; '
         f'{fixed}'
-        f"the other values are the preset's. Engine version {version}; "
+        f"the other values are the preset's. {held_out}Engine version {version}; "
         f'{datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")} on {platform.node()} '
         f'({platform.machine()}, {platform.python_implementation()} {platform.python_version()}).'
     )
