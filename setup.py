@@ -1,5 +1,6 @@
 from glob import glob
 import os
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
@@ -62,6 +63,10 @@ setup(
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/config/presets', glob('config/presets/*.yaml')),
+        *(
+            ('share/' + package_name + '/' + d, glob(d + '/*.yaml'))
+            for d in sorted(str(p) for p in Path('config/presets').iterdir() if p.is_dir())
+        ),
     ]
     + bag_files(),
     package_data={package_name: ['py.typed']},

@@ -43,7 +43,9 @@ def test_reference_bags_are_named_after_their_reference():
     )
     with pytest.raises(ValueError, match='unknown synthetic reference'):
         xr.reference_bag('towel', 'dynamic', 'sofa')
-    cells = xr.cross_reference_cells('towel', ['dynamic'], [0, 1], 100.0, xr.DEFAULT_ENTRANTS)
+    cells, _ = xr.cross_reference_cells(
+        'towel', ['dynamic'], [0, 1], 100.0, xr.DEFAULT_ENTRANTS, kinds=['preset']
+    )
     assert len(cells) == len(xr.DEFAULT_ENTRANTS) * 2 * 2
     assert {c.config.split(',')[0] for c in cells} == {'reference=mujoco', 'reference=newton-vbd'}
     assert len({c.key() for c in cells}) == len(cells)  # resumable: every cell has its own key
@@ -139,3 +141,98 @@ def test_cross_reference_command_refuses_bad_input_in_one_line(argv, words, caps
     assert exit_.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and all(w in err for w in words)
+
+
+def _identified_sets(tmp_path, monkeypatch) -> None:
+    """config/ with the shipped presets and an identified set per reference, towel fling only."""
+    import shutil
+
+    from cloth_bench_ros.engines import presets
+
+    shipped = presets.config_dir()
+    config = tmp_path / 'config'
+    shutil.copytree(
+        shipped / 'presets', config / 'presets', ignore=shutil.ignore_patterns('identified*')
+    )
+    for name, mass in (('identified', 0.2), ('identified-newton-vbd', 0.3)):
+        (config / 'presets' / name).mkdir()
+        for engine, extra in (('mujoco', ''), ('newton', ', model: xpbd')):
+            (config / 'presets' / name / f'{engine}.yaml').write_text(
+                f'engine: {engine}\nengine_version: "x"\nprovenance: test\n'
+                f'presets: {{towel: {{dynamic: {{mass: {mass}{extra}}}}}}}\n'
+            )
+    monkeypatch.setattr(presets, 'config_dir', lambda: config)
+
+
+def test_identified_entrants_run_with_the_set_fitted_to_their_own_reference(tmp_path, monkeypatch):
+    _identified_sets(tmp_path, monkeypatch)
+    entrants = [
+        ('mujoco', {}),
+        ('bullet', {}),
+        ('newton', {'model': 'vbd'}),
+        ('newton', {'model': 'xpbd'}),
+    ]
+    cells, missing = xr.cross_reference_cells('towel', ['dynamic'], [1, 2], 100.0, entrants)
+    identified = [c for c in cells if c.preset_set != 'default']
+    # MuJoCo and Newton XPBD have identified values, PyBullet none; XPBD values never mean VBD.
+    assert sorted({(c.engine, c.params.get('model'), c.reference) for c in identified}) == [
+        ('mujoco', None, 'mujoco'),
+        ('mujoco', None, 'newton-vbd'),
+        ('newton', 'xpbd', 'mujoco'),
+        ('newton', 'xpbd', 'newton-vbd'),
+    ]
+    for c in identified:  # each scored against the reference it was identified against
+        assert c.params['mass'] == (0.2 if c.reference == 'mujoco' else 0.3)
+        name = 'identified' if c.reference == 'mujoco' else 'identified-newton-vbd'
+        assert c.preset_set == name
+    assert len(missing) == 4 and all('no identified' in m for m in missing)
+    assert len({c.key() for c in cells}) == len(cells) == (4 + 2) * 2 * 2
+    row = sw.run_cell.__globals__['_cell_fields'](identified[0])
+    assert (row['presets'], row['reference']) == (identified[0].preset_set, identified[0].reference)
+
+
+def _row(engine, reference, cd, seed, presets='identified', model=None):
+    return {
+        'mode': xr.MODE,
+        'engine': engine,
+        'reference': reference,
+        'primitive': 'dynamic',
+        'cloth': 'towel',
+        'seed': seed,
+        'rate_hz': 100.0,
+        'status': 'ok',
+        'CD': cd,
+        'presets': presets,
+        'params': {'model': model} if model else {},
+    }
+
+
+def test_ranking_has_bootstrap_intervals_and_says_whether_it_holds_across_references():
+    from cloth_bench_ros.report.ranking import bootstrap_ranking
+
+    apart = bootstrap_ranking({'a': [0.030, 0.031, 0.029], 'b': [0.050, 0.052, 0.049]})
+    assert [(r.name, r.rank, r.p_rank) for r in apart] == [('a', 1, 1.0), ('b', 2, 1.0)]
+    for r, values in zip(apart, ([0.030, 0.031, 0.029], [0.050, 0.052, 0.049])):
+        assert min(values) <= r.low <= r.mean <= r.high <= max(values)
+        assert r.mean == pytest.approx(np.mean(values)) and r.n == 3
+    close = bootstrap_ranking({'a': [0.030, 0.040, 0.035], 'b': [0.036, 0.033, 0.038]})
+    assert 0.2 < close[0].p_rank < 0.9  # overlapping seeds: the order is not settled
+    assert bootstrap_ranking({'a': [0.03, float('nan')], 'b': [None]})[0].n == 1  # diverged seeds
+
+    rows = [_row('mujoco', 'mujoco', 0.020 + 0.001 * s, s) for s in range(3)]
+    rows += [_row('bullet', 'mujoco', 0.040 + 0.001 * s, s) for s in range(3)]
+    rows += [_row('mujoco', 'newton-vbd', 0.050 + 0.001 * s, s) for s in range(3)]
+    rows += [_row('bullet', 'newton-vbd', 0.030 + 0.001 * s, s) for s in range(3)]
+    rows += [_row('bullet', 'mujoco', 0.01, s, presets='default') for s in range(3)]  # not ranked
+    rankings = report_xr.identified_rankings(rows)
+    assert [r.name for r in rankings[('mujoco', 'dynamic')]] == ['MuJoCo', 'Bullet']
+    assert [r.name for r in rankings[('newton-vbd', 'dynamic')]] == ['Bullet', 'MuJoCo']
+    (line,) = report_xr.ranking_statements(rankings)
+    assert line.startswith('dynamic: the ranking changes between references')
+    same = [r for r in rows if not (r['reference'] == 'newton-vbd')] + [
+        {**r, 'reference': 'newton-vbd'} for r in rows if r['reference'] == 'mujoco'
+    ]
+    (line,) = report_xr.ranking_statements(report_xr.identified_rankings(same))
+    assert 'holds across references: MuJoCo < Bullet' in line
+    md = report_xr.cross_reference_markdown(rows)
+    assert 'Bullet, identified' in md and '95 % CI' in md and 'changes between' in md

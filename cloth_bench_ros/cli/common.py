@@ -86,6 +86,28 @@ def scene_options(primitive: bool = True) -> argparse.ArgumentParser:
     return parent
 
 
+def presets_options() -> argparse.ArgumentParser:
+    """Parent parser: --presets, a named preset set or a directory of <engine>.yaml files."""
+    parent = argparse.ArgumentParser(add_help=False)
+    parent.add_argument(
+        '--presets',
+        default='default',
+        help=(
+            'cloth parameters: default (config/presets), identified (fitted to the bundled '
+            'MuJoCo-made references), identified-newton-vbd (fitted to the Newton VBD ones), or '
+            'a directory of <engine>.yaml files (e.g. an identify --output)'
+        ),
+    )
+    return parent
+
+
+def preset_set(args: argparse.Namespace) -> Any:
+    """Return the PresetSet of --presets (EngineError, one line, for an unknown name or path)."""
+    from cloth_bench_ros.engines.presets import preset_set as resolve
+
+    return resolve(args.presets)
+
+
 def executor_options() -> argparse.ArgumentParser:
     """Parent parser: where a study's cells run (local workers or Dask) and its progress bar."""
     parent = argparse.ArgumentParser(add_help=False)

@@ -15,7 +15,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register hil."""
     hil = sub.add_parser(
         'hil',
-        parents=[common.scene_options(), tolerance_options()],
+        parents=[common.scene_options(), tolerance_options(), common.presets_options()],
         help='hardware in the loop: targets on the wall clock, the simulator in its own process',
     )
     hil.add_argument('--engine', action='append', help='repeat for several (default mujoco)')
@@ -124,6 +124,7 @@ def cmd_hil(args: argparse.Namespace) -> int:
     from cloth_bench_ros.report.hil import hil_table, text_table, write_hil_report
     from cloth_bench_ros.studies import hil
     from cloth_bench_ros.studies.hil_layout import resolve_layout
+    from cloth_bench_ros.studies.cells import set_label, set_values
     from cloth_bench_ros.studies.sweep import config_label
 
     if args.budget is None:
@@ -154,10 +155,14 @@ def cmd_hil(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UserError(str(exc)) from None
     print(layout.line())
+    presets = common.preset_set(args)
     results = []
     for engine in engines:
         for rate in args.rate or [100.0]:
-            params = dict(overrides.get(engine, {}))
+            user = dict(overrides.get(engine, {}))  # --set, on top of everything
+            base = set_values(presets, engine, args.cloth, args.primitive)
+            params = {**base, **user}
+            label = set_label(presets, config_label(args.grid, user))
             config = hil.HilConfig(
                 engine,
                 float(rate),
@@ -167,7 +172,7 @@ def cmd_hil(args: argparse.Namespace) -> int:
                 args.seed,
                 args.grid,
                 tuple(sorted(params.items())),
-                config_label(args.grid, params),
+                label,
                 not args.in_process,
                 layout.cpu,
                 layout.fifo,
@@ -186,10 +191,10 @@ def cmd_hil(args: argparse.Namespace) -> int:
                     args.tolerance_abs,
                     args.budget,
                 )
-                label = rec.config + (
-                    f',{config_label(None, params)}' if params else ''
-                )  # --set on top
-                config = hil.with_config(config, label, rec.grid, {**rec.params, **params})
+                label = set_label(
+                    presets, rec.config + (f',{config_label(None, user)}' if user else '')
+                )
+                config = hil.with_config(config, label, rec.grid, {**base, **rec.params, **user})
                 print(
                     f'{engine} at {rate:g} Hz: recommended `{rec.config}` from {source}: CD'
                     f' {rec.cd:.4f} m (best {rec.best_config}: {rec.best_cd:.4f} m), step p99'

@@ -39,7 +39,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         type=_trials,
         default=500,
         help=(
-            'trials per sampler (default 500, as the paper), or auto: 16, then doubling while a '
+            'trials per sampler (default 500, as the paper), or auto: 32, then doubling while a '
             'doubling improves the best by 2 %% or more (at most 512)'
         ),
     )

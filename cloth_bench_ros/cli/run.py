@@ -17,7 +17,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register run, trajectory and engines."""
     run = sub.add_parser(
         'run',
-        parents=[common.scene_options()],
+        parents=[common.scene_options(), common.presets_options()],
         help='run the node graph on a bag and print the result table',
     )
     run.add_argument(
@@ -27,9 +27,6 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         '--rate', type=common.rate, default=100.0, help='simulator rate in Hz (default 100)'
     )
     run.add_argument('--bag', help='rosbag2 bag to score against (default: the bundled one)')
-    run.add_argument(
-        '--presets', help='directory of <engine>.yaml presets (default: config/presets)'
-    )
     run.add_argument(
         '--seed', type=common.seed, default=0, help='perturbs the initial cloth (default 0)'
     )
@@ -226,12 +223,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     engines = validation.unique(args.engine or ['mujoco'], '--engine')
     for name in engines:
         engine_class(name)
-    presets = Path(args.presets) if args.presets else None
-    for (
-        name
-    ) in (
-        engines
-    ):  # a missing directory, malformed preset file or bad value fails here, in one line
+    presets = common.preset_set(args).directory
+    for name in engines:  # a missing set, malformed preset file or bad value fails here, one line
         load_preset(name, args.cloth, args.primitive, presets)
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic)

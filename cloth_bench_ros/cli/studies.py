@@ -37,7 +37,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     executor = common.executor_options()
     sweep = sub.add_parser(
         'sweep',
-        parents=[executor],
+        parents=[executor, common.presets_options()],
         help='many runs in parallel: engines x rates x cloths x tasks x seeds',
     )
     sweep.add_argument(
@@ -148,7 +148,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
     stress = sub.add_parser(
         'stress',
-        parents=[executor],
+        parents=[executor, common.presets_options()],
         help='run the suite of hard cases; reports divergence, never fails',
     )
     stress.add_argument(
@@ -181,8 +181,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     xref.add_argument(
         '--seeds',
         type=common.integer('--seeds', 1),
-        default=3,
-        help='seeds 0..N-1 per engine (default 3)',
+        default=5,
+        help='seeds per engine (default 5)',
+    )
+    xref.add_argument(
+        '--seed-start',
+        type=common.seed,
+        default=1,
+        help='first seed (default 1: identifications run on seed 0, so every seed is held out)',
     )
     xref.add_argument(
         '--rate', type=common.rate, default=100.0, help='simulator rate in Hz (default 100)'
@@ -219,6 +225,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         args.step_per_target,
         args.keep_frames,
         args.axis or [],
+        common.preset_set(args),
     )
     cells = plan.cells()
     out = (
@@ -321,12 +328,14 @@ def cmd_stress(args: argparse.Namespace) -> int:
     engines = validation.unique(
         args.engine or [e for e in ('mujoco', 'bullet', 'newton') if e in available], '--engine'
     )
-    cases = select_cases(engines, args.case, args.max_wall_s)
+    presets = common.preset_set(args)
+    cases = select_cases(engines, args.case, args.max_wall_s, presets)
     if args.list:
         for c in cases:
             print(f'{c.engine:<8} {c.name:<24} {c.description}')
         return 0
-    out = Path(args.output) if args.output else Path('results') / 'stress'
+    default_out = 'stress' if presets.is_default else f'stress_{Path(presets.name).name}'
+    out = Path(args.output) if args.output else Path('results') / default_out
     rows = run_suite(
         cases, out, args.workers, progress=not args.no_progress, scheduler=args.scheduler
     )
@@ -343,20 +352,22 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
 def cmd_cross_reference(args: argparse.Namespace) -> int:
     """Score every engine against both synthetic references on the executor; print the table."""
-    from cloth_bench_ros.report.cross_reference import cross_reference_table
+    from cloth_bench_ros.report.cross_reference import cross_reference_markdown
     from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
     from cloth_bench_ros.studies import sweep as sw
     from cloth_bench_ros.studies.cross_reference import cross_reference_cells, DEFAULT_ENTRANTS
 
     available = common.available_engines()
     entrants = [(e, o) for e, o in DEFAULT_ENTRANTS if e in available]
-    cells = cross_reference_cells(
+    cells, missing = cross_reference_cells(
         args.cloth,
         args.primitive or ['dynamic', 'quasi_static'],
-        range(args.seeds),
+        range(args.seed_start, args.seed_start + args.seeds),
         args.rate,
         entrants,
     )
+    for line in missing:
+        print(f'cross-reference: {line}; that entrant runs with its preset only')
     for bag in sorted({c.bag for c in cells}):
         common.check_bag(Path(bag))
     out = check_output_dir(args.output)
@@ -381,8 +392,9 @@ def cmd_cross_reference(args: argparse.Namespace) -> int:
         f'cross-reference: {outcome.ran} cells run in {outcome.wall_s:.1f} s ({outcome.skipped}'
         f' already done), {outcome.diverged} diverged, {outcome.errors} errors'
     )
-    table = cross_reference_table(sw.load_rows(results))
-    text = table.markdown() if table is not None else '(no rows)'
+    keys = {c.key() for c in cells}
+    rows = [r for r in sw.load_rows(results) if sw.row_key(r) in keys]
+    text = cross_reference_markdown(rows)
     atomic_write_text(out / 'cross_reference.md', text + '\n')
     print(text)
     return 0

@@ -13,6 +13,7 @@ EngineError of one line naming the file.
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 from pathlib import Path
 
 from cloth_bench_ros import validation
@@ -145,3 +146,83 @@ def _check_against_engine(engine: str, values: dict, path: Path, where: str) -> 
         cls.validate_params(values)
     except EngineError as exc:
         raise EngineError(f'preset file {path}: presets.{where}: {exc}') from None
+
+
+# Named preset sets (`--presets NAME`), beside a directory path: the shipped presets (default)
+# and the parameters identified against each bundled synthetic reference, in config/presets/<name>.
+DEFAULT_SET = 'default'
+IDENTIFIED_SETS = {'identified': 'mujoco', 'identified-newton-vbd': 'newton-vbd'}
+
+
+@dataclass(frozen=True)
+class PresetSet:
+    """A set of preset files: its name as the user gave it, and its directory (None: shipped)."""
+
+    name: str
+    directory: Path | None
+
+    @property
+    def is_default(self) -> bool:
+        return self.directory is None
+
+
+def preset_set(value: str | Path | None) -> PresetSet:
+    """
+    Return the preset set a `--presets` value names: default, identified, ... or a directory.
+
+    EngineError (one line) for a value that is neither a set's name nor an existing directory.
+    """
+    text = str(value or '').strip() or DEFAULT_SET
+    if text == DEFAULT_SET:
+        return PresetSet(DEFAULT_SET, None)
+    if text in IDENTIFIED_SETS:
+        return PresetSet(text, config_dir() / 'presets' / text)
+    if Path(text).is_dir():
+        return PresetSet(text, Path(text))
+    names = ', '.join((DEFAULT_SET, *IDENTIFIED_SETS))
+    raise EngineError(f'--presets {text}: neither a preset set ({names}) nor a directory')
+
+
+def identified_set_of(reference: str) -> str:
+    """Return the name of the set identified against a synthetic reference (mujoco, newton-vbd)."""
+    for name, ref in IDENTIFIED_SETS.items():
+        if ref == reference:
+            return name
+    raise EngineError(f'no identified preset set for reference {reference!r}')
+
+
+def merge_identified(preset_files: list[Path], out_dir: Path) -> list[Path]:
+    """
+    Merge identification outputs (<output>/presets/<engine>.yaml) into one file per engine.
+
+    Each cloth and task keeps its values; the provenance lists each entry's own. Returns the
+    files written.
+    """
+    from cloth_bench_ros.safe_io import atomic_write_text
+    import yaml
+
+    merged: dict[str, dict] = {}
+    for path in preset_files:
+        data = read_preset_file(path)
+        doc = merged.setdefault(
+            data['engine'],
+            {
+                'engine': data['engine'],
+                'engine_version': data['engine_version'],
+                'provenance': [],
+                'presets': {},
+            },
+        )
+        for cloth, tasks in data['presets'].items():
+            for primitive, values in tasks.items():
+                doc['presets'].setdefault(cloth, {})[primitive] = values
+                doc['provenance'].append(f'{cloth} {primitive}: {data["provenance"]}')
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    for engine, doc in sorted(merged.items()):
+        doc['provenance'] = '\n'.join(doc['provenance'])
+        target = out_dir / f'{engine}.yaml'
+        atomic_write_text(target, yaml.safe_dump(doc, sort_keys=False, width=100))
+        read_preset_file(target)  # what was written must load
+        written.append(target)
+    return written

@@ -1,8 +1,9 @@
 """
-Cross-reference table: every engine's CD_d / CD_q against every synthetic reference.
+Cross-reference: every engine's CD_d / CD_q against every synthetic reference, and the ranking.
 
 An engine of the reference's own family should win on its own reference, and by how much is the
-point (the cells are studies/cross_reference.py's).
+point (the cells are studies/cross_reference.py's). Engines identified against a reference are
+ranked on it with bootstrap intervals over seeds (report/ranking.py).
 """
 
 from __future__ import annotations
@@ -11,13 +12,20 @@ import math
 from typing import Sequence
 
 from cloth_bench_ros.report.blocks import Table
+from cloth_bench_ros.report.ranking import (
+    bootstrap_ranking,
+    order_agreement,
+    Ranked,
+    ranking_table,
+)
 from cloth_bench_ros.report.selections import engine_label
-from cloth_bench_ros.studies.aggregate import group, stat
-from cloth_bench_ros.studies.cross_reference import DEFAULT_ENTRANTS, MODE, REFERENCES
+from cloth_bench_ros.studies.aggregate import stat
+from cloth_bench_ros.studies.cross_reference import DEFAULT_ENTRANTS, KINDS, MODE, REFERENCES
 
 REFERENCE_LABEL = {'mujoco': 'MuJoCo shell ref.', 'newton-vbd': 'Newton VBD ref.'}
 NOTE = (
-    'Every engine with its preset (lockstep, the rate given) scored against both synthetic'
+    'Every engine with its preset, and identified against that reference where it was'
+    ' (lockstep, the rate given), scored against both synthetic'
     " references of the bundled bags: MuJoCo's flex shell (`bags/<cloth>_<task>`) and Newton's"
     ' VBD (`bags/<cloth>_<task>_newton_vbd`), both 31 x 43 vertices seen by the same virtual'
     " Kinect. Mean ± std over seeds, in metres; bold: the best in its column. A column's winner"
@@ -32,41 +40,46 @@ def entrant_name(engine: str, overrides: dict) -> str:
     return f'{engine_label(engine)} ({model})' if model else engine_label(engine)
 
 
+def _entrant(row: dict) -> tuple[str, str, str]:
+    """Return (engine, model, kind) of a row; kind: preset or identified."""
+    kind = 'preset' if row.get('presets', 'default') == 'default' else 'identified'
+    return row['engine'], (row.get('params') or {}).get('model', ''), kind
+
+
+def _selected(rows: Sequence[dict]) -> list[dict]:
+    return [r for r in rows if r.get('mode') == MODE and r.get('reference') in REFERENCES]
+
+
 def cross_reference_table(rows: Sequence[dict], digits: int = 3) -> Table | None:
     """Return entrants x (reference, task) of CD_d / CD_q; None without cross-reference rows."""
-    sel = [r for r in rows if r.get('mode') == MODE and r.get('reference') in REFERENCES]
+    sel = _selected(rows)
     if not sel:
         return None
     primitives = [p for p in ('dynamic', 'quasi_static') if any(r['primitive'] == p for r in sel)]
     references = [ref for ref in REFERENCES if any(r['reference'] == ref for r in sel)]
     columns = [(ref, p) for ref in references for p in primitives]
-    # The default entrants' order, then any other; rows come in the order their cells finished.
-    order = [(engine, overrides.get('model', '')) for engine, overrides in DEFAULT_ENTRANTS]
-    found = {(r['engine'], (r.get('params') or {}).get('model', '')) for r in sel}
+    # The default entrants' order (preset, then identified), then any other.
+    order = [(e, o.get('model', ''), k) for k in KINDS for e, o in DEFAULT_ENTRANTS]
+    found = {_entrant(r) for r in sel}
     entrants = sorted(found, key=lambda e: (order.index(e) if e in order else len(order), e))
-    by = group(sel, 'engine', 'reference', 'primitive')
-    stats = {}
-    for engine, model in entrants:
-        for ref, p in columns:
-            cell_rows = [
-                r
-                for r in by.get((engine, ref, p), [])
-                if (r.get('params') or {}).get('model', '') == model
-            ]
-            stats[(engine, model, ref, p)] = stat(cell_rows, 'CD')
+    by: dict[tuple, list[dict]] = {}
+    for r in sel:
+        by.setdefault(_entrant(r) + (r['reference'], r['primitive']), []).append(r)
+    stats = {e + col: stat(by.get(e + col, []), 'CD') for e in entrants for col in columns}
     best = {
         col: min(
-            (s.mean for (e, m, *c), s in stats.items() if tuple(c) == col and s.used),
-            default=math.nan,
+            (s.mean for key, s in stats.items() if key[3:] == col and s.used), default=math.nan
         )
         for col in columns
     }
     body = []
-    for engine, model in entrants:
-        line = [entrant_name(engine, {'model': model} if model else {})]
+    for entrant in entrants:
+        engine, model, kind = entrant
+        name = entrant_name(engine, {'model': model} if model else {})
+        line = [name + (', identified' if kind == 'identified' else '')]
         for col in columns:
-            s = stats[(engine, model) + tuple(col)]
-            text = s.text(digits, show_n=False)
+            s = stats[entrant + col]
+            text = s.text(digits, show_n=False) if s.n else '-'
             line.append(
                 f'**{text}**' if s.used and s.mean == best[col] and len(entrants) > 1 else text
             )
@@ -75,6 +88,47 @@ def cross_reference_table(rows: Sequence[dict], digits: int = 3) -> Table | None
         f'{REFERENCE_LABEL[ref]} {"CD_d" if p == "dynamic" else "CD_q"}' for ref, p in columns
     ]
     return Table('cross_reference', headers, body, 'l' + 'r' * len(columns))
+
+
+def identified_rankings(rows: Sequence[dict]) -> dict[tuple[str, str], list[Ranked]]:
+    """Return {(reference, task): identified engines ranked on it, with bootstrap intervals}."""
+    sel = [r for r in _selected(rows) if _entrant(r)[2] == 'identified']
+    out = {}
+    for ref in REFERENCES:
+        for task in ('dynamic', 'quasi_static'):
+            samples: dict[str, list[float | None]] = {}
+            for r in sel:
+                if r['reference'] == ref and r['primitive'] == task:
+                    engine, model, _ = _entrant(r)
+                    name = entrant_name(engine, {'model': model} if model else {})
+                    value = r.get('CD') if r.get('status') == 'ok' else None
+                    samples.setdefault(name, []).append(value)
+            if samples:
+                out[(ref, task)] = bootstrap_ranking(samples)
+    return out
+
+
+def ranking_statements(rankings: dict[tuple[str, str], list[Ranked]]) -> list[str]:
+    """Return one line per task: whether the identified engines' order holds across references."""
+    lines = []
+    for task in ('dynamic', 'quasi_static'):
+        per_ref = {REFERENCE_LABEL[ref]: r for (ref, t), r in rankings.items() if t == task}
+        if per_ref:
+            lines.append(f'{task}: {order_agreement(per_ref)}')
+    return lines
+
+
+def cross_reference_markdown(rows: Sequence[dict]) -> str:
+    """Return the matrix, the ranking of identified engines and the statements, as Markdown."""
+    table = cross_reference_table(rows)
+    if table is None:
+        return '(no rows)'
+    parts = [table.markdown()]
+    rankings = identified_rankings(rows)
+    if rankings:
+        parts.append(ranking_table('ranking', rankings).markdown())
+        parts.append('\n'.join(f'- {line}' for line in ranking_statements(rankings)))
+    return '\n\n'.join(parts)
 
 
 def cross_reference_section(rows: Sequence[dict]) -> tuple[str, str, Table] | None:

@@ -18,6 +18,7 @@ from pathlib import Path
 import re
 from typing import Iterable, Sequence
 
+from cloth_bench_ros.engines.presets import PresetSet
 from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
 
 DEFAULT_RATES = (10.0, 100.0, 1000.0)
@@ -85,12 +86,40 @@ class Cell:
             return None
         return self.config.split(',')[0].removeprefix('reference=')
 
+    @property
+    def preset_set(self) -> str:
+        """Return the name of the preset set the cell runs with ("default": the shipped one)."""
+        for part in self.config.split(','):
+            if part.startswith('presets='):
+                return part.removeprefix('presets=')
+        return 'default'
+
 
 def _shown(value: object) -> str:
     """Return a setting's value in a configuration name: on/off, numbers as %g, text as it is."""
     if isinstance(value, bool):
         return 'on' if value else 'off'
     return f'{value:g}' if isinstance(value, float) else str(value)
+
+
+def set_values(presets: PresetSet | None, engine: str, cloth: str, primitive: str) -> dict:
+    """
+    Return a preset set's values as overrides of the shipped preset ({} for the shipped set).
+
+    A cell carries its preset as overrides, so its run, key and results row say what it ran.
+    """
+    from cloth_bench_ros.engines.presets import load_preset
+
+    if presets is None or presets.is_default:
+        return {}
+    return load_preset(engine, cloth, primitive, presets.directory)
+
+
+def set_label(presets: PresetSet | None, label: str) -> str:
+    """Return a configuration's name with its preset set: "presets=identified[,...]"."""
+    if presets is None or presets.is_default:
+        return label
+    return f'presets={presets.name}' + ('' if label == PRESET else f',{label}')
 
 
 def config_label(grid: tuple[int, int] | None, overrides: dict) -> str:
@@ -162,13 +191,14 @@ def paper_cells(
     pacing: str = 'lockstep',
     step_per_target: bool = False,
     keep_frames_seeds: Iterable[int] | None = None,
+    presets: PresetSet | None = None,
 ) -> list[Cell]:
     """
     Return the cells of the paper's layout.
 
     step_per_target: internal time step = 1 / rate, one engine step per target (the paper's
     frequency study), instead of the preset's time step. keep_frames_seeds: seeds whose per-frame
-    scores are kept (default: the first seed).
+    scores are kept (default: the first seed). presets: a preset set instead of the shipped one.
     """
     overrides = overrides or {}
     _check_engines(engines, overrides)
@@ -182,6 +212,8 @@ def paper_cells(
                 if step_per_target:
                     params.update(timestep=1.0 / float(rate), substeps=1)
                     label = 'step=1/rate' if label == PRESET else f'{label},step=1/rate'
+                params = {**set_values(presets, engine, cloth, primitive), **params}
+                label = set_label(presets, label)
                 cells.append(
                     Cell(
                         engine,
@@ -211,6 +243,7 @@ def settings_cells(
     bag_dir: Path | None = None,
     axes: dict[str, list] | None = None,
     overrides: dict[str, dict] | None = None,
+    presets: PresetSet | None = None,
 ) -> list[Cell]:
     """
     Factorial sweep over the settings that cost time, per engine, at one rate.
@@ -245,6 +278,7 @@ def settings_cells(
                 )
         for cloth, primitive in product(cloths, primitives):
             for trial, bag in find_bags(bag_dir, cloth, primitive):
+                base = set_values(presets, engine, cloth, primitive)
                 for (label, grid, params), seed in product(combos, seeds):
                     cells.append(
                         Cell(
@@ -256,9 +290,9 @@ def settings_cells(
                             str(bag),
                             trial,
                             'settings',
-                            label,
+                            set_label(presets, label),
                             grid,
-                            params,
+                            tuple(sorted({**base, **dict(params)}.items())),
                             'lockstep',
                             False,
                         )

@@ -3,8 +3,11 @@ Cross-reference cells: every engine against every synthetic reference, as a swee
 
 The bundled bags are simulations, so a score on them says how much an engine behaves like the
 reference model. Scoring every engine against two references of different model families
-(MuJoCo's shell, Newton's VBD) turns that bias into numbers. The cells run on the executor like
-any sweep's (parallel, resumable, one results row each, with the reference it was scored against).
+(MuJoCo's shell, Newton's VBD) turns that bias into numbers. Each engine runs with its shipped
+preset and, where one exists, with the parameters identified against the same reference (the set
+`identified` or `identified-newton-vbd`): only identified engines compare fairly. The cells run
+on the executor like any sweep's (parallel, resumable, one results row each, with the reference
+and the preset set).
 """
 
 from __future__ import annotations
@@ -12,11 +15,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.engines.base import EngineError
+from cloth_bench_ros.engines.presets import identified_set_of, load_preset, preset_set
 from cloth_bench_ros.paths import share_dir
-from cloth_bench_ros.studies.cells import Cell, config_label, CROSS_REFERENCE
+from cloth_bench_ros.studies.cells import Cell, config_label, CROSS_REFERENCE, set_label
 
 MODE = CROSS_REFERENCE
 REFERENCES = ('mujoco', 'newton-vbd')
+KINDS = ('preset', 'identified')
+SEED_START = 1  # the identifications ran on seed 0: every cross-reference seed is held out
 # (engine, parameter overrides of its preset): the entrants of the table.
 DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
     ('mujoco', {}),
@@ -36,34 +43,71 @@ def reference_bag(cloth: str, primitive: str, reference: str) -> Path:
     return share_dir('bags') / f'{cloth}_{primitive}{suffix}'
 
 
+def identified_values(
+    engine: str, overrides: dict, cloth: str, primitive: str, reference: str
+) -> dict | None:
+    """
+    Return an entrant's parameters identified against `reference`, or None if there are none.
+
+    None too when the identified model is another than the entrant's (Newton XPBD values do not
+    stand for Newton VBD).
+    """
+    try:
+        directory = preset_set(identified_set_of(reference)).directory
+        values = load_preset(engine, cloth, primitive, directory)
+    except EngineError:
+        return None
+    if 'model' in overrides and values.get('model') != overrides['model']:
+        return None
+    return {**values, **overrides}
+
+
 def cross_reference_cells(
     cloth: str = 'towel',
     primitives: Sequence[str] = ('dynamic', 'quasi_static'),
-    seeds: Sequence[int] = (0, 1, 2),
+    seeds: Sequence[int] = tuple(range(SEED_START, SEED_START + 5)),
     rate_hz: float = 100.0,
     entrants: Sequence[tuple[str, dict]] = DEFAULT_ENTRANTS,
     references: Sequence[str] = REFERENCES,
-) -> list[Cell]:
-    """One sweep cell per entrant x reference x task x seed (mode "cross_reference")."""
-    cells = []
+    kinds: Sequence[str] = KINDS,
+) -> tuple[list[Cell], list[str]]:
+    """
+    One sweep cell per entrant x kind x reference x task x seed (mode "cross_reference").
+
+    Returns the cells and one line per identified entrant that has no identified parameters.
+    """
+    cells, missing = [], []
     for reference in references:
         for primitive in primitives:
             bag = reference_bag(cloth, primitive, reference)
-            for (engine, overrides), seed in ((e, s) for e in entrants for s in seeds):
-                label = f'reference={reference},' + config_label(None, overrides)
-                cells.append(
-                    Cell(
-                        engine,
-                        float(rate_hz),
-                        cloth,
-                        primitive,
-                        int(seed),
-                        str(bag),
-                        0,
-                        MODE,
-                        label,
-                        None,
-                        tuple(sorted(overrides.items())),
+            for (engine, overrides), kind in ((e, k) for e in entrants for k in kinds):
+                label = config_label(None, overrides)
+                params: dict | None = overrides
+                if kind == 'identified':
+                    params = identified_values(engine, overrides, cloth, primitive, reference)
+                    name = identified_set_of(reference)
+                    label = set_label(preset_set(name), label)
+                    if params is None:
+                        missing.append(
+                            f'{engine} {config_label(None, overrides)}: no {name} preset for'
+                            f' {cloth} {primitive}'
+                        )
+                        continue
+                assert params is not None
+                for seed in seeds:
+                    cells.append(
+                        Cell(
+                            engine,
+                            float(rate_hz),
+                            cloth,
+                            primitive,
+                            int(seed),
+                            str(bag),
+                            0,
+                            MODE,
+                            f'reference={reference},{label}',
+                            None,
+                            tuple(sorted(params.items())),
+                        )
                     )
-                )
-    return cells
+    return cells, missing

@@ -30,10 +30,10 @@ from cloth_bench_ros.studies.objective import evaluate, Trial
 
 SAMPLERS = ('cmaes', 'tpe', 'gp', 'both')
 DEFAULT_TRIALS = 500
-# The trial budget chosen from the convergence curve (`trials=AUTO`): run 16 trials, then double
+# The trial budget chosen from the convergence curve (`trials=AUTO`): run 32 trials, then double
 # while a doubling still improves the best value by at least 2 %, up to AUTO_MAX_TRIALS.
 AUTO = 0
-AUTO_FIRST, AUTO_MAX_TRIALS, AUTO_TOLERANCE = 16, 512, 0.02
+AUTO_FIRST, AUTO_MAX_TRIALS, AUTO_TOLERANCE = 32, 512, 0.02
 DEFAULT_SPAN = 10.0
 JOURNAL_FILE = 'study.journal'
 TRIALS_FILE = 'trials.jsonl'

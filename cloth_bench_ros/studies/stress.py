@@ -27,6 +27,7 @@ import time
 from typing import Sequence
 
 from cloth_bench_ros.core.table import Table
+from cloth_bench_ros.engines.presets import PresetSet
 import numpy as np
 
 STRESS_FILE = 'stress.jsonl'
@@ -192,12 +193,16 @@ def default_cases(engines: Sequence[str] = ('mujoco', 'bullet', 'newton')) -> li
 
 
 def select_cases(
-    engines: Sequence[str], names: Sequence[str] | None = None, max_wall_s: float | None = None
+    engines: Sequence[str],
+    names: Sequence[str] | None = None,
+    max_wall_s: float | None = None,
+    presets: PresetSet | None = None,
 ) -> list[StressCase]:
-    """Return the suite for `engines`, optionally only `names` and another wall-time budget."""
+    """Return the suite for `engines`; optionally only `names`, a time budget, a preset set."""
     from dataclasses import replace
 
     from cloth_bench_ros.engines import engine_class
+    from cloth_bench_ros.studies.cells import set_values
 
     for name in engines:
         engine_class(name)
@@ -214,7 +219,11 @@ def select_cases(
         if not (math.isfinite(max_wall_s) and max_wall_s > 0):
             raise ValueError(f'--max-wall-s must be a number of seconds > 0, got {max_wall_s}')
         cases = [replace(c, max_wall_s=max_wall_s) for c in cases]
-    return cases
+    # A preset set's values go in as overrides of the towel preset, under each case's own.
+    return [
+        replace(c, params={**set_values(presets, c.engine, 'towel', c.primitive), **c.params})
+        for c in cases
+    ]
 
 
 def case_targets(case: StressCase):

@@ -22,6 +22,8 @@ import time
 import traceback
 from typing import Sequence
 
+from cloth_bench_ros.engines.presets import PresetSet
+
 # re-exported: the studies' one vocabulary
 from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
@@ -117,6 +119,8 @@ def _cell_fields(cell: Cell) -> dict:
     }
     if cell.reference:  # a cross-reference cell names the synthetic reference it is scored against
         fields['reference'] = cell.reference
+    if cell.preset_set != 'default':
+        fields['presets'] = cell.preset_set
     return fields
 
 
@@ -307,6 +311,7 @@ class SweepPlan:
     step_per_target: bool = False
     keep_frames: str = 'first'  # first | all | none
     axes: Sequence[str] = ()  # settings mode: "name=v1,v2" strings
+    presets: PresetSet | None = None  # a preset set instead of the shipped presets
 
     def seeds(self) -> list[int]:
         settings = self.mode == 'settings'
@@ -349,6 +354,7 @@ class SweepPlan:
                 self.bag_dir,
                 axes,
                 self.overrides,
+                self.presets,
             )
         if self.axes:
             raise ValueError('--axis is for --mode settings')
@@ -365,6 +371,7 @@ class SweepPlan:
             self.pacing,
             self.step_per_target,
             keep,
+            self.presets,
         )
 
 

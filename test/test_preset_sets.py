@@ -1,0 +1,89 @@
+"""
+Named preset sets (`--presets default|identified|identified-newton-vbd|DIR`) in every command.
+
+Real preset files, written by the identification's own writer and merged as the shipped sets are.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cloth_bench_ros.cli import main
+from cloth_bench_ros.engines import presets
+from cloth_bench_ros.engines.base import EngineError
+from cloth_bench_ros.studies.cells import paper_cells, settings_cells
+from cloth_bench_ros.studies.stress import select_cases
+import pytest
+import yaml
+
+
+def _identified_file(folder: Path, engine: str, primitive: str, values: dict) -> Path:
+    """Write what identify --output writes: the shipped preset with fitted values."""
+    folder.mkdir(parents=True)
+    doc = {
+        'engine': engine,
+        'engine_version': '1',
+        'provenance': f'fitted {primitive}',
+        'presets': {
+            'towel': {primitive: {**presets.load_preset(engine, 'towel', primitive), **values}}
+        },
+    }
+    path = folder / f'{engine}.yaml'
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+@pytest.fixture
+def identified(tmp_path) -> Path:
+    """Return a set directory merged from two identifications (fling, lower-and-drag)."""
+    files = [
+        _identified_file(tmp_path / 'a', 'mujoco', 'dynamic', {'mass': 0.2}),
+        _identified_file(tmp_path / 'b', 'mujoco', 'quasi_static', {'mass': 0.3}),
+    ]
+    out = tmp_path / 'set'
+    assert presets.merge_identified(files, out) == [out / 'mujoco.yaml']
+    return out
+
+
+def test_a_set_is_a_name_or_a_directory_and_anything_else_is_one_line(tmp_path):
+    assert presets.preset_set(None).is_default and presets.preset_set('default').is_default
+    named = presets.preset_set('identified')
+    assert named.directory == presets.config_dir() / 'presets' / 'identified'
+    assert presets.preset_set(str(tmp_path)).directory == tmp_path
+    with pytest.raises(EngineError, match='neither a preset set .*identified-newton-vbd'):
+        presets.preset_set(str(tmp_path / 'nowhere'))
+    assert presets.identified_set_of('newton-vbd') == 'identified-newton-vbd'
+
+
+def test_merged_identifications_keep_each_task_and_its_provenance(identified):
+    assert presets.load_preset('mujoco', 'towel', 'dynamic', identified)['mass'] == 0.2
+    assert presets.load_preset('mujoco', 'towel', 'quasi_static', identified)['mass'] == 0.3
+    text = (identified / 'mujoco.yaml').read_text()
+    assert 'towel dynamic: fitted dynamic' in text and 'towel quasi_static: fitted' in text
+    with pytest.raises(EngineError, match='no preset for linen dynamic'):
+        presets.load_preset('mujoco', 'linen', 'dynamic', identified)
+
+
+def test_sweep_settings_and_stress_cells_carry_the_set_as_overrides(identified):
+    chosen = presets.preset_set(str(identified))
+    cells = paper_cells(['mujoco'], [100.0], ['towel'], ['dynamic'], [0], presets=chosen,
+                        overrides={'mujoco': {'damping': 0.5}})
+    (cell,) = cells
+    assert cell.params['mass'] == 0.2 and cell.params['damping'] == 0.5  # --set on top
+    assert cell.config == f'presets={identified},damping=0.5'
+    assert cell.preset_set == str(identified)
+    (plain,) = paper_cells(['mujoco'], [100.0], ['towel'], ['dynamic'], [0])
+    assert plain.config == 'preset' and plain.key() != cell.key()  # resumable side by side
+    settings = settings_cells(['mujoco'], 100.0, ['towel'], ['quasi_static'], [0],
+                              axes={'solver_iterations': [5]}, presets=chosen)
+    assert {c.params['mass'] for c in settings} == {0.3}
+    assert all(c.config.startswith(f'presets={identified},') for c in settings)
+    cases = select_cases(['mujoco'], ['fling_10hz'], presets=chosen)
+    assert cases and all(c.params['mass'] == 0.2 and c.params['timestep'] == 0.1 for c in cases)
+
+
+@pytest.mark.parametrize('command', [['run'], ['sweep', '--dry-run'], ['hil'], ['stress']])
+def test_every_command_takes_presets_and_refuses_an_unknown_set_in_one_line(command, capsys):
+    assert main([*command, '--presets', 'fitted-somewhere']) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and 'neither a preset set' in err
