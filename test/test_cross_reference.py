@@ -188,7 +188,8 @@ def test_identified_entrants_run_with_the_set_fitted_to_their_own_reference(tmp_
     assert len(missing) == 4 and all('no identified' in m for m in missing)
     assert len({c.key() for c in cells}) == len(cells) == (4 + 2) * 2 * 2
     row = sw.run_cell.__globals__['_cell_fields'](identified[0])
-    assert (row['presets'], row['reference']) == (identified[0].preset_set, identified[0].reference)
+    first = identified[0]
+    assert (row['presets'], row['reference']) == (first.preset_set, first.reference)
 
 
 def _row(engine, reference, cd, seed, presets='identified', model=None):
