@@ -16,6 +16,7 @@ import numpy as np
 
 # sensor_msgs/PointField datatypes
 INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
+XYZ32_LAYOUT = [('x', 0, FLOAT32, 1), ('y', 4, FLOAT32, 1), ('z', 8, FLOAT32, 1)]
 _NUMPY_TYPES = {
     INT8: 'i1',
     UINT8: 'u1',
@@ -69,7 +70,18 @@ def _as_bytes(data: Any) -> bytes | np.ndarray:
 
 def read_xyz(cloud: Any) -> np.ndarray:
     """Return the x, y, z of every point as float64 (n, 3), NaN points kept (see `drop_nan`)."""
-    names = [f.name for f in cloud.fields]
+    fields, n = cloud.fields, int(cloud.width) * int(cloud.height)
+    if (  # the layout create_cloud_xyz32 writes, checked first: one flat read
+        len(fields) == 3
+        and int(cloud.point_step) == 12
+        and int(cloud.row_step) == 12 * int(cloud.width)
+        and [(f.name, f.offset, f.datatype, f.count) for f in fields] == XYZ32_LAYOUT
+    ):
+        raw = _as_bytes(cloud.data)
+        if n and len(raw) >= 12 * n:
+            order = '>' if cloud.is_bigendian else '<'
+            return np.frombuffer(raw, dtype=order + 'f4', count=3 * n).reshape(n, 3).astype(float)
+    names = [f.name for f in fields]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise PointCloudError(f'PointCloud2 has two fields named {", ".join(twice)}')

@@ -2,7 +2,8 @@
 Steps one cloth engine per target and publishes the mesh vertices as PointCloud2.
 
 The step path (`on_target`) is the critical path of hardware in the loop: its two outgoing
-messages are built once and filled in place, the gripper targets go into a preallocated array,
+messages are built once and refilled (in place, or from a pool where subscribers get the objects
+themselves), the gripper targets go into a preallocated array,
 and start-up work (model compilation, a throwaway step, the reset at the first target) is done
 in the constructor, before the first deadline. Optionally the process is pinned to a core, asks
 for SCHED_FIFO and freezes its start-up heap (`cpu`, `realtime_priority`, `freeze_gc`).
@@ -10,7 +11,6 @@ for SCHED_FIFO and freezes its start-up heap (`cpu`, `realtime_priority`, `freez
 
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 import time
 
@@ -41,22 +41,25 @@ from cloth_bench_ros.runtime import (
     serialize_message,
     stamp_ns,
 )
+from cloth_bench_ros.runtime.message_pool import MessagePool
 import numpy as np
 
 
 class StateMessages:
     """
-    The simulator's cloud and step status, built once; `fill` writes a step into them in place.
+    The simulator's cloud and step status; `fill` writes a step into them.
 
-    With a transport that passes message objects by reference (`in_place` False), fill builds
-    fresh messages instead, so that states still queued for a subscriber keep their own data.
+    Over a transport that serialises on publish (`in_place`), one pair of messages is refilled
+    every step. The intra-process transport hands subscribers the objects themselves: there a
+    MessagePool refills a pair only when no queue or subscriber holds it any more.
     """
 
     STATUS_KEYS = ('step', 'step_time', 'diverged', 'diverged_at_step', 'skipped_targets')
 
     def __init__(self, engine_name: str, n_vertices: int, in_place: bool) -> None:
         self.engine_name, self.n_vertices, self.in_place = engine_name, n_vertices, in_place
-        self.cloud, self.xyz, self.status = self._build()
+        parts = lambda m: (m[0], m[0].data, m[2])  # noqa: E731 - what a subscriber may keep
+        self.pool = MessagePool(self._build, parts, 1 if in_place else 4)
 
     def _build(self) -> tuple[PointCloud2, np.ndarray, DiagnosticArray]:
         header = Header(frame_id='world')
@@ -74,45 +77,11 @@ class StateMessages:
         )
         return cloud, xyz, DiagnosticArray(header=header, status=[status])
 
-    def _fresh(self) -> tuple[PointCloud2, np.ndarray, DiagnosticArray]:
-        """Return new messages shaped as the first ones, every field given (the cheap way)."""
-        first, first_status = self.cloud, self.status.status[0]
-        header = Header(stamp=first.header.stamp, frame_id=first.header.frame_id)
-        fields = [
-            PointField(name=f.name, offset=f.offset, datatype=f.datatype, count=f.count)
-            for f in first.fields
-        ]
-        data = copy.copy(first.data)  # the array type the message class uses, zeroed below
-        xyz = np.frombuffer(data, dtype=np.float32).reshape(self.n_vertices, 3)
-        xyz[:] = 0.0
-        cloud = PointCloud2(
-            header=header,
-            height=1,
-            width=first.width,
-            fields=fields,
-            is_bigendian=first.is_bigendian,
-            point_step=first.point_step,
-            row_step=first.row_step,
-            data=data,
-            is_dense=True,
-        )
-        values = [KeyValue(key=k, value='') for k in self.STATUS_KEYS]
-        status = DiagnosticStatus(
-            level=DiagnosticStatus.OK,
-            name=first_status.name,
-            message='ok',
-            hardware_id=first_status.hardware_id,
-            values=values,
-        )
-        return cloud, xyz, DiagnosticArray(header=header, status=[status])
-
     def fill(
         self, stamp, vertices: np.ndarray, step: int, step_time: float, divergence, skipped: int
     ) -> tuple[PointCloud2, DiagnosticArray]:
         """Return the two messages of one step (the float32 conversion is the one copy)."""
-        cloud, xyz, status = (
-            (self.cloud, self.xyz, self.status) if self.in_place else self._fresh()
-        )
+        cloud, xyz, status = self.pool.slots[0] if self.in_place else self.pool.take()
         cloud.header.stamp = stamp
         np.copyto(xyz, vertices, casting='same_kind')
         values = status.status[0].values
@@ -197,6 +166,7 @@ class Simulator(Node):
         self.stamps = np.array(
             [self.targets.stamp_ns(k) for k in range(len(self.targets))], dtype=np.int64
         )
+        self.stamp_list = self.stamps.tolist()
         self.last_k = -1
         self.last_cloud: PointCloud2 | None = (
             None  # the state of target last_k, sent again on a repeat
@@ -228,7 +198,7 @@ class Simulator(Node):
         """
         vertices = self.engine.start(self.seed, self.targets.left[0], self.targets.right[0])
         cloud, status = self.messages.fill(
-            self.messages.cloud.header.stamp, vertices, 0, 0.0, None, 0
+            Header().stamp, vertices, 0, 0.0, None, 0
         )
         serialize_message(cloud)  # the serialisers are generated on first use
         serialize_message(status)
@@ -240,8 +210,10 @@ class Simulator(Node):
         g[0, 0], g[0, 1], g[0, 2] = p[0].position.x, p[0].position.y, p[0].position.z
         g[1, 0], g[1, 1], g[1, 2] = p[1].position.x, p[1].position.y, p[1].position.z
         stamp = stamp_ns(msg.header.stamp)
-        k = int(np.searchsorted(self.stamps, stamp))
-        known = k < len(self.stamps) and self.stamps[k] == stamp
+        k = self.last_k + 1  # the next target, as a rule; else looked up
+        if not (k < len(self.stamp_list) and self.stamp_list[k] == stamp):
+            k = int(np.searchsorted(self.stamps, stamp))
+        known = k < len(self.stamp_list) and self.stamp_list[k] == stamp
         if known and k == self.last_k and self.last_cloud is not None:
             # The newest target again (a controller's start-up handshake): its state again, no
             # step.

@@ -32,6 +32,7 @@ from cloth_bench_ros.runtime import (
     steady_clock,
     Time,
 )
+from cloth_bench_ros.runtime.message_pool import MessagePool
 import numpy as np
 
 PACINGS = ('lockstep', 'realtime')
@@ -83,6 +84,9 @@ class TrajectoryPublisher(Node):
             if duration > 0
             else len(self.targets)
         )
+        tg = self.targets
+        self.target_stamps = [tg.stamp_ns(k) for k in range(len(tg))]
+        self.euler = np.stack([tg.roll, tg.pitch, tg.yaw], axis=1)  # per target: one row to read
         self.target_pub = self.create_publisher(PoseArray, 'targets', make_qos(10))
         self.clock_pub = self.create_publisher(Clock, '/clock', make_qos(10))
         self.state_subs = {
@@ -96,15 +100,14 @@ class TrajectoryPublisher(Node):
         self.done = False
         self.pace_timer: Any = None  # a Timer while the real-time schedule runs
         # Realtime: the controller's view of each target (due, sent, state received), per engine.
-        stamps = np.array(
-            [self.targets.stamp_ns(k) for k in range(self.n_targets)], dtype=np.int64
-        )
+        stamps = np.array(self.target_stamps[: self.n_targets], dtype=np.int64)
         self.timelines = {engine: TargetTimeline(stamps) for engine in self.engines}
         self.period_ns = round(1e9 / rate_hz)
-        # Real time: one target message filled in place before each send where publish serialises
-        # it (the embedded intra-process transport hands subscribers the object itself).
-        self.fill_in_place = self.pacing == 'realtime' and publish_serialises(self)
+        # One target message filled in place before each send where publish serialises it; the
+        # embedded intra-process transport hands subscribers the object itself: a pool there.
+        self.fill_in_place = publish_serialises(self)
         self.target_msg = self._new_target_msg()
+        self.target_pool = MessagePool(self._new_target_msg)
         self.wait_until_ns: int | None = None
         self.preroll_sent_ns: int | None = (
             None  # real time: when the start-up handshake's target 0 went out
@@ -173,17 +176,12 @@ class TrajectoryPublisher(Node):
         return PoseArray(header=Header(frame_id='world'), poses=[Pose(), Pose()])
 
     def _target(self, k: int) -> PoseArray:
-        """Target k as a message (the real-time one filled in place)."""
-        tg = self.targets
-        msg = self.target_msg if self.fill_in_place else self._new_target_msg()
-        msg.header.stamp = Time(nanoseconds=tg.stamp_ns(k)).to_msg()
-        qx, qy, qz, qw = quaternion_xyz(tg.roll[k], tg.pitch[k], tg.yaw[k])
-        for pose, position in zip(msg.poses, (tg.left[k], tg.right[k])):
-            pose.position.x, pose.position.y, pose.position.z = (
-                float(position[0]),
-                float(position[1]),
-                float(position[2]),
-            )
+        """Target k as a message (filled in place, or taken from the pool)."""
+        msg = self.target_msg if self.fill_in_place else self.target_pool.take()
+        msg.header.stamp = Time(nanoseconds=self.target_stamps[k]).to_msg()
+        qx, qy, qz, qw = quaternion_xyz(*self.euler[k].tolist())
+        for pose, position in zip(msg.poses, (self.targets.left[k], self.targets.right[k])):
+            pose.position.x, pose.position.y, pose.position.z = position.tolist()
             pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = (
                 qx,
                 qy,

@@ -68,6 +68,7 @@ class IntraProcessTransport:
 
     def __init__(self, context: Any) -> None:
         self.context = context
+        self._readers: dict[int, list] = {}  # id(publisher) -> its matched subscriptions
 
     def add_publisher(self, pub: Endpoint) -> None:
         self.context.publishers.setdefault(pub.topic_name, []).append(pub)
@@ -76,8 +77,10 @@ class IntraProcessTransport:
         pubs = self.context.publishers.get(pub.topic_name, [])
         if pub in pubs:
             pubs.remove(pub)
+        self._readers.pop(id(pub), None)
 
     def add_subscription(self, sub: Endpoint) -> None:
+        self._readers.clear()  # matched once per publisher, again after any change of readers
         self.context.subscriptions.setdefault(sub.topic_name, []).append(sub)
         if sub.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:  # late joiners get the history
             for pub in self.context.publishers.get(sub.topic_name, ()):
@@ -86,6 +89,7 @@ class IntraProcessTransport:
                         self.context.enqueue(sub, msg)
 
     def remove_subscription(self, sub: Endpoint) -> None:
+        self._readers.clear()
         subs = self.context.subscriptions.get(sub.topic_name, [])
         if sub in subs:
             subs.remove(sub)
@@ -93,9 +97,13 @@ class IntraProcessTransport:
     def publish(self, pub: Any, msg: Any) -> None:
         if pub.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:
             pub._history.append(msg)
-        for sub in self.context.subscriptions.get(pub.topic_name, ()):
-            if compatible(pub.qos, sub.qos):
-                self.context.enqueue(sub, msg)
+        readers = self._readers.get(id(pub))
+        if readers is None:
+            subs = self.context.subscriptions.get(pub.topic_name, ())
+            readers = self._readers[id(pub)] = [s for s in subs if compatible(pub.qos, s.qos)]
+        enqueue = self.context.enqueue
+        for sub in readers:
+            enqueue(sub, msg)
 
     # services: a request goes to every server of the name and type, the reply to its client
     def add_service(self, srv: Any) -> None:
