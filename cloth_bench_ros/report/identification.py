@@ -193,6 +193,8 @@ def plot_convergence(ident: dict, path: Path) -> Path | None:
         failed = sum(p[1] is None for p in points)
         if failed:
             ax.plot([], [], ls='', label=f'{name}: {failed} failed (diverged) trials')
+        for _, after, _ in (result.get('budget') or {}).get('doublings') or []:
+            ax.axvline(after, color=line.get_color(), ls=':', lw=0.8)
         drawn = True
     if not drawn:
         plt.close(fig)
@@ -206,23 +208,79 @@ def plot_convergence(ident: dict, path: Path) -> Path | None:
     ax.grid(True, which='both', alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(
-        f'{engine_label(ident["engine"])} {ident["cloth"]} {ident["primitive"]}: convergence'
+        f'{engine_label(ident["engine"])} {ident["cloth"]} {ident["primitive"]} against'
+        f' {Path(str(ident.get("bag", ""))).name}: convergence (dotted: budget doublings)',
+        fontsize=9,
     )
     return save_figure(fig, path)
 
 
+def file_suffix(ident: dict) -> str:
+    """Return <engine>_<cloth>_<task>[_<reference>]: one name per identification of a report."""
+    task = f'{ident["cloth"]}_{ident["primitive"]}'
+    bag = Path(str(ident.get('bag', ''))).name
+    return f'{ident["engine"]}_{task}' + (bag[len(task):] if bag.startswith(task + '_') else '')
+
+
+def budget_text(result: dict) -> str:
+    """Return how a sampler's trial budget was chosen, e.g. 'doubling 32 -> 64: 1.2 %, enough'."""
+    budget = result.get('budget') or {}
+    doublings = budget.get('doublings') or []
+    if not doublings:
+        return 'fixed'
+    steps = ', '.join(f'{a} -> {b}: {_num(g):.1%}' for a, b, g in doublings)
+    return steps + ('; enough' if budget.get('reached') else '; cap reached')
+
+
+def held_out(ident: dict) -> tuple[dict, dict]:
+    """Return the first validation bag's (preset, identified) statistics on held-out seeds."""
+    for v in ident.get('validation', []):
+        if isinstance(v, dict) and isinstance(v.get('preset'), dict):
+            return v['preset'], v.get('identified') or {}
+    return {}, {}
+
+
+def summary_table(idents: Sequence[dict]) -> Table:
+    """Return one row per identification: budget per sampler, wall time, held-out CD."""
+    body = []
+    for ident in idents:
+        preset, fitted = held_out(ident)
+        body.append(
+            [
+                engine_label(ident['engine']) + (f' ({ident["fixed"]["model"]})'
+                                                 if 'model' in (ident.get('fixed') or {}) else ''),
+                Path(str(ident.get('bag', ''))).name,
+                '; '.join(
+                    f'{s} {r.get("trials", "?")} ({budget_text(r)})'
+                    for s, r in ident['per_sampler'].items()
+                ),
+                f'{_num(ident.get("wall_s")) / 60:.1f}',
+                _mean_std(preset) if preset else '-',
+                _mean_std(fitted) if fitted else '-',
+            ]
+        )
+    return Table(
+        'identifications',
+        ['engine', 'bag', 'trials per sampler (doublings)', 'wall (min)',
+         'held-out CD preset (m)', 'held-out CD identified (m)'],
+        body,
+        'lllrrr',
+    )
+
+
 def identification_section(ident: dict, rows: Sequence[dict] = ()) -> list[Block]:
     """One identification: what was fitted, before/after, convergence per sampler, importance."""
-    suffix = f'{ident["engine"]}_{ident["cloth"]}_{ident["primitive"]}'
+    suffix = file_suffix(ident)
     trials = ', '.join(
-        f'{s} {r.get("trials", "?")} trials (best {fmt_sig(_num(r.get("value")), 4)} m)'
+        f'{s} {r.get("trials", "?")} trials (best {fmt_sig(_num(r.get("value")), 4)} m;'
+        f' budget {budget_text(r)})'
         for s, r in ident['per_sampler'].items()
     )
     return [
         heading(
             2,
             f'Parameter identification: {engine_label(ident["engine"])}, {ident["cloth"]}'
-            f' {ident["primitive"]}',
+            f' {ident["primitive"]}, against `{Path(str(ident.get("bag", ""))).name}`',
         ),
         paragraph(
             f'Minimised {str(ident["objective"]).upper()} of the task window against'

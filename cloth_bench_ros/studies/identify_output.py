@@ -130,8 +130,8 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
         f' {params}; '
         f'{fixed}'
         f"the other values are the preset's. {held_out}Engine version {version}; "
-        f'{datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")} on {platform.node()} '
-        f'({platform.machine()}, {platform.python_implementation()} {platform.python_version()}).'
+        f'{datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")} on '
+        f'{platform.machine()}, {platform.python_implementation()} {platform.python_version()}.'
     )
 
 
@@ -156,7 +156,7 @@ def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
     summary['preset_file'] = str(Path(PRESETS_DIR) / preset.name)
     summary['engine_version'] = str(version)
     summary['date'] = datetime.now(timezone.utc).isoformat(timespec='seconds')
-    summary['machine'] = f'{platform.node()} ({platform.machine()})'
+    summary['machine'] = platform.machine()  # no host name: preset files get shipped
     atomic_write_text(
         spec.output / 'identification.json', json.dumps(json_safe(summary), indent=1) + '\n'
     )
