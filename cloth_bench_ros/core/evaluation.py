@@ -42,6 +42,7 @@ class _EngineState:
     diverged_step: int | None = None
     diverged_time: float | None = None
     diverged_reason: str = ''
+    skipped_targets: int = 0  # targets the simulator never stepped (a newer one was waiting)
 
 
 class OnlineEvaluator:
@@ -100,10 +101,12 @@ class OnlineEvaluator:
         step_time: float,
         diverged: bool,
         reason: str = '',
+        skipped_targets: int = 0,
     ) -> None:
-        """Take the simulator's report of one step: compute time and divergence."""
+        """Take the simulator's report of one step: compute time, divergence, skipped targets."""
         e = self.engines[engine]
         e.last_step_stamp = stamp_ns
+        e.skipped_targets = max(e.skipped_targets, int(skipped_targets))
         if step > 0:
             e.step_times.append(step_time)
         if diverged and e.diverged_step is None:
@@ -219,6 +222,7 @@ class OnlineEvaluator:
                     int(np.sum(np.asarray(e.latencies) > period_s)) if period_s else None
                 ),
                 'real_time_factor': sim_s / wall_s if sim_s and wall_s else None,
+                'skipped_targets': e.skipped_targets,
                 'frames_scored': len(rows),
                 'frames_in_window': len(window),
                 'diverged': e.diverged_step is not None,

@@ -221,6 +221,7 @@ class Evaluator(Node):
             float(v['step_time']),
             v['diverged'] == 'true',
             msg.status[0].message,
+            int(v.get('skipped_targets') or 0),
         )
         self.finish_if_complete()
 

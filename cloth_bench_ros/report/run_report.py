@@ -29,4 +29,13 @@ def result_table(summary: dict) -> str:
             f' {_fmt(ms["p99"], 3):>8} {_fmt(ms["max"], 3):>8}  {status}'
         )
     lines.append('CD/HD in m (one-sided, L1); L_s in m; step times in ms.')
+    for engine, m in summary['engines'].items():
+        lat = m.get('latency') or {}
+        if lat.get('count'):  # realtime pacing: targets on the wall clock
+            lines.append(
+                f'{engine} real time: latency p50 {_fmt(lat["p50"] * 1e3, 3)} ms, p99'
+                f' {_fmt(lat["p99"] * 1e3, 3)} ms; {m.get("deadline_misses")} of {lat["count"]}'
+                f' states late (deadline 1/rate); {m.get("skipped_targets", 0)} targets skipped'
+                ' (a newer one was waiting)'
+            )
     return '\n'.join(lines)

@@ -88,6 +88,7 @@ def summary_row(cell: Cell, summary: dict) -> dict:
         'latency_p99': lat['p99'],
         'latency_max': lat['max'],
         'deadline_misses': m.get('deadline_misses'),
+        'skipped_targets': m.get('skipped_targets'),
         'real_time_factor': m.get('real_time_factor'),
         'frames_scored': m.get('frames_scored'),
         'frames_in_window': m.get('frames_in_window'),
