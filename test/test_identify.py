@@ -150,6 +150,7 @@ def test_search_space_is_the_schema_range_log_scaled_around_the_preset_where_it_
     [
         (['--params', 'nope'], 'unknown mujoco parameter nope'),
         (['--trials', '0'], '--trials: 0 is outside [1, inf]'),
+        (['--trials', 'many'], "--trials: 'many' is not an integer (or auto)"),
         (['--span', '1'], '--span: 1.0 is outside (1, inf]'),
         (['--span', 'nan'], '--span: nan is not a finite number'),
         (['--cloth', 'silk'], "--cloth: invalid choice: 'silk'"),

@@ -13,7 +13,12 @@ def _trials(text: str) -> int:
     """--trials: a count >= 1, or auto (the study's AUTO)."""
     from cloth_bench_ros.studies.identify import AUTO
 
-    return AUTO if text.strip().lower() == 'auto' else common.integer('--trials', 1)(text)
+    if text.strip().lower() == 'auto':
+        return AUTO
+    try:
+        return common.integer('--trials', 1)(text)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f'{exc} (or auto)') from None
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
