@@ -26,14 +26,21 @@ import time
 from typing import Any, Sequence
 import warnings
 
+from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-exported)
+    AUTO,
+    AUTO_FIRST,
+    AUTO_MAX_TRIALS,
+    AUTO_TOLERANCE,
+    best_value,
+    budget_reached,
+    convergence,
+    finite_or_inf,
+    importance,
+)
 from cloth_bench_ros.studies.objective import evaluate, Trial
 
 SAMPLERS = ('cmaes', 'tpe', 'gp', 'both')
 DEFAULT_TRIALS = 500
-# The trial budget chosen from the convergence curve (`trials=AUTO`): run 32 trials, then double
-# while a doubling still improves the best value by at least 2 %, up to AUTO_MAX_TRIALS.
-AUTO = 0
-AUTO_FIRST, AUTO_MAX_TRIALS, AUTO_TOLERANCE = 32, 512, 0.02
 DEFAULT_SPAN = 10.0
 JOURNAL_FILE = 'study.journal'
 TRIALS_FILE = 'trials.jsonl'
@@ -304,31 +311,12 @@ def run_sampler(
             trial.set_user_attr('step', result['step'])
             study.tell(trial, state=TrialState.FAIL)
         record(result)
-        bar.set_postfix(best=f'{_best_value(study):.5f}', refresh=False)
+        bar.set_postfix(best=f'{best_value(study):.5f}', refresh=False)
         bar.update(1)
         if left > 0:
             ask()
     bar.close()
     return study
-
-
-def best_after(curve: Sequence[Sequence], n: int) -> float:
-    """Return the best value among a convergence curve's first n trials (inf if none finished)."""
-    values = [row[1] for row in curve[:n] if row[1] is not None]
-    return min(values) if values else math.inf
-
-
-def budget_reached(curve: Sequence[Sequence], n: int) -> tuple[bool, float]:
-    """
-    Whether n trials are enough: the doubling from n / 2 to n improved the best by < 2 %.
-
-    Returns (enough, relative improvement of the last doubling).
-    """
-    before, after = best_after(curve, n // 2), best_after(curve, n)
-    if not math.isfinite(after):
-        return False, math.nan
-    gain = 1.0 if not math.isfinite(before) else (before - after) / before
-    return gain < AUTO_TOLERANCE, gain
 
 
 def run_budgeted(
@@ -355,46 +343,6 @@ def run_budgeted(
         'trials': n,
         'reached': bool(enough),
     }
-
-
-def _best_value(study: Any) -> float:
-    try:
-        return float(study.best_value)
-    except ValueError:
-        return math.nan
-
-
-def _finite_or_inf(value: float) -> float:
-    return value if math.isfinite(value) else math.inf
-
-
-def convergence(study: Any) -> list[list]:
-    """Return [number, value or None, best so far or None] per finished trial, in order."""
-    from optuna.trial import TrialState
-
-    out, best = [], math.inf
-    for t in sorted(study.get_trials(deepcopy=False), key=lambda t: t.number):
-        if t.state not in (TrialState.COMPLETE, TrialState.FAIL):
-            continue
-        value = t.value if t.state == TrialState.COMPLETE else None
-        if value is not None:
-            best = min(best, value)
-        out.append([t.number, value, best if math.isfinite(best) else None])
-    return out
-
-
-def importance(study: Any) -> dict[str, float]:
-    """Return how much each parameter explains (PED-ANOVA); {} with too few trials."""
-    import optuna
-
-    try:
-        evaluator = optuna.importance.PedAnovaImportanceEvaluator()
-        return {
-            k: float(v)
-            for k, v in optuna.importance.get_param_importances(study, evaluator=evaluator).items()
-        }
-    except Exception:  # too few complete trials, or every value equal
-        return {}
 
 
 @dataclass
@@ -442,8 +390,8 @@ def identify(
             for s in samplers
         }
         studies = {s: study for s, (study, _) in budgets.items()}
-        best = min(studies, key=lambda s: _finite_or_inf(_best_value(studies[s])))
-        if not math.isfinite(_best_value(studies[best])):
+        best = min(studies, key=lambda s: finite_or_inf(best_value(studies[s])))
+        if not math.isfinite(best_value(studies[best])):
             raise ValueError(
                 f'identify: no trial of {", ".join(samplers)} finished without diverging '
                 f'(see {spec.output / TRIALS_FILE})'
@@ -482,14 +430,14 @@ def summarise(
         'samplers': list(studies),
         'best_sampler': best,
         'params': dict(studies[best].best_params),
-        'value': _best_value(studies[best]),
+        'value': best_value(studies[best]),
         'preset_params': {n: base.get(n) for n in space},
         'preset_value': before['value'],
         'preset_status': before['status'],
         'per_sampler': {
             s: {
-                'value': _best_value(st),
-                'params': st.best_params if math.isfinite(_best_value(st)) else {},
+                'value': best_value(st),
+                'params': st.best_params if math.isfinite(best_value(st)) else {},
                 'convergence': convergence(st),
                 'importance': importance(st),
                 'trials': len(convergence(st)),
