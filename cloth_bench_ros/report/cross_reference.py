@@ -40,17 +40,22 @@ def entrant_name(engine: str, overrides: dict) -> str:
     return f'{engine_label(engine)} ({model})' if model else engine_label(engine)
 
 
+# Engines entered with several models (Newton: vbd, xpbd): their model is part of the name.
+MODEL_ENGINES = {engine for engine, overrides in DEFAULT_ENTRANTS if 'model' in overrides}
+
+
 def _entrant(row: dict) -> tuple[str, str, str]:
-    """Return (engine, model, kind) of a row; kind: preset or identified."""
+    """Return (engine, model or '', kind) of a row; kind: preset or identified."""
     kind = 'preset' if row.get('presets', 'default') == 'default' else 'identified'
-    return row['engine'], (row.get('params') or {}).get('model', ''), kind
+    model = (row.get('params') or {}).get('model', '') if row['engine'] in MODEL_ENGINES else ''
+    return row['engine'], model, kind
 
 
 def _selected(rows: Sequence[dict]) -> list[dict]:
     return [r for r in rows if r.get('mode') == MODE and r.get('reference') in REFERENCES]
 
 
-def cross_reference_table(rows: Sequence[dict], digits: int = 3) -> Table | None:
+def cross_reference_table(rows: Sequence[dict], digits: int = 4) -> Table | None:
     """Return entrants x (reference, task) of CD_d / CD_q; None without cross-reference rows."""
     sel = _selected(rows)
     if not sel:
