@@ -19,7 +19,7 @@ from cloth_bench_ros.runtime.arguments import (
     validate_node_name,
     validate_topic_name,
 )
-from cloth_bench_ros.runtime.clock import Clock, ClockType, Time, Timer
+from cloth_bench_ros.runtime.clock import Clock, ClockType, Timer
 from cloth_bench_ros.runtime.context import Context, default_context
 from cloth_bench_ros.runtime.node_parameters import NodeParameters
 from cloth_bench_ros.runtime.parameter_service import ParameterService
