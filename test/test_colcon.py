@@ -58,6 +58,12 @@ def test_layout_for_ros2_run_and_launch(install):
     assert (share / 'launch' / 'benchmark.launch.py').is_file()
     assert (share / 'config' / 'benchmark.yaml').is_file()
     assert any((share / 'config' / 'presets').glob('*.yaml'))
+    for name in ('identified', 'identified-newton-vbd'):  # the named preset sets (--presets NAME)
+        assert sorted(p.name for p in (share / 'config' / 'presets' / name).glob('*.yaml')) == [
+            'bullet.yaml',
+            'mujoco.yaml',
+            'newton.yaml',
+        ]
 
 
 def _installed_env(install: Path) -> dict:

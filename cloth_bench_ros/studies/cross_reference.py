@@ -88,10 +88,8 @@ def cross_reference_cells(
                     name = identified_set_of(reference)
                     label = set_label(preset_set(name), label)
                     if params is None:
-                        missing.append(
-                            f'{engine} {config_label(None, overrides)}: no {name} preset for'
-                            f' {cloth} {primitive}'
-                        )
+                        model = f' ({overrides["model"]})' if 'model' in overrides else ''
+                        missing.append(f'{engine}{model}: no {name} preset, {cloth} {primitive}')
                         continue
                 assert params is not None
                 for seed in seeds:
