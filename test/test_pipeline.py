@@ -92,3 +92,19 @@ def test_two_engines_in_one_run_are_scored_against_the_same_bag(hanging_bag, tmp
     rows = (tmp_path / 'both' / 'frames.csv').read_text().splitlines()[1:]
     assert sorted({r.split(',')[0] for r in rows}) == ['bullet', 'mujoco'] and len(rows) == 264
     assert summary['engines']['mujoco']['CD_d'] != summary['engines']['bullet']['CD_d']
+
+
+def test_the_printout_names_late_states_and_skipped_targets_only_when_paced_in_real_time():
+    from cloth_bench_ros.report.run_report import result_table
+
+    timing = {'mean': 1e-3, 'p50': 1e-3, 'p99': 2e-3, 'max': 3e-3}
+    m = {
+        'CD_d': 0.03, 'HD_d': 0.1, 'L_s': 1e-4, 'diverged': False, 'diverged_at_step': None,
+        'step_time': {'count': 741, **timing}, 'latency': {'count': 709, **timing},
+        'deadline_misses': 42, 'skipped_targets': 32,
+    }
+    summary = {'run': {'primitive': 'dynamic'}, 'engines': {'mujoco': m}}
+    assert 'real time' not in result_table(summary)  # lockstep: no deadline to miss
+    line = result_table(summary, realtime=True).splitlines()[-1]
+    assert line.startswith('mujoco real time: latency p50 1.000 ms, p99 2.000 ms')
+    assert '42 of 709 states late' in line and '32 targets skipped' in line

@@ -279,7 +279,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
         f' bag {bag}'
     )
-    print(result_table(summary))
+    print(result_table(summary, realtime=args.pacing == 'realtime'))
     _print_real(summary)
     print(f'report: {out}/summary.json, {out}/frames.csv')
     for key in ('bag', 'figure', 'animation'):

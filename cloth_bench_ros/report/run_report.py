@@ -11,8 +11,8 @@ def _fmt(value: float | None, digits: int = 4) -> str:
     return f'{value:.{digits}f}'
 
 
-def result_table(summary: dict) -> str:
-    """One row per engine: CD, HD, L_s and step latency (ms), in a fixed-width table."""
+def result_table(summary: dict, realtime: bool = False) -> str:
+    """One row per engine: CD, HD, L_s and step time (ms); realtime: latency, misses, skips."""
     suffix = 'd' if summary['run']['primitive'] == 'dynamic' else 'q'
     header = (
         f'{"engine":<10} {"CD_" + suffix:>8} {"HD_" + suffix:>8} {"L_s":>10} '
@@ -29,9 +29,9 @@ def result_table(summary: dict) -> str:
             f' {_fmt(ms["p99"], 3):>8} {_fmt(ms["max"], 3):>8}  {status}'
         )
     lines.append('CD/HD in m (one-sided, L1); L_s in m; step times in ms.')
-    for engine, m in summary['engines'].items():
+    for engine, m in summary['engines'].items() if realtime else ():
         lat = m.get('latency') or {}
-        if lat.get('count'):  # realtime pacing: targets on the wall clock
+        if lat.get('count'):  # targets on the wall clock: deadlines mean something
             lines.append(
                 f'{engine} real time: latency p50 {_fmt(lat["p50"] * 1e3, 3)} ms, p99'
                 f' {_fmt(lat["p99"] * 1e3, 3)} ms; {m.get("deadline_misses")} of {lat["count"]}'
