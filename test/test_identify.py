@@ -31,6 +31,26 @@ def target(tmp_path_factory):
     )
 
 
+def _spec(target, out, sampler: str, trials: int, params: list, batch: int) -> IdentifySpec:
+    """Return a MuJoCo towel-fling identification against the target bag, no validation."""
+    return IdentifySpec(
+        'mujoco',
+        'towel',
+        'dynamic',
+        target,
+        out,
+        sampler,
+        trials,
+        'cd',
+        params,
+        grid=GRID,
+        fixed=dict(FIXED),
+        span=5.0,
+        batch=batch,
+        validate_seeds=0,
+    )
+
+
 def test_the_objective_is_zero_at_the_truth_and_grows_away_from_it(target):
     at = evaluate(
         Trial(
@@ -57,22 +77,7 @@ def test_the_objective_is_zero_at_the_truth_and_grows_away_from_it(target):
 
 
 def test_identification_recovers_known_parameters_with_both_samplers_and_resumes(target, tmp_path):
-    spec = IdentifySpec(
-        'mujoco',
-        'towel',
-        'dynamic',
-        target,
-        tmp_path,
-        'both',
-        50,
-        'cd',
-        ['damping', 'young'],
-        grid=GRID,
-        fixed=dict(FIXED),
-        span=5.0,
-        batch=2,
-        validate_seeds=0,
-    )
+    spec = _spec(target, tmp_path, 'both', 50, ['damping', 'young'], batch=2)
     outcome = identify(spec, workers=2, progress=False)
     s = outcome.summary
     assert s['preset_value'] > 1e-5
@@ -237,22 +242,7 @@ def test_an_automatic_budget_doubles_until_the_curve_flattens(target, tmp_path, 
 
     monkeypatch.setattr(identify_module, 'AUTO_FIRST', 4)
     monkeypatch.setattr(identify_module, 'AUTO_MAX_TRIALS', 32)
-    spec = IdentifySpec(
-        'mujoco',
-        'towel',
-        'dynamic',
-        target,
-        tmp_path,
-        'cmaes',
-        identify_module.AUTO,
-        'cd',
-        ['damping'],
-        grid=GRID,
-        fixed=dict(FIXED),
-        span=5.0,
-        batch=1,
-        validate_seeds=0,
-    )
+    spec = _spec(target, tmp_path, 'cmaes', identify_module.AUTO, ['damping'], batch=1)
     s = identify(spec, workers=1, progress=False).summary['per_sampler']['cmaes']
     budget, curve = s['budget'], s['convergence']
     assert len(curve) == budget['trials'] == budget['doublings'][-1][1] and budget['trials'] >= 8

@@ -71,7 +71,7 @@ def _as_bytes(data: Any) -> bytes | np.ndarray:
 def read_xyz(cloud: Any) -> np.ndarray:
     """Return the x, y, z of every point as float64 (n, 3), NaN points kept (see `drop_nan`)."""
     fields, n = cloud.fields, int(cloud.width) * int(cloud.height)
-    if (  # the layout create_cloud_xyz32 writes, checked first: one flat read
+    if (  # the layout create_cloud_xyz32 writes, checked first: one flat read, no per-field copies
         len(fields) == 3
         and int(cloud.point_step) == 12
         and int(cloud.row_step) == 12 * int(cloud.width)
@@ -101,15 +101,7 @@ def read_xyz(cloud: Any) -> np.ndarray:
             f'PointCloud2 data of {len(raw)} bytes does not hold {cloud.height} rows of '
             f'{cloud.width} points (point_step {point_step}, row_step {row_step})'
         )
-    if (
-        point_step == 12
-        and row_step == 12 * int(cloud.width)
-        and [(by_name[c].offset, by_name[c].datatype) for c in 'xyz']
-        == [(0, FLOAT32), (4, FLOAT32), (8, FLOAT32)]
-    ):
-        # The layout create_cloud_xyz32 writes: one flat read, no per-field copies.
-        return np.frombuffer(raw, dtype=order + 'f4', count=3 * n).reshape(n, 3).astype(np.float64)
-    # Drop the padding at the end of each row so that points are evenly spaced.
+    # Any other layout: drop the padding at the end of each row so that points are evenly spaced.
     rows = np.asarray(raw)[: row_step * int(cloud.height)].reshape(int(cloud.height), row_step)
     packed = np.ascontiguousarray(rows[:, : point_step * int(cloud.width)]).reshape(n, point_step)
     out = np.empty((n, 3))

@@ -57,9 +57,9 @@ class StateMessages:
     STATUS_KEYS = ('step', 'step_time', 'diverged', 'diverged_at_step', 'skipped_targets')
 
     def __init__(self, engine_name: str, n_vertices: int, in_place: bool) -> None:
-        self.engine_name, self.n_vertices, self.in_place = engine_name, n_vertices, in_place
+        self.engine_name, self.n_vertices = engine_name, n_vertices
         parts = lambda m: (m[0], m[0].data, m[2])  # noqa: E731 - what a subscriber may keep
-        self.pool = MessagePool(self._build, parts, 1 if in_place else 4)
+        self.pool = MessagePool(self._build, parts, in_place=in_place)
 
     def _build(self) -> tuple[PointCloud2, np.ndarray, DiagnosticArray]:
         header = Header(frame_id='world')
@@ -81,7 +81,7 @@ class StateMessages:
         self, stamp, vertices: np.ndarray, step: int, step_time: float, divergence, skipped: int
     ) -> tuple[PointCloud2, DiagnosticArray]:
         """Return the two messages of one step (the float32 conversion is the one copy)."""
-        cloud, xyz, status = self.pool.slots[0] if self.in_place else self.pool.take()
+        cloud, xyz, status = self.pool.take()
         cloud.header.stamp = stamp
         np.copyto(xyz, vertices, casting='same_kind')
         values = status.status[0].values

@@ -103,11 +103,9 @@ class TrajectoryPublisher(Node):
         stamps = np.array(self.target_stamps[: self.n_targets], dtype=np.int64)
         self.timelines = {engine: TargetTimeline(stamps) for engine in self.engines}
         self.period_ns = round(1e9 / rate_hz)
-        # One target message filled in place before each send where publish serialises it; the
-        # embedded intra-process transport hands subscribers the object itself: a pool there.
-        self.fill_in_place = publish_serialises(self)
-        self.target_msg = self._new_target_msg()
-        self.target_pool = MessagePool(self._new_target_msg)
+        # Where publish serialises, one target message refilled before each send; the embedded
+        # intra-process transport hands subscribers the object itself: a pool there.
+        self.target_pool = MessagePool(self._new_target_msg, in_place=publish_serialises(self))
         self.wait_until_ns: int | None = None
         self.preroll_sent_ns: int | None = (
             None  # real time: when the start-up handshake's target 0 went out
@@ -177,7 +175,7 @@ class TrajectoryPublisher(Node):
 
     def _target(self, k: int) -> PoseArray:
         """Target k as a message (filled in place, or taken from the pool)."""
-        msg = self.target_msg if self.fill_in_place else self.target_pool.take()
+        msg = self.target_pool.take()
         msg.header.stamp = Time(nanoseconds=self.target_stamps[k]).to_msg()
         qx, qy, qz, qw = quaternion_xyz(*self.euler[k].tolist())
         for pose, position in zip(msg.poses, (self.targets.left[k], self.targets.right[k])):
