@@ -1,0 +1,44 @@
+"""The configuration of a hardware-in-the-loop run and the files its processes write."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+import re
+
+TIMELINE = 'timeline_{engine}.csv'
+SIMULATOR_FILE = 'simulator.json'
+SUMMARY_FILE = 'summary.json'
+
+
+@dataclass(frozen=True)
+class HilConfig:
+    """One real-time run: engine, rate, scene, engine configuration and process settings."""
+
+    engine: str
+    rate_hz: float
+    bag: Path
+    cloth: str = 'towel'
+    primitive: str = 'dynamic'
+    seed: int = 0
+    grid: tuple[int, int] | None = None
+    params: tuple[tuple[str, object], ...] = ()  # sorted engine parameter overrides
+    config: str = 'preset'  # the configuration's name (settings-sweep label)
+    processes: bool = True
+    cpu: int = -1  # core to pin the simulator to (-1: not pinned)
+    realtime_priority: int = (
+        0  # SCHED_FIFO priority of the simulator and the controller (0: not asked)
+    )
+    freeze_gc: bool = True
+    busy_wait: bool = (
+        False  # the simulator polls for targets instead of sleeping (give it a core: cpu)
+    )
+    duration: float = 0.0  # s of the trajectory to run (0: all of it, scored by the observer)
+
+    def ident(self) -> str:
+        """Return the run's directory name (engine, rate, task, seed, configuration), file-safe."""
+        text = (
+            f'{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}'
+            f'_s{self.seed}_{self.config}'
+        )
+        return re.sub(r'[^A-Za-z0-9_.+-]+', '-', text)
