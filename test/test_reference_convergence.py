@@ -1,8 +1,9 @@
 """The reference convergence study (`cloth-bench converge`) on a coarse, short reference."""
 
+from dataclasses import replace
 from pathlib import Path
 
-from cloth_bench_ros.data.synth import reference_config
+from cloth_bench_ros.data.synth import reference_config, simulate_reference
 from cloth_bench_ros.studies import reference_convergence as rc
 import numpy as np
 import pytest
@@ -23,7 +24,9 @@ def test_each_axis_refines_one_setting():
     rate = rc.refined(base, 'rate', 1)
     assert rate.rate_hz == 2 * base.rate_hz
     assert rate.params['timestep'] == base.params['timestep'] / 2  # the internal step halves
-    assert rc.refined(base, 'grid', 1).grid == (46, 64)  # spacing 1.7 cm -> 1.1 cm
+    grid = rc.refined(base, 'grid', 1)
+    assert grid.grid == (46, 64)  # spacing 1.7 cm -> 1.1 cm
+    assert grid.params['edge_timeconst'] == pytest.approx(base.params['edge_timeconst'] * 2 / 3)
     with pytest.raises(ValueError):
         rc.refined(base, 'colour', 1)
     labels = [v.label for v in rc.variants(base, rc.AXES, 2)]
@@ -77,3 +80,32 @@ def test_a_study_on_a_coarse_reference_compares_each_run_with_the_one_before(tmp
     rc.save(study.rows(), study, tmp_path / 'convergence.json')
     assert 'rate+1' in (tmp_path / 'convergence.json').read_text()
     assert 'shipped' in rc.format_rows(study.rows())
+
+
+def test_the_grid_axis_runs_at_the_rate_its_finest_edges_need():
+    base = reference_config('towel', 'dynamic', reference='mujoco')  # 900 Hz, edges 2.5 ms
+    runs = {v.label: v for v in rc.variants(base, ('grid',), 2)}
+    assert list(runs) == ['shipped', 'rate+1', 'grid+1', 'grid+2']
+    assert runs['grid+1'].previous == 'rate+1'  # the same rate, the coarser grid
+    assert runs['grid+2'].previous == 'grid+1'
+    for name in ('grid+1', 'grid+2'):
+        config = runs[name].config
+        assert config.rate_hz == 1800.0
+        assert config.params['edge_timeconst'] >= 2 / config.rate_hz  # MuJoCo's floor: 2 steps
+    vbd = reference_config('towel', 'dynamic', reference='newton-vbd')
+    assert rc.grid_rate_level(vbd, 2) == 0  # no edge constraints: no faster rate needed
+
+
+def test_a_finer_grid_with_scaled_edges_is_the_same_cloth():
+    """The hanging length of the shell: the same time constant stretches the finer cloth more."""
+    base = reference_config('towel', 'dynamic', grid=(7, 9), rate_hz=300.0, duration=0.05)
+    base = replace(base, params={**base.params, 'edge_timeconst': 0.02, 'timestep': 1 / 300})
+    finer = rc.refined(base, 'grid', 1)
+    same_timeconst = replace(finer, params={**finer.params, 'edge_timeconst': 0.02})
+
+    def hang(config):
+        return rc.hanging_length(next(iter(simulate_reference(config)))[1][None])
+
+    coarse = hang(base)
+    assert abs(hang(finer) - coarse) < rc.HANG_TOLERANCE_M
+    assert hang(same_timeconst) - coarse > 3 * rc.HANG_TOLERANCE_M

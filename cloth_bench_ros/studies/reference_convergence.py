@@ -14,6 +14,11 @@ frame, no camera), and each run compared with the one before it on its axis:
 
 An axis has converged when a refinement changes the trajectory by less than TOLERANCE_M on
 average and the hanging length by less than HANG_TOLERANCE_M.
+
+A finer grid must describe the same cloth: the MuJoCo shell's edge time constant is scaled with
+the spacing (`mesh_consistent_timeconst`), and the grid axis runs at the rate its finest level
+needs for that time constant (at least two internal steps), its first level compared with the
+shipped grid at the same rate.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from typing import Any, Callable
 
 from cloth_bench_ros.core.metrics import chamfer_l1
 from cloth_bench_ros.data.synth import reference_config, simulate_reference, SynthConfig
+from cloth_bench_ros.engines.mujoco_cloth import mesh_consistent_timeconst
 import numpy as np
 
 TOLERANCE_M = 0.002  # mean trajectory change between successive refinements
@@ -41,6 +47,7 @@ class Variant:
     axis: str  # '' for the shipped settings
     level: int
     config: SynthConfig = field(compare=False)
+    previous: str = ''  # label of the run it is compared with ('' for the shipped one)
 
     @property
     def label(self) -> str:
@@ -48,10 +55,13 @@ class Variant:
 
     def describe(self) -> str:
         p = self.config.params
-        return (
+        text = (
             f'{self.config.grid[0]}x{self.config.grid[1]}, {self.config.rate_hz:g} Hz,'
             f' {p.get("solver_iterations")} iterations'
         )
+        if 'edge_timeconst' in p:
+            text += f', edges {1000 * float(p["edge_timeconst"]):.3g} ms'
+        return text
 
 
 def label(axis: str, level: int) -> str:
@@ -64,7 +74,7 @@ def refined(config: SynthConfig, axis: str, level: int) -> SynthConfig:
     Return `config` with one setting refined `level` times.
 
     Iterations x2 each; the rate x2 with the longest internal step /2 (so the step the engine
-    takes halves too); the grid's spacing /1.5.
+    takes halves too); the grid's spacing /1.5, with the edge time constant scaled alike.
     """
     if axis == 'iterations':
         iterations = int(config.params['solver_iterations']) * 2**level
@@ -76,17 +86,39 @@ def refined(config: SynthConfig, axis: str, level: int) -> SynthConfig:
         return replace(config, rate_hz=config.rate_hz * 2**level, params=params)
     if axis == 'grid':
         nx, nz = config.grid
-        scale = 1.5**level  # 31 x 43 -> 46 x 64 -> 68 x 95: spacing 1.7 -> 1.1 -> 0.7 cm
-        return replace(config, grid=(round((nx - 1) * scale) + 1, round((nz - 1) * scale) + 1))
+        scale = 1.5**level  # 31 x 43 -> 46 x 64 -> 69 x 95: spacing 1.7 -> 1.1 -> 0.7 cm
+        grid = (round((nx - 1) * scale) + 1, round((nz - 1) * scale) + 1)
+        params = dict(config.params)
+        if params.get('model', 'shell') == 'shell' and 'edge_timeconst' in params:
+            ratio = (nz - 1) / (grid[1] - 1)
+            params['edge_timeconst'] = mesh_consistent_timeconst(
+                float(params['edge_timeconst']), ratio
+            )
+        return replace(config, grid=grid, params=params)
     raise ValueError(f'unknown axis {axis!r} (valid: {", ".join(AXES)})')
 
 
+def grid_rate_level(config: SynthConfig, levels: int) -> int:
+    """Return the rate doublings the finest grid needs: edge time constant >= 2 internal steps."""
+    timeconst = refined(config, 'grid', levels).params.get('edge_timeconst')
+    doublings = 0
+    while timeconst is not None and 2.0 / (config.rate_hz * 2**doublings) > timeconst * (1 + 1e-9):
+        doublings += 1
+    return doublings
+
+
 def variants(base: SynthConfig, axes: tuple[str, ...], levels: int) -> list[Variant]:
-    """Return the shipped run and `levels` refinements along each axis."""
-    runs = [Variant('', 0, base)]
+    """Return the shipped run and `levels` refinements along each axis, each with its baseline."""
+    runs = {'shipped': Variant('', 0, base)}
     for axis in axes:
-        runs += [Variant(axis, n, refined(base, axis, n)) for n in range(1, levels + 1)]
-    return runs
+        start, start_label = base, 'shipped'
+        if axis == 'grid' and (doublings := grid_rate_level(base, levels)):
+            start, start_label = refined(base, 'rate', doublings), label('rate', doublings)
+            runs.setdefault(start_label, Variant('rate', doublings, start, 'shipped'))
+        for n in range(1, levels + 1):
+            previous = start_label if n == 1 else label(axis, n - 1)
+            runs[label(axis, n)] = Variant(axis, n, refined(start, axis, n), previous)
+    return list(runs.values())
 
 
 def trajectory(variant: Variant) -> tuple[np.ndarray, float]:
@@ -201,7 +233,7 @@ class ConvergenceStudy:
             }
             if variant.label in frames:
                 row['hanging_length_m'] = hanging_length(frames[variant.label])
-            previous = by_label[label(variant.axis, variant.level - 1)] if variant.axis else None
+            previous = by_label.get(variant.previous)
             if previous is not None and {variant.label, previous.label} <= set(frames):
                 change = trajectory_change(
                     frames[previous.label], previous.config.grid,
