@@ -87,3 +87,23 @@ def test_every_command_takes_presets_and_refuses_an_unknown_set_in_one_line(comm
     assert main([*command, '--presets', 'fitted-somewhere']) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and 'neither a preset set' in err
+
+
+def test_a_sweep_over_the_default_cloths_keeps_what_the_set_covers(tmp_path, capsys):
+    """A set of the towel fling for MuJoCo only: the default sweep runs that, and says so."""
+    folder = tmp_path / 'set'
+    presets.merge_identified(
+        [_identified_file(tmp_path / 'a', 'mujoco', 'dynamic', {'mass': 0.2})], folder
+    )
+    assert main(['sweep', '--dry-run', '--engine', 'mujoco', '--presets', str(folder),
+                 '--seeds', '1', '--rate', '100', '--output', str(tmp_path / 'out')]) == 0
+    out = capsys.readouterr().out
+    assert 'cloth-bench sweep: 1 cells' in out
+    assert 'no values for mujoco chequered dynamic' in out and 'mujoco towel quasi_static' in out
+    # named cloth and task: the user insists, so a missing entry is an error
+    assert main(['sweep', '--dry-run', '--engine', 'mujoco', '--presets', str(folder),
+                 '--cloth', 'towel', '--primitive', 'quasi_static']) == 2
+    assert 'no preset for towel quasi_static' in capsys.readouterr().err
+    assert main(['sweep', '--dry-run', '--engine', 'mujoco', '--presets', str(folder),
+                 '--cloth', 'linen']) == 2
+    assert 'has no values for linen' in capsys.readouterr().err

@@ -215,7 +215,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         engines,
         args.rate or [],
         args.cloth or [],
-        args.primitive or list(sw.DEFAULT_PRIMITIVES),
+        args.primitive or [],
         args.seeds,
         args.seed_start,
         Path(args.bag_dir) if args.bag_dir else None,
@@ -228,6 +228,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         common.preset_set(args),
     )
     cells = plan.cells()
+    if plan.left_out:
+        print(
+            f'cloth-bench sweep: --presets {plan.presets.name if plan.presets else ""} has no'
+            f' values for {", ".join(plan.left_out)}: left out (--cloth and --primitive insist)'
+        )
     out = (
         Path(args.output)
         if args.output

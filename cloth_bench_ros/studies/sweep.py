@@ -13,7 +13,8 @@ segfault in an engine, or a machine lost) is replaced and the cell runs again el
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from itertools import product
 import math
 import os
 from pathlib import Path
@@ -313,6 +314,7 @@ class SweepPlan:
     keep_frames: str = 'first'  # first | all | none
     axes: Sequence[str] = ()  # settings mode: "name=v1,v2" strings
     presets: PresetSet | None = None  # a preset set instead of the shipped presets
+    left_out: list[str] = field(default_factory=list)  # 'engine cloth task' the set lacks
 
     def seeds(self) -> list[int]:
         settings = self.mode == 'settings'
@@ -336,6 +338,24 @@ class SweepPlan:
         for cloth in cloths:
             if cloth not in CLOTHS:
                 raise ValueError(f'unknown cloth {cloth!r} (valid: {", ".join(CLOTHS)})')
+        primitives = list(self.primitives) or list(DEFAULT_PRIMITIVES)
+        gaps = self._preset_gaps(cloths, primitives)
+        if gaps and not (self.cloths and self.primitives):
+            # A set covering part of the default cloths and tasks: sweep what it covers.
+            if len(gaps) == len(self.engines) * len(cloths) * len(primitives):
+                raise ValueError(
+                    f'--presets {self.presets.name if self.presets else ""} has no values for'
+                    f' {", ".join(cloths)} ({", ".join(primitives)})'
+                )
+            self.left_out = [' '.join(gap) for gap in sorted(gaps)]
+            return [
+                cell
+                for engine, cloth, primitive in product(self.engines, cloths, primitives)
+                if (engine, cloth, primitive) not in gaps
+                for cell in replace(
+                    self, engines=[engine], cloths=[cloth], primitives=[primitive]
+                ).cells()
+            ]
         seeds = self.seeds()
         if settings:
             if len(self.rates) > 1:
@@ -350,7 +370,7 @@ class SweepPlan:
                 self.engines,
                 (list(self.rates) or [SETTINGS_RATE])[0],
                 cloths,
-                self.primitives,
+                primitives,
                 seeds,
                 self.bag_dir,
                 axes,
@@ -364,7 +384,7 @@ class SweepPlan:
             self.engines,
             list(self.rates) or list(DEFAULT_RATES),
             cloths,
-            self.primitives,
+            primitives,
             seeds,
             self.bag_dir,
             self.grid,
@@ -374,6 +394,21 @@ class SweepPlan:
             keep,
             self.presets,
         )
+
+    def _preset_gaps(self, cloths: list[str], primitives: list[str]) -> set[tuple[str, str, str]]:
+        """Return the (engine, cloth, task) a named preset set has no values for."""
+        from cloth_bench_ros.engines.base import EngineError
+        from cloth_bench_ros.engines.presets import load_preset
+
+        if self.presets is None or self.presets.is_default:
+            return set()
+        gaps = set()
+        for engine, cloth, primitive in product(self.engines, cloths, primitives):
+            try:
+                load_preset(engine, cloth, primitive, self.presets.directory)
+            except EngineError:
+                gaps.add((engine, cloth, primitive))
+        return gaps
 
 
 def estimate(cells: Sequence[Cell], out_dir: Path, workers: int | None) -> str:
