@@ -539,3 +539,14 @@ def test_recorder_on_a_full_tmpfs_stops_with_a_complete_bag(tmp_path):
     assert 'disk nearly full' in result.stderr, result.stderr
     result.stderr = result.stderr.replace(str(out), str(keep))
     _check_stopped_recording(result, keep, complete=True)
+
+
+def test_synth_rate_must_put_frames_on_steps(capsys, tmp_path, monkeypatch):
+    out = tmp_path / 'bag'
+    code, _, err = run_main(capsys, cli.main, ['synth', '--out', str(out), '--rate', '1000'])
+    assert_one_line(code, err, '1000 Hz', 'not a multiple of 30 fps')
+    assert not out.exists()
+    made = []  # the reference configuration the bag would be made from (minutes at 31 x 43)
+    monkeypatch.setattr(synth, 'write_synthetic_bag', lambda config, *a: made.append(config) or out)
+    assert cli.main(['synth', '--out', str(out), '--rate', '1800', '--quiet']) == 0
+    assert made[0].rate_hz == 1800.0 and made[0].steps_per_frame == 60

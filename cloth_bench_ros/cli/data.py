@@ -59,6 +59,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
             '(config/synth_newton_vbd.yaml); default bag name <cloth>_<primitive>[_newton_vbd]'
         ),
     )
+    synth.add_argument(
+        '--rate',
+        type=common.number(validation.positive, '--rate'),
+        metavar='HZ',
+        help="the reference's step rate, a multiple of 30 (default: the reference file's)",
+    )
     synth.add_argument('--overwrite', action='store_true', help='replace the bag if it exists')
     synth.add_argument('--quiet', action='store_true', help='no progress bar')
     synth.set_defaults(func=cmd_synth)
@@ -153,6 +159,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         progress=not args.quiet,
         reference=args.reference,
+        rate_hz=args.rate,
     )
     print(f'synthetic bag written: {bag}')
     return 0

@@ -517,7 +517,11 @@ def synth_command(
     overwrite: bool = False,
     progress: bool = True,
     reference: str = DEFAULT_REFERENCE,
+    rate_hz: float | None = None,
 ) -> Path:
     """`cloth-bench synth`: the synthetic bag of a cloth and primitive from a reference."""
     config = reference_config(cloth, primitive, seed, reference=reference)
+    if rate_hz is not None:
+        config = replace(config, rate_hz=float(rate_hz))
+        config.steps_per_frame  # SynthError before anything is simulated
     return write_synthetic_bag(config, Path(out), overwrite, progress)
