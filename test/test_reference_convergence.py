@@ -109,3 +109,29 @@ def test_a_finer_grid_with_scaled_edges_is_the_same_cloth():
     coarse = hang(base)
     assert abs(hang(finer) - coarse) < rc.HANG_TOLERANCE_M
     assert hang(same_timeconst) - coarse > 3 * rc.HANG_TOLERANCE_M
+
+
+def test_engine_scores_are_the_cd_of_its_vertices_to_the_runs_surface():
+    x, z = np.meshgrid(np.arange(4) * 0.1, np.arange(3) * 0.2)
+    flat = np.stack([x, np.zeros_like(x), z], axis=-1).reshape(-1, 3)
+    run = np.stack([flat, flat + [0, 0.01, 0]])  # two frames, the second 1 cm off the plane
+    scores = rc.engine_scores({'same': run, 'off': run + [0, 0.005, 0]}, run, (4, 3))
+    assert scores['same'] < 1e-12
+    assert scores['off'] == pytest.approx(0.005)
+
+
+def test_a_study_scores_engines_against_every_run(tmp_path: Path, capsys):
+    study = rc.ConvergenceStudy(
+        'mujoco', 'towel', 'dynamic', axes=('iterations',), levels=1, duration=0.1,
+        overrides=COARSE, scored=('mujoco', 'bullet'),
+    )
+    study.run(tmp_path, _serial)
+    rows = study.rows()
+    for row in rows:
+        assert set(row['scores_m']) == {'mujoco', 'bullet'}
+        assert all(0 < cd < 0.2 for cd in row['scores_m'].values())  # m: a cloth near the other
+    assert rows[0]['scores_m']['mujoco'] != rows[0]['scores_m']['bullet']
+    assert 'CD bullet' in rc.format_rows(rows).splitlines()[0]
+    from cloth_bench_ros import cli
+    assert cli.main(['converge', '--score', 'pybullet', '--output', str(tmp_path / 'x')]) == 2
+    assert "--score: 'pybullet' is not an available engine" in capsys.readouterr().err

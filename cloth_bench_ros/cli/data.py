@@ -90,6 +90,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help='seconds of the quintic part (default: the whole trial)',
     )
     converge.add_argument(
+        '--score',
+        action='append',
+        metavar='ENGINE',
+        help="score this engine's preset (tested grid) against every run (repeatable)",
+    )
+    converge.add_argument(
         '--output', help='directory: one .npz per run (reused) and convergence.json'
         ' (default results/convergence/<reference>_<cloth>_<primitive>)',
     )
@@ -171,6 +177,12 @@ def cmd_converge(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies import reference_convergence as rc
     from cloth_bench_ros.studies.executor import open_client, run_tasks
 
+    available = common.available_engines()
+    for engine in args.score or []:
+        if engine not in available:
+            raise validation.InputError(
+                f'--score: {engine!r} is not an available engine ({", ".join(available)})'
+            )
     study = rc.ConvergenceStudy(
         args.reference,
         args.cloth,
@@ -178,6 +190,7 @@ def cmd_converge(args: argparse.Namespace) -> int:
         axes=tuple(args.axis or rc.AXES),
         levels=args.levels,
         duration=args.duration,
+        scored=tuple(validation.unique(args.score or [], '--score')),
     )
     name = f'{args.reference.replace("-", "_")}_{args.cloth}_{args.primitive}'
     out = check_output_dir(args.output or f'results/convergence/{name}')

@@ -15,6 +15,11 @@ frame, no camera), and each run compared with the one before it on its axis:
 An axis has converged when a refinement changes the trajectory by less than TOLERANCE_M on
 average and the hanging length by less than HANG_TOLERANCE_M.
 
+What a refinement does to the scores: with `scored` engines, each engine's shipped preset runs on
+the tested grid through the same trial (at SCORE_RATE_HZ, so that frames fall on steps) and its
+vertices' one-sided L1 CD to every run's surface is reported, so a reference's numerical error
+can be read in the units of the benchmark's scores.
+
 A finer grid must describe the same cloth: the MuJoCo shell's edge time constant is scaled with
 the spacing (`mesh_consistent_timeconst`), and the grid axis runs at the rate its finest level
 needs for that time constant (at least two internal steps), its first level compared with the
@@ -29,7 +34,7 @@ from pathlib import Path
 import time
 from typing import Any, Callable
 
-from cloth_bench_ros.core.metrics import chamfer_l1
+from cloth_bench_ros.core.metrics import chamfer_l1, RealCloud
 from cloth_bench_ros.data.synth import reference_config, simulate_reference, SynthConfig
 from cloth_bench_ros.engines.mujoco_cloth import mesh_consistent_timeconst
 import numpy as np
@@ -37,6 +42,7 @@ import numpy as np
 TOLERANCE_M = 0.002  # mean trajectory change between successive refinements
 HANG_TOLERANCE_M = 0.005
 AXES = ('iterations', 'rate', 'grid')
+SCORE_RATE_HZ = 300.0  # the engines scored against each run: every frame falls on a step
 _SURFACE_UPSAMPLING = 10  # samples per grid spacing: about 1.7 mm on the 31 x 43 references
 
 
@@ -166,6 +172,34 @@ def hanging_length(frames: np.ndarray) -> float:
     return float(np.ptp(frames[0][:, 2]))
 
 
+def engine_frames(engine: str, base: SynthConfig) -> np.ndarray:
+    """Run an engine's shipped preset on the tested grid through the trial: vertices per frame."""
+    from cloth_bench_ros.core.scene import ClothGrid
+    from cloth_bench_ros.engines.presets import load_preset
+
+    tested = ClothGrid()
+    config = replace(
+        base,
+        engine=engine,
+        grid=(tested.nx, tested.nz),
+        rate_hz=SCORE_RATE_HZ,
+        params=load_preset(engine, base.cloth, base.primitive),
+    )
+    return np.stack([v for _, v in simulate_reference(config)])
+
+
+def engine_scores(
+    engines: dict[str, np.ndarray], run: np.ndarray, grid: tuple[int, int]
+) -> dict[str, float]:
+    """Return each engine's score against one run: its vertices' CD to the run's surface."""
+    per_frame: dict[str, list[float]] = {name: [] for name in engines}
+    for k, vertices in enumerate(run):
+        cloth = RealCloud(surface(vertices, grid))
+        for name, frames in engines.items():
+            per_frame[name].append(float(cloth.nearest_l1(frames[k]).mean()))
+    return {name: float(np.mean(values)) for name, values in per_frame.items()}
+
+
 def _simulate(variant: Variant, out_dir: str) -> dict:
     """Run one variant on a worker and keep its trajectory in out_dir (a rerun reuses it)."""
     path = Path(out_dir) / f'{variant.label}.npz'
@@ -190,6 +224,7 @@ class ConvergenceStudy:
     levels: int = 1
     duration: float | None = None  # s of the quintic part (None: the whole trial)
     overrides: dict[str, Any] = field(default_factory=dict)  # of the base (tests: a coarse grid)
+    scored: tuple[str, ...] = ()  # engines whose presets are scored against every run
     runs: dict[str, dict] = field(default_factory=dict)
 
     def variants(self) -> list[Variant]:
@@ -223,6 +258,9 @@ class ConvergenceStudy:
             for label, run in self.runs.items()
             if 'path' in run
         }
+        engines = {
+            name: engine_frames(name, by_label['shipped'].config) for name in self.scored
+        }
         rows = []
         for variant in by_label.values():
             row: dict[str, Any] = {
@@ -233,6 +271,10 @@ class ConvergenceStudy:
             }
             if variant.label in frames:
                 row['hanging_length_m'] = hanging_length(frames[variant.label])
+                if engines:
+                    row['scores_m'] = engine_scores(
+                        engines, frames[variant.label], variant.config.grid
+                    )
             previous = by_label.get(variant.previous)
             if previous is not None and {variant.label, previous.label} <= set(frames):
                 change = trajectory_change(
@@ -252,18 +294,26 @@ class ConvergenceStudy:
 
 
 def format_rows(rows: list[dict[str, Any]]) -> str:
-    """Return the study's table as text (mm)."""
+    """Return the study's table as text (mm); scored engines' CD in the last columns."""
+    scored = list(next((r['scores_m'] for r in rows if r.get('scores_m')), {}))
     lines = [
-        f'{"run":<14} {"settings":<34} {"s":>7} {"hang mm":>8} {"vs":<14}'
-        f' {"mean mm":>8} {"max mm":>7} {"d hang":>7}  converged'
+        f'{"run":<14} {"settings":<46} {"s":>7} {"hang mm":>8} {"vs":<14}'
+        f' {"mean mm":>8} {"max mm":>7} {"d hang":>7}  {"converged":<9}'
+        + ''.join(f' {"CD " + name:>12}' for name in scored)
     ]
     for r in rows:
         mm = (lambda key: f'{1000 * r[key]:.1f}' if r.get(key) is not None else '-')  # noqa: E731
         seconds = f'{r["seconds"]:.0f}' if r.get('seconds') is not None else '-'
+        converged = 'error' if r.get('error') else str(r.get('converged', ''))
+        scores = r.get('scores_m') or {}
         lines.append(
-            f'{r["run"]:<14} {r["settings"]:<34} {seconds:>7} {mm("hanging_length_m"):>8}'
+            f'{r["run"]:<14} {r["settings"]:<46} {seconds:>7} {mm("hanging_length_m"):>8}'
             f' {r.get("compared_with", ""):<14} {mm("change_mean_m"):>8} {mm("change_max_m"):>7}'
-            f' {mm("hang_change_m"):>7}  {"error" if r.get("error") else r.get("converged", "")}'
+            f' {mm("hang_change_m"):>7}  {converged:<9}'
+            + ''.join(
+                f' {1000 * scores[name]:>12.1f}' if name in scores else f' {"-":>12}'
+                for name in scored
+            )
         )
     return '\n'.join(lines)
 
@@ -277,6 +327,8 @@ def save(rows: list[dict[str, Any]], study: ConvergenceStudy, path: Path) -> Non
         'duration': study.duration,
         'tolerance_m': TOLERANCE_M,
         'hang_tolerance_m': HANG_TOLERANCE_M,
+        'scored': list(study.scored),
+        'score_rate_hz': SCORE_RATE_HZ,
         'rows': rows,
     }
     path.write_text(json.dumps(doc, indent=1) + '\n', encoding='utf-8')
