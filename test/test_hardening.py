@@ -546,7 +546,12 @@ def test_synth_rate_must_put_frames_on_steps(capsys, tmp_path, monkeypatch):
     code, _, err = run_main(capsys, cli.main, ['synth', '--out', str(out), '--rate', '1000'])
     assert_one_line(code, err, '1000 Hz', 'not a multiple of 30 fps')
     assert not out.exists()
-    made = []  # the reference configuration the bag would be made from (minutes at 31 x 43)
-    monkeypatch.setattr(synth, 'write_synthetic_bag', lambda config, *a: made.append(config) or out)
+    made = []  # the configuration the bag would be made from (minutes to simulate at 31 x 43)
+
+    def keep_config(config, *args):
+        made.append(config)
+        return out
+
+    monkeypatch.setattr(synth, 'write_synthetic_bag', keep_config)
     assert cli.main(['synth', '--out', str(out), '--rate', '1800', '--quiet']) == 0
     assert made[0].rate_hz == 1800.0 and made[0].steps_per_frame == 60
