@@ -64,6 +64,37 @@ def test_merged_identifications_keep_each_task_and_its_provenance(identified):
         presets.load_preset('mujoco', 'linen', 'dynamic', identified)
 
 
+def test_a_new_identification_extends_a_merged_set_and_replaces_only_its_entry(identified,
+                                                                              tmp_path):
+    again = _identified_file(tmp_path / 'c', 'mujoco', 'dynamic', {'mass': 0.25})
+    before = (identified / 'mujoco.yaml').read_text()
+    assert presets.merge_identified([again], identified) == [identified / 'mujoco.yaml']
+    assert presets.load_preset('mujoco', 'towel', 'dynamic', identified)['mass'] == 0.25
+    assert presets.load_preset('mujoco', 'towel', 'quasi_static', identified)['mass'] == 0.3
+    doc = presets.read_preset_file(identified / 'mujoco.yaml')
+    assert doc['provenance'].splitlines() == [
+        'towel dynamic: fitted dynamic', 'towel quasi_static: fitted quasi_static']
+    presets.merge_identified([again], identified)  # the same again: the same file
+    presets.merge_identified([_identified_file(tmp_path / 'd', 'mujoco', 'dynamic',
+                                               {'mass': 0.2})], identified)
+    assert (identified / 'mujoco.yaml').read_text() == before
+    (tmp_path / 'plain').mkdir()
+    (tmp_path / 'plain' / 'mujoco.yaml').write_text(
+        (presets.config_dir() / 'presets' / 'mujoco.yaml').read_text())
+    with pytest.raises(EngineError, match='names no entry .*not a merged set'):
+        presets.merge_identified([again], tmp_path / 'plain')  # the shipped presets: refused
+
+
+def test_the_shipped_identified_sets_are_merged_sets():
+    for name in presets.IDENTIFIED_SETS:
+        folder = presets.config_dir() / 'presets' / name
+        for path in sorted(folder.glob('*.yaml')):
+            doc = presets.read_preset_file(path)
+            entries = [f'{c} {p}' for c, tasks in doc['presets'].items() for p in tasks]
+            keys = [line.split(': ')[0] for line in doc['provenance'].splitlines()]
+            assert keys == entries, path
+
+
 def test_sweep_settings_and_stress_cells_carry_the_set_as_overrides(identified):
     chosen = presets.preset_set(str(identified))
     cells = paper_cells(['mujoco'], [100.0], ['towel'], ['dynamic'], [0], presets=chosen,

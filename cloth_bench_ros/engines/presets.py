@@ -195,8 +195,8 @@ def merge_identified(preset_files: list[Path], out_dir: Path) -> list[Path]:
     """
     Merge identification outputs (<output>/presets/<engine>.yaml) into one file per engine.
 
-    Each cloth and task keeps its values; the provenance lists each entry's own. Returns the
-    files written.
+    A file already in out_dir is extended: each cloth and task given replaces its entry and its
+    provenance paragraph, every other entry stays. Returns the files written.
     """
     from cloth_bench_ros.safe_io import atomic_write_text
     import yaml
@@ -204,25 +204,38 @@ def merge_identified(preset_files: list[Path], out_dir: Path) -> list[Path]:
     merged: dict[str, dict] = {}
     for path in preset_files:
         data = read_preset_file(path)
-        doc = merged.setdefault(
-            data['engine'],
-            {
-                'engine': data['engine'],
-                'engine_version': data['engine_version'],
-                'provenance': [],
-                'presets': {},
-            },
-        )
+        doc = merged.get(data['engine'])
+        if doc is None:
+            doc = merged[data['engine']] = _merge_base(out_dir / f'{data["engine"]}.yaml', data)
+        doc['engine_version'] = data['engine_version']
         for cloth, tasks in data['presets'].items():
             for primitive, values in tasks.items():
                 doc['presets'].setdefault(cloth, {})[primitive] = values
-                doc['provenance'].append(f'{cloth} {primitive}: {data["provenance"]}')
+                doc['provenance'][f'{cloth} {primitive}'] = data['provenance']
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for engine, doc in sorted(merged.items()):
-        doc['provenance'] = '\n'.join(doc['provenance'])
+        doc['provenance'] = '\n'.join(f'{k}: {v}' for k, v in doc['provenance'].items())
         target = out_dir / f'{engine}.yaml'
         atomic_write_text(target, yaml.safe_dump(doc, sort_keys=False, width=100))
         read_preset_file(target)  # what was written must load
         written.append(target)
     return written
+
+
+def _merge_base(existing: Path, first: dict) -> dict:
+    """Return the merge's start: an existing merged file's entries, keyed provenance, or empty."""
+    doc = {'engine': first['engine'], 'engine_version': first['engine_version'],
+           'provenance': {}, 'presets': {}}
+    if not existing.is_file():
+        return doc
+    data = read_preset_file(existing)
+    doc['presets'] = copy.deepcopy(data['presets'])
+    entries = {f'{c} {p}' for c, tasks in data['presets'].items() for p in tasks}
+    for paragraph in str(data['provenance']).split('\n'):
+        key, _, text = paragraph.partition(': ')
+        if key not in entries:
+            raise EngineError(f'{existing}: provenance paragraph {paragraph[:40]!r}... names no '
+                              'entry ("<cloth> <task>: ..." expected): not a merged set')
+        doc['provenance'][key] = text
+    return doc
