@@ -64,8 +64,7 @@ def test_merged_identifications_keep_each_task_and_its_provenance(identified):
         presets.load_preset('mujoco', 'linen', 'dynamic', identified)
 
 
-def test_a_new_identification_extends_a_merged_set_and_replaces_only_its_entry(identified,
-                                                                              tmp_path):
+def test_a_new_identification_extends_a_merged_set_and_replaces_its_entry(identified, tmp_path):
     again = _identified_file(tmp_path / 'c', 'mujoco', 'dynamic', {'mass': 0.25})
     before = (identified / 'mujoco.yaml').read_text()
     assert presets.merge_identified([again], identified) == [identified / 'mujoco.yaml']
@@ -75,8 +74,8 @@ def test_a_new_identification_extends_a_merged_set_and_replaces_only_its_entry(i
     assert doc['provenance'].splitlines() == [
         'towel dynamic: fitted dynamic', 'towel quasi_static: fitted quasi_static']
     presets.merge_identified([again], identified)  # the same again: the same file
-    presets.merge_identified([_identified_file(tmp_path / 'd', 'mujoco', 'dynamic',
-                                               {'mass': 0.2})], identified)
+    first = _identified_file(tmp_path / 'd', 'mujoco', 'dynamic', {'mass': 0.2})
+    presets.merge_identified([first], identified)
     assert (identified / 'mujoco.yaml').read_text() == before
     (tmp_path / 'plain').mkdir()
     (tmp_path / 'plain' / 'mujoco.yaml').write_text(
