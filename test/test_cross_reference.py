@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from cloth_bench_ros.data import BagReader, CLOUD_TOPIC, synth
+from cloth_bench_ros.data import BagReader, CLOUD_TOPIC, synth, virtual_camera
 from cloth_bench_ros.report import cross_reference as report_xr
 from cloth_bench_ros.studies import cross_reference as xr
 from cloth_bench_ros.studies import sweep as sw
@@ -17,7 +17,7 @@ from cloth_bench_ros.studies.sweep import Cell
 import numpy as np
 import pytest
 
-SMALL = synth.Camera(width=320, height=180)
+SMALL = virtual_camera.Camera(width=320, height=180)
 
 
 def test_newton_reference_is_another_family_with_the_same_cloths():

@@ -18,7 +18,7 @@ import subprocess
 import sys
 
 from cloth_bench_ros import cli, validation
-from cloth_bench_ros.data import BagReader, synth
+from cloth_bench_ros.data import BagReader, synth, virtual_camera
 from cloth_bench_ros.nodes import evaluator, recorder, simulator, trajectory_publisher
 import numpy as np
 import pytest
@@ -377,7 +377,9 @@ def _tiny_reference() -> synth.SynthConfig:
         grid=(5, 7),
         rate_hz=300.0,
         duration=0.2,
-        sensor=synth.Sensor(camera=synth.Camera(width=64, height=36), max_points=100),
+        sensor=virtual_camera.Sensor(
+            camera=virtual_camera.Camera(width=64, height=36), max_points=100
+        ),
     )
 
 

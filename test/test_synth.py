@@ -13,15 +13,15 @@ from cloth_bench_ros.core import cleaning, scene
 from cloth_bench_ros.core.metrics import chamfer_l1
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import sample_quintic
-from cloth_bench_ros.data import BagReader, CLOUD_TOPIC, synth
+from cloth_bench_ros.data import BagReader, CLOUD_TOPIC, synth, virtual_camera
 from cloth_bench_ros.data.importer import CLOTH_NAMES
 from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.paths import bundled_bag
 import numpy as np
 import pytest
 
-SMALL = synth.Camera(width=320, height=180)  # same optics (hfov 90 deg), 4x coarser pixels
-EXACT = synth.DepthNoise(sigma0=0.0, sigma2=0.0, flying_fraction=0.0, depth_step=0.0)
+SMALL = virtual_camera.Camera(width=320, height=180)  # the same optics, 4x coarser pixels
+EXACT = virtual_camera.DepthNoise(sigma0=0.0, sigma2=0.0, flying_fraction=0.0, depth_step=0.0)
 
 
 def plane(
@@ -29,11 +29,11 @@ def plane(
 ) -> np.ndarray:
     """Two triangles (2, 3, 3) of an x-z rectangle at depth y facing the camera (or away)."""
     (x0, x1), (z0, z1) = x, z
-    tris = synth._quad((x0, y, z0), (x1, y, z0), (x1, y, z1), (x0, y, z1))
+    tris = virtual_camera._quad((x0, y, z0), (x1, y, z0), (x1, y, z1), (x0, y, z1))
     return tris[:, ::-1] if flip else tris
 
 
-def back_project_all(camera: synth.Camera, depth: np.ndarray) -> np.ndarray:
+def back_project_all(camera: virtual_camera.Camera, depth: np.ndarray) -> np.ndarray:
     v, u = np.nonzero(np.isfinite(depth))
     return camera.back_project(u.astype(float), v.astype(float), depth[v, u])
 
@@ -42,7 +42,7 @@ def back_project_all(camera: synth.Camera, depth: np.ndarray) -> np.ndarray:
 
 
 def test_camera_is_the_azure_kinect_of_the_scene():
-    cam = synth.Camera()
+    cam = virtual_camera.Camera()
     assert (cam.width, cam.height) == (1280, 720)
     assert cam.focal == pytest.approx(640.0)  # hfov 90 deg
     # The cloth's rest centre projects near the image centre; depth = distance along -y.
@@ -60,7 +60,7 @@ def test_camera_is_the_azure_kinect_of_the_scene():
 def test_zbuffer_keeps_only_the_visible_surface(flip_front):
     front = plane((0.0, 0.5), (0.5, 1.0), 0.0, flip=flip_front)  # both faces must render
     back = plane((-0.2, 0.7), (0.4, 1.1), -0.3)
-    depth, ids = synth.rasterize(SMALL, np.concatenate([back, front]))
+    depth, ids = virtual_camera.rasterize(SMALL, np.concatenate([back, front]))
     pts = back_project_all(SMALL, depth)
     assert len(pts) > 1000
     in_front = (pts[:, 0] > 0.01) & (pts[:, 0] < 0.49) & (pts[:, 2] > 0.51) & (pts[:, 2] < 0.99)
@@ -78,7 +78,7 @@ def test_zbuffer_keeps_only_the_visible_surface(flip_front):
 
 def test_zbuffer_depth_is_perspective_correct_on_a_slanted_triangle():
     tri = np.array([[[0.0, 0.3, 0.5], [0.5, -0.4, 0.5], [0.25, 0.0, 1.0]]])
-    depth, _ = synth.rasterize(SMALL, tri)
+    depth, _ = virtual_camera.rasterize(SMALL, tri)
     pts = back_project_all(SMALL, depth)
     a, b, c = tri[0]
     normal = np.cross(b - a, c - a)
@@ -90,21 +90,23 @@ def test_zbuffer_depth_is_perspective_correct_on_a_slanted_triangle():
 
 
 def test_depth_noise_is_as_configured():
-    noise = synth.DepthNoise(sigma0=0.001, sigma2=0.0005, flying_fraction=0.0, depth_step=0.0)
-    sensor = synth.Sensor(
+    noise = virtual_camera.DepthNoise(
+        sigma0=0.001, sigma2=0.0005, flying_fraction=0.0, depth_step=0.0
+    )
+    sensor = virtual_camera.Sensor(
         camera=SMALL, noise=noise, sor_std_ratio=50.0, max_points=10**9, resolution=0.0
     )
     rng = np.random.default_rng(1)
-    pts = synth.observe(sensor, plane((-0.3, 0.8), (0.3, 1.2), 0.0), rng)  # facing the camera
+    pts = virtual_camera.observe(sensor, plane((-0.3, 0.8), (0.3, 1.2), 0.0), rng)  # facing it
     expected = 0.001 + 0.0005 * 1.80**2  # 2.62 mm: the Azure Kinect's 1.5-3 mm at 1.8 m
     assert len(pts) > 5000
     residual = pts[:, 1]  # depth error along the ray = along -y for this plane
     assert abs(residual.mean()) < 1e-4
     assert residual.std() == pytest.approx(expected, rel=0.05)
     # Depth comes in whole millimetres by default, as the Kinect's uint16 depth image.
-    d, _ = synth.rasterize(SMALL, plane((0.0, 0.5), (0.5, 1.0), 0.0))
+    d, _ = virtual_camera.rasterize(SMALL, plane((0.0, 0.5), (0.5, 1.0), 0.0))
     cloth = np.isfinite(d)
-    measured = synth.noisy_depth(d, cloth, synth.DepthNoise(), rng)[cloth]
+    measured = virtual_camera.noisy_depth(d, cloth, virtual_camera.DepthNoise(), rng)[cloth]
     assert np.allclose(measured * 1000, np.round(measured * 1000), atol=1e-6)
 
 
@@ -124,15 +126,15 @@ def test_outlier_removal_drops_injected_outliers():
 
 
 def test_flying_pixels_appear_at_the_silhouette_and_are_mostly_cleaned():
-    noise = synth.DepthNoise(flying_fraction=1.0)
+    noise = virtual_camera.DepthNoise(flying_fraction=1.0)
     cloth = plane((0.0, 0.5), (0.3, 1.0), 0.0)
-    background = synth.rasterize(SMALL, synth.background_triangles())
+    background = virtual_camera.rasterize(SMALL, virtual_camera.background_triangles())
 
     def far(sor_std_ratio: float) -> int:
-        sensor = synth.Sensor(
+        sensor = virtual_camera.Sensor(
             camera=SMALL, noise=noise, sor_std_ratio=sor_std_ratio, max_points=10**9
         )
-        pts = synth.observe(sensor, cloth, np.random.default_rng(3), background)
+        pts = virtual_camera.observe(sensor, cloth, np.random.default_rng(3), background)
         return int((np.abs(pts[:, 1]) > 0.03).sum())
 
     raw, cleaned = far(1e6), far(2.0)
@@ -141,13 +143,13 @@ def test_flying_pixels_appear_at_the_silhouette_and_are_mostly_cleaned():
 
 
 def test_cloud_is_cropped_above_the_table():
-    sensor = synth.Sensor(camera=SMALL, max_points=10**9)
+    sensor = virtual_camera.Sensor(camera=SMALL, max_points=10**9)
     cloth = plane((0.0, 0.5), (0.0, 1.0), 0.0)  # reaches below the table top
-    pts = synth.observe(
+    pts = virtual_camera.observe(
         sensor,
         cloth,
         np.random.default_rng(4),
-        synth.rasterize(SMALL, synth.background_triangles()),
+        virtual_camera.rasterize(SMALL, virtual_camera.background_triangles()),
     )
     assert pts[:, 2].min() > scene.TABLE_TOP_Z
     assert pts[:, 2].min() < scene.TABLE_TOP_Z + 0.01
