@@ -12,7 +12,7 @@ from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines import presets
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.studies.cells import paper_cells, settings_cells
-from cloth_bench_ros.studies.stress import select_cases
+from cloth_bench_ros.studies.stress_cases import select_cases
 import pytest
 import yaml
 

@@ -18,7 +18,8 @@ from cloth_bench_ros.cli import main
 from cloth_bench_ros.report import selections
 from cloth_bench_ros.studies import aggregate, recommend
 from cloth_bench_ros.studies import sweep as sw
-from cloth_bench_ros.studies.stress import default_cases, run_case
+from cloth_bench_ros.studies.stress import run_case
+from cloth_bench_ros.studies.stress_cases import default_cases
 import matplotlib.image as mpimg
 import numpy as np
 import pytest

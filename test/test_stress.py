@@ -10,14 +10,8 @@ from cloth_bench_ros.core import scene
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.engines.presets import load_preset
-from cloth_bench_ros.studies.stress import (
-    case_targets,
-    default_cases,
-    load_stress,
-    run_case,
-    StressCase,
-    verdict,
-)
+from cloth_bench_ros.studies.stress import load_stress, run_case, verdict
+from cloth_bench_ros.studies.stress_cases import case_targets, default_cases, StressCase
 import numpy as np
 import pytest
 

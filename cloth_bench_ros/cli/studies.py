@@ -327,7 +327,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_stress(args: argparse.Namespace) -> int:
     """Run the stress suite and print which cases diverged."""
-    from cloth_bench_ros.studies.stress import run_suite, select_cases, stress_table, verdict
+    from cloth_bench_ros.studies.stress import run_suite, stress_table, verdict
+    from cloth_bench_ros.studies.stress_cases import select_cases
 
     available = common.available_engines()
     engines = validation.unique(
