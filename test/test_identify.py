@@ -119,6 +119,25 @@ def test_identification_recovers_known_parameters_with_both_samplers_and_resumes
     )
 
 
+def test_validation_runs_again_when_more_trials_fitted_other_values(target, tmp_path):
+    """A resumed identification validates the values it has now, never the last run's."""
+    from cloth_bench_ros.studies.executor import open_client
+    from cloth_bench_ros.studies.identify_output import validate
+    from cloth_bench_ros.studies.results import load_rows
+
+    spec = IdentifySpec(**{**_spec(target, tmp_path, 'tpe', 1, ['damping'], 1).__dict__,
+                           'validate_seeds': 1})
+    with open_client(None, 1, tmp_path / 'workers.log') as client:
+        validate(client, spec, {'damping': 3.0}, progress=False)
+        validate(client, spec, {'damping': 3.0}, progress=False)  # nothing new: resumed
+        assert sorted(str(r['params'].get('damping')) for r in load_rows(tmp_path)) == [
+            '3.0', 'None']
+        (entry,) = validate(client, spec, {'damping': 0.5}, progress=False)
+    rows = load_rows(tmp_path)
+    assert sorted(str(r['params'].get('damping')) for r in rows) == ['0.5', 'None']
+    assert entry['identified']['ok'] == 1 and entry['preset']['ok'] == 1
+
+
 def test_a_diverging_trial_is_a_failed_trial_with_its_reason_and_step(target):
     # PyBullet with one 0.1 s step per target explodes during the fling.
     r = evaluate(

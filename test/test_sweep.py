@@ -6,6 +6,7 @@ import json
 import math
 import os
 from pathlib import Path
+import shutil
 
 from bag_fixtures import write_hanging_cloth_bag
 from cloth_bench_ros.cli import main
@@ -164,6 +165,37 @@ def test_sweep_appends_rows_and_resumes_without_recomputing(bag_dir, tmp_path):
     grown = sw.run_sweep(more, tmp_path, workers=2, progress=False)
     assert (grown.ran, grown.skipped) == (1, 2)
     assert sorted(r['seed'] for r in sw.load_rows(tmp_path)) == [0, 1, 2]
+
+
+def test_a_row_made_with_other_parameters_or_another_bag_is_never_resumed(tmp_path, capsys):
+    """A preset set or a bag changed since: one line, nothing run, nothing appended."""
+    from dataclasses import replace
+
+    bags, out = tmp_path / 'bags', tmp_path / 'out'
+    write_hanging_cloth_bag(bags / 'towel_dynamic', frames=40, change_of_phase_frame=30)
+    cells = sw.paper_cells(['mujoco'], [100], ['towel'], ['dynamic'], [0], bags, GRID)
+    assert sw.run_sweep(cells, out, workers=1, progress=False).ran == 1
+    (row,) = sw.load_rows(out)
+    assert row['bag_fingerprint'] and row['params'] == {}
+    assert sw.run_sweep(cells, out, workers=1, progress=False).skipped == 1
+
+    other_values = [replace(c, overrides=(('damping', 0.5),)) for c in cells]  # same key
+    with pytest.raises(sw.ResultsError, match=r'1 cells .*other parameters.*another --output'):
+        sw.run_sweep(other_values, out, workers=1, progress=False)
+    shutil.rmtree(bags / 'towel_dynamic')  # the same bag made again, with other noise
+    write_hanging_cloth_bag(bags / 'towel_dynamic', frames=40, change_of_phase_frame=30, seed=1)
+    with pytest.raises(sw.ResultsError, match=r'another bag at .*towel_dynamic'):
+        sw.run_sweep(cells, out, workers=1, progress=False)
+    assert main(['sweep', '--bag-dir', str(bags), '--engine', 'mujoco', '--rate', '100',
+                 '--cloth', 'towel', '--primitive', 'dynamic', '--seeds', '1', '--grid', '6x8',
+                 '--output', str(out)]) == 2
+    assert 'another bag' in capsys.readouterr().err
+    assert len(sw.load_rows(out)) == 1
+
+    # Rows written before rows had a fingerprint resume on their parameters alone.
+    (out / sw.RESULTS_FILE).write_text(
+        json.dumps({k: v for k, v in row.items() if k != 'bag_fingerprint'}) + '\n')
+    assert sw.run_sweep(cells, out, workers=1, progress=False).skipped == 1
 
 
 def test_a_diverged_cell_is_a_result_and_a_failing_cell_an_error_row(bag_dir, tmp_path):

@@ -62,11 +62,17 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
 def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]:
     """Run the validation cells (resumable): per bag, preset against identified parameters."""
     from cloth_bench_ros.studies.executor import run_tasks
-    from cloth_bench_ros.studies.sweep import cells_to_run, error_row, run_cell
+    from cloth_bench_ros.studies.results import rewrite_rows
+    from cloth_bench_ros.studies.sweep import cells_to_run, error_row, run_cell, stale_cells
 
     results = spec.output / RESULTS_FILE
     cells = validation_cells(spec, fitted)
-    todo = cells_to_run(cells, load_rows(results))
+    rows = load_rows(results)
+    stale = stale_cells(cells, rows)
+    if stale:  # more trials fitted other values (or the bag changed): validate those again
+        rows = [r for r in rows if _key(r) not in stale]
+        rewrite_rows(results, rows)
+    todo = cells_to_run(cells, rows)
     if todo:
         run_tasks(
             client,

@@ -18,7 +18,7 @@ import math
 import os
 from pathlib import Path
 import socket
-from typing import Any, Mapping, TypedDict
+from typing import Any, Mapping, Sequence, TypedDict
 
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.safe_io import confined_path, read_text_bounded, safe_name, UnsafeInputError
@@ -74,6 +74,7 @@ class ResultRow(TypedDict, total=False):
     seed: int
     pacing: str
     bag: str
+    bag_fingerprint: str | None  # data.bag_layout.fingerprint: resumes only on the same bag
     grid: str | None
     params: dict
     status: str  # ok | diverged | error
@@ -191,10 +192,22 @@ def load_rows(path: Path) -> list[dict[str, Any]]:
     return rows
 
 
+def row_line(row: Mapping[str, Any]) -> str:
+    """Return a row as its line of results.jsonl."""
+    return json.dumps(json_safe(dict(row)), sort_keys=True) + '\n'
+
+
+def rewrite_rows(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
+    """Replace a results file by these rows, atomically (the rest were made with other inputs)."""
+    from cloth_bench_ros.safe_io import atomic_write_text
+
+    atomic_write_text(Path(path), ''.join(row_line(r) for r in rows))
+
+
 def append_row(path: Path, row: Mapping[str, Any]) -> None:
     """Append one JSON line, flushed; after a torn line, on a line of its own."""
     path = Path(path)
-    data = (json.dumps(json_safe(dict(row)), sort_keys=True) + '\n').encode()
+    data = row_line(row).encode()
     with path.open('ab') as f:
         if f.tell() > 0:
             with path.open('rb') as r:
@@ -241,3 +254,25 @@ class ResultsLock:
             os.ftruncate(self._fd, 0)
             os.close(self._fd)  # closing the descriptor releases the lock
             self._fd = None
+
+
+def stale_rows(cells: list, rows: list[dict],
+               fingerprints: Mapping[str, str | None]) -> dict[tuple, str]:
+    """
+    Return the key of each row of these cells that other inputs made, with a phrase saying why.
+
+    A row resumes a cell only if it ran the same parameters on the same bag (its `params`, and its
+    `bag_fingerprint` where the row has one); `fingerprints` maps each cell's bag to its own.
+    """
+    by_key = {row_key(r): r for r in rows}
+    stale = {}
+    for cell in cells:
+        row = by_key.get(cell.key())
+        if row is None:
+            continue
+        params = json.loads(json.dumps(json_safe(cell.params)))
+        if 'params' in row and row['params'] != params:
+            stale[cell.key()] = f'{cell.ident()} (other parameters)'
+        elif row.get('bag_fingerprint') not in (None, fingerprints.get(cell.bag)):
+            stale[cell.key()] = f'{cell.ident()} (another bag at {cell.bag})'
+    return stale

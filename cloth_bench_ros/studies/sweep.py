@@ -55,8 +55,10 @@ from cloth_bench_ros.studies.results import (  # noqa: F401
     load_rows,
     ResultRow,
     RESULTS_FILE,
+    ResultsError,
     ResultsLock,
     row_key,
+    stale_rows,
 )
 from cloth_bench_ros.studies.run_config import RunConfig
 
@@ -118,12 +120,29 @@ def _cell_fields(cell: Cell) -> dict:
         'bag': cell.bag,
         'grid': f'{cell.grid[0]}x{cell.grid[1]}' if cell.grid else None,
         'params': cell.params,
+        'bag_fingerprint': _fingerprint(cell.bag),
     }
     if cell.reference:  # a cross-reference cell names the synthetic reference it is scored against
         fields['reference'] = cell.reference
     if cell.preset_set != 'default':
         fields['presets'] = cell.preset_set
     return fields
+
+
+def stale_cells(cells: Sequence[Cell], existing: Sequence[dict]) -> dict[tuple, str]:
+    """Return the keys of the rows of these cells made with other parameters or another bag."""
+    fingerprints = {bag: _fingerprint(bag) for bag in {c.bag for c in cells}}
+    return stale_rows(list(cells), list(existing), fingerprints)
+
+
+def _fingerprint(bag: str) -> str | None:
+    """Return a bag's fingerprint, or None where it cannot be read (the run reports why)."""
+    from cloth_bench_ros.data.bag_layout import fingerprint
+
+    try:
+        return fingerprint(Path(bag))
+    except OSError:
+        return None
 
 
 def _substeps(cell: Cell) -> int | None:
@@ -228,7 +247,18 @@ class SweepOutcome:
 def cells_to_run(
     cells: Sequence[Cell], existing: Sequence[dict], retry_errors: bool = False
 ) -> list[Cell]:
-    """Return the cells not yet in `existing`, seed by seed, the longest first within a seed."""
+    """
+    Return the cells not yet in `existing`, seed by seed, the longest first within a seed.
+
+    ResultsError (one line) if a row of one of these cells was made with other inputs.
+    """
+    stale = list(stale_cells(cells, existing).values())
+    if stale:
+        raise ResultsError(
+            f'{len(stale)} cells of this study are already in the results with other inputs, e.g.'
+            f' {stale[0]}: the preset set or the bag changed since; give another --output'
+            ' (or remove those rows) to run them again'
+        )
     done = {row_key(r) for r in existing if not retry_errors or r.get('status') != 'error'}
     todo: dict[tuple, Cell] = {}
     for cell in cells:
