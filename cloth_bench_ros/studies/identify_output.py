@@ -62,8 +62,8 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
 def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]:
     """Run the validation cells (resumable): per bag, preset against identified parameters."""
     from cloth_bench_ros.studies.executor import run_tasks
-    from cloth_bench_ros.studies.results import rewrite_rows
-    from cloth_bench_ros.studies.sweep import cells_to_run, error_row, run_cell, stale_cells
+    from cloth_bench_ros.studies.results import rewrite_rows, stale_cells
+    from cloth_bench_ros.studies.sweep import cells_to_run, error_row, run_cell
 
     results = spec.output / RESULTS_FILE
     cells = validation_cells(spec, fitted)

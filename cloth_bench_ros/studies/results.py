@@ -276,3 +276,19 @@ def stale_rows(cells: list, rows: list[dict],
         elif row.get('bag_fingerprint') not in (None, fingerprints.get(cell.bag)):
             stale[cell.key()] = f'{cell.ident()} (another bag at {cell.bag})'
     return stale
+
+
+def stale_cells(cells: Sequence[Any], existing: Sequence[dict]) -> dict[tuple, str]:
+    """Return the keys of the rows of these cells made with other parameters or another bag."""
+    fingerprints = {bag: bag_fingerprint(bag) for bag in {c.bag for c in cells}}
+    return stale_rows(list(cells), list(existing), fingerprints)
+
+
+def bag_fingerprint(bag: str) -> str | None:
+    """Return a bag's fingerprint, or None where it cannot be read (the run reports why)."""
+    from cloth_bench_ros.data.bag_layout import fingerprint
+
+    try:
+        return fingerprint(Path(bag))
+    except OSError:
+        return None

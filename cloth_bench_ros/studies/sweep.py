@@ -51,6 +51,7 @@ from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
 )
 from cloth_bench_ros.studies.results import (  # noqa: F401
     append_row,
+    bag_fingerprint,
     json_safe,
     load_rows,
     ResultRow,
@@ -58,7 +59,7 @@ from cloth_bench_ros.studies.results import (  # noqa: F401
     ResultsError,
     ResultsLock,
     row_key,
-    stale_rows,
+    stale_cells,
 )
 from cloth_bench_ros.studies.run_config import RunConfig
 
@@ -120,29 +121,13 @@ def _cell_fields(cell: Cell) -> dict:
         'bag': cell.bag,
         'grid': f'{cell.grid[0]}x{cell.grid[1]}' if cell.grid else None,
         'params': cell.params,
-        'bag_fingerprint': _fingerprint(cell.bag),
+        'bag_fingerprint': bag_fingerprint(cell.bag),
     }
     if cell.reference:  # a cross-reference cell names the synthetic reference it is scored against
         fields['reference'] = cell.reference
     if cell.preset_set != 'default':
         fields['presets'] = cell.preset_set
     return fields
-
-
-def stale_cells(cells: Sequence[Cell], existing: Sequence[dict]) -> dict[tuple, str]:
-    """Return the keys of the rows of these cells made with other parameters or another bag."""
-    fingerprints = {bag: _fingerprint(bag) for bag in {c.bag for c in cells}}
-    return stale_rows(list(cells), list(existing), fingerprints)
-
-
-def _fingerprint(bag: str) -> str | None:
-    """Return a bag's fingerprint, or None where it cannot be read (the run reports why)."""
-    from cloth_bench_ros.data.bag_layout import fingerprint
-
-    try:
-        return fingerprint(Path(bag))
-    except OSError:
-        return None
 
 
 def _substeps(cell: Cell) -> int | None:
