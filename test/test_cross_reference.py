@@ -28,7 +28,7 @@ def test_newton_reference_is_another_family_with_the_same_cloths():
             assert (mujoco.engine, newton.engine) == ('mujoco', 'newton')
             assert newton.params['model'] == 'vbd' and newton.params['self_collision']
             assert newton.grid == mujoco.grid and newton.frame_count == mujoco.frame_count
-            assert newton.steps_per_frame == 10 and newton.provenance
+            assert newton.steps_per_frame == 80 and newton.provenance  # 2400 Hz
             for key in ('mass', 'friction'):
                 assert newton.params[key] == mujoco.params[key]
     with pytest.raises(synth.SynthError, match="unknown synthetic reference 'bullet'"):

@@ -290,7 +290,7 @@ def test_bundled_newton_reference_bags_for_the_towel():
         trial = reader.trial
         assert (trial.cloth, trial.primitive) == ('towel', primitive)
         assert trial.source.startswith(
-            'synthetic: reference newton vbd cloth 31x43, 300 Hz, self-collision on'
+            'synthetic: reference newton vbd cloth 31x43, 2400 Hz, self-collision on'
         )
     bags = bundled_bag('towel', 'dynamic').parent
     assert (
