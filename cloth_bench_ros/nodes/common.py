@@ -204,4 +204,11 @@ def run_node(factory: Callable[[], object], args: list[str] | None = None) -> in
     In the embedded runtime it talks DDS unless CLOTH_BENCH_TRANSPORT=intra, so that console
     scripts in separate processes make one graph, as under `ros2 run`.
     """
-    return run_nodes([factory], args, transport_choice('dds') if EMBEDDED else None)
+    status = run_nodes([factory], args, transport_choice('dds') if EMBEDDED else None)
+    if args is None and threading.current_thread() is threading.main_thread():
+        # The process's own node has ended. Python puts its stop signals back to the default
+        # while it finalises, so a launcher's SIGINT arriving then would kill the process with
+        # status 130 after a clean run; there is nothing left to stop.
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
+    return status
