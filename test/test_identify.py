@@ -16,6 +16,7 @@ from cloth_bench_ros.studies.identify import budget_reached, identify, IdentifyS
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from identify_target import write_engine_target_bag
 import pytest
+import yaml
 
 GRID = (5, 6)
 TRUTH = {'damping': 3.0, 'young': 1.0e5}  # the preset has 0.939 and 32955: about 3x off each
@@ -102,6 +103,8 @@ def test_identification_recovers_known_parameters_with_both_samplers_and_resumes
     )
     text = outcome.preset_file.read_text()
     assert 'provenance:' in text and 'cd' in text.lower() and 'trials' in text
+    provenance = yaml.safe_load(text)['provenance']
+    assert '(towel, dynamic; test: mujoco with ' in provenance  # what made the bag
     # Resume: more trials run only the missing ones, from the journal.
     before = len((tmp_path / 'trials.jsonl').read_text().splitlines())
     identify(

@@ -113,6 +113,19 @@ def _key(row: dict) -> tuple:
     return row_key(row)
 
 
+def bag_source(bag: Any, limit: int = 120) -> str:
+    """Return the head of a bag's `source` (what made it: a reference and its rate), or ''."""
+    from cloth_bench_ros.data import BagReader
+
+    try:
+        trial = BagReader(Path(bag)).trial
+    except Exception:  # a bag that cannot say: the provenance names its path only
+        return ''
+    source = (trial.source if trial is not None else '') or ''
+    head = source.split(' (')[0].split(';')[0].strip()
+    return head if len(head) <= limit else head[: limit - 3] + '...'
+
+
 def provenance_text(spec: Any, summary: dict, version: str) -> str:
     """Return the preset file's provenance: what was fitted against what, how, when and where."""
     params = ', '.join(f'{k} = {v:.6g}' for k, v in summary['params'].items())
@@ -125,9 +138,10 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
         for v in summary.get('validation', [])
     )
     held_out = f'Held-out seeds ({spec.objective.upper()}): {held_out}. ' if held_out else ''
+    made_by = bag_source(spec.bag)
     return (
         f'Identified by cloth-bench identify against bag {spec.bag} ({spec.cloth},'
-        f' {spec.primitive}): '
+        f' {spec.primitive}{"; " + made_by if made_by else ""}): '
         f'minimised {spec.objective.upper()} of the task window to {summary["value"]:.6g} m '
         f'(the preset: {summary["preset_value"]:.6g} m) with {summary["best_sampler"]} '
         f'(trials: {trials}; seed {spec.seed}, '
