@@ -116,10 +116,11 @@ def _key(row: dict) -> tuple:
 def bag_source(bag: Any, limit: int = 120) -> str:
     """Return the head of a bag's `source` (what made it: a reference and its rate), or ''."""
     from cloth_bench_ros.data import BagReader
+    from cloth_bench_ros.errors import ClothBenchError
 
     try:
         trial = BagReader(Path(bag)).trial
-    except Exception:  # a bag that cannot say: the provenance names its path only
+    except (ClothBenchError, OSError):  # a bag that cannot say: the provenance names its path
         return ''
     source = (trial.source if trial is not None else '') or ''
     head = source.split(' (')[0].split(';')[0].strip()

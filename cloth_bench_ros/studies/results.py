@@ -256,32 +256,28 @@ class ResultsLock:
             self._fd = None
 
 
-def stale_rows(cells: list, rows: list[dict],
-               fingerprints: Mapping[str, str | None]) -> dict[tuple, str]:
+def stale_cells(cells: Sequence[Any], existing: Sequence[dict]) -> dict[tuple, str]:
     """
     Return the key of each row of these cells that other inputs made, with a phrase saying why.
 
     A row resumes a cell only if it ran the same parameters on the same bag (its `params`, and its
-    `bag_fingerprint` where the row has one); `fingerprints` maps each cell's bag to its own.
+    `bag_fingerprint` where the row has one).
     """
-    by_key = {row_key(r): r for r in rows}
+    by_key = {row_key(r): r for r in existing}
+    fingerprints: dict[str, str | None] = {}
     stale = {}
     for cell in cells:
         row = by_key.get(cell.key())
         if row is None:
             continue
         params = json.loads(json.dumps(json_safe(cell.params)))
+        if cell.bag not in fingerprints:
+            fingerprints[cell.bag] = bag_fingerprint(cell.bag)
         if 'params' in row and row['params'] != params:
             stale[cell.key()] = f'{cell.ident()} (other parameters)'
-        elif row.get('bag_fingerprint') not in (None, fingerprints.get(cell.bag)):
+        elif row.get('bag_fingerprint') not in (None, fingerprints[cell.bag]):
             stale[cell.key()] = f'{cell.ident()} (another bag at {cell.bag})'
     return stale
-
-
-def stale_cells(cells: Sequence[Any], existing: Sequence[dict]) -> dict[tuple, str]:
-    """Return the keys of the rows of these cells made with other parameters or another bag."""
-    fingerprints = {bag: bag_fingerprint(bag) for bag in {c.bag for c in cells}}
-    return stale_rows(list(cells), list(existing), fingerprints)
 
 
 def bag_fingerprint(bag: str) -> str | None:
