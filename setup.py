@@ -12,6 +12,7 @@ INSTALL_REQUIRES = [
     'numpy>=1.24',
     'scipy>=1.10',
     'numba>=0.60',
+    'POT>=0.9',
     'PyYAML>=6.0',
     'mujoco>=3.3',
     'pybullet>=3.2.6',
@@ -29,6 +30,7 @@ EXTRAS_REQUIRE = {
     'newton': ['warp-lang>=1.17', 'newton>=1.8'],  # the third engine (Warp on the CPU)
     'test': [
         'pytest>=7.0',
+        'trimesh>=4.0',
         'mcap-ros2-support>=0.5',
         'colcon-common-extensions>=0.3',
         'ros-jazzy-ament-flake8==0.17.3',

@@ -58,6 +58,7 @@ PIP_ONLY = {
     'distributed',
     'newton',
     'warp',
+    'ot',  # POT, the optimal-transport distance
 }
 OPTIONAL_IMPORTS = {
     'torch'

@@ -5,6 +5,11 @@ Real frames and simulated states arrive in any interleaving, each in time order.
 time t is scored against the simulated state of the same time: the state stamped t when there is
 one, otherwise the linear interpolation of the two states that bracket t (at 100 Hz and 30 fps
 only every third real frame falls on a simulator step).
+
+Given the mesh's faces, every scored frame also gets the surface metrics (core/surface_metrics.py)
+and, for the dynamic task, the contact-onset error: the same rule (core/phase.py `in_contact`)
+applied to the real points and to the simulated surface's area samples at every scored real
+frame. Without faces (identification trials) only the paper's CD/HD are computed.
 """
 
 from __future__ import annotations
@@ -13,7 +18,17 @@ from collections import deque
 from dataclasses import dataclass, field
 import math
 
+from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.core.metrics import latency_stats, RealCloud, StabilityAccumulator
+from cloth_bench_ros.core.phase import CONTACT_MARGIN, first_contact, in_contact
+from cloth_bench_ros.core.scene import TABLE_TOP_Z
+from cloth_bench_ros.core.surface_metrics import (
+    NAN_SCORES,
+    settings as surface_settings,
+    SURFACE_FIELDS,
+    surface_samples,
+    surface_scores,
+)
 from cloth_bench_ros.core.trajectory import Primitive
 import numpy as np
 
@@ -29,6 +44,19 @@ class FrameScore:
     hd: float
     in_window: bool  # counts toward CD_d/HD_d (dynamic: before the change of phase) or CD_q/HD_q
     diverged: bool
+    # the surface metrics (NaN when not computed: no faces given, or a diverged state)
+    cd_reverse: float = math.nan
+    hd_reverse: float = math.nan
+    cd_surface: float = math.nan
+    hd_surface: float = math.nan
+    cd_two_sided: float = math.nan
+    hd_two_sided: float = math.nan
+    precision: float = math.nan
+    recall: float = math.nan
+    fscore: float = math.nan
+    emd: float = math.nan
+    real_contact: bool | None = None  # dynamic task: the real cloth touches the table
+    sim_contact: bool | None = None  # ... and the simulated one, by the same rule
 
 
 @dataclass
@@ -43,6 +71,7 @@ class _EngineState:
     diverged_time: float | None = None
     diverged_reason: str = ''
     skipped_targets: int = 0  # targets the simulator never stepped (a newer one was waiting)
+    contact: list = field(default_factory=list)  # (t, touching) at every scored real frame
 
 
 class OnlineEvaluator:
@@ -56,6 +85,7 @@ class OnlineEvaluator:
         change_of_phase_frame: int | None,
         fps: float = 30.0,
         keep_pairs: bool = False,
+        faces: np.ndarray | None = None,
     ) -> None:
         self.primitive = Primitive(primitive)
         self.quintic_start_ns = int(quintic_start_ns)
@@ -76,6 +106,10 @@ class OnlineEvaluator:
             keep_pairs  # keep (score, real points, vertices) for the comparison outputs
         )
         self.pairs: list[tuple[FrameScore, np.ndarray, np.ndarray]] = []
+        # the mesh's triangles: the surface metrics and contact onset are computed with them
+        self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
+        self.contact_rule = self.faces is not None and self.primitive is Primitive.DYNAMIC
+        self.real_contact: list[tuple[float, bool]] = []
 
     # inputs
     def add_state(self, engine: str, stamp_ns: int, vertices: np.ndarray) -> None:
@@ -164,6 +198,7 @@ class OnlineEvaluator:
         else:
             in_window = True
         paired = False
+        real_touch = in_contact(cloud.points) if self.contact_rule else None
         for name, e in self.engines.items():
             vertices = self._state_at(e, stamp)
             if vertices is None:
@@ -171,16 +206,30 @@ class OnlineEvaluator:
                 continue
             paired = True
             diverged = e.diverged_time is not None and t >= e.diverged_time - 1e-9
+            surface, sim_touch = NAN_SCORES, None
             if diverged or not np.isfinite(vertices).all():
                 cd = hd = math.nan
                 diverged = True
             else:
                 cd, hd = cloud.chamfer_hausdorff(vertices)
-            self.scores.append(FrameScore(name, frame, t, cd, hd, in_window, diverged))
+                if self.faces is not None and len(vertices) > int(self.faces.max()):
+                    samples = surface_samples(vertices, self.faces)
+                    surface = surface_scores(cloud, vertices, self.faces, samples=samples)
+                    sim_touch = in_contact(samples) if self.contact_rule else None
+            if real_touch is not None:
+                e.contact.append((t, bool(sim_touch)))
+            self.scores.append(
+                FrameScore(
+                    name, frame, t, cd, hd, in_window, diverged, **surface.as_dict(),
+                    real_contact=real_touch, sim_contact=sim_touch,
+                )
+            )
             if self.keep_pairs:
                 self.pairs.append((self.scores[-1], cloud.points, np.array(vertices)))
         if paired:
             self.scored_frames += 1
+            if real_touch is not None:
+                self.real_contact.append((t, real_touch))
         else:
             self.unpaired_real_frames += 1
 
@@ -230,6 +279,17 @@ class OnlineEvaluator:
                 'diverged_at_time': e.diverged_time,
                 'diverged_reason': e.diverged_reason,
             }
+            if self.faces is not None:
+                for f in SURFACE_FIELDS:
+                    values = [getattr(s, f) for s in window]
+                    out[name][METRICS[f].summary_key(self.primitive.value)] = (
+                        math.nan if diverged_in_window or not values else float(np.mean(values))
+                    )
+                out[name]['surface_metrics'] = surface_settings()
+            if self.contact_rule:
+                onset = contact_onset(self.real_contact, e.contact)
+                out[name]['contact_onset'] = onset
+                out[name]['contact_onset_error_s'] = onset['error_s']
         return out
 
     def real_summary(self) -> dict[str, int]:
@@ -242,6 +302,40 @@ class OnlineEvaluator:
             'unpaired_real_frames': self.unpaired_real_frames,
             'irregular_intervals': self.irregular_intervals,
         }
+
+
+CONTACT_RULE = (
+    f'in contact: at least max(8, 0.4 %) of the points within {CONTACT_MARGIN * 100:g} cm above'
+    f' the table top (z {TABLE_TOP_Z:g} m); real: the frame\'s points; simulated: the surface\'s'
+    ' area samples; checked at every scored real frame (30 fps), the first frame of the sequence'
+    ' in contact gives no onset'
+)
+
+
+def contact_onset(real: list[tuple[float, bool]], sim: list[tuple[float, bool]]) -> dict:
+    """
+    Return the contact onsets (s) of the real and simulated cloth and the error sim - real.
+
+    Each is the first frame in contact by `core.phase.first_contact`; when either has none the
+    error is None and `reason` says which.
+    """
+    found = {}
+    for side, flags in (('real', real), ('sim', sim)):
+        search = first_contact(touching for _, touching in flags)
+        found[side] = (flags[search.index][0] if search.index is not None else None, search)
+    (real_s, real_search), (sim_s, sim_search) = found['real'], found['sim']
+    reasons = [
+        f'{side}: {search.reason}'
+        for side, (at, search) in found.items()
+        if at is None
+    ]
+    return {
+        'real_s': real_s,
+        'sim_s': sim_s,
+        'error_s': sim_s - real_s if real_s is not None and sim_s is not None else None,
+        'reason': '; '.join(reasons) if reasons else 'both touch',
+        'rule': CONTACT_RULE,
+    }
 
 
 FRAME_FATES = (

@@ -13,7 +13,8 @@ from cloth_bench_ros.core.evaluation import accounting_line, OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.core.run_summary import run_summary
-from cloth_bench_ros.core.scene import REAL_FPS, SETTLE_DURATION
+from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
+from cloth_bench_ros.core.surface_distance import grid_faces
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
 from cloth_bench_ros.data.trial import trial_from_message
 from cloth_bench_ros.nodes.common import (
@@ -59,6 +60,8 @@ class Evaluator(Node):
         self.declare_parameter('comparison_figures', False)
         cloth = self.declare_parameter('cloth', 'towel').value
         self.declare_parameter('seed', 0)
+        self.declare_parameter('grid_nx', 0)  # the simulators' grid (0: the default), whose
+        self.declare_parameter('grid_nz', 0)  # triangles the surface metrics are computed on
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,
@@ -69,8 +72,12 @@ class Evaluator(Node):
                 'engines': validation.unique,
                 'comparison_figures': validation.boolean,
                 'change_of_phase_frame': lambda v, n: validation.frame_index(v, n, unset=-1),
+                'grid_nx': lambda v, n: validation.integer(v, n, 0, validation.MAX_GRID_SIDE),
+                'grid_nz': lambda v, n: validation.integer(v, n, 0, validation.MAX_GRID_SIDE),
             },
         )
+        nx, nz = p['grid_nx'], p['grid_nz']
+        grid = ClothGrid(nx, nz) if nx and nz else ClothGrid()
         self.engines, rate_hz, offset, cut = (
             p['engines'],
             p['rate_hz'],
@@ -99,6 +106,7 @@ class Evaluator(Node):
             cut,
             REAL_FPS,
             keep_pairs=bool(self.comparison_bag or self.comparison_figures),
+            faces=grid_faces(grid.nx, grid.nz),
         )
         self.replay: dict = {}  # the recorder's frame accounting, from the trial message
         self.expected_real_frames: int | None = None  # as announced by the recorder

@@ -22,6 +22,7 @@ from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
+from cloth_bench_ros.core.surface_distance import grid_faces
 from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, parse_primitive
 from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.data.alignment import reference_motion
@@ -133,7 +134,10 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
     plan, replay = _replay(config, cut)
     trial = TrialInfo.from_strings(plan.trial.to_strings())
     offset_ns = int(round(SETTLE_DURATION * 1e9))
-    core = OnlineEvaluator(list(config.engines), primitive, offset_ns, cut, REAL_FPS)
+    grid = ClothGrid(*config.grid) if config.grid else ClothGrid()
+    core = OnlineEvaluator(
+        list(config.engines), primitive, offset_ns, cut, REAL_FPS, faces=grid_faces(grid.nx, grid.nz)
+    )
     if core.change_of_phase_frame is None:
         core.change_of_phase_frame = trial.change_of_phase_frame
     targets = full_targets(primitive, rate_hz)

@@ -7,8 +7,8 @@ mesh resolution. Each is refined in turn from the shipped setting (iterations x2
 x2, ...; a finer grid), the reference run through the whole trial (its vertices at every 30 fps
 frame, no camera), and each run compared with the one before it on its axis:
 
-- trajectory change: per frame, the one-sided L1 Chamfer distance from one run's vertices to the
-  other's cloth surface (its grid upsampled bilinearly, so that meshes of different resolution
+- trajectory change: per frame, the mean L1 distance from one run's vertices to the other's cloth
+  surface (its grid's triangles, core/surface_distance.py, so that meshes of different resolution
   compare as surfaces), both ways, the larger; the mean over the frames and the largest frame;
 - hanging length: the cloth's vertical extent at frame 0, after the settle.
 
@@ -17,7 +17,7 @@ average and the hanging length by less than HANG_TOLERANCE_M.
 
 What a refinement does to the scores: with `scored` engines, each engine's shipped preset runs on
 the tested grid through the same trial (at SCORE_RATE_HZ, so that frames fall on steps) and its
-vertices' one-sided L1 CD to every run's surface is reported, so a reference's numerical error
+vertices' mean L1 distance to every run's surface is reported, so a reference's numerical error
 can be read in the units of the benchmark's scores.
 
 A finer grid must describe the same cloth: the MuJoCo shell's edge time constant is scaled with
@@ -34,7 +34,7 @@ from pathlib import Path
 import time
 from typing import Any, Callable
 
-from cloth_bench_ros.core.metrics import chamfer_l1, RealCloud
+from cloth_bench_ros.core.surface_distance import grid_faces, point_to_surface, TriangleMesh
 from cloth_bench_ros.data.synth import reference_config, simulate_reference, SynthConfig
 from cloth_bench_ros.engines.mujoco_cloth import mesh_consistent_timeconst
 import numpy as np
@@ -43,7 +43,6 @@ TOLERANCE_M = 0.002  # mean trajectory change between successive refinements
 HANG_TOLERANCE_M = 0.005
 AXES = ('iterations', 'rate', 'grid')
 SCORE_RATE_HZ = 300.0  # the engines scored against each run: every frame falls on a step
-_SURFACE_UPSAMPLING = 10  # samples per grid spacing: about 1.7 mm on the 31 x 43 references
 
 
 @dataclass(frozen=True)
@@ -134,22 +133,9 @@ def trajectory(variant: Variant) -> tuple[np.ndarray, float]:
     return np.stack(frames), time.perf_counter() - start
 
 
-def surface(vertices: np.ndarray, grid: tuple[int, int]) -> np.ndarray:
-    """Return points on the cloth surface: the vertex grid upsampled bilinearly."""
-    nx, nz = grid
-    mesh = vertices.reshape(nz, nx, 3).astype(np.float64)
-    u = np.linspace(0, nx - 1, (nx - 1) * _SURFACE_UPSAMPLING + 1)
-    w = np.linspace(0, nz - 1, (nz - 1) * _SURFACE_UPSAMPLING + 1)
-    i0 = np.minimum(np.floor(u).astype(int), nx - 2)
-    j0 = np.minimum(np.floor(w).astype(int), nz - 2)
-    fu, fw = (u - i0)[None, :, None], (w - j0)[:, None, None]
-    corner = mesh[j0][:, i0]
-    right = mesh[j0][:, i0 + 1]
-    below = mesh[j0 + 1][:, i0]
-    diagonal = mesh[j0 + 1][:, i0 + 1]
-    top = corner * (1 - fu) + right * fu
-    bottom = below * (1 - fu) + diagonal * fu
-    return (top * (1 - fw) + bottom * fw).reshape(-1, 3)
+def surface_distance(points: np.ndarray, vertices: np.ndarray, grid: tuple[int, int]) -> float:
+    """Return the mean L1 distance from points to a grid's cloth surface (its triangles)."""
+    return float(point_to_surface(points, vertices, grid_faces(*grid)).mean())
 
 
 def trajectory_change(
@@ -159,8 +145,8 @@ def trajectory_change(
     return np.array(
         [
             max(
-                chamfer_l1(va.astype(np.float64), surface(vb, grid_b)),
-                chamfer_l1(vb.astype(np.float64), surface(va, grid_a)),
+                surface_distance(va, vb, grid_b),
+                surface_distance(vb, va, grid_a),
             )
             for va, vb in zip(a, b)
         ]
@@ -191,12 +177,12 @@ def engine_frames(engine: str, base: SynthConfig) -> np.ndarray:
 def engine_scores(
     engines: dict[str, np.ndarray], run: np.ndarray, grid: tuple[int, int]
 ) -> dict[str, float]:
-    """Return each engine's score against one run: its vertices' CD to the run's surface."""
+    """Return each engine's score against one run: its vertices' mean distance to its surface."""
     per_frame: dict[str, list[float]] = {name: [] for name in engines}
     for k, vertices in enumerate(run):
-        cloth = RealCloud(surface(vertices, grid))
+        cloth = TriangleMesh(vertices, grid_faces(*grid))
         for name, frames in engines.items():
-            per_frame[name].append(float(cloth.nearest_l1(frames[k]).mean()))
+            per_frame[name].append(float(cloth.distances(frames[k]).mean()))
     return {name: float(np.mean(values)) for name, values in per_frame.items()}
 
 

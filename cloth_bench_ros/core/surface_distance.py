@@ -1,0 +1,290 @@
+"""
+The one point-to-surface distance: from points to a triangle mesh (the cloth's surface), exact.
+
+For each point p, min over the points x of the mesh's triangles of ||p - x|| in L1 (the paper's
+norm, the default) or L2. Exact, not sampled: a triangle's minimum is found in closed form. The
+distance from p to the triangle's plane is |n . (p - a)| / max_k |n_k| in L1 (dual norm of L1 is
+L-infinity), |n . (p - a)| / ||n||_2 in L2, reached by moving along one axis (L1) or along n (L2);
+if that point of the plane lies inside the triangle it is the answer, otherwise the minimum lies
+on the boundary (the norm is convex, so a minimum inside the triangle would be the plane's), and
+an edge's minimum in L1 is at one of its ends or where it crosses a plane x_k = p_k (the sum of
+absolute values is piecewise linear along the edge), in L2 at the clamped projection.
+
+The triangles are bucketed once per mesh on a uniform grid (each in every cell its bounding box
+overlaps); each point searches the cells in growing shells around its own, skipping cells and
+triangles whose distance bound already exceeds the best found (as core/nearest.py does for
+points), starting from the triangle nearest to the previous point (real frames arrive in raster
+order, neighbours share a triangle).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+from numba import njit
+import numpy as np
+
+L1, L2 = 1, 2
+
+
+@lru_cache(maxsize=16)
+def grid_faces(nx: int, nz: int) -> np.ndarray:
+    """Triangles of an nx x nz vertex grid (index j * nx + i), as core.scene.ClothGrid.faces."""
+    j, i = np.meshgrid(np.arange(nz - 1), np.arange(nx - 1), indexing='ij')
+    a = (j * nx + i).ravel()
+    b, c, d = a + 1, a + nx, a + nx + 1
+    faces = np.empty((2 * len(a), 3), dtype=np.int64)
+    faces[0::2] = np.stack([a, c, b], axis=1)
+    faces[1::2] = np.stack([b, c, d], axis=1)
+    faces.setflags(write=False)
+    return faces
+
+
+class TriangleMesh:
+    """A triangle mesh prepared once (edges, normals, bounding boxes, grid) for distance queries."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        v = np.ascontiguousarray(vertices, dtype=np.float64)
+        f = np.asarray(faces, dtype=np.int64)
+        a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+        self.a = np.ascontiguousarray(a)
+        self.e1 = np.ascontiguousarray(b - a)
+        self.e2 = np.ascontiguousarray(c - a)
+        self.n = np.ascontiguousarray(np.cross(self.e1, self.e2))
+        nn = np.einsum('ij,ij->i', self.n, self.n)
+        scale = np.divide(1.0, nn, out=np.zeros_like(nn), where=nn > 0)[:, None]
+        # barycentric coordinates of a point a + w of the plane: w . m1 (along e1), w . m2 (e2)
+        self.m1 = np.ascontiguousarray(np.cross(self.e2, self.n) * scale)
+        self.m2 = np.ascontiguousarray(np.cross(self.n, self.e1) * scale)
+        corners = np.stack([a, b, c])
+        self.lo = np.ascontiguousarray(corners.min(axis=0))
+        self.hi = np.ascontiguousarray(corners.max(axis=0))
+        glo, ghi = self.lo.min(axis=0), self.hi.max(axis=0)
+        extent = np.maximum(ghi - glo, 1e-9)
+        # cells about half a triangle's size: a cell holds few triangles, a triangle few cells
+        size = float(np.mean(np.abs(self.e1).sum(axis=1))) / 2.0 if len(f) else 1.0
+        cell = max(size, float(extent.max()) / 256.0, 1e-6)
+        dims = np.minimum(np.floor(extent / cell).astype(np.int64) + 1, 256)
+        self.glo, self.cell, self.dims = glo, cell, dims
+        self.order, self.starts = _bucket_triangles(self.lo, self.hi, glo, cell, dims)
+
+    def distances(self, points: np.ndarray, norm: int = L1) -> np.ndarray:
+        """For each point, its distance to the nearest point of the mesh's surface (exact)."""
+        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        if len(self.a) == 0:
+            return np.full(len(p), np.inf)
+        return _query(
+            p, self.a, self.e1, self.e2, self.n, self.m1, self.m2, self.lo, self.hi,
+            self.order, self.starts, self.glo, self.cell, self.dims, int(norm),
+        )
+
+
+def point_to_surface(
+    points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, norm: int = L1
+) -> np.ndarray:
+    """Return each point's distance to the surface of the mesh (vertices, faces): L1 or L2."""
+    return TriangleMesh(vertices, faces).distances(points, norm)
+
+
+@njit(cache=True)
+def _cell_of(x, lo, inv, n):
+    i = int((x - lo) * inv)
+    return 0 if i < 0 else (n - 1 if i >= n else i)
+
+
+@njit(cache=True)
+def _cell_range(t, lo, hi, glo, inv, dims):
+    """The cells (first and last along x, y, z) that triangle t's bounding box overlaps."""
+    return (
+        _cell_of(lo[t, 0], glo[0], inv, dims[0]), _cell_of(hi[t, 0], glo[0], inv, dims[0]),
+        _cell_of(lo[t, 1], glo[1], inv, dims[1]), _cell_of(hi[t, 1], glo[1], inv, dims[1]),
+        _cell_of(lo[t, 2], glo[2], inv, dims[2]), _cell_of(hi[t, 2], glo[2], inv, dims[2]),
+    )
+
+
+@njit(cache=True)
+def _bucket_triangles(lo, hi, glo, cell, dims):
+    """Return triangle indices ordered by cell (each in every cell its box overlaps), starts."""
+    inv = 1.0 / cell
+    ncell = dims[0] * dims[1] * dims[2]
+    starts = np.zeros(ncell + 1, dtype=np.int64)
+    for t in range(lo.shape[0]):
+        x0, x1, y0, y1, z0, z1 = _cell_range(t, lo, hi, glo, inv, dims)
+        for iz in range(z0, z1 + 1):
+            for iy in range(y0, y1 + 1):
+                for ix in range(x0, x1 + 1):
+                    starts[(iz * dims[1] + iy) * dims[0] + ix + 1] += 1
+    for c in range(ncell):
+        starts[c + 1] += starts[c]
+    fill = starts[:-1].copy()
+    order = np.empty(starts[ncell], dtype=np.int64)
+    for t in range(lo.shape[0]):
+        x0, x1, y0, y1, z0, z1 = _cell_range(t, lo, hi, glo, inv, dims)
+        for iz in range(z0, z1 + 1):
+            for iy in range(y0, y1 + 1):
+                for ix in range(x0, x1 + 1):
+                    c = (iz * dims[1] + iy) * dims[0] + ix
+                    order[fill[c]] = t
+                    fill[c] += 1
+    return order, starts
+
+
+@njit(cache=True)
+def _combine(gx, gy, gz, norm):
+    if norm == 1:
+        return gx + gy + gz
+    return np.sqrt(gx * gx + gy * gy + gz * gz)
+
+
+@njit(cache=True)
+def _gap(x, a, b):
+    """Distance along one axis from x to the interval [a, b] (0 inside it)."""
+    if x < a:
+        return a - x
+    return x - b if x > b else 0.0
+
+
+@njit(cache=True)
+def _segment(px, py, pz, ax, ay, az, dx, dy, dz, norm):
+    """Distance from p to the segment a + s d, s in [0, 1]."""
+    if norm == 2:
+        dd = dx * dx + dy * dy + dz * dz
+        s = 0.0
+        if dd > 0.0:
+            s = ((px - ax) * dx + (py - ay) * dy + (pz - az) * dz) / dd
+            s = min(max(s, 0.0), 1.0)
+        rx, ry, rz = ax + s * dx - px, ay + s * dy - py, az + s * dz - pz
+        return np.sqrt(rx * rx + ry * ry + rz * rz)
+    # L1: piecewise linear in s; its minimum is at an end or at a breakpoint x_k = p_k
+    best = abs(ax - px) + abs(ay - py) + abs(az - pz)
+    end = abs(ax + dx - px) + abs(ay + dy - py) + abs(az + dz - pz)
+    best = min(best, end)
+    for k in range(3):
+        d = dx if k == 0 else (dy if k == 1 else dz)
+        if d == 0.0:
+            continue
+        q = px if k == 0 else (py if k == 1 else pz)
+        o = ax if k == 0 else (ay if k == 1 else az)
+        s = (q - o) / d
+        if 0.0 < s < 1.0:
+            v = abs(ax + s * dx - px) + abs(ay + s * dy - py) + abs(az + s * dz - pz)
+            best = min(best, v)
+    return best
+
+
+@njit(cache=True)
+def _triangle(px, py, pz, t, a, e1, e2, n, m1, m2, norm, best):
+    """
+    Exact distance from p to triangle t, or a value >= best once it cannot be below best.
+
+    The plane point x* lies outside the triangle past one edge's line (that edge holds the
+    minimum: the segment from any point of the triangle to x* crosses that edge, and the norm
+    does not grow along it) or past two (one of those two edges holds it).
+    """
+    ax, ay, az = a[t, 0], a[t, 1], a[t, 2]
+    ux, uy, uz = e1[t, 0], e1[t, 1], e1[t, 2]
+    vx, vy, vz = e2[t, 0], e2[t, 1], e2[t, 2]
+    nx, ny, nz = n[t, 0], n[t, 1], n[t, 2]
+    wx, wy, wz = px - ax, py - ay, pz - az
+    s = nx * wx + ny * wy + nz * wz
+    beta = wx * m1[t, 0] + wy * m1[t, 1] + wz * m1[t, 2]
+    gamma = wx * m2[t, 0] + wy * m2[t, 1] + wz * m2[t, 2]
+    if norm == 1:  # x* = p moved along the axis where the normal is largest
+        anx, any_, anz = abs(nx), abs(ny), abs(nz)
+        if anx >= any_ and anx >= anz:
+            k, big = 0, nx
+        elif any_ >= anz:
+            k, big = 1, ny
+        else:
+            k, big = 2, nz
+        if big == 0.0:  # a degenerate triangle: its edges
+            return min(
+                _segment(px, py, pz, ax, ay, az, ux, uy, uz, norm),
+                _segment(px, py, pz, ax, ay, az, vx, vy, vz, norm),
+                _segment(px, py, pz, ax + ux, ay + uy, az + uz, vx - ux, vy - uy, vz - uz, norm),
+            )
+        f = s / big
+        dist = abs(f)
+        beta -= f * m1[t, k]
+        gamma -= f * m2[t, k]
+    else:  # x* = p moved along the normal (m1, m2 are orthogonal to it)
+        nn = nx * nx + ny * ny + nz * nz
+        if nn == 0.0:
+            return min(
+                _segment(px, py, pz, ax, ay, az, ux, uy, uz, norm),
+                _segment(px, py, pz, ax, ay, az, vx, vy, vz, norm),
+                _segment(px, py, pz, ax + ux, ay + uy, az + uz, vx - ux, vy - uy, vz - uz, norm),
+            )
+        dist = abs(s) / np.sqrt(nn)
+    if dist >= best:  # the plane is already farther
+        return dist
+    out_b, out_g, out_s = beta < 0.0, gamma < 0.0, beta + gamma > 1.0
+    if not (out_b or out_g or out_s):
+        return dist
+    d = np.inf
+    if out_g:  # past the edge a -> b
+        d = _segment(px, py, pz, ax, ay, az, ux, uy, uz, norm)
+    if out_b:  # past the edge a -> c
+        d = min(d, _segment(px, py, pz, ax, ay, az, vx, vy, vz, norm))
+    if out_s:  # past the edge b -> c
+        d = min(d, _segment(px, py, pz, ax + ux, ay + uy, az + uz, vx - ux, vy - uy, vz - uz, norm))
+    return d
+
+
+@njit(cache=True)
+def _query(points, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm):
+    inv = 1.0 / cell
+    m = a.shape[0]
+    seen = np.full(m, -1, dtype=np.int64)
+    out = np.empty(points.shape[0])
+    reach = max(dims[0], max(dims[1], dims[2]))
+    slack = 1e-9 * cell
+    last = 0
+    for q in range(points.shape[0]):
+        px, py, pz = points[q, 0], points[q, 1], points[q, 2]
+        best = _triangle(px, py, pz, last, a, e1, e2, n, m1, m2, norm, np.inf)  # the previous point's triangle
+        seen[last] = q
+        best_t = last
+        cx = _cell_of(px, glo[0], inv, dims[0])
+        cy = _cell_of(py, glo[1], inv, dims[1])
+        cz = _cell_of(pz, glo[2], inv, dims[2])
+        for r in range(reach + 1):
+            if (r - 1) * cell > best + slack:  # nothing in this shell or beyond can be closer
+                break
+            for iz in range(max(cz - r, 0), min(cz + r, dims[2] - 1) + 1):
+                z0 = glo[2] + iz * cell
+                gz = _gap(pz, z0, z0 + cell)
+                if gz > best + slack:
+                    continue
+                for iy in range(max(cy - r, 0), min(cy + r, dims[1] - 1) + 1):
+                    y0 = glo[1] + iy * cell
+                    gy = _gap(py, y0, y0 + cell)
+                    if _combine(0.0, gy, gz, norm) > best + slack:
+                        continue
+                    on_face = abs(iz - cz) == r or abs(iy - cy) == r
+                    step = 1 if on_face else 2 * r
+                    ix = max(cx - r, 0) if on_face else cx - r
+                    while ix <= min(cx + r, dims[0] - 1):
+                        x0 = glo[0] + ix * cell
+                        if ix >= 0 and _combine(_gap(px, x0, x0 + cell), gy, gz, norm) <= best + slack:
+                            c = (iz * dims[1] + iy) * dims[0] + ix
+                            for j in range(starts[c], starts[c + 1]):
+                                t = order[j]
+                                if seen[t] == q:
+                                    continue
+                                seen[t] = q
+                                bound = _combine(
+                                    _gap(px, lo[t, 0], hi[t, 0]),
+                                    _gap(py, lo[t, 1], hi[t, 1]),
+                                    _gap(pz, lo[t, 2], hi[t, 2]),
+                                    norm,
+                                )
+                                if bound >= best:
+                                    continue
+                                d = _triangle(px, py, pz, t, a, e1, e2, n, m1, m2, norm, best)
+                                if d < best:
+                                    best, best_t = d, t
+                        ix += step
+        out[q] = best
+        last = best_t
+    return out
