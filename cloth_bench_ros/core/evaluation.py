@@ -20,7 +20,13 @@ import math
 
 from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.core.metrics import latency_stats, RealCloud, StabilityAccumulator
-from cloth_bench_ros.core.phase import CONTACT_MARGIN, first_contact, in_contact
+from cloth_bench_ros.core.phase import (
+    CONTACT_MARGIN,
+    CONTACT_MIN_FRACTION,
+    CONTACT_MIN_POINTS,
+    first_contact,
+    in_contact,
+)
 from cloth_bench_ros.core.scene import TABLE_TOP_Z
 from cloth_bench_ros.core.surface_metrics import (
     NAN_SCORES,
@@ -305,10 +311,10 @@ class OnlineEvaluator:
 
 
 CONTACT_RULE = (
-    f'in contact: at least max(8, 0.4 %) of the points within {CONTACT_MARGIN * 100:g} cm above'
-    f' the table top (z {TABLE_TOP_Z:g} m); real: the frame\'s points; simulated: the surface\'s'
-    ' area samples; checked at every scored real frame (30 fps), the first frame of the sequence'
-    ' in contact gives no onset'
+    f'in contact: at least max({CONTACT_MIN_POINTS}, {CONTACT_MIN_FRACTION * 100:g} %) of the'
+    f' points within {CONTACT_MARGIN * 100:g} cm above the table top (z {TABLE_TOP_Z:g} m);'
+    " real: the frame's points; simulated: the surface's area samples; checked at every scored"
+    ' real frame (30 fps); a sequence in contact from its first frame gives no onset'
 )
 
 
@@ -323,7 +329,7 @@ def contact_onset(real: list[tuple[float, bool]], sim: list[tuple[float, bool]])
     for side, flags in (('real', real), ('sim', sim)):
         search = first_contact(touching for _, touching in flags)
         found[side] = (flags[search.index][0] if search.index is not None else None, search)
-    (real_s, real_search), (sim_s, sim_search) = found['real'], found['sim']
+    real_s, sim_s = found['real'][0], found['sim'][0]
     reasons = [
         f'{side}: {search.reason}'
         for side, (at, search) in found.items()

@@ -52,8 +52,8 @@ class Metric:
 METRICS: dict[str, Metric] = {
     m.name: m
     for m in (
-        Metric('cd', 'CD', "CD (paper: vertices -> real)", 'm'),
-        Metric('hd', 'HD', "HD (paper: vertices -> real)", 'm'),
+        Metric('cd', 'CD', 'CD (paper: vertices -> real)', 'm'),
+        Metric('hd', 'HD', 'HD (paper: vertices -> real)', 'm'),
         Metric('cd_reverse', 'CD_reverse', 'CD real -> surface', 'm'),
         Metric('hd_reverse', 'HD_reverse', 'HD real -> surface', 'm'),
         Metric('cd_surface', 'CD_surface', 'CD surface -> real', 'm'),

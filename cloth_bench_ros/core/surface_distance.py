@@ -41,7 +41,7 @@ def grid_faces(nx: int, nz: int) -> np.ndarray:
 
 
 class TriangleMesh:
-    """A triangle mesh prepared once (edges, normals, bounding boxes, grid) for distance queries."""
+    """A triangle mesh prepared once (edges, normals, boxes, a grid) for distance queries."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
         v = np.ascontiguousarray(vertices, dtype=np.float64)
@@ -94,7 +94,7 @@ def _cell_of(x, lo, inv, n):
 
 @njit(cache=True)
 def _cell_range(t, lo, hi, glo, inv, dims):
-    """The cells (first and last along x, y, z) that triangle t's bounding box overlaps."""
+    """Return the cells (first and last along x, y, z) that triangle t's box overlaps."""
     return (
         _cell_of(lo[t, 0], glo[0], inv, dims[0]), _cell_of(hi[t, 0], glo[0], inv, dims[0]),
         _cell_of(lo[t, 1], glo[1], inv, dims[1]), _cell_of(hi[t, 1], glo[1], inv, dims[1]),
@@ -227,7 +227,8 @@ def _triangle(px, py, pz, t, a, e1, e2, n, m1, m2, norm, best):
     if out_b:  # past the edge a -> c
         d = min(d, _segment(px, py, pz, ax, ay, az, vx, vy, vz, norm))
     if out_s:  # past the edge b -> c
-        d = min(d, _segment(px, py, pz, ax + ux, ay + uy, az + uz, vx - ux, vy - uy, vz - uz, norm))
+        bx, by, bz = ax + ux, ay + uy, az + uz
+        d = min(d, _segment(px, py, pz, bx, by, bz, vx - ux, vy - uy, vz - uz, norm))
     return d
 
 
@@ -242,7 +243,8 @@ def _query(points, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims,
     last = 0
     for q in range(points.shape[0]):
         px, py, pz = points[q, 0], points[q, 1], points[q, 2]
-        best = _triangle(px, py, pz, last, a, e1, e2, n, m1, m2, norm, np.inf)  # the previous point's triangle
+        # the previous point's nearest triangle first: a close bound from the start
+        best = _triangle(px, py, pz, last, a, e1, e2, n, m1, m2, norm, np.inf)
         seen[last] = q
         best_t = last
         cx = _cell_of(px, glo[0], inv, dims[0])
@@ -266,7 +268,8 @@ def _query(points, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims,
                     ix = max(cx - r, 0) if on_face else cx - r
                     while ix <= min(cx + r, dims[0] - 1):
                         x0 = glo[0] + ix * cell
-                        if ix >= 0 and _combine(_gap(px, x0, x0 + cell), gy, gz, norm) <= best + slack:
+                        gap = _combine(_gap(px, x0, x0 + cell), gy, gz, norm)
+                        if ix >= 0 and gap <= best + slack:
                             c = (iz * dims[1] + iy) * dims[0] + ix
                             for j in range(starts[c], starts[c + 1]):
                                 t = order[j]

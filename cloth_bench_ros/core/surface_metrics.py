@@ -60,7 +60,7 @@ NAN_SCORES = SurfaceScores(*([math.nan] * len(SURFACE_FIELDS)))
 
 @lru_cache(maxsize=8)
 def _uniforms(n: int, seed: int) -> np.ndarray:
-    """The fixed draws behind the surface samples: (n, 3) in [0, 1)."""
+    """Return the fixed draws behind the surface samples: (n, 3) in [0, 1)."""
     draws = np.random.default_rng(seed).random((n, 3))
     draws.setflags(write=False)
     return draws
@@ -92,7 +92,7 @@ def surface_samples(
 
 @lru_cache(maxsize=8)
 def _subsample(size: int, n: int, seed: int) -> np.ndarray:
-    """Fixed indices of n of `size` points (all of them when there are no more than n)."""
+    """Return fixed indices of n of `size` points (all of them when there are no more)."""
     if size <= n:
         return np.arange(size)
     return np.sort(np.random.default_rng(seed).choice(size, n, replace=False))

@@ -135,9 +135,8 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
     trial = TrialInfo.from_strings(plan.trial.to_strings())
     offset_ns = int(round(SETTLE_DURATION * 1e9))
     grid = ClothGrid(*config.grid) if config.grid else ClothGrid()
-    core = OnlineEvaluator(
-        list(config.engines), primitive, offset_ns, cut, REAL_FPS, faces=grid_faces(grid.nx, grid.nz)
-    )
+    faces = grid_faces(grid.nx, grid.nz)
+    core = OnlineEvaluator(list(config.engines), primitive, offset_ns, cut, REAL_FPS, faces=faces)
     if core.change_of_phase_frame is None:
         core.change_of_phase_frame = trial.change_of_phase_frame
     targets = full_targets(primitive, rate_hz)

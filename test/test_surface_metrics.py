@@ -1,0 +1,175 @@
+"""The surface metrics, contact onset and metric choice: analytic cases, independent code."""
+
+import csv
+import json
+import math
+
+from cloth_bench_ros.core.evaluation import OnlineEvaluator
+from cloth_bench_ros.core.metric_choice import metric, METRICS
+from cloth_bench_ros.core.metrics import RealCloud
+from cloth_bench_ros.core.run_files import write_run_report
+from cloth_bench_ros.core.scene import ClothGrid, TABLE_TOP_Z
+from cloth_bench_ros.core.surface_distance import grid_faces, point_to_surface
+from cloth_bench_ros.core.surface_metrics import (
+    FSCORE_THRESHOLD_M,
+    OT_SAMPLES,
+    surface_samples,
+    surface_scores,
+    transport_distance,
+)
+from cloth_bench_ros.core.trajectory import Primitive
+from cloth_bench_ros.validation import InputError
+import numpy as np
+import ot
+import pytest
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial.distance import cdist
+
+
+def _sheet(nx: int, nz: int) -> tuple[np.ndarray, np.ndarray]:
+    grid = ClothGrid(nx, nz)
+    return grid.vertices(), grid_faces(nx, nz)
+
+
+def _raster(nu: int = 101, nw: int = 141) -> np.ndarray:
+    """Return points on the flat 0.50 x 0.70 m sheet (y = 0), ClothGrid's vertices included."""
+    u, w = np.meshgrid(np.linspace(0, 0.5, nu), 1.0 - np.linspace(0, 0.7, nw))
+    return np.column_stack([u.ravel(), np.zeros(u.size), w.ravel()])
+
+
+@pytest.mark.parametrize('grid', [(11, 15), (21, 29)])
+def test_a_flat_sheet_against_points_on_its_own_surface(grid):
+    vertices, faces = _sheet(*grid)
+    s = surface_scores(RealCloud(_raster()), vertices, faces)
+    assert s.cd_reverse < 1e-12 and s.hd_reverse < 1e-12  # every real point lies on the sheet
+    assert s.cd_surface < 0.003 and s.hd_surface <= 0.0086  # raster spacing 5 x 5 mm
+    assert s.precision == s.recall == s.fscore == 1.0
+
+
+def test_a_copy_shifted_by_d_is_d_away_in_every_distance():
+    d = 0.004
+    vertices, faces = _sheet(11, 15)
+    samples = surface_samples(vertices, faces)
+    real = np.concatenate([vertices, samples]) + [0.0, d, 0.0]  # off the sheet by d
+    s = surface_scores(RealCloud(real), vertices, faces)
+    paper = RealCloud(real).chamfer_hausdorff(vertices)
+    values = [*paper, s.cd_reverse, s.hd_reverse, s.cd_surface, s.hd_surface, s.cd_two_sided,
+              s.hd_two_sided]
+    np.testing.assert_allclose(values, d, rtol=0, atol=1e-12)
+    assert s.precision == s.recall == 1.0  # d < 1 cm
+    far = surface_scores(RealCloud(real + [0, FSCORE_THRESHOLD_M, 0]), vertices, faces)
+    assert far.precision == far.recall == far.fscore == 0.0
+    # the transport distance of the same shift: Jensen's bound d, reached by the shift itself
+    small = samples[:OT_SAMPLES] + [0.0, d, 0.0]
+    assert surface_scores(RealCloud(small), vertices, faces).emd == pytest.approx(d, abs=1e-12)
+
+
+def test_a_sheet_crumpled_into_half_the_real_area():
+    """The paper's CD is small, the reverse direction and the missing recall are not."""
+    vertices, faces = _sheet(11, 15)
+    half = vertices.copy()
+    half[:, 2] = 1.0 - 0.5 * (1.0 - half[:, 2])  # the top 0.35 m of the real sheet
+    cloud = RealCloud(_raster())
+    cd, hd = cloud.chamfer_hausdorff(half)
+    s = surface_scores(cloud, half, faces)
+    assert cd < 0.001 and hd < 0.005  # every vertex lies on real cloth
+    assert s.cd_reverse > 0.08 and s.hd_reverse > 0.34  # half the real cloth is 0-0.35 m away
+    assert 0.45 < s.recall < 0.55 and s.precision == 1.0 and s.fscore < 0.7
+    assert s.emd > 0.1 > s.cd_surface
+
+
+def test_surface_samples_are_uniform_by_area_on_the_surface_and_fixed():
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [3, 0, 0], [0, 3, 0]], dtype=float)
+    faces = np.array([[0, 1, 2], [0, 3, 4]])  # areas 0.5 and 4.5, the first inside the second
+    samples = surface_samples(vertices, faces, 4000, 7)
+    assert np.array_equal(samples, surface_samples(vertices, faces, 4000, 7))
+    assert np.all(samples[:, 2] == 0) and np.all(samples[:, :2] >= 0)
+    assert np.all(samples[:, 0] + samples[:, 1] <= 3 + 1e-12)
+    # uniform over the big triangle: the small one (1/9 of its area) holds ~ (0.5 + 0.5) / 5
+    inside_small = np.mean(samples[:, 0] + samples[:, 1] <= 1)
+    assert inside_small == pytest.approx((0.5 + 4.5 / 9) / 5.0, abs=0.02)
+    assert np.max(point_to_surface(samples, vertices, faces)) < 1e-12
+
+
+def test_transport_distance_is_the_optimal_assignment():
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(60, 3)), rng.normal(size=(60, 3))
+    cost = cdist(a, b, 'cityblock')
+    rows, cols = linear_sum_assignment(cost)  # scipy's Hungarian method, not POT
+    assert transport_distance(a, b) == pytest.approx(cost[rows, cols].mean(), abs=1e-12)
+    # unequal sizes: each of 30 points carries two of 60's mass, an assignment to its copies
+    half = a[:30]
+    cost = cdist(np.concatenate([half, half]), b, 'cityblock')
+    rows, cols = linear_sum_assignment(cost)
+    assert transport_distance(half, b) == pytest.approx(cost[rows, cols].mean(), abs=1e-12)
+
+
+def test_the_frames_emd_is_pots_exact_emd_of_the_two_samples():
+    vertices, faces = _sheet(5, 6)
+    rng = np.random.default_rng(3)
+    real = rng.uniform([0, -0.05, 0.3], [0.5, 0.05, 1.0], size=(100, 3))  # fewer than OT_SAMPLES
+    surface = surface_samples(vertices, faces)[:OT_SAMPLES]
+    expected = ot.emd2(np.full(100, 0.01), np.full(len(surface), 1 / len(surface)),
+                       cdist(real, surface, 'cityblock'))
+    assert surface_scores(RealCloud(real), vertices, faces).emd == pytest.approx(expected)
+
+
+def _falling(evaluator, real_touch_frame, sim_touch_frame, frames=12):
+    """Drop a real cloud and a simulated sheet onto the table at the given frames."""
+    vertices, _ = _sheet(5, 6)
+    real = _raster(21, 29)
+    for k in range(frames):
+        stamp = int(round(k / 30 * 1e9))
+
+        def low(touch, k=k):
+            return TABLE_TOP_Z + (0.01 if touch is not None and k >= touch else 0.3)
+
+        evaluator.add_state('e', stamp, vertices + [0, 0, low(sim_touch_frame) - 0.3])
+        evaluator.add_step('e', stamp, k, 0.0, False)
+        evaluator.add_real(stamp, real + [0, 0, low(real_touch_frame) - 0.3])
+    evaluator.finish()
+    return evaluator.summary()['e']
+
+
+def test_contact_onset_is_the_same_rule_on_both_sides():
+    faces = grid_faces(5, 6)
+    summary = _falling(OnlineEvaluator(['e'], Primitive.DYNAMIC, 0, 6, faces=faces), 5, 8)
+    onset = summary['contact_onset']
+    assert onset['real_s'] == pytest.approx(5 / 30) and onset['sim_s'] == pytest.approx(8 / 30)
+    assert summary['contact_onset_error_s'] == pytest.approx(3 / 30)
+    never = _falling(OnlineEvaluator(['e'], Primitive.DYNAMIC, 0, 6, faces=faces), 5, None)
+    assert never['contact_onset_error_s'] is None
+    assert 'sim: no table contact in 12 frames' in never['contact_onset']['reason']
+    # without faces (an identification trial) nothing but the paper's metrics
+    plain = _falling(OnlineEvaluator(['e'], Primitive.DYNAMIC, 0, 6), 5, 8)
+    assert 'contact_onset' not in plain and 'CD_reverse_d' not in plain
+    assert math.isfinite(plain['CD_d'])
+
+
+def test_summary_and_frames_csv_carry_every_metric(tmp_path):
+    faces = grid_faces(5, 6)
+    core = OnlineEvaluator(['e'], Primitive.DYNAMIC, 0, 6, faces=faces)
+    summary = _falling(core, 5, 8)
+    for m in METRICS.values():
+        assert m.summary_key('dynamic') in summary, m.name
+    assert summary['CD_two_sided_d'] == pytest.approx(
+        (summary['CD_reverse_d'] + summary['CD_surface_d']) / 2
+    )
+    write_run_report(tmp_path, {'engines': {'e': summary}}, core.scores)
+    rows = list(csv.DictReader((tmp_path / 'frames.csv').open()))
+    assert len(rows) == 12 and {'cd_reverse', 'fscore', 'emd', 'sim_contact'} <= set(rows[0])
+    assert float(rows[0]['cd_two_sided']) == pytest.approx(core.scores[0].cd_two_sided)
+    saved = json.loads((tmp_path / 'summary.json').read_text())['engines']['e']
+    assert saved['surface_metrics']['ot_samples'] == OT_SAMPLES
+
+
+def test_the_metric_choice_is_validated_and_orders_best_first():
+    assert metric('cd').summary_key('dynamic') == 'CD_d'
+    assert metric('EMD').summary_key('quasi_static') == 'EMD_q'
+    with pytest.raises(InputError, match='unknown metric .*valid: cd, hd, '):
+        metric('chamfer')
+    fscore, onset = metric('fscore'), metric('contact_onset')
+    ordered = sorted([0.2, math.nan, 0.9], key=fscore.sort_key)  # more is better, NaN last
+    assert ordered[:2] == [0.9, 0.2] and math.isnan(ordered[2])
+    assert sorted([-0.3, None, 0.1], key=onset.sort_key) == [0.1, -0.3, None]  # by magnitude
+    assert math.isnan(onset.value({'contact_onset_error_s': None}, 'dynamic'))
