@@ -8,7 +8,12 @@ seen by a depth camera, points in raster order, as an organized PointCloud2 arri
 same number of points in random order (the worst case for the grid's memory traffic).
 Goals: <= 1 ms for a 50,000-point frame, <= 5 ms for a 640 x 480 (307,200-point) frame.
 
-    python benchmarks/bench_evaluator.py [--points 50000 307200] [--repeats 5]
+Then every metric of a scored frame (core/surface_metrics.py: the area samples to the real points,
+each real point's exact distance to the mesh's triangles, the optimal-transport distance), against
+CD + HD alone on the same camera-like frame in the same process: goal <= 4x the CD + HD time, the
+paper's CD/HD unchanged (equal to brute force) beside them.
+
+    python benchmarks/bench_evaluator.py [--points 50000 307200] [--repeats 5] [--all-points 50000]
 """
 
 from __future__ import annotations
@@ -19,9 +24,19 @@ import time
 
 from cloth_bench_ros.core.metrics import RealCloud
 from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.surface_distance import grid_faces, TriangleMesh
+from cloth_bench_ros.core.surface_metrics import (
+    _subsample,
+    OT_SAMPLES,
+    OT_SEED,
+    surface_samples,
+    surface_scores,
+    transport_distance,
+)
 import numpy as np
 
 GOALS_MS = {50_000: 1.0, 307_200: 5.0}
+ALL_METRICS_GOAL = 4.0  # x the CD + HD time of the same frame
 
 
 def brute_force(V: np.ndarray, P: np.ndarray) -> tuple[float, float]:
@@ -58,6 +73,10 @@ def main() -> None:
     parser.add_argument('--nx', type=int, default=11)
     parser.add_argument('--nz', type=int, default=15)
     parser.add_argument('--repeats', type=int, default=5)
+    parser.add_argument(
+        '--all-points', type=int, nargs='*', default=[50_000],
+        help='frame sizes timed with every metric against CD + HD (none: skip)',
+    )
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     grid = ClothGrid(args.nx, args.nz)
@@ -87,6 +106,51 @@ def main() -> None:
                 f' ({t_brute / t_frame:.0f}x); CD {result[0]:.6f} m, HD {result[1]:.6f} m, equal'
                 ' to brute force'
             )
+    for n in args.all_points:
+        all_metrics(n, V, grid_faces(grid.nx, grid.nz), args.repeats, rng)
+
+
+def all_metrics(n: int, V: np.ndarray, faces: np.ndarray, repeats: int, rng) -> None:
+    """Time every metric of one scored frame against CD + HD alone, and its parts."""
+    P = camera_frame(n, rng)
+    surface_scores(RealCloud(P[:1000]), V, faces)  # compiled before timing
+    t_paper, paper = best_of(lambda: RealCloud(P).chamfer_hausdorff(V), repeats)
+    assert paper == brute_force(V, P)
+
+    def every_metric():
+        cloud = RealCloud(P)
+        return cloud.chamfer_hausdorff(V), surface_scores(cloud, V, faces)
+
+    t_all, (cd_hd, scores) = best_of(every_metric, repeats)
+    assert cd_hd == paper  # the paper's CD/HD unchanged beside the new metrics
+    cloud = RealCloud(P)
+    samples = surface_samples(V, faces)
+    parts = {
+        'area samples (1000)': best_of(lambda: surface_samples(V, faces), repeats)[0],
+        'samples -> real (CD/HD_surface)': best_of(lambda: cloud.nearest_l1(samples), repeats)[0],
+        'real -> triangles (CD/HD_reverse)': best_of(
+            lambda: TriangleMesh(V, faces).distances(P), repeats
+        )[0],
+        f'EMD ({OT_SAMPLES} + {OT_SAMPLES} points)': best_of(
+            lambda: transport_distance(
+                P[_subsample(len(P), OT_SAMPLES, OT_SEED)], samples[:OT_SAMPLES]
+            ),
+            repeats,
+        )[0],
+    }
+    ratio = t_all / t_paper
+    verdict = 'met' if ratio <= ALL_METRICS_GOAL else 'NOT met'
+    print(
+        f'{n:>7} points, camera: CD + HD {t_paper * 1e3:.2f} ms; every metric'
+        f' {t_all * 1e3:.2f} ms per real frame = {ratio:.1f}x (goal <= {ALL_METRICS_GOAL:g}x:'
+        f' {verdict}); CD/HD equal to brute force'
+    )
+    for name, seconds in parts.items():
+        print(f'    {name:<36} {seconds * 1e3:7.2f} ms')
+    print(
+        f'    values: CD_reverse {scores.cd_reverse:.4f} m, CD_surface {scores.cd_surface:.4f} m,'
+        f' F {scores.fscore:.3f}, EMD {scores.emd:.4f} m'
+    )
 
 
 if __name__ == '__main__':

@@ -89,7 +89,7 @@ def test_report_files_exist_and_the_plots_are_non_empty_pngs(rendered):
     for name in (
         'report.md',
         'report.html',
-        'table2.csv',
+        'table3.csv',
         'fig5.csv',
         'timing.csv',
         'stability.csv',
@@ -112,9 +112,9 @@ def test_report_files_exist_and_the_plots_are_non_empty_pngs(rendered):
         assert f']({name})' in md and f'src="{name}"' in html
 
 
-def test_table2_has_the_papers_layout_with_our_and_the_papers_numbers(rendered):
+def test_table3_has_the_papers_layout_with_our_and_the_papers_numbers(rendered):
     out, report = rendered
-    table = _csv(report / 'table2.csv')
+    table = _csv(report / 'table3.csv')
     header, rows = table[0], table[1:]
     assert header == [
         'cloth',

@@ -197,3 +197,16 @@ def read_transform(path: str):
             f'transform {path}: needs 16 finite numbers (a 4x4 matrix), found {values.size}'
         )
     return values.reshape(4, 4)
+
+
+def add_metric_option(parser: argparse.ArgumentParser) -> None:
+    """Add `--metric`: what rankings and comparisons are made on (core/metric_choice.py)."""
+    from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, METRICS
+
+    parser.add_argument(
+        '--metric',
+        default=DEFAULT_METRIC,
+        choices=tuple(METRICS),
+        help=f"metric to rank and compare on (default {DEFAULT_METRIC}: the paper's CD;"
+        ' docs/metrics.md)',
+    )

@@ -116,6 +116,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     sweep.add_argument(
         '--report', action='store_true', help='render the report into <output>/report afterwards'
     )
+    common.add_metric_option(sweep)
     sweep.set_defaults(func=cmd_sweep)
 
     report = sub.add_parser(
@@ -136,7 +137,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         '--rate',
         type=common.rate,
         default=100.0,
-        help='rate of the Table II layout (default 100 Hz)',
+        help='rate of the Table III layout (default 100 Hz)',
     )
     report.add_argument(
         '--fig5-cloth',
@@ -144,6 +145,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         choices=common.CLOTH_CHOICES,
         help='cloth of the Fig. 5 layout (default towel)',
     )
+    common.add_metric_option(report)
     report.set_defaults(func=cmd_report)
 
     stress = sub.add_parser(
@@ -198,6 +200,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         default='results/cross_reference',
         help='results directory: results.jsonl (resumed) and cross_reference.md',
     )
+    common.add_metric_option(xref)
     xref.set_defaults(func=cmd_cross_reference)
 
 
@@ -276,7 +279,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         f' done), {outcome.diverged} diverged, {outcome.errors} errors; results: {outcome.results}'
     )
     if args.report:
-        return render(out, out / 'report', None, 100.0, 'towel', TOLERANCE_REL, TOLERANCE_ABS)
+        return render(
+            out, out / 'report', None, 100.0, 'towel', TOLERANCE_REL, TOLERANCE_ABS, args.metric
+        )
     return 0
 
 
@@ -288,13 +293,16 @@ def render(
     cloth: str,
     tol_rel: float,
     tol_abs: float,
+    metric: str = 'cd',
 ) -> int:
     """Render the report of `results` into `out` and print its headline tables."""
     from cloth_bench_ros.report.document import report_directory
 
-    outcome = report_directory(Path(results), out, stress, rate, cloth, tol_rel, tol_abs)
-    if 'table2' in outcome.tables:
-        print(outcome.tables['table2'].markdown())
+    outcome = report_directory(
+        Path(results), out, stress, rate, cloth, tol_rel, tol_abs, metric=metric
+    )
+    if 'table3' in outcome.tables:
+        print(outcome.tables['table3'].markdown())
     for note in outcome.recommendations:
         print(
             f'recommended {note["engine"]} {note["cloth"]} {note["primitive"]} {note["rate_hz"]:g}'
@@ -322,6 +330,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         args.fig5_cloth,
         args.tolerance_rel,
         args.tolerance_abs,
+        args.metric,
     )
 
 
@@ -400,7 +409,7 @@ def cmd_cross_reference(args: argparse.Namespace) -> int:
     )
     keys = {c.key() for c in cells}
     rows = [r for r in sw.load_rows(results) if sw.row_key(r) in keys]
-    text = cross_reference_markdown(rows)
+    text = cross_reference_markdown(rows, args.metric)
     atomic_write_text(out / 'cross_reference.md', text + '\n')
     print(text)
     return 0

@@ -4,7 +4,8 @@ The metrics a ranking or comparison can be made on (`--metric`), declared once (
 Each has its name on the command line, the key of its task-window value in a run's summary
 (per engine; `_d` / `_q` appended for a per-task metric), whether more is better, and its unit.
 `metric(name)` is the validated choice; `Metric.value(summary, primitive)` reads an engine's value
-and `Metric.sort_key` orders values best first, a missing (NaN) value last.
+in a run's summary, `Metric.row_value(row)` a study row's (the row holds the task's value under
+`key`), and `Metric.sort_key` orders values best first, a missing (NaN) value last.
 """
 
 from __future__ import annotations
@@ -39,6 +40,19 @@ class Metric:
         """Return an engine's value of this metric (NaN when missing)."""
         v = engine_summary.get(self.summary_key(primitive))
         return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else math.nan
+
+    def row_value(self, row: dict) -> float:
+        """Return a study results row's value of this metric (its task's; NaN when missing)."""
+        v = row.get(self.key)
+        return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else math.nan
+
+    def ranked(self, value: float | None) -> float | None:
+        """Return the value a ranking orders lowest first (negated if more is better, |error|)."""
+        if value is None or not math.isfinite(value):
+            return None
+        if self.absolute:
+            return abs(value)
+        return -value if self.higher_is_better else value
 
     def sort_key(self, value: float | None) -> float:
         """Return a key that orders values best first (missing or NaN last)."""

@@ -19,6 +19,7 @@ def comparison_section(results_dir: Path) -> list:
     into the report directory when the report is written.
     """
     from cloth_bench_ros.report.blocks import figure_block, heading, paragraph
+    from cloth_bench_ros.report.metric_sections import fig4_blocks
 
     found = sorted({*results_dir.glob('qualitative.png'), *results_dir.glob('*/qualitative.png')})
     if not found:
@@ -37,7 +38,7 @@ def comparison_section(results_dir: Path) -> list:
             blocks.append(
                 figure_block(f'{run}_{src.name}', f'{run}: {what}', partial(_copy_into, src))
             )
-    return blocks
+    return blocks + fig4_blocks(results_dir)
 
 
 def _copy_into(src: Path, dst: Path) -> Path:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
+from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, metric as metric_choice
 from cloth_bench_ros.report.blocks import Table
 from cloth_bench_ros.report.ranking import (
     bootstrap_ranking,
@@ -55,8 +56,11 @@ def _selected(rows: Sequence[dict]) -> list[dict]:
     return [r for r in rows if r.get('mode') == MODE and r.get('reference') in REFERENCES]
 
 
-def cross_reference_table(rows: Sequence[dict], digits: int = 4) -> Table | None:
-    """Return entrants x (reference, task) of CD_d / CD_q; None without cross-reference rows."""
+def cross_reference_table(
+    rows: Sequence[dict], digits: int = 4, metric: str = DEFAULT_METRIC
+) -> Table | None:
+    """Return entrants x (reference, task) of the metric (CD_d / CD_q by default), or None."""
+    chosen = metric_choice(metric)
     sel = _selected(rows)
     if not sel:
         return None
@@ -70,10 +74,12 @@ def cross_reference_table(rows: Sequence[dict], digits: int = 4) -> Table | None
     by: dict[tuple, list[dict]] = {}
     for r in sel:
         by.setdefault(_entrant(r) + (r['reference'], r['primitive']), []).append(r)
-    stats = {e + col: stat(by.get(e + col, []), 'CD') for e in entrants for col in columns}
+    stats = {e + col: stat(by.get(e + col, []), chosen.key) for e in entrants for col in columns}
     best = {
         col: min(
-            (s.mean for key, s in stats.items() if key[3:] == col and s.used), default=math.nan
+            (s.mean for key, s in stats.items() if key[3:] == col and s.used),
+            key=chosen.sort_key,
+            default=math.nan,
         )
         for col in columns
     }
@@ -90,13 +96,16 @@ def cross_reference_table(rows: Sequence[dict], digits: int = 4) -> Table | None
             )
         body.append(line)
     headers = ['engine'] + [
-        f'{REFERENCE_LABEL[ref]} {"CD_d" if p == "dynamic" else "CD_q"}' for ref, p in columns
+        f'{REFERENCE_LABEL[ref]} {chosen.summary_key(p)}' for ref, p in columns
     ]
     return Table('cross_reference', headers, body, 'l' + 'r' * len(columns))
 
 
-def identified_rankings(rows: Sequence[dict]) -> dict[tuple[str, str], list[Ranked]]:
-    """Return {(reference, task): identified engines ranked on it, with bootstrap intervals}."""
+def identified_rankings(
+    rows: Sequence[dict], metric: str = DEFAULT_METRIC
+) -> dict[tuple[str, str], list[Ranked]]:
+    """Return {(reference, task): identified engines ranked on it by the metric, bootstrapped."""
+    chosen = metric_choice(metric)
     sel = [r for r in _selected(rows) if _entrant(r)[2] == 'identified']
     out = {}
     for ref in REFERENCES:
@@ -106,10 +115,12 @@ def identified_rankings(rows: Sequence[dict]) -> dict[tuple[str, str], list[Rank
                 if r['reference'] == ref and r['primitive'] == task:
                     engine, model, _ = _entrant(r)
                     name = entrant_name(engine, {'model': model} if model else {})
-                    value = r.get('CD') if r.get('status') == 'ok' else None
+                    value = chosen.row_value(r) if r.get('status') == 'ok' else None
                     samples.setdefault(name, []).append(value)
             if samples:
-                out[(ref, task)] = bootstrap_ranking(samples)
+                out[(ref, task)] = bootstrap_ranking(
+                    samples, higher_is_better=chosen.higher_is_better, absolute=chosen.absolute
+                )
     return out
 
 
@@ -123,22 +134,24 @@ def ranking_statements(rankings: dict[tuple[str, str], list[Ranked]]) -> list[st
     return lines
 
 
-def cross_reference_markdown(rows: Sequence[dict]) -> str:
+def cross_reference_markdown(rows: Sequence[dict], metric: str = DEFAULT_METRIC) -> str:
     """Return the matrix, the ranking of identified engines and the statements, as Markdown."""
-    table = cross_reference_table(rows)
+    table = cross_reference_table(rows, metric=metric)
     if table is None:
         return '(no rows)'
     parts = [table.markdown()]
-    rankings = identified_rankings(rows)
+    rankings = identified_rankings(rows, metric)
     if rankings:
         parts.append(ranking_table('ranking', rankings).markdown())
         parts.append('\n'.join(f'- {line}' for line in ranking_statements(rankings)))
     return '\n\n'.join(parts)
 
 
-def cross_reference_section(rows: Sequence[dict]) -> tuple[str, str, Table] | None:
+def cross_reference_section(
+    rows: Sequence[dict], metric: str = DEFAULT_METRIC
+) -> tuple[str, str, Table] | None:
     """Return (heading, note, table) of the cross-reference section, or None without such rows."""
-    table = cross_reference_table(rows)
+    table = cross_reference_table(rows, metric=metric)
     if table is None:
         return None
     cloths = sorted({r['cloth'] for r in rows if r.get('mode') == MODE})

@@ -3,7 +3,7 @@ The report of a study (`cloth-bench report RESULTS`): Markdown and HTML, PNG and
 
 `render_report` composes the document from section builders, each a short function of the rows
 that returns blocks (headings, paragraphs, tables, figures to draw); `write_document` does every
-file write. Sections: the paper's Table II and Fig. 5 layouts, speed against error with its
+file write. Sections: the paper's Table III and Fig. 5 layouts, speed against error with its
 Pareto front, per-frame CD and HD, timing and hardware in the loop, stability, the settings
 recommendation, the stress suite, and parameter identification when the directory holds one.
 """
@@ -48,7 +48,7 @@ from cloth_bench_ros.report.tables import (
     fig5_table,
     PAPER_FIG5,
     stability_table,
-    table2,
+    table3,
     timing_table,
 )
 from cloth_bench_ros.studies.aggregate import finite
@@ -113,7 +113,7 @@ def overview_section(rows: Sequence[dict]) -> list[Block]:
 
 
 def paper_configs(rows: Sequence[dict]) -> list[str]:
-    """Return the configurations of the lockstep paper sweep, Table II's (the presets) first."""
+    """Return the configurations of the lockstep paper sweep, Table III's (the presets) first."""
     counts = Counter(
         r.get('config', 'preset')
         for r in rows
@@ -125,18 +125,18 @@ def paper_configs(rows: Sequence[dict]) -> list[str]:
     return [main] + sorted(c for c in counts if c != main)
 
 
-def table2_section(paper: Sequence[dict], config: str, wanted_rate: float) -> list[Block]:
-    """Return the paper's Table II layout at one rate, ours beside the paper's numbers."""
+def table3_section(paper: Sequence[dict], config: str, wanted_rate: float) -> list[Block]:
+    """Return the paper's Table III layout at one rate, ours beside the paper's numbers."""
     rate = table_rate(paper, wanted_rate)
     what = 'engine presets' if config == 'preset' else f'configuration `{config}`'
     combos = len({(r['seed'], r.get('trial', 0)) for r in paper if float(r['rate_hz']) == rate})
     return [
-        heading(2, f'Table II layout: accuracy per cloth and engine at {rate:g} Hz'),
+        heading(2, f'Table III layout: accuracy per cloth and engine at {rate:g} Hz'),
         paragraph(
             f'Columns marked (ours): this system, {what}, lockstep pacing, {rate:g} Hz, over'
             f' {combos} seed x trial '
             f"combinations per cell; bold = best of ours. Columns marked (paper) are the paper's"
-            f' Table II '
+            f' Table III '
             f'(docs/benchmark.md, section 6: real rags, 3 trials x 20 seeds, MuJoCo 3.1.1, Bullet'
             f' 3.26, Flex 1.2, '
             f'SOFA 23.06; bold = best in the paper). The paper scores real clouds; ours are scored'
@@ -144,7 +144,7 @@ def table2_section(paper: Sequence[dict], config: str, wanted_rate: float) -> li
             f'bags given to the sweep, so the columns compare layouts and magnitudes, not the same'
             f' data.'
         ),
-        table_block(table2(paper, rate if rate is not None else wanted_rate)),
+        table_block(table3(paper, rate if rate is not None else wanted_rate)),
     ]
 
 
@@ -313,10 +313,12 @@ def render_report(
     tol_abs: float = 0.002,
     title: str = 'cloth_bench_ros: speed against error',
     identifications: Sequence[dict] = (),
+    metric: str = 'cd',
 ) -> ReportOutcome:
     """Render every table and figure of the rows into out_dir (report.md, .html, .png, .csv)."""
     from cloth_bench_ros.report.comparison import comparison_section
     from cloth_bench_ros.report.identification import identification_section
+    from cloth_bench_ros.report.metric_sections import metrics_section
 
     results_dir, out_dir = Path(results_dir), Path(out_dir)
     doc = Document(title)
@@ -327,7 +329,7 @@ def render_report(
     configs = paper_configs(rows)
     paper = paper_rows(rows, configs[0]) if configs else []
     if paper:
-        doc.extend(table2_section(paper, configs[0], wanted_rate))
+        doc.extend(table3_section(paper, configs[0], wanted_rate))
     for config in configs:
         doc.extend(fig5_section(paper_rows(rows, config), config, configs[0], fig5_cloth))
     doc.extend(speed_error_section(rows, fig5_cloth, pareto))
@@ -343,7 +345,8 @@ def render_report(
         doc.extend(identifications_summary(identifications))
     for ident in identifications:
         doc.extend(identification_section(ident, rows))
-    doc.extend(cross_reference_blocks(rows))
+    doc.extend(metrics_section(rows, metric))
+    doc.extend(cross_reference_blocks(rows, metric))
     doc.extend(comparison_section(results_dir))
     tables = {t.name: t for t in doc.tables()}
     md, html, images = write_document(doc, out_dir, csv_only=[results_table(rows)])
@@ -358,6 +361,7 @@ def report_directory(
     fig5_cloth: str = 'towel',
     tol_rel: float = 0.05,
     tol_abs: float = 0.002,
+    metric: str = 'cd',
 ) -> ReportOutcome:
     """
     `cloth-bench report`: the report of a results.jsonl (or its directory).
@@ -395,4 +399,5 @@ def report_directory(
         tol_rel,
         tol_abs,
         identifications=identifications,
+        metric=metric,
     )

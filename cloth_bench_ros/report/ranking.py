@@ -34,9 +34,21 @@ class Ranked:
 
 
 def bootstrap_ranking(
-    samples: Mapping[str, Sequence[float | None]], replicates: int = REPLICATES, seed: int = 0
+    samples: Mapping[str, Sequence[float | None]],
+    replicates: int = REPLICATES,
+    seed: int = 0,
+    higher_is_better: bool = False,
+    absolute: bool = False,
 ) -> list[Ranked]:
-    """Return the engines ranked by mean (lowest first), each with its bootstrap interval."""
+    """
+    Return the engines ranked by mean (lowest first), each with its bootstrap interval.
+
+    higher_is_better ranks the highest mean first (F-score, recall); absolute ranks on the values'
+    magnitudes (a signed error such as the contact onset's), whose mean is then reported.
+    """
+    if absolute:
+        samples = {n: [None if v is None else abs(v) for v in vs] for n, vs in samples.items()}
+    sign = -1.0 if higher_is_better else 1.0
     names = [n for n, v in samples.items() if len(finite(v))]
     if not names:
         return []
@@ -47,8 +59,8 @@ def bootstrap_ranking(
         picks = rng.integers(0, len(values), size=(replicates, len(values)))
         means[:, j] = values[picks].mean(axis=1)
     point = np.array([finite(samples[n]).mean() for n in names])
-    order = np.argsort(point, kind='stable')
-    ranks_of = np.argsort(np.argsort(means, axis=1, kind='stable'), axis=1)  # rank per replicate
+    order = np.argsort(sign * point, kind='stable')
+    ranks_of = np.argsort(np.argsort(sign * means, axis=1, kind='stable'), axis=1)  # per replicate
     alpha = (1.0 - CONFIDENCE) / 2.0
     out = []
     for rank, j in enumerate(order, 1):

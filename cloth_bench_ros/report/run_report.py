@@ -4,6 +4,23 @@ from __future__ import annotations
 
 import math
 
+from cloth_bench_ros.core.metric_choice import METRICS
+
+# the metrics beside the paper's, in the order of docs/metrics.md: (name, column title, digits)
+SURFACE_COLUMNS = (
+    ('cd_reverse', 'CD rev', 4),
+    ('hd_reverse', 'HD rev', 4),
+    ('cd_surface', 'CD surf', 4),
+    ('hd_surface', 'HD surf', 4),
+    ('cd_two_sided', 'CD 2s', 4),
+    ('hd_two_sided', 'HD 2s', 4),
+    ('precision', 'P', 3),
+    ('recall', 'R', 3),
+    ('fscore', 'F', 3),
+    ('emd', 'EMD', 4),
+    ('contact_onset', 'onset s', 3),
+)
+
 
 def _fmt(value: float | None, digits: int = 4) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
@@ -29,6 +46,7 @@ def result_table(summary: dict, realtime: bool = False) -> str:
             f' {_fmt(ms["p99"], 3):>8} {_fmt(ms["max"], 3):>8}  {status}'
         )
     lines.append('CD/HD in m (one-sided, L1); L_s in m; step times in ms.')
+    lines.extend(surface_table(summary))
     for engine, m in summary['engines'].items() if realtime else ():
         lat = m.get('latency') or {}
         if lat.get('count'):  # targets on the wall clock: deadlines mean something
@@ -39,3 +57,39 @@ def result_table(summary: dict, realtime: bool = False) -> str:
                 ' (a newer one was waiting)'
             )
     return '\n'.join(lines)
+
+
+def surface_table(summary: dict) -> list[str]:
+    """Lines of the metrics beside the paper's per engine (none when they were not computed)."""
+    primitive = summary['run']['primitive']
+    engines = summary['engines']
+    if not any(METRICS['cd_reverse'].summary_key(primitive) in m for m in engines.values()):
+        return []
+    header = f'{"engine":<10}' + ''.join(f' {title:>8}' for _, title, _ in SURFACE_COLUMNS)
+    lines = ['', header, '-' * len(header)]
+    for engine, m in engines.items():
+        cells = ''.join(
+            f' {_fmt(METRICS[name].value(m, primitive), digits):>8}'
+            for name, _, digits in SURFACE_COLUMNS
+        )
+        lines.append(f'{engine:<10}{cells}')
+    lines.append(
+        "beside the paper's (docs/metrics.md): rev = real points -> simulated surface, surf ="
+        ' surface samples -> real points, 2s = two-sided; P/R/F at'
+        f' {_threshold(engines) * 100:g} cm; EMD on'
+        f' {_setting(engines, "ot_samples")} + {_setting(engines, "ot_samples")} points;'
+        ' onset = simulated - real contact time (s, dynamic; - when either never touches).'
+    )
+    return lines
+
+
+def _setting(engines: dict, key: str) -> object:
+    for m in engines.values():
+        if key in (m.get('surface_metrics') or {}):
+            return m['surface_metrics'][key]
+    return '-'
+
+
+def _threshold(engines: dict) -> float:
+    value = _setting(engines, 'fscore_threshold_m')
+    return float(value) if isinstance(value, (int, float)) else math.nan

@@ -6,6 +6,7 @@ from functools import partial
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.core.metric_choice import metric as metric_choice
 from cloth_bench_ros.report import figures
 from cloth_bench_ros.report.blocks import Block, figure_block, heading, paragraph, table_block
 from cloth_bench_ros.report.selections import engine_label, engines_of
@@ -75,7 +76,7 @@ def settings_section(
     return blocks
 
 
-def cross_reference_blocks(rows: Sequence[dict]) -> list[Block]:
+def cross_reference_blocks(rows: Sequence[dict], metric: str = 'cd') -> list[Block]:
     """Each engine against each synthetic reference (the reference's bias as numbers)."""
     from cloth_bench_ros.report.cross_reference import (
         cross_reference_section,
@@ -84,18 +85,19 @@ def cross_reference_blocks(rows: Sequence[dict]) -> list[Block]:
     )
     from cloth_bench_ros.report.ranking import ranking_table, REPLICATES
 
-    xref = cross_reference_section(rows)
+    xref = cross_reference_section(rows, metric)
     if xref is None:
         return []
     blocks = [heading(2, xref[0]), paragraph(xref[1]), table_block(xref[2])]
-    rankings = identified_rankings(rows)
+    rankings = identified_rankings(rows, metric)
     if rankings:
         blocks += [
             heading(3, 'Ranking of the identified engines, with bootstrap intervals'),
             paragraph(
                 'Each engine with the parameters identified against the reference it is scored'
                 ' on, over held-out seeds (the identification ran on seed 0). 95 % interval of'
-                f' the mean CD from {REPLICATES} bootstrap replicates of the seeds; P(rank): the'
+                f' the mean {metric_choice(metric).label} from {REPLICATES} bootstrap replicates'
+                ' of the seeds; P(rank): the'
                 ' share of replicates in which the engine holds its rank. '
                 + ' '.join(s[0].upper() + s[1:] + '.' for s in ranking_statements(rankings))
             ),

@@ -1,4 +1,4 @@
-"""The report's tables: the paper's Table II layout, Fig. 5's numbers, timing, stability."""
+"""The report's tables: the paper's Table III layout, Fig. 5's numbers, timing, stability."""
 
 from __future__ import annotations
 
@@ -21,9 +21,9 @@ from cloth_bench_ros.report.selections import (
 from cloth_bench_ros.studies.aggregate import finite, group, stat
 import numpy as np
 
-# docs/benchmark.md section 6, Table II: (mean, std, bold in the paper) per cloth, metric and
+# docs/benchmark.md section 6, Table III: (mean, std, bold in the paper) per cloth, metric and
 # engine.
-PAPER_TABLE2: dict[tuple[str, str], dict[str, tuple[float, float, bool]]] = {
+PAPER_TABLE3: dict[tuple[str, str], dict[str, tuple[float, float, bool]]] = {
     ('towel', 'CD_d'): {
         'mujoco': (0.079, 0.031, False),
         'bullet': (0.155, 0.093, False),
@@ -106,8 +106,8 @@ PAPER_FIG5 = (
 )
 
 
-def table2(rows: Sequence[dict], rate: float) -> Table:
-    """Return the paper's Table II layout: cloth x metric rows; ours, then the paper's."""
+def table3(rows: Sequence[dict], rate: float) -> Table:
+    """Return the paper's Table III layout: cloth x metric rows; ours, then the paper's."""
     sel = [r for r in rows if float(r['rate_hz']) == rate]
     engines = engines_of(sel)
     headers = (
@@ -134,14 +134,14 @@ def table2(rows: Sequence[dict], rate: float) -> Table:
                 )
             paper = []
             for e in PAPER_ENGINES:
-                v = PAPER_TABLE2.get((cloth, metric), {}).get(e)
+                v = PAPER_TABLE3.get((cloth, metric), {}).get(e)
                 paper.append(
                     '-'
                     if v is None
                     else (f'**{v[0]:.3f} ± {v[1]:.3f}**' if v[2] else f'{v[0]:.3f} ± {v[1]:.3f}')
                 )
             out.append([cloth, metric] + ours + paper)
-    return Table('table2', headers, out, 'll' + 'r' * (len(headers) - 2))
+    return Table('table3', headers, out, 'll' + 'r' * (len(headers) - 2))
 
 
 def fig5_table(rows: Sequence[dict], cloth: str, name: str = 'fig5') -> Table:

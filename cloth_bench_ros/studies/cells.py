@@ -4,7 +4,7 @@ The cells of a study: one run each (engine, rate, cloth, task, bag, seed, config
 Two kinds of sweep build cells:
 
 - paper (`cloth-bench sweep`): engines x rates x cloths x tasks x trials x seeds with the
-  engines' presets, the layout of the paper's Table II and Fig. 5;
+  engines' presets, the layout of the paper's Table III and Fig. 5;
 - settings (`cloth-bench sweep --mode settings`): per engine, a factorial sweep over the settings
   that cost time (mesh resolution, self-collision, internal time step, solver iterations) at one
   rate, to find the cheapest configuration within a tolerance of the most accurate one.

@@ -43,6 +43,18 @@ NAME_FIELDS = ('mode', 'engine', 'cloth', 'primitive', 'pacing')
 NUMERIC_FIELDS = (
     'CD',
     'HD',
+    # the metrics beside the paper's (core/metric_choice.py keys)
+    'CD_reverse',
+    'HD_reverse',
+    'CD_surface',
+    'HD_surface',
+    'CD_two_sided',
+    'HD_two_sided',
+    'precision',
+    'recall',
+    'F',
+    'EMD',
+    'contact_onset_error_s',
     'L_s',
     'step_time_mean',
     'step_time_p50',

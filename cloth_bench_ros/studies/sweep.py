@@ -23,6 +23,7 @@ import time
 import traceback
 from typing import Sequence
 
+from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.engines.presets import PresetSet
 
 # re-exported: the studies' one vocabulary
@@ -76,7 +77,13 @@ def summary_row(cell: Cell, summary: dict) -> dict:
     suffix = 'd' if cell.primitive == 'dynamic' else 'q'
     trial = summary['run'].get('trial') or {}
     st, lat = m['step_time'], m['latency']
+    beside = {  # the metrics beside the paper's, under their task-free keys (core/metric_choice)
+        x.key: _nan(m.get(x.summary_key(cell.primitive)))
+        for x in METRICS.values()
+        if x.summary_key(cell.primitive) in m
+    }
     return {
+        **beside,
         'CD': _nan(m.get(f'CD_{suffix}')),
         'HD': _nan(m.get(f'HD_{suffix}')),
         'task_suffix': suffix,
