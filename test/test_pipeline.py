@@ -40,7 +40,10 @@ def test_report_files_match_the_summary(two_runs):
         summary['engines']['mujoco']['CD_d']
     )
     rows = (out / 'run0' / 'frames.csv').read_text().splitlines()
-    assert rows[0] == 'engine,frame,t,cd,hd,in_window,diverged' and len(rows) == 133
+    assert rows[0] == (
+        'engine,frame,t,cd,hd,in_window,diverged,cd_reverse,hd_reverse,cd_surface,hd_surface,'
+        'cd_two_sided,hd_two_sided,precision,recall,fscore,emd,real_contact,sim_contact'
+    ) and len(rows) == 133
     cds = np.array([float(r.split(',')[3]) for r in rows[1:100]])
     assert np.mean(cds) == pytest.approx(summary['engines']['mujoco']['CD_d'], rel=1e-12)
 
