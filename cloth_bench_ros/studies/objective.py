@@ -5,7 +5,9 @@ A trial drives the engine directly along the primitive's targets (settle phase i
 scores it with the evaluator's core (core.evaluation.OnlineEvaluator: the same pairing and the
 same CD/HD as `cloth-bench run`), stopping after the last real frame the objective uses (the
 change of phase of a dynamic trial; `max_frames` cuts it shorter). A worker decodes a bag's
-clouds once and keeps them, with their k-d trees, for every later trial on that bag.
+clouds once and keeps them, with their k-d trees, for every later trial on that bag. The evaluator
+core is given no mesh faces here, so a trial computes the paper's CD/HD (its objective) and none
+of the metrics beside them (docs/metrics.md), which would cost it tens of milliseconds per frame.
 """
 
 from __future__ import annotations
