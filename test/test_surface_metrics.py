@@ -173,3 +173,11 @@ def test_the_metric_choice_is_validated_and_orders_best_first():
     assert ordered[:2] == [0.9, 0.2] and math.isnan(ordered[2])
     assert sorted([-0.3, None, 0.1], key=onset.sort_key) == [0.1, -0.3, None]  # by magnitude
     assert math.isnan(onset.value({'contact_onset_error_s': None}, 'dynamic'))
+
+
+def test_states_of_another_grid_are_not_scored_on_the_wrong_triangles():
+    core = OnlineEvaluator(['e'], Primitive.DYNAMIC, 0, 6, faces=grid_faces(4, 6))  # 24 vertices
+    summary = _falling(core, 5, 8)  # the states have 5 x 6 = 30 vertices
+    assert math.isnan(summary['CD_reverse_d']) and math.isfinite(summary['CD_d'])
+    assert '30 vertices, the faces given 24' in summary['surface_metrics']['not_computed']
+    assert summary['contact_onset_error_s'] is None

@@ -78,6 +78,7 @@ class _EngineState:
     diverged_reason: str = ''
     skipped_targets: int = 0  # targets the simulator never stepped (a newer one was waiting)
     contact: list = field(default_factory=list)  # (t, touching) at every scored real frame
+    mesh_mismatch: int = 0  # vertices of a state that does not fit the faces (0: none)
 
 
 class OnlineEvaluator:
@@ -114,6 +115,7 @@ class OnlineEvaluator:
         self.pairs: list[tuple[FrameScore, np.ndarray, np.ndarray]] = []
         # the mesh's triangles: the surface metrics and contact onset are computed with them
         self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
+        self.mesh_vertices = 0 if self.faces is None else int(self.faces.max()) + 1
         self.contact_rule = self.faces is not None and self.primitive is Primitive.DYNAMIC
         self.real_contact: list[tuple[float, bool]] = []
 
@@ -218,7 +220,9 @@ class OnlineEvaluator:
                 diverged = True
             else:
                 cd, hd = cloud.chamfer_hausdorff(vertices)
-                if self.faces is not None and len(vertices) > int(self.faces.max()):
+                if self.faces is not None and len(vertices) != self.mesh_vertices:
+                    e.mesh_mismatch = len(vertices)  # another grid than the faces': not scored
+                elif self.faces is not None:
                     samples = surface_samples(vertices, self.faces)
                     surface = surface_scores(cloud, vertices, self.faces, samples=samples)
                     sim_touch = in_contact(samples) if self.contact_rule else None
@@ -292,8 +296,16 @@ class OnlineEvaluator:
                         math.nan if diverged_in_window or not values else float(np.mean(values))
                     )
                 out[name]['surface_metrics'] = surface_settings()
+                if e.mesh_mismatch:
+                    out[name]['surface_metrics']['not_computed'] = (
+                        f'the states have {e.mesh_mismatch} vertices, the faces given'
+                        f' {self.mesh_vertices}: the surface metrics need the simulators grid'
+                        ' (evaluator parameters grid_nx, grid_nz)'
+                    )
             if self.contact_rule:
                 onset = contact_onset(self.real_contact, e.contact)
+                if e.mesh_mismatch:
+                    onset.update(sim_s=None, error_s=None, reason='not computed: another grid')
                 out[name]['contact_onset'] = onset
                 out[name]['contact_onset_error_s'] = onset['error_s']
         return out
