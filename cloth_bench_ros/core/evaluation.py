@@ -295,9 +295,10 @@ class OnlineEvaluator:
                     out[name][METRICS[f].summary_key(self.primitive.value)] = (
                         math.nan if diverged_in_window or not values else float(np.mean(values))
                     )
-                out[name]['surface_metrics'] = surface_settings()
+                settings: dict[str, object] = dict(surface_settings())
+                out[name]['surface_metrics'] = settings
                 if e.mesh_mismatch:
-                    out[name]['surface_metrics']['not_computed'] = (
+                    settings['not_computed'] = (
                         f'the states have {e.mesh_mismatch} vertices, the faces given'
                         f' {self.mesh_vertices}: the surface metrics need the simulators grid'
                         ' (evaluator parameters grid_nx, grid_nz)'
