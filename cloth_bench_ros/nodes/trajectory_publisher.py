@@ -10,6 +10,7 @@ from typing import Any
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.hil_timing import TargetTimeline
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     all_subscriptions_matched,
     NAMESPACE,
@@ -74,7 +75,7 @@ class TrajectoryPublisher(Node):
             p['wait_for_evaluator'],
         )
         if self.pacing not in PACINGS:
-            raise ValueError(f'unknown pacing {self.pacing!r} (valid: {", ".join(PACINGS)})')
+            raise InputError(f'unknown pacing {self.pacing!r} (valid: {", ".join(PACINGS)})')
         self.timing_log = self.declare_parameter('timing_log', '').value
         duration = declare_float(self, 'duration', 0.0)
         self.targets = full_targets(primitive, rate_hz)

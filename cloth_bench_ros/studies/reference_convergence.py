@@ -37,6 +37,7 @@ from typing import Any, Callable
 from cloth_bench_ros.core.metrics import chamfer_l1, RealCloud
 from cloth_bench_ros.data.synth import reference_config, simulate_reference, SynthConfig
 from cloth_bench_ros.engines.mujoco_cloth import mesh_consistent_timeconst
+from cloth_bench_ros.errors import InputError
 import numpy as np
 
 TOLERANCE_M = 0.002  # mean trajectory change between successive refinements
@@ -101,7 +102,7 @@ def refined(config: SynthConfig, axis: str, level: int) -> SynthConfig:
                 float(params['edge_timeconst']), ratio
             )
         return replace(config, grid=grid, params=params)
-    raise ValueError(f'unknown axis {axis!r} (valid: {", ".join(AXES)})')
+    raise InputError(f'unknown axis {axis!r} (valid: {", ".join(AXES)})')
 
 
 def grid_rate_level(config: SynthConfig, levels: int) -> int:

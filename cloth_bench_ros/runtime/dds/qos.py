@@ -16,6 +16,7 @@ import os
 from typing import Mapping
 
 from cloth_bench_ros.data.messages import type_hash
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.runtime.qos import (
     DurabilityPolicy,
     HistoryPolicy,
@@ -84,7 +85,7 @@ def domain_id(environ: Mapping[str, str] = os.environ) -> int:
     if not text:
         return 0
     if not text.isdigit() or int(text) > 232:
-        raise ValueError(f'ROS_DOMAIN_ID: expected an integer from 0 to 232, got {text!r}')
+        raise InputError(f'ROS_DOMAIN_ID: expected an integer from 0 to 232, got {text!r}')
     return int(text)
 
 
@@ -94,7 +95,7 @@ def discovery_range(environ: Mapping[str, str] = os.environ) -> str:
         return 'LOCALHOST'
     text = environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '').strip().upper()
     if text and text not in ('SUBNET', 'LOCALHOST', 'OFF', 'SYSTEM_DEFAULT'):
-        raise ValueError(f'ROS_AUTOMATIC_DISCOVERY_RANGE: unknown value {text!r}')
+        raise InputError(f'ROS_AUTOMATIC_DISCOVERY_RANGE: unknown value {text!r}')
     return text or 'SUBNET'
 
 
