@@ -72,7 +72,7 @@ def scheduler(text: str) -> str:
 
     try:
         return check_scheduler_address(text)
-    except ValueError as exc:
+    except ClothBenchError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
@@ -157,7 +157,7 @@ def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) 
             )
         try:
             engine_class(engine).validate_params(params)
-        except ValueError as exc:
+        except ClothBenchError as exc:
             raise UserError(f'--set {engine}: {exc}') from None
     return overrides
 

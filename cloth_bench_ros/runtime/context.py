@@ -7,7 +7,7 @@ from typing import Any
 
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.runtime.arguments import parse_ros_args, RosArguments
-from cloth_bench_ros.runtime.parameters import RCLError
+from cloth_bench_ros.runtime.parameter_errors import RCLError
 from cloth_bench_ros.runtime.qos import HistoryPolicy
 from cloth_bench_ros.runtime.rosout import PROCESS_LOG_LEVELS
 from cloth_bench_ros.runtime.transport import IntraProcessTransport, transport_choice, TRANSPORTS
