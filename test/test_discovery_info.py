@@ -12,9 +12,9 @@ import time
 
 from cloth_bench_ros.runtime import embedded as rclpy
 from cloth_bench_ros.runtime.dds.discovery_info import parse_participant_entities
+from cloth_bench_ros.runtime.dds.domain import domain_id
 from cloth_bench_ros.runtime.dds.graph import DISCOVERY_TOPIC
 from cloth_bench_ros.runtime.dds.idl import ParticipantEntitiesInfo_, String_
-from cloth_bench_ros.runtime.dds.qos import domain_id
 from cloth_bench_ros.runtime.dds.transport import padded
 from cyclonedds._clayer import ddspy_write
 from cyclonedds.domain import DomainParticipant

@@ -20,6 +20,7 @@ from cloth_bench_ros.nodes.common import (
     publishers_matched,
     run_node,
 )
+from cloth_bench_ros.nodes.message_pool import MessagePool
 from cloth_bench_ros.runtime import (
     Clock,
     declare_float,
@@ -33,7 +34,6 @@ from cloth_bench_ros.runtime import (
     steady_clock,
     Time,
 )
-from cloth_bench_ros.runtime.message_pool import MessagePool
 import numpy as np
 
 PACINGS = ('lockstep', 'realtime')

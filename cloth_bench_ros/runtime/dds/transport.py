@@ -17,9 +17,10 @@ import uuid
 
 from cloth_bench_ros.data import messages as cdr
 from cloth_bench_ros.runtime.dds.cyclone_private import delete_entity, take_cdr, write_cdr
+from cloth_bench_ros.runtime.dds.domain import domain_config, domain_id
 from cloth_bench_ros.runtime.dds.graph import Graph
 from cloth_bench_ros.runtime.dds.idl import dds_type
-from cloth_bench_ros.runtime.dds.qos import domain_config, domain_id, endpoint_qos
+from cloth_bench_ros.runtime.dds.qos import endpoint_qos
 from cloth_bench_ros.runtime.dds.services import DdsServices
 from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 from cloth_bench_ros.runtime.transport import Endpoint
