@@ -78,8 +78,8 @@ def test_topic_names_expand_and_remap_as_rcl_does():
     assert remap_node_name(rules, 'sim') == 'simulator'
 
 
-def test_an_unknown_substitution_is_an_invalid_topic_name():
-    with pytest.raises(InvalidTopicNameException, match='unknown substitution'):
+def test_an_unknown_substitution_is_a_value_error_as_in_rclpy():
+    with pytest.raises(ValueError, match='unknown substitution'):
         expand_topic_name('/a/{robot}', 'sim', '/ns')
 
 

@@ -146,9 +146,8 @@ def expand_topic_name(name: str, node_name: str, namespace: str) -> str:
             return node_name
         if key in ('ns', 'namespace'):
             return base
-        raise InvalidTopicNameException(
-            name, f'has an unknown substitution {{{key}}}', match.start()
-        )
+        # rclpy raises a ValueError here too (test/conformance_cases.py: topic name '{bad}')
+        raise ValueError(f"topic name '{name}' is invalid: unknown substitution: {{{key}}}")
 
     name = re.sub(r'\{([^{}]*)\}', substitute, name)
     return name if name.startswith('/') else f'{base}/{name}'
