@@ -10,7 +10,7 @@ through rosbags (data/bag_storage.py). Payloads are CDR.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable, Iterator
 from dataclasses import dataclass
 import os
 from pathlib import Path
@@ -53,9 +53,9 @@ class CloudStats:
 
 def _stamp_from_cdr(cdr: bytes) -> int:
     """Header stamp at the start of a CDR payload whose first field is std_msgs/Header."""
-    order = 'little' if cdr[1] & 1 else 'big'
-    sec = int.from_bytes(cdr[4:8], order, signed=True)
-    nsec = int.from_bytes(cdr[8:12], order)
+    little = bool(cdr[1] & 1)
+    sec = int.from_bytes(cdr[4:8], 'little' if little else 'big', signed=True)
+    nsec = int.from_bytes(cdr[8:12], 'little' if little else 'big')
     return sec * 1_000_000_000 + nsec
 
 
@@ -244,7 +244,7 @@ class BagReader:
 
     def raw_messages(
         self, topics: Iterable[str] | str | None = None
-    ) -> Iterator[tuple[str, str, int, bytes]]:
+    ) -> Generator[tuple[str, str, int, bytes], None, None]:
         """(topic, msgtype, stamp_ns, cdr) in record order; stamp = header stamp, else log time."""
         for topic, msgtype, stamp, data in self.logged_messages(topics):
             try:
