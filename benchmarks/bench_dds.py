@@ -86,7 +86,8 @@ def round_trips(kind: str, msg: object, count: int, env: dict[str, str]) -> np.n
 def baseline_echo(kind: str) -> None:
     """Child of the baseline: Cyclone's own typed reader and writer (element-by-element CDR)."""
     from cloth_bench_ros.runtime.dds.idl import dds_type
-    from cloth_bench_ros.runtime.dds.qos import domain_id, endpoint_qos
+    from cloth_bench_ros.runtime.dds.domain import domain_id
+    from cloth_bench_ros.runtime.dds.qos import endpoint_qos
     from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
     from cyclonedds.domain import DomainParticipant
     from cyclonedds.pub import DataWriter
@@ -110,7 +111,8 @@ def baseline_round_trips(kind: str, msg: object, count: int, env: dict[str, str]
     """Return the same round trip with typed samples serialised by Cyclone's Python binding."""
     from cloth_bench_ros.data import messages as cdr
     from cloth_bench_ros.runtime.dds.idl import dds_type
-    from cloth_bench_ros.runtime.dds.qos import domain_id, endpoint_qos
+    from cloth_bench_ros.runtime.dds.domain import domain_id
+    from cloth_bench_ros.runtime.dds.qos import endpoint_qos
     from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
     from cyclonedds.domain import DomainParticipant
     from cyclonedds.pub import DataWriter

@@ -19,7 +19,7 @@ import stat
 import tempfile
 from typing import Any
 
-from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.errors import ClothBenchError, one_line, path_error
 import yaml
 
 MAX_TEXT_BYTES = 16 * 1024 * 1024
@@ -70,8 +70,7 @@ def load_yaml_bounded(text: str, source: str) -> Any:
         loader = _BoundedLoader(text)  # the reader refuses non-printable characters here already
         return loader.get_single_data()
     except yaml.YAMLError as exc:
-        reason = ' '.join(str(exc).split())
-        raise UnsafeInputError(f'{source}: not valid YAML ({reason})') from None
+        raise UnsafeInputError(f'{source}: not valid YAML ({one_line(exc)})') from None
     finally:
         if loader is not None:
             loader.dispose()
@@ -83,13 +82,20 @@ def load_yaml_file(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> Any:
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write beside `path`, flush, then rename over it: readers see the old or the new file."""
+    """
+    Write beside `path`, flush, then rename over it: readers see the old or the new file.
+
+    An OSError (a directory that cannot be written, a full disk) is a PathError naming `path`.
+    """
     path = Path(path)
     try:
         mode = stat.S_IMODE(os.stat(path).st_mode)
     except OSError:
         mode = 0o644  # mkstemp's 0600 would hide results and bags from other users
-    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+    except OSError as exc:
+        raise path_error(path, 'write', exc) from None
     try:
         os.fchmod(fd, mode)
         with os.fdopen(fd, 'wb') as f:
@@ -97,8 +103,10 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise path_error(path, 'write', exc) from None
         raise
 
 

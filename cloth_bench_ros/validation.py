@@ -19,7 +19,7 @@ from pathlib import Path
 import re
 from typing import Any
 
-from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.safe_io import load_yaml_bounded, UnsafeInputError
 
 MIN_RATE_HZ = 1.0  # below this a trajectory has too few steps to score
@@ -30,10 +30,6 @@ MAX_SEED = 2**63 - 1  # a ROS 2 integer parameter is int64
 MAX_FRAME = 10**7  # 90 hours at 30 fps
 MAX_ENGINE_PARAMS_BYTES = 64 * 1024  # the engine_params YAML string of a node
 MAX_TIME_OFFSET_S = 1e6  # s; keeps stamps well inside int64 nanoseconds
-
-
-class InputError(ClothBenchError, ValueError):
-    """A user-facing value that is refused; str() is one line naming the input and the problem."""
 
 
 def _is_number(value: object) -> bool:

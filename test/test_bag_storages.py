@@ -11,10 +11,15 @@ Each is lossless, so each must give the same CD/HD digits and frame counts as th
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
+import shutil
+import subprocess
+import tempfile
 
 from cloth_bench_ros import cli
 from cloth_bench_ros.data import BagError, BagReader
+from cloth_bench_ros.data.bag_storage import decompressed_dirs, DECOMPRESSED_PREFIX
 from cloth_bench_ros.paths import bundled_bag
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -334,3 +339,48 @@ def test_a_file_compressed_bag_is_decompressed_once_per_reader(tmp_path, monkeyp
     assert [s for s, _ in reader.clouds()] == passes[0] and len(
         opened
     ) == 2  # reopened after close
+
+
+def _open_fds() -> dict[int, str]:
+    """Return this process's open file descriptors and what each points to."""
+    out = {}
+    for fd in Path('/proc/self/fd').iterdir():
+        try:
+            out[int(fd.name)] = os.readlink(fd)
+        except OSError:  # the descriptor of the listing itself, closed already
+            continue
+    return out
+
+
+@pytest.mark.parametrize(
+    'storage, compression', [('sqlite3', None), ('sqlite3', 'file'), ('mcap', 'file')]
+)
+def test_a_run_leaves_no_file_open_and_no_decompressed_copy(
+    storage, compression, original, tmp_path
+):
+    # `original` ran once already: what a first run opens for good (imports, engines) is open.
+    bag = write_with_rosbags(tmp_path / 'bag', storage, compression)
+    before, copies = _open_fds(), set(decompressed_dirs(os.getpid()))  # other tests' readers
+    _score(bag, tmp_path)
+    left = {fd: target for fd, target in _open_fds().items() if fd not in before}
+    assert not left, f'file descriptors left open by the run: {left}'
+    assert set(decompressed_dirs(os.getpid())) <= copies, 'a decompressed copy stayed on disk'
+
+
+def test_a_decompressed_copy_left_by_a_killed_process_is_removed_on_the_next_open(tmp_path):
+    dead = subprocess.Popen(['true'])  # its pid is free once it has been waited for
+    dead.wait()
+    orphan = Path(tempfile.mkdtemp(prefix=f'{DECOMPRESSED_PREFIX}{dead.pid}-'))
+    (orphan / 'copy.db3').write_bytes(b'decompressed')
+    mine = Path(tempfile.mkdtemp(prefix=f'{DECOMPRESSED_PREFIX}{os.getpid()}-'))
+    try:
+        bag = write_with_rosbags(tmp_path / 'file', 'sqlite3', 'file')
+        copies = set(decompressed_dirs(os.getpid()))
+        with BagReader(bag) as reader:
+            assert reader.trial is not None
+            assert len(set(decompressed_dirs(os.getpid())) - copies) == 1  # the reader's own
+        assert set(decompressed_dirs(os.getpid())) == copies  # removed at close
+        assert not orphan.exists() and mine.exists()  # a live process's copy stays
+    finally:
+        shutil.rmtree(orphan, ignore_errors=True)
+        shutil.rmtree(mine, ignore_errors=True)

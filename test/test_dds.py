@@ -16,7 +16,7 @@ from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32, read_xyz
 from cloth_bench_ros.runtime import embedded as rclpy
 from cloth_bench_ros.runtime import messages as M
 from cloth_bench_ros.runtime.dds import loopback_environment
-from cloth_bench_ros.runtime.dds.qos import domain_config
+from cloth_bench_ros.runtime.dds.domain import domain_config
 from cloth_bench_ros.runtime.dds.transport import dds_topic_name
 import numpy as np
 import pytest

@@ -12,9 +12,9 @@ import time
 
 from cloth_bench_ros.runtime import embedded as rclpy
 from cloth_bench_ros.runtime.dds.discovery_info import parse_participant_entities
+from cloth_bench_ros.runtime.dds.domain import domain_id
 from cloth_bench_ros.runtime.dds.graph import DISCOVERY_TOPIC
-from cloth_bench_ros.runtime.dds.idl import ParticipantEntitiesInfo_, String_
-from cloth_bench_ros.runtime.dds.qos import domain_id
+from cloth_bench_ros.runtime.dds.idl import dds_type, ParticipantEntitiesInfo_
 from cloth_bench_ros.runtime.dds.transport import padded
 from cyclonedds._clayer import ddspy_write
 from cyclonedds.domain import DomainParticipant
@@ -83,7 +83,7 @@ def test_an_embedded_node_sees_the_name_of_a_humble_node_over_dds():
     try:
         observer = rclpy.create_node('observer', context=context)
         humble = DomainParticipant(domain_id())
-        chatter = DataWriter(humble, Topic(humble, 'rt/chatter', String_))
+        chatter = DataWriter(humble, Topic(humble, 'rt/chatter', dds_type('std_msgs/msg/String')))
         reliable = Qos(
             Policy.Reliability.Reliable(0), Policy.Durability.TransientLocal,
             Policy.History.KeepLast(1),

@@ -16,7 +16,7 @@ import sys
 import types
 
 from cloth_bench_ros.runtime import embedded as rclpy
-from cloth_bench_ros.runtime.parameters import load_params_file, PARAMS_KEY
+from cloth_bench_ros.runtime.params_file import load_params_file, PARAMS_KEY
 import pytest
 import yaml
 

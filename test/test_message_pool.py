@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+from cloth_bench_ros.nodes.message_pool import MessagePool
 from cloth_bench_ros.nodes.simulator import StateMessages
 from cloth_bench_ros.runtime import EMBEDDED, Node, PointCloud2, rclpy, SingleThreadedExecutor
-from cloth_bench_ros.runtime.message_pool import MessagePool
 import numpy as np
 import pytest
 

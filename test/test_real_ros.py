@@ -364,12 +364,11 @@ def test_a_real_rclpy_node_reads_the_embedded_nodes_rosout_and_parameter_events(
 
 def test_the_service_types_hash_as_the_installed_rcl_interfaces_says():
     """The RIHS01 hashes the service endpoints announce equal those of the installed .json."""
-    from cloth_bench_ros.data.messages import type_hash
-    from cloth_bench_ros.runtime import services  # noqa: F401 (registers the srv types)
+    from cloth_bench_ros.data.messages import SERVICE_DEFINITIONS, type_hash
 
     share = ROS_PYTHON.parent.parent / 'share' / 'rcl_interfaces' / 'srv'
     compared = 0
-    for srv in services.SERVICE_DEFINITIONS:
+    for srv in SERVICE_DEFINITIONS:
         name = srv.rsplit('/', 1)[1]
         hashes = json.loads((share / f'{name}.json').read_text())['type_hashes']
         installed = {h['type_name']: h['hash_string'] for h in hashes}

@@ -31,7 +31,7 @@ from cloth_bench_ros.runtime.embedded import (
     UnknownROSArgsError,
 )
 from cloth_bench_ros.runtime.messages import Clock, PoseArray, String
-from cloth_bench_ros.runtime.parameters import load_params_file, ParamsFileError, rcl_scalar
+from cloth_bench_ros.runtime.params_file import load_params_file, ParamsFileError, rcl_scalar
 import pytest
 
 

@@ -10,7 +10,7 @@ import warnings
 
 from cloth_bench_ros.cli import data, hil, identify, run, studies
 from cloth_bench_ros.cli.common import Parser, UserError
-from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.errors import is_user_error, one_line
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 __all__ = ['UserError', 'build_parser', 'main']
@@ -39,32 +39,21 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # `cloth-bench ... | head`: the reader left, nothing to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except (
-        ClothBenchError,
-        ValueError,
-        OSError,
-    ) as exc:  # ValueError, OSError: raised plain for bad input too
-        print(f'cloth-bench: error: {_one_line(exc)}', file=sys.stderr)
-        return 2
     except StudyInterrupted as exc:
         print(f'cloth-bench: {exc}', file=sys.stderr)
         return 130
     except KeyboardInterrupt:
         print('cloth-bench: interrupted', file=sys.stderr)
         return 130
-    except (
-        Exception
-    ) as exc:  # noqa: BLE001 - a bug: one line (the traceback with --verbose), status 1
+    except Exception as exc:  # noqa: BLE001 - sorted below: bad input (2) or a bug (1)
+        if is_user_error(exc):
+            print(f'cloth-bench: error: {one_line(exc)}', file=sys.stderr)
+            return 2
         if args.verbose:
             raise
         print(
-            f'cloth-bench: internal error: {type(exc).__name__}: {_one_line(exc)} '
-            '(a bug; --verbose shows the traceback)',
+            f'cloth-bench: internal error (a bug): {one_line(exc, with_type=True)} '
+            '(--verbose shows the traceback)',
             file=sys.stderr,
         )
         return 1
-
-
-def _one_line(exc: BaseException) -> str:
-    """str(exc) on one line (an OSError without a file name still says what failed)."""
-    return ' '.join(str(exc).split()) or type(exc).__name__

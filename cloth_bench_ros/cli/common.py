@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
+from contextlib import closing
 from pathlib import Path
 from typing import Any
 
@@ -71,7 +72,7 @@ def scheduler(text: str) -> str:
 
     try:
         return check_scheduler_address(text)
-    except ValueError as exc:
+    except ClothBenchError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
@@ -132,29 +133,16 @@ def engine_override_option(
 
 def check_bag(bag: Path, topic: str | None = None) -> None:
     """Fail early, in one line naming the bag, unless the cloud topic's first frame decodes."""
-    from cloth_bench_ros.core.pointcloud2 import read_xyz
     from cloth_bench_ros.data import BagReader
-    from cloth_bench_ros.data.messages import deserialize
+    from cloth_bench_ros.data.bag_reader import decode_cloud
 
-    reader = BagReader(bag)
-    topic = reader.cloud_topic(topic)
-    first = next(reader.raw_messages([topic]), None)
-    if first is None:
-        raise UserError(f'bag {bag}: no PointCloud2 message on {topic} could be read')
-    try:
-        msg = deserialize(first[3], first[1])
-    except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
-        what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise UserError(
-            f'bag {bag}: frame 0 on {topic} (stamp {first[2] / 1e9:.3f} s) '
-            f'is not a valid PointCloud2 ({what})'
-        ) from None
-    try:
-        read_xyz(msg)
-    except ValueError as exc:
-        raise UserError(
-            f'bag {bag}: frame 0 on {topic} (stamp {first[2] / 1e9:.3f} s): {exc}'
-        ) from None
+    with BagReader(bag) as reader:
+        topic = reader.cloud_topic(topic)
+        with closing(reader.raw_messages([topic])) as frames:  # its file is closed here
+            first = next(frames, None)
+        if first is None:
+            raise UserError(f'bag {bag}: no PointCloud2 message on {topic} could be read')
+        decode_cloud(bag, topic, 0, first[2], first[3])
 
 
 def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) -> dict[str, dict]:
@@ -169,7 +157,7 @@ def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) 
             )
         try:
             engine_class(engine).validate_params(params)
-        except ValueError as exc:
+        except ClothBenchError as exc:
             raise UserError(f'--set {engine}: {exc}') from None
     return overrides
 

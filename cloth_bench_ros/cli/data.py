@@ -220,7 +220,8 @@ def cmd_bag_rewrite(args: argparse.Namespace) -> int:
     counts = rewrite_bag(Path(args.src), Path(args.dst), args.change_of_phase_frame)
     changed = ''
     if args.change_of_phase_frame is not None:
-        trial = BagReader(Path(args.dst)).trial
+        with BagReader(Path(args.dst)) as rewritten:
+            trial = rewritten.trial
         frame = trial.change_of_phase_frame if trial is not None else None
         changed = f'; change of phase set to frame {frame}'
     print(

@@ -152,7 +152,7 @@ def cmd_hil(args: argparse.Namespace) -> int:
     )
     try:
         layout = resolve_layout(args.layout, args.cpu, args.fifo, args.busy_wait)
-    except ValueError as exc:
+    except common.ClothBenchError as exc:
         raise UserError(str(exc)) from None
     print(layout.line())
     presets = common.preset_set(args)

@@ -208,7 +208,7 @@ def _checked_output(path: Path, option: str) -> Path:
 
     try:
         return check_output_dir(path)
-    except ValueError as exc:
+    except common.ClothBenchError as exc:
         raise UserError(f'{option} {exc}') from None
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import io
 import math
 
+from cloth_bench_ros.errors import InputError
 import numpy as np
 
 UNSET = -1  # a time not (yet) taken
@@ -76,12 +77,12 @@ class TargetTimeline:
         """Return a timeline written by `to_csv`; ValueError on another layout."""
         lines = text.splitlines()
         if not lines or lines[0].strip() != ','.join(TIMELINE_COLUMNS):
-            raise ValueError(f'timeline: header is not {",".join(TIMELINE_COLUMNS)}')
+            raise InputError(f'timeline: header is not {",".join(TIMELINE_COLUMNS)}')
         table = np.loadtxt(io.StringIO(text), dtype=np.int64, delimiter=',', skiprows=1, ndmin=2)
         if table.shape[1] != len(TIMELINE_COLUMNS) or not np.array_equal(
             table[:, 0], np.arange(len(table))
         ):
-            raise ValueError('timeline: rows are not k = 0, 1, 2, ... with five columns')
+            raise InputError('timeline: rows are not k = 0, 1, 2, ... with five columns')
         timeline = cls(table[:, 1])
         timeline.due[:], timeline.sent[:], timeline.received[:] = (
             table[:, 2],

@@ -15,6 +15,7 @@ import math
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core import scene
+from cloth_bench_ros.errors import InputError
 import numpy as np
 
 
@@ -31,7 +32,7 @@ def parse_primitive(name: str) -> Primitive:
     try:
         return Primitive(name)
     except ValueError:
-        raise ValueError(f'unknown primitive {name!r} (valid: {", ".join(PRIMITIVES)})') from None
+        raise InputError(f'unknown primitive {name!r} (valid: {", ".join(PRIMITIVES)})') from None
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,11 @@ def describe(path: str | os.PathLike[str], validate: bool = True) -> str:
     with warnings.catch_warnings():
         warnings.simplefilter('ignore', BagWarning)
         reader = BagReader(path)
+    with reader:
+        return _summary(reader, validate)
+
+
+def _summary(reader: BagReader, validate: bool) -> str:
     size = sum(f.stat().st_size for f in reader.files)
     start, end = reader.start_ns, reader.end_ns
     lines = [

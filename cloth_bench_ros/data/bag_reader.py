@@ -10,7 +10,7 @@ through rosbags (data/bag_storage.py). Payloads are CDR.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable, Iterator
 from dataclasses import dataclass
 import os
 from pathlib import Path
@@ -20,6 +20,7 @@ import warnings
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
 from cloth_bench_ros.data.bag_layout import locate
+from cloth_bench_ros.data.bag_mcap import mcap_records, open_mcap_file
 from cloth_bench_ros.data.bag_storage import RosbagsStorage
 from cloth_bench_ros.data.errors import BagError, BagWarning
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
@@ -31,14 +32,11 @@ from cloth_bench_ros.data.trial import (
     TRIAL_TOPIC,
     TrialInfo,
 )
-from mcap.reader import SeekingReader
-from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema
-from mcap.stream_reader import breakup_chunk, MAGIC_SIZE, StreamReader
+from cloth_bench_ros.errors import one_line
+from mcap.records import Message
 import numpy as np
 
 IRREGULAR_TOLERANCE = 0.25  # an interval off 1/fps by more than this fraction is irregular
-
-_MAGIC = b'\x89MCAP0\r\n'
 
 
 @dataclass
@@ -53,33 +51,32 @@ class CloudStats:
     irregular_intervals: int = 0  # stamp steps off 1/fps by more than IRREGULAR_TOLERANCE
 
 
-# --------------------------------------------------------------------------------------- reading
-
-
-@dataclass
-class _McapFile:
-    path: Path
-    complete: bool  # footer and summary readable
-    topics: dict[str, str]
-    counts: dict[str, int]
-    metadata: dict[str, dict[str, str]]
-    start_ns: int | None
-    end_ns: int | None
-    compression: str
-    damage: str | None = None  # where a truncated file stops
-
-
 def _stamp_from_cdr(cdr: bytes) -> int:
     """Header stamp at the start of a CDR payload whose first field is std_msgs/Header."""
-    order = '<' if cdr[1] & 1 else '>'
-    sec = int.from_bytes(cdr[4:8], 'little' if order == '<' else 'big', signed=True)
-    nsec = int.from_bytes(cdr[8:12], 'little' if order == '<' else 'big')
+    little = bool(cdr[1] & 1)
+    sec = int.from_bytes(cdr[4:8], 'little' if little else 'big', signed=True)
+    nsec = int.from_bytes(cdr[8:12], 'little' if little else 'big')
     return sec * 1_000_000_000 + nsec
 
 
-def _schema_name(schemas: dict[int, Schema], channel: Channel) -> str:
-    schema = schemas.get(channel.schema_id)
-    return schema.name if schema is not None else ''
+def decode_cloud(
+    bag: str | os.PathLike[str], topic: str, index: int, stamp_ns: int, cdr: bytes
+) -> tuple[np.ndarray, str]:
+    """
+    Return the x, y, z points (NaN kept) and frame_id of frame `index` of a bag's cloud topic.
+
+    The one PointCloud2 decode of a bag's frames: a frame that does not decode is a BagError
+    naming the bag, the frame, the topic and its stamp.
+    """
+    where = f'bag {os.fspath(bag)}: frame {index} on {topic} (stamp {stamp_ns / 1e9:.3f} s)'
+    try:
+        msg = messages.deserialize(cdr, POINTCLOUD2)
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
+        raise BagError(f'{where} is not a valid PointCloud2 ({one_line(exc)})') from None
+    try:
+        return pointcloud2.read_xyz(msg), msg.header.frame_id
+    except pointcloud2.PointCloudError as exc:
+        raise BagError(f'{where}: {exc}') from None
 
 
 class BagReader:
@@ -104,7 +101,7 @@ class BagReader:
             self._rosbags = RosbagsStorage.open(
                 self.path, layout.rosbags_storage, layout.rosbags_sources
             )
-        self._files = [self._open_file(p) for p in layout.mcap_files]
+        self._files = [open_mcap_file(p, self._warn) for p in layout.mcap_files]
         self.topics: dict[str, str] = {}
         self.message_counts: dict[str, int] = {}
         if self._rosbags is not None:
@@ -120,143 +117,9 @@ class BagReader:
                     self.message_counts[topic] = self.message_counts.get(topic, 0) + n
         self._trial: TrialInfo | None | bool = False  # False: not looked up yet
 
-    # -- opening
-
     def _warn(self, text: str) -> None:
         self.warnings.append(text)
         warnings.warn(text, BagWarning, stacklevel=3)
-
-    def _open_file(self, path: Path) -> _McapFile:
-        try:
-            with path.open('rb') as f:
-                head = f.read(MAGIC_SIZE)
-                f.seek(0, os.SEEK_END)
-                size = f.tell()
-                if head != _MAGIC:
-                    raise BagError(f'bag {path} is not an MCAP file (no MCAP magic at the start)')
-                try:
-                    f.seek(size - MAGIC_SIZE)
-                    if f.read(MAGIC_SIZE) != _MAGIC:
-                        raise ValueError('no closing magic')
-                    f.seek(0)
-                    summary = SeekingReader(f).get_summary()
-                    complete = True
-                except Exception:  # noqa: BLE001 - any failure here means no usable summary
-                    summary, complete = None, False
-                metadata: dict[str, dict[str, str]] = {}
-                if complete:
-                    f.seek(0)
-                    try:
-                        for rec in SeekingReader(f).iter_metadata():
-                            metadata[rec.name] = dict(rec.metadata)
-                    except Exception as exc:  # noqa: BLE001
-                        raise BagError(f'bag {path} is corrupt (metadata: {exc})') from None
-        except OSError as exc:
-            raise BagError(f'bag {path} cannot be read ({exc.strerror or exc})') from None
-        if summary is not None and summary.channels:
-            stats = summary.statistics
-            topics = {
-                ch.topic: _schema_name(summary.schemas, ch) for ch in summary.channels.values()
-            }
-            counts: dict[str, int] = {}
-            if stats is not None:
-                for cid, n in stats.channel_message_counts.items():
-                    topic = summary.channels[cid].topic
-                    counts[topic] = counts.get(topic, 0) + n
-            compression = ','.join(
-                sorted({c.compression or 'none' for c in summary.chunk_indexes})
-            )
-            start = stats.message_start_time if stats and stats.message_count else None
-            end = stats.message_end_time if stats and stats.message_count else None
-            return _McapFile(
-                path, True, topics, counts, metadata, start, end, compression or 'none'
-            )
-        # No summary: scan the data section (a truncated file, or a writer that skipped it).
-        scan = _McapFile(path, complete, {}, {}, metadata, None, None, '')
-        kinds: set[str] = set()
-        for rec, _ in self._records(scan, on_chunk=lambda c: kinds.add(c.compression or 'none')):
-            if isinstance(rec, Message):
-                scan.start_ns = (
-                    rec.log_time if scan.start_ns is None else min(scan.start_ns, rec.log_time)
-                )
-                scan.end_ns = (
-                    rec.log_time if scan.end_ns is None else max(scan.end_ns, rec.log_time)
-                )
-            elif isinstance(rec, Metadata):
-                scan.metadata[rec.name] = dict(rec.metadata)
-        scan.compression = ','.join(sorted(kinds)) or 'none'
-        if scan.damage and scan.start_ns is None:
-            raise BagError(f'bag {path} is corrupt: no message could be read before the damage')
-        if scan.damage:
-            self._warn(scan.damage)
-        return scan
-
-    def _records(
-        self, mf: _McapFile, topics: set[str] | None = None, on_chunk: Any = None
-    ) -> Iterator[tuple[Any, str]]:
-        """
-        (record, topic) for Message (topic set) and Metadata records in file order.
-
-        Keeps the file's topic table and message counts current while scanning; stops at the
-        damage of an incomplete file (recording `mf.damage`), raises BagError on a complete one.
-        """
-        schemas: dict[int, Schema] = {}
-        channels: dict[int, Channel] = {}
-        n = 0
-        scanning = on_chunk is not None
-
-        def sort(rec: Any) -> Iterator[tuple[Any, str]]:
-            nonlocal n
-            if isinstance(rec, Schema):
-                schemas[rec.id] = rec
-            elif isinstance(rec, Channel):
-                channels[rec.id] = rec
-                if scanning:
-                    mf.topics[rec.topic] = _schema_name(schemas, rec)
-            elif isinstance(rec, Message):
-                n += 1
-                ch = channels.get(rec.channel_id)
-                if ch is None:
-                    raise ValueError(f'message on unknown channel {rec.channel_id}')
-                if scanning:
-                    mf.counts[ch.topic] = mf.counts.get(ch.topic, 0) + 1
-                if topics is None or ch.topic in topics:
-                    yield rec, ch.topic
-            elif isinstance(rec, Metadata):
-                yield rec, ''
-
-        try:
-            with mf.path.open('rb') as f:
-                size = os.fstat(f.fileno()).st_size
-                reader = StreamReader(f, emit_chunks=True, record_size_limit=max(size, 1))
-                for rec in reader.records:
-                    if isinstance(rec, (DataEnd, Footer)):
-                        return
-                    if isinstance(rec, Chunk):
-                        if on_chunk is not None:
-                            on_chunk(rec)
-                        for inner in breakup_chunk(rec, validate_crc=True):
-                            yield from sort(inner)
-                    else:
-                        yield from sort(rec)
-        except OSError as exc:
-            raise BagError(f'bag {mf.path} cannot be read ({exc.strerror or exc})') from None
-        except BagError:
-            raise
-        except Exception as exc:  # noqa: BLE001 - the mcap library raises many types on bad data
-            what = (
-                f'{type(exc).__name__}: {exc}'.splitlines()[0] if str(exc) else type(exc).__name__
-            )
-            if mf.complete:
-                raise BagError(f'bag {mf.path} is corrupt after {n} messages ({what})') from None
-            if mf.damage is None:
-                mf.damage = (
-                    f'bag {mf.path} is truncated (no MCAP summary, recording interrupted?); '
-                    f'read {n} messages up to the damage ({what})'
-                )
-            return
-        if not mf.complete and mf.damage is None:
-            mf.damage = f'bag {mf.path} has no MCAP footer; read {n} messages'
 
     # -- public surface
 
@@ -381,7 +244,7 @@ class BagReader:
 
     def raw_messages(
         self, topics: Iterable[str] | str | None = None
-    ) -> Iterator[tuple[str, str, int, bytes]]:
+    ) -> Generator[tuple[str, str, int, bytes], None, None]:
         """(topic, msgtype, stamp_ns, cdr) in record order; stamp = header stamp, else log time."""
         for topic, msgtype, stamp, data in self.logged_messages(topics):
             try:
@@ -401,7 +264,7 @@ class BagReader:
         if self._rosbags is not None:
             yield from self._rosbags.messages(wanted)
         for mf in self._files:
-            for rec, topic in self._records(mf, wanted):
+            for rec, topic in mcap_records(mf, wanted):
                 if isinstance(rec, Message):
                     yield (
                         topic,
@@ -431,20 +294,7 @@ class BagReader:
         stats = self.stats = CloudStats()
         prev: int | None = None
         for i, (_, _, stamp, cdr) in enumerate(self.raw_messages([topic])):
-            try:
-                msg = messages.deserialize(cdr, POINTCLOUD2)
-            except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
-                what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-                raise BagError(
-                    f'bag {self.path}: frame {i} on {topic} (stamp {stamp / 1e9:.3f} s) '
-                    f'is not a valid PointCloud2 ({what})'
-                ) from None
-            try:
-                pts = pointcloud2.read_xyz(msg)
-            except pointcloud2.PointCloudError as exc:
-                raise BagError(
-                    f'bag {self.path}: frame {i} on {topic} (stamp {stamp / 1e9:.3f} s): {exc}'
-                ) from None
+            pts, _ = decode_cloud(self.path, topic, i, stamp, cdr)
             stats.messages += 1
             if prev is not None and abs((stamp - prev) - period) > IRREGULAR_TOLERANCE * period:
                 stats.irregular_intervals += 1

@@ -70,7 +70,13 @@ def rewrite_bag(
     src_path, dst_path = Path(src), Path(dst)
     if dst_path.exists() and src_path.exists() and dst_path.resolve() == src_path.resolve():
         raise BagError(f'bag {dst_path}: give a new directory, not the source bag itself')
-    reader = BagReader(src_path)
+    with BagReader(src_path) as reader:
+        return _rewrite(reader, src_path, dst_path, change_of_phase_frame)
+
+
+def _rewrite(
+    reader: BagReader, src_path: Path, dst_path: Path, change_of_phase_frame: int | str | None
+) -> dict[str, int]:
     if not reader.complete:
         raise BagError(f'bag {src_path} is truncated; rewriting would keep only part of it')
     trial = source_trial = reader.trial
@@ -115,7 +121,8 @@ def rewrite_bag(
                 f'bag {src_path} has trial metadata but no trial message; rewriting would add one'
             )
         counts = writer.close()
-        _check_same(reader, BagReader(dst_path), trial)
+        with BagReader(dst_path) as written:
+            _check_same(reader, written, trial)
     except BaseException:
         writer.close()
         if created:

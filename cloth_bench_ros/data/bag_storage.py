@@ -11,13 +11,62 @@ BagError line naming the bag.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
+import functools
+import os
 from pathlib import Path
+import shutil
+import tempfile
 import threading
 
 from cloth_bench_ros.data.errors import BagError
+from cloth_bench_ros.errors import one_line
 from rosbags.rosbag2 import Reader
+import rosbags.rosbag2.reader
+
+# rosbags decompresses a file-compressed bag into a tempfile.TemporaryDirectory() it names itself
+# and removes at close; a process killed before that leaves it behind. The copy is made under a
+# name of ours instead (the pid in it), so that the next run can tell an orphan from the copy of a
+# live process and remove it. Reader offers no parameter for the directory: its module's
+# TemporaryDirectory is replaced, under a lock, only while one compressed bag opens.
+DECOMPRESSED_PREFIX = 'cloth-bench-bag-'
+_OPENING = threading.Lock()
+
+
+def decompressed_dirs(pid: int | None = None) -> list[Path]:
+    """Return the decompressed copies on disk (of process `pid`, else of every process)."""
+    head = f'{DECOMPRESSED_PREFIX}{pid}-' if pid is not None else DECOMPRESSED_PREFIX
+    return sorted(Path(tempfile.gettempdir()).glob(f'{head}*'))
+
+
+def remove_orphans() -> None:
+    """Remove the decompressed copies left by processes that are gone (killed mid-run)."""
+    for path in decompressed_dirs():
+        try:
+            pid = int(path.name[len(DECOMPRESSED_PREFIX):].split('-')[0])
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            shutil.rmtree(path, ignore_errors=True)
+        except (ValueError, PermissionError):  # not ours, or another user's live process
+            continue
+
+
+def _open_decompressing(source: Path) -> Reader:
+    """Return rosbags' Reader opened, a decompressed copy made under DECOMPRESSED_PREFIX."""
+    own = functools.partial(
+        tempfile.TemporaryDirectory, prefix=f'{DECOMPRESSED_PREFIX}{os.getpid()}-'
+    )
+    reader = Reader(source)
+    with _OPENING:
+        remove_orphans()
+        rosbags_tmp = rosbags.rosbag2.reader.TemporaryDirectory
+        rosbags.rosbag2.reader.TemporaryDirectory = own  # type: ignore[misc, assignment]
+        try:
+            reader.open()
+        finally:
+            rosbags.rosbag2.reader.TemporaryDirectory = rosbags_tmp  # type: ignore[misc]
+    return reader
 
 
 @dataclass
@@ -65,12 +114,11 @@ class RosbagsStorage:
             yield self._decompressed[key]
             return
         try:
-            reader = Reader(source)
-            reader.open()
+            reader = _open_decompressing(source)
         except (
             Exception
         ) as exc:  # noqa: BLE001 - rosbags, sqlite3 and zstd raise many types on bad files
-            raise BagError(f'bag {self.path} cannot be read ({_one_line(exc)})') from None
+            raise BagError(f'bag {self.path} cannot be read ({one_line(exc)})') from None
         keep = reader.compression_mode == 'file'
         if keep:
             self._decompressed[key] = reader
@@ -81,9 +129,10 @@ class RosbagsStorage:
                 reader.close()
 
     def close(self) -> None:
-        """Remove the decompressed copies of a file-compressed bag."""
+        """Close the storage and remove the decompressed copies of a file-compressed bag."""
         while self._decompressed:
-            self._decompressed.popitem()[1].close()
+            with suppress(Exception):  # sqlite3 closes only in its thread; the copy goes anyway
+                self._decompressed.popitem()[1].close()
 
     @property
     def files(self) -> list[Path]:
@@ -108,8 +157,4 @@ class RosbagsStorage:
                     for conn, log_time, data in reader.messages(wanted):
                         yield conn.topic, conn.msgtype, log_time, bytes(data)
                 except Exception as exc:  # noqa: BLE001 - as in _reader
-                    raise BagError(f'bag {self.path} is corrupt ({_one_line(exc)})') from None
-
-
-def _one_line(exc: BaseException) -> str:
-    return ' '.join(str(exc).split()) or type(exc).__name__
+                    raise BagError(f'bag {self.path} is corrupt ({one_line(exc)})') from None

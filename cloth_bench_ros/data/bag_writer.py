@@ -256,12 +256,12 @@ class BagWriter:
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter('ignore', BagWarning)
-                    reader = BagReader(self.mcap_path)
-                counts, self._start, self._end = (
-                    reader.message_counts,
-                    reader.start_ns,
-                    reader.end_ns,
-                )
+                    with BagReader(self.mcap_path) as reader:
+                        counts, self._start, self._end = (
+                            reader.message_counts,
+                            reader.start_ns,
+                            reader.end_ns,
+                        )
             except BagError:
                 pass  # nothing readable before the damage
             self.counts = {topic: counts.get(topic, 0) for topic in self._types}

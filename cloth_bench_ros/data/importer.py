@@ -286,7 +286,7 @@ def find_trials(root: Path) -> list[DatasetTrial]:
     """Return the trial folders under root with their frame files; ValueError if none."""
     root = Path(root)
     if not root.is_dir():
-        raise ValueError(f'dataset root {root} is not a directory')
+        raise CloudFileError(f'dataset root {root} is not a directory')
     trials = []
     for trial_dir in sorted(p for p in root.iterdir() if p.is_dir()):
         m = _TRIAL_DIR.match(trial_dir.name)
@@ -304,12 +304,12 @@ def find_trials(root: Path) -> list[DatasetTrial]:
                     continue
                 k = int(fm.group(1))
                 if k in frames:
-                    raise ValueError(
+                    raise CloudFileError(
                         f'{cloud_dir}: frame {k:05d} exists as both {frames[k].name} and {f.name}'
                     )
                 frames[k] = f
             if not frames:
-                raise ValueError(f'{cloud_dir}: no <NNNNN>.ply or .pcd frame files')
+                raise CloudFileError(f'{cloud_dir}: no <NNNNN>.ply or .pcd frame files')
             trials.append(
                 DatasetTrial(
                     cloth, index, primitive, trial_dir / primitive, tuple(sorted(frames.items()))
@@ -318,12 +318,12 @@ def find_trials(root: Path) -> list[DatasetTrial]:
     by_name: dict[str, DatasetTrial] = {}
     for tr in trials:  # e.g. cotton_rag_1 and cotton_rag_01: one would silently replace the other
         if tr.bag_name in by_name:
-            raise ValueError(
+            raise CloudFileError(
                 f'{by_name[tr.bag_name].folder} and {tr.folder} both map to trial {tr.bag_name}'
             )
         by_name[tr.bag_name] = tr
     if not trials:
-        raise ValueError(
+        raise CloudFileError(
             f'dataset root {root} has no <cloth>_rag_<trial>/<primitive>/cloud folders '
             f'(cloth in {", ".join(CLOTH_NAMES)}, primitive in {", ".join(PRIMITIVES)})'
         )
@@ -335,9 +335,9 @@ def _check_transform(transform: np.ndarray | None) -> np.ndarray | None:
         return None
     t = np.asarray(transform, dtype=float)
     if t.shape != (4, 4) or not np.isfinite(t).all():
-        raise ValueError(f'transform must be a finite 4x4 matrix, got shape {t.shape}')
+        raise CloudFileError(f'transform must be a finite 4x4 matrix, got shape {t.shape}')
     if not np.allclose(t[3], [0, 0, 0, 1]):
-        raise ValueError(f"transform's last row must be 0 0 0 1, got {t[3].tolist()}")
+        raise CloudFileError(f"transform's last row must be 0 0 0 1, got {t[3].tolist()}")
     return t
 
 
@@ -364,7 +364,7 @@ def import_dataset(
     check_output_dir(out)
     for tr in trials:  # every existing bag is found before the first one is written
         if (out / tr.bag_name).exists() and not overwrite:
-            raise ValueError(
+            raise CloudFileError(
                 f'bag {out / tr.bag_name} already exists (pass overwrite to replace it)'
             )
     bags = []

@@ -11,9 +11,51 @@ from functools import lru_cache
 from typing import Any
 
 from cloth_bench_ros.errors import ClothBenchError
-from rosbags.typesys import get_typestore, Stores
+from rosbags.typesys import get_types_from_msg, get_typestore, Stores
+from rosbags.typesys.store import Typestore
 
-TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
+# rcl_interfaces/srv: request and response fields (the .srv files' two halves).
+SERVICE_DEFINITIONS = {
+    'rcl_interfaces/srv/DescribeParameters': (
+        'string[] names',
+        'ParameterDescriptor[] descriptors',
+    ),
+    'rcl_interfaces/srv/GetParameters': ('string[] names', 'ParameterValue[] values'),
+    'rcl_interfaces/srv/GetParameterTypes': ('string[] names', 'uint8[] types'),
+    'rcl_interfaces/srv/ListParameters': (
+        'uint64 DEPTH_RECURSIVE=0\nstring[] prefixes\nuint64 depth',
+        'ListParametersResult result',
+    ),
+    'rcl_interfaces/srv/SetParameters': (
+        'Parameter[] parameters',
+        'SetParametersResult[] results',
+    ),
+    'rcl_interfaces/srv/SetParametersAtomically': (
+        'Parameter[] parameters',
+        'SetParametersResult result',
+    ),
+}
+
+
+def _project_typestore() -> Typestore:
+    """
+    Return ROS 2 Humble's type store with the rcl_interfaces services' request and response types.
+
+    rosbags has no srv types; the parameter services of every node need these. They are part of
+    the store from its making: no module changes it afterwards.
+    """
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    types: dict = {}
+    for srv_type, halves in SERVICE_DEFINITIONS.items():
+        for suffix, text in zip(('_Request', '_Response'), halves):
+            # Parsed as a msg of the same package, so that `Parameter` names rcl_interfaces/msg/.
+            parsed = get_types_from_msg(text, srv_type.replace('/srv/', '/msg/') + suffix)
+            types.update({n.replace('/msg/', '/srv/'): fields for n, fields in parsed.items()})
+    store.register(types)
+    return store
+
+
+TYPESTORE = _project_typestore()
 
 POINTCLOUD2 = 'sensor_msgs/msg/PointCloud2'
 POSE_ARRAY = 'geometry_msgs/msg/PoseArray'

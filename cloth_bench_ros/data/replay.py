@@ -17,12 +17,13 @@ from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.core.cleaning import clean, CleaningConfig, CleaningStats, scene_cleaning
 from cloth_bench_ros.core.phase import first_table_contact
 from cloth_bench_ros.core.trajectory import full_targets
-from cloth_bench_ros.data import alignment, messages
-from cloth_bench_ros.data.bag_reader import BagReader, IRREGULAR_TOLERANCE
+from cloth_bench_ros.data import alignment
+from cloth_bench_ros.data.bag_reader import BagReader, decode_cloud, IRREGULAR_TOLERANCE
 from cloth_bench_ros.data.errors import BagError
-from cloth_bench_ros.data.messages import POINTCLOUD2, POSE_ARRAY
+from cloth_bench_ros.data.messages import POSE_ARRAY
 from cloth_bench_ros.data.tf_buffer import apply, TF_MESSAGE, TF_TOPICS, TfBuffer, TransformError
 from cloth_bench_ros.data.trial import TARGETS_TOPIC, TrialInfo
+from cloth_bench_ros.errors import InputError
 import numpy as np
 
 WORLD = 'world'
@@ -122,32 +123,14 @@ def _targets(reader: BagReader, topic: str) -> tuple[list[int], list[np.ndarray]
     return stamps, positions
 
 
-def _decode(
-    reader: BagReader, topic: str, index: int, stamp: int, cdr: bytes
-) -> tuple[np.ndarray, str]:
-    try:
-        msg = messages.deserialize(cdr, POINTCLOUD2)
-        return pointcloud2.read_xyz(msg), msg.header.frame_id
-    except pointcloud2.PointCloudError as exc:
-        raise BagError(
-            f'bag {reader.path}: frame {index} on {topic} (stamp {stamp / 1e9:.3f} s): {exc}'
-        ) from None
-    except Exception as exc:  # noqa: BLE001 - rosbags raises several types on bad CDR
-        what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise BagError(
-            f'bag {reader.path}: frame {index} on {topic} (stamp {stamp / 1e9:.3f} s) '
-            f'is not a valid PointCloud2 ({what})'
-        ) from None
-
-
 def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig | None:
     """Return the cleaning of a replay, or None when off (project bags are cleaned already)."""
     if options.clean not in CLEAN_MODES:
-        raise ValueError(f'clean mode {options.clean!r} is not one of {", ".join(CLEAN_MODES)}')
+        raise InputError(f'clean mode {options.clean!r} is not one of {", ".join(CLEAN_MODES)}')
     if options.clean == 'off' or (options.clean == 'auto' and project_bag):
         return None
     if options.table_plane not in TABLE_MODES:
-        raise ValueError(
+        raise InputError(
             f'table plane mode {options.table_plane!r} is not one of {", ".join(TABLE_MODES)}'
         )
     # Removing the plane also removes cloth lying flat on the table, which the quasi-static drag
@@ -173,7 +156,7 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     stats = CleaningStats() if config is not None else None
     stamps, clouds, nan_dropped = [], [], 0
     for index, (_, _, stamp, cdr) in enumerate(reader.raw_messages([topic])):
-        points, frame_id = _decode(reader, topic, index, stamp, cdr)
+        points, frame_id = decode_cloud(reader.path, topic, index, stamp, cdr)
         try:
             matrix = to_world(frame_id, stamp)
         except TransformError as exc:

@@ -199,7 +199,7 @@ def coarse_vertices(
     """Return the vertices of a coarse grid nested in a fine one (every n-th row and column)."""
     (fx, fz), (cx, cz) = fine, coarse
     if (fx - 1) % (cx - 1) or (fz - 1) % (cz - 1):
-        raise ValueError(f'grid {cx}x{cz} is not nested in grid {fx}x{fz}')
+        raise SynthError(f'grid {cx}x{cz} is not nested in grid {fx}x{fz}')
     grid = np.asarray(vertices).reshape(fz, fx, 3)
     return grid[:: (fz - 1) // (cz - 1), :: (fx - 1) // (cx - 1)].reshape(-1, 3)
 

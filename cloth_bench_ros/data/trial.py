@@ -14,6 +14,7 @@ from typing import Any
 from cloth_bench_ros import validation
 from cloth_bench_ros.data import messages
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY
+from cloth_bench_ros.errors import InputError
 import numpy as np
 
 CLOUD_TOPIC = '/cloth_bench/real/cloud'
@@ -46,7 +47,7 @@ class TrialInfo:
     def __post_init__(self) -> None:
         t = np.asarray(self.transform, dtype=float)
         if t.shape != (4, 4) or not np.isfinite(t).all():
-            raise ValueError(f'trial transform must be a finite 4x4 matrix, got shape {t.shape}')
+            raise InputError(f'trial transform must be a finite 4x4 matrix, got shape {t.shape}')
         self.transform = t.tolist()
         self.trial = validation.integer(self.trial, 'trial', 0)
         self.fps = validation.positive(self.fps, 'trial fps', 10_000.0)
@@ -64,7 +65,7 @@ class TrialInfo:
         names = set(cls.__dataclass_fields__)
         missing = [k for k in ('cloth', 'trial', 'primitive', 'source') if k not in data]
         if missing:
-            raise ValueError(f'trial metadata lacks {", ".join(missing)}')
+            raise InputError(f'trial metadata lacks {", ".join(missing)}')
         kwargs = {k: v for k, v in data.items() if k in names}
         kwargs.setdefault('change_of_phase_frame', None)
         return cls(**kwargs)

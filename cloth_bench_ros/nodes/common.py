@@ -7,10 +7,9 @@ import sys
 import threading
 from typing import Callable, Iterable, Sequence
 
-from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.errors import is_user_error, one_line
 from cloth_bench_ros.runtime import (
     EMBEDDED,
-    is_user_error,
     rclpy,
     SetParametersResult,
     SingleThreadedExecutor,
@@ -167,20 +166,12 @@ def run_nodes(
             type(exc).__name__ == 'ExternalShutdownException'
         ):  # rclpy shut down from outside: a stop
             return 0
-        # rclpy's parameter, name and argument errors are not ValueErrors: matched by class name;
-        # rcl's own RCLError while starting is a bad argument, parameter or params file too
-        user = (
-            isinstance(exc, (ClothBenchError, ValueError))
-            or is_user_error(exc)
-            or (starting and type(exc).__name__ == 'RCLError')
-        )
-        if not user:
+        # The project's errors and rclpy's parameter, name and argument errors are bad input;
+        # rcl's own RCLError while starting is a bad argument, parameter or params file too.
+        # Anything else is a bug: its traceback goes out as Python prints it.
+        if not (is_user_error(exc) or (starting and type(exc).__name__ == 'RCLError')):
             raise
-        print(
-            'error:'
-            f' {str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__}',
-            file=sys.stderr,
-        )
+        print(f'error: {one_line(exc)}', file=sys.stderr)
         return 2
     finally:
         if executor is not None:

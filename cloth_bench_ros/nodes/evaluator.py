@@ -37,7 +37,7 @@ from cloth_bench_ros.runtime import (
     stamp_ns,
     steady_clock,
 )
-from cloth_bench_ros.safe_io import check_output_dir
+from cloth_bench_ros.safe_io import check_output_dir, UnsafeInputError
 
 
 def _values(msg: DiagnosticArray) -> dict[str, str]:
@@ -95,7 +95,7 @@ class Evaluator(Node):
         if self.output_dir:  # an unwritable report directory is found now, not after the run
             try:
                 check_output_dir(self.output_dir)
-            except ValueError as exc:
+            except UnsafeInputError as exc:
                 raise validation.InputError(f'evaluator: parameter output_dir: {exc}') from None
         targets = full_targets(self.primitive, rate_hz)
         self.final_stamp = targets.stamp_ns(len(targets) - 1)

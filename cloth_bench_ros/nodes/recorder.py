@@ -30,6 +30,7 @@ from cloth_bench_ros.data.trial import TRIAL_STATUS_NAME
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     parameters_fixed_at_start,
@@ -75,19 +76,20 @@ class Recorder(Node):
         self.mode = self.declare_parameter('mode', 'replay').value
         self.done = False
         self.writer: BagWriter | None = None
+        self.bag: BagReader | None = None  # replay: closed by close()
         if self.mode == 'record':
             self.start_recording()
         elif self.mode == 'replay':
             self.start_replay()
         else:
-            raise ValueError(f'recorder: unknown mode {self.mode!r} (valid: replay, record)')
+            raise InputError(f'recorder: unknown mode {self.mode!r} (valid: replay, record)')
 
     # --- replay ------------------------------------------------------------------------------
 
     def start_replay(self) -> None:
         path = self.declare_parameter('bag', '').value
         if not path:
-            raise ValueError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
+            raise InputError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
         # Frames are stamped from the start of the quintic part; the run starts with the settle
         # phase.
         declare_float(self, 'time_offset', SETTLE_DURATION)
@@ -109,7 +111,7 @@ class Recorder(Node):
         self.start_offset_ns = int(round(p['start_offset'] * 1e9))
         self.rate_factor, self.loop = p['rate_factor'], p['loop']
         if clock not in ('sim', 'wall'):
-            raise ValueError(f'recorder: unknown clock {clock!r} (valid: sim, wall)')
+            raise InputError(f'recorder: unknown clock {clock!r} (valid: sim, wall)')
         self.bag = BagReader(path)
         options = self.replay_options()
         self.declare_parameter('grid_nx', 0)  # 0: the preset's grid
@@ -117,8 +119,15 @@ class Recorder(Node):
         side = partial(validation.integer, low=0, high=validation.MAX_GRID_SIDE)
         g = validation.node_parameters(self, {'grid_nx': side, 'grid_nz': side})
         nx, nz = g['grid_nx'], g['grid_nz']
-        self.plan = plan_replay(self.bag, options, partial(self.reference_motion, options, nx, nz))
+        try:
+            self.plan = plan_replay(
+                self.bag, options, partial(self.reference_motion, options, nx, nz)
+            )
+        except BaseException:
+            self.bag.close()  # a node that fails to start is never closed by its main
+            raise
         self.topic = self.plan.topic
+        self.plan_bag = self.bag.path
         self.published = 0
         # Keep-all, as the evaluator's reader: a keep-last writer drops the frames a slow reader
         # has not acknowledged yet (DDS), and the evaluator waits for every announced frame.
@@ -146,7 +155,7 @@ class Recorder(Node):
         self.declare_parameter('change_of_phase_frame', -1)
         transform = list(self.declare_parameter('transform', [0.0]).value)
         if transform != [0.0] and len(transform) != 16:
-            raise ValueError(
+            raise InputError(
                 f'recorder: transform needs 16 numbers (a 4x4 matrix), got {len(transform)}'
             )
         for name, default in (
@@ -218,7 +227,7 @@ class Recorder(Node):
         status = DiagnosticStatus(
             level=DiagnosticStatus.OK,
             name=TRIAL_STATUS_NAME,
-            message=str(self.bag.path),
+            message=str(self.plan_bag),
             hardware_id='recorder',
             values=values,
         )
@@ -270,12 +279,12 @@ class Recorder(Node):
         output = self.declare_parameter('output', '').value
         entries = list(self.declare_parameter('record_topics', ['']).value)
         if not output:
-            raise ValueError(
+            raise InputError(
                 "recorder: parameter 'output' is empty (bag directory to record into)"
             )
         topics = [e.rsplit(':', 1) for e in entries if e]
         if not topics or any(len(t) != 2 for t in topics):
-            raise ValueError("recorder: record_topics needs entries 'topic:package/msg/Type'")
+            raise InputError("recorder: record_topics needs entries 'topic:package/msg/Type'")
         self.received = 0
         self.stopped = False
         self.unchecked_bytes = 0
@@ -352,7 +361,9 @@ class Recorder(Node):
         self.reserve.unlink(missing_ok=True)
 
     def close(self) -> None:
-        """Finalise a recording and report received and written counts."""
+        """Close the replayed bag; finalise a recording and report received and written counts."""
+        if self.bag is not None:
+            self.bag.close()
         if self.writer is not None and not getattr(self, 'reported', False):
             self.reported = True
             self.close_writer()

@@ -26,6 +26,7 @@ from cloth_bench_ros.nodes.common import (
     publish_serialises,
     run_node,
 )
+from cloth_bench_ros.nodes.message_pool import MessagePool
 from cloth_bench_ros.runtime import (
     declare_float,
     DiagnosticArray,
@@ -41,7 +42,6 @@ from cloth_bench_ros.runtime import (
     serialize_message,
     stamp_ns,
 )
-from cloth_bench_ros.runtime.message_pool import MessagePool
 import numpy as np
 
 

@@ -10,6 +10,7 @@ from typing import Any
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.hil_timing import TargetTimeline
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     all_subscriptions_matched,
     NAMESPACE,
@@ -19,6 +20,7 @@ from cloth_bench_ros.nodes.common import (
     publishers_matched,
     run_node,
 )
+from cloth_bench_ros.nodes.message_pool import MessagePool
 from cloth_bench_ros.runtime import (
     Clock,
     declare_float,
@@ -32,7 +34,6 @@ from cloth_bench_ros.runtime import (
     steady_clock,
     Time,
 )
-from cloth_bench_ros.runtime.message_pool import MessagePool
 import numpy as np
 
 PACINGS = ('lockstep', 'realtime')
@@ -74,7 +75,7 @@ class TrajectoryPublisher(Node):
             p['wait_for_evaluator'],
         )
         if self.pacing not in PACINGS:
-            raise ValueError(f'unknown pacing {self.pacing!r} (valid: {", ".join(PACINGS)})')
+            raise InputError(f'unknown pacing {self.pacing!r} (valid: {", ".join(PACINGS)})')
         self.timing_log = self.declare_parameter('timing_log', '').value
         duration = declare_float(self, 'duration', 0.0)
         self.targets = full_targets(primitive, rate_hz)

@@ -18,6 +18,7 @@ from pathlib import Path
 import re
 from typing import Sequence
 
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.report import figures
 from cloth_bench_ros.report.blocks import (
     Block,
@@ -378,16 +379,16 @@ def report_directory(
         find_identifications(results_file.parent) if results_file.parent.is_dir() else []
     )
     if not results_file.is_file() and not identifications:
-        raise ValueError(
+        raise InputError(
             f'results {results}: no {RESULTS_FILE} there (run `cloth-bench sweep` first)'
         )
     rows = load_rows(results_file)
     if not rows and not identifications:
-        raise ValueError(f'results {results_file}: holds no result rows')
+        raise InputError(f'results {results_file}: holds no result rows')
     if stress is None and (results_file.parent / STRESS_FILE).is_file():
         stress = results_file.parent / STRESS_FILE
     if stress is not None and not Path(stress).exists():
-        raise ValueError(f'stress results {stress}: no such file or directory')
+        raise InputError(f'stress results {stress}: no such file or directory')
     stress_rows = load_stress(Path(stress)) if stress is not None else None
     return render_report(
         rows,

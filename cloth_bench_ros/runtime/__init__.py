@@ -11,6 +11,8 @@ from __future__ import annotations
 import os
 from typing import TYPE_CHECKING
 
+from cloth_bench_ros.errors import InputError, is_rclpy_user_error, RCLPY_USER_ERRORS
+
 EMBEDDED = bool(os.environ.get('CLOTH_BENCH_EMBEDDED'))
 if not EMBEDDED and not TYPE_CHECKING:
     try:
@@ -142,7 +144,7 @@ def message_type(typename: str) -> type:
     try:
         return MESSAGE_TYPES[typename]
     except KeyError:
-        raise ValueError(f'message type {typename} is not used by cloth_bench_ros') from None
+        raise InputError(f'message type {typename} is not used by cloth_bench_ros') from None
 
 
 def typename(msg_type: type) -> str:
@@ -172,23 +174,10 @@ def make_qos(depth: int, latched: bool = False, keep_all: bool = False) -> QoSPr
     )
 
 
-# Exceptions that are the user's input (a parameter, a name, a --ros-args argument, a params
-# file), by class name so that rclpy's own (rclpy.exceptions.ParameterException,
-# NameValidationException, _rclpy.RCLInvalidROSArgsError, UnknownROSArgsError) and the embedded
-# runtime's twins are both one line and exit status 2.
-USER_ERROR_CLASSES = frozenset(
-    {
-        'ParameterException',
-        'NameValidationException',
-        'RCLInvalidROSArgsError',
-        'UnknownROSArgsError',
-    }
-)
-
-
-def is_user_error(exc: BaseException) -> bool:
-    """Return True for rclpy's (or the embedded runtime's) parameter, name and argument errors."""
-    return any(cls.__name__ in USER_ERROR_CLASSES for cls in type(exc).__mro__)
+# The user's input errors of rclpy (and of the embedded runtime's twins), matched by class name:
+# errors.RCLPY_USER_ERRORS, under the names rclpy users know.
+USER_ERROR_CLASSES = RCLPY_USER_ERRORS
+is_user_error = is_rclpy_user_error
 
 
 def declare_float(node, name: str, default: float) -> float:
@@ -204,7 +193,7 @@ def declare_float(node, name: str, default: float) -> float:
         name, float(default), ParameterDescriptor(dynamic_typing=True)
     ).value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f'parameter {name}: expected a number (double or integer), got {value!r}')
+        raise InputError(f'parameter {name}: expected a number (double or integer), got {value!r}')
     return float(value)
 
 

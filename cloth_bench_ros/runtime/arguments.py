@@ -13,13 +13,8 @@ from dataclasses import dataclass, field
 import re
 import sys
 
-from cloth_bench_ros.runtime.parameters import (
-    load_params_file,
-    Overrides,
-    parse_param_rule,
-    RCLInvalidROSArgsError,
-    UnknownROSArgsError,
-)
+from cloth_bench_ros.runtime.parameter_errors import RCLInvalidROSArgsError, UnknownROSArgsError
+from cloth_bench_ros.runtime.params_file import load_params_file, Overrides, parse_param_rule
 
 _TOKEN = r'[A-Za-z_][A-Za-z0-9_]*'
 _TOPIC = re.compile(
@@ -151,6 +146,7 @@ def expand_topic_name(name: str, node_name: str, namespace: str) -> str:
             return node_name
         if key in ('ns', 'namespace'):
             return base
+        # rclpy raises a ValueError here too (test/conformance_cases.py: topic name '{bad}')
         raise ValueError(f"topic name '{name}' is invalid: unknown substitution: {{{key}}}")
 
     name = re.sub(r'\{([^{}]*)\}', substitute, name)

@@ -5,8 +5,9 @@ from __future__ import annotations
 from collections import deque
 from typing import Any
 
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.runtime.arguments import parse_ros_args, RosArguments
-from cloth_bench_ros.runtime.parameters import RCLError
+from cloth_bench_ros.runtime.parameter_errors import RCLError
 from cloth_bench_ros.runtime.qos import HistoryPolicy
 from cloth_bench_ros.runtime.rosout import PROCESS_LOG_LEVELS
 from cloth_bench_ros.runtime.transport import IntraProcessTransport, transport_choice, TRANSPORTS
@@ -19,7 +20,7 @@ def make_transport(context: 'Context', name: str, domain_id: int | None = None) 
 
         return DdsTransport(context, domain_id)
     if name not in TRANSPORTS:
-        raise ValueError(f'unknown transport {name!r} (valid: intra, dds)')
+        raise InputError(f'unknown transport {name!r} (valid: intra, dds)')
     return IntraProcessTransport(context)
 
 

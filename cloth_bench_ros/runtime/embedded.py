@@ -56,23 +56,25 @@ from cloth_bench_ros.runtime.executors import (  # noqa: F401 (rclpy's names)
     spin_until_future_complete,
 )
 from cloth_bench_ros.runtime.node import Node, Publisher, Subscription  # noqa: F401
-from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
+from cloth_bench_ros.runtime.parameter_errors import (  # noqa: F401 (rclpy's names)
     InvalidParameterException,
     InvalidParameterTypeException,
     InvalidParameterValueException,
-    load_params_file,
-    Parameter,
     ParameterAlreadyDeclaredException,
-    ParameterDescriptor,
     ParameterException,
     ParameterNotDeclaredException,
-    ParameterType,
     ParameterUninitializedException,
     RCLError,
     RCLInvalidROSArgsError,
-    SetParametersResult,
     UnknownROSArgsError,
 )
+from cloth_bench_ros.runtime.parameters import (  # noqa: F401 (re-exported as rclpy's names)
+    Parameter,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from cloth_bench_ros.runtime.params_file import load_params_file  # noqa: F401
 from cloth_bench_ros.runtime.qos import (  # noqa: F401 (re-exported as rclpy's names)
     DurabilityPolicy,
     HistoryPolicy,

@@ -12,6 +12,7 @@ from typing import Any, Callable, TYPE_CHECKING
 
 from cloth_bench_ros.data.messages import TYPESTORE
 import numpy as np
+from rosbags.interfaces import Nodetype
 from rosbags.typesys.stores import ros2_humble as _store  # the type stubs' bases
 
 _NUMPY = {
@@ -34,8 +35,8 @@ _classes: dict[str, type] = {}
 
 def _factory(node: tuple) -> Callable[[], Any]:
     """Return a zero-argument maker of a field's default value, as rclpy's constructors give it."""
-    kind, detail = int(node[0]), node[1]
-    if kind == 1:  # base type: an immutable constant
+    kind, detail = node[0], node[1]
+    if kind == Nodetype.BASE:  # an immutable constant
         name = detail[0]
         value: Any = (
             ''
@@ -43,7 +44,7 @@ def _factory(node: tuple) -> Callable[[], Any]:
             else False if name == 'bool' else 0.0 if name.startswith('float') else 0
         )
         return lambda: value
-    if kind == 2:  # nested message; its class is looked up on first use (types may nest deeply)
+    if kind == Nodetype.NAME:  # a message; its class is looked up on first use (deep nesting)
         nested: list[type] = []
 
         def make_nested() -> Any:
@@ -53,13 +54,13 @@ def _factory(node: tuple) -> Callable[[], Any]:
 
         return make_nested
     (inner_kind, inner), length = detail
-    numeric = int(inner_kind) == 1 and inner[0] in _NUMPY
-    if kind == 3:  # fixed-size array
+    numeric = inner_kind == Nodetype.BASE and inner[0] in _NUMPY
+    if kind == Nodetype.ARRAY:  # fixed size
         if numeric:
             return lambda: np.zeros(length, dtype=_NUMPY[inner[0]])
         element = _factory((inner_kind, inner))
         return lambda: [element() for _ in range(length)]
-    if numeric:  # sequence
+    if numeric:  # Nodetype.SEQUENCE
         return lambda: np.zeros(0, dtype=_NUMPY[inner[0]])
     return list
 
@@ -92,14 +93,18 @@ def with_numpy_arrays(msg: Any, typename: str) -> Any:
     fields: Any = TYPESTORE.fielddefs[typename][1]  # rosbags' node tuples, read as in _factory
     for name, (kind, detail) in fields:
         value = getattr(msg, name)
-        if int(kind) == 2:
+        if kind == Nodetype.NAME:
             with_numpy_arrays(value, detail)
-        elif int(kind) in (3, 4):
+        elif kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
             (inner_kind, inner), _ = detail
-            if int(inner_kind) == 2:
+            if inner_kind == Nodetype.NAME:
                 for item in value:
                     with_numpy_arrays(item, inner)
-            elif int(inner_kind) == 1 and inner[0] in _NUMPY and not isinstance(value, np.ndarray):
+            elif (
+                inner_kind == Nodetype.BASE
+                and inner[0] in _NUMPY
+                and not isinstance(value, np.ndarray)
+            ):
                 items = [v[0] if isinstance(v, bytes) else v for v in value]
                 setattr(msg, name, np.asarray(items, dtype=_NUMPY[inner[0]]))
     return msg

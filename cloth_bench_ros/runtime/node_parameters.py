@@ -12,17 +12,19 @@ import dataclasses
 from typing import Any, Callable, Sequence
 import warnings
 
-from cloth_bench_ros.runtime.parameter_service import list_parameters
-from cloth_bench_ros.runtime.parameters import (
+from cloth_bench_ros.runtime.parameter_errors import (
     InvalidParameterException,
     InvalidParameterTypeException,
     InvalidParameterValueException,
-    Parameter,
     ParameterAlreadyDeclaredException,
-    ParameterDescriptor,
     ParameterNotDeclaredException,
-    ParameterType,
     ParameterUninitializedException,
+)
+from cloth_bench_ros.runtime.parameter_service import list_parameters
+from cloth_bench_ros.runtime.parameters import (
+    Parameter,
+    ParameterDescriptor,
+    ParameterType,
     SetParametersResult,
 )
 from cloth_bench_ros.runtime.rosout import parameter_event

@@ -13,12 +13,14 @@ from __future__ import annotations
 from typing import Any
 
 from cloth_bench_ros.runtime.messages import message_class
+from cloth_bench_ros.runtime.parameter_errors import (
+    ParameterNotDeclaredException,
+    ParameterUninitializedException,
+)
 from cloth_bench_ros.runtime.parameters import (
     Parameter,
     ParameterDescriptor,
-    ParameterNotDeclaredException,
     ParameterType,
-    ParameterUninitializedException,
     SetParametersResult,
 )
 from cloth_bench_ros.runtime.rosout import parameter_message, VALUE_FIELDS

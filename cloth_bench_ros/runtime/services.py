@@ -15,43 +15,8 @@ import itertools
 import time
 from typing import Any, Callable
 
-from cloth_bench_ros.data.messages import TYPESTORE
 from cloth_bench_ros.runtime.messages import message_class
 from cloth_bench_ros.runtime.qos import QoSProfile
-from rosbags.typesys import get_types_from_msg
-
-# rcl_interfaces/srv: request and response fields (the .srv files' two halves).
-SERVICE_DEFINITIONS = {
-    'rcl_interfaces/srv/DescribeParameters': (
-        'string[] names',
-        'ParameterDescriptor[] descriptors',
-    ),
-    'rcl_interfaces/srv/GetParameters': ('string[] names', 'ParameterValue[] values'),
-    'rcl_interfaces/srv/GetParameterTypes': ('string[] names', 'uint8[] types'),
-    'rcl_interfaces/srv/ListParameters': (
-        'uint64 DEPTH_RECURSIVE=0\nstring[] prefixes\nuint64 depth',
-        'ListParametersResult result',
-    ),
-    'rcl_interfaces/srv/SetParameters': (
-        'Parameter[] parameters',
-        'SetParametersResult[] results',
-    ),
-    'rcl_interfaces/srv/SetParametersAtomically': (
-        'Parameter[] parameters',
-        'SetParametersResult result',
-    ),
-}
-
-
-def _register_service_types() -> None:
-    """Add the request and response types to the project's type store (rosbags has no srv)."""
-    types: dict = {}
-    for srv_type, halves in SERVICE_DEFINITIONS.items():
-        for suffix, text in zip(('_Request', '_Response'), halves):
-            # Parsed as a msg of the same package, so that `Parameter` names rcl_interfaces/msg/.
-            parsed = get_types_from_msg(text, srv_type.replace('/srv/', '/msg/') + suffix)
-            types.update({n.replace('/msg/', '/srv/'): fields for n, fields in parsed.items()})
-    TYPESTORE.register(types)
 
 
 def service_class(srv_type: str) -> type:
@@ -68,7 +33,6 @@ def service_class(srv_type: str) -> type:
     )
 
 
-_register_service_types()
 DescribeParameters = service_class('rcl_interfaces/srv/DescribeParameters')
 GetParameters = service_class('rcl_interfaces/srv/GetParameters')
 GetParameterTypes = service_class('rcl_interfaces/srv/GetParameterTypes')

@@ -17,6 +17,7 @@ import os
 import time
 from typing import Any, Protocol
 
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.runtime.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 
@@ -36,7 +37,7 @@ def transport_choice(default: str) -> str:
     """Return CLOTH_BENCH_TRANSPORT if set (intra or dds), else `default`."""
     choice = os.environ.get('CLOTH_BENCH_TRANSPORT', '').strip().lower() or default
     if choice not in TRANSPORTS:
-        raise ValueError(
+        raise InputError(
             f'CLOTH_BENCH_TRANSPORT: unknown transport {choice!r} (valid: intra, dds)'
         )
     return choice

@@ -19,6 +19,7 @@ import re
 from typing import Iterable, Sequence
 
 from cloth_bench_ros.engines.presets import PresetSet
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
 
 DEFAULT_RATES = (10.0, 100.0, 1000.0)
@@ -153,7 +154,7 @@ def find_bags(bag_dir: Path | None, cloth: str, primitive: str) -> list[tuple[in
             if m and path.is_dir():
                 found.append((int(m.group(1)) if m.group(1) else _bag_trial(path), path))
     if not found:
-        raise ValueError(
+        raise InputError(
             f'bag directory {base}: no bag named {cloth}_{primitive} or'
             f' {cloth}_<trial>_{primitive}'
         )
@@ -164,7 +165,8 @@ def _bag_trial(path: Path) -> int:
     from cloth_bench_ros.data import BagReader
 
     try:
-        trial = BagReader(path).trial
+        with BagReader(path) as reader:
+            trial = reader.trial
     except Exception:  # an unreadable bag is reported by the cell that runs it
         return 0
     return int(trial.trial) if trial is not None else 0

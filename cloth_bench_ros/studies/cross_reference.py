@@ -17,6 +17,7 @@ from typing import Sequence
 
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.engines.presets import identified_set_of, load_preset, preset_set
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.studies.cells import Cell, config_label, CROSS_REFERENCE, set_label
 
@@ -36,7 +37,7 @@ DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
 def reference_bag(cloth: str, primitive: str, reference: str) -> Path:
     """Return the bundled bag of a cloth and task made by `reference`."""
     if reference not in REFERENCES:
-        raise ValueError(
+        raise InputError(
             f'unknown synthetic reference {reference!r} (valid: {", ".join(REFERENCES)})'
         )
     suffix = '' if reference == 'mujoco' else '_' + reference.replace('-', '_')

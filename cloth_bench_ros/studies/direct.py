@@ -31,6 +31,7 @@ from cloth_bench_ros.data.trial import TrialInfo
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.base import ClothEngine
 from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.run_config import RunConfig
 import yaml
 
@@ -112,7 +113,8 @@ def _replay(config: RunConfig, cut: int | None) -> tuple[Any, dict[str, Any]]:
             finally:
                 engine.close()
 
-        plan = plan_replay(BagReader(config.bag), options, motion)
+        with BagReader(config.bag) as reader:
+            plan = plan_replay(reader, options, motion)
         while len(_PLANS) >= _PLANS_KEPT:
             _PLANS.pop(next(iter(_PLANS)))
         _PLANS[key] = (plan, json.dumps(plan.accounting()))
@@ -123,7 +125,7 @@ def _replay(config: RunConfig, cut: int | None) -> tuple[Any, dict[str, Any]]:
 def run_direct(config: RunConfig) -> dict[str, Any]:
     """Run one lockstep cell without the node graph; the evaluator's summary of it."""
     if config.pacing != 'lockstep' or config.replay or config.record_comparison:
-        raise ValueError(
+        raise InputError(
             'the direct study path runs lockstep cells of bundled-style bags only: '
             'realtime pacing, replay options and comparison outputs need the node graph'
         )

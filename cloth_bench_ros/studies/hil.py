@@ -21,6 +21,7 @@ from cloth_bench_ros.core.hil_timing import (
     HilFigures,
     TargetTimeline,
 )
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.hil_config import HilConfig, SIMULATOR_FILE, SUMMARY_FILE, TIMELINE
 from cloth_bench_ros.studies.hil_groups import run_groups
 from cloth_bench_ros.studies.recommend import DEADLINE_BUDGET
@@ -251,7 +252,7 @@ def recommended(
             float(rate_hz),
         ):
             return rec, f'{shipped} (shipped; no settings-sweep result for it in {settings})'
-    raise ValueError(
+    raise InputError(
         f'--config recommended: no settings-sweep result for {engine}, {cloth} {primitive} at'
         f' {rate_hz:g} Hz in {settings} and no entry in {shipped}; run `cloth-bench sweep --mode'
         f' settings --engine {engine} --rate {rate_hz:g} --cloth {cloth} --primitive {primitive}`'

@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 import os
 
+from cloth_bench_ros.errors import InputError
+
 LAYOUTS = ('auto', 'none')
 FIFO_PRIORITY = (
     50  # the controller's SCHED_FIFO priority (below the kernel's threaded IRQs at 50+)
@@ -88,7 +90,7 @@ def choose_layout(cpus: list[int], fifo_ok: bool) -> Layout:
 def resolve_layout(name: str, cpu: int | None, fifo: int | None, busy_wait: bool | None) -> Layout:
     """Return the layout of a run: `auto` (the machine's best) or `none`, flags on top."""
     if name not in LAYOUTS:
-        raise ValueError(f'--layout {name!r} is not one of {", ".join(LAYOUTS)}')
+        raise InputError(f'--layout {name!r} is not one of {", ".join(LAYOUTS)}')
     if name == 'none':
         base = Layout(
             -1, 0, False, 'none (--layout none): no pinning, no real-time priority, no polling'
@@ -104,7 +106,7 @@ def resolve_layout(name: str, cpu: int | None, fifo: int | None, busy_wait: bool
         '',
     )
     if given.busy_wait and given.cpu < 0:
-        raise ValueError('--busy-wait needs a core of its own for the step loop: give --cpu N too')
+        raise InputError('--busy-wait needs a core of its own for the step loop: give --cpu N too')
     parts = [
         f'step loop {"polling" if given.busy_wait else "sleeping"} '
         + (f'on core {given.cpu}' if given.cpu >= 0 else 'not pinned'),

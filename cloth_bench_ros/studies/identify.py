@@ -26,6 +26,7 @@ import time
 from typing import Any, Sequence
 import warnings
 
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-exported)
     AUTO,
     AUTO_FIRST,
@@ -116,11 +117,11 @@ def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> 
     for name in names:
         p = schema.get(name)
         if p is None:
-            raise ValueError(
+            raise InputError(
                 f'--params: unknown {engine} parameter {name} (known: {", ".join(schema)})'
             )
         if p.choices or isinstance(p.default, bool) or p.low is None or p.high is None:
-            raise ValueError(f'--params: {engine} parameter {name} is not a number with a range')
+            raise InputError(f'--params: {engine} parameter {name} is not a number with a range')
         value = float(base.get(name, p.default))
         low, high = float(p.low), float(p.high)
         decades = high >= 100 * low if low > 0 else value > 0 and high >= 100 * value
@@ -150,17 +151,17 @@ def make_sampler(name: str, seed: int) -> Any:
         try:
             import torch  # noqa: F401
         except ImportError:
-            raise ValueError(
+            raise InputError(
                 '--sampler gp needs PyTorch (pip install torch); use tpe or cmaes'
             ) from None
         return optuna.samplers.GPSampler(seed=seed)
-    raise ValueError(f'unknown sampler {name!r} (valid: {", ".join(SAMPLERS)})')
+    raise InputError(f'unknown sampler {name!r} (valid: {", ".join(SAMPLERS)})')
 
 
 def samplers_of(choice: str) -> list[str]:
     """Return the samplers a --sampler choice runs (both: CMA-ES, then BO with TPE)."""
     if choice not in SAMPLERS:
-        raise ValueError(f'unknown sampler {choice!r} (valid: {", ".join(SAMPLERS)})')
+        raise InputError(f'unknown sampler {choice!r} (valid: {", ".join(SAMPLERS)})')
     return ['cmaes', 'tpe'] if choice == 'both' else [choice]
 
 
@@ -184,7 +185,7 @@ def repair_journal(path: Path) -> int:
                 json.loads(line)
             except ValueError:
                 if any(rest.strip() for rest in lines[number:]):
-                    raise ValueError(
+                    raise InputError(
                         f'identify: journal {path} is damaged at line {number} (not a torn last '
                         'line); move it aside to start the identification again'
                     ) from None
@@ -392,7 +393,7 @@ def identify(
         studies = {s: study for s, (study, _) in budgets.items()}
         best = min(studies, key=lambda s: finite_or_inf(best_value(studies[s])))
         if not math.isfinite(best_value(studies[best])):
-            raise ValueError(
+            raise InputError(
                 f'identify: no trial of {", ".join(samplers)} finished without diverging '
                 f'(see {spec.output / TRIALS_FILE})'
             )

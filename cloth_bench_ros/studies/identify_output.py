@@ -119,7 +119,8 @@ def bag_source(bag: Any, limit: int = 120) -> str:
     from cloth_bench_ros.errors import ClothBenchError
 
     try:
-        trial = BagReader(Path(bag)).trial
+        with BagReader(Path(bag)) as reader:
+            trial = reader.trial
     except (ClothBenchError, OSError):  # a bag that cannot say: the provenance names its path
         return ''
     source = (trial.source if trial is not None else '') or ''

@@ -19,6 +19,7 @@ from pathlib import Path
 import time
 from typing import Any
 
+from cloth_bench_ros.data.errors import BagError
 import numpy as np
 
 OBJECTIVES = ('cd', 'hd')
@@ -48,19 +49,20 @@ class Trial:
 def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
     """Return a bag's change-of-phase frame and (stamp ns, points, NaN dropped), decoded once."""
     from cloth_bench_ros.core.phase import first_table_contact
-    from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
+    from cloth_bench_ros.core.pointcloud2 import drop_nan
     from cloth_bench_ros.data import BagReader
-    from cloth_bench_ros.data.messages import deserialize
+    from cloth_bench_ros.data.bag_reader import decode_cloud
 
     st = os.stat(bag) if os.path.isfile(bag) else os.stat(Path(bag) / 'metadata.yaml')
     key = (str(Path(bag).resolve()), st.st_mtime_ns, st.st_size)
     if key not in _BAG_CACHE:
-        reader = BagReader(Path(bag))
-        frames = []
-        for _, msgtype, stamp, cdr in reader.raw_messages([reader.cloud_topic()]):
-            points, dropped = drop_nan(read_xyz(deserialize(cdr, msgtype)))
-            frames.append((stamp, points, dropped))
-        trial = reader.trial
+        with BagReader(Path(bag)) as reader:
+            topic = reader.cloud_topic()
+            frames = []
+            for i, (_, _, stamp, cdr) in enumerate(reader.raw_messages([topic])):
+                points, dropped = drop_nan(decode_cloud(bag, topic, i, stamp, cdr)[0])
+                frames.append((stamp, points, dropped))
+            trial = reader.trial
         cop = trial.change_of_phase_frame if trial is not None else None
         if cop is None and (
             trial is None or trial.primitive == 'dynamic'
@@ -107,7 +109,7 @@ def evaluate(trial: Trial) -> dict:
         ]
         used = used[: trial.max_frames] if trial.max_frames else used
         if not used:
-            raise ValueError(f'bag {trial.bag}: no frame to score')
+            raise BagError(f'bag {trial.bag}: no frame to score')
         for stamp, points, dropped in used:
             core.add_real(stamp + offset, points, dropped)
         last = used[-1][0] + offset

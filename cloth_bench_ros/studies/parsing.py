@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.cells import PRESET
 from cloth_bench_ros.validation import parse_grid, parse_overrides, parse_value
 
@@ -16,7 +17,7 @@ def parse_settings_axes(specs: Sequence[str]) -> dict[str, list]:
     for spec in specs:
         name, sep, values = spec.partition('=')
         if not sep or not name or not values:
-            raise ValueError(f'settings axis {spec!r} is not name=value1,value2,...')
+            raise InputError(f'settings axis {spec!r} is not name=value1,value2,...')
         parsed: list = []
         for text in values.split(','):
             text = text.strip()

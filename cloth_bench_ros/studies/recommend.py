@@ -17,6 +17,7 @@ import math
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.aggregate import compute_per_sim_second, finite, group, Stat, stat
 import numpy as np
 
@@ -223,7 +224,7 @@ def load_recommendations(path: Path) -> list[Recommendation]:
     data = load_yaml_file(path)
     entries = data.get('recommendations') if isinstance(data, dict) else None
     if not isinstance(entries, list):
-        raise ValueError(f"recommendation file {path}: no 'recommendations' list")
+        raise InputError(f"recommendation file {path}: no 'recommendations' list")
     out = []
     for i, e in enumerate(entries):
         if not isinstance(e, dict) or not {
@@ -233,7 +234,7 @@ def load_recommendations(path: Path) -> list[Recommendation]:
             'rate_hz',
             'config',
         } <= set(e):
-            raise ValueError(
+            raise InputError(
                 f'recommendation file {path}: entry {i} lacks engine, cloth, primitive, rate_hz or'
                 ' config'
             )
@@ -241,10 +242,10 @@ def load_recommendations(path: Path) -> list[Recommendation]:
         if grid is not None and not (
             isinstance(grid, list) and len(grid) == 2 and all(isinstance(g, int) for g in grid)
         ):
-            raise ValueError(f'recommendation file {path}: entry {i} grid is not [nx, nz]')
+            raise InputError(f'recommendation file {path}: entry {i} grid is not [nx, nz]')
         params = e.get('params') or {}
         if not isinstance(params, dict):
-            raise ValueError(f'recommendation file {path}: entry {i} params is not a mapping')
+            raise InputError(f'recommendation file {path}: entry {i} params is not a mapping')
         out.append(
             Recommendation(
                 str(e['engine']),

@@ -37,6 +37,7 @@ from typing import Any, Callable
 from cloth_bench_ros.core.surface_distance import grid_faces, point_to_surface, TriangleMesh
 from cloth_bench_ros.data.synth import reference_config, simulate_reference, SynthConfig
 from cloth_bench_ros.engines.mujoco_cloth import mesh_consistent_timeconst
+from cloth_bench_ros.errors import InputError
 import numpy as np
 
 TOLERANCE_M = 0.002  # mean trajectory change between successive refinements
@@ -100,7 +101,7 @@ def refined(config: SynthConfig, axis: str, level: int) -> SynthConfig:
                 float(params['edge_timeconst']), ratio
             )
         return replace(config, grid=grid, params=params)
-    raise ValueError(f'unknown axis {axis!r} (valid: {", ".join(AXES)})')
+    raise InputError(f'unknown axis {axis!r} (valid: {", ".join(AXES)})')
 
 
 def grid_rate_level(config: SynthConfig, levels: int) -> int:

@@ -26,6 +26,7 @@ import time
 from typing import Sequence
 
 from cloth_bench_ros.core.table import Table
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.stress_cases import case_targets, StressCase
 import numpy as np
 
@@ -212,11 +213,11 @@ def load_stress(path: Path) -> list[dict]:
         try:
             r = json.loads(line)
         except json.JSONDecodeError:
-            raise ValueError(f'{where}: not a JSON line') from None
+            raise InputError(f'{where}: not a JSON line') from None
         if not isinstance(r, dict) or not all(
             k in r for k in ('case', 'engine', 'rate_hz', 'status')
         ):
-            raise ValueError(
+            raise InputError(
                 f'{where}: a stress row must be a JSON object with case, engine, rate_hz and'
                 ' status'
             )
@@ -224,9 +225,9 @@ def load_stress(path: Path) -> list[dict]:
             safe_name(r['case'], 'case')
             safe_name(r['engine'], 'engine')
         except UnsafeInputError as exc:
-            raise ValueError(f'{where}: {exc}') from None
+            raise InputError(f'{where}: {exc}') from None
         if isinstance(r['rate_hz'], bool) or not isinstance(r['rate_hz'], (int, float)):
-            raise ValueError(f'{where}: rate_hz {r["rate_hz"]!r} is not a number')
+            raise InputError(f'{where}: rate_hz {r["rate_hz"]!r} is not a number')
         for k in ('L_s', 'max_vertex_speed', 'step_time_mean', 'step_time_p99', 'step_time_max'):
             if r.get(k) is None:
                 r[k] = math.nan

@@ -13,6 +13,7 @@ import math
 from typing import Sequence
 
 from cloth_bench_ros.engines.presets import PresetSet
+from cloth_bench_ros.errors import InputError
 
 MAX_CASE_WALL_S = 120.0
 
@@ -194,13 +195,13 @@ def select_cases(
         known = {c.name for c in cases}
         unknown = sorted(set(names) - known)
         if unknown:
-            raise ValueError(
+            raise InputError(
                 f'unknown stress case {", ".join(unknown)} (known: {", ".join(sorted(known))})'
             )
         cases = [c for c in cases if c.name in names]
     if max_wall_s is not None:
         if not (math.isfinite(max_wall_s) and max_wall_s > 0):
-            raise ValueError(f'--max-wall-s must be a number of seconds > 0, got {max_wall_s}')
+            raise InputError(f'--max-wall-s must be a number of seconds > 0, got {max_wall_s}')
         cases = [replace(c, max_wall_s=max_wall_s) for c in cases]
     # A preset set's values go in as overrides of the towel preset, under each case's own.
     return [

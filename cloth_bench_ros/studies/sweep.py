@@ -27,6 +27,7 @@ from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.engines.presets import PresetSet
 
 # re-exported: the studies' one vocabulary
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
     config_label,
@@ -346,9 +347,9 @@ class SweepPlan:
             else (SETTINGS_SEEDS if settings else DEFAULT_SEEDS)
         )
         if n < 1:
-            raise ValueError(f'--seeds must be at least 1, got {n}')
+            raise InputError(f'--seeds must be at least 1, got {n}')
         if self.seed_start < 0:
-            raise ValueError(f'--seed-start must be >= 0, got {self.seed_start}')
+            raise InputError(f'--seed-start must be >= 0, got {self.seed_start}')
         return list(range(self.seed_start, self.seed_start + n))
 
     def cells(self) -> list[Cell]:
@@ -359,13 +360,13 @@ class SweepPlan:
         cloths = list(self.cloths) or (['towel'] if settings else list(DEFAULT_CLOTHS))
         for cloth in cloths:
             if cloth not in CLOTHS:
-                raise ValueError(f'unknown cloth {cloth!r} (valid: {", ".join(CLOTHS)})')
+                raise InputError(f'unknown cloth {cloth!r} (valid: {", ".join(CLOTHS)})')
         primitives = list(self.primitives) or list(DEFAULT_PRIMITIVES)
         gaps = self._preset_gaps(cloths, primitives)
         if gaps and not (self.cloths and self.primitives):
             # A set covering part of the default cloths and tasks: sweep what it covers.
             if len(gaps) == len(self.engines) * len(cloths) * len(primitives):
-                raise ValueError(
+                raise InputError(
                     f'--presets {self.presets.name if self.presets else ""} has no values for'
                     f' {", ".join(cloths)} ({", ".join(primitives)})'
                 )
@@ -381,9 +382,9 @@ class SweepPlan:
         seeds = self.seeds()
         if settings:
             if len(self.rates) > 1:
-                raise ValueError('--mode settings runs at one rate: give --rate once')
+                raise InputError('--mode settings runs at one rate: give --rate once')
             if self.grid:
-                raise ValueError(
+                raise InputError(
                     '--mode settings sweeps the grid itself: use --axis grid=6x8,11x15 instead of'
                     ' --grid'
                 )
@@ -400,7 +401,7 @@ class SweepPlan:
                 self.presets,
             )
         if self.axes:
-            raise ValueError('--axis is for --mode settings')
+            raise InputError('--axis is for --mode settings')
         keep = {'first': seeds[:1], 'all': seeds, 'none': []}[self.keep_frames]
         return paper_cells(
             self.engines,

@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import Any
 import uuid
 
+from cloth_bench_ros.runtime.dds.cyclone_private import take_cdr
 from cloth_bench_ros.runtime.dds.discovery_info import parse_participant_entities
 from cloth_bench_ros.runtime.dds.idl import (
     Gid_,
@@ -33,7 +34,6 @@ from cloth_bench_ros.runtime.topic_endpoint_info import (
     TopicEndpointTypeEnum,
     UNKNOWN_NODE,
 )
-from cyclonedds._clayer import ddspy_take
 from cyclonedds.builtin import (
     BuiltinDataReader,
     BuiltinTopicDcpsParticipant,
@@ -123,7 +123,7 @@ class Graph:
 
     # everyone's
     def _refresh(self) -> None:
-        samples = ddspy_take(self.reader._ref, _ANY, 1000)  # raw: Humble's GIDs are 24 bytes
+        samples = take_cdr(self.reader, _ANY, 1000)  # raw: Humble's GIDs are 24 bytes
         for payload, info in samples if not isinstance(samples, int) else ():
             if not info.valid_data:
                 continue

@@ -21,9 +21,9 @@ import time
 from typing import Any
 
 from cloth_bench_ros.data import messages as cdr
+from cloth_bench_ros.runtime.dds.cyclone_private import take_cdr, write_cdr
 from cloth_bench_ros.runtime.dds.qos import endpoint_qos
 from cloth_bench_ros.runtime.messages import with_numpy_arrays
-from cyclonedds._clayer import ddspy_take, ddspy_write
 from cyclonedds.core import (
     DDSException,
     InstanceState,
@@ -169,7 +169,7 @@ class DdsServices:
         for entity, pair in list(self.pairs.items()):
             if not pair.condition.triggered:
                 continue
-            samples = ddspy_take(pair.reader._ref, _ANY, 64)
+            samples = take_cdr(pair.reader, _ANY, 64)
             if isinstance(samples, int):
                 raise DDSException(samples, f'taking from {entity.service_name}')
             for payload, info in samples:
@@ -245,6 +245,6 @@ class DdsServices:
 
     @staticmethod
     def _write(pair: _Pair, entity: Any, payload: bytes) -> None:
-        ret = ddspy_write(pair.writer._ref, payload + b'\0' * (-len(payload) % 4))
+        ret = write_cdr(pair.writer, payload + b'\0' * (-len(payload) % 4))
         if ret < 0:
             raise DDSException(ret, f'writing to {entity.service_name}')

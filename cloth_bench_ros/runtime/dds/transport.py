@@ -16,13 +16,14 @@ from typing import Any
 import uuid
 
 from cloth_bench_ros.data import messages as cdr
+from cloth_bench_ros.runtime.dds.cyclone_private import delete_entity, take_cdr, write_cdr
+from cloth_bench_ros.runtime.dds.domain import domain_config, domain_id
 from cloth_bench_ros.runtime.dds.graph import Graph
 from cloth_bench_ros.runtime.dds.idl import dds_type
-from cloth_bench_ros.runtime.dds.qos import domain_config, domain_id, endpoint_qos
+from cloth_bench_ros.runtime.dds.qos import endpoint_qos
 from cloth_bench_ros.runtime.dds.services import DdsServices
 from cloth_bench_ros.runtime.topic_endpoint_info import TopicEndpointInfo, TopicEndpointTypeEnum
 from cloth_bench_ros.runtime.transport import Endpoint
-from cyclonedds._clayer import ddspy_take, ddspy_write
 from cyclonedds.core import (
     DDSException,
     GuardCondition,
@@ -53,13 +54,6 @@ def dds_topic_name(ros_topic: str) -> str:
 def padded(payload: bytes) -> bytes:
     """Return a serialized sample zero-padded to a multiple of 4 bytes, as Cyclone sends it."""
     return payload + b'\0' * (-len(payload) % 4)
-
-
-def _dispose(entity: Any) -> None:
-    """Delete a Cyclone entity now (and its children), not when Python collects the object."""
-    if entity._entities.get(entity._ref) is entity:
-        del entity._entities[entity._ref]
-        entity._delete(entity._ref)
 
 
 def _participant(domain: int) -> DomainParticipant:
@@ -98,7 +92,7 @@ class DdsTransport:
 
     @staticmethod
     def dispose(entity: Any) -> None:
-        _dispose(entity)
+        delete_entity(entity)
 
     # endpoints
     def add_publisher(self, pub: Endpoint) -> None:
@@ -113,7 +107,7 @@ class DdsTransport:
     def remove_publisher(self, pub: Endpoint) -> None:
         writer = self.writers.pop(pub, None)
         if writer is not None:
-            _dispose(writer)
+            delete_entity(writer)
             self.graph_changed(pub.node)
 
     def add_subscription(self, sub: Endpoint) -> None:
@@ -133,8 +127,8 @@ class DdsTransport:
         if entry is not None:
             reader, condition = entry
             self.waitset.detach(condition)
-            _dispose(condition)
-            _dispose(reader)
+            delete_entity(condition)
+            delete_entity(reader)
             self.graph_changed(sub.node)
 
     def graph_changed(self, node: Any) -> None:
@@ -174,7 +168,7 @@ class DdsTransport:
         writer = self.writers.get(pub)
         if writer is None:
             return
-        ret = ddspy_write(writer._ref, padded(cdr.serialize(msg, pub.msg_type.__msgtype__)))
+        ret = write_cdr(writer, padded(cdr.serialize(msg, pub.msg_type.__msgtype__)))
         if ret < 0:
             raise DDSException(ret, f'writing to {pub.topic_name}')
 
@@ -186,7 +180,7 @@ class DdsTransport:
         for sub, (reader, _) in list(self.readers.items()):
             ros_type = sub.msg_type.__msgtype__
             while True:
-                samples = ddspy_take(reader._ref, _ANY, _TAKE_BATCH)
+                samples = take_cdr(reader, _ANY, _TAKE_BATCH)
                 if isinstance(samples, int):
                     raise DDSException(samples, f'taking from {sub.topic_name}')
                 for payload, info in samples:
@@ -237,4 +231,4 @@ class DdsTransport:
         self.writers.clear()
         self.services.pairs.clear()
         self.topics.clear()
-        _dispose(self.participant)
+        delete_entity(self.participant)
