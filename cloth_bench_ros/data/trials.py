@@ -1,0 +1,318 @@
+"""
+The repetitions of the motion in a recording, found without any simulation engine.
+
+A recording of a robot doing the task a few times holds several trials, with rest between them.
+`split_targets` finds them in the recorded gripper targets; `split_clouds` in the clouds alone:
+
+- motion: a frame moves when its mean nearest-neighbour distance to the cloud `LAG_S` earlier
+  is more than `MOTION_FACTOR` times the recording's rest level (the median of its quietest
+  fifth) and more than `MOTION_FLOOR` above it; moving frames separated by less than the task's
+  longest still phase plus `MERGE_MARGIN_S` are one motion. A motion shorter than `MIN_MOTION_S`
+  is a jump (the cloth put back by hand between takes, a glitch), not a trial.
+- start: the task's gripper path is known (core.trajectory), so the start of each motion is
+  fitted, not thresholded: the displacement of the cloth's top band (points within `TOP_BAND`
+  of its top, the part held by the grippers) from its rest position is least-squares fitted by
+  the grippers' displacement `t - start` after the start (in y and z: the band's x is which
+  points fall in it), over the rest before it and the first 2 cm of the task's motion. The start's precision is where the fit's sum of squares
+  rises by one noise variance (a 1-sigma interval, at least half the fine step). The gripper
+  targets are fitted the same way (scale 1 expected) over the whole motion.
+- a motion is a usable trial only when it matches the task: the fit's RMS residual at most
+  `MAX_RESIDUAL` (targets: `MAX_TARGET_RESIDUAL`), its scale within `SCALE_RANGE`, and its
+  duration at least `MIN_DURATION_FRACTION` of the task's (targets: within
+  `TARGET_DURATION_TOLERANCE`) and, for clouds, at most the task's plus `MAX_SETTLE_S`. Anything
+  else is reported with its reason and left out, never guessed at.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from cloth_bench_ros.core.trajectory import sample_quintic
+from cloth_bench_ros.data.alignment import StartTime
+import numpy as np
+from scipy.spatial import cKDTree
+
+LAG_S = 0.1  # s between the frames compared for motion
+MOTION_FACTOR = 2.5  # x the rest level
+MOTION_FLOOR = 0.004  # m above the rest level
+MERGE_MARGIN_S = 0.5  # s added to the task's longest still phase
+MIN_MOTION_S = 0.2  # s: shorter motions are jumps, not trials
+TOP_BAND = 0.01  # m below the top of the cloud: the part the grippers hold
+FIT_DISPLACEMENT = 0.02  # m of the task's motion the cloud fit covers
+FIT_PRE_S = 1.0  # s of rest before the motion the fit covers (at most)
+MAX_RESIDUAL = 0.015  # m RMS, clouds
+MAX_TARGET_RESIDUAL = 0.005  # m RMS, recorded targets
+SCALE_RANGE = (0.5, 2.0)
+MIN_DURATION_FRACTION = 0.75
+TARGET_DURATION_TOLERANCE = 0.1  # fraction of the task's duration
+MAX_SETTLE_S = 3.0  # s the cloth may keep moving after the grippers stop
+COARSE_STEP_S = 0.005
+FINE_STEP_S = 0.0005
+TEMPLATE_RATE = 1000.0
+
+
+@dataclass
+class FoundTrial:
+    """One motion found in a recording: where, how its start was fitted, and whether it is used."""
+
+    number: int  # 1-based, in the order found
+    first_ns: int  # bag time of the motion's first moving frame (or target)
+    last_ns: int  # bag time of its last one
+    start: StartTime | None  # fitted start of the task's motion
+    residual_m: float = float('nan')  # RMS of the start's fit
+    scale: float = float('nan')
+    duration_s: float = 0.0  # from the start to the last moving frame
+    usable: bool = False
+    reason: str = ''  # why it is left out
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            'number': self.number,
+            'first_ns': self.first_ns,
+            'last_ns': self.last_ns,
+            'start': self.start.as_dict() if self.start else None,
+            'residual_m': _finite(self.residual_m),
+            'scale': _finite(self.scale),
+            'duration_s': self.duration_s,
+            'usable': self.usable,
+            'reason': self.reason,
+        }
+
+
+@dataclass
+class Split:
+    """The trials of a recording and how they were found."""
+
+    source: str  # 'targets topic <name>' or 'clouds'
+    trials: list[FoundTrial] = field(default_factory=list)
+    jumps: int = 0  # motions shorter than MIN_MOTION_S
+    reason: str = ''  # why nothing was found, when nothing was
+
+    @property
+    def usable(self) -> list[FoundTrial]:
+        return [t for t in self.trials if t.usable]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            'source': self.source,
+            'trials': [t.as_dict() for t in self.trials],
+            'jumps': self.jumps,
+            'reason': self.reason,
+        }
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
+
+
+def task_displacement(primitive: str) -> tuple[np.ndarray, np.ndarray]:
+    """(t, d): the grippers' mid-point displacement (n, 3) from its start over the task."""
+    targets = sample_quintic(primitive, TEMPLATE_RATE)
+    mid = (targets.left + targets.right) / 2
+    return targets.t, mid - mid[0]
+
+
+def longest_still(primitive: str) -> float:
+    """Return the longest phase (s) in which the task's grippers do not move."""
+    t, d = task_displacement(primitive)
+    still = np.abs(np.diff(d, axis=0)).max(axis=1) < 1e-7
+    longest = run = 0
+    for flag in still:
+        run = run + 1 if flag else 0
+        longest = max(longest, run)
+    return longest / TEMPLATE_RATE
+
+
+def _template_at(t_ref: np.ndarray, d_ref: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    out = np.empty((len(tau), 3))
+    for axis in range(3):
+        out[:, axis] = np.interp(tau, t_ref, d_ref[:, axis], left=0.0, right=d_ref[-1, axis])
+    return out
+
+
+def _fit_cost(
+    times: np.ndarray, position: np.ndarray, t_ref: np.ndarray, d_ref: np.ndarray, t0: float
+) -> tuple[float, float]:
+    """
+    (sum of squares, scale): position - rest against the template(times - t0) moved rigidly.
+
+    The held part moves as the grippers do (scale 1); `scale` is the least-squares one, which
+    tells a motion of another size or direction.
+    """
+    before = (times < t0) & (times >= t0 - FIT_PRE_S)
+    disp = position - (position[before].mean(axis=0) if before.any() else position[0])
+    g = _template_at(t_ref, d_ref, times - t0)
+    g[:, position[0] == 0.0] = 0.0  # an axis left out of the signal (clouds: x)
+    gg = float(np.sum(g * g))
+    scale = float(np.sum(g * disp) / gg) if gg > 0 else 0.0
+    return float(np.sum((disp - g) ** 2)), scale
+
+
+def fit_start(
+    times: np.ndarray, position: np.ndarray, primitive: str, low: float, high: float
+) -> tuple[float, float, float, float]:
+    """
+    Fit the task's start time in [low, high] (s) to positions (n, 3) sampled at `times`.
+
+    The displacement fitted is from the mean position in the FIT_PRE_S before the start; every
+    sample given enters the fit. Returns (start, 1-sigma precision, RMS residual, scale).
+    """
+    t_ref, d_ref = task_displacement(primitive)
+    coarse = np.arange(low, high + COARSE_STEP_S / 2, COARSE_STEP_S)
+    costs = [_fit_cost(times, position, t_ref, d_ref, t0)[0] for t0 in coarse]
+    best = float(coarse[int(np.argmin(costs))])
+    reach = 8 * COARSE_STEP_S
+    fine = best + np.arange(-reach, reach + FINE_STEP_S / 2, FINE_STEP_S)
+    fine_costs = np.array([_fit_cost(times, position, t_ref, d_ref, t0)[0] for t0 in fine])
+    i = int(np.argmin(fine_costs))
+    start = float(fine[i])
+    sse, scale = _fit_cost(times, position, t_ref, d_ref, start)
+    n = len(times)
+    # 1 sigma: the sum of squares rises by one noise variance (sse / (n - 2)) from its least.
+    within = fine[fine_costs <= sse * (1.0 + 1.0 / max(1, n - 2))]
+    half = (within.max() - within.min()) / 2 if len(within) else 0.0
+    return start, max(half, FINE_STEP_S / 2), float(np.sqrt(sse / n)), scale
+
+
+def _motion_runs(moving: np.ndarray, times: np.ndarray, gap_s: float) -> list[tuple[int, int]]:
+    """Return [first, last] index pairs of moving runs, merged over still gaps below gap_s."""
+    runs: list[list[int]] = []
+    for i in np.nonzero(moving)[0]:
+        if runs and times[i] - times[runs[-1][1]] <= gap_s:
+            runs[-1][1] = int(i)
+        else:
+            runs.append([int(i), int(i)])
+    return [(a, b) for a, b in runs]
+
+
+def _check(trial: FoundTrial, task_s: float, targets: bool) -> None:
+    """Mark the trial usable, or give the first reason it does not match the task."""
+    limit = MAX_TARGET_RESIDUAL if targets else MAX_RESIDUAL
+    low, high = SCALE_RANGE
+    if targets:
+        ok_duration = abs(trial.duration_s - task_s) <= TARGET_DURATION_TOLERANCE * task_s
+        expected = f'{task_s:.2f} s +/- {TARGET_DURATION_TOLERANCE:.0%}'
+    else:
+        ok_duration = MIN_DURATION_FRACTION * task_s <= trial.duration_s <= task_s + MAX_SETTLE_S
+        expected = f'{MIN_DURATION_FRACTION * task_s:.2f}-{task_s + MAX_SETTLE_S:.2f} s'
+    if not ok_duration:
+        trial.reason = (
+            f'its motion lasts {trial.duration_s:.2f} s, the task {expected}: does not match'
+        )
+    elif not trial.residual_m <= limit:
+        trial.reason = (
+            f'its start fits the task with a residual of {trial.residual_m * 1e3:.1f} mm RMS '
+            f'(at most {limit * 1e3:g} mm): does not match'
+        )
+    elif not low <= trial.scale <= high:
+        trial.reason = (
+            f'it moves {trial.scale:.2f} x as far as the task ({low:g}-{high:g} x): does not match'
+        )
+    else:
+        trial.usable = True
+
+
+def split_targets(
+    stamps_ns: list[int], positions: list[np.ndarray], topic: str, primitive: str
+) -> Split:
+    """Find the repetitions of the task in recorded gripper targets (PoseArray positions)."""
+    split = Split(f'targets topic {topic}')
+    if len(stamps_ns) < 3:
+        split.reason = f'targets topic {topic} holds {len(stamps_ns)} messages'
+        return split
+    if len({p.shape for p in positions}) != 1:
+        split.reason = f'targets topic {topic}: messages with different numbers of poses'
+        return split
+    times = (np.asarray(stamps_ns, dtype=np.int64) - stamps_ns[0]) / 1e9
+    mids = np.array([p.mean(axis=0) for p in positions])
+    step = np.abs(np.diff(mids, axis=0)).max(axis=1)
+    moving = np.concatenate([[False], step > 1e-9])
+    return _split(split, times, mids, moving, stamps_ns[0], primitive, targets=True)
+
+
+def split_clouds(stamps_ns: list[int], clouds: list[np.ndarray], primitive: str) -> Split:
+    """Find the repetitions of the task in world clouds (cleaned: the cloth, little else)."""
+    split = Split('clouds')
+    keep = [i for i, c in enumerate(clouds) if len(c) >= 10]
+    if len(keep) < 10:
+        split.reason = f'{len(keep)} frames hold a cloud of 10 points or more'
+        return split
+    times = (np.asarray([stamps_ns[i] for i in keep], dtype=np.int64) - stamps_ns[keep[0]]) / 1e9
+    fps = (len(times) - 1) / max(times[-1] - times[0], 1e-9)
+    lag = max(1, int(round(LAG_S * fps)))
+    trees = [cKDTree(clouds[i]) for i in keep]
+    change = np.full(len(keep), np.nan)
+    for j in range(lag, len(keep)):
+        change[j] = float(trees[j - lag].query(clouds[keep[j]])[0].mean())
+    quiet = np.sort(change[np.isfinite(change)])
+    rest = float(np.median(quiet[: max(1, len(quiet) // 5)]))
+    threshold = max(MOTION_FACTOR * rest, rest + MOTION_FLOOR)
+    # A frame `lag` after the last move still differs from the one before it: shift back.
+    moved = np.nan_to_num(change, nan=0.0) > threshold
+    moving = np.zeros(len(keep), bool)
+    for j in np.nonzero(moved)[0]:
+        moving[max(0, j - lag + 1) : j + 1] = True
+    tops = np.array([_top_band(clouds[i]) for i in keep])
+    tops[:, 0] = 0.0  # the band's x is which points fall in it; the task moves in y and z
+    split.reason = '' if moving.any() else (
+        f'no motion: no frame differs from the one {LAG_S:g} s before by more than '
+        f'{threshold * 1e3:.1f} mm (rest level {rest * 1e3:.1f} mm)'
+    )
+    return _split(split, times, tops, moving, stamps_ns[keep[0]], primitive, targets=False)
+
+
+def _top_band(points: np.ndarray) -> np.ndarray:
+    top = np.percentile(points[:, 2], 98)
+    return points[points[:, 2] >= top - TOP_BAND].mean(axis=0)
+
+
+def _split(
+    split: Split,
+    times: np.ndarray,
+    position: np.ndarray,
+    moving: np.ndarray,
+    base_ns: int,
+    primitive: str,
+    targets: bool,
+) -> Split:
+    t_ref, d_ref = task_displacement(primitive)
+    task_s = float(t_ref[-1])
+    reach = np.linalg.norm(d_ref, axis=1)
+    fit_end = None if targets else float(t_ref[np.argmax(reach >= FIT_DISPLACEMENT)])
+    runs = _motion_runs(moving, times, longest_still(primitive) + MERGE_MARGIN_S)
+    previous_end = -np.inf
+    for first, last in runs:
+        if times[last] - times[first] < MIN_MOTION_S:
+            split.jumps += 1
+            previous_end = times[last]
+            continue
+        number = len(split.trials) + 1
+        trial = FoundTrial(number, base_ns + _ns(times[first]), base_ns + _ns(times[last]), None)
+        split.trials.append(trial)
+        low = max(times[first] - FIT_PRE_S, previous_end)
+        previous_end = times[last]
+        # The first moving sample is after the start; clouds flag a move up to LAG_S early.
+        high = times[first] + (0.0 if targets else LAG_S)
+        end = times[last] if fit_end is None else high + fit_end
+        window = (times >= low) & (times <= end)
+        if np.count_nonzero(window & (times < times[first])) < 2:
+            trial.reason = 'no rest before its motion to fit its start to'
+            continue
+        start, precision, residual, scale = fit_start(
+            times[window], position[window], primitive, low, high
+        )
+        trial.start = StartTime(
+            base_ns + _ns(start), f'{split.source}, fitted to the task', precision
+        )
+        trial.residual_m, trial.scale = residual, scale
+        trial.duration_s = float(times[last] - start)
+        _check(trial, task_s, targets)
+    if not split.trials and not split.reason:
+        jumps = f' ({split.jumps} shorter jumps)' if split.jumps else ''
+        split.reason = f'no motion longer than {MIN_MOTION_S:g} s{jumps}'
+    return split
+
+
+def _ns(seconds: float) -> int:
+    return int(round(seconds * 1e9))
