@@ -13,9 +13,12 @@ A recording of a robot doing the task a few times holds several trials, with res
   fitted, not thresholded: the displacement of the cloth's top band (points within `TOP_BAND`
   of its top, the part held by the grippers) from its rest position is least-squares fitted by
   the grippers' displacement `t - start` after the start (in y and z: the band's x is which
-  points fall in it), over the rest before it and the first 2 cm of the task's motion. The start's precision is where the fit's sum of squares
-  rises by one noise variance (a 1-sigma interval, at least half the fine step). The gripper
-  targets are fitted the same way (scale 1 expected) over the whole motion.
+  points fall in it), over the rest before it and the first 2 cm of the task's motion. The
+  start's precision is where the fit's sum of squares rises by one noise variance (a 1-sigma
+  interval, at least half the fine step). The gripper targets are fitted the same way over the
+  whole motion. The least-squares scale of the displacement is kept to tell a motion of another
+  size or direction. The cloth lags its grippers a little, so a start found in the clouds is
+  late by about 20-35 ms on the camera-like copies of the bundled fling (docs/own-recording.md).
 - a motion is a usable trial only when it matches the task: the fit's RMS residual at most
   `MAX_RESIDUAL` (targets: `MAX_TARGET_RESIDUAL`), its scale within `SCALE_RANGE`, and its
   duration at least `MIN_DURATION_FRACTION` of the task's (targets: within
@@ -65,6 +68,7 @@ class FoundTrial:
     duration_s: float = 0.0  # from the start to the last moving frame
     usable: bool = False
     reason: str = ''  # why it is left out
+    frames: int = 0  # frames from the start to the end of the task's motion
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -77,6 +81,7 @@ class FoundTrial:
             'duration_s': self.duration_s,
             'usable': self.usable,
             'reason': self.reason,
+            'frames': self.frames,
         }
 
 
@@ -88,6 +93,7 @@ class Split:
     trials: list[FoundTrial] = field(default_factory=list)
     jumps: int = 0  # motions shorter than MIN_MOTION_S
     reason: str = ''  # why nothing was found, when nothing was
+    origin_ns: int = 0  # bag time of the recording's first frame
 
     @property
     def usable(self) -> list[FoundTrial]:
@@ -99,6 +105,7 @@ class Split:
             'trials': [t.as_dict() for t in self.trials],
             'jumps': self.jumps,
             'reason': self.reason,
+            'origin_ns': self.origin_ns,
         }
 
 
@@ -252,7 +259,7 @@ def split_clouds(stamps_ns: list[int], clouds: list[np.ndarray], primitive: str)
     moved = np.nan_to_num(change, nan=0.0) > threshold
     moving = np.zeros(len(keep), bool)
     for j in np.nonzero(moved)[0]:
-        moving[max(0, j - lag + 1) : j + 1] = True
+        moving[max(0, j - lag + 1):j + 1] = True
     tops = np.array([_top_band(clouds[i]) for i in keep])
     tops[:, 0] = 0.0  # the band's x is which points fall in it; the task moves in y and z
     split.reason = '' if moving.any() else (
