@@ -139,7 +139,12 @@ def _template_at(t_ref: np.ndarray, d_ref: np.ndarray, tau: np.ndarray) -> np.nd
 
 
 def _fit_cost(
-    times: np.ndarray, position: np.ndarray, t_ref: np.ndarray, d_ref: np.ndarray, t0: float
+    times: np.ndarray,
+    position: np.ndarray,
+    t_ref: np.ndarray,
+    d_ref: np.ndarray,
+    t0: float,
+    axes: np.ndarray,
 ) -> tuple[float, float]:
     """
     (sum of squares, scale): position - rest against the template(times - t0) moved rigidly.
@@ -149,32 +154,38 @@ def _fit_cost(
     """
     before = (times < t0) & (times >= t0 - FIT_PRE_S)
     disp = position - (position[before].mean(axis=0) if before.any() else position[0])
+    disp[:, ~axes] = 0.0
     g = _template_at(t_ref, d_ref, times - t0)
-    g[:, position[0] == 0.0] = 0.0  # an axis left out of the signal (clouds: x)
+    g[:, ~axes] = 0.0
     gg = float(np.sum(g * g))
     scale = float(np.sum(g * disp) / gg) if gg > 0 else 0.0
     return float(np.sum((disp - g) ** 2)), scale
 
 
 def fit_start(
-    times: np.ndarray, position: np.ndarray, primitive: str, low: float, high: float
+    times: np.ndarray,
+    position: np.ndarray,
+    primitive: str,
+    low: float,
+    high: float,
+    axes: np.ndarray = np.ones(3, bool),
 ) -> tuple[float, float, float, float]:
     """
     Fit the task's start time in [low, high] (s) to positions (n, 3) sampled at `times`.
 
     The displacement fitted is from the mean position in the FIT_PRE_S before the start; every
-    sample given enters the fit. Returns (start, 1-sigma precision, RMS residual, scale).
+    sample given enters the fit, on the `axes` marked True. Returns (start, 1-sigma precision, RMS residual, scale).
     """
     t_ref, d_ref = task_displacement(primitive)
     coarse = np.arange(low, high + COARSE_STEP_S / 2, COARSE_STEP_S)
-    costs = [_fit_cost(times, position, t_ref, d_ref, t0)[0] for t0 in coarse]
+    costs = [_fit_cost(times, position, t_ref, d_ref, t0, axes)[0] for t0 in coarse]
     best = float(coarse[int(np.argmin(costs))])
     reach = 8 * COARSE_STEP_S
     fine = best + np.arange(-reach, reach + FINE_STEP_S / 2, FINE_STEP_S)
-    fine_costs = np.array([_fit_cost(times, position, t_ref, d_ref, t0)[0] for t0 in fine])
+    fine_costs = np.array([_fit_cost(times, position, t_ref, d_ref, t0, axes)[0] for t0 in fine])
     i = int(np.argmin(fine_costs))
     start = float(fine[i])
-    sse, scale = _fit_cost(times, position, t_ref, d_ref, start)
+    sse, scale = _fit_cost(times, position, t_ref, d_ref, start, axes)
     n = len(times)
     # 1 sigma: the sum of squares rises by one noise variance (sse / (n - 2)) from its least.
     within = fine[fine_costs <= sse * (1.0 + 1.0 / max(1, n - 2))]
@@ -261,7 +272,6 @@ def split_clouds(stamps_ns: list[int], clouds: list[np.ndarray], primitive: str)
     for j in np.nonzero(moved)[0]:
         moving[max(0, j - lag + 1):j + 1] = True
     tops = np.array([_top_band(clouds[i]) for i in keep])
-    tops[:, 0] = 0.0  # the band's x is which points fall in it; the task moves in y and z
     split.reason = '' if moving.any() else (
         f'no motion: no frame differs from the one {LAG_S:g} s before by more than '
         f'{threshold * 1e3:.1f} mm (rest level {rest * 1e3:.1f} mm)'
@@ -306,8 +316,10 @@ def _split(
         if np.count_nonzero(window & (times < times[first])) < 2:
             trial.reason = 'no rest before its motion to fit its start to'
             continue
+        # The top band's x is which points fall in it; the task moves in y and z.
+        axes = np.array([targets, True, True])
         start, precision, residual, scale = fit_start(
-            times[window], position[window], primitive, low, high
+            times[window], position[window], primitive, low, high, axes
         )
         trial.start = StartTime(
             base_ns + _ns(start), f'{split.source}, fitted to the task', precision
