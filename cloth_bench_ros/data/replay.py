@@ -165,13 +165,23 @@ def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig
     return replace(scene_cleaning((options.primitive,), options.voxel), table_plane=remove)
 
 
-def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> ReplayPlan:
-    """
-    Read, transform, clean, align and sort every frame of the topic (see module doc).
+@dataclass
+class RecordedFrames:
+    """Every frame of a bag's cloud topic in world, cleaned where asked, with how."""
 
-    `reference` is a callable (seconds) -> (t, vertices) of the reference simulation, needed
-    only when the start must be searched automatically.
-    """
+    topic: str
+    trial: TrialInfo
+    project_bag: bool
+    stamps: list[int]
+    clouds: list[np.ndarray]
+    frames_source: str
+    config: CleaningConfig | None
+    stats: CleaningStats | None
+    nan_dropped: int
+
+
+def read_frames(reader: BagReader, options: ReplayOptions) -> RecordedFrames:
+    """Read, transform and clean every frame of the cloud topic (BagError on a bad frame)."""
     topic = reader.cloud_topic(options.topic or None)
     project_bag = reader.trial is not None
     trial = _trial(reader, options, topic)
@@ -197,6 +207,22 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
         clouds.append(points)
     if not stamps:
         raise BagError(f'bag {reader.path}: topic {topic} holds no message')
+    return RecordedFrames(
+        topic, trial, project_bag, stamps, clouds, frames_source, config, stats, nan_dropped
+    )
+
+
+def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> ReplayPlan:
+    """
+    Read, transform, clean, align and sort every frame of the topic (see module doc).
+
+    `reference` is a callable (seconds) -> (t, vertices) of the reference simulation, needed
+    only when the start must be searched automatically.
+    """
+    rec = read_frames(reader, options)
+    topic, trial, project_bag = rec.topic, rec.trial, rec.project_bag
+    stamps, clouds, stats, config = rec.stamps, rec.clouds, rec.stats, rec.config
+    frames_source, nan_dropped = rec.frames_source, rec.nan_dropped
     split = None if project_bag or options.start_time else split_recording(
         reader, options, stamps, clouds
     )
