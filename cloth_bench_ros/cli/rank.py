@@ -94,7 +94,7 @@ def cmd_rank(args: argparse.Namespace) -> int:
         args.rates, args.grid, args.metric, args.max_frames,
         common.engine_overrides(args.set, sorted({e for e, _ in entrants})),
     )
-    print(f'cloth-bench rank: {len(args.recordings)} recordings, engines '
+    print(f'cloth-bench rank: {", ".join(args.recordings)}; engines '
           f'{", ".join(e + (":" + o["model"] if o else "") for e, o in entrants)}; output {out}',
           flush=True)
     try:

@@ -107,11 +107,19 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
     from cloth_bench_ros.studies.identify import identify, IdentifySpec, SUMMARY_FILE
 
     bags = [t.bag for t in train]
+    stamp = json.loads(json.dumps({
+        'bags': bags, 'trials': spec.trials, 'sampler': spec.sampler, 'grid': spec.grid,
+        'metric': spec.metric, 'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
+        'fixed': {**spec.fixed.get(engine, {}), **overrides},
+    }))
     done = out / SUMMARY_FILE
     if done.exists():
-        summary = json.loads(done.read_text())
-        if summary.get('training_bags') == bags:
-            return summary
+        try:
+            summary = json.loads(done.read_text())
+            if summary.get('rank_stamp') == stamp:
+                return summary
+        except ValueError:
+            pass  # damaged: identify again (its journal keeps the finished trials)
     ident = IdentifySpec(
         engine, train[0].cloth, train[0].primitive, Path(bags[0]), out, spec.sampler,
         spec.trials, spec.metric, (), 0, spec.rate_hz, spec.grid,
@@ -119,17 +127,22 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         max_frames=spec.max_frames, also=tuple(bags[1:]),
     )
     summary = identify(ident, scheduler, workers, progress).summary
-    summary['training_bags'] = bags
+    summary['rank_stamp'] = stamp
     done.write_text(json.dumps(summary, indent=1, default=str))
     return summary
 
 
 def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int, rate: float,
           label: str) -> tuple[str, Trial]:
-    key = f'{engine}|{sorted(params.items())}|{trial.bag}|{seed}|{rate:g}|{spec.metric}|{label}'
+    # A timing cell runs the whole motion: step times of the settle phase alone say little.
+    frames = None if label == 'timing' else spec.max_frames
+    key = (
+        f'{engine}|{sorted(params.items())}|{trial.bag}|{seed}|{rate:g}|{spec.metric}|{label}|'
+        f'{spec.grid}|{frames}'
+    )
     return key, Trial(
         engine, trial.cloth, trial.primitive, trial.bag, tuple(sorted(params.items())),
-        spec.metric, seed, rate, spec.grid, spec.max_frames, -1, label,
+        spec.metric, seed, rate, spec.grid, frames, -1, label,
     )
 
 
