@@ -4,9 +4,11 @@ The repetitions of the motion in a recording, found without any simulation engin
 A recording of a robot doing the task a few times holds several trials, with rest between them.
 `split_targets` finds them in the recorded gripper targets; `split_clouds` in the clouds alone:
 
-- motion: a frame moves when its mean nearest-neighbour distance to the cloud `LAG_S` earlier
-  is more than `MOTION_FACTOR` times the recording's rest level (the median of its quietest
-  fifth) and more than `MOTION_FLOOR` above it; moving frames separated by less than the task's
+- motion: a frame moves when its mean nearest-neighbour distance to the cloud a lag earlier
+  (the time the task's grippers take to move `LAG_DISTANCE` at their mean speed, within
+  `LAG_RANGE_S`: 0.07 s for the fling, 0.54 s for the slow drag) is more than `MOTION_FACTOR`
+  times the recording's rest level (the median of its quietest fifth) and more than
+  `MOTION_FLOOR` above it; moving frames separated by less than the task's
   longest still phase plus `MERGE_MARGIN_S` are one motion. A motion shorter than `MIN_MOTION_S`
   is a jump (the cloth put back by hand between takes, a glitch), not a trial.
 - start: the task's gripper path is known (core.trajectory), so the start of each motion is
@@ -37,13 +39,15 @@ from cloth_bench_ros.data.alignment import StartTime
 import numpy as np
 from scipy.spatial import cKDTree
 
-LAG_S = 0.1  # s between the frames compared for motion
+LAG_DISTANCE = 0.03  # m the grippers move, on average, between the frames compared for motion
+LAG_RANGE_S = (0.05, 1.0)
 MOTION_FACTOR = 2.5  # x the rest level
 MOTION_FLOOR = 0.004  # m above the rest level
 MERGE_MARGIN_S = 0.5  # s added to the task's longest still phase
 MIN_MOTION_S = 0.2  # s: shorter motions are jumps, not trials
 CORNER_FIT_S = 1.0  # s of the task's motion the cloud fit covers
 CORNER_CAP = 0.05  # m: a corner further from the cloud than this counts as this far
+CORNER_GAP = 0.1  # m: at rest the cloud's nearest point to a gripper is at most this far
 FIT_PRE_S = 1.0  # s of rest before the motion the fit covers (at most)
 MAX_RESIDUAL = 0.025  # m RMS, clouds
 MAX_TARGET_RESIDUAL = 0.005  # m RMS, recorded targets
@@ -119,6 +123,13 @@ def task_displacement(primitive: str) -> tuple[np.ndarray, np.ndarray]:
     targets = sample_quintic(primitive, TEMPLATE_RATE)
     mid = (targets.left + targets.right) / 2
     return targets.t, mid - mid[0]
+
+
+def motion_lag(primitive: str) -> float:
+    """Return the time (s) the task's grippers take to move LAG_DISTANCE at their mean speed."""
+    t, d = task_displacement(primitive)
+    path = float(np.sum(np.linalg.norm(np.diff(d, axis=0), axis=1)))
+    return float(np.clip(LAG_DISTANCE * t[-1] / path, *LAG_RANGE_S))
 
 
 def longest_still(primitive: str) -> float:
@@ -262,7 +273,8 @@ def split_clouds(stamps_ns: list[int], clouds: list[np.ndarray], primitive: str)
         return split
     times = (np.asarray([stamps_ns[i] for i in keep], dtype=np.int64) - stamps_ns[keep[0]]) / 1e9
     fps = (len(times) - 1) / max(times[-1] - times[0], 1e-9)
-    lag = max(1, int(round(LAG_S * fps)))
+    lag_s = motion_lag(primitive)
+    lag = max(1, int(round(lag_s * fps)))
     trees = [cKDTree(clouds[i]) for i in keep]
     change = np.full(len(keep), np.nan)
     for j in range(lag, len(keep)):
@@ -276,7 +288,7 @@ def split_clouds(stamps_ns: list[int], clouds: list[np.ndarray], primitive: str)
     for j in np.nonzero(moved)[0]:
         moving[max(0, j - lag + 1):j + 1] = True
     split.reason = '' if moving.any() else (
-        f'no motion: no frame differs from the one {LAG_S:g} s before by more than '
+        f'no motion: no frame differs from the one {lag_s:.2f} s before by more than '
         f'{threshold * 1e3:.1f} mm (rest level {rest * 1e3:.1f} mm)'
     )
     corners = _CornerFit(trees, times, primitive)
@@ -313,10 +325,10 @@ class _CornerFit:
             return 'no rest before its motion to fit its start to'
         nearest = [self.trees[f].query(self.grippers) for f in rest]
         gap = float(np.mean([d for d, _ in nearest]))
-        if gap > CORNER_CAP:
+        if gap > CORNER_GAP:
             return (
                 f"the cloud is {gap * 1e3:.0f} mm from the task's grippers at rest "
-                f'(at most {CORNER_CAP * 1e3:g} mm): not the task (or the cloud not in world)'
+                f'(at most {CORNER_GAP * 1e3:g} mm): not the task (or the cloud not in world)'
             )
         corners = np.mean([self.trees[f].data[i] for f, (_, i) in zip(rest, nearest)], axis=0)
         coarse = np.arange(low, high + COARSE_STEP_S / 2, COARSE_STEP_S)
@@ -350,8 +362,8 @@ def _split(
         split.trials.append(trial)
         low = max(times[first] - FIT_PRE_S, previous_end)
         previous_end = times[last]
-        # The first moving sample is after the start; clouds flag a move up to LAG_S early.
-        fitted = fit(first, low, times[first] + (0.0 if targets else LAG_S), last)
+        # The first moving sample is after the start; clouds flag a move up to a lag early.
+        fitted = fit(first, low, times[first] + (0.0 if targets else motion_lag(primitive)), last)
         if isinstance(fitted, str):
             trial.reason = fitted
             continue
