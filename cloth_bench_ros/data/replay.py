@@ -375,7 +375,7 @@ def _start(
         return alignment.given_start(options.start_time, min(stamps)), 0, everything
     if options.align not in ('simulation', 'onset'):
         raise alignment.AlignmentError(f'align {options.align!r} is not simulation or onset')
-    if split is not None and (options.trial or len(split.usable) > 1):
+    if split is not None and (options.trial or len(split.trials) > 1):
         chosen = choose_trial(split, options.trial)
         others = [t for t in split.trials if t is not chosen]
         low = max([t.last_ns for t in others if t.number < chosen.number], default=-np.inf)

@@ -285,7 +285,7 @@ def split_clouds(stamps_ns: list[int], clouds: list[np.ndarray], primitive: str)
     # A frame `lag` after the last move still differs from the one before it: shift back.
     moved = np.nan_to_num(change, nan=0.0) > threshold
     moving = np.zeros(len(keep), bool)
-    for j in np.nonzero(moved)[0]:
+    for j in np.nonzero(moved)[0].tolist():
         moving[max(0, j - lag + 1):j + 1] = True
     split.reason = '' if moving.any() else (
         f'no motion: no frame differs from the one {lag_s:.2f} s before by more than '

@@ -39,7 +39,8 @@ def significance(ranked: list[Ranked]) -> str:
     """Return one sentence: which neighbours in the ranking differ (intervals apart) or not."""
     if len(ranked) < 2:
         return 'one engine ranked: nothing to compare'
-    apart, together = [], []
+    apart: list[str] = []
+    together: list[str] = []
     for a, b in zip(ranked, ranked[1:]):
         (apart if a.high < b.low else together).append(f'{a.name} < {b.name}')
     parts = []

@@ -221,12 +221,12 @@ def floor_distance(bag_a: str, bag_b: str, primitive: str, vertices: int) -> flo
 
 def floor(trials: Sequence[RankTrial], vertices: int) -> dict[str, Any]:
     """Return the floor of a group: every ordered pair's distance, their mean, min and max."""
-    pairs = []
+    pairs: list[tuple[str, str, float]] = []
     for a in trials:
         for b in trials:
             if a is not b:
-                pairs.append([a.name, b.name, floor_distance(a.bag, b.bag, a.primitive, vertices)])
-    values = np.array([v for *_, v in pairs if np.isfinite(v)])
+                pairs.append((a.name, b.name, floor_distance(a.bag, b.bag, a.primitive, vertices)))
+    values = np.array([v for _, _, v in pairs if np.isfinite(v)])
     return {
         'pairs': pairs,
         'mean': float(values.mean()) if len(values) else None,
