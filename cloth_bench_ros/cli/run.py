@@ -220,7 +220,8 @@ def trials_lines(split: dict | None) -> list[str]:
 
 
 def trial_line(t: dict, origin_ns: int = 0) -> str:
-    """One trial: `trial 2: bag time 41.3-46.2 s, 147 frames, start +/- 0.4 ms, ...`.
+    """
+    One trial: `trial 2: bag time 41.3-46.2 s, 147 frames, start +/- 0.4 ms, ...`.
 
     Bag times are seconds from the recording's first frame (`origin_ns`).
     """
