@@ -162,3 +162,86 @@ def make_camera_recording(
                     serialize(organized_cloud(t, optical[:50], 5, 10, rng)),
                 )
     return EPOCH_START_NS
+
+
+TARGETS_TOPIC = '/arm/targets'
+
+
+def _targets_message(stamp: int, left: np.ndarray, right: np.ndarray) -> object:
+    pose, point = msg_class('geometry_msgs/msg/Pose'), msg_class('geometry_msgs/msg/Point')
+    quat = msg_class('geometry_msgs/msg/Quaternion')
+    return msg_class('geometry_msgs/msg/PoseArray')(
+        header=header(stamp, 'world'),
+        poses=[
+            pose(position=point(x=float(p[0]), y=float(p[1]), z=float(p[2])), orientation=quat(
+                x=0.0, y=0.0, z=0.0, w=1.0))
+            for p in (left, right)
+        ],
+    )
+
+
+def make_repeated_recording(
+    source: Path,
+    out: Path,
+    repetitions: int = 3,
+    rest_s: float = 2.0,
+    seed: int = 0,
+    noise: float = 0.002,
+    storage: str = 'mcap',
+    targets_rate: float = 0.0,
+    jitter_ns: int = 0,
+) -> list[int]:
+    """
+    Write a camera-like recording of the bundled trial done `repetitions` times; true starts (ns).
+
+    Each repetition: `rest_s` of the cloth hanging still, the trial's frames, then `rest_s` of
+    the cloth lying still where it ended; the cloth is put back between repetitions unseen (one
+    jump). Each repetition's noise is its own (so are the repetitions' clouds, apart from the
+    trial's motion); `jitter_ns` shifts each repetition's frames off the camera's clock by up
+    to that much. With `targets_rate` > 0, the task's gripper targets are
+    recorded on TARGETS_TOPIC at that rate (the start pose at rest before, the end pose after).
+    """
+    from cloth_bench_ros.core.trajectory import sample_quintic
+
+    rng = np.random.default_rng(seed)
+    reader = BagReader(source)
+    clouds = list(reader.clouds())
+    period = clouds[1][0] - clouds[0][0]
+    rest = int(round(rest_s * 1e9 / period))
+    position = scene.CAMERA_POSITION
+    optical_in_link = LINK_ROTATION.T @ R_WORLD_OPTICAL.T
+    tf = msg_class('tf2_msgs/msg/TFMessage')(
+        transforms=[
+            _transform('world', 'camera_link', position, LINK_ROTATION),
+            _transform('camera_link', OPTICAL, (0.0, 0.0, 0.0), optical_in_link),
+        ]
+    )
+    starts = []
+    with _RosbagsBag(out, storage, 'none') as bag:
+        bag.write('/tf_static', 'tf2_msgs/msg/TFMessage', EPOCH_START_NS - 10**8, serialize(tf))
+        t = EPOCH_START_NS
+        for _ in range(repetitions):
+            shift = int(rng.integers(0, jitter_ns + 1))
+            frames = (
+                [clouds[0][1]] * rest + [c for _, c in clouds] + [clouds[-1][1]] * rest
+            )
+            start = t + rest * period + shift
+            starts.append(start)
+            if targets_rate > 0:  # at rest, the quintic part, at rest
+                targets = sample_quintic(reader.trial.primitive, targets_rate)
+                step = int(round(1e9 / targets_rate))
+                lead = int(rest_s * targets_rate)
+                for k in range(-lead, len(targets) + lead):
+                    i = min(max(k, 0), len(targets) - 1)
+                    stamp = start + k * step
+                    msg = _targets_message(stamp, targets.left[i], targets.right[i])
+                    bag.write(TARGETS_TOPIC, 'geometry_msgs/msg/PoseArray', stamp, serialize(msg))
+            for k, points in enumerate(frames):
+                cloth = points + rng.normal(0.0, noise, points.shape) if noise else points
+                world = np.concatenate([cloth, scene_clutter(rng)])
+                optical = (world - position) @ R_WORLD_OPTICAL.T
+                stamp = t + k * period + shift
+                cloud = organized_cloud(stamp, optical, 48, 64, rng)
+                bag.write(CAMERA_TOPIC, POINTCLOUD2, stamp, serialize(cloud))
+            t += len(frames) * period
+    return starts

@@ -8,7 +8,7 @@ import os
 import sys
 import warnings
 
-from cloth_bench_ros.cli import data, hil, identify, run, studies
+from cloth_bench_ros.cli import data, hil, identify, rank, run, studies
 from cloth_bench_ros.cli.common import Parser, UserError
 from cloth_bench_ros.errors import is_user_error, one_line
 from cloth_bench_ros.studies.errors import StudyInterrupted
@@ -21,7 +21,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog='cloth-bench', description='Sim-to-real benchmark of cloth simulators.')
     parser.add_argument('-v', '--verbose', action='store_true', help="log the nodes' messages")
     sub = parser.add_subparsers(dest='command', required=True, parser_class=Parser)
-    for group in (run, studies, identify, hil, data):
+    for group in (run, studies, identify, rank, hil, data):
         group.add_parsers(sub)
     return parser
 

@@ -105,6 +105,21 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help='coarse step of the automatic alignment (default 1/30 s; refined 8x)',
     )
     scoring.add_argument(
+        '--trial',
+        type=common.integer('--trial', 1),
+        metavar='N',
+        help='the repetition to score in a recording of several (default: the first usable)',
+    )
+    scoring.add_argument(
+        '--align',
+        default='simulation',
+        choices=('simulation', 'onset'),
+        help=(
+            'start of a cloud-only recording: simulation (search against the first engine) or '
+            'onset (fitted to the task in the clouds, no engine); default simulation'
+        ),
+    )
+    scoring.add_argument(
         '--record-comparison', metavar='DIR', help='write a comparison bag (Foxglove/RViz)'
     )
     scoring.add_argument(
@@ -147,7 +162,10 @@ def _replay_params(args: argparse.Namespace) -> dict:
         'table_plane': args.table_plane,
         'align_window': float(args.align_window),
         'align_step': float(args.align_step),
+        'align': args.align,
     }
+    if args.trial:
+        params['trial'] = int(args.trial)
     if args.transform:
         params['transform'] = [float(v) for v in common.read_transform(args.transform).ravel()]
     return params
@@ -159,6 +177,8 @@ def _print_real(summary: dict) -> None:
     real = summary['real']
     acc = real['accounting']
     print(accounting_line(acc))
+    for line in trials_lines(real.get('trials')):
+        print(line)
     start = real.get('alignment') or {}
     if start:
         print(
@@ -178,6 +198,42 @@ def _print_real(summary: dict) -> None:
             f'bag: no frame was scored ({accounting_line(acc)[len("real frames: ") :]}); '
             'check --start-time/--topic/--primitive'
         )
+
+
+def trials_lines(split: dict | None) -> list[str]:
+    """Return the repetitions found in a recording, one line each, and which one is scored."""
+    if not split:
+        return []
+    found = split['trials']
+    usable = [t['number'] for t in found if t['usable']]
+    head = (
+        f'recording: {len(found)} trials found in the {split["source"]}'
+        f' ({len(usable)} usable'
+        + (f', {split["jumps"]} jumps between rests ignored' if split['jumps'] else '')
+        + ')'
+    )
+    if split.get('scored'):
+        head += f'; scoring trial {split["scored"]} (--trial N chooses)'
+    elif split.get('reason'):
+        head += f': {split["reason"]}'
+    return [head] + [f'  {trial_line(t, split.get("origin_ns", 0))}' for t in found]
+
+
+def trial_line(t: dict, origin_ns: int = 0) -> str:
+    """
+    One trial: `trial 2: bag time 41.3-46.2 s, 147 frames, start +/- 0.4 ms, ...`.
+
+    Bag times are seconds from the recording's first frame (`origin_ns`).
+    """
+    start = t.get('start')
+    first = ((start['bag_ns'] if start else t['first_ns']) - origin_ns) / 1e9
+    last = (t['last_ns'] - origin_ns) / 1e9
+    text = f'trial {t["number"]}: bag time {first:.1f}-{last:.1f} s'
+    if start:
+        text += f', {t.get("frames", 0)} frames, start +/- {start["precision_s"] * 1e3:.1f} ms'
+    if t.get('residual_m') is not None:
+        text += f', fit residual {t["residual_m"] * 1e3:.1f} mm'
+    return text + (', usable' if t['usable'] else f', left out: {t["reason"]}')
 
 
 def window_line(summary: dict) -> str:

@@ -360,6 +360,7 @@ def contact_onset(real: list[tuple[float, bool]], sim: list[tuple[float, bool]])
 FRAME_FATES = (
     'scored',
     'before_start',
+    'other_trials',
     'after_trajectory',
     'empty',
     'unpaired',
@@ -382,6 +383,7 @@ def frame_accounting(replay: dict, real: dict) -> dict:
     fates = {
         'scored': real['scored_frames'],
         'before_start': replay.get('before_start', 0),
+        'other_trials': replay.get('other_trials', 0),  # other repetitions in the recording
         'after_trajectory': replay.get('after_trajectory', 0),
         'empty': replay.get('empty_after_cleaning', 0) + real['empty_frames_skipped'],
         'unpaired': real['unpaired_real_frames'],

@@ -49,6 +49,7 @@ def run_summary(
             **real,
             'accounting': accounting,
             'alignment': replay.get('start'),
+            'trials': replay.get('trials'),
             'frames_from': replay.get('frames'),
             'cleaning': replay.get('cleaning'),
             'topic': replay.get('topic'),

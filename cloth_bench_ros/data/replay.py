@@ -17,7 +17,7 @@ from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.core.cleaning import clean, CleaningConfig, CleaningStats, scene_cleaning
 from cloth_bench_ros.core.phase import first_table_contact
 from cloth_bench_ros.core.trajectory import full_targets
-from cloth_bench_ros.data import alignment
+from cloth_bench_ros.data import alignment, trials
 from cloth_bench_ros.data.bag_reader import BagReader, decode_cloud, IRREGULAR_TOLERANCE
 from cloth_bench_ros.data.errors import BagError
 from cloth_bench_ros.data.messages import POSE_ARRAY
@@ -49,6 +49,8 @@ class ReplayOptions:
     rate_hz: float = 100.0
     align_engine: str = 'mujoco'
     search: alignment.SearchSettings = alignment.SearchSettings()
+    trial: int = 0  # the repetition to score (1-based); 0: the only one, else the first usable
+    align: str = 'simulation'  # a cloud-only start: 'simulation' (align_engine) or 'onset'
 
 
 @dataclass
@@ -67,6 +69,8 @@ class ReplayPlan:
     nan_points_dropped: int = 0
     irregular_intervals: int = 0  # stamp steps off 1/fps by more than IRREGULAR_TOLERANCE
     change_of_phase: dict[str, Any] = field(default_factory=dict)  # see `change_of_phase`
+    split: trials.Split | None = None  # the repetitions found (recordings without a start)
+    trial_scored: int = 0  # which of them is scored (0: the recording as one trial)
 
     def accounting(self) -> dict[str, Any]:
         """Return the recorder's share of the frame accounting, for the summary."""
@@ -79,6 +83,9 @@ class ReplayPlan:
             'change_of_phase': self.change_of_phase,
             'nan_points_dropped': self.nan_points_dropped,
             'irregular_intervals': self.irregular_intervals,
+            'trials': None if self.split is None else {
+                **self.split.as_dict(), 'scored': self.trial_scored
+            },
             'cleaning': (
                 None
                 if self.cleaning is None
@@ -141,13 +148,23 @@ def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig
     return replace(scene_cleaning((options.primitive,), options.voxel), table_plane=remove)
 
 
-def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> ReplayPlan:
-    """
-    Read, transform, clean, align and sort every frame of the topic (see module doc).
+@dataclass
+class RecordedFrames:
+    """Every frame of a bag's cloud topic in world, cleaned where asked, with how."""
 
-    `reference` is a callable (seconds) -> (t, vertices) of the reference simulation, needed
-    only when the start must be searched automatically.
-    """
+    topic: str
+    trial: TrialInfo
+    project_bag: bool
+    stamps: list[int]
+    clouds: list[np.ndarray]
+    frames_source: str
+    config: CleaningConfig | None
+    stats: CleaningStats | None
+    nan_dropped: int
+
+
+def read_frames(reader: BagReader, options: ReplayOptions) -> RecordedFrames:
+    """Read, transform and clean every frame of the cloud topic (BagError on a bad frame)."""
     topic = reader.cloud_topic(options.topic or None)
     project_bag = reader.trial is not None
     trial = _trial(reader, options, topic)
@@ -173,7 +190,28 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
         clouds.append(points)
     if not stamps:
         raise BagError(f'bag {reader.path}: topic {topic} holds no message')
-    start = _start(reader, options, project_bag, stamps, clouds, reference)
+    return RecordedFrames(
+        topic, trial, project_bag, stamps, clouds, frames_source, config, stats, nan_dropped
+    )
+
+
+def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> ReplayPlan:
+    """
+    Read, transform, clean, align and sort every frame of the topic (see module doc).
+
+    `reference` is a callable (seconds) -> (t, vertices) of the reference simulation, needed
+    only when the start must be searched automatically.
+    """
+    rec = read_frames(reader, options)
+    topic, trial, project_bag = rec.topic, rec.trial, rec.project_bag
+    stamps, clouds, stats, config = rec.stamps, rec.clouds, rec.stats, rec.config
+    frames_source, nan_dropped = rec.frames_source, rec.nan_dropped
+    split = None if project_bag or options.start_time else split_recording(
+        reader, options, stamps, clouds
+    )
+    start, chosen, region = _start(
+        reader, options, project_bag, stamps, clouds, reference, split
+    )
     targets = full_targets(options.primitive, options.rate_hz)
     end_ns = targets.stamp_ns(len(targets) - 1) - int(round(targets.quintic_start * 1e9))
     plan = ReplayPlan(
@@ -185,8 +223,12 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
         cleaning_config=config,
         frames_source=frames_source,
         nan_points_dropped=nan_dropped if stats is None else stats.non_finite,
+        split=split,
+        trial_scored=chosen,
     )
     counts = {'before_start': 0, 'after_trajectory': 0, 'empty_after_cleaning': 0, 'to_send': 0}
+    if chosen:
+        counts['other_trials'] = 0
     # A frame within the start's precision of it is at the start (not before it).
     tolerance = max(
         int(round(start.precision_s * 1e9)), 1000
@@ -194,7 +236,9 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     for stamp, points in zip(stamps, clouds):
         t_ns = stamp - start.bag_ns
         t_ns = 0 if -tolerance <= t_ns < 0 else t_ns
-        if t_ns < 0:
+        if chosen and not region[0] < stamp < region[1]:
+            counts['other_trials'] += 1
+        elif t_ns < 0:
             counts['before_start'] += 1
         elif t_ns > end_ns:
             counts['after_trajectory'] += 1
@@ -256,6 +300,49 @@ def change_of_phase(
     }
 
 
+def split_recording(
+    reader: BagReader, options: ReplayOptions, stamps: list[int], clouds: list[np.ndarray]
+) -> trials.Split:
+    """Return the repetitions of the task in a recording: from its targets topic, else clouds."""
+    topic = options.targets_topic or TARGETS_TOPIC
+    if reader.topics.get(topic) == POSE_ARRAY:
+        split = trials.split_targets(*_targets(reader, topic), topic, options.primitive)
+    else:
+        split = trials.split_clouds(stamps, clouds, options.primitive)
+    split.origin_ns = min(stamps)
+    targets = full_targets(options.primitive, options.rate_hz)
+    end_ns = targets.stamp_ns(len(targets) - 1) - int(round(targets.quintic_start * 1e9))
+    at = np.asarray(stamps, dtype=np.int64)
+    for found in split.trials:
+        if found.start is not None:
+            since = at - found.start.bag_ns
+            found.frames = int(np.count_nonzero((since >= 0) & (since <= end_ns)))
+    return split
+
+
+def choose_trial(split: trials.Split, number: int) -> trials.FoundTrial:
+    """Return trial `number` (1-based) of a split, or the first usable; AlignmentError if none."""
+    found = ', '.join(str(t.number) for t in split.usable) or 'none'
+    if number:
+        match = [t for t in split.trials if t.number == number]
+        if not match:
+            raise alignment.AlignmentError(
+                f'--trial {number}: the recording holds {len(split.trials)} trials '
+                f'(usable: {found})'
+            )
+        if not match[0].usable:
+            raise alignment.AlignmentError(
+                f'--trial {number} is left out: {match[0].reason} (usable: {found})'
+            )
+        return match[0]
+    if not split.usable:
+        raise alignment.AlignmentError(
+            f'no trial of the task in the recording ({split.source}): '
+            + (split.reason or '; '.join(f'{t.number}: {t.reason}' for t in split.trials))
+        )
+    return split.usable[0]
+
+
 def _start(
     reader: BagReader,
     options: ReplayOptions,
@@ -263,19 +350,45 @@ def _start(
     stamps: list[int],
     clouds: list[np.ndarray],
     reference,
-) -> alignment.StartTime:
+    split: trials.Split | None,
+) -> tuple[alignment.StartTime, int, tuple[float, float]]:
+    """Return the start, the trial scored (0: the recording as one) and that trial's region."""
+    everything = (-np.inf, np.inf)
     if options.start_time:
-        return alignment.given_start(options.start_time, min(stamps))
+        return alignment.given_start(options.start_time, min(stamps)), 0, everything
+    if options.align not in ('simulation', 'onset'):
+        raise alignment.AlignmentError(f'align {options.align!r} is not simulation or onset')
+    if split is not None and (options.trial or len(split.trials) > 1):
+        chosen = choose_trial(split, options.trial)
+        others = [t for t in split.trials if t is not chosen]
+        low = max([t.last_ns for t in others if t.number < chosen.number], default=-np.inf)
+        later = [t for t in others if t.number > chosen.number]
+        high = min([t.start.bag_ns if t.start else t.first_ns for t in later], default=np.inf)
+        assert chosen.start is not None  # a usable trial has its fitted start
+        start = chosen.start
+        if options.align == 'simulation' and not split.source.startswith('targets'):
+            if reference is None:
+                raise alignment.AlignmentError('automatic alignment needs a reference simulation')
+            inside = [(st, c) for st, c in zip(stamps, clouds) if low < st < high]
+            t_ref, states = reference(options.search.window)
+            start = alignment.search_start(
+                [st for st, _ in inside], [c for _, c in inside], t_ref, states, options.search
+            )
+        return start, chosen.number, (low, high)
     targets_topic = options.targets_topic or (TARGETS_TOPIC if not project_bag else '')
     if options.targets_topic and reader.topics.get(targets_topic) != POSE_ARRAY:
         raise BagError(f'bag {reader.path} has no {POSE_ARRAY} topic {targets_topic}')
     if targets_topic and reader.topics.get(targets_topic) == POSE_ARRAY:
-        return alignment.targets_start(*_targets(reader, targets_topic), targets_topic)
+        start = alignment.targets_start(*_targets(reader, targets_topic), targets_topic)
+        return start, 0, everything
     if project_bag:
         return alignment.StartTime(
             0, "bag stamps (the project's bags count from the start of the motion)", 0.0
-        )
+        ), 0, everything
+    if options.align == 'onset':
+        assert split is not None
+        return choose_trial(split, 0).start or alignment.StartTime(0, '', 0.0), 0, everything
     if reference is None:
         raise alignment.AlignmentError('automatic alignment needs a reference simulation')
     t_ref, states = reference(options.search.window)
-    return alignment.search_start(stamps, clouds, t_ref, states, options.search)
+    return alignment.search_start(stamps, clouds, t_ref, states, options.search), 0, everything

@@ -153,6 +153,7 @@ class Recorder(Node):
     def replay_options(self) -> ReplayOptions:
         """Return what the bag does not say, from the node's parameters."""
         self.declare_parameter('change_of_phase_frame', -1)
+        self.declare_parameter('trial', 0)  # the repetition to score; 0: the first usable
         transform = list(self.declare_parameter('transform', [0.0]).value)
         if transform != [0.0] and len(transform) != 16:
             raise InputError(
@@ -169,6 +170,7 @@ class Recorder(Node):
             self,
             {
                 'change_of_phase_frame': lambda v, n: validation.frame_index(v, n, unset=-1),
+                'trial': lambda v, n: validation.integer(v, n, 0),
                 'align_window': validation.positive,
                 'align_step': validation.positive,
                 'voxel': validation.non_negative,
@@ -190,6 +192,8 @@ class Recorder(Node):
             rate_hz=p['rate_hz'],
             align_engine=self.declare_parameter('align_engine', 'mujoco').value,
             search=search,
+            trial=p['trial'],
+            align=self.declare_parameter('align', 'simulation').value,
         )
 
     @staticmethod

@@ -80,6 +80,7 @@ class IdentifySpec:
     batch: int | None = None  # trials in flight (default: the cluster's worker threads)
     validate_seeds: int = 5
     bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
+    also: tuple[str, ...] = ()  # more training bags: the objective is the mean over all of them
 
 
 def default_params(engine: str, model: str | None = None) -> list[str]:
@@ -249,6 +250,7 @@ def trial_of(spec: IdentifySpec, params: dict, number: int, sampler: str) -> Tri
         spec.max_frames,
         number,
         sampler,
+        tuple(spec.also),
     )
 
 

@@ -44,6 +44,7 @@ class Trial:
     max_frames: int | None = None  # score at most this many frames of the window
     number: int = -1  # Optuna's trial number (-1: the preset, before identification)
     sampler: str = ''
+    also: tuple[str, ...] = ()  # more bags of the task: the value is the mean over every bag
 
 
 def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
@@ -91,28 +92,15 @@ def evaluate(trial: Trial) -> dict:
     }
     engine = None
     try:
-        from cloth_bench_ros.core.evaluation import OnlineEvaluator
         from cloth_bench_ros.core.pointcloud2 import as_carried
-        from cloth_bench_ros.core.trajectory import Primitive
         from cloth_bench_ros.core.scene import ClothGrid, SETTLE_DURATION
         from cloth_bench_ros.core.trajectory import full_targets
         from cloth_bench_ros.engines import make_engine
         from cloth_bench_ros.engines.presets import load_preset
 
-        cut, frames = bag_clouds(trial.bag)
         offset = int(round(SETTLE_DURATION * 1e9))
-        core = OnlineEvaluator([trial.engine], Primitive(trial.primitive), offset, cut, FPS)
-        used = [
-            f
-            for f in frames
-            if trial.primitive != 'dynamic' or cut is None or int(round(f[0] / 1e9 * FPS)) < cut
-        ]
-        used = used[: trial.max_frames] if trial.max_frames else used
-        if not used:
-            raise BagError(f'bag {trial.bag}: no frame to score')
-        for stamp, points, dropped in used:
-            core.add_real(stamp + offset, points, dropped)
-        last = used[-1][0] + offset
+        cores = [_scored_bag(trial, bag, offset) for bag in (trial.bag, *trial.also)]
+        last = max(end for _, end in cores)
         targets = full_targets(trial.primitive, trial.rate_hz)
         params = {**load_preset(trial.engine, trial.cloth, trial.primitive), **dict(trial.params)}
         engine = make_engine(
@@ -126,23 +114,28 @@ def evaluate(trial: Trial) -> dict:
                 vertices = engine.step(targets.left[k], targets.right[k])
             stamp = targets.stamp_ns(k)
             d = engine.divergence
-            core.add_step(
-                trial.engine,
-                stamp,
-                k,
-                time.perf_counter() - t0,
-                d is not None,
-                d.reason if d else '',
-            )
-            core.add_state(trial.engine, stamp, as_carried(vertices))  # as a run carries it
+            step_s = time.perf_counter() - t0
+            carried = as_carried(vertices)  # as a run carries it
+            for core, _ in cores:
+                core.add_step(trial.engine, stamp, k, step_s, d is not None, d.reason if d else '')
+                core.add_state(trial.engine, stamp, carried)
             if d is not None or stamp >= last:
                 break
-        core.finish()
-        m = core.summary()[trial.engine]
         suffix = 'd' if trial.primitive == 'dynamic' else 'q'
+        per_bag = []
+        for core, _ in cores:
+            core.finish()
+            per_bag.append(core.summary()[trial.engine])
+        m = per_bag[0]
         out.update(
-            CD=_num(m[f'CD_{suffix}']), HD=_num(m[f'HD_{suffix}']), frames=m['frames_in_window']
+            CD=float(np.mean([_num(b[f'CD_{suffix}']) for b in per_bag])),
+            HD=float(np.mean([_num(b[f'HD_{suffix}']) for b in per_bag])),
+            frames=int(sum(b['frames_in_window'] for b in per_bag)),
+            step_p50_ms=_num(m['step_time']['p50']) * 1e3,
+            step_p99_ms=_num(m['step_time']['p99']) * 1e3,
         )
+        if trial.also:
+            out['per_bag'] = [_num(b[f'CD_{suffix}']) for b in per_bag]
         out['value'] = out['CD'] if trial.objective == 'cd' else out['HD']
         if m['diverged'] and not math.isfinite(out['value']):
             out.update(status='diverged', reason=m['diverged_reason'], step=m['diverged_at_step'])
@@ -163,6 +156,26 @@ def evaluate(trial: Trial) -> dict:
     out['wall_s'] = time.perf_counter() - start
     out['cpu_s'] = time.process_time() - cpu_start  # what the trial costs on an idle core
     return out
+
+
+def _scored_bag(trial: Trial, bag: str, offset: int) -> tuple[Any, int]:
+    """Return an evaluator core fed with a bag's frames of the window, and its last stamp."""
+    from cloth_bench_ros.core.evaluation import OnlineEvaluator
+    from cloth_bench_ros.core.trajectory import Primitive
+
+    cut, frames = bag_clouds(bag)
+    core = OnlineEvaluator([trial.engine], Primitive(trial.primitive), offset, cut, FPS)
+    used = [
+        f
+        for f in frames
+        if trial.primitive != 'dynamic' or cut is None or int(round(f[0] / 1e9 * FPS)) < cut
+    ]
+    used = used[: trial.max_frames] if trial.max_frames else used
+    if not used:
+        raise BagError(f'bag {bag}: no frame to score')
+    for stamp, points, dropped in used:
+        core.add_real(stamp + offset, points, dropped)
+    return core, used[-1][0] + offset
 
 
 def _num(value: object) -> float:

@@ -1,0 +1,116 @@
+"""`cloth-bench rank`: which simulator for my cloth, from the user's own recordings."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from cloth_bench_ros.cli import common
+from cloth_bench_ros.cli.common import UserError
+from cloth_bench_ros.cli.identify import _trials
+from cloth_bench_ros.cli.run import _replay_params
+from cloth_bench_ros.studies.errors import StudyInterrupted
+
+RESULT_FILE = 'rank.json'
+
+
+def _entrant(text: str) -> tuple[str, dict]:
+    """--engine NAME or NAME:MODEL (newton:xpbd, newton:vbd)."""
+    from cloth_bench_ros.engines import engine_class
+
+    name, _, model = text.strip().partition(':')
+    try:
+        engine_class(name)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return name, ({'model': model} if model else {})
+
+
+def _rates(text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(',') if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'--rates {text!r}: comma-separated Hz') from None
+    if not values or any(not v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f'--rates {text!r}: rates must be > 0 Hz')
+    return values
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    """Register rank."""
+    rank = sub.add_parser(
+        'rank',
+        parents=[common.scene_options(), common.executor_options()],
+        help='rank the engines on your own recordings: identified, scored on held-out trials',
+    )
+    rank.add_argument('recordings', nargs='+', metavar='RECORDING',
+                      help="rosbag2 bags, or folders of bags (the importer's output)")
+    rank.add_argument('--engine', action='append', type=_entrant,
+                      help='engine[:model] (repeat; default mujoco, bullet, newton:xpbd)')
+    rank.add_argument('--trials', type=_trials, default=0,
+                      help='identification trials per sampler, or auto (default auto)')
+    rank.add_argument('--sampler', default='both', choices=('cmaes', 'tpe', 'gp', 'both'))
+    rank.add_argument('--seeds', type=common.integer('--seeds', 1), default=3,
+                      help='held-out seeds per held-out trial (default 3)')
+    rank.add_argument('--rate', type=common.rate, default=100.0,
+                      help='simulator rate of identification and scoring (default 100 Hz)')
+    rank.add_argument('--rates', type=_rates, default=[10.0, 100.0, 1000.0],
+                      help='rates whose step times decide the recommendation '
+                      '(default 10,100,1000)')
+    rank.add_argument('--grid', type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
+    rank.add_argument('--metric', default='cd', choices=('cd', 'hd'),
+                      help="what is identified and ranked (default cd, the paper's)")
+    rank.add_argument('--max-frames', type=common.integer('--max-frames', 1),
+                      help='score only the first N frames of each window (faster)')
+    rank.add_argument('--topic', help='PointCloud2 topic of plain recordings')
+    rank.add_argument('--targets-topic', help='recorded PoseArray gripper targets')
+    rank.add_argument('--clean', default='auto', choices=('auto', 'on', 'off'))
+    rank.add_argument('--output', help='directory (default results/rank)')
+    common.engine_override_option(rank, 'fixed on every entrant of that engine, not fitted')
+    rank.set_defaults(func=cmd_rank)
+
+
+def cmd_rank(args: argparse.Namespace) -> int:
+    """Run the protocol, print the table and its sentences, write rank.json."""
+    from cloth_bench_ros.data.replay import ReplayOptions
+    from cloth_bench_ros.report.rank import rank_answer, rank_lines, rank_table
+    from cloth_bench_ros.studies.rank import CELLS_FILE, DEFAULT_ENTRANTS, run_rank, RankSpec
+
+    entrants = args.engine or list(DEFAULT_ENTRANTS)
+    out = Path(args.output) if args.output else Path('results') / 'rank'
+    params = _replay_params(argparse.Namespace(
+        topic=args.topic, start_time=None, targets_topic=args.targets_topic, clean=args.clean,
+        voxel=0.0, table_plane='auto', align_window=1.0, align_step=1 / 30, align='onset',
+        transform=None, trial=None,
+    ))
+    replay = ReplayOptions(
+        cloth=args.cloth, primitive=args.primitive, topic=params['topic'],
+        targets_topic=params['targets_topic'], clean=params['clean'], rate_hz=args.rate,
+        align='onset',
+    )
+    spec = RankSpec(
+        args.recordings, out, entrants, replay, args.trials, args.sampler, args.seeds, args.rate,
+        args.rates, args.grid, args.metric, args.max_frames,
+        common.engine_overrides(args.set, sorted({e for e, _ in entrants})),
+    )
+    print(f'cloth-bench rank: {", ".join(args.recordings)}; engines '
+          f'{", ".join(e + (":" + o["model"] if o else "") for e, o in entrants)}; output {out}',
+          flush=True)
+    try:
+        raw = run_rank(spec, args.scheduler, args.workers, progress=not args.no_progress)
+    except KeyboardInterrupt:
+        raise StudyInterrupted(
+            f'rank interrupted: every finished identification (journals under {out}/identify) '
+            f'and cell ({out / CELLS_FILE}) is kept; run the same command again to resume'
+        ) from None
+    result = rank_answer(raw)
+    print(rank_table(result).markdown())
+    for line in rank_lines(result):
+        print(line)
+    path = out / RESULT_FILE
+    path.write_text(json.dumps(result, indent=1, default=float, allow_nan=False))
+    print(f'rank: {path}')
+    if not result['answer']:
+        raise UserError('rank: no group could be ranked')
+    return 0

@@ -1,0 +1,185 @@
+"""
+The answer of `cloth-bench rank`: per cloth and task, the engines on held-out trials, ranked.
+
+From the study's numbers (studies.rank): each entrant's held-out values over trials and seeds,
+ranked with the cross-reference study's bootstrap (report.ranking: intervals, P(rank)); one
+sentence on which neighbours in the ranking differ significantly (their 95 % intervals do not
+overlap); the preset beside the identified figure; the floor; step times and, per rate, the most
+accurate entrant that meets the rate's deadline (studies.recommend's one rule: step p99 under
+DEADLINE_BUDGET of the period); the Pareto front of error against step time; the cross-task
+check.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from cloth_bench_ros.core.table import Table
+from cloth_bench_ros.report.ranking import bootstrap_ranking, finite, Ranked
+from cloth_bench_ros.studies.recommend import DEADLINE_BUDGET
+import numpy as np
+
+
+def deadline_ms(rate_hz: float) -> float:
+    """Return the step time (ms) a configuration must stay under, at p99, to run at a rate."""
+    return DEADLINE_BUDGET * 1e3 / rate_hz
+
+
+def _values(cells: list[dict], group: str, entrant: str, config: str) -> list[float | None]:
+    return [
+        c.get('value')
+        for c in cells
+        if c.get('kind') == 'held_out' and c['group'] == group and c['entrant'] == entrant
+        and c['config'] == config
+    ]
+
+
+def significance(ranked: list[Ranked]) -> str:
+    """Return one sentence: which neighbours in the ranking differ (intervals apart) or not."""
+    if len(ranked) < 2:
+        return 'one engine ranked: nothing to compare'
+    apart: list[str] = []
+    together: list[str] = []
+    for a, b in zip(ranked, ranked[1:]):
+        (apart if a.high < b.low else together).append(f'{a.name} < {b.name}')
+    parts = []
+    if apart:
+        parts.append('significant (95 % intervals apart): ' + ', '.join(apart))
+    if together:
+        parts.append('not told apart (intervals overlap): ' + ', '.join(together))
+    return '; '.join(parts)
+
+
+def _timing(cells: list[dict], group: str, entrant: str) -> dict[str, dict]:
+    out = {}
+    for c in cells:
+        if c.get('kind') == 'timing' and c['group'] == group and c['entrant'] == entrant:
+            p99 = c.get('step_p99_ms')
+            out[f'{c["rate_hz"]:g}'] = {
+                'step_p50_ms': c.get('step_p50_ms'),
+                'step_p99_ms': p99,
+                'deadline_ms': deadline_ms(c['rate_hz']),
+                'meets_deadline': p99 is not None and p99 < deadline_ms(c['rate_hz']),
+                'status': c.get('status'),
+            }
+    return out
+
+
+def _pareto(entries: dict[str, dict], rate: str) -> list[str]:
+    """Return the entrants no other beats in both held-out error and step time at `rate`."""
+    points = {
+        n: (e['identified']['mean'], e['timing'].get(rate, {}).get('step_p50_ms'))
+        for n, e in entries.items()
+    }
+    points = {n: p for n, p in points.items() if p[0] is not None and p[1] is not None}
+    return sorted(
+        n for n, (cd, t) in points.items()
+        if not any(c2 <= cd and t2 <= t and (c2, t2) != (cd, t) for c2, t2 in points.values())
+    )
+
+
+def rank_answer(raw: dict[str, Any]) -> dict[str, Any]:
+    """Return the raw numbers with, per group, the ranking and everything said about it."""
+    cells = raw['cells']
+    answer: dict[str, Any] = {}
+    for group, info in raw['groups'].items():
+        entries: dict[str, dict] = {}
+        for entrant in raw['spec']['entrants']:
+            ident, preset = (_values(cells, group, entrant, k) for k in ('identified', 'preset'))
+            fi, fp = finite(ident), finite(preset)
+            entries[entrant] = {
+                'identified': {'values': ident, 'mean': float(fi.mean()) if len(fi) else None,
+                               'ok': len(fi), 'n': len(ident)},
+                'preset': {'values': preset, 'mean': float(fp.mean()) if len(fp) else None,
+                           'ok': len(fp), 'n': len(preset)},
+                'timing': _timing(cells, group, entrant),
+            }
+        ranked = bootstrap_ranking({n: e['identified']['values'] for n, e in entries.items()})
+        recommendation = {}
+        for rate in raw['spec']['rates']:
+            key = f'{rate:g}'
+            timing = {n: e['timing'].get(key, {}) for n, e in entries.items()}
+            fit = [r for r in ranked if timing[r.name].get('meets_deadline')]
+            recommendation[key] = (
+                {'entrant': fit[0].name, 'mean': fit[0].mean,
+                 'step_p99_ms': entries[fit[0].name]['timing'][key]['step_p99_ms']}
+                if fit else None
+            )
+        cross = [
+            {'entrant': c['entrant'], 'fitted_on': c['fitted_on'], 'trial': c['trial'],
+             'value': c.get('value')}
+            for c in cells if c.get('kind') == 'cross_task' and c['group'] == group
+        ]
+        answer[group] = {
+            'ranking': [r.__dict__ for r in ranked],
+            'significance': significance(ranked),
+            'entrants': entries,
+            'floor': info['floor'],
+            'recommendation': recommendation,
+            'deadline_rule': f'step p99 < {DEADLINE_BUDGET:g} x the period',
+            'pareto': {f'{r:g}': _pareto(entries, f'{r:g}') for r in raw['spec']['rates']},
+            'cross_task': cross,
+        }
+    return {**raw, 'answer': answer}
+
+
+def _f(value: float | None, digits: int = 4) -> str:
+    return '-' if value is None or not math.isfinite(value) else f'{value:.{digits}f}'
+
+
+def rank_table(result: dict[str, Any]) -> Table:
+    """Return one row per group and entrant: rank, held-out figure, interval, P(rank), preset."""
+    metric = result['spec']['metric'].upper()
+    rate = f'{result["spec"]["rate_hz"]:g}'
+    body = []
+    for group, a in result['answer'].items():
+        floor = a['floor']['mean']
+        for r in a['ranking']:
+            e = a['entrants'][r['name']]
+            t = e['timing'].get(rate, {})
+            body.append([
+                group, str(r['rank']), r['name'], _f(r['mean']),
+                f'[{_f(r["low"])}, {_f(r["high"])}]', f'{r["p_rank"]:.2f}', str(r['n']),
+                _f(e['preset']['mean']), _f(floor), _f(t.get('step_p99_ms'), 2),
+            ])
+    headers = ['cloth_task', 'rank', 'engine', f'{metric} held-out (m)', '95 % CI', 'P(rank)',
+               'runs', f'{metric} preset (m)', 'floor (m)', f'step p99 at {rate} Hz (ms)']
+    return Table('rank', headers, body, 'lrlrrrrrrr')
+
+
+def rank_lines(result: dict[str, Any]) -> list[str]:
+    """Return the sentences under the table: significance, floor, recommendation, cross-task."""
+    lines = []
+    for group, a in result['answer'].items():
+        lines.append(f'{group}: {a["significance"]}')
+        floor = a['floor']
+        if floor['mean'] is not None:
+            above = [
+                r['name'] for r in a['ranking'] if r['low'] > floor['max']
+            ]
+            lines.append(
+                f'{group}: floor (repeated real trials, {floor["vertices"]} points) '
+                f'{floor["mean"]:.4f} m (pairs {floor["min"]:.4f}-{floor["max"]:.4f}); '
+                + (f'further from a trial than the trials are from each other: {", ".join(above)}'
+                   if above else "no engine is clearly further than the trials' own spread")
+            )
+        for rate, rec in a['recommendation'].items():
+            rule = f'p99 < {DEADLINE_BUDGET * 1e3 / float(rate):.2f} ms'
+            lines.append(
+                f'{group} at {rate} Hz ({rule}): '
+                + (f'{rec["entrant"]} (held-out {rec["mean"]:.4f} m, step p99 '
+                   f'{rec["step_p99_ms"]:.2f} ms)' if rec else 'no engine meets the deadline')
+            )
+        by: dict[tuple[str, str], list] = {}
+        for c in a['cross_task']:
+            by.setdefault((c['entrant'], c['fitted_on']), []).append(c['value'])
+        for (entrant, fitted_on), values in sorted(by.items()):
+            own = a['entrants'].get(entrant, {}).get('identified', {}).get('mean')
+            v = finite(values)
+            mean = float(np.mean(v)) if len(v) else None
+            lines.append(
+                f'{group}: {entrant} fitted on {fitted_on}: {_f(mean)} m '
+                f'(fitted on this task: {_f(own)} m)'
+            )
+    return lines

@@ -1,0 +1,265 @@
+"""
+`cloth-bench rank`: the engines fitted to a user's cloth, scored on trials they were not fitted to.
+
+The protocol, the same for every engine: the recordings' trials (studies.rank_trials) grouped by
+cloth and task; per group, leave-one-trial-out folds (5 folds above 5 trials); per engine and
+fold, identification (studies.identify, the same sampler and budget for every engine) on the
+training trials, the objective being the mean over them; then the held-out trial scored with the
+identified parameters and with the preset on `seeds` seeds (the evaluator's core, as `run`
+scores); step times at each rate; the cross-task check where a cloth's two tasks were recorded;
+the floor (the distance between the group's real trials). Every finished identification and
+cell is kept (the identifications' journals, `cells.jsonl`): the same command resumes.
+The ranking itself is the report's (report.rank): this module computes, it does not judge.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import json
+from pathlib import Path
+import sys
+from typing import Any, Callable, Sequence
+
+from cloth_bench_ros.data.replay import ReplayOptions
+from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.studies.objective import evaluate, Trial
+from cloth_bench_ros.studies.rank_trials import (
+    floor,
+    prepare_trials,
+    RankTrial,
+    recordings_of,
+)
+
+DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
+    ('mujoco', {}),
+    ('bullet', {}),
+    ('newton', {'model': 'xpbd'}),
+)
+RATES = (10.0, 100.0, 1000.0)
+MAX_FOLDS = 5
+CELLS_FILE = 'cells.jsonl'
+
+
+class RankError(ClothBenchError, ValueError):
+    """Rank cannot give an answer (no group with two usable trials); str() says why."""
+
+
+@dataclass
+class RankSpec:
+    """What to rank, on what, how."""
+
+    recordings: Sequence[str]
+    output: Path
+    entrants: Sequence[tuple[str, dict]] = DEFAULT_ENTRANTS
+    replay: ReplayOptions = field(default_factory=ReplayOptions)  # cloth, task, topic, ...
+    trials: int = 0  # identification budget per sampler (AUTO: from the convergence curve)
+    sampler: str = 'both'
+    seeds: int = 3  # held-out seeds 1..seeds
+    rate_hz: float = 100.0
+    rates: Sequence[float] = RATES
+    grid: tuple[int, int] | None = None
+    metric: str = 'cd'  # the identification objective and the ranking metric
+    max_frames: int | None = None
+    fixed: dict = field(default_factory=dict)  # per engine: overrides on every entrant of it
+
+
+def entrant_key(engine: str, overrides: dict) -> str:
+    """Return an entrant's file-safe name, e.g. newton-xpbd."""
+    return '-'.join([engine, *(str(v) for _, v in sorted(overrides.items()))])
+
+
+def folds(n: int) -> list[list[int]]:
+    """Return the held-out trial indices of each fold: one each up to MAX_FOLDS, else 5 folds."""
+    if n <= MAX_FOLDS:
+        return [[i] for i in range(n)]
+    return [list(range(k, n, MAX_FOLDS)) for k in range(MAX_FOLDS)]
+
+
+def groups_of(trials: Sequence[RankTrial], say: Callable[[str], None]) -> dict:
+    """Return (cloth, primitive) -> trials of groups with two usable trials or more."""
+    groups: dict[tuple[str, str], list[RankTrial]] = {}
+    for t in trials:
+        groups.setdefault((t.cloth, t.primitive), []).append(t)
+    kept = {}
+    for (cloth, primitive), members in sorted(groups.items()):
+        if len(members) < 2:
+            say(f'{cloth} {primitive}: {len(members)} usable trial; left out (ranking needs 2)')
+        else:
+            kept[(cloth, primitive)] = members
+    return kept
+
+
+def _read_cells(path: Path) -> dict[str, dict]:
+    rows = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            try:
+                row = json.loads(line)
+                rows[row['key']] = row
+            except (ValueError, KeyError, TypeError):
+                continue  # a torn last line: that cell runs again
+    return rows
+
+
+def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTrial], out: Path,
+              scheduler: str | None, workers: int | None, progress: bool) -> dict:
+    """Return the identified parameters of one fold (resumed or reused when already done)."""
+    from cloth_bench_ros.studies.identify import identify, IdentifySpec, SUMMARY_FILE
+
+    bags = [t.bag for t in train]
+    stamp = json.loads(json.dumps({
+        'bags': bags, 'trials': spec.trials, 'sampler': spec.sampler, 'grid': spec.grid,
+        'metric': spec.metric, 'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
+        'fixed': {**spec.fixed.get(engine, {}), **overrides},
+    }))
+    done = out / SUMMARY_FILE
+    if done.exists():
+        try:
+            summary = json.loads(done.read_text())
+            if summary.get('rank_stamp') == stamp:
+                return summary
+        except ValueError:
+            pass  # damaged: identify again (its journal keeps the finished trials)
+    ident = IdentifySpec(
+        engine, train[0].cloth, train[0].primitive, Path(bags[0]), out, spec.sampler,
+        spec.trials, spec.metric, (), 0, spec.rate_hz, spec.grid,
+        {**spec.fixed.get(engine, {}), **overrides}, validate_seeds=0,
+        max_frames=spec.max_frames, also=tuple(bags[1:]),
+    )
+    summary = identify(ident, scheduler, workers, progress).summary
+    summary['rank_stamp'] = stamp
+    done.write_text(json.dumps(summary, indent=1, default=str))
+    return summary
+
+
+def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int, rate: float,
+          label: str) -> tuple[str, Trial]:
+    # A timing cell runs the whole motion: step times of the settle phase alone say little.
+    frames = None if label == 'timing' else spec.max_frames
+    key = (
+        f'{engine}|{sorted(params.items())}|{trial.bag}|{seed}|{rate:g}|{spec.metric}|{label}|'
+        f'{spec.grid}|{frames}'
+    )
+    return key, Trial(
+        engine, trial.cloth, trial.primitive, trial.bag, tuple(sorted(params.items())),
+        spec.metric, seed, rate, spec.grid, frames, -1, label,
+    )
+
+
+def run_rank(
+    spec: RankSpec,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+    say: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Run the protocol (resumable) and return every number it produced (see module doc)."""
+    from cloth_bench_ros.core.scene import ClothGrid
+    from cloth_bench_ros.safe_io import check_output_dir
+    from cloth_bench_ros.studies.executor import open_client
+    from cloth_bench_ros.studies.results import append_row, ResultsLock
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    out = check_output_dir(spec.output)
+    with ResultsLock(out, 'rank'):
+        trials = prepare_trials(recordings_of(spec.recordings), spec.replay, out / 'trials', say)
+        groups = groups_of(trials, say)
+        if not groups:
+            raise RankError(
+                f'rank: no cloth and task with two usable trials among {len(trials)} trials '
+                'found; record the task at least twice'
+            )
+        identified: dict[str, Any] = {}
+        todo: list[tuple[str, Trial, dict]] = []
+        for (cloth, primitive), members in groups.items():
+            group = f'{cloth}_{primitive}'
+            for engine, overrides in spec.entrants:
+                name = entrant_key(engine, overrides)
+                preset = {**spec.fixed.get(engine, {}), **overrides}
+                for k, held in enumerate(folds(len(members))):
+                    train = [t for i, t in enumerate(members) if i not in held]
+                    say(f'identify {name} on {group} fold {k + 1}: {len(train)} training trials')
+                    summary = _identify(spec, engine, overrides, train,
+                                        out / 'identify' / group / name / f'fold{k + 1}',
+                                        scheduler, workers, progress)
+                    fitted = {**preset, **summary['params']}
+                    identified[f'{group}|{name}|{k + 1}'] = {
+                        'group': group, 'entrant': name, 'fold': k + 1,
+                        'training': [t.name for t in train], 'params': summary['params'],
+                        'value': summary['value'], 'best_sampler': summary['best_sampler'],
+                        'trials': {s: v['trials'] for s, v in summary['per_sampler'].items()},
+                    }
+                    meta = {'group': group, 'entrant': name, 'fold': k + 1}
+                    for i in held:
+                        for seed in range(1, spec.seeds + 1):
+                            for label, params in (('identified', fitted), ('preset', preset)):
+                                key, cell = _cell(spec, engine, params, members[i], seed,
+                                                  spec.rate_hz, label)
+                                todo.append((key, cell, {**meta, 'trial': members[i].name,
+                                                         'kind': 'held_out'}))
+                    if k == 0:
+                        for rate in spec.rates:
+                            key, cell = _cell(spec, engine, fitted, members[0], 1, rate, 'timing')
+                            todo.append((key, cell, {**meta, 'trial': members[0].name,
+                                                     'kind': 'timing'}))
+                        for (c2, p2), others in groups.items():
+                            if c2 == cloth and p2 != primitive:  # the cross-task check
+                                for t in others:
+                                    key, cell = _cell(spec, engine, fitted, t, 1, spec.rate_hz,
+                                                      f'cross:{primitive}')
+                                    todo.append((key, cell, {**meta, 'trial': t.name,
+                                                             'group': f'{c2}_{p2}',
+                                                             'fitted_on': group,
+                                                             'kind': 'cross_task'}))
+        done = _read_cells(out / CELLS_FILE)
+        left = [(k, c, m) for k, c, m in todo if k not in done]
+        say(f'cells: {len(todo)} ({len(todo) - len(left)} kept from an earlier run)')
+        if left:
+            with open_client(scheduler, workers, out / 'workers.log') as client:
+                futures = {client.submit(evaluate, c, pure=False): (k, c, m) for k, c, m in left}
+                bar = tqdm(total=len(left), desc='rank cells', unit='cell',
+                           disable=not progress, file=sys.stderr, dynamic_ncols=True)
+                for future in as_completed(futures):
+                    key, cell, meta = futures[future]
+                    result = future.result()
+                    row = {'key': key, **meta, 'engine': cell.engine, 'seed': cell.seed,
+                           'rate_hz': cell.rate_hz, 'config': cell.sampler, **result}
+                    append_row(out / CELLS_FILE, row)
+                    done[key] = row
+                    bar.update(1)
+                bar.close()
+        vertices = (spec.grid[0] * spec.grid[1]) if spec.grid else ClothGrid().nx * ClothGrid().nz
+        return {
+            'spec': {
+                'recordings': [str(r) for r in spec.recordings],
+                'entrants': [entrant_key(e, o) for e, o in spec.entrants],
+                'trials': spec.trials, 'sampler': spec.sampler, 'seeds': spec.seeds,
+                'rate_hz': spec.rate_hz, 'rates': list(spec.rates), 'grid': spec.grid,
+                'metric': spec.metric, 'max_frames': spec.max_frames,
+            },
+            'trials': [t.as_dict() for t in trials],
+            'groups': {
+                f'{c}_{p}': {
+                    'cloth': c, 'primitive': p, 'trials': [t.name for t in m],
+                    'folds': [[m[i].name for i in held] for held in folds(len(m))],
+                    'floor': floor(m, vertices),
+                }
+                for (c, p), m in groups.items()
+            },
+            'identified': identified,
+            'cells': [replace_nan(done[k]) for k, _, _ in todo if k in done],
+        }
+
+
+def replace_nan(row: dict) -> dict:
+    """Return the row with non-finite numbers as None (rank.json is strict JSON)."""
+    def fix(v: Any) -> Any:
+        if isinstance(v, float) and v != v or v in (float('inf'), float('-inf')):
+            return None
+        if isinstance(v, dict):
+            return {k: fix(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [fix(x) for x in v]
+        return v
+    return fix(dict(row))

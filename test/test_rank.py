@@ -1,0 +1,91 @@
+"""`cloth-bench rank` on recordings written by rosbags (the project's writer never makes them)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from camera_recording import CAMERA_TOPIC, make_camera_recording, make_repeated_recording
+from cloth_bench_ros import cli
+from cloth_bench_ros.paths import bundled_bag
+from cloth_bench_ros.report.rank import deadline_ms, significance
+from cloth_bench_ros.report.ranking import Ranked
+from cloth_bench_ros.studies.rank import folds
+import pytest
+
+TINY = ['--topic', CAMERA_TOPIC, '--engine', 'mujoco', '--trials', '2', '--sampler', 'tpe',
+        '--seeds', '1', '--grid', '6x8', '--rates', '100', '--max-frames', '6', '--workers', '2',
+        '--no-progress']
+
+
+@pytest.fixture(scope='module')
+def recordings(tmp_path_factory) -> Path:
+    """One MCAP and one sqlite3 bag of one fling, one MCAP bag of three: five trials."""
+    root = tmp_path_factory.mktemp('recordings')
+    source = bundled_bag('towel', 'dynamic')
+    make_camera_recording(source, root / 'one_mcap', seed=1, pre_roll=30, noise=0.002)
+    make_camera_recording(
+        source, root / 'one_sqlite', seed=2, pre_roll=30, noise=0.002, storage='sqlite3'
+    )
+    make_repeated_recording(source, root / 'three', rest_s=1.0, seed=3)
+    return root
+
+
+def test_folds_leave_one_trial_out_up_to_five_then_five_folds():
+    assert folds(3) == [[0], [1], [2]]
+    assert folds(7) == [[0, 5], [1, 6], [2], [3], [4]]
+
+
+def test_significance_says_which_neighbours_differ():
+    ranked = [Ranked('a', 1, 1.0, 0.9, 1.1, 1.0, 5), Ranked('b', 2, 2.0, 1.9, 2.1, 1.0, 5),
+              Ranked('c', 3, 2.05, 2.0, 2.2, 0.6, 5)]
+    assert significance(ranked) == (
+        'significant (95 % intervals apart): a < b; not told apart (intervals overlap): b < c'
+    )
+    assert deadline_ms(1000.0) == pytest.approx(0.5)
+
+
+def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
+    out = tmp_path / 'rank'
+    assert cli.main(['rank', str(recordings), '--output', str(out), *TINY]) == 0
+    printed = capsys.readouterr().out
+    for name in ('one_mcap: trial 1', 'one_sqlite: trial 1', 'three: trial 1', 'three: trial 2',
+                 'three: trial 3'):
+        assert name in printed, printed
+    assert 'change of phase at frame 10' in printed
+    result = json.loads((out / 'rank.json').read_text())
+    assert len(result['trials']) == 5
+    group = result['answer']['towel_dynamic']
+    assert len(result['groups']['towel_dynamic']['folds']) == 5
+    assert len([k for k in result['identified'] if k.startswith('towel_dynamic|mujoco|')]) == 5
+    (ranked,) = group['ranking']
+    assert ranked['name'] == 'mujoco' and ranked['n'] == 5  # 5 held-out trials x 1 seed
+    held = [c for c in result['cells'] if c['kind'] == 'held_out' and c['config'] == 'identified']
+    assert sorted(c['trial'] for c in held) == sorted(t['name'] for t in result['trials'])
+    floor = group['floor']
+    assert len(floor['pairs']) == 20 and 0 < floor['min'] <= floor['mean'] <= floor['max']
+    assert floor['mean'] < ranked['mean']  # the trials are copies of one simulation, noisier
+    # Every number the table prints is in rank.json.
+    row = next(line for line in printed.splitlines() if line.startswith('| towel_dynamic'))
+    cells = [c.strip() for c in row.strip('|').split('|')]
+    timing = group['entrants']['mujoco']['timing']['100']
+    assert cells[3] == f'{ranked["mean"]:.4f}' and cells[7] == (
+        f'{group["entrants"]["mujoco"]["preset"]["mean"]:.4f}'
+    )
+    assert cells[4] == f'[{ranked["low"]:.4f}, {ranked["high"]:.4f}]'
+    assert cells[8] == f'{floor["mean"]:.4f}' and cells[9] == f'{timing["step_p99_ms"]:.2f}'
+    assert 'towel_dynamic at 100 Hz (p99 < 5.00 ms): ' in printed
+    # The same command again: every identification and cell is kept.
+    assert cli.main(['rank', str(recordings), '--output', str(out), *TINY]) == 0
+    again = capsys.readouterr().out
+    assert 'cells: 11 (11 kept from an earlier run)' in again
+    assert json.loads((out / 'rank.json').read_text())['answer'] == result['answer']
+
+
+def test_one_trial_is_no_ranking(recordings, tmp_path, capsys):
+    code = cli.main(['rank', str(recordings / 'one_mcap'), '--output', str(tmp_path), *TINY])
+    assert code == 2
+    err = capsys.readouterr()
+    assert 'towel dynamic: 1 usable trial; left out (ranking needs 2)' in err.out
+    assert err.err.strip().startswith('cloth-bench: error: rank: no cloth and task with two')
+    assert len(err.err.strip().splitlines()) == 1
