@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 import math
+from typing import Callable
 
 from cloth_bench_ros.core.metrics import latency_stats, RealCloud, StabilityAccumulator
 from cloth_bench_ros.core.trajectory import Primitive
@@ -29,6 +30,22 @@ class FrameScore:
     hd: float
     in_window: bool  # counts toward CD_d/HD_d (dynamic: before the change of phase) or CD_q/HD_q
     diverged: bool
+
+
+@dataclass(frozen=True)
+class ScoredFrame:
+    """
+    One scored (real frame, engine) pair with the arrays behind its numbers.
+
+    `errors` holds each vertex's own term of CD: its L1 distance to the nearest real point (CD is
+    their mean, HD their maximum); None when the engine had diverged.
+    """
+
+    score: FrameScore
+    stamp_ns: int  # the real frame's stamp
+    real: np.ndarray  # (m, 3) the real points scored against
+    vertices: np.ndarray  # (n, 3) the engine's vertices at the real frame's stamp (interpolated)
+    errors: np.ndarray | None  # (n,) L1 distance of each vertex to the nearest real point
 
 
 @dataclass
@@ -75,7 +92,10 @@ class OnlineEvaluator:
         self.keep_pairs = (
             keep_pairs  # keep (score, real points, vertices) for the comparison outputs
         )
-        self.pairs: list[tuple[FrameScore, np.ndarray, np.ndarray]] = []
+        self.pairs: list[tuple[FrameScore, np.ndarray, np.ndarray, np.ndarray | None]] = []
+        # Each scored frame goes to these callables as it is scored (the live view, ROS topics).
+        self.listeners: list[Callable[[ScoredFrame], None]] = []
+        self.worst: dict[str, ScoredFrame] = {}  # per engine: the scored frame of the largest CD
 
     # inputs
     def add_state(self, engine: str, stamp_ns: int, vertices: np.ndarray) -> None:
@@ -171,14 +191,21 @@ class OnlineEvaluator:
                 continue
             paired = True
             diverged = e.diverged_time is not None and t >= e.diverged_time - 1e-9
+            errors = None
             if diverged or not np.isfinite(vertices).all():
                 cd = hd = math.nan
                 diverged = True
-            else:
-                cd, hd = cloud.chamfer_hausdorff(vertices)
+            else:  # the per-vertex terms, then CD and HD of them (RealCloud.chamfer_hausdorff)
+                errors = cloud.nearest_l1(vertices)
+                cd, hd = float(errors.mean()), float(errors.max())
             self.scores.append(FrameScore(name, frame, t, cd, hd, in_window, diverged))
+            scored = ScoredFrame(self.scores[-1], stamp, cloud.points, vertices, errors)
             if self.keep_pairs:
-                self.pairs.append((self.scores[-1], cloud.points, np.array(vertices)))
+                self.pairs.append((self.scores[-1], cloud.points, np.array(vertices), errors))
+            if errors is not None and (name not in self.worst or cd > self.worst[name].score.cd):
+                self.worst[name] = scored
+            for listener in self.listeners:
+                listener(scored)
         if paired:
             self.scored_frames += 1
         else:

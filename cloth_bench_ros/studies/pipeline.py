@@ -51,6 +51,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
             'record_comparison': str(config.record_comparison or ''),
             'comparison_figures': config.comparison_figures,
             'change_of_phase_frame': _cut(config),
+            **config.live,
         },
     }
     for engine in config.engines:

@@ -50,6 +50,25 @@ class String_(IdlStruct, typename='std_msgs::msg::dds_::String_'):
 
 
 @dataclass
+class MultiArrayDimension_(IdlStruct, typename='std_msgs::msg::dds_::MultiArrayDimension_'):
+    label: str = ''
+    size: t.uint32 = 0
+    stride: t.uint32 = 0
+
+
+@dataclass
+class MultiArrayLayout_(IdlStruct, typename='std_msgs::msg::dds_::MultiArrayLayout_'):
+    dim: t.sequence[MultiArrayDimension_] = field(default_factory=list)
+    data_offset: t.uint32 = 0
+
+
+@dataclass
+class Float64MultiArray_(IdlStruct, typename='std_msgs::msg::dds_::Float64MultiArray_'):
+    layout: MultiArrayLayout_ = field(default_factory=MultiArrayLayout_)
+    data: t.sequence[t.float64] = field(default_factory=list)
+
+
+@dataclass
 class Clock_(IdlStruct, typename='rosgraph_msgs::msg::dds_::Clock_'):
     clock: Time_ = field(default_factory=Time_)
 
@@ -358,6 +377,9 @@ DDS_TYPES: dict[str, type] = {
     'builtin_interfaces/msg/Time': Time_,
     'std_msgs/msg/Header': Header_,
     'std_msgs/msg/String': String_,
+    'std_msgs/msg/MultiArrayDimension': MultiArrayDimension_,
+    'std_msgs/msg/MultiArrayLayout': MultiArrayLayout_,
+    'std_msgs/msg/Float64MultiArray': Float64MultiArray_,
     'rosgraph_msgs/msg/Clock': Clock_,
     'geometry_msgs/msg/Point': Point_,
     'geometry_msgs/msg/Quaternion': Quaternion_,
