@@ -48,6 +48,11 @@ class ScoredFrame:
     errors: np.ndarray | None  # (n,) L1 distance of each vertex to the nearest real point
 
 
+def _worse(a: FrameScore, b: FrameScore) -> bool:
+    """Return True if a is a worse frame than b: in the scoring window first, then larger CD."""
+    return (a.in_window, a.cd) > (b.in_window, b.cd)
+
+
 @dataclass
 class _EngineState:
     states: deque = field(default_factory=lambda: deque(maxlen=4096))  # (stamp_ns, vertices)
@@ -95,7 +100,7 @@ class OnlineEvaluator:
         self.pairs: list[tuple[FrameScore, np.ndarray, np.ndarray, np.ndarray | None]] = []
         # Each scored frame goes to these callables as it is scored (the live view, ROS topics).
         self.listeners: list[Callable[[ScoredFrame], None]] = []
-        self.worst: dict[str, ScoredFrame] = {}  # per engine: the scored frame of the largest CD
+        self.worst: dict[str, ScoredFrame] = {}  # per engine: its largest CD (see _worse)
 
     # inputs
     def add_state(self, engine: str, stamp_ns: int, vertices: np.ndarray) -> None:
@@ -202,7 +207,9 @@ class OnlineEvaluator:
             scored = ScoredFrame(self.scores[-1], stamp, cloud.points, vertices, errors)
             if self.keep_pairs:
                 self.pairs.append((self.scores[-1], cloud.points, np.array(vertices), errors))
-            if errors is not None and (name not in self.worst or cd > self.worst[name].score.cd):
+            if errors is not None and (
+                name not in self.worst or _worse(scored.score, self.worst[name].score)
+            ):
                 self.worst[name] = scored
             for listener in self.listeners:
                 listener(scored)

@@ -315,6 +315,7 @@ def render_report(
     identifications: Sequence[dict] = (),
 ) -> ReportOutcome:
     """Render every table and figure of the rows into out_dir (report.md, .html, .png, .csv)."""
+    from cloth_bench_ros.report.cloth_error import cloth_error_section
     from cloth_bench_ros.report.comparison import comparison_section
     from cloth_bench_ros.report.identification import identification_section
 
@@ -345,6 +346,7 @@ def render_report(
         doc.extend(identification_section(ident, rows))
     doc.extend(cross_reference_blocks(rows))
     doc.extend(comparison_section(results_dir))
+    doc.extend(cloth_error_section(results_dir))
     tables = {t.name: t for t in doc.tables()}
     md, html, images = write_document(doc, out_dir, csv_only=[results_table(rows)])
     return ReportOutcome(md, html, images, tables, recs, pareto)

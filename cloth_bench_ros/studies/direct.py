@@ -20,6 +20,7 @@ from cloth_bench_ros import validation
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
 from cloth_bench_ros.core.run_files import write_run_report
+from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, parse_primitive
@@ -160,4 +161,5 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
     summary = run_summary(core, replay, run, 1.0 / rate_hz, wall_s, final_stamp)
     if config.output_dir:
         write_run_report(config.output_dir, summary, core.scores)
+        write_worst_frames(config.output_dir, core.worst)
     return summary
