@@ -16,6 +16,7 @@ import csv
 import json
 import os
 from pathlib import Path
+import re
 import socket
 import struct
 import subprocess
@@ -154,7 +155,8 @@ def test_the_client_sees_every_channel_and_the_run_said_it_waited(watched):
         '/cloth_bench/mujoco/frame_metrics',
         '/cloth_bench/mujoco/step_metrics',
     }
-    assert all(c['encoding'] == 'cdr' and c['schemaEncoding'] == 'ros2msg' for c in topics.values())
+    assert all(c['encoding'] == 'cdr' for c in topics.values())
+    assert all(c['schemaEncoding'] == 'ros2msg' for c in topics.values())
     assert topics['/cloth_bench/mujoco/error_cloud']['schemaName'] == 'sensor_msgs/msg/PointCloud2'
     assert set(seen['messages']) == set(topics)  # every channel carried something
     waits = [line for line in stderr.splitlines() if 'waiting up to 60 s for a viewer' in line]
@@ -271,3 +273,24 @@ def test_a_viewer_that_leaves_or_stops_reading_never_stalls_the_run(tmp_path):
     assert (tmp_path / 'gone' / 'frames.csv').is_file()
     left = [line for line in stderr.splitlines() if 'viewer left' in line]
     assert len(left) == 1, stderr
+
+
+def test_the_shipped_layout_is_made_from_the_topic_names_the_stream_uses(watched):
+    from cloth_bench_ros.data.live_layout import layout_json
+    from cloth_bench_ros.data.live_view import LAYOUT_FILE
+    from cloth_bench_ros.paths import share_dir
+
+    shipped = share_dir('config') / 'foxglove' / LAYOUT_FILE
+    assert shipped.read_text() == layout_json()  # `python -m cloth_bench_ros.data.live_layout`
+    layout = json.loads(shipped.read_text())
+    text = json.dumps(layout)
+    paths = re.findall(r'/cloth_bench/[\w/]+(?:\.data\[\d\])?', text)
+    referenced = {re.sub(r'\.data\[\d\]$', '', t) for t in paths}
+    streamed = {c['topic'] for c in watched[1]['channels']}
+    for engine in ('bullet', 'newton'):  # the layout's other engines, by the same names
+        streamed |= {t.replace('/mujoco/', f'/{engine}/') for t in streamed}
+    assert referenced and referenced <= streamed
+    # the plotted indices are those of the documented field orders
+    assert '/cloth_bench/mujoco/frame_metrics.data[1]' in text  # cd
+    assert '/cloth_bench/mujoco/step_metrics.data[1]' in text  # step_time
+    assert layout['content']['items'][0]['content']['panelType'] == 'ThreeDee'

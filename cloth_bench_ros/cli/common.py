@@ -129,7 +129,7 @@ def live_options() -> argparse.ArgumentParser:
         '--live-port',
         type=integer('--live-port', 0, 65535),
         default=DEFAULT_PORT,
-        help=f'its port (default {DEFAULT_PORT}, Foxglove\'s)',
+        help=f"its port (default {DEFAULT_PORT}, Foxglove's)",
     )
     group.add_argument(
         '--live-wait',

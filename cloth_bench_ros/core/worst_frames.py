@@ -2,8 +2,9 @@
 The worst frame of each engine, kept beside a run's summary.json for the report to draw.
 
 The report renders and runs nothing, so the run keeps, per engine, the arrays of its scored frame
-of the largest CD: the real points, the scored vertices (at the real frame's stamp) and each
-vertex's error (its L1 distance to the nearest real point, the term CD averages). One .npz file,
+of the largest CD (in the scoring window, if any frame of it was scored): the real points, the
+scored vertices (at the real frame's stamp) and each vertex's error (its L1 distance to the
+nearest real point, the term CD averages). One .npz file,
 read without pickles; engine names in it are labels only, never paths.
 """
 
@@ -22,7 +23,7 @@ MAX_FILE_BYTES = 256 * 1024 * 1024
 
 
 class WorstFrameError(ClothBenchError, ValueError):
-    """A worst_frames.npz that cannot be read (not an npz, arrays missing or of the wrong shape)."""
+    """A worst_frames.npz that cannot be read (not an npz, arrays missing or misshapen)."""
 
 
 class WorstFrame(NamedTuple):

@@ -74,7 +74,11 @@ def error_cloud(header: Any, scored: Any, cloud_type: type, field_type: type) ->
 
 
 def metrics_array(
-    values: list[float], fields: tuple[str, ...], array_type: type, layout_type: type, dim_type: type
+    values: list[float],
+    fields: tuple[str, ...],
+    array_type: type,
+    layout_type: type,
+    dim_type: type,
 ) -> Any:
     """Return a Float64MultiArray of `values` whose one dimension's label names the fields."""
     dim = dim_type(label=','.join(fields), size=len(values), stride=len(values))

@@ -17,7 +17,7 @@ from typing import Any
 
 from cloth_bench_ros.data import error_view
 
-LAYOUT_ENGINES = ('mujoco', 'bullet', 'newton')  # series for an engine that is not there stay empty
+LAYOUT_ENGINES = ('mujoco', 'bullet', 'newton')  # an engine not in the run: its series stay empty
 ERROR_RANGE_M = (0.0, 0.05)  # the colour map's span: the paper's CDs are a few centimetres
 
 

@@ -16,9 +16,9 @@ from typing import Any
 from cloth_bench_ros import validation
 from cloth_bench_ros.data import error_view
 from cloth_bench_ros.runtime import (
+    declare_float,
     Float64MultiArray,
     Header,
-    declare_float,
     make_qos,
     MultiArrayDimension,
     MultiArrayLayout,
@@ -67,12 +67,13 @@ class ErrorTopics:
             e: node.create_publisher(PointCloud2, f'{e}/{error_view.ERROR_CLOUD}', qos)
             for e in engines
         }
+        array = Float64MultiArray
         self.frames = {
-            e: node.create_publisher(Float64MultiArray, f'{e}/{error_view.FRAME_METRICS_TOPIC}', qos)
+            e: node.create_publisher(array, f'{e}/{error_view.FRAME_METRICS_TOPIC}', qos)
             for e in engines
         }
         self.steps = {
-            e: node.create_publisher(Float64MultiArray, f'{e}/{error_view.STEP_METRICS_TOPIC}', qos)
+            e: node.create_publisher(array, f'{e}/{error_view.STEP_METRICS_TOPIC}', qos)
             for e in engines
         }
         self.latency: dict[str, tuple[int, float]] = {}  # engine -> (state stamp, latency s)
@@ -127,7 +128,8 @@ class ErrorTopics:
         engine = scored.score.engine
         header = Header(frame_id='world')
         header.stamp.sec, header.stamp.nanosec = divmod(int(scored.stamp_ns), 1_000_000_000)
-        self.clouds[engine].publish(error_view.error_cloud(header, scored, PointCloud2, PointField))
+        cloud = error_view.error_cloud(header, scored, PointCloud2, PointField)
+        self.clouds[engine].publish(cloud)
         self.frames[engine].publish(
             self._array(error_view.frame_values(scored.score), error_view.FRAME_METRICS)
         )
@@ -159,4 +161,3 @@ class ErrorTopics:
         """Stop the live view's server."""
         if self.live is not None:
             self.live.close()
-

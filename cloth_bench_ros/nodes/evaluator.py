@@ -12,10 +12,10 @@ from cloth_bench_ros import validation
 from cloth_bench_ros.core.evaluation import accounting_line, OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.core.run_files import write_run_report
-from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
+from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data.trial import trial_from_message
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,

@@ -1,7 +1,7 @@
 """
 The report's error-on-the-cloth view: where on the cloth each engine departs from the real one.
 
-Each run keeps its engines' worst frames (the scored frame of the largest CD) in
+Each run keeps its engines' worst frames (the largest CD in the scoring window) in
 worst_frames.npz beside summary.json (core/worst_frames.py); this section draws them, nothing
 is run: the real cloud in grey and the scored vertices coloured by their own term of CD (each
 vertex's L1 distance to the nearest real point), seen from the side (y-z) and from above (x-y).
@@ -72,9 +72,10 @@ def cloth_error_section(results_dir: Path) -> list:
     blocks = [
         heading(2, 'Error on the cloth: the worst frame of each engine'),
         paragraph(
-            'The real cloud in grey; the simulated vertices at the real frame\'s time coloured'
-            ' by their own term of CD (each vertex\'s L1 distance to the nearest real point: CD'
-            ' is their mean, HD their maximum), at the frame of the largest CD of each engine.'
+            "The real cloud in grey; the simulated vertices at the real frame's time coloured"
+            " by their own term of CD (each vertex's L1 distance to the nearest real point: CD"
+            ' is their mean, HD their maximum), at the frame of the largest CD of each engine in'
+            ' its scoring window.'
             + (
                 f' {len(drawn)} of {len(files)} runs drawn.'
                 if len(files) > len(drawn)

@@ -20,10 +20,10 @@ from cloth_bench_ros import validation
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
 from cloth_bench_ros.core.run_files import write_run_report
-from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, parse_primitive
+from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.data.alignment import reference_motion
 from cloth_bench_ros.data.replay import plan_replay, ReplayOptions
