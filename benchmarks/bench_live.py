@@ -3,12 +3,13 @@ Cost of `--live`: a lockstep run with the live view and one viewer against the s
 
 Runs, in one process and alternately, the node graph (trajectory publisher, simulator, recorder
 replaying the bundled towel dynamic bag, evaluator) at 100 Hz (a) without the live view and (b)
-with it and one viewer connected: a WebSocket client on a thread of its own that subscribes to
+with it and one viewer connected: a WebSocket client in a process of its own that subscribes to
 every channel and reads every message (the Foxglove protocol, as test/test_live_view.py speaks
 it). The figure is the run's own wall time (first target to the evaluator's end, summary.json's
-run.wall_time), so the wait for the viewer before the start is not counted; the medians' ratio is
-printed (and that of the minima, steadier on a busy machine). Goal: at most 1.05. The metrics
-of both runs must be identical.
+run.wall_time), so the wait for the viewer before the start is not counted; the medians' ratio
+is printed (and that of the minima, steadier on a busy machine), and the ratio of the CPU time
+the run's process spent (every thread: the server's included), which load on the machine
+disturbs least. Goal: at most 1.05. The metrics of both runs must be identical.
 
     python benchmarks/bench_live.py [--engine mujoco] [--rate 100] [--repeats 3]
         [--grid 11x15]
@@ -19,9 +20,11 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import resource
 import socket
 import statistics
-import threading
+import subprocess
+import sys
 import time
 
 from cloth_bench_ros.paths import bundled_bag
@@ -37,62 +40,61 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-class Viewer(threading.Thread):
-    """One viewer: connects (retrying until the server is up), subscribes to all, reads all."""
+async def watch(port: int) -> int:
+    """One viewer: connect (retrying until the server is up), subscribe to all, read all."""
+    import websockets
 
-    def __init__(self, port: int) -> None:
-        super().__init__(daemon=True)
-        self.port, self.messages, self.bytes = port, 0, 0
-
-    def run(self) -> None:
-        asyncio.run(self._watch())
-
-    async def _watch(self) -> None:
-        import websockets
-
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                ws = await websockets.connect(
-                    f'ws://127.0.0.1:{self.port}',
-                    subprotocols=['foxglove.sdk.v1', 'foxglove.websocket.v1'],
-                    max_size=None,
-                )
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    return
-                await asyncio.sleep(0.05)
-        async with ws:
-            try:
-                async for msg in ws:
-                    if isinstance(msg, str):
-                        op = json.loads(msg)
-                        if op['op'] == 'advertise':
-                            subs = [{'id': c['id'], 'channelId': c['id']} for c in op['channels']]
-                            await ws.send(json.dumps({'op': 'subscribe', 'subscriptions': subs}))
-                    else:
-                        self.messages += 1
-                        self.bytes += len(msg)
-            except websockets.exceptions.ConnectionClosed:
-                pass
+    deadline = time.monotonic() + 60
+    while True:
+        try:
+            ws = await websockets.connect(
+                f'ws://127.0.0.1:{port}',
+                subprotocols=['foxglove.sdk.v1', 'foxglove.websocket.v1'],
+                max_size=None,
+            )
+            break
+        except OSError:
+            if time.monotonic() > deadline:
+                return 0
+            await asyncio.sleep(0.05)
+    messages = 0
+    async with ws:
+        try:
+            async for msg in ws:
+                if isinstance(msg, str):
+                    op = json.loads(msg)
+                    if op['op'] == 'advertise':
+                        subs = [{'id': c['id'], 'channelId': c['id']} for c in op['channels']]
+                        await ws.send(json.dumps({'op': 'subscribe', 'subscriptions': subs}))
+                else:
+                    messages += 1
+        except websockets.exceptions.ConnectionClosed:
+            pass
+    return messages
 
 
-def one_run(config: RunConfig, live: bool) -> tuple[float, dict, int]:
-    """Return the run's own wall time, its summary and the messages its viewer read."""
+def _cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)  # every thread of this process
+    return usage.ru_utime + usage.ru_stime
+
+
+def one_run(config: RunConfig, live: bool) -> tuple[float, float, dict, int]:
+    """Return the run's own wall time, this process's CPU time, the summary, messages viewed."""
     viewer = None
-    if live:
+    if live:  # the viewer in a process of its own: its work is not the run's
         port = _free_port()
         config.live = {'live': True, 'live_port': port, 'live_wait': 30.0}
-        viewer = Viewer(port)
-        viewer.start()
+        viewer = subprocess.Popen(
+            [sys.executable, __file__, '--viewer', str(port)], stdout=subprocess.PIPE, text=True
+        )
     else:
         config.live = {}
+    cpu = _cpu_s()
     summary = run_pipeline(config)
+    cpu = _cpu_s() - cpu
     assert summary is not None
-    if viewer is not None:
-        viewer.join(timeout=30)
-    return float(summary['run']['wall_time']), summary, viewer.messages if viewer else 0
+    messages = int(viewer.communicate(timeout=60)[0] or 0) if viewer is not None else 0
+    return float(summary['run']['wall_time']), cpu, summary, messages
 
 
 def main() -> None:
@@ -101,7 +103,11 @@ def main() -> None:
     parser.add_argument('--rate', type=float, default=100.0)
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--grid', default=None, help="NXxNZ (default: the engine's, 11x15)")
+    parser.add_argument('--viewer', type=int, metavar='PORT', help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.viewer:  # the viewer process of one run
+        print(asyncio.run(watch(args.viewer)))
+        return
     config = RunConfig(
         bag=bundled_bag('towel', 'dynamic'),
         engines=[args.engine],
@@ -109,26 +115,31 @@ def main() -> None:
         grid=parse_grid(args.grid) if args.grid else None,
     )
     plain, live, counts, metrics = [], [], [], set()
+    plain_cpu, live_cpu = [], []
     one_run(config, False)  # warm-up: imports, engine compilation, caches
     for _ in range(args.repeats):
-        wall, summary, _ = one_run(config, False)
+        wall, cpu, summary, _ = one_run(config, False)
         plain.append(wall)
+        plain_cpu.append(cpu)
         metrics.add(json.dumps(summary['engines'][args.engine]['CD_d']))
-        wall, summary, messages = one_run(config, True)
+        wall, cpu, summary, messages = one_run(config, True)
         live.append(wall)
+        live_cpu.append(cpu)
         counts.append(messages)
         metrics.add(json.dumps(summary['engines'][args.engine]['CD_d']))
-    ratio = statistics.median(live) / statistics.median(plain)
+    med = statistics.median
+    ratio = med(live) / med(plain)
     best = min(live) / min(plain)  # the least disturbed run of each: steadier on a busy machine
     print(
         f'{args.engine} lockstep at {args.rate:g} Hz, {args.repeats} runs each: without --live'
-        f' {statistics.median(plain):.3f} s, with --live and one viewer'
-        f' {statistics.median(live):.3f} s (median run wall time; the viewer read'
-        f' {min(counts)}-{max(counts)} messages)'
+        f' {med(plain):.3f} s, with --live and one viewer {med(live):.3f} s (median run wall'
+        f' time; the viewer read {min(counts)}-{max(counts)} messages); CPU time of the process'
+        f' (server threads included, viewer not) {med(plain_cpu):.3f} s against'
+        f' {med(live_cpu):.3f} s'
     )
     print(
         f'ratio live / plain: {ratio:.3f} of medians, {best:.3f} of minima (goal <= {GOAL});'
-        f' CD_d identical: {len(metrics) == 1}'
+        f' CPU time {med(live_cpu) / med(plain_cpu):.3f}; CD_d identical: {len(metrics) == 1}'
     )
 
 

@@ -58,6 +58,8 @@ PIP_ONLY = {
     'distributed',
     'newton',
     'warp',
+    'foxglove',  # foxglove-sdk, the live view (--live); the test's websockets likewise
+    'websockets',
 }
 OPTIONAL_IMPORTS = {
     'torch'
