@@ -127,7 +127,8 @@ def test_an_extra_field_round_trips_through_cdr_beside_xyz():
         ('x', 0, FLOAT32), ('y', 4, FLOAT32), ('z', 8, FLOAT32), ('error', 12, FLOAT32)
     ]
     assert (msg.point_step, msg.row_step, msg.width) == (16, 16 * 48, 48)
-    back = deserialize(serialize(msg, 'sensor_msgs/msg/PointCloud2'), 'sensor_msgs/msg/PointCloud2')
+    pc2 = 'sensor_msgs/msg/PointCloud2'
+    back = deserialize(serialize(msg, pc2), pc2)
     np.testing.assert_array_equal(read_xyz(back), pts.astype(np.float32))
     np.testing.assert_array_equal(read_field(back, 'error'), error.astype(np.float32))
     with pytest.raises(PointCloudError, match='no intensity field'):

@@ -1,15 +1,15 @@
-"""Each engine's worst frame: chosen by the evaluator's core, kept beside summary.json, read back."""
+"""Each engine's worst frame: chosen by the evaluator's core, kept beside summary.json, read."""
 
 from __future__ import annotations
 
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
+from cloth_bench_ros.core.trajectory import Primitive
 from cloth_bench_ros.core.worst_frames import (
     read_worst_frames,
-    write_worst_frames,
     WORST_FRAMES_FILE,
     WorstFrameError,
+    write_worst_frames,
 )
-from cloth_bench_ros.core.trajectory import Primitive
 import numpy as np
 import pytest
 

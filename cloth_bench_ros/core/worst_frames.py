@@ -41,7 +41,7 @@ def write_worst_frames(out_dir: Path, worst: dict[str, Any]) -> Path | None:
     """Write each engine's worst ScoredFrame (core.evaluation) to out_dir; None if none scored."""
     if not worst:
         return None
-    arrays: dict[str, np.ndarray] = {'engines': np.array(sorted(worst), dtype=str)}
+    arrays: dict[str, Any] = {'engines': np.array(sorted(worst), dtype=str)}
     for i, engine in enumerate(sorted(worst)):
         s = worst[engine]
         arrays[f'{i}_score'] = np.array([s.score.frame, s.score.t, s.score.cd, s.score.hd])
@@ -49,7 +49,7 @@ def write_worst_frames(out_dir: Path, worst: dict[str, Any]) -> Path | None:
         arrays[f'{i}_vertices'] = np.asarray(s.vertices, dtype=np.float64)
         arrays[f'{i}_errors'] = np.asarray(s.errors, dtype=np.float64)
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, **arrays)  # type: ignore[arg-type]  (numpy's stub: kwargs)
+    np.savez_compressed(buffer, **arrays)
     path = Path(out_dir) / WORST_FRAMES_FILE
     atomic_write_bytes(path, buffer.getvalue())
     return path

@@ -17,7 +17,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.data import error_view, messages
@@ -103,7 +103,7 @@ class LiveView:
                 name='cloth_bench',
                 host=host,
                 port=int(port),
-                server_listener=self.listener,
+                server_listener=cast(Any, self.listener),  # the SDK's Protocol, by shape
                 context=self.context,
                 message_backlog_size=BACKLOG,
             )

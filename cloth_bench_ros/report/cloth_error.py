@@ -55,6 +55,7 @@ def plot_worst_frames(frames: list[WorstFrame], path: Path) -> Path:
                 f'CD {f.cd:.4f} m, HD {f.hd:.4f} m',
                 fontsize=7,
             )
+    assert points is not None  # at least one frame was drawn
     fig.colorbar(points, ax=axes, shrink=0.8, label='vertex error: L1 distance to real (m)')
     fig.savefig(path, dpi=110)
     plt.close(fig)
