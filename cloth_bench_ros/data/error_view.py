@@ -20,6 +20,7 @@ valid; each array's `layout.dim[0].label` names its fields in order.
 
 from __future__ import annotations
 
+import array
 from functools import lru_cache
 import math
 from typing import Any
@@ -83,9 +84,11 @@ def metrics_array(
 ) -> Any:
     """Return a Float64MultiArray of `values` whose one dimension's label names the fields."""
     dim = dim_type(label=','.join(fields), size=len(values), stride=len(values))
-    return array_type(
-        layout=layout_type(dim=[dim], data_offset=0), data=np.asarray(values, dtype=np.float64)
-    )
+    if hasattr(array_type, '_fields_and_field_types'):  # rclpy's class: array('d'), not numpy
+        data: Any = array.array('d', [float(v) for v in values])
+    else:  # rosbags' (and the embedded runtime's): numpy, as its CDR codec wants
+        data = np.asarray(values, dtype=np.float64)
+    return array_type(layout=layout_type(dim=[dim], data_offset=0), data=data)
 
 
 # rosbags messages (the live stream and the comparison bag): CDR bytes of one message
