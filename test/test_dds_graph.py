@@ -178,6 +178,7 @@ TOPICS = {  # DDS topic: (type, ROS type)
     'rt/cloth_bench/targets': (PoseArray, 'geometry_msgs/msg/PoseArray'),
     'rt/clock': (Clock, 'rosgraph_msgs/msg/Clock'),
     'rt/cloth_bench/mujoco/frame_metrics': (Float64MultiArray, 'std_msgs/msg/Float64MultiArray'),
+    'rt/cloth_bench/mujoco/error_cloud': (PointCloud2, 'sensor_msgs/msg/PointCloud2'),
 }
 ROSBAGS = get_typestore(Stores.ROS2_HUMBLE)
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -271,6 +272,12 @@ def test_a_plain_dds_reader_receives_the_graph_and_its_bytes_are_rosbags_cdr(gra
     assert len(frames) == 132 and frames[0].layout.dim[0].label == 't,cd,hd,in_window'
     window = [f.data[1] for f in frames if f.data[3] == 1.0]
     assert np.mean(window) == pytest.approx(summary['engines']['mujoco']['CD_d'], rel=1e-12)
+    errors = [PointCloud2.deserialize(p) for p in payloads['rt/cloth_bench/mujoco/error_cloud']]
+    assert len(errors) == 132 and [f.name for f in errors[0].fields] == ['x', 'y', 'z', 'error']
+    for cloud, frame in zip(errors, frames):  # each vertex's error: CD their mean, HD their max
+        error = np.frombuffer(bytes(cloud.data), np.float32).reshape(48, 4)[:, 3]
+        assert error.max() == pytest.approx(frame.data[2], rel=1e-6)
+        assert error.astype(float).mean() == pytest.approx(frame.data[1], rel=1e-5)
     for topic, (cls, msgtype) in TOPICS.items():
         assert payloads[topic], topic
         for payload in payloads[topic][:3] + payloads[topic][-3:]:

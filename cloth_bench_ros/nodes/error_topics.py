@@ -126,13 +126,17 @@ class ErrorTopics:
     def scored(self, scored: Any) -> None:
         """Publish one scored frame: error cloud and frame metrics (and send them live)."""
         engine = scored.score.engine
-        header = Header(frame_id='world')
-        header.stamp.sec, header.stamp.nanosec = divmod(int(scored.stamp_ns), 1_000_000_000)
-        cloud = error_view.error_cloud(header, scored, PointCloud2, PointField)
-        self.clouds[engine].publish(cloud)
-        self.frames[engine].publish(
-            self._array(error_view.frame_values(scored.score), error_view.FRAME_METRICS)
-        )
+        # Volatile topics: a message no subscription is matched to goes nowhere, so it is not
+        # even built (a run nobody watches pays nothing for them).
+        if self.clouds[engine].get_subscription_count():
+            header = Header(frame_id='world')
+            header.stamp.sec, header.stamp.nanosec = divmod(int(scored.stamp_ns), 1_000_000_000)
+            cloud = error_view.error_cloud(header, scored, PointCloud2, PointField)
+            self.clouds[engine].publish(cloud)
+        if self.frames[engine].get_subscription_count():
+            self.frames[engine].publish(
+                self._array(error_view.frame_values(scored.score), error_view.FRAME_METRICS)
+            )
         if self.live is not None:
             self.live.frame(scored)
 
@@ -147,7 +151,8 @@ class ErrorTopics:
         values = error_view.step_values(
             (stamp_ns - self.quintic_start_ns) / 1e9, step_time, latency
         )
-        self.steps[engine].publish(self._array(values, error_view.STEP_METRICS))
+        if self.steps[engine].get_subscription_count():
+            self.steps[engine].publish(self._array(values, error_view.STEP_METRICS))
         if self.live is not None:
             self.live.step(engine, stamp_ns, values)
 
