@@ -29,6 +29,7 @@ DEFAULT_HOST = '127.0.0.1'
 DEFAULT_PORT = 8765
 DEFAULT_WAIT_S = 30.0
 BACKLOG = 256  # messages queued per viewer before the oldest are dropped
+CLOSE_GRACE_S = 0.25  # at the end, for the server's threads to send what is queued
 LAYOUT_FILE = 'cloth_bench_live.json'  # in the package's share/config
 
 
@@ -209,7 +210,9 @@ class LiveView:
         )
 
     def close(self) -> None:
-        """Stop the server (viewers see it go)."""
+        """Stop the server (viewers see it go), a moment after the last message to a viewer."""
         if not self.closed:
             self.closed = True
+            if self.viewers():
+                time.sleep(CLOSE_GRACE_S)  # the server sends on its own threads
             self.server.stop()
