@@ -294,3 +294,46 @@ def test_the_shipped_layout_is_made_from_the_topic_names_the_stream_uses(watched
     assert '/cloth_bench/mujoco/frame_metrics.data[1]' in text  # cd
     assert '/cloth_bench/mujoco/step_metrics.data[1]' in text  # step_time
     assert layout['content']['items'][0]['content']['panelType'] == 'ThreeDee'
+
+
+def test_the_streams_shortcut_encodings_are_rosbags_cdr_byte_for_byte():
+    """Error clouds, poses and metric arrays are put into bytes serialised once by rosbags."""
+    from cloth_bench_ros.core.evaluation import FrameScore, ScoredFrame
+    from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz_fields
+    from cloth_bench_ros.core.trajectory import full_targets
+    from cloth_bench_ros.data import error_view
+    from cloth_bench_ros.data.comparison_bag import target_poses, targets_message
+
+    rng = np.random.default_rng(5)
+    tg = full_targets('dynamic', 100.0)
+    for n, stamp, diverged in ((48, 3_000_000_001, False), (165, 7_123_456_789, False),
+                               (48, 4_000_000_000, True)):
+        score = FrameScore('mujoco', 3, 0.1, 0.02, 0.05, True, diverged)
+        vertices = rng.normal(size=(n, 3))
+        errors = None if diverged else rng.uniform(0, 0.1, n)
+        scored = ScoredFrame(score, stamp, rng.normal(size=(10, 3)), vertices, errors)
+        msg = create_cloud_xyz_fields(
+            TYPES.types['std_msgs/msg/Header'](
+                stamp=TYPES.types['builtin_interfaces/msg/Time'](
+                    sec=stamp // 10**9, nanosec=stamp % 10**9
+                ),
+                frame_id='world',
+            ),
+            vertices,
+            {'error': np.full(n, np.nan) if errors is None else errors},
+            TYPES.types['sensor_msgs/msg/PointCloud2'],
+            TYPES.types['sensor_msgs/msg/PointField'],
+        )
+        assert error_view.cdr_error_cloud(scored) == bytes(
+            TYPES.serialize_cdr(msg, 'sensor_msgs/msg/PointCloud2')
+        )
+        poses = error_view.cdr_poses(stamp, target_poses(tg, 100.0, stamp))
+        reference = targets_message(tg, 100.0, stamp)
+        assert poses == bytes(TYPES.serialize_cdr(reference, 'geometry_msgs/msg/PoseArray'))
+        values = [score.t, score.cd, float('nan'), 1.0]
+        array = TYPES.deserialize_cdr(
+            error_view.cdr_metrics(values, error_view.FRAME_METRICS),
+            'std_msgs/msg/Float64MultiArray',
+        )
+        assert array.layout.dim[0].label == 't,cd,hd,in_window'
+        np.testing.assert_array_equal(array.data, values)

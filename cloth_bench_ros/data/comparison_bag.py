@@ -129,6 +129,13 @@ def _tf_static() -> Any:
     return messages.msg_class(TF_MESSAGE)(transforms=[ts])
 
 
+def target_poses(tg: GripperTargets, rate_hz: float, stamp: int) -> np.ndarray:
+    """Return the [left, right] targets at a run-time stamp as (2, 7): x, y, z, qx, qy, qz, qw."""
+    k = int(np.clip(round(stamp / 1e9 * rate_hz), 0, len(tg) - 1))
+    q = quaternion_xyz(tg.roll[k], tg.pitch[k], tg.yaw[k])
+    return np.array([[*map(float, p[:3]), *q] for p in (tg.left[k], tg.right[k])])
+
+
 def targets_message(tg: GripperTargets, rate_hz: float, stamp: int) -> Any:
     """Return the PoseArray [left, right] of the grippers' targets at a run-time stamp."""
     k = int(np.clip(round(stamp / 1e9 * rate_hz), 0, len(tg) - 1))
