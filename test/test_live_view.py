@@ -337,3 +337,29 @@ def test_the_streams_shortcut_encodings_are_rosbags_cdr_byte_for_byte():
         )
         assert array.layout.dim[0].label == 't,cd,hd,in_window'
         np.testing.assert_array_equal(array.data, values)
+
+
+def test_hil_live_is_stamped_in_wall_time_and_never_waits(tmp_path):
+    port = _free_port()
+    started = time.time_ns()
+    proc = subprocess.Popen(
+        _cli('hil', '--in-process', '--grid', GRID, '--no-lockstep', '--output',
+             str(tmp_path / 'hil'), '--live', '--live-port', str(port)),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, 'PYTHONPATH': os.pathsep.join(sys.path)},
+    )
+    try:
+        seen = asyncio.run(_watch(port))
+        stdout, stderr = proc.communicate(timeout=300)
+    finally:
+        proc.kill()
+    ended = time.time_ns()
+    assert proc.returncode == 0, stderr
+    assert 'waiting up to' not in stderr and f'live view at ws://127.0.0.1:{port}' in stderr
+    clouds = seen['messages']['/cloth_bench/mujoco/error_cloud']
+    assert clouds  # a realtime run starts on its schedule: the client sees what follows its join
+    log_times = [log_time for log_time, _ in clouds]
+    assert started <= log_times[0] and log_times[-1] <= ended  # wall time, not simulation time
+    assert log_times == sorted(log_times)
