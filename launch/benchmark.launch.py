@@ -2,7 +2,7 @@
 Launch the benchmark's node graph.
 
 ros2 launch cloth_bench_ros benchmark.launch.py [engines:=mujoco,bullet] [rate_hz:=100.0]
-[bag:=PATH] ...
+[bag:=PATH] [live:=true] [live_port:=8765] [live_wait:=30.0] ...
 
 The node graph (README, "The node graph"), one process per node, output on the screen; the launch
 ends when the evaluator has written its report. Launch arguments win over config/benchmark.yaml:
@@ -67,6 +67,11 @@ def _nodes(context):
         params_file,
         common,
         {'output_dir': arg('output_dir'), 'pacing': pacing, 'seed': seed},
+        {  # the live view in Foxglove (docs/live.md)
+            'live': arg('live').lower() == 'true',
+            'live_port': int(arg('live_port')),
+            'live_wait': float(arg('live_wait')),
+        },
     )
     for engine in engines:
         nodes.append(
@@ -96,6 +101,9 @@ def generate_launch_description():
         'seed': '0',
         'pacing': 'lockstep',
         'output_dir': 'cloth_bench_results',
+        'live': 'false',
+        'live_port': '8765',
+        'live_wait': '30.0',
     }
     return LaunchDescription(
         [DeclareLaunchArgument(name, default_value=value) for name, value in defaults.items()]

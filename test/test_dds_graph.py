@@ -150,6 +150,25 @@ class PointCloud2Octet(IdlStruct, typename='sensor_msgs::msg::dds_::PointCloud2_
     is_dense: bool = False
 
 
+@dataclass
+class MultiArrayDimension(IdlStruct, typename='std_msgs::msg::dds_::MultiArrayDimension_'):
+    label: str = ''
+    size: t.uint32 = 0
+    stride: t.uint32 = 0
+
+
+@dataclass
+class MultiArrayLayout(IdlStruct, typename='std_msgs::msg::dds_::MultiArrayLayout_'):
+    dim: t.sequence[MultiArrayDimension] = field(default_factory=list)
+    data_offset: t.uint32 = 0
+
+
+@dataclass
+class Float64MultiArray(IdlStruct, typename='std_msgs::msg::dds_::Float64MultiArray_'):
+    layout: MultiArrayLayout = field(default_factory=MultiArrayLayout)
+    data: t.sequence[t.float64] = field(default_factory=list)
+
+
 # --- the run ---------------------------------------------------------------------------------
 
 ENGINES = ['mujoco', 'bullet']
@@ -158,6 +177,8 @@ TOPICS = {  # DDS topic: (type, ROS type)
     'rt/cloth_bench/mujoco/cloud': (PointCloud2, 'sensor_msgs/msg/PointCloud2'),
     'rt/cloth_bench/targets': (PoseArray, 'geometry_msgs/msg/PoseArray'),
     'rt/clock': (Clock, 'rosgraph_msgs/msg/Clock'),
+    'rt/cloth_bench/mujoco/frame_metrics': (Float64MultiArray, 'std_msgs/msg/Float64MultiArray'),
+    'rt/cloth_bench/mujoco/error_cloud': (PointCloud2, 'sensor_msgs/msg/PointCloud2'),
 }
 ROSBAGS = get_typestore(Stores.ROS2_HUMBLE)
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -222,6 +243,8 @@ def _to_rosbags(sample, msgtype: str):
                 value = [_to_rosbags(v, inner) for v in value]
             elif inner[0] == 'uint8':
                 value = np.array(value, dtype=np.uint8)
+            elif inner[0] == 'float64':
+                value = np.array(value, dtype=np.float64)
         values[name] = value
     return ROSBAGS.types[msgtype](**values)
 
@@ -243,6 +266,18 @@ def test_a_plain_dds_reader_receives_the_graph_and_its_bytes_are_rosbags_cdr(gra
     assert len(clouds) == 371 and clouds[-1].width == 48 and clouds[-1].header.frame_id == 'world'
     xyz = np.frombuffer(bytes(clouds[-1].data), np.float32).reshape(48, 3)
     assert np.isfinite(xyz).all() and 0.0 < xyz[:, 2].max() < 2.0
+    frames = [
+        Float64MultiArray.deserialize(p) for p in payloads['rt/cloth_bench/mujoco/frame_metrics']
+    ]
+    assert len(frames) == 132 and frames[0].layout.dim[0].label == 't,cd,hd,in_window'
+    window = [f.data[1] for f in frames if f.data[3] == 1.0]
+    assert np.mean(window) == pytest.approx(summary['engines']['mujoco']['CD_d'], rel=1e-12)
+    errors = [PointCloud2.deserialize(p) for p in payloads['rt/cloth_bench/mujoco/error_cloud']]
+    assert len(errors) == 132 and [f.name for f in errors[0].fields] == ['x', 'y', 'z', 'error']
+    for cloud, frame in zip(errors, frames):  # each vertex's error: CD their mean, HD their max
+        error = np.frombuffer(bytes(cloud.data), np.float32).reshape(48, 4)[:, 3]
+        assert error.max() == pytest.approx(frame.data[2], rel=1e-6)
+        assert error.astype(float).mean() == pytest.approx(frame.data[1], rel=1e-5)
     for topic, (cls, msgtype) in TOPICS.items():
         assert payloads[topic], topic
         for payload in payloads[topic][:3] + payloads[topic][-3:]:

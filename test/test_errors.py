@@ -79,7 +79,7 @@ def test_a_planted_value_error_in_the_scoring_path_is_an_internal_error(
     def planted(self, vertices):
         raise ValueError('planted bug in the scoring path')
 
-    monkeypatch.setattr(RealCloud, 'chamfer_hausdorff', planted)
+    monkeypatch.setattr(RealCloud, 'nearest_l1', planted)
     assert main(_run_args(tmp_path)) == 1
     err = capsys.readouterr().err
     assert 'internal error' in err and 'planted bug' in err and 'cloth-bench: error:' not in err

@@ -76,15 +76,21 @@ def _check_comparison_bag(path: Path, frames: int) -> None:
     """Rosbags and the mcap reader with mcap_ros2's decoder both read every topic."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
+    from cloth_bench_ros.core.pointcloud2 import read_field
     from rosbags.highlevel import AnyReader
 
-    topics = {
+    errors: list = []
+    metrics: list = []
+
+    topics = {  # the node graph's and the live view's names (data/error_view.py)
         '/tf_static',
-        '/cloth_bench/comparison/real/cloud',
-        '/cloth_bench/comparison/targets',
-        '/cloth_bench/comparison/metrics',
-        '/cloth_bench/comparison/mujoco/cloud',
-        '/cloth_bench/comparison/mujoco/mesh',
+        '/cloth_bench/scene',
+        '/cloth_bench/real/cloud',
+        '/cloth_bench/targets',
+        '/cloth_bench/metrics',
+        '/cloth_bench/mujoco/error_cloud',
+        '/cloth_bench/mujoco/frame_metrics',
+        '/cloth_bench/mujoco/mesh',
     }
     with AnyReader([path]) as reader:
         seen: dict[str, int] = {}
@@ -93,7 +99,16 @@ def _check_comparison_bag(path: Path, frames: int) -> None:
             seen[conn.topic] = seen.get(conn.topic, 0) + 1
             if conn.topic.endswith('/mesh'):
                 assert msg.type == 11 and len(msg.points) == 3 * 2 * 5 * 7 and msg.color.r == 1.0
-    assert set(seen) == topics and seen['/cloth_bench/comparison/real/cloud'] == frames
+            if conn.topic.endswith('/error_cloud'):
+                assert [f.name for f in msg.fields] == ['x', 'y', 'z', 'error']
+                errors.append(read_field(msg, 'error'))
+            if conn.topic.endswith('/frame_metrics'):
+                metrics.append(list(msg.data))
+    assert set(seen) == topics and seen['/cloth_bench/real/cloud'] == frames
+    # each error cloud's per-vertex errors average to its frame's CD and peak at its HD
+    assert len(errors) == len(metrics) == frames
+    for error, (_, cd, hd, _) in zip(errors, metrics):
+        assert error.mean() == pytest.approx(cd, rel=1e-5) and error.max() == pytest.approx(hd)
     decoded: dict[str, int] = {}
     with (path / f'{path.name}_0.mcap').open('rb') as f:
         for _, channel, _, msg in make_reader(
@@ -101,7 +116,7 @@ def _check_comparison_bag(path: Path, frames: int) -> None:
         ).iter_decoded_messages():
             decoded[channel.topic] = decoded.get(channel.topic, 0) + 1
             assert channel.metadata['topic_type_hash'].startswith('RIHS01_')
-            if channel.topic == '/cloth_bench/comparison/targets':
+            if channel.topic == '/cloth_bench/targets':
                 assert len(msg.poses) == 2
     assert decoded == seen
 

@@ -59,6 +59,8 @@ PIP_ONLY = {
     'newton',
     'warp',
     'ot',  # POT, the optimal-transport distance
+    'foxglove',  # foxglove-sdk, the live view (--live); the test's websockets likewise
+    'websockets',
 }
 OPTIONAL_IMPORTS = {
     'torch'

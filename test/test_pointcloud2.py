@@ -4,10 +4,12 @@ import sys
 
 from cloth_bench_ros.core.pointcloud2 import (
     create_cloud_xyz32,
+    create_cloud_xyz_fields,
     drop_nan,
     FLOAT32,
     FLOAT64,
     PointCloudError,
+    read_field,
     read_xyz,
 )
 from cloth_bench_ros.data.messages import deserialize, serialize
@@ -113,3 +115,21 @@ def test_short_data_is_refused():
 
 def test_empty_cloud():
     assert read_xyz(make(np.zeros((0, 3)))).shape == (0, 3)
+
+
+def test_an_extra_field_round_trips_through_cdr_beside_xyz():
+    rng = np.random.default_rng(1)
+    pts, error = rng.normal(size=(48, 3)), rng.uniform(0, 0.1, size=48)
+    msg = create_cloud_xyz_fields(
+        Header(frame_id='world'), pts, {'error': error}, PointCloud2, PointField
+    )
+    assert [(f.name, f.offset, f.datatype) for f in msg.fields] == [
+        ('x', 0, FLOAT32), ('y', 4, FLOAT32), ('z', 8, FLOAT32), ('error', 12, FLOAT32)
+    ]
+    assert (msg.point_step, msg.row_step, msg.width) == (16, 16 * 48, 48)
+    pc2 = 'sensor_msgs/msg/PointCloud2'
+    back = deserialize(serialize(msg, pc2), pc2)
+    np.testing.assert_array_equal(read_xyz(back), pts.astype(np.float32))
+    np.testing.assert_array_equal(read_field(back, 'error'), error.astype(np.float32))
+    with pytest.raises(PointCloudError, match='no intensity field'):
+        read_field(back, 'intensity')

@@ -109,6 +109,54 @@ def preset_set(args: argparse.Namespace) -> Any:
     return resolve(args.presets)
 
 
+def live_options() -> argparse.ArgumentParser:
+    """Parent parser: --live and its server's address and wait (docs/live.md)."""
+    from cloth_bench_ros.data.live_view import DEFAULT_HOST, DEFAULT_PORT, DEFAULT_WAIT_S
+
+    parent = argparse.ArgumentParser(add_help=False)
+    group = parent.add_argument_group('live view in Foxglove (see docs/live.md)')
+    group.add_argument(
+        '--live',
+        action='store_true',
+        help='serve the run to Foxglove while it goes (WebSocket; the error on the cloth, CD/HD)',
+    )
+    group.add_argument(
+        '--live-host',
+        type=option(validation.host, '--live-host'),
+        default=DEFAULT_HOST,
+        help=f'address the live view binds (default {DEFAULT_HOST}: this machine only)',
+    )
+    group.add_argument(
+        '--live-port',
+        type=integer('--live-port', 0, 65535),
+        default=DEFAULT_PORT,
+        help=f"its port (default {DEFAULT_PORT}, Foxglove's)",
+    )
+    group.add_argument(
+        '--live-wait',
+        type=number(validation.wait_s, '--live-wait'),
+        default=DEFAULT_WAIT_S,
+        metavar='S',
+        help=(
+            f'seconds a lockstep run waits for a first viewer before it starts (default'
+            f' {DEFAULT_WAIT_S:g}; then it goes on without one)'
+        ),
+    )
+    return parent
+
+
+def live_parameters(args: argparse.Namespace) -> dict:
+    """Return the evaluator's live-view parameters of --live and its options ({} without)."""
+    if not getattr(args, 'live', False):
+        return {}
+    return {
+        'live': True,
+        'live_host': args.live_host,
+        'live_port': int(args.live_port),
+        'live_wait': float(args.live_wait),
+    }
+
+
 def executor_options() -> argparse.ArgumentParser:
     """Parent parser: where a study's cells run (local workers or Dask) and its progress bar."""
     parent = argparse.ArgumentParser(add_help=False)

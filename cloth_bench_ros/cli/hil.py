@@ -15,7 +15,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register hil."""
     hil = sub.add_parser(
         'hil',
-        parents=[common.scene_options(), tolerance_options(), common.presets_options()],
+        parents=[
+            common.scene_options(),
+            tolerance_options(),
+            common.presets_options(),
+            common.live_options(),
+        ],
         help='hardware in the loop: targets on the wall clock, the simulator in its own process',
     )
     hil.add_argument('--engine', action='append', help='repeat for several (default mujoco)')
@@ -179,6 +184,7 @@ def cmd_hil(args: argparse.Namespace) -> int:
                 not args.no_freeze_gc,
                 layout.busy_wait,
                 args.duration,
+                live=tuple(sorted(common.live_parameters(args).items())),
             )
             if args.config == 'recommended':
                 rec, source = hil.recommended(

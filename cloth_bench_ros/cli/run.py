@@ -17,7 +17,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register run, trajectory and engines."""
     run = sub.add_parser(
         'run',
-        parents=[common.scene_options(), common.presets_options()],
+        parents=[common.scene_options(), common.presets_options(), common.live_options()],
         help='run the node graph on a bag and print the result table',
     )
     run.add_argument(
@@ -312,6 +312,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         change_of_phase_frame=args.change_of_phase_frame,
         record_comparison=Path(args.record_comparison) if args.record_comparison else None,
         comparison_figures=args.figures,
+        live=common.live_parameters(args),
     )
     if config.record_comparison is not None:  # checked before the run, not after it
         if config.record_comparison.exists() and any(config.record_comparison.iterdir()):

@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 import math
+from typing import Callable
 
 from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.core.metrics import latency_stats, RealCloud, StabilityAccumulator
@@ -63,6 +64,27 @@ class FrameScore:
     emd: float = math.nan
     real_contact: bool | None = None  # dynamic task: the real cloth touches the table
     sim_contact: bool | None = None  # ... and the simulated one, by the same rule
+
+
+@dataclass(frozen=True)
+class ScoredFrame:
+    """
+    One scored (real frame, engine) pair with the arrays behind its numbers.
+
+    `errors` holds each vertex's own term of CD: its L1 distance to the nearest real point (CD is
+    their mean, HD their maximum); None when the engine had diverged.
+    """
+
+    score: FrameScore
+    stamp_ns: int  # the real frame's stamp
+    real: np.ndarray  # (m, 3) the real points scored against
+    vertices: np.ndarray  # (n, 3) the engine's vertices at the real frame's stamp (interpolated)
+    errors: np.ndarray | None  # (n,) L1 distance of each vertex to the nearest real point
+
+
+def _worse(a: FrameScore, b: FrameScore) -> bool:
+    """Return True if a is a worse frame than b: in the scoring window first, then larger CD."""
+    return (a.in_window, a.cd) > (b.in_window, b.cd)
 
 
 @dataclass
@@ -112,7 +134,10 @@ class OnlineEvaluator:
         self.keep_pairs = (
             keep_pairs  # keep (score, real points, vertices) for the comparison outputs
         )
-        self.pairs: list[tuple[FrameScore, np.ndarray, np.ndarray]] = []
+        self.pairs: list[tuple[FrameScore, np.ndarray, np.ndarray, np.ndarray | None]] = []
+        # Each scored frame goes to these callables as it is scored (the live view, ROS topics).
+        self.listeners: list[Callable[[ScoredFrame], None]] = []
+        self.worst: dict[str, ScoredFrame] = {}  # per engine: its largest CD (see _worse)
         # the mesh's triangles: the surface metrics and contact onset are computed with them
         self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
         self.mesh_vertices = 0 if self.faces is None else int(self.faces.max()) + 1
@@ -215,11 +240,13 @@ class OnlineEvaluator:
             paired = True
             diverged = e.diverged_time is not None and t >= e.diverged_time - 1e-9
             surface, sim_touch = NAN_SCORES, None
+            errors = None
             if diverged or not np.isfinite(vertices).all():
                 cd = hd = math.nan
                 diverged = True
-            else:
-                cd, hd = cloud.chamfer_hausdorff(vertices)
+            else:  # the per-vertex terms, then CD and HD of them (RealCloud.chamfer_hausdorff)
+                errors = cloud.nearest_l1(vertices)
+                cd, hd = float(errors.mean()), float(errors.max())
                 if self.faces is not None and len(vertices) != self.mesh_vertices:
                     e.mesh_mismatch = len(vertices)  # another grid than the faces': not scored
                 elif self.faces is not None:
@@ -234,8 +261,15 @@ class OnlineEvaluator:
                     real_contact=real_touch, sim_contact=sim_touch,
                 )
             )
+            scored = ScoredFrame(self.scores[-1], stamp, cloud.points, vertices, errors)
             if self.keep_pairs:
-                self.pairs.append((self.scores[-1], cloud.points, np.array(vertices)))
+                self.pairs.append((self.scores[-1], cloud.points, np.array(vertices), errors))
+            if errors is not None and (
+                name not in self.worst or _worse(scored.score, self.worst[name].score)
+            ):
+                self.worst[name] = scored
+            for listener in self.listeners:
+                listener(scored)
         if paired:
             self.scored_frames += 1
             if real_touch is not None:

@@ -60,6 +60,65 @@ def create_cloud_xyz32(header: Any, points: np.ndarray, cloud_type: type, field_
     )
 
 
+def create_cloud_xyz_fields(
+    header: Any,
+    points: np.ndarray,
+    extra: dict[str, np.ndarray],
+    cloud_type: type,
+    field_type: type,
+) -> Any:
+    """Return a PointCloud2 of float32 x, y, z and one float32 field per `extra` column."""
+    pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+    names = ['x', 'y', 'z', *extra]
+    table = np.empty((len(pts), len(names)), dtype=np.float32)
+    table[:, :3] = pts
+    for i, values in enumerate(extra.values()):
+        table[:, 3 + i] = np.asarray(values, dtype=np.float32).reshape(len(pts))
+    step = 4 * len(names)
+    fields = [
+        field_type(name=name, offset=4 * i, datatype=FLOAT32, count=1)
+        for i, name in enumerate(names)
+    ]
+    return cloud_type(
+        header=header,
+        height=1,
+        width=len(pts),
+        fields=fields,
+        is_bigendian=sys.byteorder != 'little',
+        point_step=step,
+        row_step=step * len(pts),
+        data=_cloud_data(cloud_type, table.tobytes()),
+        is_dense=bool(np.isfinite(table).all()),
+    )
+
+
+def read_field(cloud: Any, name: str) -> np.ndarray:
+    """Return one numeric field of every point as float64 (n,), e.g. the `error` of a cloud."""
+    by_name = {f.name: f for f in cloud.fields}
+    if name not in by_name:
+        known = ', '.join(sorted(by_name)) or 'none'
+        raise PointCloudError(f'PointCloud2 has no {name} field (fields: {known})')
+    f = by_name[name]
+    if f.datatype not in _NUMPY_TYPES:
+        raise PointCloudError(f'PointCloud2 field {name} has unknown datatype {f.datatype}')
+    n, point_step, row_step = int(cloud.width) * int(cloud.height), int(cloud.point_step), int(
+        cloud.row_step
+    )
+    dtype = np.dtype(('>' if cloud.is_bigendian else '<') + _NUMPY_TYPES[f.datatype])
+    raw = _as_bytes(cloud.data)
+    if (
+        f.offset + dtype.itemsize > point_step
+        or row_step < point_step * int(cloud.width)
+        or len(raw) < row_step * int(cloud.height)
+    ):
+        raise PointCloudError(f'PointCloud2 field {name} lies outside its data')
+    if n == 0:
+        return np.zeros(0)
+    rows = np.asarray(raw)[: row_step * int(cloud.height)].reshape(int(cloud.height), row_step)
+    packed = np.ascontiguousarray(rows[:, : point_step * int(cloud.width)]).reshape(n, point_step)
+    return packed[:, f.offset:f.offset + dtype.itemsize].copy().view(dtype).ravel().astype(float)
+
+
 def _as_bytes(data: Any) -> bytes | np.ndarray:
     if isinstance(data, np.ndarray):
         return data.view(np.uint8).ravel()

@@ -1,10 +1,12 @@
 """
 The comparison bag of a run, for Foxglove/RViz, stamped in run time.
 
-Input is what the evaluator kept of each scored real frame: its `FrameScore`, the real points and
-the engine's vertices at that time. The bag holds the real cloud, each engine's vertices
-(PointCloud2) and mesh (visualization_msgs/Marker TRIANGLE_LIST, red), the gripper targets,
-per-frame metrics, and /tf_static for `world`.
+Input is what the evaluator kept of each scored real frame: its `FrameScore`, the real points, the
+engine's vertices at that time and each vertex's error. The topics are the node graph's and the
+live view's (data/error_view.py): the real cloud, each engine's error cloud (PointCloud2 with the
+per-vertex `error` field), mesh (visualization_msgs/Marker TRIANGLE_LIST, red) and frame metrics
+(Float64MultiArray), the gripper targets, the per-frame DiagnosticArray, the table, and
+/tf_static for `world`.
 """
 
 from __future__ import annotations
@@ -12,18 +14,26 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from cloth_bench_ros.core.scene import ClothGrid, SETTLE_DURATION
-from cloth_bench_ros.core.trajectory import full_targets, quaternion_xyz
-from cloth_bench_ros.data import messages
+from cloth_bench_ros.core.scene import (
+    ClothGrid,
+    SETTLE_DURATION,
+    TABLE_THICKNESS,
+    TABLE_TOP_Z,
+    TABLE_X,
+    TABLE_Y,
+)
+from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, quaternion_xyz
+from cloth_bench_ros.data import error_view, messages
 from cloth_bench_ros.data.bag_writer import BagWriter
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POSE_ARRAY, TYPESTORE
 import numpy as np
 
 MARKER = 'visualization_msgs/msg/Marker'
 TF_MESSAGE = 'tf2_msgs/msg/TFMessage'
-REAL_TOPIC = '/cloth_bench/comparison/real/cloud'
-TARGETS_TOPIC = '/cloth_bench/comparison/targets'
-METRICS_TOPIC = '/cloth_bench/comparison/metrics'
+REAL_TOPIC = error_view.topic(error_view.REAL_CLOUD)
+TARGETS_TOPIC = error_view.topic(error_view.TARGETS)
+METRICS_TOPIC = error_view.topic(error_view.METRICS)
+SCENE_TOPIC = error_view.topic(error_view.SCENE)
 
 
 def default_message(msgtype: str, **values: Any) -> Any:
@@ -87,6 +97,28 @@ def _marker(stamp: int, engine: str, vertices: np.ndarray, faces: np.ndarray) ->
     )
 
 
+def table_marker(stamp: int) -> Any:
+    """Return the table as a grey CUBE Marker in `world`, its top at the scene's table height."""
+    vector = messages.msg_class('geometry_msgs/msg/Vector3')
+    return default_message(
+        MARKER,
+        header=messages.header(stamp),
+        ns='table',
+        type=1,  # CUBE
+        pose=default_message(
+            'geometry_msgs/msg/Pose',
+            position=messages.msg_class('geometry_msgs/msg/Point')(
+                x=sum(TABLE_X) / 2, y=sum(TABLE_Y) / 2, z=TABLE_TOP_Z - TABLE_THICKNESS / 2
+            ),
+            orientation=messages.msg_class('geometry_msgs/msg/Quaternion')(
+                x=0.0, y=0.0, z=0.0, w=1.0
+            ),
+        ),
+        scale=vector(x=TABLE_X[1] - TABLE_X[0], y=TABLE_Y[1] - TABLE_Y[0], z=TABLE_THICKNESS),
+        color=messages.msg_class('std_msgs/msg/ColorRGBA')(r=0.6, g=0.6, b=0.6, a=0.5),
+    )
+
+
 def _tf_static() -> Any:
     ts = default_message(
         'geometry_msgs/msg/TransformStamped',
@@ -97,8 +129,15 @@ def _tf_static() -> Any:
     return messages.msg_class(TF_MESSAGE)(transforms=[ts])
 
 
-def _targets(primitive: str, rate_hz: float, stamp: int) -> Any:
-    tg = full_targets(primitive, rate_hz)
+def target_poses(tg: GripperTargets, rate_hz: float, stamp: int) -> np.ndarray:
+    """Return the [left, right] targets at a run-time stamp as (2, 7): x, y, z, qx, qy, qz, qw."""
+    k = int(np.clip(round(stamp / 1e9 * rate_hz), 0, len(tg) - 1))
+    q = quaternion_xyz(tg.roll[k], tg.pitch[k], tg.yaw[k])
+    return np.array([[*map(float, p[:3]), *q] for p in (tg.left[k], tg.right[k])])
+
+
+def targets_message(tg: GripperTargets, rate_hz: float, stamp: int) -> Any:
+    """Return the PoseArray [left, right] of the grippers' targets at a run-time stamp."""
     k = int(np.clip(round(stamp / 1e9 * rate_hz), 0, len(tg) - 1))
     pose = messages.msg_class('geometry_msgs/msg/Pose')
     qx, qy, qz, qw = quaternion_xyz(tg.roll[k], tg.pitch[k], tg.yaw[k])
@@ -132,23 +171,51 @@ def _metrics(stamp: int, score: Any) -> Any:
 def write_comparison_bag(
     path: Path, pairs: list, primitive: str, rate_hz: float
 ) -> dict[str, int]:
-    """Return the comparison bag (see module doc); returns messages per topic."""
+    """
+    Write the comparison bag (see module doc); returns messages per topic.
+
+    pairs: (FrameScore, real points, vertices, per-vertex errors or None) per scored frame.
+    """
     offset = int(round(SETTLE_DURATION * 1e9))
+    pc2 = messages.POINTCLOUD2
+    tg = full_targets(primitive, rate_hz)
     with BagWriter(path) as bag:
         bag.write_message('/tf_static', _tf_static(), 0)
+        bag.write_message(SCENE_TOPIC, table_marker(0), 0)
         real_done: set[int] = set()
-        for score, real, vertices in pairs:
+        for score, real, vertices, errors in pairs:
             stamp = offset + int(round(score.t * 1e9))
             if score.frame not in real_done:
                 real_done.add(score.frame)
                 bag.write_cloud(REAL_TOPIC, stamp, real)
-                bag.write_message(TARGETS_TOPIC, _targets(primitive, rate_hz, stamp), stamp)
+                bag.write_message(TARGETS_TOPIC, targets_message(tg, rate_hz, stamp), stamp)
             engine = score.engine
-            bag.write_cloud(f'/cloth_bench/comparison/{engine}/cloud', stamp, vertices)
+            scored = _Scored(stamp, vertices, errors)
+            bag.write(
+                error_view.topic(error_view.ERROR_CLOUD, engine),
+                pc2,
+                stamp,
+                error_view.cdr_error_cloud(scored),
+            )
             bag.write_message(
-                f'/cloth_bench/comparison/{engine}/mesh',
+                error_view.topic(error_view.MESH, engine),
                 _marker(stamp, engine, vertices, grid_for(len(vertices)).faces()),
                 stamp,
             )
+            bag.write(
+                error_view.topic(error_view.FRAME_METRICS_TOPIC, engine),
+                error_view.FLOAT64_MULTI_ARRAY,
+                stamp,
+                error_view.cdr_metrics(
+                    error_view.frame_values(score), error_view.FRAME_METRICS
+                ),
+            )
             bag.write_message(METRICS_TOPIC, _metrics(stamp, score), stamp)
         return bag.close()
+
+
+class _Scored:
+    """The part of a ScoredFrame that an error cloud is made of."""
+
+    def __init__(self, stamp_ns: int, vertices: np.ndarray, errors: np.ndarray | None) -> None:
+        self.stamp_ns, self.vertices, self.errors = stamp_ns, vertices, errors

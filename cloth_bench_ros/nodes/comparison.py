@@ -55,7 +55,7 @@ def qualitative_figure(pairs: list, primitive: str, path: Path) -> tuple[int, in
     for row, (engine, rows) in enumerate(engines.items()):
         for col, t in enumerate(times):
             ax = axes[row][col]
-            score, real, vertices = min(rows, key=lambda p: abs(p[0].t - t))
+            score, real, vertices = min(rows, key=lambda p: abs(p[0].t - t))[:3]
             _draw(ax, real, vertices)
             ax.set_xlabel(f't={score.t:.1f} s\nCD {score.cd:.3f}  HD {score.hd:.3f}', fontsize=7)
             if col == 0:
@@ -83,7 +83,7 @@ def animation(pairs: list, path: Path) -> tuple[Path, int]:
     def update(i: int) -> None:
         for ax, (engine, rows) in zip(axes[0], engines.items()):
             ax.clear()
-            score, real, vertices = rows[picks[i]]
+            score, real, vertices = rows[picks[i]][:3]
             _draw(ax, real, vertices)
             ax.set_title(f'{engine} t={score.t:.2f} s CD {score.cd:.3f}', fontsize=7)
 

@@ -16,6 +16,7 @@ from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.core.surface_distance import grid_faces
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
+from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data.trial import trial_from_message
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
@@ -25,6 +26,7 @@ from cloth_bench_ros.nodes.common import (
     run_node,
 )
 from cloth_bench_ros.nodes.comparison import write_comparison
+from cloth_bench_ros.nodes.error_topics import declare_live_parameters, ErrorTopics
 from cloth_bench_ros.runtime import (
     declare_float,
     DiagnosticArray,
@@ -152,9 +154,25 @@ class Evaluator(Node):
         self.summary: dict | None = None
         self.done = False
         self.exit_status = 0  # 1: the frame accounting does not add up (main() returns it)
+        # Error cloud, frame and step metrics on the graph's topics and the live view (last: a
+        # live view's port in use is one line, and nothing after it can fail).
+        self.error_topics = ErrorTopics(
+            self,
+            self.engines,
+            self.primitive.value,
+            rate_hz,
+            self.core.quintic_start_ns,
+            self.realtime,
+            declare_live_parameters(self),
+        )
+        self.core.listeners.append(self.error_topics.scored)
 
     def check_ready(self) -> None:
-        if self.trial_received and all(publishers_matched(self, sub) for sub in self.inputs):
+        if (
+            self.trial_received
+            and all(publishers_matched(self, sub) for sub in self.inputs)
+            and self.error_topics.ready_to_start()
+        ):
             self.destroy_timer(self.ready_timer)
             self.metrics_pub = self.create_publisher(DiagnosticArray, 'metrics', make_qos(100))
             self.publish_scores()
@@ -211,9 +229,13 @@ class Evaluator(Node):
         stamp = stamp_ns(msg.header.stamp)
         if self.realtime and self.first_target_ns is not None:
             due = self.first_target_ns + (stamp - self.first_target_stamp)
-            self.core.add_latency(engine, (time.monotonic_ns() - due) / 1e9)
+            latency = (time.monotonic_ns() - due) / 1e9
+            self.core.add_latency(engine, latency)
+            self.error_topics.state_latency(engine, stamp, latency)
         elif stamp in self.target_sent:
-            self.core.add_latency(engine, (time.monotonic_ns() - self.target_sent[stamp]) / 1e9)
+            latency = (time.monotonic_ns() - self.target_sent[stamp]) / 1e9
+            self.core.add_latency(engine, latency)
+            self.error_topics.state_latency(engine, stamp, latency)
             if len(self.engines) == 1:
                 del self.target_sent[stamp]
         self.core.add_state(engine, stamp, read_xyz(msg))
@@ -231,6 +253,7 @@ class Evaluator(Node):
             msg.status[0].message,
             int(v.get('skipped_targets') or 0),
         )
+        self.error_topics.step(engine, stamp_ns(msg.header.stamp), float(v['step_time']))
         self.finish_if_complete()
 
     def finish_if_complete(self) -> None:
@@ -292,6 +315,7 @@ class Evaluator(Node):
 
     def close(self) -> None:
         """Say what the run was waiting for when it is stopped before its end (signal or hang)."""
+        self.error_topics.close()
         if not self.done:
             waiting = '; '.join(self.waiting_for()) or 'nothing more'
             self.get_logger().warning(f'stopped before the run ended, waiting for {waiting}')
@@ -341,6 +365,7 @@ class Evaluator(Node):
             )
         if self.output_dir:
             write_run_report(Path(self.output_dir), self.summary, self.core.scores)
+            write_worst_frames(Path(self.output_dir), self.core.worst)
             self.get_logger().info(f'report written to {self.output_dir}')
         self.done = True
 

@@ -317,6 +317,7 @@ def render_report(
     metric: str = 'cd',
 ) -> ReportOutcome:
     """Render every table and figure of the rows into out_dir (report.md, .html, .png, .csv)."""
+    from cloth_bench_ros.report.cloth_error import cloth_error_section
     from cloth_bench_ros.report.comparison import comparison_section
     from cloth_bench_ros.report.identification import identification_section
     from cloth_bench_ros.report.metric_sections import metrics_section
@@ -349,6 +350,7 @@ def render_report(
     doc.extend(metrics_section(rows, metric))
     doc.extend(cross_reference_blocks(rows, metric))
     doc.extend(comparison_section(results_dir))
+    doc.extend(cloth_error_section(results_dir))
     tables = {t.name: t for t in doc.tables()}
     md, html, images = write_document(doc, out_dir, csv_only=[results_table(rows)])
     return ReportOutcome(md, html, images, tables, recs, pareto)

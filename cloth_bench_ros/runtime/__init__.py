@@ -50,8 +50,11 @@ if EMBEDDED or TYPE_CHECKING:  # the type checker reads the embedded runtime's A
         Clock,
         DiagnosticArray,
         DiagnosticStatus,
+        Float64MultiArray,
         Header,
         KeyValue,
+        MultiArrayDimension,
+        MultiArrayLayout,
         Point,
         PointCloud2,
         PointField,
@@ -84,7 +87,7 @@ else:
     from rclpy.time import Time
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import PointCloud2, PointField
-    from std_msgs.msg import Header
+    from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension, MultiArrayLayout
 
 __all__ = [  # the API the nodes are written against, under either runtime
     'Clock',
@@ -95,6 +98,7 @@ __all__ = [  # the API the nodes are written against, under either runtime
     'DiagnosticStatus',
     'DurabilityPolicy',
     'EMBEDDED',
+    'Float64MultiArray',
     'GetParameters',
     'GetParameterTypes',
     'Header',
@@ -105,6 +109,8 @@ __all__ = [  # the API the nodes are written against, under either runtime
     'make_qos',
     'message_type',
     'MESSAGE_TYPES',
+    'MultiArrayDimension',
+    'MultiArrayLayout',
     'Node',
     'Parameter',
     'ParameterDescriptor',
@@ -136,6 +142,7 @@ MESSAGE_TYPES = {
     'geometry_msgs/msg/PoseArray': PoseArray,
     'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray,
     'rosgraph_msgs/msg/Clock': Clock,
+    'std_msgs/msg/Float64MultiArray': Float64MultiArray,
 }
 
 

@@ -155,6 +155,15 @@ if TYPE_CHECKING:  # what the type checker reads: rosbags' classes, rclpy's keyw
     class DiagnosticArray(_Keywords, _store.diagnostic_msgs__msg__DiagnosticArray):
         pass
 
+    class MultiArrayDimension(_Keywords, _store.std_msgs__msg__MultiArrayDimension):
+        pass
+
+    class MultiArrayLayout(_Keywords, _store.std_msgs__msg__MultiArrayLayout):
+        pass
+
+    class Float64MultiArray(_Keywords, _store.std_msgs__msg__Float64MultiArray):
+        pass
+
 else:
     Time = message_class('builtin_interfaces/msg/Time')
     Header = message_class('std_msgs/msg/Header')
@@ -169,3 +178,6 @@ else:
     KeyValue = message_class('diagnostic_msgs/msg/KeyValue')
     DiagnosticStatus = message_class('diagnostic_msgs/msg/DiagnosticStatus')
     DiagnosticArray = message_class('diagnostic_msgs/msg/DiagnosticArray')
+    MultiArrayDimension = message_class('std_msgs/msg/MultiArrayDimension')
+    MultiArrayLayout = message_class('std_msgs/msg/MultiArrayLayout')
+    Float64MultiArray = message_class('std_msgs/msg/Float64MultiArray')

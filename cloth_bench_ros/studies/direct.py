@@ -24,6 +24,7 @@ from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
 from cloth_bench_ros.core.surface_distance import grid_faces
 from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, parse_primitive
+from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.data.alignment import reference_motion
 from cloth_bench_ros.data.replay import plan_replay, ReplayOptions
@@ -165,4 +166,5 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
     summary = run_summary(core, replay, run, 1.0 / rate_hz, wall_s, final_stamp)
     if config.output_dir:
         write_run_report(config.output_dir, summary, core.scores)
+        write_worst_frames(config.output_dir, core.worst)
     return summary

@@ -34,6 +34,7 @@ class HilConfig:
         False  # the simulator polls for targets instead of sleeping (give it a core: cpu)
     )
     duration: float = 0.0  # s of the trajectory to run (0: all of it, scored by the observer)
+    live: tuple[tuple[str, object], ...] = ()  # the evaluator's live-view parameters (--live)
 
     def ident(self) -> str:
         """Return the run's directory name (engine, rate, task, seed, configuration), file-safe."""

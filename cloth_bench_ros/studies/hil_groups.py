@@ -94,6 +94,7 @@ def _parameters(config: HilConfig, group: str, run_dir: Path) -> list[tuple[str,
                 'seed': int(config.seed),
                 'pacing': 'realtime',
                 'use_sim_time': True,
+                **dict(config.live),
             },
         ),
         ('recorder', {'bag': str(config.bag), 'use_sim_time': True}),
@@ -272,6 +273,7 @@ def _config_from_json(text: str) -> HilConfig:
             'bag': Path(d['bag']),
             'grid': tuple(d['grid']) if d['grid'] else None,
             'params': tuple(tuple(p) for p in d['params']),
+            'live': tuple(tuple(p) for p in d.get('live', ())),
         }
     )
 

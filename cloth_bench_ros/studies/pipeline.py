@@ -53,6 +53,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
             'change_of_phase_frame': _cut(config),
             'grid_nx': nx,
             'grid_nz': nz,
+            **config.live,
         },
     }
     for engine in config.engines:

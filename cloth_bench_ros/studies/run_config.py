@@ -25,3 +25,4 @@ class RunConfig:
     change_of_phase_frame: int | None = None  # None: the bag's own
     record_comparison: Path | None = None  # comparison MCAP bag to write
     comparison_figures: bool = False  # qualitative figure and animation in output_dir
+    live: dict = field(default_factory=dict)  # evaluator's live, live_host, live_port, live_wait
