@@ -142,10 +142,10 @@ def remedy_line(
             'a quieter machine: the step p99 meets the rule, so the misses are the round trip'
             f' and the load (CPU busy {100 * result.load.get("cpu_busy", float("nan")):.0f} %)'
         )
-    grid = f' --grid {timing.grid[0]}x{timing.grid[1]}'
+    mesh = f' --grid {timing.grid[0]}x{timing.grid[1]}'
     ways.append(
         f'a lower rate: this configuration meets the rule up to {check.rate_met_hz:.3g} Hz'
-        f' (`cloth-bench hil --find-rate --engine {config.engine}{grid}` finds the highest rate'
+        f' (`cloth-bench hil --find-rate --engine {config.engine}{mesh}` finds the highest rate'
         ' it holds)'
     )
     return (

@@ -40,14 +40,21 @@ class RateProbe:
     miss_fractions: list[float]
     held: bool
     runs: list[HilResult] = field(repr=False, default_factory=list)
+    failures: list[str] = field(default_factory=list)  # runs that did not finish (not held)
 
     def median_run(self) -> HilResult:
         """Return the run whose miss share is the median (the lower middle of an even count)."""
-        order = sorted(range(len(self.runs)), key=lambda i: self.miss_fractions[i])
+        shares = [miss_fraction(r) for r in self.runs]
+        order = sorted(range(len(self.runs)), key=lambda i: shares[i])
         return self.runs[order[(len(order) - 1) // 2]]
 
     def as_dict(self) -> dict:
-        return {'rate_hz': self.rate_hz, 'miss_fractions': self.miss_fractions, 'held': self.held}
+        return {
+            'rate_hz': self.rate_hz,
+            'miss_fractions': self.miss_fractions,
+            'held': self.held,
+            'failures': self.failures,
+        }
 
 
 @dataclass
@@ -123,17 +130,24 @@ def find_rate(
     grid = 'x'.join(map(str, base.grid)) if base.grid else 'default'
 
     def probe(rate: float) -> bool:
-        runs = []
+        runs, fractions, failures = [], [], []
         for i in range(repeats):
             config = replace(base, rate_hz=rate, config=f'{base.config},find-rate,{i}')
-            runs.append(run_hil(config, out_dir, lockstep=False))
-        fractions = [miss_fraction(r) for r in runs]
+            try:
+                run = run_hil(config, out_dir, lockstep=False)
+            except RuntimeError as exc:  # a run that did not finish in time holds nothing
+                failures.append(str(exc))
+                fractions.append(math.nan)
+                continue
+            runs.append(run)
+            fractions.append(miss_fraction(run))
         held = holds_rate(fractions, threshold)
-        probes.append(RateProbe(rate, fractions, held, runs))
+        probes.append(RateProbe(rate, fractions, held, runs, failures))
         log(
-            f'  {base.engine} {grid} at {rate:.4g} Hz: misses '
+            f'  {base.engine} {grid} at {rate:.4g} Hz: missed '
             + ', '.join(f'{100 * f:.2f} %' for f in fractions)
             + (' -> held' if held else ' -> not held')
+            + ''.join(f'; a run failed: {f}' for f in failures)
         )
         return held
 
