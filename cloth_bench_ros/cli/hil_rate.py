@@ -232,10 +232,10 @@ FIND_RATE_HEADERS = [
 
 def _table_row(r: dict) -> list[str]:
     rate = r['rate_hz']
-    low, high = r['bracket_hz']
-    if rate != rate:  # nan: not even the lowest rate
+    _, high = r['bracket_hz']
+    if rate is None:  # not even the lowest rate
         shown = f'< {high:g}'
-    elif high == float('inf'):
+    elif high is None:  # the highest rate held
         shown = f'>= {rate:.4g}'
     else:
         shown = f'{rate:.4g}'
@@ -245,14 +245,14 @@ def _table_row(r: dict) -> list[str]:
         else '-'
     )
     latency = '-' if r['latency_p999'] is None else f'{1e3 * r["latency_p999"]:.3g}'
-    warm = r['warmup_step_p99']
+    warm, rule, cd = r['warmup_step_p99'], r['rule_rate_hz'], r['cd_lockstep']
     return [
         r['engine'],
         r['grid'],
         shown,
         missed,
         latency,
-        '-' if warm != warm else f'{1e3 * warm:.3g}',
-        '-' if r['rule_rate_hz'] != r['rule_rate_hz'] else f'{r["rule_rate_hz"]:.4g}',
-        '-' if r['cd_lockstep'] != r['cd_lockstep'] else f'{r["cd_lockstep"]:.4f}',
+        '-' if warm is None else f'{1e3 * warm:.3g}',
+        '-' if rule is None else f'{rule:.4g}',
+        '-' if cd is None else f'{cd:.4f}',
     ]

@@ -51,7 +51,7 @@ class RateProbe:
     def as_dict(self) -> dict:
         return {
             'rate_hz': self.rate_hz,
-            'miss_fractions': self.miss_fractions,
+            'miss_fractions': [_finite(f) for f in self.miss_fractions],  # None: run failed
             'held': self.held,
             'failures': self.failures,
         }
@@ -81,8 +81,8 @@ class PeakRate:
         return {
             'engine': self.engine,
             'grid': self.grid,
-            'rate_hz': self.rate_hz,
-            'bracket_hz': list(self.bracket),
+            'rate_hz': _finite(self.rate_hz),
+            'bracket_hz': [_finite(v) for v in self.bracket],
             'missed': missed(run) if run else None,
             'deadline_misses': run.figures.deadline_misses if run else None,
             'skipped': run.figures.skipped if run else None,
@@ -94,11 +94,16 @@ class PeakRate:
                 else None
             ),
             'latency_p999': run.figures.latency_p999 if run else None,
-            'warmup_step_p99': self.warmup_p99_s,
-            'rule_rate_hz': rule.rate_met_hz,
-            'cd_lockstep': self.cd,
+            'warmup_step_p99': _finite(self.warmup_p99_s),
+            'rule_rate_hz': _finite(rule.rate_met_hz),
+            'cd_lockstep': _finite(self.cd),
             'probes': [p.as_dict() for p in self.probes],
         }
+
+
+def _finite(value: float) -> float | None:
+    """Return a number for JSON: None for nan (not measured) and inf (no bound)."""
+    return float(value) if math.isfinite(value) else None
 
 
 def missed(result: HilResult) -> int:
