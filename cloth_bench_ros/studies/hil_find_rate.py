@@ -150,7 +150,7 @@ def find_rate(
         probes.append(RateProbe(rate, fractions, held, runs, failures))
         log(
             f'  {base.engine} {grid} at {rate:.4g} Hz: missed '
-            + ', '.join(f'{100 * f:.2f} %' for f in fractions)
+            + ', '.join(f'{100 * f:.2f} %' if math.isfinite(f) else 'failed' for f in fractions)
             + (' -> held' if held else ' -> not held')
             + ''.join(f'; a run failed: {f}' for f in failures)
         )
