@@ -174,7 +174,10 @@ def find_rates(args: argparse.Namespace, bases: list[HilConfig], out: Path) -> i
         f' runs of {length}; held: under {100 * args.miss_threshold:g} % of the deadlines missed'
         ' (a skipped target counts as missed)'
     )
-    print(deadline_rule(args.budget) + ' (the rule rate column)')
+    print(
+        'rule rate: the highest rate at which the warm-up step p99 at the rate held meets the'
+        f' deadline rule (budget {args.budget:g}); CD: lockstep at the rate held'
+    )
     found = []
     for base in bases:
         print(f'{base.engine}, configuration {base.config} ...', flush=True)
