@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.cli import common
+from cloth_bench_ros.cli import common, hil_rate
 from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.cli.studies import tolerance_options
 
@@ -52,7 +52,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     hil.add_argument('--bag', help='rosbag2 bag (default: the bundled one)')
     hil.add_argument('--seed', type=common.seed, default=0)
-    hil.add_argument('--grid', type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
+    hil.add_argument(
+        '--grid',
+        type=common.grid,
+        action='append',
+        help="cloth mesh NXxNZ (default: the engine's; several with --find-rate)",
+    )
     common.engine_override_option(hil, 'engine parameter override')
     hil.add_argument(
         '--layout',
@@ -119,11 +124,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     hil.add_argument(
         '--note', help="--export-recommended: a provenance note (e.g. the sweep's command)"
     )
+    hil_rate.add_options(hil)
     hil.set_defaults(func=cmd_hil)
 
 
 def cmd_hil(args: argparse.Namespace) -> int:
     """Run each engine and rate with targets on the wall clock and print the deadline table."""
+    from cloth_bench_ros.core.deadline import deadline_rule
     from cloth_bench_ros.engines import engine_class
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.hil import hil_table, text_table, write_hil_report
@@ -141,6 +148,14 @@ def cmd_hil(args: argparse.Namespace) -> int:
         engine_class(name)
     if args.config == 'recommended' and args.grid:
         raise UserError('--grid and --config recommended both choose the mesh: give one')
+    if args.grid and len(args.grid) > 1 and not args.find_rate:
+        raise UserError('several --grid need --find-rate (one real-time run has one mesh)')
+    if args.find_rate and args.config == 'recommended':
+        raise UserError(
+            '--find-rate searches the rate of one configuration; --config recommended changes'
+            ' with the rate: give --grid/--set instead'
+        )
+    grids = [tuple(g) for g in args.grid] if args.grid else [None]
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag)
     overrides = common.engine_overrides(args.set, engines)
@@ -160,14 +175,20 @@ def cmd_hil(args: argparse.Namespace) -> int:
     except common.ClothBenchError as exc:
         raise UserError(str(exc)) from None
     print(layout.line())
+    print(
+        f'{deadline_rule(args.budget)}; a run holds its rate with under'
+        f' {100 * args.miss_threshold:g} % of the deadlines missed'
+    )
     presets = common.preset_set(args)
     results = []
-    for engine in engines:
-        for rate in args.rate or [100.0]:
+    remedies = []
+    bases = []
+    for engine, grid in ((e, g) for e in engines for g in grids):
+        for rate in args.rate or [args.rate_min if args.find_rate else 100.0]:
             user = dict(overrides.get(engine, {}))  # --set, on top of everything
             base = set_values(presets, engine, args.cloth, args.primitive)
             params = {**base, **user}
-            label = set_label(presets, config_label(args.grid, user))
+            label = set_label(presets, config_label(grid, user))
             config = hil.HilConfig(
                 engine,
                 float(rate),
@@ -175,7 +196,7 @@ def cmd_hil(args: argparse.Namespace) -> int:
                 args.cloth,
                 args.primitive,
                 args.seed,
-                args.grid,
+                grid,
                 tuple(sorted(params.items())),
                 label,
                 not args.in_process,
@@ -208,12 +229,19 @@ def cmd_hil(args: argparse.Namespace) -> int:
                     + ('under' if rec.meets_deadline else 'NOT under')
                     + f' {1e3 * args.budget / rate:g} ms'
                 )
+            if args.find_rate:
+                bases.append(config)
+                continue
             print(
                 f'running {engine} at {rate:g} Hz, configuration {config.config} ...', flush=True
             )
+            check, timing = hil_rate.warmup_check(config, args.budget)
             result = hil.run_hil(config, out, lockstep=not args.no_lockstep)
             results.append(result)
             print('  simulator process: ' + '; '.join(result.realtime))
+            remedies.append((config, result, check, timing))
+    if args.find_rate:
+        return hil_rate.find_rates(args, bases, out)
     rows = [r.row() for r in results]
     hil.write_results(results, out)
     print(text_table(hil_table(rows)))
@@ -227,6 +255,12 @@ def cmd_hil(args: argparse.Namespace) -> int:
     print(
         f'results: {out / "hil.jsonl"}; report: {report} (latency over time and histogram per run)'
     )
+    for config, result, check, timing in remedies:
+        line = hil_rate.remedy_line(
+            config, result, check, timing, args, args.config == 'recommended'
+        )
+        if line:
+            print(line)
     return 1 if any(r.problems for r in results) else 0
 
 

@@ -1,7 +1,8 @@
 """
 Hardware in the loop: the configuration chosen per rate and the report of real-time runs.
 
-- `deadline_tables`: studies/recommend.py's criterion for every configuration of a settings sweep.
+- `deadline_tables`: the deadline rule (core/deadline.py) for every configuration of a settings
+  sweep.
 - the recommendation file (config/hil_recommended.yaml): what `cloth-bench hil --config
   recommended` falls back to without settings-sweep results, with its provenance.
 - `write_hil_report`: per engine, rate and configuration the latency p50 / p99 / p99.9 / max,
@@ -16,6 +17,7 @@ import math
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.core.deadline import deadline_rule, within_tolerance
 from cloth_bench_ros.report.blocks import (
     Document,
     figure_block,
@@ -29,6 +31,7 @@ from cloth_bench_ros.report.selections import fmt_fixed as _fmt
 from cloth_bench_ros.studies.aggregate import finite
 from cloth_bench_ros.studies.recommend import (
     DEADLINE_BUDGET,
+    meets_deadline,
     recommend_for_rate,
     Recommendation,
     settings_results,
@@ -48,7 +51,9 @@ def deadline_tables(
     keys = sorted(
         {(r['engine'], r['cloth'], r['primitive'], float(r['rate_hz'])) for r in settings}
     )
-    tables, notes = [], []
+    tables: list[Table] = []
+    notes = [f'{deadline_rule(budget)}; within tolerance: CD <= best + max({tol_rel:g} x best,'
+             f' {tol_abs * 1e3:g} mm).'] if keys else []
     for engine, cloth, primitive, rate in keys:
         sel = [
             r
@@ -61,8 +66,12 @@ def deadline_tables(
         period_ms = 1e3 / rate
         out = []
         for r in sorted(settings_results(sel), key=lambda r: p99.get(r.config, math.inf)):
-            within = rec is not None and r.stable and r.cd.mean <= rec.best_cd + rec.tolerance_m
-            fast = p99.get(r.config, math.nan) < budget * period_ms
+            within = (
+                rec is not None
+                and r.stable
+                and within_tolerance(r.cd.mean, rec.best_cd, rec.tolerance_m)
+            )
+            fast = meets_deadline(p99.get(r.config, math.nan), rate, budget)
             flag = '**recommended**' if rec is not None and r.config == rec.config else ''
             out.append(
                 [

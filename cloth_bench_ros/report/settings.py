@@ -6,6 +6,7 @@ from collections import defaultdict
 import math
 from typing import Sequence
 
+from cloth_bench_ros.core.deadline import within_tolerance
 from cloth_bench_ros.report.blocks import Table
 from cloth_bench_ros.report.selections import (
     engine_label,
@@ -48,10 +49,7 @@ def settings_tables(
             if not r.stable:
                 flags.append('unstable')
             within = (
-                best is not None
-                and r.stable
-                and math.isfinite(r.cd.mean)
-                and r.cd.mean <= best.cd.mean + tol
+                best is not None and r.stable and within_tolerance(r.cd.mean, best.cd.mean, tol)
             )
             rows_out.append(
                 [
@@ -123,7 +121,7 @@ def settings_tables(
             near_best = {
                 r.config
                 for r in by[k]
-                if best is not None and r.stable and r.cd.mean <= best.cd.mean + tol
+                if best is not None and r.stable and within_tolerance(r.cd.mean, best.cd.mean, tol)
             }
             ok_everywhere = near_best if ok_everywhere is None else ok_everywhere & near_best
             for r in by[k]:

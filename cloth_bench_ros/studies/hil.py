@@ -15,6 +15,7 @@ import math
 import os
 from pathlib import Path
 
+from cloth_bench_ros.core.deadline import DEADLINE_BUDGET
 from cloth_bench_ros.core.hil_timing import (
     check_bookkeeping,
     hil_figures,
@@ -24,7 +25,6 @@ from cloth_bench_ros.core.hil_timing import (
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.hil_config import HilConfig, SIMULATOR_FILE, SUMMARY_FILE, TIMELINE
 from cloth_bench_ros.studies.hil_groups import run_groups
-from cloth_bench_ros.studies.recommend import DEADLINE_BUDGET
 
 
 @dataclass
@@ -212,7 +212,7 @@ def with_config(
 
 RECOMMENDED_FILE = 'hil_recommended.yaml'
 HIL_DEADLINE_BUDGET = (
-    DEADLINE_BUDGET  # the step's share of the period (studies/recommend.py says why)
+    DEADLINE_BUDGET  # the step's share of the period (the deadline rule, core/deadline.py)
 )
 DEFAULT_SETTINGS = Path('results') / 'settings'  # where `cloth-bench sweep --mode settings` writes
 

@@ -17,6 +17,12 @@ import math
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.core.deadline import (
+    cd_tolerance,
+    DEADLINE_BUDGET,
+    deadline_check,
+    within_tolerance,
+)
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.aggregate import compute_per_sim_second, finite, group, Stat, stat
 import numpy as np
@@ -37,11 +43,9 @@ RECOMMENDATION_KEYS = (
     'meets_deadline',
 )
 
-
-# The step's share of the period: the rest is the round trip (two DDS hops, the messages in
-# Python), 0.4-0.5 ms on a 2-core machine, so at 1 kHz a configuration must step in half the
-# period.
-DEADLINE_BUDGET = 0.5
+# DEADLINE_BUDGET (core/deadline.py): the step's share of the period; the rest is the round trip
+# (two DDS hops, the messages in Python), 0.4-0.5 ms on a 2-core machine, so at 1 kHz a
+# configuration must step in half the period.
 
 
 @dataclass
@@ -99,8 +103,8 @@ def recommend(
     if not stable:
         return None, None, math.nan
     best = min(stable, key=lambda r: (r.cd.mean, r.step_ms))
-    tol = max(tol_rel * best.cd.mean, tol_abs)
-    within = [r for r in stable if r.cd.mean <= best.cd.mean + tol]
+    tol = cd_tolerance(best.cd.mean, tol_rel, tol_abs)
+    within = [r for r in stable if within_tolerance(r.cd.mean, best.cd.mean, tol)]
     cheapest = min(within, key=lambda r: (r.step_ms, r.cd.mean))
     return best, cheapest, tol
 
@@ -143,6 +147,11 @@ def step_ms_by_config(rows: Sequence[dict], key: str) -> dict[str, float]:
     }
 
 
+def meets_deadline(step_p99_ms: float, rate_hz: float, budget: float = DEADLINE_BUDGET) -> bool:
+    """Return whether a step p99 in ms meets the deadline rule (core/deadline.py) at a rate."""
+    return deadline_check(step_p99_ms / 1e3, rate_hz, budget).meets
+
+
 def _grid_params(rows: Sequence[dict], config: str) -> tuple[tuple[int, int] | None, dict]:
     row = next(r for r in rows if r['config'] == config)
     grid = row.get('grid')
@@ -165,7 +174,7 @@ def recommend_for_rate(
     """
     Return the cheapest configuration within tolerance of the most accurate.
 
-    Only configurations whose step p99 < budget / rate count.
+    Only configurations that meet the deadline rule (step p99 < budget / rate) count.
 
     Cheapest: the lowest median step time (p50), which other work on a shared machine inflates far
     less than the mean. If no accurate-enough configuration meets the deadline, the cheapest
@@ -186,13 +195,8 @@ def recommend_for_rate(
     if best is None:
         return None
     p50, p99 = step_ms_by_config(sel, 'step_time_p50'), step_ms_by_config(sel, 'step_time_p99')
-    period_ms = 1e3 / rate_hz
-    accurate = [
-        r
-        for r in results
-        if r.stable and math.isfinite(r.cd.mean) and r.cd.mean <= best.cd.mean + tol
-    ]
-    fast = [r for r in accurate if p99.get(r.config, math.nan) < budget * period_ms]
+    accurate = [r for r in results if r.stable and within_tolerance(r.cd.mean, best.cd.mean, tol)]
+    fast = [r for r in accurate if meets_deadline(p99.get(r.config, math.nan), rate_hz, budget)]
 
     def cost(r) -> tuple[float, float]:
         value = p50.get(r.config, math.nan)
