@@ -99,6 +99,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         '--output', help='directory: one .npz per run (reused) and convergence.json'
         ' (default results/convergence/<reference>_<cloth>_<primitive>)',
     )
+    common.device_option(converge, with_set=False)
     converge.set_defaults(func=cmd_converge)
 
     bag = sub.add_parser('bag', help='bag tools')
@@ -191,6 +192,7 @@ def cmd_converge(args: argparse.Namespace) -> int:
         levels=args.levels,
         duration=args.duration,
         scored=tuple(validation.unique(args.score or [], '--score')),
+        device=args.device,
     )
     name = f'{args.reference.replace("-", "_")}_{args.cloth}_{args.primitive}'
     out = check_output_dir(args.output or f'results/convergence/{name}')

@@ -175,9 +175,8 @@ def simulate_reference(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
     targets = full_targets(config.primitive, config.rate_hz)
     start = targets.quintic_index
     last = start + (config.frame_count - 1) * per_frame
-    engine = make_engine(
-        config.engine, config.rate_hz, dict(config.params), ClothGrid(*config.grid)
-    )
+    grid = ClothGrid(*config.grid)  # a reference's parameters are set for its own grid
+    engine = make_engine(config.engine, config.rate_hz, dict(config.params), grid, grid)
     try:
         vertices = engine.reset(config.seed, targets.left[0], targets.right[0])
         for i in range(1, last + 1):

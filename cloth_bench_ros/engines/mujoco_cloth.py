@@ -11,7 +11,9 @@ Two cloth models, chosen by the `model` parameter:
   The constraint is soft: its stiffness is set in acceleration space (1 / timeconst^2), so in
   N/m it goes with the vertex mass, i.e. with the grid spacing squared. The same timeconst on a
   finer grid is a softer cloth (the towel hangs 17 mm longer at 46 x 64 than at 31 x 43); the
-  same membrane on another grid needs `mesh_consistent_timeconst`.
+  same membrane on another grid needs `mesh_consistent_timeconst`, which `params_for_spacing`
+  applies (with an internal step short enough for it) whenever a mesh is not the one the
+  parameters were set for.
 - "edges" (mass-spring): a net of springs on the grid, structural, shear (both diagonals) and
   bending (every second vertex), all of stiffness `edge_stiffness` and damping `damping`.
   MuJoCo >= 4.0 gives passive edge stiffness only to 1D flexes, so the net is a 1D flex whose
@@ -161,6 +163,26 @@ class MujocoCloth(ClothEngine):
     @classmethod
     def version(cls) -> str:
         return mujoco.__version__
+
+    @classmethod
+    def params_for_spacing(cls, params: Mapping[str, Any], ratio: float) -> dict[str, Any]:
+        """
+        Scale the shell's edge time constant with the spacing, the internal step if it must.
+
+        The edge constraint's stiffness goes with the vertex mass (see the module docstring), so
+        the same membrane needs `mesh_consistent_timeconst`; the engine floors a time constant at
+        two internal steps, so the longest internal step is shortened to half the scaled one
+        where it was longer. The mass-spring model's springs (N/m per edge) and every edge's
+        damping describe a sheet of the same stiffness and damping on any grid: not scaled.
+        """
+        scaled = dict(params)
+        config = cls.validate_params(params)
+        if config['model'] == 'shell':
+            timeconst = mesh_consistent_timeconst(float(config['edge_timeconst']), ratio)
+            scaled['edge_timeconst'] = timeconst
+            if 2 * float(config['timestep']) > timeconst:
+                scaled['timestep'] = timeconst / 2
+        return scaled
 
     @classmethod
     def validate_params(cls, params: Mapping[str, Any]) -> dict[str, Any]:
