@@ -19,7 +19,7 @@ def _preset(name: str, overrides: dict) -> dict:
 
 
 def _hold(engine, steps: int) -> np.ndarray:
-    """The cloth after `steps` steps hanging from the grippers' start poses."""
+    """Return the cloth after `steps` steps hanging from the grippers' start poses."""
     vertices = engine.start(0, GRIPPER_START_LEFT, GRIPPER_START_RIGHT)
     for _ in range(steps):
         vertices = engine.step(GRIPPER_START_LEFT, GRIPPER_START_RIGHT)
@@ -31,8 +31,8 @@ def _hold(engine, steps: int) -> np.ndarray:
 def test_default_mesh_is_bit_identical_to_the_unscaled_path(name, overrides):
     """On 11 x 15 make_engine runs exactly what the engine built from the preset runs."""
     params = _preset(name, overrides)
-    assert params_for_grid(engine_class(name), params, ClothGrid()) == params
-    assert params_for_grid(engine_class(name), params, None) == params
+    assert params_for_grid(engine_class(name), params, 100.0, ClothGrid()) == params
+    assert params_for_grid(engine_class(name), params, 100.0, None) == params
     scaled = _hold(make_engine(name, 100.0, params, ClothGrid()), 20)
     unscaled = _hold(engine_class(name)(100.0, params, ClothGrid()), 20)
     assert np.array_equal(scaled, unscaled)
@@ -42,33 +42,34 @@ def test_parameters_set_for_their_own_grid_are_not_scaled():
     """A synthetic reference's parameters are set for its grid: simulate_reference keeps them."""
     config = reference_config('towel', 'dynamic')
     grid = ClothGrid(*config.grid)
-    assert params_for_grid(engine_class('mujoco'), config.params, grid, grid) == config.params
+    mujoco = engine_class('mujoco')
+    assert params_for_grid(mujoco, config.params, 900.0, grid, grid) == config.params
 
 
 def test_mujoco_scales_its_edge_time_constant_and_internal_step():
     cls = engine_class('mujoco')
     params = _preset('mujoco', {})
-    fine = params_for_grid(cls, params, ClothGrid(31, 43))
+    fine = params_for_grid(cls, params, 100.0, ClothGrid(31, 43))
     ratio = spacing_ratio(ClothGrid(31, 43), ClothGrid())
     assert ratio == pytest.approx(1 / 3)
     assert fine['edge_timeconst'] == pytest.approx(params['edge_timeconst'] / 3)
     # 3.3 ms is under two of the preset's 2 ms steps: the step follows (at most half of it)
     assert fine['timestep'] == pytest.approx(fine['edge_timeconst'] / 2)
-    coarse = params_for_grid(cls, params, ClothGrid(6, 8))
+    coarse = params_for_grid(cls, params, 100.0, ClothGrid(6, 8))
     assert coarse['edge_timeconst'] == pytest.approx(2 * params['edge_timeconst'])
     assert coarse['timestep'] == params['timestep']
     springs = {**params, 'model': 'edges', 'integrator': 'Euler'}
-    assert params_for_grid(cls, springs, ClothGrid(31, 43)) == springs  # per edge: a sheet
+    assert params_for_grid(cls, springs, 100.0, ClothGrid(31, 43)) == springs  # per edge: a sheet
 
 
 def test_newton_scales_contact_with_vertex_area_and_xpbd_step():
     cls = engine_class('newton')
     xpbd = _preset('newton', {'model': 'xpbd', 'contact_stiffness': 1000.0})
-    fine = params_for_grid(cls, xpbd, ClothGrid(21, 29))
+    fine = params_for_grid(cls, xpbd, 100.0, ClothGrid(21, 29))
     assert fine['contact_stiffness'] == pytest.approx(250.0)
     assert fine['timestep'] == pytest.approx(xpbd['timestep'] / 2)
     vbd = _preset('newton', {'model': 'vbd'})
-    assert params_for_grid(cls, vbd, ClothGrid(21, 29))['timestep'] == vbd['timestep']
+    assert params_for_grid(cls, vbd, 100.0, ClothGrid(21, 29))['timestep'] == vbd['timestep']
 
 
 def test_mujoco_coarse_mesh_hangs_like_the_default_one():
@@ -91,7 +92,7 @@ def test_converge_grid_axis_uses_the_same_rule():
     config = reference_config('towel', 'dynamic')
     finer = refined(config, 'grid', 1)
     expected = params_for_grid(
-        engine_class(config.engine), config.params, ClothGrid(*finer.grid),
+        engine_class(config.engine), config.params, config.rate_hz, ClothGrid(*finer.grid),
         ClothGrid(*config.grid),
     )
     assert finer.params == expected

@@ -89,4 +89,4 @@ def make_engine(
     resolution of the cloth.
     """
     cls = engine_class(name)
-    return cls(rate_hz, params_for_grid(cls, params or {}, grid, params_grid), grid)
+    return cls(rate_hz, params_for_grid(cls, params or {}, rate_hz, grid, params_grid), grid)

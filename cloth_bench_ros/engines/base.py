@@ -61,6 +61,7 @@ def spacing_ratio(grid: ClothGrid, params_grid: ClothGrid) -> float:
 def params_for_grid(
     cls: type[ClothEngine],
     params: Mapping[str, Any],
+    rate_hz: float,
     grid: ClothGrid | None,
     params_grid: ClothGrid | None = None,
 ) -> dict[str, Any]:
@@ -75,7 +76,7 @@ def params_for_grid(
     grid, params_grid = grid or ClothGrid(), params_grid or ClothGrid()
     if grid.spacing == params_grid.spacing:
         return dict(params)
-    return cls.params_for_spacing(params, spacing_ratio(grid, params_grid))
+    return cls.params_for_spacing(params, spacing_ratio(grid, params_grid), rate_hz)
 
 
 @dataclass(frozen=True)
@@ -162,9 +163,13 @@ class ClothEngine(abc.ABC):
         return config
 
     @classmethod
-    def params_for_spacing(cls, params: Mapping[str, Any], ratio: float) -> dict[str, Any]:
+    def params_for_spacing(
+        cls, params: Mapping[str, Any], ratio: float, rate_hz: float
+    ) -> dict[str, Any]:
         """
         Return `params`, set for one mesh spacing, restated for a spacing `ratio` times it.
+
+        `rate_hz` is the engine's step rate (an internal step the scaling needs depends on it).
 
         The parameters of an engine that depend on the spacing (a quantity per vertex or per edge
         that a finer mesh would otherwise turn into another cloth) are scaled so that the mesh

@@ -28,6 +28,7 @@ millimetres during the fling.
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros.core import scene
@@ -52,6 +53,11 @@ GRIPPER_MASS = 1000.0  # kg
 MODELS = ('shell', 'edges')
 INTEGRATORS = ('Euler', 'discrete')
 SOLVERS = ('Newton', 'CG', 'PGS')
+
+
+# A scaled edge time constant this much under two internal steps is left to the engine's floor
+# (a mesh whose x and z spacings round apart by ~1 % would otherwise double the substeps).
+TIMECONST_SLACK = 0.01
 
 
 def mesh_consistent_timeconst(timeconst: float, spacing_ratio: float) -> float:
@@ -165,22 +171,27 @@ class MujocoCloth(ClothEngine):
         return mujoco.__version__
 
     @classmethod
-    def params_for_spacing(cls, params: Mapping[str, Any], ratio: float) -> dict[str, Any]:
+    def params_for_spacing(
+        cls, params: Mapping[str, Any], ratio: float, rate_hz: float
+    ) -> dict[str, Any]:
         """
         Scale the shell's edge time constant with the spacing, the internal step if it must.
 
         The edge constraint's stiffness goes with the vertex mass (see the module docstring), so
         the same membrane needs `mesh_consistent_timeconst`; the engine floors a time constant at
-        two internal steps, so the longest internal step is shortened to half the scaled one
-        where it was longer. The mass-spring model's springs (N/m per edge) and every edge's
-        damping describe a sheet of the same stiffness and damping on any grid: not scaled.
+        two internal steps, so where two of the internal steps taken at `rate_hz` exceed the
+        scaled one (by more than TIMECONST_SLACK) the longest internal step becomes half of it.
+        The mass-spring model's springs (N/m per edge) and every edge's damping describe a sheet
+        of the same stiffness and damping on any grid: not scaled.
         """
         scaled = dict(params)
         config = cls.validate_params(params)
         if config['model'] == 'shell':
             timeconst = mesh_consistent_timeconst(float(config['edge_timeconst']), ratio)
             scaled['edge_timeconst'] = timeconst
-            if 2 * float(config['timestep']) > timeconst:
+            dt = 1.0 / rate_hz
+            substeps = max(int(config['substeps']), math.ceil(dt / config['timestep'] - 1e-9))
+            if 2 * dt / substeps > timeconst * (1 + TIMECONST_SLACK):
                 scaled['timestep'] = timeconst / 2
         return scaled
 

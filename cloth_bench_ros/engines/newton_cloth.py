@@ -241,7 +241,9 @@ class NewtonCloth(ClothEngine):
             return f'unknown (warp {wp.config.version})'
 
     @classmethod
-    def params_for_spacing(cls, params: Mapping[str, Any], ratio: float) -> dict[str, Any]:
+    def params_for_spacing(
+        cls, params: Mapping[str, Any], ratio: float, rate_hz: float
+    ) -> dict[str, Any]:
         """
         Scale the table contact with the vertex area, and XPBD's internal step on finer meshes.
 

@@ -40,6 +40,7 @@ from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.data.synth import reference_config, simulate_reference, SynthConfig
 from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.engines.base import params_for_grid
+from cloth_bench_ros.engines.mujoco_cloth import TIMECONST_SLACK
 import numpy as np
 
 TOLERANCE_M = 0.002  # mean trajectory change between successive refinements
@@ -99,7 +100,8 @@ def refined(config: SynthConfig, axis: str, level: int) -> SynthConfig:
         scale = 1.5**level  # 31 x 43 -> 46 x 64 -> 69 x 95: spacing 1.7 -> 1.1 -> 0.7 cm
         grid = (round((nx - 1) * scale) + 1, round((nz - 1) * scale) + 1)
         params = params_for_grid(
-            engine_class(config.engine), config.params, ClothGrid(*grid), ClothGrid(nx, nz)
+            engine_class(config.engine), config.params, config.rate_hz, ClothGrid(*grid),
+            ClothGrid(nx, nz),
         )
         return replace(config, grid=grid, params=params)
     raise ValueError(f'unknown axis {axis!r} (valid: {", ".join(AXES)})')
@@ -109,7 +111,8 @@ def grid_rate_level(config: SynthConfig, levels: int) -> int:
     """Return the rate doublings the finest grid needs: edge time constant >= 2 internal steps."""
     timeconst = refined(config, 'grid', levels).params.get('edge_timeconst')
     doublings = 0
-    while timeconst is not None and 2.0 / (config.rate_hz * 2**doublings) > timeconst * (1 + 1e-9):
+    slack = 1 + TIMECONST_SLACK  # within it the engine floors the time constant at 2 steps
+    while timeconst is not None and 2.0 / (config.rate_hz * 2**doublings) > timeconst * slack:
         doublings += 1
     return doublings
 
