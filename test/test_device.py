@@ -51,6 +51,8 @@ def test_absent_device_is_refused_naming_what_was_found():
     ['hil', '--engine', 'newton'],
     ['converge', '--reference', 'newton-vbd'],
     ['stress', '--engine', 'newton'],
+    ['cross-reference'],
+    ['synth', '--reference', 'newton-vbd'],
 ])
 def test_every_command_refuses_an_absent_device_in_one_line(command, capsys):
     with pytest.raises(SystemExit) as exit_:

@@ -67,6 +67,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     synth.add_argument('--overwrite', action='store_true', help='replace the bag if it exists')
     synth.add_argument('--quiet', action='store_true', help='no progress bar')
+    common.device_option(synth, with_set=False)
     synth.set_defaults(func=cmd_synth)
 
     converge = sub.add_parser(
@@ -167,6 +168,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         reference=args.reference,
         rate_hz=args.rate,
+        device=args.device,
     )
     print(f'synthetic bag written: {bag}')
     return 0

@@ -200,6 +200,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         default='results/cross_reference',
         help='results directory: results.jsonl (resumed) and cross_reference.md',
     )
+    common.device_option(xref, with_set=False)
     xref.set_defaults(func=cmd_cross_reference)
 
 
@@ -374,6 +375,8 @@ def cmd_cross_reference(args: argparse.Namespace) -> int:
 
     available = common.available_engines()
     entrants = [(e, o) for e, o in DEFAULT_ENTRANTS if e in available]
+    if args.device is not None:  # Newton's entrants on the device asked for
+        entrants = [(e, {**o, 'device': args.device} if e == 'newton' else o) for e, o in entrants]
     cells, missing = cross_reference_cells(
         args.cloth,
         args.primitive or ['dynamic', 'quasi_static'],

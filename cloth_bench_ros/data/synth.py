@@ -287,9 +287,14 @@ def synth_command(
     progress: bool = True,
     reference: str = DEFAULT_REFERENCE,
     rate_hz: float | None = None,
+    device: str | None = None,
 ) -> Path:
     """`cloth-bench synth`: the synthetic bag of a cloth and primitive from a reference."""
     config = reference_config(cloth, primitive, seed, reference=reference)
+    if device is not None:  # the Newton reference's compute device
+        if config.engine != 'newton':
+            raise SynthError(f'--device: the {reference} reference runs on {config.engine}')
+        config = replace(config, params={**config.params, 'device': device})
     if rate_hz is not None:
         config = replace(config, rate_hz=float(rate_hz))
         config.steps_per_frame  # SynthError before anything is simulated
