@@ -98,3 +98,10 @@ def test_runs_and_result_keys_name_the_device():
     cell = Cell('newton', 100.0, 'towel', 'dynamic', 0, 'bag', overrides=(('device', 'cpu'),))
     assert cell.device == 'cpu' and 'cpu' in cell.key()
     assert Cell('mujoco', 100.0, 'towel', 'dynamic', 0, 'bag').device == 'cpu'
+
+
+def test_engines_lists_the_devices_found(capsys):
+    assert main(['engines']) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith('devices: ')
+    assert f'newton {", ".join(available_devices())}' in last and 'mujoco cpu' in last

@@ -316,9 +316,12 @@ def cmd_engines(args: argparse.Namespace) -> int:
             f'{info.name:<10} {"yes" if info.available else "no":<10} {info.version or "-":<10}'
             f' {info.reason}'
         )
-    for info in known_engines():
-        if info.available:
-            print(f'{info.name} devices: {", ".join(engine_class(info.name).devices())}')
+    devices = [
+        f'{info.name} {", ".join(engine_class(info.name).devices())}'
+        for info in known_engines()
+        if info.available
+    ]
+    print(f'devices: {"; ".join(devices)}')
     if args.warm:
         for info in known_engines():
             if info.available:
