@@ -58,6 +58,10 @@ def test_mujoco_scales_its_edge_time_constant_and_internal_step():
     coarse = params_for_grid(cls, params, 100.0, ClothGrid(6, 8))
     assert coarse['edge_timeconst'] == pytest.approx(2 * params['edge_timeconst'])
     assert coarse['timestep'] == params['timestep']
+    # A time constant under two internal steps was floored at two: that is the cloth scaled.
+    long_steps = {**params, 'timestep': 0.01}  # 10 ms steps: the 10 ms constant acts as 20 ms
+    fine = params_for_grid(cls, long_steps, 100.0, ClothGrid(21, 29))
+    assert fine['edge_timeconst'] == pytest.approx(0.01) and fine['timestep'] == 0.005
     springs = {**params, 'model': 'edges', 'integrator': 'Euler'}
     assert params_for_grid(cls, springs, 100.0, ClothGrid(31, 43)) == springs  # per edge: a sheet
 

@@ -178,19 +178,22 @@ class MujocoCloth(ClothEngine):
         Scale the shell's edge time constant with the spacing, the internal step if it must.
 
         The edge constraint's stiffness goes with the vertex mass (see the module docstring), so
-        the same membrane needs `mesh_consistent_timeconst`; the engine floors a time constant at
-        two internal steps, so where two of the internal steps taken at `rate_hz` exceed the
-        scaled one (by more than TIMECONST_SLACK) the longest internal step becomes half of it.
+        the same membrane needs `mesh_consistent_timeconst` of the time constant the cloth had
+        (the engine floors it at two internal steps at `rate_hz`); where two internal steps
+        exceed the scaled one (by more than TIMECONST_SLACK) the longest internal step becomes
+        half of it, so a sweep's `timestep` on a finer mesh can be shortened.
         The mass-spring model's springs (N/m per edge) and every edge's damping describe a sheet
         of the same stiffness and damping on any grid: not scaled.
         """
         scaled = dict(params)
         config = cls.validate_params(params)
         if config['model'] == 'shell':
-            timeconst = mesh_consistent_timeconst(float(config['edge_timeconst']), ratio)
-            scaled['edge_timeconst'] = timeconst
             dt = 1.0 / rate_hz
             substeps = max(int(config['substeps']), math.ceil(dt / config['timestep'] - 1e-9))
+            # the time constant the cloth had: the engine floors it at two internal steps
+            had = max(float(config['edge_timeconst']), 2 * dt / substeps)
+            timeconst = mesh_consistent_timeconst(had, ratio)
+            scaled['edge_timeconst'] = timeconst
             if 2 * dt / substeps > timeconst * (1 + TIMECONST_SLACK):
                 scaled['timestep'] = timeconst / 2
         return scaled
