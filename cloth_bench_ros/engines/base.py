@@ -74,6 +74,10 @@ def params_for_grid(
     `params_grid` defaults to it. On the mesh they were set for they are returned unchanged.
     """
     grid, params_grid = grid or ClothGrid(), params_grid or ClothGrid()
+    try:
+        rate_hz = validation.rate_hz(rate_hz)  # as the engine will refuse it, before any use
+    except validation.InputError as exc:
+        raise EngineError(str(exc)) from None
     if grid.spacing == params_grid.spacing:
         return dict(params)
     return cls.params_for_spacing(params, spacing_ratio(grid, params_grid), rate_hz)
