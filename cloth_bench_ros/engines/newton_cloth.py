@@ -247,14 +247,10 @@ class NewtonCloth(ClothEngine):
         """
         Scale the table contact with the vertex area, and XPBD's internal step on finer meshes.
 
-        A vertex carries a weight proportional to its area (spacing squared); contact stiffness
-        and damping (N/m per vertex) so scaled press every part of the cloth into the table alike
-        on any grid. XPBD's springs (N/m per edge) make a sheet of the same stiffness on any
-        grid, but a spring's time constant sqrt(m / k) goes with the spacing, so on a finer mesh
-        the longest internal step shortens with it (at 21 x 29 the preset's 2 ms diverges; 1 ms
-        does not); VBD is implicit and keeps its step. The membrane (per area) and the bending (a
-        flexural rigidity, turned into edge stiffness for the grid by `_edge_stiffness`) need
-        nothing.
+        Contact stiffness and damping are per vertex, whose weight goes with its area. XPBD's
+        springs (per edge) make the same sheet on any grid, but a spring's time constant
+        sqrt(m / k) goes with the spacing (at 21 x 29 the preset's 2 ms diverges). VBD is
+        implicit; membrane (per area) and bending (`_edge_stiffness`) need nothing.
         """
         scaled = dict(params)
         config = cls.validate_params(params)
