@@ -105,3 +105,21 @@ def test_engines_lists_the_devices_found(capsys):
     last = capsys.readouterr().out.strip().splitlines()[-1]
     assert last.startswith('devices: ')
     assert f'newton {", ".join(available_devices())}' in last and 'mujoco cpu' in last
+
+
+def test_identified_provenance_names_the_device_and_the_preset_does_not(tmp_path):
+    from types import SimpleNamespace
+
+    from cloth_bench_ros.studies.identify_output import provenance_text
+
+    spec = SimpleNamespace(
+        engine='newton', bag=tmp_path / 'no_bag', cloth='towel', primitive='dynamic',
+        objective='cd', seed=0, rate_hz=100.0, grid=None, max_frames=None,
+        fixed={'model': 'xpbd', 'device': 'cpu'},
+    )
+    summary = {
+        'params': {'mass': 0.2}, 'value': 0.03, 'preset_value': 0.04, 'best_sampler': 'tpe',
+        'per_sampler': {'tpe': {'trials': 3}},
+    }
+    text = provenance_text(spec, summary, '1.8.0')
+    assert 'on device cpu' in text and 'fixed model = xpbd;' in text
