@@ -92,6 +92,21 @@ def choice(value: object, name: str, choices: Sequence[str]) -> str:
     return value
 
 
+_DEVICE = re.compile(r'auto|cpu|cuda(:\d{1,4})?')
+
+
+def device(value: object, name: str = 'device') -> str:
+    """
+    Return a compute device's name: `cpu`, `cuda`, `cuda:N`, or `auto` (CUDA if one is found).
+
+    Only the spelling is checked here; whether the device is on this machine is the engine's
+    question (`engines.newton_cloth.resolve_device`), asked before anything runs.
+    """
+    if not isinstance(value, str) or not _DEVICE.fullmatch(value.strip()):
+        raise InputError(f'{name}: {value!r} is not cpu, cuda, cuda:N or auto')
+    return value.strip()
+
+
 def rate_hz(value: object, name: str = 'rate') -> float:
     """Return a simulator rate in [MIN_RATE_HZ, MAX_RATE_HZ] Hz."""
     return number(value, name, MIN_RATE_HZ, MAX_RATE_HZ, unit='Hz')

@@ -172,11 +172,57 @@ def executor_options() -> argparse.ArgumentParser:
     return parent
 
 
+def device(text: str) -> str:
+    """
+    Return the Newton device of `--device` (cpu, cuda, cuda:N, auto), checked on this machine.
+
+    A device that is not here is refused now, in one line naming what Warp found.
+    """
+    try:
+        name = validation.device(text, '--device')
+        from cloth_bench_ros.engines import engine_device
+
+        return engine_device('newton', {'device': name})
+    except ValueError as exc:  # InputError, or EngineError (also for Newton not installed)
+        raise argparse.ArgumentTypeError(
+            str(exc).removeprefix('--device: ').removeprefix('parameter device: ')
+        ) from None
+
+
+class _DeviceAction(argparse.Action):
+    """--device X: the same as --set newton.device=X (so every command with --set has it)."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:  # noqa: D102
+        specs = list(getattr(namespace, 'set', None) or [])
+        setattr(namespace, 'set', [*specs, f'newton.device={values}'])
+        setattr(namespace, self.dest, values)
+
+
+def device_option(parser: argparse.ArgumentParser, with_set: bool = True) -> None:
+    """
+    --device cpu|cuda[:N]|auto: where Newton runs (default auto: CUDA if Warp finds it, else CPU).
+
+    With `with_set`, the choice is also an engine override (`--set newton.device=...`), which is
+    how it reaches the engines of every command that takes --set.
+    """
+    parser.add_argument(
+        '--device',
+        type=device,
+        action=_DeviceAction if with_set else 'store',
+        metavar='DEVICE',
+        help=(
+            "Newton's device: cpu, cuda or cuda:N (default: the first CUDA device Warp finds,"
+            ' else cpu)'
+        ),
+    )
+
+
 def engine_override_option(
     parser: argparse.ArgumentParser, help: str  # noqa: A002  (argparse's own keyword)
 ) -> None:
-    """--set ENGINE.PARAM=VALUE (repeatable)."""
+    """--set ENGINE.PARAM=VALUE (repeatable), and --device for Newton."""
     parser.add_argument('--set', action='append', metavar='ENGINE.PARAM=VALUE', help=help)
+    device_option(parser)
 
 
 def check_bag(bag: Path, topic: str | None = None) -> None:
@@ -199,6 +245,11 @@ def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) 
 
     overrides = validation.parse_overrides(specs)
     for engine, params in overrides.items():
+        if engines is not None and engine not in engines and set(params) == {'device'}:
+            raise UserError(
+                f'--device applies to engine {engine}, which is not part of this run'
+                f' ({", ".join(engines)})'
+            )
         if engines is not None and engine not in engines:
             raise UserError(
                 f'--set {engine}.…: engine {engine} is not part of this run ({", ".join(engines)})'

@@ -67,6 +67,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     synth.add_argument('--overwrite', action='store_true', help='replace the bag if it exists')
     synth.add_argument('--quiet', action='store_true', help='no progress bar')
+    common.device_option(synth, with_set=False)
     synth.set_defaults(func=cmd_synth)
 
     converge = sub.add_parser(
@@ -99,6 +100,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         '--output', help='directory: one .npz per run (reused) and convergence.json'
         ' (default results/convergence/<reference>_<cloth>_<primitive>)',
     )
+    common.device_option(converge, with_set=False)
     converge.set_defaults(func=cmd_converge)
 
     bag = sub.add_parser('bag', help='bag tools')
@@ -166,6 +168,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         reference=args.reference,
         rate_hz=args.rate,
+        device=args.device,
     )
     print(f'synthetic bag written: {bag}')
     return 0
@@ -191,6 +194,7 @@ def cmd_converge(args: argparse.Namespace) -> int:
         levels=args.levels,
         duration=args.duration,
         scored=tuple(validation.unique(args.score or [], '--score')),
+        device=args.device,
     )
     name = f'{args.reference.replace("-", "_")}_{args.cloth}_{args.primitive}'
     out = check_output_dir(args.output or f'results/convergence/{name}')

@@ -332,9 +332,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         summary = run_pipeline(config)
     if summary is None:
         raise RuntimeError('the node graph ended before the evaluator finished')
+    devices = summary['run'].get('devices', {})
+    on = ''.join(f', {name} on {device}' for name, device in devices.items())
     print(
         f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
-        f' bag {bag}'
+        f' bag {bag}{on}'
     )
     print(result_table(summary, realtime=args.pacing == 'realtime'))
     _print_real(summary)
@@ -371,6 +373,12 @@ def cmd_engines(args: argparse.Namespace) -> int:
             f'{info.name:<10} {"yes" if info.available else "no":<10} {info.version or "-":<10}'
             f' {info.reason}'
         )
+    devices = [
+        f'{info.name} {", ".join(engine_class(info.name).devices())}'
+        for info in known_engines()
+        if info.available
+    ]
+    print(f'devices: {"; ".join(devices)}')
     if args.warm:
         for info in known_engines():
             if info.available:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from cloth_bench_ros import validation
@@ -164,6 +165,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help='wall-time budget per case (default 120 s)',
     )
     stress.add_argument('--output', help='results directory (default results/stress)')
+    common.device_option(stress, with_set=False)
     stress.set_defaults(func=cmd_stress)
 
     xref = sub.add_parser(
@@ -201,6 +203,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help='results directory: results.jsonl (resumed) and cross_reference.md',
     )
     common.add_metric_option(xref)
+    common.device_option(xref, with_set=False)
     xref.set_defaults(func=cmd_cross_reference)
 
 
@@ -345,6 +348,13 @@ def cmd_stress(args: argparse.Namespace) -> int:
     )
     presets = common.preset_set(args)
     cases = select_cases(engines, args.case, args.max_wall_s, presets)
+    if args.device is not None:  # Newton's cases on the device asked for
+        if 'newton' not in engines:
+            raise common.UserError('--device applies to engine newton, not part of this run')
+        cases = [
+            replace(c, params={**c.params, 'device': args.device}) if c.engine == 'newton' else c
+            for c in cases
+        ]
     if args.list:
         for c in cases:
             print(f'{c.engine:<8} {c.name:<24} {c.description}')
@@ -374,6 +384,8 @@ def cmd_cross_reference(args: argparse.Namespace) -> int:
 
     available = common.available_engines()
     entrants = [(e, o) for e, o in DEFAULT_ENTRANTS if e in available]
+    if args.device is not None:  # Newton's entrants on the device asked for
+        entrants = [(e, {**o, 'device': args.device} if e == 'newton' else o) for e, o in entrants]
     cells, missing = cross_reference_cells(
         args.cloth,
         args.primitive or ['dynamic', 'quasi_static'],

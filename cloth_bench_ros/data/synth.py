@@ -175,9 +175,8 @@ def simulate_reference(config: SynthConfig) -> Iterator[tuple[int, np.ndarray]]:
     targets = full_targets(config.primitive, config.rate_hz)
     start = targets.quintic_index
     last = start + (config.frame_count - 1) * per_frame
-    engine = make_engine(
-        config.engine, config.rate_hz, dict(config.params), ClothGrid(*config.grid)
-    )
+    grid = ClothGrid(*config.grid)  # a reference's parameters are set for its own grid
+    engine = make_engine(config.engine, config.rate_hz, dict(config.params), grid, grid)
     try:
         vertices = engine.reset(config.seed, targets.left[0], targets.right[0])
         for i in range(1, last + 1):
@@ -288,9 +287,14 @@ def synth_command(
     progress: bool = True,
     reference: str = DEFAULT_REFERENCE,
     rate_hz: float | None = None,
+    device: str | None = None,
 ) -> Path:
     """`cloth-bench synth`: the synthetic bag of a cloth and primitive from a reference."""
     config = reference_config(cloth, primitive, seed, reference=reference)
+    if device is not None:  # the Newton reference's compute device
+        if config.engine != 'newton':
+            raise SynthError(f'--device: the {reference} reference runs on {config.engine}')
+        config = replace(config, params={**config.params, 'device': device})
     if rate_hz is not None:
         config = replace(config, rate_hz=float(rate_hz))
         config.steps_per_frame  # SynthError before anything is simulated

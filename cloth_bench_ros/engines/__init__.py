@@ -11,8 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib.metadata import entry_points
+from typing import Any, Mapping
 
-from cloth_bench_ros.engines.base import ClothEngine, EngineError
+from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.engines.base import ClothEngine, EngineError, params_for_grid
 
 ENTRY_POINT_GROUP = 'cloth_bench_ros.engines'
 
@@ -67,6 +69,24 @@ def known_engines() -> list[EngineInfo]:
     return infos
 
 
-def make_engine(name: str, rate_hz: float, params: dict | None = None, grid=None) -> ClothEngine:
-    """Instantiate engine `name` at `rate_hz` with validated parameters."""
-    return engine_class(name)(rate_hz, params, grid)
+def engine_device(name: str, params: Mapping[str, Any] | None = None) -> str:
+    """Return the device engine `name` runs on with `params` (EngineError if it is absent)."""
+    return engine_class(name).device_for(params or {})
+
+
+def make_engine(
+    name: str,
+    rate_hz: float,
+    params: dict | None = None,
+    grid: ClothGrid | None = None,
+    params_grid: ClothGrid | None = None,
+) -> ClothEngine:
+    """
+    Instantiate engine `name` at `rate_hz` with validated parameters on `grid`.
+
+    `params` are set for `params_grid` (default: the default mesh, as presets and identified
+    values are) and scaled to `grid` by `params_for_grid`, so that a mesh changes only the
+    resolution of the cloth.
+    """
+    cls = engine_class(name)
+    return cls(rate_hz, params_for_grid(cls, params or {}, rate_hz, grid, params_grid), grid)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import abc
 from dataclasses import dataclass
 import math
-from typing import Any, ClassVar, Mapping
+from typing import Any, Callable, ClassVar, Mapping
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.scene import ClothGrid
@@ -29,11 +29,14 @@ class Param:
     high: float | None = None
     doc: str = ''
     choices: tuple[str, ...] = ()
+    check: Callable[[object, str], object] | None = None  # a text parameter's validation rule
 
     def validate(self, value: object) -> object:
         """`value` checked against this parameter's type and range (validation's rules)."""
         name = f'parameter {self.name}'
         try:
+            if self.check is not None:
+                return self.check(value, name)
             if self.choices:
                 return validation.choice(value, name, self.choices)
             if isinstance(self.default, bool):
@@ -47,6 +50,37 @@ class Param:
 
 def _int_bound(bound: float | None) -> int | None:
     return None if bound is None else int(bound)
+
+
+def spacing_ratio(grid: ClothGrid, params_grid: ClothGrid) -> float:
+    """Return the mesh spacing of `grid` over that of `params_grid` (geometric mean of x and z)."""
+    (dx, dz), (px, pz) = grid.spacing, params_grid.spacing
+    return math.sqrt((dx / px) * (dz / pz))
+
+
+def params_for_grid(
+    cls: type[ClothEngine],
+    params: Mapping[str, Any],
+    rate_hz: float,
+    grid: ClothGrid | None,
+    params_grid: ClothGrid | None = None,
+) -> dict[str, Any]:
+    """
+    Return an engine's `params`, set for `params_grid`, for the same cloth on `grid`.
+
+    The one place where a mesh other than the one the parameters were set for is given the same
+    material (`--grid`, the settings sweep's mesh axis, identification, `converge`): presets,
+    overrides and identified values are set for the default mesh (`ClothGrid()`, 11 x 15), so
+    `params_grid` defaults to it. On the mesh they were set for they are returned unchanged.
+    """
+    grid, params_grid = grid or ClothGrid(), params_grid or ClothGrid()
+    try:
+        rate_hz = validation.rate_hz(rate_hz)  # as the engine will refuse it, before any use
+    except validation.InputError as exc:
+        raise EngineError(str(exc)) from None
+    if grid.spacing == params_grid.spacing:
+        return dict(params)
+    return cls.params_for_spacing(params, spacing_ratio(grid, params_grid), rate_hz)
 
 
 @dataclass(frozen=True)
@@ -87,6 +121,7 @@ class ClothEngine(abc.ABC):
 
     name: ClassVar[str]
     params: ClassVar[tuple[Param, ...]]
+    device: str = 'cpu'  # the compute device this engine runs on (`device_for` its params)
 
     def __init__(
         self,
@@ -130,6 +165,31 @@ class ClothEngine(abc.ABC):
         config: dict[str, Any] = {p.name: p.default for p in cls.params}
         config.update({k: schema[k].validate(v) for k, v in params.items()})
         return config
+
+    @classmethod
+    def params_for_spacing(
+        cls, params: Mapping[str, Any], ratio: float, rate_hz: float
+    ) -> dict[str, Any]:
+        """
+        Return `params`, set for one mesh spacing, restated for a spacing `ratio` times it.
+
+        `rate_hz` is the engine's step rate (an internal step the scaling needs depends on it).
+
+        The parameters of an engine that depend on the spacing (a quantity per vertex or per edge
+        that a finer mesh would otherwise turn into another cloth) are scaled so that the mesh
+        changes only the resolution; the default scales nothing. Called by `params_for_grid`.
+        """
+        return dict(params)
+
+    @classmethod
+    def device_for(cls, params: Mapping[str, Any]) -> str:
+        """Return the device an engine with `params` runs on (`cpu` unless an engine says)."""
+        return 'cpu'
+
+    @classmethod
+    def devices(cls) -> tuple[str, ...]:
+        """Return the devices this engine can run on, on this machine."""
+        return ('cpu',)
 
     @classmethod
     def version(cls) -> str:

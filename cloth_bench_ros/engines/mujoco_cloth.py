@@ -11,7 +11,9 @@ Two cloth models, chosen by the `model` parameter:
   The constraint is soft: its stiffness is set in acceleration space (1 / timeconst^2), so in
   N/m it goes with the vertex mass, i.e. with the grid spacing squared. The same timeconst on a
   finer grid is a softer cloth (the towel hangs 17 mm longer at 46 x 64 than at 31 x 43); the
-  same membrane on another grid needs `mesh_consistent_timeconst`.
+  same membrane on another grid needs `mesh_consistent_timeconst`, which `params_for_spacing`
+  applies (with an internal step short enough for it) whenever a mesh is not the one the
+  parameters were set for.
 - "edges" (mass-spring): a net of springs on the grid, structural, shear (both diagonals) and
   bending (every second vertex), all of stiffness `edge_stiffness` and damping `damping`.
   MuJoCo >= 4.0 gives passive edge stiffness only to 1D flexes, so the net is a 1D flex whose
@@ -26,6 +28,7 @@ millimetres during the fling.
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros.core import scene
@@ -50,6 +53,11 @@ GRIPPER_MASS = 1000.0  # kg
 MODELS = ('shell', 'edges')
 INTEGRATORS = ('Euler', 'discrete')
 SOLVERS = ('Newton', 'CG', 'PGS')
+
+
+# A scaled edge time constant this much under two internal steps is left to the engine's floor
+# (a mesh whose x and z spacings round apart by ~1 % would otherwise double the substeps).
+TIMECONST_SLACK = 0.01
 
 
 def mesh_consistent_timeconst(timeconst: float, spacing_ratio: float) -> float:
@@ -161,6 +169,34 @@ class MujocoCloth(ClothEngine):
     @classmethod
     def version(cls) -> str:
         return mujoco.__version__
+
+    @classmethod
+    def params_for_spacing(
+        cls, params: Mapping[str, Any], ratio: float, rate_hz: float
+    ) -> dict[str, Any]:
+        """
+        Scale the shell's edge time constant with the spacing, the internal step if it must.
+
+        The edge constraint's stiffness goes with the vertex mass (see the module docstring), so
+        the same membrane needs `mesh_consistent_timeconst` of the time constant the cloth had
+        (the engine floors it at two internal steps at `rate_hz`); where two internal steps
+        exceed the scaled one (by more than TIMECONST_SLACK) the longest internal step becomes
+        half of it, so a sweep's `timestep` on a finer mesh can be shortened.
+        The mass-spring model's springs (N/m per edge) and every edge's damping describe a sheet
+        of the same stiffness and damping on any grid: not scaled.
+        """
+        scaled = dict(params)
+        config = cls.validate_params(params)
+        if config['model'] == 'shell':
+            dt = 1.0 / rate_hz
+            substeps = max(int(config['substeps']), math.ceil(dt / config['timestep'] - 1e-9))
+            # the time constant the cloth had: the engine floors it at two internal steps
+            had = max(float(config['edge_timeconst']), 2 * dt / substeps)
+            timeconst = mesh_consistent_timeconst(had, ratio)
+            scaled['edge_timeconst'] = timeconst
+            if 2 * dt / substeps > timeconst * (1 + TIMECONST_SLACK):
+                scaled['timestep'] = timeconst / 2
+        return scaled
 
     @classmethod
     def validate_params(cls, params: Mapping[str, Any]) -> dict[str, Any]:

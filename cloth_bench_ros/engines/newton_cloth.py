@@ -1,5 +1,5 @@
 """
-Newton cloth engine (NVIDIA Warp, run on the CPU): XPBD or VBD cloth held by two point grasps.
+Newton cloth engine (NVIDIA Warp, on the CPU or a CUDA device): XPBD or VBD cloth, two grasps.
 
 Two cloth models, chosen by the `model` parameter:
 
@@ -16,6 +16,11 @@ its position alone, so it is written before every substep at the point of the st
 the previous target to the new one reached at the end of that substep, with the line's velocity.
 The table is a static box shape. With `graph_capture`, one engine step (all substeps) is recorded
 once as a Warp graph and replayed; the targets are read from device arrays by a small kernel.
+
+Device: `device` (`--device` on every command) is `cpu`, `cuda`, `cuda:N` or `auto` (the default:
+the first CUDA device if Warp finds one, else the CPU); a device that is not on the machine is
+refused by `validate_params`, before anything runs. The device changes the numbers (float32
+kernels in another order), so a run names its device.
 
 Warp compiles its kernels on first use (about 35 s per solver on one core) and caches them in its
 kernel cache (by default ~/.cache/warp); `cloth-bench engines --warm` fills it.
@@ -34,13 +39,35 @@ import warp as wp
 wp.config.log_level = wp.LOG_ERROR  # no banner and no line per compiled module
 with quiet_c_output():  # Warp's C++ init warns on stderr that there is no CUDA driver
     wp.init()
-from cloth_bench_ros.core import scene  # noqa: E402, I100  (after Warp's quiet init)
+from cloth_bench_ros import validation  # noqa: E402, I100  (after Warp's quiet init)
+from cloth_bench_ros.core import scene  # noqa: E402
 from cloth_bench_ros.core.scene import ClothGrid  # noqa: E402
-from cloth_bench_ros.engines.base import ClothEngine, Param  # noqa: E402
+from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param  # noqa: E402
 import newton  # noqa: E402
 
 MODELS = ('xpbd', 'vbd')
-DEVICE = 'cpu'
+
+
+def available_devices() -> tuple[str, ...]:
+    """Return the devices Warp finds on this machine: `cpu`, then `cuda:0`, `cuda:1`, ..."""
+    return ('cpu', *(f'cuda:{i}' for i in range(wp.get_cuda_device_count())))
+
+
+def resolve_device(name: str) -> str:
+    """
+    Return the Warp device `name` means here (`auto`: the first CUDA device, else `cpu`).
+
+    EngineError, one line naming what Warp found, for a device that is not on this machine.
+    """
+    found = available_devices()
+    if name == 'auto':
+        return found[1] if len(found) > 1 else 'cpu'
+    wanted = 'cuda:0' if name == 'cuda' else name
+    if wanted not in found:
+        raise EngineError(
+            f'parameter device: {name} is not on this machine (Warp found: {", ".join(found)})'
+        )
+    return wanted
 
 
 @wp.kernel
@@ -60,7 +87,7 @@ def _move_grasps(
 
 class NewtonCloth(ClothEngine):
     """
-    Newton cloth: XPBD springs and bending, or VBD triangle elements and bending, on the CPU.
+    Newton cloth: XPBD springs and bending, or VBD triangle elements and bending, on a device.
 
     reset(seed) starts the cloth in the task's seeded initial state (core/task.py) at rest.
     """
@@ -183,7 +210,28 @@ class NewtonCloth(ClothEngine):
             ),
         ),
         Param('graph_capture', True, '', doc='record one step as a Warp graph and replay it'),
+        Param(
+            'device',
+            'auto',
+            '',
+            doc='cpu, cuda, cuda:N, or auto (the first CUDA device Warp finds, else cpu)',
+            check=validation.device,
+        ),
     )
+
+    @classmethod
+    def validate_params(cls, params: Mapping[str, Any]) -> dict[str, Any]:
+        config = super().validate_params(params)
+        resolve_device(str(config['device']))  # refused here, before anything runs
+        return config
+
+    @classmethod
+    def device_for(cls, params: Mapping[str, Any]) -> str:
+        return resolve_device(str(cls.validate_params(params)['device']))
+
+    @classmethod
+    def devices(cls) -> tuple[str, ...]:
+        return available_devices()
 
     @classmethod
     def version(cls) -> str:
@@ -191,6 +239,26 @@ class NewtonCloth(ClothEngine):
             return f'{package_version("newton")} (warp {wp.config.version})'
         except PackageNotFoundError:
             return f'unknown (warp {wp.config.version})'
+
+    @classmethod
+    def params_for_spacing(
+        cls, params: Mapping[str, Any], ratio: float, rate_hz: float
+    ) -> dict[str, Any]:
+        """
+        Scale the table contact with the vertex area, and XPBD's internal step on finer meshes.
+
+        Contact stiffness and damping are per vertex, whose weight goes with its area. XPBD's
+        springs (per edge) make the same sheet on any grid, but a spring's time constant
+        sqrt(m / k) goes with the spacing (at 21 x 29 the preset's 2 ms diverges). VBD is
+        implicit; membrane (per area) and bending (`_edge_stiffness`) need nothing.
+        """
+        scaled = dict(params)
+        config = cls.validate_params(params)
+        for name in ('contact_stiffness', 'contact_damping'):
+            scaled[name] = float(config[name]) * ratio**2
+        if config['model'] == 'xpbd' and ratio < 1:
+            scaled['timestep'] = float(config['timestep']) * ratio
+        return scaled
 
     @classmethod
     def warm(cls) -> None:
@@ -213,7 +281,8 @@ class NewtonCloth(ClothEngine):
         super().__init__(rate_hz, params, grid)
         c = self.config
         self._vbd = c['model'] == 'vbd'
-        with wp.ScopedDevice(DEVICE):
+        self.device = resolve_device(str(c['device']))
+        with wp.ScopedDevice(self.device):
             self.model = self._build_model()
             self._states = (self.model.state(), self.model.state())
             self._control = self.model.control()
@@ -330,7 +399,7 @@ class NewtonCloth(ClothEngine):
                     dim=2,
                     inputs=[self._start, self._velocity, self._index, k * self.h],
                     outputs=[s.particle_q, s.particle_qd],
-                    device=DEVICE,
+                    device=self.device,
                 )
             a.clear_forces()
             self._pipeline.collide(a, self._contacts)
@@ -345,7 +414,7 @@ class NewtonCloth(ClothEngine):
             self._substeps()
             return
         if self._graph is None:
-            with wp.ScopedCapture(device=DEVICE) as capture:
+            with wp.ScopedCapture(device=self.device) as capture:
                 self._substeps()
             self._graph = capture.graph
         wp.capture_launch(self._graph)

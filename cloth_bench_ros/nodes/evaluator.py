@@ -64,6 +64,8 @@ class Evaluator(Node):
         self.declare_parameter('seed', 0)
         self.declare_parameter('grid_nx', 0)  # the simulators' grid (0: the default), whose
         self.declare_parameter('grid_nz', 0)  # triangles the surface metrics are computed on
+        # The engines' devices, comma-separated in the order of `engines` ('' : not recorded).
+        devices = str(self.declare_parameter('devices', '').value)
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,
@@ -94,6 +96,14 @@ class Evaluator(Node):
             'cloth': cloth,
             'seed': p['seed'],
         }
+        if devices:
+            names = [validation.device(d, 'parameter devices') for d in devices.split(',')]
+            if len(names) != len(self.engines):
+                raise validation.InputError(
+                    f'evaluator: parameter devices: {len(names)} devices for'
+                    f' {len(self.engines)} engines'
+                )
+            self.run_info['devices'] = dict(zip(self.engines, names))
         if self.output_dir:  # an unwritable report directory is found now, not after the run
             try:
                 check_output_dir(self.output_dir)

@@ -130,6 +130,7 @@ class Simulator(Node):
         self.declare_parameter('grid_nx', 0)
         self.declare_parameter('grid_nz', 0)
         presets_dir = self.declare_parameter('presets_dir', '').value
+        self.declare_parameter('device', '')  # '' : engine_params' device, else the engine's
         # Every value through the one validation layer; an error names the node and parameter.
         checked = validation.node_parameters(
             self,
@@ -139,6 +140,7 @@ class Simulator(Node):
                 'engine_params': validation.parameter_mapping,
                 'grid_nx': _grid_side,
                 'grid_nz': _grid_side,
+                'device': lambda v, n: validation.device(v, n) if v != '' else '',
             },
         )
         overrides, nx, nz = checked['engine_params'], checked['grid_nx'], checked['grid_nz']
@@ -152,6 +154,8 @@ class Simulator(Node):
             self.engine_name, cloth, primitive, Path(presets_dir) if presets_dir else None
         )
         params = {**preset, **overrides}
+        if checked['device']:  # the engine refuses it if it has no such parameter or device
+            params['device'] = checked['device']
         self.engine = make_engine(self.engine_name, rate_hz, params, grid)
         self.cloud_pub = self.create_publisher(
             PointCloud2, f'{self.engine_name}/cloud', make_qos(10)

@@ -81,6 +81,17 @@ class Cell:
         return dict(self.overrides)
 
     @property
+    def device(self) -> str:
+        """Return the device the cell's engine runs on (Newton: its `device` or Warp's default)."""
+        from cloth_bench_ros.engines import engine_device
+        from cloth_bench_ros.errors import ClothBenchError
+
+        try:
+            return engine_device(self.engine, self.params)
+        except ClothBenchError:  # an engine or device not on this machine: as the cell names it
+            return str(self.params.get('device', 'cpu'))
+
+    @property
     def reference(self) -> str | None:
         """Return the synthetic reference a cross-reference cell is scored against."""
         if self.mode != CROSS_REFERENCE:

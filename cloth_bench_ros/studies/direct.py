@@ -161,6 +161,7 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
         'engines': list(config.engines),
         'cloth': config.cloth,
         'seed': int(config.seed),
+        'devices': {name: engine.device for name, engine in engines.items()},
         'trial': trial.to_dict(),
     }
     summary = run_summary(core, replay, run, 1.0 / rate_hz, wall_s, final_stamp)

@@ -130,9 +130,11 @@ def bag_source(bag: Any, limit: int = 120) -> str:
 
 def provenance_text(spec: Any, summary: dict, version: str) -> str:
     """Return the preset file's provenance: what was fitted against what, how, when and where."""
+    from cloth_bench_ros.engines import engine_device
+
     params = ', '.join(f'{k} = {v:.6g}' for k, v in summary['params'].items())
-    fixed = ', '.join(f'{k} = {v}' for k, v in spec.fixed.items())
-    fixed = f'fixed {fixed}; ' if spec.fixed else ''
+    fixed = ', '.join(f'{k} = {v}' for k, v in spec.fixed.items() if k != 'device')
+    fixed = f'fixed {fixed}; ' if fixed else ''
     trials = ', '.join(f'{s} {r["trials"]}' for s, r in summary['per_sampler'].items())
     held_out = '; '.join(
         f'{Path(v["bag"]).name}: preset {v["preset"]["mean"]:.4f} m, identified'
@@ -151,7 +153,8 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
         f'{", first " + str(spec.max_frames) + " frames" if spec.max_frames else ""}); fitted'
         f' {params}; '
         f'{fixed}'
-        f"the other values are the preset's. {held_out}Engine version {version}; "
+        f"the other values are the preset's. {held_out}Engine version {version}"
+        f' on device {engine_device(spec.engine, spec.fixed)}; '
         f'{datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")} on '
         f'{platform.machine()}, {platform.python_implementation()} {platform.python_version()}.'
     )
@@ -159,12 +162,13 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
 
 def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
     """<output>/presets/<engine>.yaml (config/presets format) and <output>/identification.json."""
-    from cloth_bench_ros.engines import engine_class
+    from cloth_bench_ros.engines import engine_class, engine_device
     from cloth_bench_ros.safe_io import atomic_write_text
     import yaml
 
     version = engine_class(spec.engine).version() or 'unknown'
     values = {**base, **{k: float(v) for k, v in summary['params'].items()}}
+    values.pop('device', None)  # a preset is of the cloth; the device is in the provenance
     document = {
         'engine': spec.engine,
         'engine_version': str(version),
@@ -177,6 +181,7 @@ def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
     atomic_write_text(preset, yaml.safe_dump(document, sort_keys=False, width=100))
     summary['preset_file'] = str(Path(PRESETS_DIR) / preset.name)
     summary['engine_version'] = str(version)
+    summary['device'] = engine_device(spec.engine, spec.fixed)
     summary['date'] = datetime.now(timezone.utc).isoformat(timespec='seconds')
     summary['machine'] = platform.machine()  # no host name: preset files get shipped
     atomic_write_text(

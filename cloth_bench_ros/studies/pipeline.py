@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 import random
 
+from cloth_bench_ros.engines import engine_device
 from cloth_bench_ros.nodes.common import close_nodes
 from cloth_bench_ros.nodes.evaluator import Evaluator
 from cloth_bench_ros.nodes.recorder import Recorder
@@ -23,6 +24,12 @@ def _params(values: dict) -> list:
 
 def _cut(config: RunConfig) -> int:
     return -1 if config.change_of_phase_frame is None else int(config.change_of_phase_frame)
+
+
+def run_devices(config: RunConfig) -> dict[str, str]:
+    """Return the device each engine of the run runs on (its overrides' device, or its default)."""
+    params = config.engine_params
+    return {name: engine_device(name, params.get(name, {})) for name in config.engines}
 
 
 def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[str, dict]:
@@ -54,6 +61,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
             'grid_nx': nx,
             'grid_nz': nz,
             **config.live,
+            'devices': ','.join(run_devices(config).values()),
         },
     }
     for engine in config.engines:

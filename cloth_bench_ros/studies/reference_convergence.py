@@ -20,9 +20,10 @@ the tested grid through the same trial (at SCORE_RATE_HZ, so that frames fall on
 vertices' mean L1 distance to every run's surface is reported, so a reference's numerical error
 can be read in the units of the benchmark's scores.
 
-A finer grid must describe the same cloth: the MuJoCo shell's edge time constant is scaled with
-the spacing (`mesh_consistent_timeconst`), and the grid axis runs at the rate its finest level
-needs for that time constant (at least two internal steps), its first level compared with the
+A finer grid must describe the same cloth: the parameters that depend on the spacing are scaled
+by the engines' one rule (`params_for_grid`: the MuJoCo shell's edge time constant, Newton's
+contact stiffness), and the grid axis runs at the rate its finest level needs for that time
+constant (at least two internal steps), its first level compared with the
 shipped grid at the same rate.
 """
 
@@ -34,9 +35,12 @@ from pathlib import Path
 import time
 from typing import Any, Callable
 
+from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.surface_distance import grid_faces, point_to_surface, TriangleMesh
 from cloth_bench_ros.data.synth import reference_config, simulate_reference, SynthConfig
-from cloth_bench_ros.engines.mujoco_cloth import mesh_consistent_timeconst
+from cloth_bench_ros.engines import engine_class
+from cloth_bench_ros.engines.base import params_for_grid
+from cloth_bench_ros.engines.mujoco_cloth import TIMECONST_SLACK
 from cloth_bench_ros.errors import InputError
 import numpy as np
 
@@ -80,7 +84,8 @@ def refined(config: SynthConfig, axis: str, level: int) -> SynthConfig:
     Return `config` with one setting refined `level` times.
 
     Iterations x2 each; the rate x2 with the longest internal step /2 (so the step the engine
-    takes halves too); the grid's spacing /1.5, with the edge time constant scaled alike.
+    takes halves too); the grid's spacing /1.5, with the parameters that depend on the spacing
+    scaled by the engines' one rule (`params_for_grid`).
     """
     if axis == 'iterations':
         iterations = int(config.params['solver_iterations']) * 2**level
@@ -94,12 +99,10 @@ def refined(config: SynthConfig, axis: str, level: int) -> SynthConfig:
         nx, nz = config.grid
         scale = 1.5**level  # 31 x 43 -> 46 x 64 -> 69 x 95: spacing 1.7 -> 1.1 -> 0.7 cm
         grid = (round((nx - 1) * scale) + 1, round((nz - 1) * scale) + 1)
-        params = dict(config.params)
-        if params.get('model', 'shell') == 'shell' and 'edge_timeconst' in params:
-            ratio = (nz - 1) / (grid[1] - 1)
-            params['edge_timeconst'] = mesh_consistent_timeconst(
-                float(params['edge_timeconst']), ratio
-            )
+        params = params_for_grid(
+            engine_class(config.engine), config.params, config.rate_hz, ClothGrid(*grid),
+            ClothGrid(nx, nz),
+        )
         return replace(config, grid=grid, params=params)
     raise InputError(f'unknown axis {axis!r} (valid: {", ".join(AXES)})')
 
@@ -108,7 +111,8 @@ def grid_rate_level(config: SynthConfig, levels: int) -> int:
     """Return the rate doublings the finest grid needs: edge time constant >= 2 internal steps."""
     timeconst = refined(config, 'grid', levels).params.get('edge_timeconst')
     doublings = 0
-    while timeconst is not None and 2.0 / (config.rate_hz * 2**doublings) > timeconst * (1 + 1e-9):
+    slack = 1 + TIMECONST_SLACK  # within it the engine floors the time constant at 2 steps
+    while timeconst is not None and 2.0 / (config.rate_hz * 2**doublings) > timeconst * slack:
         doublings += 1
     return doublings
 
@@ -161,7 +165,6 @@ def hanging_length(frames: np.ndarray) -> float:
 
 def engine_frames(engine: str, base: SynthConfig) -> np.ndarray:
     """Run an engine's shipped preset on the tested grid through the trial: vertices per frame."""
-    from cloth_bench_ros.core.scene import ClothGrid
     from cloth_bench_ros.engines.presets import load_preset
 
     tested = ClothGrid()
@@ -212,6 +215,7 @@ class ConvergenceStudy:
     duration: float | None = None  # s of the quintic part (None: the whole trial)
     overrides: dict[str, Any] = field(default_factory=dict)  # of the base (tests: a coarse grid)
     scored: tuple[str, ...] = ()  # engines whose presets are scored against every run
+    device: str | None = None  # the Newton reference's device (None: its default)
     runs: dict[str, dict] = field(default_factory=dict)
 
     def variants(self) -> list[Variant]:
@@ -222,6 +226,12 @@ class ConvergenceStudy:
             duration=self.duration,
             **self.overrides,
         )
+        if self.device is not None:
+            if base.engine != 'newton':
+                raise ValueError(
+                    f'--device: the {self.reference} reference runs on {base.engine}, not Newton'
+                )
+            base = replace(base, params={**base.params, 'device': self.device})
         return variants(base, self.axes, self.levels)
 
     def run(self, out_dir: Path, executor: Callable[..., None]) -> None:

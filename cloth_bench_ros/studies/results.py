@@ -38,6 +38,7 @@ KEY_FIELDS: dict[str, Any] = {
     'trial': 0,
     'seed': None,
     'pacing': 'lockstep',
+    'device': 'cpu',  # the engine's compute device (rows written before it existed ran on the CPU)
 }
 NAME_FIELDS = ('mode', 'engine', 'cloth', 'primitive', 'pacing')
 NUMERIC_FIELDS = (
@@ -85,6 +86,7 @@ class ResultRow(TypedDict, total=False):
     trial: int
     seed: int
     pacing: str
+    device: str  # the device the engine ran on (cpu, cuda:0, ...)
     bag: str
     bag_fingerprint: str | None  # data.bag_layout.fingerprint: resumes only on the same bag
     grid: str | None

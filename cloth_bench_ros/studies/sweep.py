@@ -126,6 +126,7 @@ def _cell_fields(cell: Cell) -> dict:
         'trial': int(cell.trial),
         'seed': int(cell.seed),
         'pacing': cell.pacing,
+        'device': cell.device,
         'bag': cell.bag,
         'grid': f'{cell.grid[0]}x{cell.grid[1]}' if cell.grid else None,
         'params': cell.params,
