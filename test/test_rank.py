@@ -43,6 +43,9 @@ def test_significance_says_which_neighbours_differ():
         'significant (95 % intervals apart): a < b; not told apart (intervals overlap): b < c'
     )
     assert deadline_ms(1000.0) == pytest.approx(0.5)
+    more_is_better = [Ranked('a', 1, 0.9, 0.85, 0.95, 1.0, 5),
+                      Ranked('b', 2, 0.5, 0.45, 0.55, 1.0, 5)]
+    assert significance(more_is_better) == 'significant (95 % intervals apart): a < b'
 
 
 def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
@@ -80,6 +83,22 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
     again = capsys.readouterr().out
     assert 'cells: 11 (11 kept from an earlier run)' in again
     assert json.loads((out / 'rank.json').read_text())['answer'] == result['answer']
+    # Another metric: the same identifications (fitted on CD), held-out cells scored again with
+    # every metric the evaluator reports, ranked on the F-score (more is better).
+    assert cli.main(['rank', str(recordings), '--output', str(out), *TINY,
+                     '--metric', 'fscore']) == 0
+    printed = capsys.readouterr().out
+    assert 'cells: 11 (1 kept from an earlier run)' in printed  # the timing cell is kept
+    result = json.loads((out / 'rank.json').read_text())
+    assert result['spec']['metric'] == 'fscore' and result['spec']['objective'] == 'cd'
+    held = [c for c in result['cells'] if c['kind'] == 'held_out' and c['config'] == 'identified']
+    assert all(0 < c['metrics']['fscore'] <= 1 and c['metrics']['cd'] == c['CD'] for c in held)
+    (ranked,) = result['answer']['towel_dynamic']['ranking']
+    assert ranked['mean'] == pytest.approx(sum(c['metrics']['fscore'] for c in held) / 5)
+    assert 'FSCORE held-out |' in printed and 'so no engine is compared with it' in printed
+    with pytest.raises(SystemExit) as refused:  # argparse's choices: one usage line, exit 2
+        cli.main(['rank', str(recordings), '--output', str(out), *TINY, '--metric', 'nope'])
+    assert refused.value.code == 2 and "invalid choice: 'nope'" in capsys.readouterr().err
 
 
 def test_one_trial_is_no_ranking(recordings, tmp_path, capsys):

@@ -59,8 +59,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                       help='rates whose step times decide the recommendation '
                       '(default 10,100,1000)')
     rank.add_argument('--grid', type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
-    rank.add_argument('--metric', default='cd', choices=('cd', 'hd'),
-                      help="what is identified and ranked (default cd, the paper's)")
+    common.add_metric_option(rank)  # cd/hd: also the identification objective (else cd)
     rank.add_argument('--max-frames', type=common.integer('--max-frames', 1),
                       help='score only the first N frames of each window (faster)')
     rank.add_argument('--topic', help='PointCloud2 topic of plain recordings')

@@ -10,7 +10,8 @@ clouds once and keeps them, with their k-d trees, for every later trial on that 
 reported as `partial`, and the trial stops there, `pruned`, where it is above `prune_above`.
 The evaluator core is given no mesh faces here, so a trial computes the paper's CD/HD (its
 objective) and none of the metrics beside them (docs/metrics.md), which would cost it tens of
-milliseconds per frame.
+milliseconds per frame; `all_metrics` gives it the mesh's faces, and the trial returns every
+metric of core.metric_choice (`metrics`: rank's held-out cells).
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ class Trial:
     also: tuple[str, ...] = ()  # more bags of the task: the value is the mean over every bag
     rung: float | None = None  # multi-fidelity: score this fraction of the frames first
     prune_above: float | None = None  # stop (pruned) where that partial value is above this
+    all_metrics: bool = False  # also every metric the evaluator reports (given the mesh's faces)
 
 
 def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
@@ -104,15 +106,16 @@ def evaluate(trial: Trial) -> dict:
         from cloth_bench_ros.engines.presets import load_preset
 
         offset = int(round(SETTLE_DURATION * 1e9))
-        scored = [_scored_bag(trial, bag, offset) for bag in (trial.bag, *trial.also)]
-        cores = [(core, stamps[-1]) for core, stamps in scored]
-        last = max(end for _, end in cores)
-        rung = _rung(trial, scored)
         targets = full_targets(trial.primitive, trial.rate_hz)
         params = {**load_preset(trial.engine, trial.cloth, trial.primitive), **dict(trial.params)}
         engine = make_engine(
             trial.engine, trial.rate_hz, params, ClothGrid(*trial.grid) if trial.grid else None
         )
+        faces = engine.faces if trial.all_metrics else None
+        scored = [_scored_bag(trial, bag, offset, faces) for bag in (trial.bag, *trial.also)]
+        cores = [(core, stamps[-1]) for core, stamps in scored]
+        last = max(end for _, end in cores)
+        rung = _rung(trial, scored)
         for k in range(len(targets)):
             t0 = time.perf_counter()
             if k == 0:
@@ -147,6 +150,13 @@ def evaluate(trial: Trial) -> dict:
             step_p50_ms=_num(m['step_time']['p50']) * 1e3,
             step_p99_ms=_num(m['step_time']['p99']) * 1e3,
         )
+        if trial.all_metrics:
+            from cloth_bench_ros.core.metric_choice import METRICS
+
+            out['metrics'] = {
+                name: float(np.mean([metric.value(b, trial.primitive) for b in per_bag]))
+                for name, metric in METRICS.items()
+            }
         if trial.also:
             out['per_bag'] = [_num(b[f'CD_{suffix}']) for b in per_bag]
         out['value'] = out['CD'] if trial.objective == 'cd' else out['HD']
@@ -192,13 +202,17 @@ def _partial(trial: Trial, scored: list[tuple[Any, list[int]]], counts: list[int
     return value if math.isfinite(value) else math.inf
 
 
-def _scored_bag(trial: Trial, bag: str, offset: int) -> tuple[Any, list[int]]:
+def _scored_bag(
+    trial: Trial, bag: str, offset: int, faces: np.ndarray | None = None
+) -> tuple[Any, list[int]]:
     """Return an evaluator core fed with a bag's frames of the window, and their stamps."""
     from cloth_bench_ros.core.evaluation import OnlineEvaluator
     from cloth_bench_ros.core.trajectory import Primitive
 
     cut, frames = bag_clouds(bag)
-    core = OnlineEvaluator([trial.engine], Primitive(trial.primitive), offset, cut, FPS)
+    core = OnlineEvaluator(
+        [trial.engine], Primitive(trial.primitive), offset, cut, FPS, faces=faces
+    )
     used = [
         f
         for f in frames
