@@ -51,6 +51,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     rank.add_argument('--trials', type=_trials, default=0,
                       help='identification trials per sampler, or auto (default auto)')
     rank.add_argument('--sampler', default='both', choices=('cmaes', 'tpe', 'gp', 'both'))
+    rank.add_argument('--fidelity', default='full', choices=('full', 'prune'),
+                      help='identification: full (default), or prune: multi-fidelity, as identify')
     rank.add_argument('--seeds', type=common.integer('--seeds', 1), default=3,
                       help='held-out seeds per held-out trial (default 3)')
     rank.add_argument('--rate', type=common.rate, default=100.0,
@@ -91,7 +93,7 @@ def cmd_rank(args: argparse.Namespace) -> int:
     spec = RankSpec(
         args.recordings, out, entrants, replay, args.trials, args.sampler, args.seeds, args.rate,
         args.rates, args.grid, args.metric, args.max_frames,
-        common.engine_overrides(args.set, sorted({e for e, _ in entrants})),
+        common.engine_overrides(args.set, sorted({e for e, _ in entrants})), args.fidelity,
     )
     print(f'cloth-bench rank: {", ".join(args.recordings)}; engines '
           f'{", ".join(e + (":" + o["model"] if o else "") for e, o in entrants)}; output {out}',

@@ -61,6 +61,7 @@ class RankSpec:
     metric: str = 'cd'  # the ranking metric (core.metric_choice); cd/hd: the objective too
     max_frames: int | None = None
     fixed: dict = field(default_factory=dict)  # per engine: overrides on every entrant of it
+    fidelity: str = 'full'  # identification's: full, or prune (studies/identify_fidelity.py)
 
 
 def entrant_key(engine: str, overrides: dict) -> str:
@@ -110,7 +111,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
     stamp = json.loads(json.dumps({
         'bags': bags, 'trials': spec.trials, 'sampler': spec.sampler, 'grid': spec.grid,
         'metric': objective(spec), 'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
-        'fixed': {**spec.fixed.get(engine, {}), **overrides},
+        'fixed': {**spec.fixed.get(engine, {}), **overrides}, 'fidelity': spec.fidelity,
     }))
     done = out / SUMMARY_FILE
     if done.exists():
@@ -124,7 +125,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         engine, train[0].cloth, train[0].primitive, Path(bags[0]), out, spec.sampler,
         spec.trials, objective(spec), (), 0, spec.rate_hz, spec.grid,
         {**spec.fixed.get(engine, {}), **overrides}, validate_seeds=0,
-        max_frames=spec.max_frames, also=tuple(bags[1:]),
+        max_frames=spec.max_frames, also=tuple(bags[1:]), fidelity=spec.fidelity,
     )
     summary = identify(ident, scheduler, workers, progress).summary
     summary['rank_stamp'] = stamp
@@ -243,7 +244,7 @@ def run_rank(
                 'trials': spec.trials, 'sampler': spec.sampler, 'seeds': spec.seeds,
                 'rate_hz': spec.rate_hz, 'rates': list(spec.rates), 'grid': spec.grid,
                 'metric': spec.metric, 'objective': objective(spec),
-                'max_frames': spec.max_frames,
+                'max_frames': spec.max_frames, 'fidelity': spec.fidelity,
             },
             'trials': [t.as_dict() for t in trials],
             'groups': {
