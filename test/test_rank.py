@@ -99,6 +99,21 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
     with pytest.raises(SystemExit) as refused:  # argparse's choices: one usage line, exit 2
         cli.main(['rank', str(recordings), '--output', str(out), *TINY, '--metric', 'nope'])
     assert refused.value.code == 2 and "invalid choice: 'nope'" in capsys.readouterr().err
+    # `cloth-bench report` on the rank directory: the table, the sentences and both figures.
+    assert cli.main(['report', str(out)]) == 0
+    printed = capsys.readouterr().out
+    md = (out / 'report' / 'report.md').read_text()
+    assert f'| {ranked["mean"]:.4f} |' in md and 'so no engine is compared with it' in md
+    for figure in ('rank_towel_dynamic.png', 'rank_speed_towel_dynamic.png'):
+        assert (out / 'report' / figure).stat().st_size > 1000 and figure in md
+    assert '| towel_dynamic | 1 | mujoco |' in printed and '2 plots' in printed
+
+
+def test_report_of_a_damaged_rank_directory_is_one_line(tmp_path, capsys):
+    (tmp_path / 'rank.json').write_text('{"spec": {}}')
+    assert cli.main(['report', str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert 'not a rank.json of cloth-bench rank' in err and len(err.splitlines()) == 1
 
 
 def test_one_trial_is_no_ranking(recordings, tmp_path, capsys):
