@@ -7,10 +7,12 @@ from pathlib import Path
 
 from camera_recording import CAMERA_TOPIC, make_camera_recording, make_repeated_recording
 from cloth_bench_ros import cli
+from cloth_bench_ros.core.metric_choice import metric
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.report.rank import deadline_ms, significance
+from cloth_bench_ros.report.rank import deadline_ms, significance, within_reference_error
 from cloth_bench_ros.report.ranking import Ranked
 from cloth_bench_ros.studies.rank import folds
+from cloth_bench_ros.studies.rank_trials import RankTrial, reference_error
 import pytest
 
 TINY = ['--topic', CAMERA_TOPIC, '--engine', 'mujoco', '--trials', '2', '--sampler', 'tpe',
@@ -114,6 +116,25 @@ def test_report_of_a_damaged_rank_directory_is_one_line(tmp_path, capsys):
     assert cli.main(['report', str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert 'not a rank.json of cloth-bench rank' in err and len(err.splitlines()) == 1
+
+
+def test_differences_under_a_bundled_references_numerical_error_are_said_to_be_so(recordings):
+    def trial(bag, source='metadata'):
+        return RankTrial('t', 'towel', 'dynamic', str(bag), str(bag), 0, source, 0.0, 132, 104)
+
+    mujoco = [trial(bundled_bag('towel', 'dynamic'))] * 2
+    vbd = trial(bundled_bag('towel', 'dynamic').with_name('towel_dynamic_newton_vbd'))
+    assert reference_error(mujoco)['reference'] == 'mujoco'
+    assert reference_error([vbd, vbd])['error_m'] > reference_error(mujoco)['error_m']
+    assert reference_error([mujoco[0], vbd]) is None  # two references: no single error
+    assert reference_error([trial(recordings / 'one_mcap', 'clouds')]) is None
+    ranked = [Ranked('a', 1, 0.0300, 0.0299, 0.0301, 1.0, 5),
+              Ranked('b', 2, 0.0320, 0.0319, 0.0321, 1.0, 5),
+              Ranked('c', 3, 0.0400, 0.0399, 0.0401, 1.0, 5)]
+    said = within_reference_error(ranked, reference_error(mujoco), metric('cd'))
+    assert [p['pair'] for p in said['pairs']] == [['a', 'b']]  # 2 mm < 3 mm; 8 mm is not
+    assert said['pairs'][0]['difference_m'] == pytest.approx(0.002)
+    assert within_reference_error(ranked, reference_error(mujoco), metric('fscore')) is None
 
 
 def test_one_trial_is_no_ranking(recordings, tmp_path, capsys):

@@ -60,6 +60,24 @@ def significance(ranked: list[Ranked]) -> str:
     return '; '.join(parts)
 
 
+def within_reference_error(ranked: list[Ranked], error: dict | None,
+                           m: Metric) -> dict[str, Any] | None:
+    """
+    Return, on a bundled reference, the neighbours whose difference is under its numerical error.
+
+    The reference's error is a CD (bags/README.md, "How converged the references are"): it is
+    compared with the ranking's differences only when the ranking is on CD.
+    """
+    if not error or m.name != 'cd':
+        return None
+    pairs = [
+        {'pair': [a.name, b.name], 'difference_m': abs(b.mean - a.mean)}
+        for a, b in zip(ranked, ranked[1:])
+        if abs(b.mean - a.mean) < error['error_m']
+    ]
+    return {**error, 'pairs': pairs}
+
+
 def _timing(cells: list[dict], group: str, entrant: str) -> dict[str, dict]:
     out = {}
     for c in cells:
@@ -129,6 +147,9 @@ def rank_answer(raw: dict[str, Any]) -> dict[str, Any]:
         answer[group] = {
             'ranking': [r.__dict__ for r in ranked],
             'significance': significance(ranked),
+            'within_reference_error': within_reference_error(
+                ranked, info.get('reference_error'), m
+            ),
             'entrants': entries,
             'floor': info['floor'],
             'recommendation': recommendation,
@@ -171,6 +192,17 @@ def rank_lines(result: dict[str, Any]) -> list[str]:
     unit = f' {m.unit}' if m.unit else ''
     for group, a in result['answer'].items():
         lines.append(f'{group}: {a["significance"]}')
+        ref = a.get('within_reference_error')
+        if ref:
+            lines.append(
+                f'{group}: on the bundled {ref["reference"]} reference, whose own numerical error'
+                f' is about {ref["error_m"] * 1e3:.0f} mm ({ref["source"]}): '
+                + ('; '.join(
+                    f'{p["pair"][0]} and {p["pair"][1]} differ by'
+                    f' {p["difference_m"] * 1e3:.1f} mm, less than that: not told apart by this'
+                    ' reference' for p in ref['pairs'])
+                   or 'every difference between neighbours is larger than that')
+            )
         floor = a['floor']
         if floor['mean'] is not None and m.name != 'cd':
             lines.append(

@@ -28,6 +28,7 @@ from cloth_bench_ros.studies.rank_trials import (
     prepare_trials,
     RankTrial,
     recordings_of,
+    reference_error,
 )
 
 DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
@@ -252,6 +253,7 @@ def run_rank(
                     'cloth': c, 'primitive': p, 'trials': [t.name for t in m],
                     'folds': [[m[i].name for i in held] for held in folds(len(m))],
                     'floor': floor(m, vertices),
+                    'reference_error': reference_error(m),
                 }
                 for (c, p), m in groups.items()
             },
