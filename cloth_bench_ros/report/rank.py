@@ -95,11 +95,11 @@ def _timing(cells: list[dict], group: str, entrant: str) -> dict[str, dict]:
 
 def _pareto(entries: dict[str, dict], rate: str, m: Metric) -> list[str]:
     """Return the entrants no other beats in both held-out error and step time at `rate`."""
-    points = {
-        n: (m.ranked(e['identified']['mean']), e['timing'].get(rate, {}).get('step_p50_ms'))
-        for n, e in entries.items()
-    }
-    points = {n: p for n, p in points.items() if p[0] is not None and p[1] is not None}
+    points: dict[str, tuple[float, float]] = {}
+    for n, e in entries.items():
+        err, step = m.ranked(e['identified']['mean']), e['timing'].get(rate, {}).get('step_p50_ms')
+        if err is not None and step is not None:
+            points[n] = (err, step)
     return sorted(
         n for n, (cd, t) in points.items()
         if not any(c2 <= cd and t2 <= t and (c2, t2) != (cd, t) for c2, t2 in points.values())

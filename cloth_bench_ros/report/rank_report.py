@@ -10,6 +10,7 @@ ranking's rate against the held-out mean, the Pareto front marked, the deadline 
 
 from __future__ import annotations
 
+from functools import partial
 import json
 from pathlib import Path
 from typing import Any
@@ -122,9 +123,9 @@ def rank_report(directory: Path, out: Path) -> tuple[Path, Path, list[Path], dic
         doc.extend([
             heading(3, group),
             figure_block(f'rank_{group}.png', f'{group}: the ranking with its intervals',
-                         lambda p, g=group: plot_ranking(result, g, p)),
+                         partial(plot_ranking, result, group)),
             figure_block(f'rank_speed_{group}.png', f'{group}: speed against error',
-                         lambda p, g=group: plot_speed_error(result, g, p)),
+                         partial(plot_speed_error, result, group)),
         ])
     tables = {t.name: t for t in doc.tables()}
     md, html, images = write_document(doc, Path(out))

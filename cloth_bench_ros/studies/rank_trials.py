@@ -123,7 +123,8 @@ def prepare_trials(
 
 
 def reference_error(trials: Sequence[RankTrial]) -> dict[str, Any] | None:
-    """Return the bundled reference all the trials were made by and its numerical error, or None.
+    """
+    Return the bundled reference all the trials were made by and its numerical error, or None.
 
     Read from each bag's trial metadata (`source: synthetic: reference <name> ...`); None where any
     trial is a recording, or the trials come from different references.
