@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 
+from cloth_bench_ros import cli
 from cloth_bench_ros.studies.identify import identify, IdentifySpec, TRIALS_FILE
 from cloth_bench_ros.studies.identify_fidelity import STARTUP
 from cloth_bench_ros.studies.objective import evaluate, Trial
@@ -60,3 +61,5 @@ def test_a_pruned_study_counts_pruned_trials_in_its_budget_and_tells_optuna(targ
     assert s['fidelity'] == 'prune' and s['value'] < rows[0]['value'] * 2
     curve = s['per_sampler']['tpe']['convergence']
     assert [row[1] is None for row in curve] == [st != 'ok' for st in statuses]
+    assert cli.main(['report', str(tmp_path / 'out')]) == 0  # the report takes pruned trials
+    assert (tmp_path / 'out' / 'report' / 'report.md').stat().st_size > 0
