@@ -7,10 +7,12 @@ from pathlib import Path
 
 from camera_recording import CAMERA_TOPIC, make_camera_recording, make_repeated_recording
 from cloth_bench_ros import cli
+from cloth_bench_ros.core.metric_choice import metric
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.report.rank import deadline_ms, significance
+from cloth_bench_ros.report.rank import deadline_ms, significance, within_reference_error
 from cloth_bench_ros.report.ranking import Ranked
 from cloth_bench_ros.studies.rank import folds
+from cloth_bench_ros.studies.rank_trials import RankTrial, reference_error
 import pytest
 
 TINY = ['--topic', CAMERA_TOPIC, '--engine', 'mujoco', '--trials', '2', '--sampler', 'tpe',
@@ -43,6 +45,9 @@ def test_significance_says_which_neighbours_differ():
         'significant (95 % intervals apart): a < b; not told apart (intervals overlap): b < c'
     )
     assert deadline_ms(1000.0) == pytest.approx(0.5)
+    more_is_better = [Ranked('a', 1, 0.9, 0.85, 0.95, 1.0, 5),
+                      Ranked('b', 2, 0.5, 0.45, 0.55, 1.0, 5)]
+    assert significance(more_is_better) == 'significant (95 % intervals apart): a < b'
 
 
 def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
@@ -80,6 +85,56 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
     again = capsys.readouterr().out
     assert 'cells: 11 (11 kept from an earlier run)' in again
     assert json.loads((out / 'rank.json').read_text())['answer'] == result['answer']
+    # Another metric: the same identifications (fitted on CD), held-out cells scored again with
+    # every metric the evaluator reports, ranked on the F-score (more is better).
+    assert cli.main(['rank', str(recordings), '--output', str(out), *TINY,
+                     '--metric', 'fscore']) == 0
+    printed = capsys.readouterr().out
+    assert 'cells: 11 (1 kept from an earlier run)' in printed  # the timing cell is kept
+    result = json.loads((out / 'rank.json').read_text())
+    assert result['spec']['metric'] == 'fscore' and result['spec']['objective'] == 'cd'
+    held = [c for c in result['cells'] if c['kind'] == 'held_out' and c['config'] == 'identified']
+    assert all(0 < c['metrics']['fscore'] <= 1 and c['metrics']['cd'] == c['CD'] for c in held)
+    (ranked,) = result['answer']['towel_dynamic']['ranking']
+    assert ranked['mean'] == pytest.approx(sum(c['metrics']['fscore'] for c in held) / 5)
+    assert 'FSCORE held-out |' in printed and 'so no engine is compared with it' in printed
+    with pytest.raises(SystemExit) as refused:  # argparse's choices: one usage line, exit 2
+        cli.main(['rank', str(recordings), '--output', str(out), *TINY, '--metric', 'nope'])
+    assert refused.value.code == 2 and "invalid choice: 'nope'" in capsys.readouterr().err
+    # `cloth-bench report` on the rank directory: the table, the sentences and both figures.
+    assert cli.main(['report', str(out)]) == 0
+    printed = capsys.readouterr().out
+    md = (out / 'report' / 'report.md').read_text()
+    assert f'| {ranked["mean"]:.4f} |' in md and 'so no engine is compared with it' in md
+    for figure in ('rank_towel_dynamic.png', 'rank_speed_towel_dynamic.png'):
+        assert (out / 'report' / figure).stat().st_size > 1000 and figure in md
+    assert '| towel_dynamic | 1 | mujoco |' in printed and '2 plots' in printed
+
+
+def test_report_of_a_damaged_rank_directory_is_one_line(tmp_path, capsys):
+    (tmp_path / 'rank.json').write_text('{"spec": {}}')
+    assert cli.main(['report', str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert 'not a rank.json of cloth-bench rank' in err and len(err.splitlines()) == 1
+
+
+def test_differences_under_a_bundled_references_numerical_error_are_said_to_be_so(recordings):
+    def trial(bag, source='metadata'):
+        return RankTrial('t', 'towel', 'dynamic', str(bag), str(bag), 0, source, 0.0, 132, 104)
+
+    mujoco = [trial(bundled_bag('towel', 'dynamic'))] * 2
+    vbd = trial(bundled_bag('towel', 'dynamic').with_name('towel_dynamic_newton_vbd'))
+    assert reference_error(mujoco)['reference'] == 'mujoco'
+    assert reference_error([vbd, vbd])['error_m'] > reference_error(mujoco)['error_m']
+    assert reference_error([mujoco[0], vbd]) is None  # two references: no single error
+    assert reference_error([trial(recordings / 'one_mcap', 'clouds')]) is None
+    ranked = [Ranked('a', 1, 0.0300, 0.0299, 0.0301, 1.0, 5),
+              Ranked('b', 2, 0.0320, 0.0319, 0.0321, 1.0, 5),
+              Ranked('c', 3, 0.0400, 0.0399, 0.0401, 1.0, 5)]
+    said = within_reference_error(ranked, reference_error(mujoco), metric('cd'))
+    assert [p['pair'] for p in said['pairs']] == [['a', 'b']]  # 2 mm < 3 mm; 8 mm is not
+    assert said['pairs'][0]['difference_m'] == pytest.approx(0.002)
+    assert within_reference_error(ranked, reference_error(mujoco), metric('fscore')) is None
 
 
 def test_one_trial_is_no_ranking(recordings, tmp_path, capsys):

@@ -49,6 +49,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         ),
     )
     ident.add_argument(
+        '--fidelity',
+        default='full',
+        choices=('full', 'prune'),
+        help=(
+            'full (default): every trial over the whole motion; prune: multi-fidelity, a trial '
+            'whose CD over the first quarter of the frames is above the best 30 %% stops there'
+        ),
+    )
+    ident.add_argument(
         '--objective',
         default='cd',
         choices=('cd', 'hd'),
@@ -135,6 +144,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         args.batch,
         args.validate_seeds,
         Path(args.bag_dir) if args.bag_dir else None,
+        fidelity=args.fidelity,
     )
     print(
         f'cloth-bench identify: {args.engine}, {args.cloth} {args.primitive},'
@@ -160,7 +170,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for name, result in s['per_sampler'].items():
         print(
             f'{name:<6} best {args.objective.upper()} {result["value"]:.5f} m after'
-            f' {result["trials"]} trials' + _budget_text(result.get('budget', {}))
+            f' {result["trials"]} trials'
+            + (f' ({result["pruned"]} pruned)' if result.get('pruned') else '')
+            + _budget_text(result.get('budget', {}))
         )
     print(
         f'identified ({s["best_sampler"]}): '

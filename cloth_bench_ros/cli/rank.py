@@ -51,6 +51,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     rank.add_argument('--trials', type=_trials, default=0,
                       help='identification trials per sampler, or auto (default auto)')
     rank.add_argument('--sampler', default='both', choices=('cmaes', 'tpe', 'gp', 'both'))
+    rank.add_argument('--fidelity', default='full', choices=('full', 'prune'),
+                      help='identification: full (default), or prune: multi-fidelity, as identify')
     rank.add_argument('--seeds', type=common.integer('--seeds', 1), default=3,
                       help='held-out seeds per held-out trial (default 3)')
     rank.add_argument('--rate', type=common.rate, default=100.0,
@@ -59,8 +61,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                       help='rates whose step times decide the recommendation '
                       '(default 10,100,1000)')
     rank.add_argument('--grid', type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
-    rank.add_argument('--metric', default='cd', choices=('cd', 'hd'),
-                      help="what is identified and ranked (default cd, the paper's)")
+    common.add_metric_option(rank)  # cd/hd: also the identification objective (else cd)
     rank.add_argument('--max-frames', type=common.integer('--max-frames', 1),
                       help='score only the first N frames of each window (faster)')
     rank.add_argument('--topic', help='PointCloud2 topic of plain recordings')
@@ -92,7 +93,7 @@ def cmd_rank(args: argparse.Namespace) -> int:
     spec = RankSpec(
         args.recordings, out, entrants, replay, args.trials, args.sampler, args.seeds, args.rate,
         args.rates, args.grid, args.metric, args.max_frames,
-        common.engine_overrides(args.set, sorted({e for e, _ in entrants})),
+        common.engine_overrides(args.set, sorted({e for e, _ in entrants})), args.fidelity,
     )
     print(f'cloth-bench rank: {", ".join(args.recordings)}; engines '
           f'{", ".join(e + (":" + o["model"] if o else "") for e, o in entrants)}; output {out}',

@@ -304,8 +304,9 @@ def render(
     outcome = report_directory(
         Path(results), out, stress, rate, cloth, tol_rel, tol_abs, metric=metric
     )
-    if 'table3' in outcome.tables:
-        print(outcome.tables['table3'].markdown())
+    for name in ('table3', 'rank'):
+        if name in outcome.tables:
+            print(outcome.tables[name].markdown())
     for note in outcome.recommendations:
         print(
             f'recommended {note["engine"]} {note["cloth"]} {note["primitive"]} {note["rate_hz"]:g}'

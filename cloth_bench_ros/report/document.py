@@ -367,7 +367,7 @@ def report_directory(
     metric: str = 'cd',
 ) -> ReportOutcome:
     """
-    `cloth-bench report`: the report of a results.jsonl (or its directory).
+    `cloth-bench report`: the report of a results.jsonl (or its directory), or of a rank directory.
 
     With the stress suite and the identifications found beside it; ValueError (one line) when there
     is nothing usable to report.
@@ -375,6 +375,12 @@ def report_directory(
     from cloth_bench_ros.report.identification import find_identifications
     from cloth_bench_ros.studies.results import load_rows, RESULTS_FILE
     from cloth_bench_ros.studies.stress import load_stress, STRESS_FILE
+
+    from cloth_bench_ros.report.rank_report import RANK_FILE, rank_report
+
+    if results.is_dir() and (results / RANK_FILE).is_file():  # a `cloth-bench rank` directory
+        md, html, images, tables = rank_report(results, out)
+        return ReportOutcome(md, html, images, tables, [], [])
 
     results_file = results / RESULTS_FILE if results.is_dir() else results
     identifications = (

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from cloth_bench_ros.core.metric_choice import Metric, metric as metric_of
 from cloth_bench_ros.core.table import Table
 from cloth_bench_ros.report.ranking import bootstrap_ranking, finite, Ranked
 from cloth_bench_ros.studies.recommend import DEADLINE_BUDGET
@@ -26,9 +27,17 @@ def deadline_ms(rate_hz: float) -> float:
     return DEADLINE_BUDGET * 1e3 / rate_hz
 
 
-def _values(cells: list[dict], group: str, entrant: str, config: str) -> list[float | None]:
+def cell_value(cell: dict, m: Metric) -> float | None:
+    """Return a cell's value of the ranking metric: its objective's, or from its metrics."""
+    if m.name in cell.get('metrics', {}):
+        return cell['metrics'][m.name]
+    return cell.get('value') if m.name in ('cd', 'hd') else None
+
+
+def _values(cells: list[dict], group: str, entrant: str, config: str,
+            m: Metric) -> list[float | None]:
     return [
-        c.get('value')
+        cell_value(c, m)
         for c in cells
         if c.get('kind') == 'held_out' and c['group'] == group and c['entrant'] == entrant
         and c['config'] == config
@@ -41,14 +50,32 @@ def significance(ranked: list[Ranked]) -> str:
         return 'one engine ranked: nothing to compare'
     apart: list[str] = []
     together: list[str] = []
-    for a, b in zip(ranked, ranked[1:]):
-        (apart if a.high < b.low else together).append(f'{a.name} < {b.name}')
+    for a, b in zip(ranked, ranked[1:]):  # either direction: more may be better
+        (apart if a.high < b.low or b.high < a.low else together).append(f'{a.name} < {b.name}')
     parts = []
     if apart:
         parts.append('significant (95 % intervals apart): ' + ', '.join(apart))
     if together:
         parts.append('not told apart (intervals overlap): ' + ', '.join(together))
     return '; '.join(parts)
+
+
+def within_reference_error(ranked: list[Ranked], error: dict | None,
+                           m: Metric) -> dict[str, Any] | None:
+    """
+    Return, on a bundled reference, the neighbours whose difference is under its numerical error.
+
+    The reference's error is a CD (bags/README.md, "How converged the references are"): it is
+    compared with the ranking's differences only when the ranking is on CD.
+    """
+    if not error or m.name != 'cd':
+        return None
+    pairs = [
+        {'pair': [a.name, b.name], 'difference_m': abs(b.mean - a.mean)}
+        for a, b in zip(ranked, ranked[1:])
+        if abs(b.mean - a.mean) < error['error_m']
+    ]
+    return {**error, 'pairs': pairs}
 
 
 def _timing(cells: list[dict], group: str, entrant: str) -> dict[str, dict]:
@@ -66,13 +93,13 @@ def _timing(cells: list[dict], group: str, entrant: str) -> dict[str, dict]:
     return out
 
 
-def _pareto(entries: dict[str, dict], rate: str) -> list[str]:
+def _pareto(entries: dict[str, dict], rate: str, m: Metric) -> list[str]:
     """Return the entrants no other beats in both held-out error and step time at `rate`."""
-    points = {
-        n: (e['identified']['mean'], e['timing'].get(rate, {}).get('step_p50_ms'))
-        for n, e in entries.items()
-    }
-    points = {n: p for n, p in points.items() if p[0] is not None and p[1] is not None}
+    points: dict[str, tuple[float, float]] = {}
+    for n, e in entries.items():
+        err, step = m.ranked(e['identified']['mean']), e['timing'].get(rate, {}).get('step_p50_ms')
+        if err is not None and step is not None:
+            points[n] = (err, step)
     return sorted(
         n for n, (cd, t) in points.items()
         if not any(c2 <= cd and t2 <= t and (c2, t2) != (cd, t) for c2, t2 in points.values())
@@ -82,11 +109,14 @@ def _pareto(entries: dict[str, dict], rate: str) -> list[str]:
 def rank_answer(raw: dict[str, Any]) -> dict[str, Any]:
     """Return the raw numbers with, per group, the ranking and everything said about it."""
     cells = raw['cells']
+    m = metric_of(raw['spec']['metric'])
     answer: dict[str, Any] = {}
     for group, info in raw['groups'].items():
         entries: dict[str, dict] = {}
         for entrant in raw['spec']['entrants']:
-            ident, preset = (_values(cells, group, entrant, k) for k in ('identified', 'preset'))
+            ident, preset = (
+                _values(cells, group, entrant, k, m) for k in ('identified', 'preset')
+            )
             fi, fp = finite(ident), finite(preset)
             entries[entrant] = {
                 'identified': {'values': ident, 'mean': float(fi.mean()) if len(fi) else None,
@@ -95,7 +125,10 @@ def rank_answer(raw: dict[str, Any]) -> dict[str, Any]:
                            'ok': len(fp), 'n': len(preset)},
                 'timing': _timing(cells, group, entrant),
             }
-        ranked = bootstrap_ranking({n: e['identified']['values'] for n, e in entries.items()})
+        ranked = bootstrap_ranking(
+            {n: e['identified']['values'] for n, e in entries.items()},
+            higher_is_better=m.higher_is_better, absolute=m.absolute,
+        )
         recommendation = {}
         for rate in raw['spec']['rates']:
             key = f'{rate:g}'
@@ -108,17 +141,20 @@ def rank_answer(raw: dict[str, Any]) -> dict[str, Any]:
             )
         cross = [
             {'entrant': c['entrant'], 'fitted_on': c['fitted_on'], 'trial': c['trial'],
-             'value': c.get('value')}
+             'value': cell_value(c, m)}
             for c in cells if c.get('kind') == 'cross_task' and c['group'] == group
         ]
         answer[group] = {
             'ranking': [r.__dict__ for r in ranked],
             'significance': significance(ranked),
+            'within_reference_error': within_reference_error(
+                ranked, info.get('reference_error'), m
+            ),
             'entrants': entries,
             'floor': info['floor'],
             'recommendation': recommendation,
             'deadline_rule': f'step p99 < {DEADLINE_BUDGET:g} x the period',
-            'pareto': {f'{r:g}': _pareto(entries, f'{r:g}') for r in raw['spec']['rates']},
+            'pareto': {f'{r:g}': _pareto(entries, f'{r:g}', m) for r in raw['spec']['rates']},
             'cross_task': cross,
         }
     return {**raw, 'answer': answer}
@@ -130,7 +166,8 @@ def _f(value: float | None, digits: int = 4) -> str:
 
 def rank_table(result: dict[str, Any]) -> Table:
     """Return one row per group and entrant: rank, held-out figure, interval, P(rank), preset."""
-    metric = result['spec']['metric'].upper()
+    m = metric_of(result['spec']['metric'])
+    metric, unit = m.name.upper(), f' ({m.unit})' if m.unit else ''
     rate = f'{result["spec"]["rate_hz"]:g}'
     body = []
     for group, a in result['answer'].items():
@@ -143,18 +180,36 @@ def rank_table(result: dict[str, Any]) -> Table:
                 f'[{_f(r["low"])}, {_f(r["high"])}]', f'{r["p_rank"]:.2f}', str(r['n']),
                 _f(e['preset']['mean']), _f(floor), _f(t.get('step_p99_ms'), 2),
             ])
-    headers = ['cloth_task', 'rank', 'engine', f'{metric} held-out (m)', '95 % CI', 'P(rank)',
-               'runs', f'{metric} preset (m)', 'floor (m)', f'step p99 at {rate} Hz (ms)']
+    headers = ['cloth_task', 'rank', 'engine', f'{metric} held-out{unit}', '95 % CI', 'P(rank)',
+               'runs', f'{metric} preset{unit}', 'floor CD (m)', f'step p99 at {rate} Hz (ms)']
     return Table('rank', headers, body, 'lrlrrrrrrr')
 
 
 def rank_lines(result: dict[str, Any]) -> list[str]:
     """Return the sentences under the table: significance, floor, recommendation, cross-task."""
     lines = []
+    m = metric_of(result['spec']['metric'])
+    unit = f' {m.unit}' if m.unit else ''
     for group, a in result['answer'].items():
         lines.append(f'{group}: {a["significance"]}')
+        ref = a.get('within_reference_error')
+        if ref:
+            lines.append(
+                f'{group}: on the bundled {ref["reference"]} reference, whose own numerical error'
+                f' is about {ref["error_m"] * 1e3:.0f} mm ({ref["source"]}): '
+                + ('; '.join(
+                    f'{p["pair"][0]} and {p["pair"][1]} differ by'
+                    f' {p["difference_m"] * 1e3:.1f} mm, less than that: not told apart by this'
+                    ' reference' for p in ref['pairs'])
+                   or 'every difference between neighbours is larger than that')
+            )
         floor = a['floor']
-        if floor['mean'] is not None:
+        if floor['mean'] is not None and m.name != 'cd':
+            lines.append(
+                f'{group}: floor (repeated real trials, CD) {floor["mean"]:.4f} m; the ranking is '
+                f'on {m.name.upper()}, so no engine is compared with it'
+            )
+        elif floor['mean'] is not None:
             above = [
                 r['name'] for r in a['ranking'] if r['low'] > floor['max']
             ]
@@ -168,7 +223,7 @@ def rank_lines(result: dict[str, Any]) -> list[str]:
             rule = f'p99 < {DEADLINE_BUDGET * 1e3 / float(rate):.2f} ms'
             lines.append(
                 f'{group} at {rate} Hz ({rule}): '
-                + (f'{rec["entrant"]} (held-out {rec["mean"]:.4f} m, step p99 '
+                + (f'{rec["entrant"]} (held-out {rec["mean"]:.4f}{unit}, step p99 '
                    f'{rec["step_p99_ms"]:.2f} ms)' if rec else 'no engine meets the deadline')
             )
         by: dict[tuple[str, str], list] = {}
@@ -179,7 +234,7 @@ def rank_lines(result: dict[str, Any]) -> list[str]:
             v = finite(values)
             mean = float(np.mean(v)) if len(v) else None
             lines.append(
-                f'{group}: {entrant} fitted on {fitted_on}: {_f(mean)} m '
-                f'(fitted on this task: {_f(own)} m)'
+                f'{group}: {entrant} fitted on {fitted_on}: {_f(mean)}{unit} '
+                f'(fitted on this task: {_f(own)}{unit})'
             )
     return lines

@@ -18,6 +18,7 @@ seeds (and the other trials' bags) against the engine's preset through the full 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import partial
 import json
 import math
 from pathlib import Path
@@ -81,6 +82,7 @@ class IdentifySpec:
     validate_seeds: int = 5
     bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
     also: tuple[str, ...] = ()  # more training bags: the objective is the mean over all of them
+    fidelity: str = 'full'  # or prune: multi-fidelity (studies/identify_fidelity.py)
 
 
 def default_params(engine: str, model: str | None = None) -> list[str]:
@@ -236,7 +238,9 @@ def open_study(spec: IdentifySpec, sampler: str) -> Any:
     return study
 
 
-def trial_of(spec: IdentifySpec, params: dict, number: int, sampler: str) -> Trial:
+def trial_of(
+    spec: IdentifySpec, params: dict, number: int, sampler: str, rung: tuple = (None, None)
+) -> Trial:
     return Trial(
         spec.engine,
         spec.cloth,
@@ -251,6 +255,7 @@ def trial_of(spec: IdentifySpec, params: dict, number: int, sampler: str) -> Tri
         number,
         sampler,
         tuple(spec.also),
+        *rung,
     )
 
 
@@ -259,12 +264,15 @@ def run_sampler(
 ) -> Any:
     """Ask and tell until the study holds `spec.trials` finished trials, a batch in flight."""
     from cloth_bench_ros.studies.executor import worker_slots
+    from cloth_bench_ros.studies.identify_fidelity import Pruner
     from distributed import as_completed
     from optuna.trial import TrialState
     from tqdm import tqdm
 
     study = open_study(spec, sampler)
-    finished = len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)))
+    done = (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED)
+    finished = len(study.get_trials(deepcopy=False, states=done))
+    pruner = Pruner(spec.fidelity, study)
     left = max(0, spec.trials - finished)
     batch = spec.batch or worker_slots(client)
     bar = tqdm(
@@ -282,9 +290,8 @@ def run_sampler(
     def ask() -> None:
         nonlocal left
         trial = study.ask(space)
-        future = client.submit(
-            evaluate, trial_of(spec, trial.params, trial.number, sampler), pure=False
-        )
+        task = trial_of(spec, trial.params, trial.number, sampler, pruner.rung())
+        future = client.submit(evaluate, task, pure=False)
         asked[future.key] = trial
         running.add(future)
         left -= 1
@@ -306,9 +313,7 @@ def run_sampler(
                 'step': None,
             }
         future.release()
-        if result['status'] == 'ok':
-            study.tell(trial, result['value'])
-        else:
+        if not pruner.tell(study, trial, result):
             trial.set_user_attr('status', result['status'])
             trial.set_user_attr('reason', str(result['reason'])[:500])
             trial.set_user_attr('step', result['step'])
@@ -381,17 +386,8 @@ def identify(
         open_client(scheduler, workers, spec.output / 'workers.log') as client,
     ):
         before = client.submit(evaluate, trial_of(spec, {}, -1, 'preset'), pure=False).result()
-        budgets = {
-            s: run_budgeted(
-                client,
-                spec,
-                s,
-                space,
-                lambda r: append_row(spec.output / TRIALS_FILE, r),
-                progress,
-            )
-            for s in samplers
-        }
+        record = partial(append_row, spec.output / TRIALS_FILE)
+        budgets = {s: run_budgeted(client, spec, s, space, record, progress) for s in samplers}
         studies = {s: study for s, (study, _) in budgets.items()}
         best = min(studies, key=lambda s: finite_or_inf(best_value(studies[s])))
         if not math.isfinite(best_value(studies[best])):
@@ -429,6 +425,7 @@ def summarise(
         'grid': list(spec.grid) if spec.grid else None,
         'fixed': spec.fixed,
         'max_frames': spec.max_frames,
+        'fidelity': spec.fidelity,
         'space': {n: [d.low, d.high, d.log] for n, d in space.items()},
         'samplers': list(studies),
         'best_sampler': best,
@@ -444,6 +441,7 @@ def summarise(
                 'convergence': convergence(st),
                 'importance': importance(st),
                 'trials': len(convergence(st)),
+                'pruned': sum(t.state.name == 'PRUNED' for t in st.get_trials(deepcopy=False)),
             }
             for s, st in studies.items()
         },

@@ -46,12 +46,12 @@ def finite_or_inf(value: float) -> float:
 
 
 def convergence(study: Any) -> list[list]:
-    """Return [number, value or None, best so far or None] per finished trial, in order."""
+    """Return [number, value or None, best so far or None] per finished trial (pruned too)."""
     from optuna.trial import TrialState
 
     out, best = [], math.inf
     for t in sorted(study.get_trials(deepcopy=False), key=lambda t: t.number):
-        if t.state not in (TrialState.COMPLETE, TrialState.FAIL):
+        if t.state not in (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED):
             continue
         value = t.value if t.state == TrialState.COMPLETE else None
         if value is not None:

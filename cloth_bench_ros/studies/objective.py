@@ -5,9 +5,13 @@ A trial drives the engine directly along the primitive's targets (settle phase i
 scores it with the evaluator's core (core.evaluation.OnlineEvaluator: the same pairing and the
 same CD/HD as `cloth-bench run`), stopping after the last real frame the objective uses (the
 change of phase of a dynamic trial; `max_frames` cuts it shorter). A worker decodes a bag's
-clouds once and keeps them, with their k-d trees, for every later trial on that bag. The evaluator
-core is given no mesh faces here, so a trial computes the paper's CD/HD (its objective) and none
-of the metrics beside them (docs/metrics.md), which would cost it tens of milliseconds per frame.
+clouds once and keeps them, with their k-d trees, for every later trial on that bag. With a `rung`
+(multi-fidelity identification), the value over that first fraction of each bag's frames is
+reported as `partial`, and the trial stops there, `pruned`, where it is above `prune_above`.
+The evaluator core is given no mesh faces here, so a trial computes the paper's CD/HD (its
+objective) and none of the metrics beside them (docs/metrics.md), which would cost it tens of
+milliseconds per frame; `all_metrics` gives it the mesh's faces, and the trial returns every
+metric of core.metric_choice (`metrics`: rank's held-out cells).
 """
 
 from __future__ import annotations
@@ -45,6 +49,9 @@ class Trial:
     number: int = -1  # Optuna's trial number (-1: the preset, before identification)
     sampler: str = ''
     also: tuple[str, ...] = ()  # more bags of the task: the value is the mean over every bag
+    rung: float | None = None  # multi-fidelity: score this fraction of the frames first
+    prune_above: float | None = None  # stop (pruned) where that partial value is above this
+    all_metrics: bool = False  # also every metric the evaluator reports (given the mesh's faces)
 
 
 def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
@@ -99,13 +106,16 @@ def evaluate(trial: Trial) -> dict:
         from cloth_bench_ros.engines.presets import load_preset
 
         offset = int(round(SETTLE_DURATION * 1e9))
-        cores = [_scored_bag(trial, bag, offset) for bag in (trial.bag, *trial.also)]
-        last = max(end for _, end in cores)
         targets = full_targets(trial.primitive, trial.rate_hz)
         params = {**load_preset(trial.engine, trial.cloth, trial.primitive), **dict(trial.params)}
         engine = make_engine(
             trial.engine, trial.rate_hz, params, ClothGrid(*trial.grid) if trial.grid else None
         )
+        faces = engine.faces if trial.all_metrics else None
+        scored = [_scored_bag(trial, bag, offset, faces) for bag in (trial.bag, *trial.also)]
+        cores = [(core, stamps[-1]) for core, stamps in scored]
+        last = max(end for _, end in cores)
+        rung = _rung(trial, scored)
         for k in range(len(targets)):
             t0 = time.perf_counter()
             if k == 0:
@@ -121,6 +131,12 @@ def evaluate(trial: Trial) -> dict:
                 core.add_state(trial.engine, stamp, carried)
             if d is not None or stamp >= last:
                 break
+            if rung is not None and stamp >= rung[0]:
+                out['partial'] = _partial(trial, scored, rung[1])
+                rung = None
+                if trial.prune_above is not None and not out['partial'] <= trial.prune_above:
+                    out.update(status='pruned', reason='partial value above the threshold')
+                    return out
         suffix = 'd' if trial.primitive == 'dynamic' else 'q'
         per_bag = []
         for core, _ in cores:
@@ -134,9 +150,18 @@ def evaluate(trial: Trial) -> dict:
             step_p50_ms=_num(m['step_time']['p50']) * 1e3,
             step_p99_ms=_num(m['step_time']['p99']) * 1e3,
         )
+        if trial.all_metrics:
+            from cloth_bench_ros.core.metric_choice import METRICS
+
+            out['metrics'] = {
+                name: float(np.mean([metric.value(b, trial.primitive) for b in per_bag]))
+                for name, metric in METRICS.items()
+            }
         if trial.also:
             out['per_bag'] = [_num(b[f'CD_{suffix}']) for b in per_bag]
         out['value'] = out['CD'] if trial.objective == 'cd' else out['HD']
+        if rung is not None:  # the window ended at the rung: the partial value is the whole one
+            out['partial'] = out['value']
         if m['diverged'] and not math.isfinite(out['value']):
             out.update(status='diverged', reason=m['diverged_reason'], step=m['diverged_at_step'])
         elif not math.isfinite(out['value']):
@@ -153,18 +178,41 @@ def evaluate(trial: Trial) -> dict:
                 engine.close()
             except Exception:
                 pass
-    out['wall_s'] = time.perf_counter() - start
-    out['cpu_s'] = time.process_time() - cpu_start  # what the trial costs on an idle core
+        out['wall_s'] = time.perf_counter() - start  # a pruned trial's too
+        out['cpu_s'] = time.process_time() - cpu_start  # what the trial costs on an idle core
     return out
 
 
-def _scored_bag(trial: Trial, bag: str, offset: int) -> tuple[Any, int]:
-    """Return an evaluator core fed with a bag's frames of the window, and its last stamp."""
+def _rung(trial: Trial, scored: list[tuple[Any, list[int]]]) -> tuple[int, list[int]] | None:
+    """Return the stamp after which the partial value is known, and frames scored per bag."""
+    if not trial.rung:
+        return None
+    counts = [max(1, math.ceil(trial.rung * len(stamps))) for _, stamps in scored]
+    return max(stamps[n - 1] for (_, stamps), n in zip(scored, counts)), counts
+
+
+def _partial(trial: Trial, scored: list[tuple[Any, list[int]]], counts: list[int]) -> float:
+    """Return the objective over each bag's first frames (mean over bags); nan if diverged."""
+    values = []
+    for (core, _), n in zip(scored, counts):
+        scores = [s for s in core.scores if s.in_window][:n]
+        key = 'cd' if trial.objective == 'cd' else 'hd'
+        values.append(float(np.mean([getattr(s, key) for s in scores])) if scores else math.nan)
+    value = float(np.mean(values))
+    return value if math.isfinite(value) else math.inf
+
+
+def _scored_bag(
+    trial: Trial, bag: str, offset: int, faces: np.ndarray | None = None
+) -> tuple[Any, list[int]]:
+    """Return an evaluator core fed with a bag's frames of the window, and their stamps."""
     from cloth_bench_ros.core.evaluation import OnlineEvaluator
     from cloth_bench_ros.core.trajectory import Primitive
 
     cut, frames = bag_clouds(bag)
-    core = OnlineEvaluator([trial.engine], Primitive(trial.primitive), offset, cut, FPS)
+    core = OnlineEvaluator(
+        [trial.engine], Primitive(trial.primitive), offset, cut, FPS, faces=faces
+    )
     used = [
         f
         for f in frames
@@ -175,7 +223,7 @@ def _scored_bag(trial: Trial, bag: str, offset: int) -> tuple[Any, int]:
         raise BagError(f'bag {bag}: no frame to score')
     for stamp, points, dropped in used:
         core.add_real(stamp + offset, points, dropped)
-    return core, used[-1][0] + offset
+    return core, [f[0] + offset for f in used]
 
 
 def _num(value: object) -> float:

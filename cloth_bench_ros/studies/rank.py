@@ -22,12 +22,13 @@ from typing import Any, Callable, Sequence
 
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.errors import ClothBenchError
-from cloth_bench_ros.studies.objective import evaluate, Trial
+from cloth_bench_ros.studies.objective import evaluate, OBJECTIVES, Trial
 from cloth_bench_ros.studies.rank_trials import (
     floor,
     prepare_trials,
     RankTrial,
     recordings_of,
+    reference_error,
 )
 
 DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
@@ -58,9 +59,10 @@ class RankSpec:
     rate_hz: float = 100.0
     rates: Sequence[float] = RATES
     grid: tuple[int, int] | None = None
-    metric: str = 'cd'  # the identification objective and the ranking metric
+    metric: str = 'cd'  # the ranking metric (core.metric_choice); cd/hd: the objective too
     max_frames: int | None = None
     fixed: dict = field(default_factory=dict)  # per engine: overrides on every entrant of it
+    fidelity: str = 'full'  # identification's: full, or prune (studies/identify_fidelity.py)
 
 
 def entrant_key(engine: str, overrides: dict) -> str:
@@ -109,8 +111,8 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
     bags = [t.bag for t in train]
     stamp = json.loads(json.dumps({
         'bags': bags, 'trials': spec.trials, 'sampler': spec.sampler, 'grid': spec.grid,
-        'metric': spec.metric, 'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
-        'fixed': {**spec.fixed.get(engine, {}), **overrides},
+        'metric': objective(spec), 'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
+        'fixed': {**spec.fixed.get(engine, {}), **overrides}, 'fidelity': spec.fidelity,
     }))
     done = out / SUMMARY_FILE
     if done.exists():
@@ -122,9 +124,9 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
             pass  # damaged: identify again (its journal keeps the finished trials)
     ident = IdentifySpec(
         engine, train[0].cloth, train[0].primitive, Path(bags[0]), out, spec.sampler,
-        spec.trials, spec.metric, (), 0, spec.rate_hz, spec.grid,
+        spec.trials, objective(spec), (), 0, spec.rate_hz, spec.grid,
         {**spec.fixed.get(engine, {}), **overrides}, validate_seeds=0,
-        max_frames=spec.max_frames, also=tuple(bags[1:]),
+        max_frames=spec.max_frames, also=tuple(bags[1:]), fidelity=spec.fidelity,
     )
     summary = identify(ident, scheduler, workers, progress).summary
     summary['rank_stamp'] = stamp
@@ -136,14 +138,20 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
           label: str) -> tuple[str, Trial]:
     # A timing cell runs the whole motion: step times of the settle phase alone say little.
     frames = None if label == 'timing' else spec.max_frames
+    every = label != 'timing' and spec.metric not in OBJECTIVES  # the faces: every metric
     key = (
-        f'{engine}|{sorted(params.items())}|{trial.bag}|{seed}|{rate:g}|{spec.metric}|{label}|'
-        f'{spec.grid}|{frames}'
+        f'{engine}|{sorted(params.items())}|{trial.bag}|{seed}|{rate:g}|{objective(spec)}|'
+        f'{label}|{spec.grid}|{frames}' + ('|all' if every else '')
     )
     return key, Trial(
         engine, trial.cloth, trial.primitive, trial.bag, tuple(sorted(params.items())),
-        spec.metric, seed, rate, spec.grid, frames, -1, label,
+        objective(spec), seed, rate, spec.grid, frames, -1, label, all_metrics=every,
     )
+
+
+def objective(spec: RankSpec) -> str:
+    """Return what identification minimises: the ranking metric if it is cd or hd, else cd."""
+    return spec.metric if spec.metric in OBJECTIVES else 'cd'
 
 
 def run_rank(
@@ -236,7 +244,8 @@ def run_rank(
                 'entrants': [entrant_key(e, o) for e, o in spec.entrants],
                 'trials': spec.trials, 'sampler': spec.sampler, 'seeds': spec.seeds,
                 'rate_hz': spec.rate_hz, 'rates': list(spec.rates), 'grid': spec.grid,
-                'metric': spec.metric, 'max_frames': spec.max_frames,
+                'metric': spec.metric, 'objective': objective(spec),
+                'max_frames': spec.max_frames, 'fidelity': spec.fidelity,
             },
             'trials': [t.as_dict() for t in trials],
             'groups': {
@@ -244,6 +253,7 @@ def run_rank(
                     'cloth': c, 'primitive': p, 'trials': [t.name for t in m],
                     'folds': [[m[i].name for i in held] for held in folds(len(m))],
                     'floor': floor(m, vertices),
+                    'reference_error': reference_error(m),
                 }
                 for (c, p), m in groups.items()
             },

@@ -30,6 +30,12 @@ from cloth_bench_ros.errors import ClothBenchError
 import numpy as np
 
 FLOOR_SEED = 0
+# The bundled synthetic references' own numerical error in the units of a score (CD, m), as
+# measured by `cloth-bench converge` (bags/README.md, "How converged the references are"): the
+# MuJoCo-made bags carry a resolution error of about 1-3 mm, the Newton VBD ones (2400 Hz) moved
+# the presets' scores by 0.4-7 mm from 2400 to 4800 Hz.
+REFERENCE_ERRORS = {'mujoco': 0.003, 'newton vbd': 0.007}
+REFERENCE_ERROR_SOURCE = 'bags/README.md, "How converged the references are"'
 
 
 class RankInputError(ClothBenchError, ValueError):
@@ -114,6 +120,31 @@ def prepare_trials(
         )
         say(f'{path}: one trial ({t.cloth} {t.primitive}, trial metadata)')
     return trials
+
+
+def reference_error(trials: Sequence[RankTrial]) -> dict[str, Any] | None:
+    """
+    Return the bundled reference all the trials were made by and its numerical error, or None.
+
+    Read from each bag's trial metadata (`source: synthetic: reference <name> ...`); None where any
+    trial is a recording, or the trials come from different references.
+    """
+    found = set()
+    for t in trials:
+        if t.source != 'metadata':
+            return None
+        with BagReader(Path(t.bag)) as reader:
+            source = reader.trial.source if reader.trial is not None else ''
+        prefix = 'synthetic: reference '
+        name = next((n for n in REFERENCE_ERRORS if source.startswith(prefix + n)), None)
+        if name is None:
+            return None
+        found.add(name)
+    if len(found) != 1:
+        return None
+    (name,) = found
+    return {'reference': name, 'error_m': REFERENCE_ERRORS[name],
+            'source': REFERENCE_ERROR_SOURCE}
 
 
 def _split_one(
