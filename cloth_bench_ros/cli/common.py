@@ -82,8 +82,10 @@ def add_option(parser: Any, name: str, flag: str | None = None, **overrides: Any
         kwargs['type'] = option(declared.parse, flag)
     if declared.metavar:
         kwargs['metavar'] = declared.metavar
+    if 'help' in overrides:  # another meaning; the unit, range and default stay the declared
+        overrides['help'] = '; '.join([overrides['help'], *declared.help_text().split('; ')[1:]])
     kwargs.update(overrides)
-    parser.add_argument(flag, **kwargs)
+    parser.add_argument(flag, **kwargs).declared = declared  # type: ignore[attr-defined]
 
 
 def scheduler(text: str) -> str:
