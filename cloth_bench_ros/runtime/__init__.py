@@ -47,6 +47,7 @@ if EMBEDDED or TYPE_CHECKING:  # the type checker reads the embedded runtime's A
         SetParameters,
         SetParametersAtomically,
     )
+    from cloth_bench_ros.runtime.parameters import FloatingPointRange, IntegerRange
     from cloth_bench_ros.runtime.messages import (
         Clock,
         DiagnosticArray,
@@ -69,6 +70,7 @@ else:
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion
     from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange
     from rcl_interfaces.msg import ParameterDescriptor, ParameterValue, SetParametersResult
     from rcl_interfaces.srv import (
         DescribeParameters,
@@ -190,10 +192,6 @@ is_user_error = is_rclpy_user_error
 
 def option_descriptor(option: Option) -> Any:
     """Return the ParameterDescriptor of a declared option: description (unit, range), range."""
-    if EMBEDDED:
-        from cloth_bench_ros.runtime.parameters import FloatingPointRange, IntegerRange
-    else:
-        from rcl_interfaces.msg import FloatingPointRange, IntegerRange
     descriptor = ParameterDescriptor(
         description=option.help_text(), dynamic_typing=option.type is float
     )
