@@ -90,7 +90,7 @@ def add_option(parser: Any, name: str, flag: str | None = None, **overrides: Any
 
 def scheduler(text: str) -> str:
     """Return a Dask scheduler address (tcp://127.0.0.1:8786)."""
-    from cloth_bench_ros.studies.executor import check_scheduler_address
+    from cloth_bench_ros.studies.dask_executor import check_scheduler_address
 
     try:
         return check_scheduler_address(text)

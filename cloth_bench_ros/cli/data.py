@@ -167,7 +167,7 @@ def cmd_converge(args: argparse.Namespace) -> int:
     """Run a reference's convergence study on the executor; print and save its table."""
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies import reference_convergence as rc
-    from cloth_bench_ros.studies.executor import open_client, run_tasks
+    from cloth_bench_ros.studies.dask_executor import open_client, run_tasks
 
     available = common.available_engines()
     for engine in args.score or []:

@@ -189,7 +189,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.run_report import result_table
-    from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
+    from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 
     engines = validation.unique(args.engine or ['mujoco'], '--engine')
     for name in engines:

@@ -15,6 +15,7 @@ from pathlib import Path
 import time
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core import realtime_process
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets
@@ -39,7 +40,6 @@ from cloth_bench_ros.runtime import (
     PointCloud2,
     PointField,
     PoseArray,
-    realtime,
     serialize_message,
     stamp_ns,
 )
@@ -159,7 +159,7 @@ class Simulator(Node):
             self.engine_name, len(self.engine.grid.vertices()), publish_serialises(self)
         )
         self.prepared: np.ndarray | None = self.warm_up()
-        self.realtime = realtime.apply(
+        self.realtime = realtime_process.apply(
             int(self.declare_parameter('cpu', -1).value),
             int(self.declare_parameter('realtime_priority', 0).value),
             bool(self.declare_parameter('freeze_gc', False).value),
@@ -219,7 +219,7 @@ class Simulator(Node):
         self.status_pub.publish(status)
         self.last_cloud = cloud
         if self.realtime.frozen:
-            realtime.collect_young()  # after the state went out: off this step's deadline
+            realtime_process.collect_young()  # after the state went out: off this step's deadline
         d = self.engine.divergence
         if d is not None and not self.reported_divergence:
             self.reported_divergence = True
@@ -236,7 +236,7 @@ class Simulator(Node):
 
     def close(self) -> None:
         self.engine.close()
-        realtime.release(self.realtime)
+        realtime_process.release(self.realtime)
 
 
 def main(args: list[str] | None = None) -> int:

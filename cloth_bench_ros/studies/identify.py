@@ -258,7 +258,7 @@ def run_sampler(
     client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool
 ) -> Any:
     """Ask and tell until the study holds `spec.trials` finished trials, a batch in flight."""
-    from cloth_bench_ros.studies.executor import worker_slots
+    from cloth_bench_ros.studies.dask_executor import worker_slots
     from distributed import as_completed
     from optuna.trial import TrialState
     from tqdm import tqdm
@@ -364,7 +364,7 @@ def identify(
     """Run the identification of `spec` and its validation; write the preset and its JSON."""
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.safe_io import check_output_dir
-    from cloth_bench_ros.studies.executor import open_client
+    from cloth_bench_ros.studies.dask_executor import open_client
     from cloth_bench_ros.studies.identify_output import validate, write_outputs
     from cloth_bench_ros.studies.results import append_row, ResultsLock
 

@@ -156,7 +156,7 @@ def run_rank(
     """Run the protocol (resumable) and return every number it produced (see module doc)."""
     from cloth_bench_ros.core.scene import ClothGrid
     from cloth_bench_ros.safe_io import check_output_dir
-    from cloth_bench_ros.studies.executor import open_client
+    from cloth_bench_ros.studies.dask_executor import open_client
     from cloth_bench_ros.studies.results import append_row, ResultsLock
     from distributed import as_completed
     from tqdm import tqdm
