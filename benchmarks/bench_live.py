@@ -30,7 +30,7 @@ import time
 
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
+from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 from cloth_bench_ros.validation import parse_grid
 
 GOAL = 1.05

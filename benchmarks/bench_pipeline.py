@@ -19,7 +19,7 @@ from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
+from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 
 GOAL_100HZ, GOAL_1KHZ = 1.10, 1.20
 

@@ -25,7 +25,7 @@ from cloth_bench_ros.core import metrics
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.studies import sweep
 from cloth_bench_ros.studies.cells import Cell
-from cloth_bench_ros.studies.pipeline import run_pipeline
+from cloth_bench_ros.studies.run_pipeline import run_pipeline
 import numpy as np
 
 GOAL = 1.05

@@ -12,8 +12,8 @@ project) gives the reference CDR.
 from dataclasses import dataclass, field
 import os
 
-from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
 from cloth_bench_ros.studies.processes import run_processes
+from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 from cyclonedds._clayer import ddspy_take
 from cyclonedds.core import InstanceState, SampleState, ViewState
 from cyclonedds.domain import DomainParticipant

@@ -18,6 +18,7 @@ import sys
 import threading
 
 from cloth_bench_ros.cli import main
+from cloth_bench_ros.core import realtime_process as realtime
 from cloth_bench_ros.core.hil_timing import check_bookkeeping, hil_figures, TargetTimeline
 from cloth_bench_ros.core.pointcloud2 import read_xyz
 from cloth_bench_ros.core.scene import ClothGrid
@@ -32,7 +33,6 @@ from cloth_bench_ros.runtime import (
     PointCloud2,
     Pose,
     PoseArray,
-    realtime,
     stamp_ns,
     Time,
 )
@@ -270,7 +270,7 @@ def test_a_polling_loop_leaves_sched_fifo_for_the_kernels_real_time_budget():
 
 def test_the_observer_yields_the_cpu():
     code = (
-        'import os; from cloth_bench_ros.runtime import realtime;'
+        'import os; from cloth_bench_ros.core import realtime_process as realtime;'
         ' print(realtime.lower_priority()); print(os.getpriority(os.PRIO_PROCESS, 0))'
     )
     out = subprocess.run(

@@ -127,7 +127,7 @@ def test_identification_recovers_known_parameters_with_both_samplers_and_resumes
 
 def test_validation_runs_again_when_more_trials_fitted_other_values(target, tmp_path):
     """A resumed identification validates the values it has now, never the last run's."""
-    from cloth_bench_ros.studies.executor import open_client
+    from cloth_bench_ros.studies.dask_executor import open_client
     from cloth_bench_ros.studies.identify_output import validate
     from cloth_bench_ros.studies.results import load_rows
 

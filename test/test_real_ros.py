@@ -44,10 +44,36 @@ def test_rclpy_is_real_in_the_tier():
     assert embedded == 'False' and 'site-packages' in path  # real rclpy, not the embedded runtime
 
 
+def test_declared_options_under_real_rclpy_take_an_integer_and_carry_their_range():
+    """`-p rate_hz:=1000` (an INTEGER under rcl) is 1000.0; the descriptor has the range."""
+    script = (
+        'import rclpy, cloth_bench_ros.runtime as r\n'
+        "rclpy.init(args=['p', '--ros-args', '-p', 'rate_hz:=1000'])\n"
+        "node = rclpy.create_node('probe')\n"
+        "rate = r.declare_option(node, 'rate_hz')\n"
+        "d = node.describe_parameter('rate_hz')\n"
+        "g = r.declare_option(node, 'grid_nx')\n"
+        "s = node.describe_parameter('grid_nx').integer_range[0]\n"
+        'f = d.floating_point_range[0]\n'
+        'print(rate, f.from_value, f.to_value, s.from_value, s.to_value, g)\n'
+        'print(d.description)\n'
+    )
+    out = subprocess.run(
+        in_namespace('-c', script), capture_output=True, text=True, env=ros_env(), timeout=120
+    )
+    assert out.returncode == 0, out.stderr
+    numbers, description = out.stdout.splitlines()[:2]
+    assert numbers.split() == ['1000.0', '1.0', '10000.0', '0', '201', '0']
+    assert description == 'simulator rate; range [1, 10000] Hz; default 100'
+
+
 @pytest.mark.parametrize(
     'ros_args, words',
     [
         (['-p', 'rate_hz:=fast'], 'parameter rate_hz'),
+        # rclpy's own range check (options.py puts the range in the descriptor), named by node
+        (['-p', 'rate_hz:=1000000000.0'], 'simulator: parameter rate_hz'),
+        (['-p', 'grid_nx:=-3', '-p', 'grid_nz:=8'], 'simulator: parameter grid_nx'),
         (['--params-file', '/nonexistent/params.yaml'], 'params file'),
         (['--log-level', 'bogus'], 'log level'),
     ],

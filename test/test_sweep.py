@@ -231,7 +231,7 @@ def _square_or_die(x: int) -> int:
 
 
 def test_a_task_that_kills_its_workers_is_retried_then_recorded_and_the_rest_finish():
-    from cloth_bench_ros.studies.executor import open_client, run_tasks
+    from cloth_bench_ros.studies.dask_executor import open_client, run_tasks
     import dask
 
     results, crashes = {}, {}

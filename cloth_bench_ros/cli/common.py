@@ -9,9 +9,10 @@ from pathlib import Path
 from typing import Any
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.trajectory import PRIMITIVES
-from cloth_bench_ros.engines.presets import CLOTHS as CLOTH_CHOICES
 from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.options import OPTIONS
+
+CLOTH_CHOICES = OPTIONS['cloth'].choices
 
 
 class UserError(ClothBenchError):
@@ -55,8 +56,8 @@ def factor(name: str) -> Callable[[str], float]:
     return number(lambda v, n: validation.number(v, n, 1.0, None, low_open=True), name)
 
 
-rate = option(lambda t, n: validation.rate_hz(validation.parse_number(t, n), n), '--rate')
-seed = option(lambda t, n: validation.seed(validation.parse_integer(t, n), n), '--seed')
+rate = option(OPTIONS['rate_hz'].parse, '--rate')
+seed = option(OPTIONS['seed'].parse, '--seed')
 frame = option(
     lambda t, n: validation.frame_index(validation.parse_integer(t, n), n),
     '--change-of-phase-frame',
@@ -66,9 +67,30 @@ workers = integer('--workers', 1)
 non_negative = number(validation.non_negative, 'value')
 
 
+def add_option(parser: Any, name: str, flag: str | None = None, **overrides: Any) -> None:
+    """Add the flag of options.OPTIONS[name]: its type, check, default, choices and help."""
+    declared = OPTIONS[name]
+    flag = flag or declared.flag
+    assert flag, f'{name} has no flag'
+    kwargs: dict[str, Any] = {
+        'default': declared.check(declared.default),
+        'help': declared.help_text(),
+    }
+    if declared.choices:
+        kwargs['choices'] = declared.choices
+    else:
+        kwargs['type'] = option(declared.parse, flag)
+    if declared.metavar:
+        kwargs['metavar'] = declared.metavar
+    if 'help' in overrides:  # another meaning; the unit, range and default stay the declared
+        overrides['help'] = '; '.join([overrides['help'], *declared.help_text().split('; ')[1:]])
+    kwargs.update(overrides)
+    parser.add_argument(flag, **kwargs).declared = declared  # type: ignore[attr-defined]
+
+
 def scheduler(text: str) -> str:
     """Return a Dask scheduler address (tcp://127.0.0.1:8786)."""
-    from cloth_bench_ros.studies.executor import check_scheduler_address
+    from cloth_bench_ros.studies.dask_executor import check_scheduler_address
 
     try:
         return check_scheduler_address(text)
@@ -79,11 +101,9 @@ def scheduler(text: str) -> str:
 def scene_options(primitive: bool = True) -> argparse.ArgumentParser:
     """Parent parser: --cloth and --primitive (one trial's cloth and task)."""
     parent = argparse.ArgumentParser(add_help=False)
-    parent.add_argument('--cloth', default='towel', choices=CLOTH_CHOICES, help='default towel')
+    add_option(parent, 'cloth')
     if primitive:
-        parent.add_argument(
-            '--primitive', default='dynamic', choices=PRIMITIVES, help='default dynamic'
-        )
+        add_option(parent, 'primitive')
     return parent
 
 

@@ -31,13 +31,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
             ' writing'
         ),
     )
-    imp.add_argument(
-        '--voxel',
-        type=common.number(validation.non_negative, '--voxel'),
-        default=0.0,
-        metavar='M',
-        help='with --clean: voxel size (default off)',
-    )
+    common.add_option(imp, 'voxel', help='with --clean: voxel size (0: off)')
     imp.add_argument('--quiet', action='store_true', help='no progress bar')
     imp.set_defaults(func=cmd_import)
 
@@ -47,9 +41,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help='make a synthetic reference bag (reference simulation seen by a virtual Kinect)',
     )
     synth.add_argument('--out', help='bag directory (default <cloth>_<primitive>)')
-    synth.add_argument(
-        '--seed', type=common.seed, default=0, help='sensor noise and reference seed (default 0)'
-    )
+    common.add_option(synth, 'seed', help='sensor noise and reference seed')
     synth.add_argument(
         '--reference',
         default='mujoco',
@@ -178,7 +170,7 @@ def cmd_converge(args: argparse.Namespace) -> int:
     """Run a reference's convergence study on the executor; print and save its table."""
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies import reference_convergence as rc
-    from cloth_bench_ros.studies.executor import open_client, run_tasks
+    from cloth_bench_ros.studies.dask_executor import open_client, run_tasks
 
     available = common.available_engines()
     for engine in args.score or []:

@@ -51,7 +51,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         ),
     )
     hil.add_argument('--bag', help='rosbag2 bag (default: the bundled one)')
-    hil.add_argument('--seed', type=common.seed, default=0)
+    common.add_option(hil, 'seed')
     hil.add_argument(
         '--grid',
         type=common.grid,

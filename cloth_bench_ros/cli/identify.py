@@ -66,12 +66,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     ident.add_argument(
         '--params', help="comma-separated parameters to fit (default: the engine's identified set)"
     )
-    ident.add_argument(
-        '--seed', type=common.seed, default=0, help='seed of every trial (default 0)'
-    )
-    ident.add_argument(
-        '--rate', type=common.rate, default=100.0, help='simulator rate in Hz (default 100)'
-    )
+    common.add_option(ident, 'seed', help='seed of every trial')
+    common.add_option(ident, 'rate_hz')
     ident.add_argument('--grid', type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
     common.engine_override_option(ident, 'fixed override, not fitted')
     ident.add_argument(

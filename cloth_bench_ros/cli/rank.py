@@ -55,8 +55,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                       help='identification: full (default), or prune: multi-fidelity, as identify')
     rank.add_argument('--seeds', type=common.integer('--seeds', 1), default=3,
                       help='held-out seeds per held-out trial (default 3)')
-    rank.add_argument('--rate', type=common.rate, default=100.0,
-                      help='simulator rate of identification and scoring (default 100 Hz)')
+    common.add_option(rank, 'rate_hz', help='simulator rate of identification and scoring')
     rank.add_argument('--rates', type=_rates, default=[10.0, 100.0, 1000.0],
                       help='rates whose step times decide the recommendation '
                       '(default 10,100,1000)')

@@ -10,7 +10,7 @@ import time
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.core.trajectory import PRIMITIVES
+from cloth_bench_ros.options import OPTIONS, REPLAY_OPTIONS
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -23,13 +23,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     run.add_argument(
         '--engine', action='append', help='engine to run (repeat for several; default mujoco)'
     )
-    run.add_argument(
-        '--rate', type=common.rate, default=100.0, help='simulator rate in Hz (default 100)'
-    )
+    common.add_option(run, 'rate_hz')
     run.add_argument('--bag', help='rosbag2 bag to score against (default: the bundled one)')
-    run.add_argument(
-        '--seed', type=common.seed, default=0, help='perturbs the initial cloth (default 0)'
-    )
+    common.add_option(run, 'seed')
     run.add_argument('--pacing', default='lockstep', choices=('lockstep', 'realtime'))
     run.add_argument(
         '--processes',
@@ -41,83 +37,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help='report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)',
     )
     scoring = run.add_argument_group('scoring your own recording (see docs/own-recording.md)')
-    scoring.add_argument(
-        '--topic', help="PointCloud2 topic to score (default: the project's, else the only one)"
-    )
-    scoring.add_argument(
-        '--start-time',
-        metavar='S',
-        help=(
-            'start of the motion in bag time: an absolute stamp '
-            '(>= 1e9 s) or seconds from the first message (default: targets topic, else automatic)'
-        ),
-    )
-    scoring.add_argument(
-        '--targets-topic',
-        help='recorded PoseArray gripper targets whose first motion is the start',
-    )
-    scoring.add_argument(
-        '--change-of-phase-frame',
-        type=common.frame,
-        metavar='N',
-        help="last frame of the dynamic window (default: the bag's metadata, else none)",
-    )
+    for name in REPLAY_OPTIONS:
+        common.add_option(scoring, name)
     scoring.add_argument(
         '--transform', metavar='FILE', help='4x4 matrix into world for every cloud, instead of tf'
-    )
-    scoring.add_argument(
-        '--clean',
-        default='auto',
-        choices=('auto', 'on', 'off'),
-        help=(
-            "crop, table plane, outliers (default auto: on for bags without the project's"
-            ' metadata)'
-        ),
-    )
-    scoring.add_argument(
-        '--voxel',
-        type=common.number(validation.non_negative, '--voxel'),
-        default=0.0,
-        metavar='M',
-        help='voxel down-sampling size (default off)',
-    )
-    scoring.add_argument(
-        '--table-plane',
-        default='auto',
-        choices=('auto', 'remove', 'keep'),
-        help=(
-            'remove the table plane; it also removes cloth lying flat on the table '
-            '(default auto: remove for dynamic, keep for quasi_static)'
-        ),
-    )
-    scoring.add_argument(
-        '--align-window',
-        type=common.number(validation.positive, '--align-window'),
-        default=1.0,
-        metavar='S',
-        help='seconds of motion the automatic alignment compares (default 1)',
-    )
-    scoring.add_argument(
-        '--align-step',
-        type=common.number(validation.positive, '--align-step'),
-        default=1.0 / 30.0,
-        metavar='S',
-        help='coarse step of the automatic alignment (default 1/30 s; refined 8x)',
-    )
-    scoring.add_argument(
-        '--trial',
-        type=common.integer('--trial', 1),
-        metavar='N',
-        help='the repetition to score in a recording of several (default: the first usable)',
-    )
-    scoring.add_argument(
-        '--align',
-        default='simulation',
-        choices=('simulation', 'onset'),
-        help=(
-            'start of a cloud-only recording: simulation (search against the first engine) or '
-            'onset (fitted to the task in the clouds, no engine); default simulation'
-        ),
     )
     scoring.add_argument(
         '--record-comparison', metavar='DIR', help='write a comparison bag (Foxglove/RViz)'
@@ -138,8 +61,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     run.set_defaults(func=cmd_run)
 
     traj = sub.add_parser('trajectory', help='print the quintic part of a primitive as CSV')
-    traj.add_argument('--primitive', default='dynamic', choices=PRIMITIVES)
-    traj.add_argument('--rate', type=common.rate, default=100.0)
+    common.add_option(traj, 'primitive')
+    common.add_option(traj, 'rate_hz')
     traj.set_defaults(func=cmd_trajectory)
 
     engines = sub.add_parser('engines', help='list known engines, their availability and version')
@@ -153,19 +76,11 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def _replay_params(args: argparse.Namespace) -> dict:
     """Return the recorder parameters for bags that do not say everything (plain recordings)."""
-    params = {
-        'topic': args.topic or '',
-        'start_time': args.start_time or '',
-        'targets_topic': args.targets_topic or '',
-        'clean': args.clean,
-        'voxel': float(args.voxel),
-        'table_plane': args.table_plane,
-        'align_window': float(args.align_window),
-        'align_step': float(args.align_step),
-        'align': args.align,
-    }
-    if args.trial:
-        params['trial'] = int(args.trial)
+    params = {}
+    for name in REPLAY_OPTIONS:
+        value = getattr(args, name)
+        params[name] = OPTIONS[name].default if value is None else value
+    params.pop('change_of_phase_frame')  # passed to every node by the pipeline
     if args.transform:
         params['transform'] = [float(v) for v in common.read_transform(args.transform).ravel()]
     return params
@@ -274,7 +189,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.run_report import result_table
-    from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
+    from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 
     engines = validation.unique(args.engine or ['mujoco'], '--engine')
     for name in engines:

@@ -134,12 +134,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
             '(default: stress.jsonl next to the results, if any)'
         ),
     )
-    report.add_argument(
-        '--rate',
-        type=common.rate,
-        default=100.0,
-        help='rate of the Table III layout (default 100 Hz)',
-    )
+    common.add_option(report, 'rate_hz', help='rate of the Table III layout')
     report.add_argument(
         '--fig5-cloth',
         default='towel',
@@ -173,12 +168,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         parents=[executor],
         help='score every engine against both synthetic references',
     )
-    xref.add_argument(
-        '--cloth',
-        default='towel',
-        choices=common.CLOTH_CHOICES,
-        help='default towel; needs its <cloth>_<task>_newton_vbd bags',
-    )
+    common.add_option(xref, 'cloth', help='the cloth; needs its <cloth>_<task>_newton_vbd bags')
     xref.add_argument(
         '--primitive', action='append', choices=PRIMITIVES, help='task (repeatable; default both)'
     )
@@ -194,9 +184,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         default=1,
         help='first seed (default 1: identifications run on seed 0, so every seed is held out)',
     )
-    xref.add_argument(
-        '--rate', type=common.rate, default=100.0, help='simulator rate in Hz (default 100)'
-    )
+    common.add_option(xref, 'rate_hz')
     xref.add_argument(
         '--output',
         default='results/cross_reference',

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 from cloth_bench_ros.core import scene
+from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
 WORKSPACE_MARGIN = 0.10  # m around the reach of the cloth
@@ -27,7 +28,7 @@ class CleaningConfig:
     table_distance: float = 0.01  # m: points this close to the plane belong to it
     sor_neighbors: int = 20
     sor_std_ratio: float = 3.0  # gentle: a cloud cleaned once already keeps its edges
-    voxel: float = 0.0  # m; 0: no down-sampling
+    voxel: float = OPTIONS['voxel'].default  # m; 0: no down-sampling
 
 
 @dataclass
@@ -66,7 +67,8 @@ def workspace_box(
 
 
 def scene_cleaning(
-    primitives: tuple[str, ...] = ('dynamic', 'quasi_static'), voxel: float = 0.0
+    primitives: tuple[str, ...] = ('dynamic', 'quasi_static'),
+    voxel: float = OPTIONS['voxel'].default,
 ) -> CleaningConfig:
     """Return the cleaning for the benchmark scene: the box of the primitives' gripper paths."""
     from cloth_bench_ros.core.trajectory import full_targets

@@ -16,6 +16,7 @@ from decimal import Decimal, InvalidOperation
 from cloth_bench_ros.core.metrics import RealCloud
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
 EPOCH_THRESHOLD_S = (
@@ -44,9 +45,9 @@ class StartTime:
 class SearchSettings:
     """The automatic search: the window compared and the grid (tests use a reduced one)."""
 
-    window: float = 1.0  # s of motion compared
+    window: float = OPTIONS['align_window'].default  # s of motion compared
     pre: float = 0.5  # s of rest before the motion compared
-    coarse_step: float = 1.0 / 30.0  # s
+    coarse_step: float = OPTIONS['align_step'].default  # s
     fine_steps: int = 8  # the fine step is coarse_step / fine_steps
     min_coverage: float = 0.6  # fraction of the window's frames a candidate must have
 

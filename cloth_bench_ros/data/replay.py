@@ -24,33 +24,38 @@ from cloth_bench_ros.data.messages import POSE_ARRAY
 from cloth_bench_ros.data.tf_buffer import apply, TF_MESSAGE, TF_TOPICS, TfBuffer, TransformError
 from cloth_bench_ros.data.trial import TARGETS_TOPIC, TrialInfo
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
 WORLD = 'world'
-CLEAN_MODES = ('auto', 'on', 'off')
-TABLE_MODES = ('auto', 'remove', 'keep')
+CLEAN_MODES = OPTIONS['clean'].choices
+TABLE_MODES = OPTIONS['table_plane'].choices
 
 
 @dataclass(frozen=True)
 class ReplayOptions:
     """What the bag does not say, and how to treat it (CLI options / recorder parameters)."""
 
-    cloth: str = 'towel'
-    primitive: str = 'dynamic'
+    cloth: str = OPTIONS['cloth'].default
+    primitive: str = OPTIONS['primitive'].default
     change_of_phase_frame: int | None = None
-    topic: str = ''  # "" : the project's cloud topic, else the only PointCloud2 topic
-    start_time: str = ''  # "" : targets topic, bag stamps (project bags) or automatic
-    targets_topic: str = ''  # "" : TARGETS_TOPIC when the bag has it
+    # "": the project's cloud topic, else the only PointCloud2 topic
+    topic: str = OPTIONS['topic'].default
+    # "": targets topic, bag stamps (project bags) or automatic
+    start_time: str = OPTIONS['start_time'].default
+    targets_topic: str = OPTIONS['targets_topic'].default  # "": TARGETS_TOPIC when the bag has it
     transform: tuple | None = None  # 16 numbers, row-major: replaces tf for every cloud
-    clean: str = 'auto'  # auto: on for bags without project metadata
-    voxel: float = 0.0
+    clean: str = OPTIONS['clean'].default  # auto: on for bags without project metadata
+    voxel: float = OPTIONS['voxel'].default
     # remove, keep, or auto: remove for dynamic (scored before contact), keep for quasi_static
-    table_plane: str = 'auto'
-    rate_hz: float = 100.0
+    table_plane: str = OPTIONS['table_plane'].default
+    rate_hz: float = OPTIONS['rate_hz'].default
     align_engine: str = 'mujoco'
     search: alignment.SearchSettings = alignment.SearchSettings()
-    trial: int = 0  # the repetition to score (1-based); 0: the only one, else the first usable
-    align: str = 'simulation'  # a cloud-only start: 'simulation' (align_engine) or 'onset'
+    # the repetition to score (1-based); 0: the only one, else the first usable
+    trial: int = OPTIONS['trial'].default
+    # a cloud-only start: 'simulation' (align_engine) or 'onset'
+    align: str = OPTIONS['align'].default
 
 
 @dataclass

@@ -19,10 +19,10 @@ from pathlib import Path
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.trajectory import PRIMITIVES
 from cloth_bench_ros.engines.base import EngineError
+from cloth_bench_ros.options import CLOTHS  # noqa: F401  (re-exported)
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.safe_io import load_yaml_file, UnsafeInputError
 
-CLOTHS = ('towel', 'chequered', 'linen')
 REQUIRED_KEYS = ('engine', 'engine_version', 'provenance', 'presets')
 MAX_PRESET_BYTES = 1024 * 1024
 

@@ -7,8 +7,9 @@ import sys
 import threading
 from typing import Callable, Iterable, Sequence
 
-from cloth_bench_ros.errors import is_user_error, one_line
+from cloth_bench_ros.errors import InputError, is_user_error, one_line
 from cloth_bench_ros.runtime import (
+    declare_option,
     EMBEDDED,
     rclpy,
     SetParametersResult,
@@ -82,6 +83,27 @@ def parameters_fixed_at_start(node) -> None:
         )
 
     node.add_on_set_parameters_callback(refuse)
+
+
+def node_grid(node) -> tuple[int, int]:
+    """
+    Declare grid_nx and grid_nz and return them: (0, 0) keeps the engine's default, else 2+ each.
+
+    The one grid check of every node (simulator, recorder, evaluator): each error names the node.
+    """
+    nx, nz = declare_option(node, 'grid_nx'), declare_option(node, 'grid_nz')
+    for name, side in (('grid_nx', nx), ('grid_nz', nz)):
+        if side == 1:
+            raise InputError(
+                f'{node.get_name()}: parameter {name}: 1 vertex per side is no cloth (0 keeps the '
+                "engine's default, else >= 2)"
+            )
+    if (nx == 0) != (nz == 0):
+        raise InputError(
+            f'{node.get_name()}: parameters grid_nx and grid_nz: set both or neither '
+            f'(got {nx} and {nz})'
+        )
+    return nx, nz
 
 
 def node_keys(infos: Iterable) -> set[tuple[str, str]]:

@@ -20,6 +20,7 @@ from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data.trial import trial_from_message
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
+    node_grid,
     parameters_fixed_at_start,
     publishers_matched,
     replay_stamps,
@@ -29,6 +30,7 @@ from cloth_bench_ros.nodes.comparison import write_comparison
 from cloth_bench_ros.nodes.error_topics import declare_live_parameters, ErrorTopics
 from cloth_bench_ros.runtime import (
     declare_float,
+    declare_option,
     DiagnosticArray,
     DiagnosticStatus,
     KeyValue,
@@ -53,48 +55,37 @@ class Evaluator(Node):
         super().__init__('evaluator', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
         parameters_fixed_at_start(self)
         self.declare_parameter('engines', ['mujoco'])
-        self.primitive = parse_primitive(self.declare_parameter('primitive', 'dynamic').value)
-        declare_float(self, 'rate_hz', 100.0)
+        self.primitive = parse_primitive(declare_option(self, 'primitive'))
+        rate_hz = declare_option(self, 'rate_hz')
         declare_float(self, 'time_offset', SETTLE_DURATION)
-        self.declare_parameter('change_of_phase_frame', -1)
+        cut = declare_option(self, 'change_of_phase_frame')
         self.output_dir = self.declare_parameter('output_dir', '').value
         self.comparison_bag = self.declare_parameter('record_comparison', '').value
         self.declare_parameter('comparison_figures', False)
-        cloth = self.declare_parameter('cloth', 'towel').value
-        self.declare_parameter('seed', 0)
-        self.declare_parameter('grid_nx', 0)  # the simulators' grid (0: the default), whose
-        self.declare_parameter('grid_nz', 0)  # triangles the surface metrics are computed on
+        cloth = declare_option(self, 'cloth')
+        seed = declare_option(self, 'seed')
+        # the simulators' grid (0: the default), whose triangles the surface metrics are on
+        nx, nz = node_grid(self)
         # The engines' devices, comma-separated in the order of `engines` ('' : not recorded).
         devices = str(self.declare_parameter('devices', '').value)
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,
             {
-                'rate_hz': validation.rate_hz,
                 'time_offset': validation.time_offset,
-                'seed': validation.seed,
                 'engines': validation.unique,
                 'comparison_figures': validation.boolean,
-                'change_of_phase_frame': lambda v, n: validation.frame_index(v, n, unset=-1),
-                'grid_nx': lambda v, n: validation.integer(v, n, 0, validation.MAX_GRID_SIDE),
-                'grid_nz': lambda v, n: validation.integer(v, n, 0, validation.MAX_GRID_SIDE),
             },
         )
-        nx, nz = p['grid_nx'], p['grid_nz']
         grid = ClothGrid(nx, nz) if nx and nz else ClothGrid()
-        self.engines, rate_hz, offset, cut = (
-            p['engines'],
-            p['rate_hz'],
-            p['time_offset'],
-            p['change_of_phase_frame'],
-        )
+        self.engines, offset = p['engines'], p['time_offset']
         self.comparison_figures = p['comparison_figures']
         self.run_info = {
             'primitive': self.primitive.value,
             'rate_hz': rate_hz,
             'engines': self.engines,
             'cloth': cloth,
-            'seed': p['seed'],
+            'seed': seed,
         }
         if devices:
             names = [validation.device(d, 'parameter devices') for d in devices.split(',')]

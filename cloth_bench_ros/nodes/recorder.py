@@ -33,13 +33,16 @@ from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
+    node_grid,
     parameters_fixed_at_start,
     REPLAY_STATUS_NAME,
     run_node,
 )
+from cloth_bench_ros.options import REPLAY_OPTIONS
 from cloth_bench_ros.runtime import (
     Clock,
     declare_float,
+    declare_option,
     DiagnosticArray,
     DiagnosticStatus,
     Header,
@@ -114,11 +117,7 @@ class Recorder(Node):
             raise InputError(f'recorder: unknown clock {clock!r} (valid: sim, wall)')
         self.bag = BagReader(path)
         options = self.replay_options()
-        self.declare_parameter('grid_nx', 0)  # 0: the preset's grid
-        self.declare_parameter('grid_nz', 0)
-        side = partial(validation.integer, low=0, high=validation.MAX_GRID_SIDE)
-        g = validation.node_parameters(self, {'grid_nx': side, 'grid_nz': side})
-        nx, nz = g['grid_nx'], g['grid_nz']
+        nx, nz = node_grid(self)  # 0, 0: the preset's grid
         try:
             self.plan = plan_replay(
                 self.bag, options, partial(self.reference_motion, options, nx, nz)
@@ -152,48 +151,29 @@ class Recorder(Node):
 
     def replay_options(self) -> ReplayOptions:
         """Return what the bag does not say, from the node's parameters."""
-        self.declare_parameter('change_of_phase_frame', -1)
-        self.declare_parameter('trial', 0)  # the repetition to score; 0: the first usable
         transform = list(self.declare_parameter('transform', [0.0]).value)
         if transform != [0.0] and len(transform) != 16:
             raise InputError(
                 f'recorder: transform needs 16 numbers (a 4x4 matrix), got {len(transform)}'
             )
-        for name, default in (
-            ('align_window', 1.0),
-            ('align_step', 1.0 / 30.0),
-            ('voxel', 0.0),
-            ('rate_hz', 100.0),
-        ):
-            declare_float(self, name, default)
-        p = validation.node_parameters(
-            self,
-            {
-                'change_of_phase_frame': lambda v, n: validation.frame_index(v, n, unset=-1),
-                'trial': lambda v, n: validation.integer(v, n, 0),
-                'align_window': validation.positive,
-                'align_step': validation.positive,
-                'voxel': validation.non_negative,
-                'rate_hz': validation.rate_hz,
-            },
-        )
+        p = {name: declare_option(self, name) for name in (*REPLAY_OPTIONS, 'rate_hz')}
         search = SearchSettings(window=p['align_window'], coarse_step=p['align_step'])
         return ReplayOptions(
-            cloth=self.declare_parameter('cloth', 'towel').value,
-            primitive=self.declare_parameter('primitive', 'dynamic').value,
+            cloth=declare_option(self, 'cloth'),
+            primitive=declare_option(self, 'primitive'),
             change_of_phase_frame=p['change_of_phase_frame'],
-            topic=self.declare_parameter('topic', '').value,
-            start_time=self.declare_parameter('start_time', '').value,
-            targets_topic=self.declare_parameter('targets_topic', '').value,
+            topic=p['topic'],
+            start_time=p['start_time'],
+            targets_topic=p['targets_topic'],
             transform=tuple(transform) if len(transform) == 16 else None,
-            clean=self.declare_parameter('clean', 'auto').value,
+            clean=p['clean'],
             voxel=p['voxel'],
-            table_plane=self.declare_parameter('table_plane', 'auto').value,
+            table_plane=p['table_plane'],
             rate_hz=p['rate_hz'],
             align_engine=self.declare_parameter('align_engine', 'mujoco').value,
             search=search,
             trial=p['trial'],
-            align=self.declare_parameter('align', 'simulation').value,
+            align=p['align'],
         )
 
     @staticmethod

@@ -15,6 +15,7 @@ from pathlib import Path
 import time
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core import realtime_process
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets
@@ -22,13 +23,14 @@ from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
+    node_grid,
     parameters_fixed_at_start,
     publish_serialises,
     run_node,
 )
 from cloth_bench_ros.nodes.message_pool import MessagePool
 from cloth_bench_ros.runtime import (
-    declare_float,
+    declare_option,
     DiagnosticArray,
     DiagnosticStatus,
     Header,
@@ -38,7 +40,6 @@ from cloth_bench_ros.runtime import (
     PointCloud2,
     PointField,
     PoseArray,
-    realtime,
     serialize_message,
     stamp_ns,
 )
@@ -101,16 +102,6 @@ class StateMessages:
         return cloud, status
 
 
-def _grid_side(value: object, name: str) -> int:
-    """0 (the engine's default) or 2..MAX_GRID_SIDE vertices."""
-    n = validation.integer(value, name, 0, validation.MAX_GRID_SIDE)
-    if n == 1:
-        raise validation.InputError(
-            f"{name}: 1 vertex per side is no cloth (0 keeps the engine's default, else >= 2)"
-        )
-    return n
-
-
 class Simulator(Node):
     """One engine: reset on the first target, one step per further target."""
 
@@ -122,33 +113,23 @@ class Simulator(Node):
         )
         parameters_fixed_at_start(self)
         self.engine_name = self.declare_parameter('engine', 'mujoco').value
-        rate_hz = declare_float(self, 'rate_hz', 100.0)
-        cloth = self.declare_parameter('cloth', 'towel').value
-        primitive = self.declare_parameter('primitive', 'dynamic').value
-        self.seed = int(self.declare_parameter('seed', 0).value)
+        rate_hz = declare_option(self, 'rate_hz')
+        cloth = declare_option(self, 'cloth')
+        primitive = declare_option(self, 'primitive')
+        self.seed = declare_option(self, 'seed')
         self.declare_parameter('engine_params', '{}')
-        self.declare_parameter('grid_nx', 0)
-        self.declare_parameter('grid_nz', 0)
+        nx, nz = node_grid(self)
         presets_dir = self.declare_parameter('presets_dir', '').value
         self.declare_parameter('device', '')  # '' : engine_params' device, else the engine's
         # Every value through the one validation layer; an error names the node and parameter.
         checked = validation.node_parameters(
             self,
             {
-                'rate_hz': validation.rate_hz,
-                'seed': validation.seed,
                 'engine_params': validation.parameter_mapping,
-                'grid_nx': _grid_side,
-                'grid_nz': _grid_side,
                 'device': lambda v, n: validation.device(v, n) if v != '' else '',
             },
         )
-        overrides, nx, nz = checked['engine_params'], checked['grid_nx'], checked['grid_nz']
-        if (nx == 0) != (nz == 0):
-            raise validation.InputError(
-                f'{self.get_name()}: parameters grid_nx and grid_nz: set both or neither '
-                f'(got {nx} and {nz})'
-            )
+        overrides = checked['engine_params']
         grid = ClothGrid(nx, nz) if nx and nz else None
         preset = load_preset(
             self.engine_name, cloth, primitive, Path(presets_dir) if presets_dir else None
@@ -182,7 +163,7 @@ class Simulator(Node):
             self.engine_name, len(self.engine.grid.vertices()), publish_serialises(self)
         )
         self.prepared: np.ndarray | None = self.warm_up()
-        self.realtime = realtime.apply(
+        self.realtime = realtime_process.apply(
             int(self.declare_parameter('cpu', -1).value),
             int(self.declare_parameter('realtime_priority', 0).value),
             bool(self.declare_parameter('freeze_gc', False).value),
@@ -242,7 +223,7 @@ class Simulator(Node):
         self.status_pub.publish(status)
         self.last_cloud = cloud
         if self.realtime.frozen:
-            realtime.collect_young()  # after the state went out: off this step's deadline
+            realtime_process.collect_young()  # after the state went out: off this step's deadline
         d = self.engine.divergence
         if d is not None and not self.reported_divergence:
             self.reported_divergence = True
@@ -259,7 +240,7 @@ class Simulator(Node):
 
     def close(self) -> None:
         self.engine.close()
-        realtime.release(self.realtime)
+        realtime_process.release(self.realtime)
 
 
 def main(args: list[str] | None = None) -> int:

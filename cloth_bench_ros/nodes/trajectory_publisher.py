@@ -24,6 +24,7 @@ from cloth_bench_ros.nodes.message_pool import MessagePool
 from cloth_bench_ros.runtime import (
     Clock,
     declare_float,
+    declare_option,
     Header,
     make_qos,
     Node,
@@ -53,8 +54,8 @@ class TrajectoryPublisher(Node):
             'trajectory_publisher', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs
         )
         parameters_fixed_at_start(self)
-        primitive = parse_primitive(self.declare_parameter('primitive', 'dynamic').value)
-        declare_float(self, 'rate_hz', 100.0)
+        primitive = parse_primitive(declare_option(self, 'primitive'))
+        rate_hz = declare_option(self, 'rate_hz')
         self.pacing = self.declare_parameter('pacing', 'lockstep').value
         self.declare_parameter('engines', ['mujoco'])
         self.declare_parameter('wait_for_recorder', True)
@@ -63,13 +64,12 @@ class TrajectoryPublisher(Node):
         p = validation.node_parameters(
             self,
             {
-                'rate_hz': validation.rate_hz,
                 'engines': validation.unique,
                 'wait_for_recorder': validation.boolean,
                 'wait_for_evaluator': validation.boolean,
             },
         )
-        self.engines, rate_hz = p['engines'], p['rate_hz']
+        self.engines = p['engines']
         self.wait_for_recorder, self.wait_for_evaluator = (
             p['wait_for_recorder'],
             p['wait_for_evaluator'],

@@ -19,6 +19,7 @@ import re
 from typing import Sequence
 
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.report import figures
 from cloth_bench_ros.report.blocks import (
     Block,
@@ -308,7 +309,7 @@ def render_report(
     results_dir: Path,
     out_dir: Path,
     stress_rows: Sequence[dict] | None = None,
-    wanted_rate: float = 100.0,
+    wanted_rate: float = OPTIONS['rate_hz'].default,
     fig5_cloth: str = 'towel',
     tol_rel: float = 0.05,
     tol_abs: float = 0.002,
@@ -360,7 +361,7 @@ def report_directory(
     results: Path,
     out: Path,
     stress: Path | None = None,
-    wanted_rate: float = 100.0,
+    wanted_rate: float = OPTIONS['rate_hz'].default,
     fig5_cloth: str = 'towel',
     tol_rel: float = 0.05,
     tol_abs: float = 0.002,

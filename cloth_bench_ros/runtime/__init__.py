@@ -9,9 +9,10 @@ Set CLOTH_BENCH_EMBEDDED=1 to use the embedded runtime even where rclpy is insta
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING
+from typing import Any, TYPE_CHECKING
 
 from cloth_bench_ros.errors import InputError, is_rclpy_user_error, RCLPY_USER_ERRORS
+from cloth_bench_ros.options import Option, OPTIONS
 
 EMBEDDED = bool(os.environ.get('CLOTH_BENCH_EMBEDDED'))
 if not EMBEDDED and not TYPE_CHECKING:
@@ -46,6 +47,7 @@ if EMBEDDED or TYPE_CHECKING:  # the type checker reads the embedded runtime's A
         SetParameters,
         SetParametersAtomically,
     )
+    from cloth_bench_ros.runtime.parameters import FloatingPointRange, IntegerRange
     from cloth_bench_ros.runtime.messages import (
         Clock,
         DiagnosticArray,
@@ -68,6 +70,7 @@ else:
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion
     from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange
     from rcl_interfaces.msg import ParameterDescriptor, ParameterValue, SetParametersResult
     from rcl_interfaces.srv import (
         DescribeParameters,
@@ -185,6 +188,46 @@ def make_qos(depth: int, latched: bool = False, keep_all: bool = False) -> QoSPr
 # errors.RCLPY_USER_ERRORS, under the names rclpy users know.
 USER_ERROR_CLASSES = RCLPY_USER_ERRORS
 is_user_error = is_rclpy_user_error
+
+
+def option_descriptor(option: Option) -> Any:
+    """Return the ParameterDescriptor of a declared option: description (unit, range), range."""
+    descriptor = ParameterDescriptor(
+        description=option.help_text(), dynamic_typing=option.type is float
+    )
+    if option.low is not None and option.high is not None and not option.low_open:
+        if option.type is int:
+            descriptor.integer_range = [
+                IntegerRange(from_value=int(option.low), to_value=int(option.high), step=0)
+            ]
+        elif option.type is float:
+            descriptor.floating_point_range = [
+                FloatingPointRange(
+                    from_value=float(option.low), to_value=float(option.high), step=0.0
+                )
+            ]
+    return descriptor
+
+
+def declare_option(node, name: str) -> Any:
+    """
+    Declare options.OPTIONS[name] on `node` and return its value, checked by the declaration.
+
+    A float option takes an integer too (`-p rate_hz:=1000`, see declare_float). A bad value is
+    one InputError naming the node and the parameter.
+    """
+    option = OPTIONS[name]
+    label = f'{node.get_name()}: parameter {name}'
+    default = float(option.default) if option.type is float else option.default
+    try:
+        value = node.declare_parameter(name, default, option_descriptor(option)).value
+    except Exception as exc:  # rclpy's own range check refused it
+        if not is_rclpy_user_error(exc):
+            raise
+        raise InputError(f'{label}: {exc}') from None
+    if option.type is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    return option.check(value, label)
 
 
 def declare_float(node, name: str, default: float) -> float:

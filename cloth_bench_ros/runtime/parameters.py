@@ -8,7 +8,7 @@ runtime/params_file.py. Nothing here imports rclpy.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import enum
 from typing import Any
 
@@ -111,6 +111,24 @@ class Parameter:
 
 
 @dataclass
+class FloatingPointRange:
+    """rcl_interfaces/msg/FloatingPointRange: [from_value, to_value], step 0 for any value."""
+
+    from_value: float = 0.0
+    to_value: float = 0.0
+    step: float = 0.0
+
+
+@dataclass
+class IntegerRange:
+    """rcl_interfaces/msg/IntegerRange: [from_value, to_value], step 0 for any value."""
+
+    from_value: int = 0
+    to_value: int = 0
+    step: int = 0
+
+
+@dataclass
 class ParameterDescriptor:
     """rcl_interfaces/msg/ParameterDescriptor, the fields declare_parameter reads."""
 
@@ -119,6 +137,8 @@ class ParameterDescriptor:
     description: str = ''
     read_only: bool = False
     dynamic_typing: bool = False
+    floating_point_range: list[FloatingPointRange] = field(default_factory=list)
+    integer_range: list[IntegerRange] = field(default_factory=list)
 
 
 @dataclass

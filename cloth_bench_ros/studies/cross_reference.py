@@ -18,6 +18,7 @@ from typing import Sequence
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.engines.presets import identified_set_of, load_preset, preset_set
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.studies.cells import Cell, config_label, CROSS_REFERENCE, set_label
 
@@ -67,7 +68,7 @@ def cross_reference_cells(
     cloth: str = 'towel',
     primitives: Sequence[str] = ('dynamic', 'quasi_static'),
     seeds: Sequence[int] = tuple(range(SEED_START, SEED_START + 5)),
-    rate_hz: float = 100.0,
+    rate_hz: float = OPTIONS['rate_hz'].default,
     entrants: Sequence[tuple[str, dict]] = DEFAULT_ENTRANTS,
     references: Sequence[str] = REFERENCES,
     kinds: Sequence[str] = KINDS,

@@ -174,7 +174,7 @@ def _cd(metrics: dict, primitive: str) -> float:
 
 def lockstep_cd(config: HilConfig) -> float:
     """CD of the same configuration run in lockstep (in one process: deterministic)."""
-    from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
+    from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 
     summary = run_pipeline(
         RunConfig(

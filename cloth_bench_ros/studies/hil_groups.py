@@ -208,7 +208,8 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
 def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
     """Run one group in this process over DDS until it finishes or gets SIGTERM."""
     from cloth_bench_ros.nodes.common import close_nodes
-    from cloth_bench_ros.runtime import rclpy, realtime, SingleThreadedExecutor
+    from cloth_bench_ros.core import realtime_process
+    from cloth_bench_ros.runtime import rclpy, SingleThreadedExecutor
 
     stopped: list[bool] = []
     signal.signal(signal.SIGTERM, lambda *_: stopped.append(True))
@@ -223,18 +224,19 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
             gc.freeze()
             # The controller is the robot's real-time loop: the same scheduling request as the
             # simulator.
-            print(f'controller: {realtime.request_fifo(config.realtime_priority)}', flush=True)
+            fifo = realtime_process.request_fifo(config.realtime_priority)
+            print(f'controller: {fifo}', flush=True)
         if group == 'observer':
-            print(f'observer: {realtime.lower_priority()}', flush=True)
+            print(f'observer: {realtime_process.lower_priority()}', flush=True)
         if group != 'simulator':  # a pinned simulator's step loop has its core to itself
-            print(f'{group}: {realtime.keep_off_cpu(config.cpu)}', flush=True)
+            print(f'{group}: {realtime_process.keep_off_cpu(config.cpu)}', flush=True)
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)
         # Polling keeps the simulator's core awake: a core that idles between targets (a VM's vCPU
         # halts) wakes slowly and steps from cold caches, 1.5-3x slower at the p99 on this machine.
         polling = group == 'simulator' and config.busy_wait
-        notes = [f'poll: {realtime.poll_on_default_scheduler()}'] if polling else []
+        notes = [f'poll: {realtime_process.poll_on_default_scheduler()}'] if polling else []
         for note in notes:
             print(f'{group}: {note}', flush=True)
         timeout = 0.0 if polling else 0.05

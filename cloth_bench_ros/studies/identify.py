@@ -28,6 +28,7 @@ from typing import Any, Sequence
 import warnings
 
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-exported)
     AUTO,
     AUTO_FIRST,
@@ -73,7 +74,7 @@ class IdentifySpec:
     objective: str = 'cd'
     params: Sequence[str] = ()
     seed: int = 0
-    rate_hz: float = 100.0
+    rate_hz: float = OPTIONS['rate_hz'].default
     grid: tuple[int, int] | None = None
     fixed: dict = field(default_factory=dict)  # overrides on top of the preset, not fitted
     span: float = DEFAULT_SPAN
@@ -263,7 +264,7 @@ def run_sampler(
     client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool
 ) -> Any:
     """Ask and tell until the study holds `spec.trials` finished trials, a batch in flight."""
-    from cloth_bench_ros.studies.executor import worker_slots
+    from cloth_bench_ros.studies.dask_executor import worker_slots
     from cloth_bench_ros.studies.identify_fidelity import Pruner
     from distributed import as_completed
     from optuna.trial import TrialState
@@ -369,7 +370,7 @@ def identify(
     """Run the identification of `spec` and its validation; write the preset and its JSON."""
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.safe_io import check_output_dir
-    from cloth_bench_ros.studies.executor import open_client
+    from cloth_bench_ros.studies.dask_executor import open_client
     from cloth_bench_ros.studies.identify_output import validate, write_outputs
     from cloth_bench_ros.studies.results import append_row, ResultsLock
 

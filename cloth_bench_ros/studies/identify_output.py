@@ -61,7 +61,7 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
 
 def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]:
     """Run the validation cells (resumable): per bag, preset against identified parameters."""
-    from cloth_bench_ros.studies.executor import run_tasks
+    from cloth_bench_ros.studies.dask_executor import run_tasks
     from cloth_bench_ros.studies.results import rewrite_rows, stale_cells
     from cloth_bench_ros.studies.sweep import cells_to_run, error_row, run_cell
 

@@ -24,6 +24,7 @@ import time
 from typing import Any
 
 from cloth_bench_ros.data.errors import BagError
+from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
 OBJECTIVES = ('cd', 'hd')
@@ -43,7 +44,7 @@ class Trial:
     params: tuple[tuple[str, object], ...]  # sorted (name, value) on top of the preset
     objective: str = 'cd'
     seed: int = 0
-    rate_hz: float = 100.0
+    rate_hz: float = OPTIONS['rate_hz'].default
     grid: tuple[int, int] | None = None
     max_frames: int | None = None  # score at most this many frames of the window
     number: int = -1  # Optuna's trial number (-1: the preset, before identification)

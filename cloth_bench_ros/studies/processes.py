@@ -1,12 +1,12 @@
 """
 The node graph as one OS process per node over DDS on loopback: `cloth-bench run --processes`.
 
-The same nodes and parameters as studies/pipeline.py's in-process run, each started as its console
-script's module (`python -m cloth_bench_ros.nodes.<node> --ros-args ...`) with one parameter file,
-on the DDS transport confined to loopback (interface lo, no multicast, peer 127.0.0.1) on
-ROS_DOMAIN_ID, or a random domain when it is not set. The nodes find each other by name (the
-trajectory publisher's graph_ready); the evaluator ends the run and writes summary.json, which is
-what this returns, with the same CD/HD/L_s as the lockstep in-process run.
+The same nodes and parameters as studies/run_pipeline.py's in-process run, each started as its
+console script's module (`python -m cloth_bench_ros.nodes.<node> --ros-args ...`) with one
+parameter file, on the DDS transport confined to loopback (interface lo, no multicast, peer
+127.0.0.1) on ROS_DOMAIN_ID, or a random domain when it is not set. The nodes find each other by
+name (the trajectory publisher's graph_ready); the evaluator ends the run and writes summary.json,
+which is what this returns, with the same CD/HD/L_s as the lockstep in-process run.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import time
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.nodes.common import NAMESPACE
 from cloth_bench_ros.runtime.dds import loopback_environment
-from cloth_bench_ros.studies.pipeline import node_parameters, RunConfig
+from cloth_bench_ros.studies.run_pipeline import node_parameters, RunConfig
 import yaml
 
 

@@ -22,6 +22,7 @@ from typing import Any, Callable, Sequence
 
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.objective import evaluate, OBJECTIVES, Trial
 from cloth_bench_ros.studies.rank_trials import (
     floor,
@@ -56,7 +57,7 @@ class RankSpec:
     trials: int = 0  # identification budget per sampler (AUTO: from the convergence curve)
     sampler: str = 'both'
     seeds: int = 3  # held-out seeds 1..seeds
-    rate_hz: float = 100.0
+    rate_hz: float = OPTIONS['rate_hz'].default
     rates: Sequence[float] = RATES
     grid: tuple[int, int] | None = None
     metric: str = 'cd'  # the ranking metric (core.metric_choice); cd/hd: the objective too
@@ -164,7 +165,7 @@ def run_rank(
     """Run the protocol (resumable) and return every number it produced (see module doc)."""
     from cloth_bench_ros.core.scene import ClothGrid
     from cloth_bench_ros.safe_io import check_output_dir
-    from cloth_bench_ros.studies.executor import open_client
+    from cloth_bench_ros.studies.dask_executor import open_client
     from cloth_bench_ros.studies.results import append_row, ResultsLock
     from distributed import as_completed
     from tqdm import tqdm

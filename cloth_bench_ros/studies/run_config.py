@@ -5,12 +5,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cloth_bench_ros.options import OPTIONS
+
 
 @dataclass
 class RunConfig:
     bag: Path
     engines: list[str] = field(default_factory=lambda: ['mujoco'])
-    rate_hz: float = 100.0
+    rate_hz: float = OPTIONS['rate_hz'].default
     cloth: str = 'towel'
     primitive: str = 'dynamic'
     seed: int = 0

@@ -158,7 +158,7 @@ def run_suite(
 ) -> list[dict]:
     """Run every case on the executor; rows in the order of `cases` (also to stress.jsonl, .md)."""
     from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
-    from cloth_bench_ros.studies.executor import default_workers, open_client, run_tasks
+    from cloth_bench_ros.studies.dask_executor import default_workers, open_client, run_tasks
     from cloth_bench_ros.studies.results import json_safe
     from tqdm import tqdm
 

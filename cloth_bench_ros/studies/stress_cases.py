@@ -14,6 +14,7 @@ from typing import Sequence
 
 from cloth_bench_ros.engines.presets import PresetSet
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.options import OPTIONS
 
 MAX_CASE_WALL_S = 120.0
 
@@ -24,7 +25,7 @@ class StressCase:
     engine: str
     description: str
     primitive: str = 'dynamic'
-    rate_hz: float = 100.0
+    rate_hz: float = OPTIONS['rate_hz'].default
     params: dict = field(default_factory=dict)  # overrides on top of the towel preset of the task
     grid: tuple[int, int] | None = None
     time_compression: float = 1.0  # the trajectory is played this many times faster

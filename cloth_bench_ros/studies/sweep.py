@@ -44,7 +44,11 @@ from cloth_bench_ros.studies.cells import (  # noqa: F401
     SETTINGS_RATE,
     SETTINGS_SEEDS,
 )
-from cloth_bench_ros.studies.executor import default_workers, open_client, run_tasks  # noqa: F401
+from cloth_bench_ros.studies.dask_executor import (  # noqa: F401
+    default_workers,
+    open_client,
+    run_tasks,
+)
 from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
     parse_grid,
     parse_overrides,
@@ -196,7 +200,7 @@ def run_cell(cell: Cell, out_dir: str) -> dict:
     try:
         from cloth_bench_ros.engines import engine_class
         from cloth_bench_ros.studies.direct import run_direct
-        from cloth_bench_ros.studies.pipeline import run_pipeline
+        from cloth_bench_ros.studies.run_pipeline import run_pipeline
 
         config = cell_config(cell, frames_dir)
         # Lockstep cells run at the physics limit (engine, trajectory and evaluator called

@@ -285,7 +285,7 @@ def test_a_worker_keeps_the_trees_of_the_clouds_it_has_scored():
 
 
 def test_the_local_cluster_listens_on_loopback_only():
-    from cloth_bench_ros.studies.executor import open_client
+    from cloth_bench_ros.studies.dask_executor import open_client
 
     with open_client(workers=1) as client:
         assert client.scheduler.address.startswith('tcp://127.0.0.1:')

@@ -2,7 +2,7 @@
 
 import json
 
-from cloth_bench_ros.studies.pipeline import run_pipeline, RunConfig
+from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 import numpy as np
 import pytest
 

@@ -1,0 +1,183 @@
+"""
+Each user-facing value declared once: name, type, default, range, unit, help.
+
+A CLI flag (cli/common.add_option), a node parameter with its ParameterDescriptor
+(runtime.declare_option) and the check of either (Option.check, the validation layer) are all made
+from the one `Option` here. A flag's help shows the unit, the range and the default.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from cloth_bench_ros import validation
+from cloth_bench_ros.core.trajectory import PRIMITIVES
+from cloth_bench_ros.errors import InputError
+
+CLOTHS = ('towel', 'chequered', 'linen')  # the cloths the presets describe
+
+
+@dataclass(frozen=True)
+class Option:
+    """One value a user sets, as a node parameter `name` and, where it has one, a CLI `flag`."""
+
+    name: str
+    type: type  # noqa: A003  (bool, int, float or str)
+    default: Any
+    help: str  # noqa: A003
+    flag: str | None = None
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False  # the range is (low, high]
+    unit: str = ''
+    choices: tuple[str, ...] = ()
+    unset: Any = None  # a node value that means "not given" (checked to None), e.g. -1
+    metavar: str | None = None
+
+    def check(self, value: Any, label: str | None = None) -> Any:
+        """Return `value` checked against the declaration (InputError naming `label`)."""
+        label = label or self.flag or self.name
+        if self.unset is not None and not isinstance(value, bool) and value == self.unset:
+            return None
+        if self.choices:
+            return validation.choice(value, label, self.choices)
+        if self.type is float:
+            return validation.number(
+                value, label, self.low, self.high, low_open=self.low_open, unit=self.unit
+            )
+        if self.type is int:
+            low = None if self.low is None else int(self.low)
+            high = None if self.high is None else int(self.high)
+            return validation.integer(value, label, low, high)
+        if self.type is bool:
+            return validation.boolean(value, label)
+        if not isinstance(value, str):
+            raise InputError(f'{label}: {value!r} is not a string')
+        return value
+
+    def parse(self, text: str, label: str | None = None) -> Any:
+        """Return the value of a command-line word, checked."""
+        label = label or self.flag or self.name
+        if self.type is float and not self.choices:
+            return self.check(validation.parse_number(text, label), label)
+        if self.type is int:
+            return self.check(validation.parse_integer(text, label), label)
+        return self.check(text, label)
+
+    def range_text(self) -> str:
+        """Return the range with its unit, e.g. '[1, 10000] Hz', or '' where there is none."""
+        if self.choices or (self.low is None and self.high is None):
+            return ''
+        left = '(' if self.low_open else '['
+        low = '-inf' if self.low is None else self._number(self.low)
+        high = 'inf' if self.high is None else self._number(self.high)
+        return f'{left}{low}, {high}]' + (f' {self.unit}' if self.unit else '')
+
+    def _number(self, value: float) -> str:
+        return str(int(value)) if self.type is int else f'{value:g}'
+
+    def help_text(self) -> str:
+        """Return the help of the flag: the meaning, unit and range, and the default."""
+        parts = [self.help]
+        if self.range_text():
+            parts.append(f'range {self.range_text()}')
+        elif self.unit:
+            parts.append(f'in {self.unit}')
+        default = self.check(self.default)
+        if default not in (None, ''):
+            parts.append(f'default {self._number(default) if self.type is float else default}')
+        return '; '.join(parts)
+
+
+def _declare(*options: Option) -> dict[str, Option]:
+    return {o.name: o for o in options}
+
+
+OPTIONS = _declare(
+    Option(
+        'rate_hz', float, 100.0, 'simulator rate', flag='--rate',
+        low=validation.MIN_RATE_HZ, high=validation.MAX_RATE_HZ, unit='Hz',
+    ),
+    Option(
+        'seed', int, 0, 'perturbs the initial cloth', flag='--seed',
+        low=0, high=validation.MAX_SEED,
+    ),
+    Option('primitive', str, 'dynamic', 'the task', flag='--primitive', choices=PRIMITIVES),
+    Option('cloth', str, 'towel', 'the cloth', flag='--cloth', choices=CLOTHS),
+    Option(
+        'grid_nx', int, 0, 'mesh vertices across the cloth (0: the engine default)',
+        low=0, high=validation.MAX_GRID_SIDE,
+    ),
+    Option(
+        'grid_nz', int, 0, 'mesh vertices down the cloth (0: the engine default)',
+        low=0, high=validation.MAX_GRID_SIDE,
+    ),
+    # what a plain recording does not say (docs/own-recording.md)
+    Option(
+        'topic', str, '', "PointCloud2 topic to score (default: the project's, else the only one)",
+        flag='--topic',
+    ),
+    Option(
+        'start_time', str, '',
+        'start of the motion in bag time: an absolute stamp (>= 1e9 s) or seconds from the first '
+        'message (default: targets topic, else automatic)',
+        flag='--start-time', metavar='S',
+    ),
+    Option(
+        'targets_topic', str, '', 'recorded PoseArray gripper targets whose first motion is the '
+        'start', flag='--targets-topic',
+    ),
+    Option(
+        'change_of_phase_frame', int, -1,
+        "last frame of the dynamic window (default: the bag's metadata, else none)",
+        flag='--change-of-phase-frame', low=0, high=validation.MAX_FRAME, unset=-1, metavar='N',
+    ),
+    Option(
+        'clean', str, 'auto',
+        "crop, table plane, outliers (auto: on for bags without the project's metadata)",
+        flag='--clean', choices=('auto', 'on', 'off'),
+    ),
+    Option(
+        'voxel', float, 0.0, 'voxel down-sampling size (0: off)', flag='--voxel', low=0.0,
+        unit='m', metavar='M',
+    ),
+    Option(
+        'table_plane', str, 'auto', 'remove the table plane; it also removes cloth lying flat on '
+        'the table (auto: remove for dynamic, keep for quasi_static)', flag='--table-plane',
+        choices=('auto', 'remove', 'keep'),
+    ),
+    Option(
+        'align_window', float, 1.0, 'seconds of motion the automatic alignment compares',
+        flag='--align-window', low=0.0, low_open=True, unit='s', metavar='S',
+    ),
+    Option(
+        'align_step', float, 1.0 / 30.0, 'coarse step of the automatic alignment (refined 8x)',
+        flag='--align-step', low=0.0, low_open=True, unit='s', metavar='S',
+    ),
+    Option(
+        'trial', int, 0,
+        'the repetition to score in a recording of several (0: the first usable)',
+        flag='--trial', low=0, metavar='N',
+    ),
+    Option(
+        'align', str, 'simulation', 'start of a cloud-only recording: simulation (search against '
+        'the first engine) or onset (fitted to the task in the clouds, no engine)',
+        flag='--align', choices=('simulation', 'onset'),
+    ),
+)
+
+# The recorder's parameters for a recording that does not say everything, in `run --help` order.
+REPLAY_OPTIONS = (
+    'topic',
+    'start_time',
+    'targets_topic',
+    'change_of_phase_frame',
+    'clean',
+    'voxel',
+    'table_plane',
+    'align_window',
+    'align_step',
+    'trial',
+    'align',
+)
