@@ -10,6 +10,7 @@ from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.cli.identify import _trials
 from cloth_bench_ros.cli.run import _replay_params
+from cloth_bench_ros.options import OPTIONS, REPLAY_OPTIONS
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 RESULT_FILE = 'rank.json'
@@ -79,11 +80,11 @@ def cmd_rank(args: argparse.Namespace) -> int:
 
     entrants = args.engine or list(DEFAULT_ENTRANTS)
     out = Path(args.output) if args.output else Path('results') / 'rank'
-    params = _replay_params(argparse.Namespace(
-        topic=args.topic, start_time=None, targets_topic=args.targets_topic, clean=args.clean,
-        voxel=0.0, table_plane='auto', align_window=1.0, align_step=1 / 30, align='onset',
-        transform=None, trial=None,
-    ))
+    declared = {name: OPTIONS[name].default for name in REPLAY_OPTIONS}  # the replay's defaults
+    params = _replay_params(argparse.Namespace(**{
+        **declared, 'topic': args.topic, 'start_time': None, 'targets_topic': args.targets_topic,
+        'clean': args.clean, 'align': 'onset', 'transform': None, 'trial': None,
+    }))
     replay = ReplayOptions(
         cloth=args.cloth, primitive=args.primitive, topic=params['topic'],
         targets_topic=params['targets_topic'], clean=params['clean'], rate_hz=args.rate,
