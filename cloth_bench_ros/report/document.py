@@ -20,7 +20,7 @@ from typing import Sequence
 
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import OPTIONS
-from cloth_bench_ros.report import figures
+from cloth_bench_ros.report import figures, time_figures
 from cloth_bench_ros.report.blocks import (
     Block,
     Document,
@@ -244,13 +244,13 @@ def speed_error_section(
 
 def _plot_frames(rows: Sequence[dict], results_dir: Path, cloth: str, path: Path) -> Path | None:
     """Draw the per-frame figure of `cloth` into `path` (a figure block's draw function)."""
-    return figures.plot_frames(rows, results_dir, cloth, path)
+    return time_figures.plot_frames(rows, results_dir, cloth, path)
 
 
 def frames_section(paper: Sequence[dict], results_dir: Path) -> list[Block]:
     """Per-frame CD and HD over time, first seed, per cloth."""
     blocks = [heading(2, 'Per-frame CD and HD over time')]
-    kept = [r for r in paper if figures.frames_file(results_dir, r) is not None]
+    kept = [r for r in paper if time_figures.frames_file(results_dir, r) is not None]
     for cloth in cloths_of(kept):
         blocks.append(
             figure_block(
@@ -290,7 +290,7 @@ def timing_section(rows: Sequence[dict]) -> list[Block]:
         figure_block(
             'latency.png',
             'latency percentiles against the deadline (ours)',
-            lambda path: figures.plot_latency(timed, path),
+            lambda path: time_figures.plot_latency(timed, path),
         ),
     ]
 
