@@ -1,14 +1,13 @@
 """
 Sweeps: many pipeline runs on the Dask executor, one JSON line per finished cell.
 
-A cell (cloth_bench_ros.studies.cells) is one run: `run_direct` for lockstep cells (the node
-graph's metrics without its nodes and messages), `run_pipeline` for realtime ones. Results go to
-<out>/results.jsonl, appended by the client as each cell finishes (so an interrupted sweep loses
-at most the cells in flight), under the directory's lock (a second study there refuses with one
-line). A new run over the same directory skips every cell already present: it resumes. A
-diverged run is a result (NaN metrics, status "diverged"); an exception inside a cell is an
-"error" row; a worker that dies mid-cell (a segfault in an engine, a machine lost) is replaced
-and the cell runs again elsewhere.
+A cell (studies/cells.py) is one run: `run_direct` in lockstep (the node graph's metrics without
+its nodes), `run_pipeline` in realtime. Results go to <out>/results.jsonl, appended as each cell
+finishes (an interrupted sweep loses at most the cells in flight), under the directory's lock (a
+second study there refuses with one line). A new run over the same directory skips every cell
+already present: it resumes. A diverged run is a result (NaN metrics, status "diverged"); an
+exception in a cell is an "error" row; a worker that dies mid-cell is replaced and the cell runs
+again elsewhere.
 """
 
 from __future__ import annotations
