@@ -6,9 +6,10 @@ nearest point of a real frame (50,000 to 300,000 points). A k-d tree over the fr
 O(n log n) to build for every frame; a grid costs O(n): the points are bucketed by cell with a
 counting sort, and each vertex searches the cells around its own in growing shells, skipping every
 cell whose L1 distance to the vertex already exceeds the best found, and stopping once no
-unsearched cell can hold a closer point (every point of shell r lies at least (r - 1) cells away in
-one coordinate, hence at least that far in L1). The distance is |dx| + |dy| + |dz| summed
-in that order, as a brute force over all pairs computes it.
+unsearched cell can hold a closer point (every point of shell r lies at least (r - 1) cells away
+in one coordinate, hence at least that far in L1, plus the vertex's distance to the grid's box).
+The distance is |dx| + |dy| + |dz| summed in that order, as a brute force over all pairs computes
+it.
 """
 
 from __future__ import annotations
@@ -26,7 +27,10 @@ class PointGrid:
         self.points = np.ascontiguousarray(points, dtype=np.float64)
         lo, hi = _bounds(self.points)  # one pass; ndarray.min(axis=0) walks an (n, 3) array slowly
         extent = np.maximum(hi - lo, 1e-9)
-        cell = float(np.cbrt(np.prod(extent) * POINTS_PER_CELL / len(self.points)))
+        # a flat cloud (a sheet seen edge-on, a synthetic plane) sized as if 1/32 of its length
+        # thick: else its near-zero volume makes the cells tiny and the grid mostly empty
+        volume = np.prod(np.maximum(extent, float(extent.max()) / 32.0))
+        cell = float(np.cbrt(volume * POINTS_PER_CELL / len(self.points)))
         cell = max(cell, float(extent.max()) / 1024.0)  # at most 1024 cells along an axis
         dims = np.minimum(np.floor(extent / cell).astype(np.int64) + 1, 1024)
         self.lo, self.cell, self.dims = lo, cell, dims
@@ -117,9 +121,17 @@ def _nearest(points, order, starts, lo, cell, dims, queries):
         cx = _cell_of(vx, lo[0], inv, dims[0])
         cy = _cell_of(vy, lo[1], inv, dims[1])
         cz = _cell_of(vz, lo[2], inv, dims[2])
+        # A query outside the grid's box is `off` away from it in L1, and every point of shell r
+        # (around the cell the query is clamped to) at least `off` + (r - 1) cells: a far query
+        # (a cloth far from the cloud) stops after a few shells, not after off / cell of them.
+        off = (
+            _gap(vx, lo[0], cell * dims[0], 0)
+            + _gap(vy, lo[1], cell * dims[1], 0)
+            + _gap(vz, lo[2], cell * dims[2], 0)
+        )
         best = np.inf
         for r in range(reach + 1):
-            if (r - 1) * cell > best + slack:  # no point of this shell or beyond can be closer
+            if off + (r - 1) * cell > best + slack:  # no point of this shell or beyond is closer
                 break
             for iz in range(max(cz - r, 0), min(cz + r, dims[2] - 1) + 1):
                 gz = _gap(vz, lo[2], cell, iz)

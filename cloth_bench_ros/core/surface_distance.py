@@ -250,8 +250,18 @@ def _query(points, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims,
         cx = _cell_of(px, glo[0], inv, dims[0])
         cy = _cell_of(py, glo[1], inv, dims[1])
         cz = _cell_of(pz, glo[2], inv, dims[2])
+        # outside the grid's box, every cell of shell r is at least `off` (the distance to the
+        # box) combined with r - 1 cells away: far points stop after a few shells
+        ox = _gap(px, glo[0], glo[0] + cell * dims[0])
+        oy = _gap(py, glo[1], glo[1] + cell * dims[1])
+        oz = _gap(pz, glo[2], glo[2] + cell * dims[2])
         for r in range(reach + 1):
-            if (r - 1) * cell > best + slack:  # nothing in this shell or beyond can be closer
+            shell = max(r - 1, 0) * cell
+            if norm == 1:
+                bound = ox + oy + oz + shell
+            else:
+                bound = np.sqrt(ox * ox + oy * oy + oz * oz + shell * shell)
+            if bound > best + slack:  # nothing in this shell or beyond can be closer
                 break
             for iz in range(max(cz - r, 0), min(cz + r, dims[2] - 1) + 1):
                 z0 = glo[2] + iz * cell
