@@ -11,8 +11,8 @@ from cloth_bench_ros.engines.newton_cloth import available_devices, resolve_devi
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.studies.cells import Cell
 from cloth_bench_ros.studies.direct import run_direct
-from cloth_bench_ros.studies.run_pipeline import node_parameters
 from cloth_bench_ros.studies.run_config import RunConfig
+from cloth_bench_ros.studies.run_pipeline import node_parameters
 import numpy as np
 import pytest
 import warp as wp

@@ -196,15 +196,16 @@ def option_descriptor(option: Option) -> Any:
         description=option.help_text(), dynamic_typing=option.type is float
     )
     if option.low is not None and option.high is not None and not option.low_open:
+        low = option.low
+        if isinstance(option.unset, (int, float)) and not isinstance(option.unset, bool):
+            low = min(low, option.unset)  # "not given" (-1) stays a value the node accepts
         if option.type is int:
             descriptor.integer_range = [
-                IntegerRange(from_value=int(option.low), to_value=int(option.high), step=0)
+                IntegerRange(from_value=int(low), to_value=int(option.high), step=0)
             ]
         elif option.type is float:
             descriptor.floating_point_range = [
-                FloatingPointRange(
-                    from_value=float(option.low), to_value=float(option.high), step=0.0
-                )
+                FloatingPointRange(from_value=float(low), to_value=float(option.high), step=0.0)
             ]
     return descriptor
 
