@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import array
 import sys
-from typing import Any
+from typing import Any, Sequence
 
 from cloth_bench_ros.errors import ClothBenchError
 import numpy as np
@@ -43,21 +43,7 @@ def _cloud_data(cloud_type: type, raw: bytes) -> object:
 def create_cloud_xyz32(header: Any, points: np.ndarray, cloud_type: type, field_type: type) -> Any:
     """Return a PointCloud2 of x, y, z float32 (point_step 12), one row, native byte order."""
     pts = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
-    fields = [
-        field_type(name=name, offset=4 * i, datatype=FLOAT32, count=1)
-        for i, name in enumerate('xyz')
-    ]
-    return cloud_type(
-        header=header,
-        height=1,
-        width=len(pts),
-        fields=fields,
-        is_bigendian=sys.byteorder != 'little',
-        point_step=12,
-        row_step=12 * len(pts),
-        data=_cloud_data(cloud_type, pts.tobytes()),
-        is_dense=bool(np.isfinite(pts).all()),
-    )
+    return _float32_cloud(header, 'xyz', pts, cloud_type, field_type)
 
 
 def create_cloud_xyz_fields(
@@ -74,6 +60,13 @@ def create_cloud_xyz_fields(
     table[:, :3] = pts
     for i, values in enumerate(extra.values()):
         table[:, 3 + i] = np.asarray(values, dtype=np.float32).reshape(len(pts))
+    return _float32_cloud(header, names, table, cloud_type, field_type)
+
+
+def _float32_cloud(
+    header: Any, names: Sequence[str], table: np.ndarray, cloud_type: type, field_type: type
+) -> Any:
+    """Return a one-row PointCloud2 of the float32 columns of `table`, named `names`."""
     step = 4 * len(names)
     fields = [
         field_type(name=name, offset=4 * i, datatype=FLOAT32, count=1)
@@ -82,11 +75,11 @@ def create_cloud_xyz_fields(
     return cloud_type(
         header=header,
         height=1,
-        width=len(pts),
+        width=len(table),
         fields=fields,
         is_bigendian=sys.byteorder != 'little',
         point_step=step,
-        row_step=step * len(pts),
+        row_step=step * len(table),
         data=_cloud_data(cloud_type, table.tobytes()),
         is_dense=bool(np.isfinite(table).all()),
     )
