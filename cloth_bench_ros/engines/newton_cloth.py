@@ -297,8 +297,8 @@ class NewtonCloth(ClothEngine):
 
     # -- model --------------------------------------------------------------------------------
 
-    def _build_model(self) -> 'newton.Model':
-        """Table box, cloth mesh in grid order, corner particles kinematic."""
+    def _build_model(self, finalize: bool = True) -> Any:
+        """Table box, cloth mesh in grid order, corner particles kinematic (or the builder)."""
         c = self.config
         builder = newton.ModelBuilder(gravity=(0.0, 0.0, scene.GRAVITY))
         x0, x1 = scene.TABLE_X
@@ -349,6 +349,8 @@ class NewtonCloth(ClothEngine):
         builder.particle_mass = [m * float(c['mass']) / free for m in builder.particle_mass]
         if self._vbd:
             builder.color(include_bending=True)
+        if not finalize:  # one world of several (benchmarks/bench_vectorised_worlds.py)
+            return builder
         model = builder.finalize()
         model.soft_contact_ke = float(c['contact_stiffness'])
         model.soft_contact_kd = float(c['contact_damping'])

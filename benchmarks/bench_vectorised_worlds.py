@@ -1,0 +1,323 @@
+"""
+Several trials at once: Newton's vectorised worlds and MuJoCo's `rollout` against one at a time.
+
+What an identification's batch of trials (a CMA-ES generation, several TPE suggestions) would
+gain on this machine's CPU from being stepped together, measured in one process:
+
+- Newton (Warp's CPU device): the N trials of a generation as N worlds of one Newton model, each
+  world the towel with its own parameters (mass, membrane, its damping, bending, friction drawn
+  within a factor 1.5 of the preset, as a CMA-ES generation has them), stepped together, against
+  the same N trials run one after the other by the engine (NewtonCloth, as identification runs
+  them), for N = 1, 2, 4, 8. Prints steps per second per world both ways, their ratio, the set-up
+  time both ways, and how far any world's vertices end from its trial run alone.
+- MuJoCo: `mujoco.rollout` (one call for the N trials, each with its own MjModel, with 1 and 2
+  threads) against today's per-step loop (the engine, one trial after the other). The engine
+  writes the grasped corners' qpos and qvel before every internal step, which rollout cannot
+  (its controls are ctrl, applied forces, mocap poses and equality switches; the corners are flex
+  vertices, not mocap bodies, and MuJoCo attaches no mocap body to an elastic flex), so both hold
+  the corners where they start: the loop by the engine's grasp, rollout by the engine's weight
+  cancelling force on the heavy corners (the difference of the two is printed).
+
+The motion is the bundled towel fling at 100 Hz on the coarse default 11 x 15 mesh, its first
+--seconds (the settle phase); MuJoCo's corners stay at the first target.
+
+    .venv/bin/python benchmarks/bench_vectorised_worlds.py [--worlds 1 2 4 8]
+        [--models xpbd vbd] [--seconds 2] [--no-mujoco] [--no-newton]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+from cloth_bench_ros.core import scene
+from cloth_bench_ros.core.task import initial_displacement
+from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.engines import engine_class, make_engine
+from cloth_bench_ros.engines.presets import load_preset
+import numpy as np
+
+RATE_HZ = 100.0
+SPREAD = 1.5  # a generation's parameters lie within this factor of the preset
+# The parameters a generation varies: identification's defaults (studies/identify.py).
+VARIED = {
+    'newton:xpbd': ('mass', 'spring_stiffness', 'spring_damping', 'bending', 'friction'),
+    'newton:vbd': ('mass', 'tri_stiffness', 'tri_damping', 'bending', 'friction'),
+    'mujoco': ('mass', 'young', 'poisson', 'thickness', 'damping'),
+}
+# What every world of one Newton model must share (settings of the model or of its solver).
+SHARED = (
+    'model', 'timestep', 'substeps', 'solver_iterations', 'self_collision', 'device',
+    'contact_stiffness', 'contact_damping',
+)
+
+
+def generation(engine: str, n: int, model: str | None = None, seed: int = 0) -> list[dict]:
+    """Return `n` parameter sets around the towel preset, as a CMA-ES generation has them."""
+    cls = engine_class(engine)
+    preset = {**load_preset(engine, 'towel', 'dynamic'), **({'model': model} if model else {})}
+    if engine == 'newton':
+        preset['device'] = 'cpu'
+    base = cls.validate_params(preset)
+    schema = {p.name: p for p in cls.params}
+    rng = np.random.default_rng(seed)
+    trials = []
+    for _ in range(n):
+        params = dict(preset)
+        for name in VARIED[f'{engine}:{model}' if model else engine]:
+            value = float(base[name]) * SPREAD ** rng.uniform(-1, 1)
+            params[name] = min(float(schema[name].high), max(float(schema[name].low), value))
+        trials.append(params)
+    return trials
+
+
+class NewtonWorlds:
+    """
+    Trials of one Newton cloth model, each with its own parameters, as the worlds of one model.
+
+    Each world is the engine's own scene (NewtonCloth's builder), so a world steps as its trial
+    alone does: the same solver and substeps, the grasp kernel over every world's corners. Two
+    things Newton does not keep per world are set here: the cloth-table friction (and contact
+    stiffness) is the mean of a model-wide value and the table's (XPBD: arithmetic mean of the
+    friction; VBD: geometric mean of it, arithmetic of stiffness and damping), so the model-wide
+    side is made neutral and each world's table carries the rest; and merging worlds recombines
+    their VBD colourings, which changes each world's Gauss-Seidel order (worlds of identical
+    parameters then end centimetres apart), so every world keeps the colour order of its own
+    model.
+    """
+
+    def __init__(self, rate_hz: float, trials: list[dict]) -> None:
+        import newton
+        from cloth_bench_ros.engines.newton_cloth import _move_grasps
+        import warp as wp
+
+        self._wp, self._move = wp, _move_grasps
+        engines = [make_engine('newton', rate_hz, p) for p in trials]
+        first = engines[0]
+        for name in SHARED:
+            if any(e.config[name] != first.config[name] for e in engines):
+                raise ValueError(f'the worlds of one model must share {name}')
+        if first.config['self_collision']:
+            raise ValueError('the worlds of one model are built here without self-collision')
+        self.worlds, self.n = len(engines), len(first._rest)
+        self.dt, self.h, self.substeps = first.dt, first.h, first.substeps
+        self.device, self._rest = first.device, first._rest
+        vbd = first.config['model'] == 'vbd'
+        n = self.n
+        with wp.ScopedDevice(self.device):
+            builder = newton.ModelBuilder(gravity=(0.0, 0.0, scene.GRAVITY))
+            for e in engines:
+                world = e._build_model(finalize=False)
+                mu, ke, kd = (float(e.config[k]) for k in ('friction', 'contact_stiffness',
+                                                           'contact_damping'))
+                f32 = np.float32(mu)
+                world.shape_material_mu[0] = float(f32 * f32) if vbd else 2 * mu
+                world.shape_material_ke[0], world.shape_material_kd[0] = 2 * ke, 2 * kd
+                builder.add_world(world)
+            if vbd:
+                groups = world.particle_color_groups
+                builder.set_coloring(
+                    [np.concatenate([np.asarray(g) + w * n for w in range(self.worlds)])
+                     for g in groups]
+                )
+            self.model = model = builder.finalize()
+            # model-wide: neutral in the means above; XPBD without particle-particle contact
+            model.soft_contact_ke = model.soft_contact_kd = 0.0
+            model.soft_contact_mu = 1.0 if vbd else 0.0
+            if not vbd:
+                model.particle_max_radius = 0.0
+                model.particle_grid = None
+            self._states = (model.state(), model.state())
+            self._control = model.control()
+            self._pipeline = newton.CollisionPipeline(model)
+            self._contacts = self._pipeline.contacts()
+            first.model = model
+            self.solver = first._make_solver()  # the engine's solver and settings, on all worlds
+            corners = [w * n + k for w in range(self.worlds) for k in first._corners]
+            self._index = wp.array(corners, dtype=wp.int32)
+            self._start = wp.zeros(2 * self.worlds, dtype=wp.vec3)
+            self._velocity = wp.zeros(2 * self.worlds, dtype=wp.vec3)
+        for e in engines:
+            e.close()
+        self._target = np.zeros((self.worlds, 2, 3))
+        self._graph: Any = None
+
+    def reset(self, seed: int, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """Every world in the task's seeded initial state (as ClothEngine.reset)."""
+        from cloth_bench_ros.core.scene import ClothGrid
+
+        shift = initial_displacement(ClothGrid(), seed, left, right)
+        q = np.tile(self._rest + shift, (self.worlds, 1)).astype(np.float32)
+        for state in self._states:
+            state.particle_q.assign(q)
+            state.particle_qd.zero_()
+        self._target[:, 0], self._target[:, 1] = left, right
+        self._start.assign(self._target.reshape(-1, 3).astype(np.float32))
+        self._velocity.zero_()
+        return self.vertices()
+
+    def vertices(self) -> np.ndarray:
+        """Return every world's vertices, shape (worlds, n, 3)."""
+        return self._states[0].particle_q.numpy().astype(float).reshape(self.worlds, self.n, 3)
+
+    def _substeps(self) -> None:
+        wp = self._wp
+        a, b = self._states
+        for k in range(1, self.substeps + 1):
+            for s in (a, b):
+                wp.launch(
+                    self._move,
+                    dim=2 * self.worlds,
+                    inputs=[self._start, self._velocity, self._index, k * self.h],
+                    outputs=[s.particle_q, s.particle_qd],
+                    device=self.device,
+                )
+            a.clear_forces()
+            self._pipeline.collide(a, self._contacts)
+            self.solver.step(a, b, self._control, self._contacts, self.h)
+            a, b = b, a
+        if a is not self._states[0]:
+            wp.copy(self._states[0].particle_q, a.particle_q)
+            wp.copy(self._states[0].particle_qd, a.particle_qd)
+
+    def step(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """Advance every world by dt, grippers to the same targets (as NewtonCloth.step)."""
+        wp = self._wp
+        goal = np.stack([left, right])[None]
+        self._start.assign(self._target.reshape(-1, 3).astype(np.float32))
+        velocity = (goal - self._target) / self.dt
+        self._velocity.assign(velocity.reshape(-1, 3).astype(np.float32))
+        if self._graph is None:
+            with wp.ScopedCapture(device=self.device) as capture:
+                self._substeps()
+            self._graph = capture.graph
+        wp.capture_launch(self._graph)
+        self._target[:] = goal
+        return self.vertices()
+
+
+def newton_row(model: str, n: int, steps: int) -> dict:
+    """Time a generation of `n` trials one by one and as `n` worlds; compare the vertices."""
+    targets = full_targets('dynamic', RATE_HZ)
+    trials = generation('newton', n, model)
+    left, right = targets.left, targets.right
+    alone, setup_seq, step_seq = [], 0.0, 0.0
+    for params in trials:
+        t0 = time.perf_counter()
+        engine = make_engine('newton', RATE_HZ, params)
+        engine.start(0, left[0], right[0])
+        t1 = time.perf_counter()
+        for k in range(1, steps):
+            vertices = engine.step(left[k], right[k])
+        step_seq += time.perf_counter() - t1
+        setup_seq += t1 - t0
+        alone.append(vertices)
+        engine.close()
+    t0 = time.perf_counter()
+    worlds = NewtonWorlds(RATE_HZ, trials)
+    worlds.reset(0, left[0], right[0])
+    worlds.step(left[0], right[0])  # as engine.start: the first step records the graph
+    worlds.reset(0, left[0], right[0])
+    t1 = time.perf_counter()
+    for k in range(1, steps):
+        together = worlds.step(left[k], right[k])
+    step_batch = time.perf_counter() - t1
+    return {
+        'seq': n * (steps - 1) / step_seq / n,
+        'batch': n * (steps - 1) / step_batch / n,
+        'setup_seq': setup_seq,
+        'setup_batch': t1 - t0,
+        'diff': max(float(np.abs(together[i] - alone[i]).max()) for i in range(n)),
+    }
+
+
+def mujoco_row(n: int, steps: int, threads: tuple[int, ...] = (1, 2)) -> dict:
+    """Time `n` trials with the engine's per-step loop and with mujoco.rollout."""
+    import mujoco
+    from mujoco import rollout
+
+    targets = full_targets('dynamic', RATE_HZ)
+    left, right = targets.left[0], targets.right[0]
+    trials = generation('mujoco', n)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    engines, initial, force, finals = [], [], [], []
+    for params in trials:
+        engine = make_engine('mujoco', RATE_HZ, params)
+        engine.reset(0, left, right)
+        state = np.empty(mujoco.mj_stateSize(engine.model, spec))
+        mujoco.mj_getState(engine.model, engine.data, state, spec)
+        initial.append(state)
+        force.append(engine.data.qfrc_applied.copy())
+        engines.append(engine)
+    start = time.perf_counter()
+    for engine in engines:
+        for _ in range(1, steps):
+            engine.step(left, right)
+        finals.append(engine.data.qpos.copy())
+    loop = time.perf_counter() - start
+    substeps = engines[0].substeps
+    row = {'substeps': substeps, 'loop': n * (steps - 1) / loop / n}
+    models = [e.model for e in engines]
+    control = np.stack(force)[:, None, :]
+    nq = models[0].nq
+    for nthread in threads:
+        data = [mujoco.MjData(models[0]) for _ in range(nthread)]
+        rollout.rollout(models, data, np.stack(initial), control,
+                        control_spec=mujoco.mjtState.mjSTATE_QFRC_APPLIED, nstep=substeps)
+        start = time.perf_counter()
+        states, _ = rollout.rollout(
+            models, data, np.stack(initial), control,
+            control_spec=mujoco.mjtState.mjSTATE_QFRC_APPLIED, nstep=(steps - 1) * substeps,
+        )
+        took = time.perf_counter() - start
+        row[f'rollout{nthread}'] = n * (steps - 1) / took / n
+        row['diff'] = max(
+            float(np.abs(states[i, -1, 1:1 + nq] - finals[i]).max()) for i in range(n)
+        )
+    for engine in engines:
+        engine.close()
+    return row
+
+
+def best(measure: Any, repeats: int, rates: tuple[str, ...], *args: Any) -> dict:
+    """Return `measure(*args)` run `repeats` times, each rate the highest seen (a loaded CPU)."""
+    rows = [measure(*args) for _ in range(max(1, repeats))]
+    return {**rows[-1], **{key: max(r[key] for r in rows) for key in rates}}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--worlds', type=int, nargs='+', default=[1, 2, 4, 8])
+    parser.add_argument('--models', nargs='+', default=['xpbd', 'vbd'], choices=['xpbd', 'vbd'])
+    parser.add_argument('--seconds', type=float, default=2.0, help='of the fling, from its start')
+    parser.add_argument(
+        '--repeats', type=int, default=2, help='runs of each row; the fastest counts (load)'
+    )
+    parser.add_argument('--no-newton', action='store_true')
+    parser.add_argument('--no-mujoco', action='store_true')
+    args = parser.parse_args()
+    steps = int(round(args.seconds * RATE_HZ)) + 1
+    print(f'towel fling, 11 x 15 mesh, {RATE_HZ:.0f} Hz, first {args.seconds:g} s; steps per '
+          "second per trial (world), on this machine's CPU")
+    if not args.no_newton:
+        print(f'\n{"Newton":<8} {"N":>3} {"one by one":>11} {"N worlds":>9} {"ratio":>6} '
+              f'{"set-up s (1-by-1 / worlds)":>27} {"max |dx| m":>11}')
+        for model in args.models:
+            for n in args.worlds:
+                r = best(newton_row, args.repeats, ('seq', 'batch'), model, n, steps)
+                print(f'{model:<8} {n:>3} {r["seq"]:>11.1f} {r["batch"]:>9.1f} '
+                      f'{r["batch"] / r["seq"]:>6.2f} {r["setup_seq"]:>13.2f} / '
+                      f'{r["setup_batch"]:<11.2f} {r["diff"]:>11.2g}', flush=True)
+    if not args.no_mujoco:
+        print(f'\n{"MuJoCo":<8} {"N":>3} {"loop":>8} {"rollout 1 thr":>14} {"ratio":>6} '
+              f'{"rollout 2 thr":>14} {"ratio":>6} {"max |dq| m":>11}')
+        for n in args.worlds:
+            r = best(mujoco_row, args.repeats, ('loop', 'rollout1', 'rollout2'), n, steps)
+            print(f'{"shell":<8} {n:>3} {r["loop"]:>8.1f} {r["rollout1"]:>14.1f} '
+                  f'{r["rollout1"] / r["loop"]:>6.2f} {r["rollout2"]:>14.1f} '
+                  f'{r["rollout2"] / r["loop"]:>6.2f} {r["diff"]:>11.2g}', flush=True)
+
+
+if __name__ == '__main__':
+    main()
