@@ -202,15 +202,16 @@ def newton_row(model: str, n: int, steps: int) -> dict:
     targets = full_targets('dynamic', RATE_HZ)
     trials = generation('newton', n, model)
     left, right = targets.left, targets.right
-    alone, setup_seq, step_seq = [], 0.0, 0.0
+    alone, setup_seq, step_seq, cpu_seq = [], 0.0, 0.0, 0.0
     for params in trials:
         t0 = time.perf_counter()
         engine = make_engine('newton', RATE_HZ, params)
         engine.start(0, left[0], right[0])
-        t1 = time.perf_counter()
+        t1, c1 = time.perf_counter(), time.process_time()
         for k in range(1, steps):
             vertices = engine.step(left[k], right[k])
         step_seq += time.perf_counter() - t1
+        cpu_seq += time.process_time() - c1
         setup_seq += t1 - t0
         alone.append(vertices)
         engine.close()
@@ -219,13 +220,16 @@ def newton_row(model: str, n: int, steps: int) -> dict:
     worlds.reset(0, left[0], right[0])
     worlds.step(left[0], right[0])  # as engine.start: the first step records the graph
     worlds.reset(0, left[0], right[0])
-    t1 = time.perf_counter()
+    t1, c1 = time.perf_counter(), time.process_time()
     for k in range(1, steps):
         together = worlds.step(left[k], right[k])
     step_batch = time.perf_counter() - t1
+    cpu_batch = time.process_time() - c1
     return {
-        'seq': n * (steps - 1) / step_seq / n,
-        'batch': n * (steps - 1) / step_batch / n,
+        'seq': n * (steps - 1) / cpu_seq,
+        'batch': n * (steps - 1) / cpu_batch,
+        'seq_wall': n * (steps - 1) / step_seq,
+        'batch_wall': n * (steps - 1) / step_batch,
         'setup_seq': setup_seq,
         'setup_batch': t1 - t0,
         'diff': max(float(np.abs(together[i] - alone[i]).max()) for i in range(n)),
@@ -250,14 +254,15 @@ def mujoco_row(n: int, steps: int, threads: tuple[int, ...] = (1, 2)) -> dict:
         initial.append(state)
         force.append(engine.data.qfrc_applied.copy())
         engines.append(engine)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for engine in engines:
         for _ in range(1, steps):
             engine.step(left, right)
         finals.append(engine.data.qpos.copy())
-    loop = time.perf_counter() - start
+    loop, loop_cpu = time.perf_counter() - start, time.process_time() - cpu
     substeps = engines[0].substeps
-    row = {'substeps': substeps, 'loop': n * (steps - 1) / loop / n}
+    row = {'substeps': substeps, 'loop': n * (steps - 1) / loop_cpu,
+           'loop_wall': n * (steps - 1) / loop}
     models = [e.model for e in engines]
     control = np.stack(force)[:, None, :]
     nq = models[0].nq
@@ -265,13 +270,14 @@ def mujoco_row(n: int, steps: int, threads: tuple[int, ...] = (1, 2)) -> dict:
         data = [mujoco.MjData(models[0]) for _ in range(nthread)]
         rollout.rollout(models, data, np.stack(initial), control,
                         control_spec=mujoco.mjtState.mjSTATE_QFRC_APPLIED, nstep=substeps)
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         states, _ = rollout.rollout(
             models, data, np.stack(initial), control,
             control_spec=mujoco.mjtState.mjSTATE_QFRC_APPLIED, nstep=(steps - 1) * substeps,
         )
-        took = time.perf_counter() - start
-        row[f'rollout{nthread}'] = n * (steps - 1) / took / n
+        took, took_cpu = time.perf_counter() - start, time.process_time() - cpu
+        row[f'rollout{nthread}'] = n * (steps - 1) / took_cpu
+        row[f'rollout{nthread}_wall'] = n * (steps - 1) / took
         row['diff'] = max(
             float(np.abs(states[i, -1, 1:1 + nq] - finals[i]).max()) for i in range(n)
         )
@@ -298,25 +304,37 @@ def main() -> None:
     parser.add_argument('--no-mujoco', action='store_true')
     args = parser.parse_args()
     steps = int(round(args.seconds * RATE_HZ)) + 1
-    print(f'towel fling, 11 x 15 mesh, {RATE_HZ:.0f} Hz, first {args.seconds:g} s; steps per '
-          "second per trial (world), on this machine's CPU")
+    print(f'towel fling, 11 x 15 mesh, {RATE_HZ:.0f} Hz, first {args.seconds:g} s, on this '
+          "machine's CPU: steps per second per trial, from the CPU time the process used (what "
+          'a core gives; stable under load) and from the wall time (as measured, load included)')
+    rates = ('seq', 'batch', 'seq_wall', 'batch_wall')
     if not args.no_newton:
-        print(f'\n{"Newton":<8} {"N":>3} {"one by one":>11} {"N worlds":>9} {"ratio":>6} '
-              f'{"set-up s (1-by-1 / worlds)":>27} {"max |dx| m":>11}')
+        print(f'\n{"Newton":<6} {"N":>2} | {"CPU: 1-by-1":>11} {"worlds":>7} {"ratio":>5} | '
+              f'{"wall: 1-by-1":>12} {"worlds":>7} {"ratio":>5} | {"set-up s":>12} | max |dx| m')
         for model in args.models:
             for n in args.worlds:
-                r = best(newton_row, args.repeats, ('seq', 'batch'), model, n, steps)
-                print(f'{model:<8} {n:>3} {r["seq"]:>11.1f} {r["batch"]:>9.1f} '
-                      f'{r["batch"] / r["seq"]:>6.2f} {r["setup_seq"]:>13.2f} / '
-                      f'{r["setup_batch"]:<11.2f} {r["diff"]:>11.2g}', flush=True)
+                r = best(newton_row, args.repeats, rates, model, n, steps)
+                print(f'{model:<6} {n:>2} | {r["seq"]:>11.1f} {r["batch"]:>7.1f} '
+                      f'{r["batch"] / r["seq"]:>5.2f} | {r["seq_wall"]:>12.1f} '
+                      f'{r["batch_wall"]:>7.1f} {r["batch_wall"] / r["seq_wall"]:>5.2f} | '
+                      f'{r["setup_seq"]:>5.2f} / {r["setup_batch"]:<4.2f} | {r["diff"]:.2g}',
+                      flush=True)
     if not args.no_mujoco:
-        print(f'\n{"MuJoCo":<8} {"N":>3} {"loop":>8} {"rollout 1 thr":>14} {"ratio":>6} '
-              f'{"rollout 2 thr":>14} {"ratio":>6} {"max |dq| m":>11}')
+        print(f'\n{"MuJoCo":<6} {"N":>2} | {"CPU: loop":>9} {"rollout 1":>9} {"ratio":>5} '
+              f'{"rollout 2":>9} {"ratio":>5} | {"wall: loop":>10} {"rollout 1":>9} {"ratio":>5} '
+              f'{"rollout 2":>9} {"ratio":>5} | max |dq| m')
+        keys = ('loop', 'rollout1', 'rollout2', 'loop_wall', 'rollout1_wall', 'rollout2_wall')
         for n in args.worlds:
-            r = best(mujoco_row, args.repeats, ('loop', 'rollout1', 'rollout2'), n, steps)
-            print(f'{"shell":<8} {n:>3} {r["loop"]:>8.1f} {r["rollout1"]:>14.1f} '
-                  f'{r["rollout1"] / r["loop"]:>6.2f} {r["rollout2"]:>14.1f} '
-                  f'{r["rollout2"] / r["loop"]:>6.2f} {r["diff"]:>11.2g}', flush=True)
+            r = best(mujoco_row, args.repeats, keys, n, steps)
+            cells = []
+            for suffix in ('', '_wall'):
+                base = r['loop' + suffix]
+                cells.append(
+                    f'{base:>{10 if suffix else 9}.1f} '
+                    + ' '.join(f'{r[f"rollout{t}{suffix}"]:>9.1f} '
+                               f'{r[f"rollout{t}{suffix}"] / base:>5.2f}' for t in (1, 2))
+                )
+            print(f'{"shell":<6} {n:>2} | {cells[0]} | {cells[1]} | {r["diff"]:.2g}', flush=True)
 
 
 if __name__ == '__main__':
