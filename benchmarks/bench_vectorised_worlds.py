@@ -22,7 +22,13 @@ The motion is the bundled towel fling at 100 Hz on the coarse default 11 x 15 me
 --seconds (the settle phase); MuJoCo's corners stay at the first target.
 
     .venv/bin/python benchmarks/bench_vectorised_worlds.py [--worlds 1 2 4 8]
-        [--models xpbd vbd] [--seconds 2] [--no-mujoco] [--no-newton]
+        [--models xpbd vbd] [--seconds 2] [--repeats 2] [--device cpu] [--no-mujoco]
+        [--no-newton]
+
+Steps per second are given from the process's CPU time (what one core gives a trial, which the
+load of a shared machine hardly changes; identification already runs a trial per core on its
+Dask workers) and from the wall time. With --device cuda the Newton rows compare the same on a
+GPU (the CPU time is then the host's).
 """
 
 from __future__ import annotations
@@ -53,12 +59,14 @@ SHARED = (
 )
 
 
-def generation(engine: str, n: int, model: str | None = None, seed: int = 0) -> list[dict]:
+def generation(
+    engine: str, n: int, model: str | None = None, device: str = 'cpu', seed: int = 0
+) -> list[dict]:
     """Return `n` parameter sets around the towel preset, as a CMA-ES generation has them."""
     cls = engine_class(engine)
     preset = {**load_preset(engine, 'towel', 'dynamic'), **({'model': model} if model else {})}
     if engine == 'newton':
-        preset['device'] = 'cpu'
+        preset['device'] = device
     base = cls.validate_params(preset)
     schema = {p.name: p for p in cls.params}
     rng = np.random.default_rng(seed)
@@ -197,10 +205,10 @@ class NewtonWorlds:
         return self.vertices()
 
 
-def newton_row(model: str, n: int, steps: int) -> dict:
+def newton_row(model: str, n: int, steps: int, device: str) -> dict:
     """Time a generation of `n` trials one by one and as `n` worlds; compare the vertices."""
     targets = full_targets('dynamic', RATE_HZ)
-    trials = generation('newton', n, model)
+    trials = generation('newton', n, model, device)
     left, right = targets.left, targets.right
     alone, setup_seq, step_seq, cpu_seq = [], 0.0, 0.0, 0.0
     for params in trials:
@@ -300,12 +308,23 @@ def main() -> None:
     parser.add_argument(
         '--repeats', type=int, default=2, help='runs of each row; the fastest counts (load)'
     )
+    parser.add_argument(
+        '--device', default='cpu', help="Newton's device (cpu, cuda, cuda:N); MuJoCo: the CPU"
+    )
     parser.add_argument('--no-newton', action='store_true')
     parser.add_argument('--no-mujoco', action='store_true')
     args = parser.parse_args()
+    if not args.no_newton:
+        from cloth_bench_ros.engines.base import EngineError
+        from cloth_bench_ros.engines.newton_cloth import resolve_device
+
+        try:
+            resolve_device(args.device)
+        except EngineError as exc:
+            parser.error(str(exc))
     steps = int(round(args.seconds * RATE_HZ)) + 1
-    print(f'towel fling, 11 x 15 mesh, {RATE_HZ:.0f} Hz, first {args.seconds:g} s, on this '
-          "machine's CPU: steps per second per trial, from the CPU time the process used (what "
+    print(f'towel fling, 11 x 15 mesh, {RATE_HZ:.0f} Hz, first {args.seconds:g} s, Newton on '
+          f'{args.device}: steps per second per trial, from the CPU time the process used (what '
           'a core gives; stable under load) and from the wall time (as measured, load included)')
     rates = ('seq', 'batch', 'seq_wall', 'batch_wall')
     if not args.no_newton:
@@ -313,7 +332,7 @@ def main() -> None:
               f'{"wall: 1-by-1":>12} {"worlds":>7} {"ratio":>5} | {"set-up s":>12} | max |dx| m')
         for model in args.models:
             for n in args.worlds:
-                r = best(newton_row, args.repeats, rates, model, n, steps)
+                r = best(newton_row, args.repeats, rates, model, n, steps, args.device)
                 print(f'{model:<6} {n:>2} | {r["seq"]:>11.1f} {r["batch"]:>7.1f} '
                       f'{r["batch"] / r["seq"]:>5.2f} | {r["seq_wall"]:>12.1f} '
                       f'{r["batch_wall"]:>7.1f} {r["batch_wall"] / r["seq_wall"]:>5.2f} | '
