@@ -16,7 +16,8 @@ install):
         [--grids 11x15 31x43] [--primitives dynamic quasi_static]
 
 Several worlds of one Newton model stepped together (vectorised worlds) are not part of the
-engine yet, so only one world is measured.
+engine, so only one world is measured here; benchmarks/bench_vectorised_worlds.py --device D
+compares them with one world at a time.
 """
 
 from __future__ import annotations
