@@ -4,9 +4,10 @@ Several trials at once: Newton's vectorised worlds and MuJoCo's `rollout` agains
 What an identification's batch of trials (a CMA-ES generation, several TPE suggestions) would
 gain on this machine's CPU from being stepped together, measured in one process:
 
-- Newton (Warp's CPU device): the N trials of a generation as N worlds of one Newton model, each
-  world the towel with its own parameters (mass, membrane, its damping, bending, friction drawn
-  within a factor 1.5 of the preset, as a CMA-ES generation has them), stepped together, against
+- Newton (Warp's CPU device, or --device): the N trials of a generation as N worlds of one
+  Newton model, each world the towel with its own parameters (mass, membrane, its damping,
+  bending, friction drawn within a factor 1.5 of the preset, as a CMA-ES generation has them),
+  stepped together, against
   the same N trials run one after the other by the engine (NewtonCloth, as identification runs
   them), for N = 1, 2, 4, 8. Prints steps per second per world both ways, their ratio, the set-up
   time both ways, and how far any world's vertices end from its trial run alone.
@@ -22,8 +23,11 @@ The motion is the bundled towel fling at 100 Hz on the coarse default 11 x 15 me
 --seconds (the settle phase); MuJoCo's corners stay at the first target.
 
     .venv/bin/python benchmarks/bench_vectorised_worlds.py [--worlds 1 2 4 8]
-        [--models xpbd vbd] [--seconds 2] [--repeats 2] [--device cpu] [--no-mujoco]
+        [--models xpbd vbd] [--seconds 1] [--repeats 2] [--device cpu] [--no-mujoco]
         [--no-newton]
+
+About a minute of CPU with the defaults (XPBD and MuJoCo); `--models xpbd vbd` adds VBD, about
+three more.
 
 Steps per second are given from the process's CPU time (what one core gives a trial, which the
 load of a shared machine hardly changes; identification already runs a trial per core on its
@@ -303,8 +307,11 @@ def best(measure: Any, repeats: int, rates: tuple[str, ...], *args: Any) -> dict
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--worlds', type=int, nargs='+', default=[1, 2, 4, 8])
-    parser.add_argument('--models', nargs='+', default=['xpbd', 'vbd'], choices=['xpbd', 'vbd'])
-    parser.add_argument('--seconds', type=float, default=2.0, help='of the fling, from its start')
+    parser.add_argument(
+        '--models', nargs='+', default=['xpbd'], choices=['xpbd', 'vbd'],
+        help='vbd: add it (a step costs 7 times an XPBD one: minutes)',
+    )
+    parser.add_argument('--seconds', type=float, default=1.0, help='of the fling, from its start')
     parser.add_argument(
         '--repeats', type=int, default=2, help='runs of each row; the fastest counts (load)'
     )
