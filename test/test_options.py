@@ -24,7 +24,8 @@ NOT_YET = {
 # The same spelling for another value, and rank's replay flags (its own defaults for a recording)
 OTHER_VALUES = {
     ('cloth-bench synth', '--rate'),  # the reference's step rate (default: its file's)
-    ('cloth-bench bag import', '--clean'),  # a switch: clean before writing
+    ('cloth-bench import', '--clean'),  # a switch: clean before writing
+    ('cloth-bench converge', '--duration'),  # of the reference's quintic part, not of a run
     ('cloth-bench bag rewrite', '--change-of-phase-frame'),  # N or "detected"
     ('cloth-bench rank', '--topic'),
     ('cloth-bench rank', '--targets-topic'),

@@ -143,7 +143,7 @@ class Evaluator(Node):
         # Latency: lockstep measures from each target's arrival; realtime from the wall-clock
         # schedule the targets should have kept (first target + sim time), so a simulator that
         # falls behind shows its queueing delay too.
-        self.realtime = self.declare_parameter('pacing', 'lockstep').value == 'realtime'
+        self.realtime = declare_option(self, 'pacing') == 'realtime'
         self.create_subscription(PoseArray, 'targets', self.on_target, make_qos(100))
         self.period_s = 1.0 / rate_hz
         self.target_sent: dict[int, int] = {}  # stamp -> monotonic ns when the target arrived

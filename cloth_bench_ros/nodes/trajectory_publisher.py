@@ -10,7 +10,6 @@ from typing import Any
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.hil_timing import TargetTimeline
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
-from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     all_subscriptions_matched,
     NAMESPACE,
@@ -23,7 +22,6 @@ from cloth_bench_ros.nodes.common import (
 from cloth_bench_ros.nodes.message_pool import MessagePool
 from cloth_bench_ros.runtime import (
     Clock,
-    declare_float,
     declare_option,
     Header,
     make_qos,
@@ -37,7 +35,6 @@ from cloth_bench_ros.runtime import (
 )
 import numpy as np
 
-PACINGS = ('lockstep', 'realtime')
 PREROLL_RESEND_S = (
     0.5  # real time: the start-up handshake's target 0 is sent again after this long
 )
@@ -56,7 +53,7 @@ class TrajectoryPublisher(Node):
         parameters_fixed_at_start(self)
         primitive = parse_primitive(declare_option(self, 'primitive'))
         rate_hz = declare_option(self, 'rate_hz')
-        self.pacing = self.declare_parameter('pacing', 'lockstep').value
+        self.pacing = declare_option(self, 'pacing')
         self.declare_parameter('engines', ['mujoco'])
         self.declare_parameter('wait_for_recorder', True)
         self.declare_parameter('wait_for_evaluator', True)
@@ -74,10 +71,8 @@ class TrajectoryPublisher(Node):
             p['wait_for_recorder'],
             p['wait_for_evaluator'],
         )
-        if self.pacing not in PACINGS:
-            raise InputError(f'unknown pacing {self.pacing!r} (valid: {", ".join(PACINGS)})')
         self.timing_log = self.declare_parameter('timing_log', '').value
-        duration = declare_float(self, 'duration', 0.0)
+        duration = declare_option(self, 'duration')
         self.targets = full_targets(primitive, rate_hz)
         # duration > 0: only the targets of the first `duration` seconds (short real-time checks).
         self.n_targets = (
