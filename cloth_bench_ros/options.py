@@ -41,7 +41,9 @@ class Option:
     choices: tuple[str, ...] = ()
     unset: Any = None  # a node value that means "not given" (checked to None), e.g. -1
     metavar: str | None = None
-    read_only: bool = False  # a running node cannot change it (its ParameterDescriptor says so)
+    # a running node cannot change it (its ParameterDescriptor says so): every node reads its
+    # parameters once, at start-up
+    read_only: bool = True
     # a str value's own check, and the command line's of any type: `validate(value, label)` ->
     # the value (e.g. parse_grid: a tuple); an InputError if it is not one
     validate: Callable[[Any, str], Any] | None = None
@@ -194,29 +196,29 @@ OPTIONS = _declare(
     # how the graph runs
     Option(
         'pacing', str, 'lockstep', 'lockstep: each target waits for every engine; realtime: '
-        'targets on the wall clock', flag='--pacing', choices=PACINGS, read_only=True,
+        'targets on the wall clock', flag='--pacing', choices=PACINGS,
     ),
     Option(
         'duration', float, 0.0, 'seconds of the trajectory to run (0: all; a shortened run is '
-        'not scored)', flag='--duration', low=0.0, unit='s', read_only=True,
+        'not scored)', flag='--duration', low=0.0, unit='s',
     ),
     # the live view (docs/live.md)
     Option(
         'live', bool, False, 'serve the run to Foxglove while it goes (WebSocket; the error on '
-        'the cloth, CD/HD)', flag='--live', action='store_true', read_only=True,
+        'the cloth, CD/HD)', flag='--live', action='store_true',
     ),
     Option(
         'live_host', str, '127.0.0.1', 'address the live view binds (127.0.0.1: this machine '
-        'only)', flag='--live-host', validate=validation.host, read_only=True,
+        'only)', flag='--live-host', validate=validation.host,
     ),
     Option(
         'live_port', int, 8765, "its port (8765: Foxglove's; 0: one the system picks)",
-        flag='--live-port', low=0, high=65535, read_only=True,
+        flag='--live-port', low=0, high=65535,
     ),
     Option(
         'live_wait', float, 30.0, 'seconds a lockstep run waits for a first viewer before it '
         'starts (then it goes on without one)', flag='--live-wait', low=0.0,
-        high=validation.MAX_WAIT_S, unit='s', metavar='S', read_only=True,
+        high=validation.MAX_WAIT_S, unit='s', metavar='S',
     ),
 )
 

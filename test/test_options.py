@@ -115,11 +115,14 @@ def test_declare_option_checks_by_the_declaration_and_takes_an_integer_for_a_flo
     )
     node = rclpy.create_node('probe', context=context)
     assert declare_option(node, 'rate_hz') == 1000.0
-    with pytest.raises(InputError, match=r'probe: parameter grid_nx: -3 is outside \[0, 201\]'):
+    # the descriptor's range refuses it, as rclpy's does (its reason, named by node and parameter)
+    refused = r'probe: parameter grid_nx: .*out of range. Min: 0, Max: 201'
+    with pytest.raises(InputError, match=refused):
         declare_option(node, 'grid_nx')
     with pytest.raises(InputError, match='probe: parameter voxel'):
         declare_option(node, 'voxel')
-    side = node.describe_parameter('grid_nx').integer_range[0]
+    assert declare_option(node, 'grid_nz') == 0
+    side = node.describe_parameter('grid_nz').integer_range[0]
     assert (side.from_value, side.to_value) == (0, 201)
 
 
@@ -202,3 +205,28 @@ def test_the_launch_file_and_the_config_agree_with_the_declarations():
     assert {'rate_hz', 'seed', 'topic', 'change_of_phase_frame'} <= set(shared)
     for name in shared:
         assert common[name] == OPTIONS[name].default, f'config/benchmark.yaml: {name}'
+
+
+def test_every_parameter_of_every_node_is_read_only_and_a_change_is_refused(context):
+    """A running node reads its parameters once: each descriptor says read-only, rclpy refuses."""
+    from cloth_bench_ros.nodes.evaluator import Evaluator
+    from cloth_bench_ros.nodes.recorder import Recorder
+    from cloth_bench_ros.nodes.simulator import Simulator
+    from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
+    from cloth_bench_ros.paths import bundled_bag
+
+    bag = bundled_bag('towel', 'dynamic')
+    rclpy.init(args=['prog', '--ros-args', '-p', f'bag:={bag}', '-p', 'grid_nx:=4',
+                     '-p', 'grid_nz:=5'], context=context)
+    settable = {'use_sim_time'}  # rclpy's time source follows it
+    for node_class in (TrajectoryPublisher, Simulator, Evaluator, Recorder):
+        node = node_class(context=context)
+        try:
+            names = [n for n in node.list_parameters([], 0).names if n not in settable]
+            assert len(names) >= 4, node_class
+            for name in names:
+                assert node.describe_parameter(name).read_only, (node_class.__name__, name)
+            refused = node.set_parameters([rclpy.Parameter(names[0], value=0)])[0]
+            assert not refused.successful and 'read-only' in refused.reason
+        finally:
+            node.destroy_node()

@@ -14,7 +14,6 @@ from cloth_bench_ros.nodes.common import (
     all_subscriptions_matched,
     NAMESPACE,
     node_keys,
-    parameters_fixed_at_start,
     publish_serialises,
     publishers_matched,
     run_node,
@@ -22,6 +21,7 @@ from cloth_bench_ros.nodes.common import (
 from cloth_bench_ros.nodes.message_pool import MessagePool
 from cloth_bench_ros.runtime import (
     Clock,
+    declare_fixed,
     declare_option,
     Header,
     make_qos,
@@ -50,13 +50,12 @@ class TrajectoryPublisher(Node):
         super().__init__(
             'trajectory_publisher', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs
         )
-        parameters_fixed_at_start(self)
         primitive = parse_primitive(declare_option(self, 'primitive'))
         rate_hz = declare_option(self, 'rate_hz')
         self.pacing = declare_option(self, 'pacing')
-        self.declare_parameter('engines', ['mujoco'])
-        self.declare_parameter('wait_for_recorder', True)
-        self.declare_parameter('wait_for_evaluator', True)
+        declare_fixed(self, 'engines', ['mujoco'])
+        declare_fixed(self, 'wait_for_recorder', True)
+        declare_fixed(self, 'wait_for_evaluator', True)
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,
@@ -71,7 +70,7 @@ class TrajectoryPublisher(Node):
             p['wait_for_recorder'],
             p['wait_for_evaluator'],
         )
-        self.timing_log = self.declare_parameter('timing_log', '').value
+        self.timing_log = declare_fixed(self, 'timing_log', '')
         duration = declare_option(self, 'duration')
         self.targets = full_targets(primitive, rate_hz)
         # duration > 0: only the targets of the first `duration` seconds (short real-time checks).
