@@ -8,6 +8,7 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
+from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import FLAGS, Option, OPTIONS
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
@@ -243,7 +244,7 @@ def render(
     cloth: str,
     tol_rel: float,
     tol_abs: float,
-    metric: str = 'cd',
+    metric: str = DEFAULT_METRIC,
 ) -> int:
     """Render the report of `results` into `out` and print its headline tables."""
     from cloth_bench_ros.report.document import report_directory

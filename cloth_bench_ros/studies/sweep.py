@@ -27,6 +27,7 @@ from cloth_bench_ros.engines.presets import PresetSet
 
 # re-exported: the studies' one vocabulary
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
     config_label,
@@ -336,7 +337,7 @@ class SweepPlan:
     bag_dir: Path | None = None
     grid: tuple[int, int] | None = None
     overrides: dict = field(default_factory=dict)
-    pacing: str = 'lockstep'
+    pacing: str = OPTIONS['pacing'].default
     step_per_target: bool = False
     keep_frames: str = 'first'  # first | all | none
     axes: Sequence[str] = ()  # settings mode: "name=v1,v2" strings
