@@ -44,11 +44,7 @@ from cloth_bench_ros.studies.cells import (  # noqa: F401
     SETTINGS_RATE,
     SETTINGS_SEEDS,
 )
-from cloth_bench_ros.studies.dask_executor import (  # noqa: F401
-    default_workers,
-    open_client,
-    run_tasks,
-)
+from cloth_bench_ros.studies.dask_executor import default_workers, open_client, run_tasks
 from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
     parse_grid,
     parse_overrides,
