@@ -13,7 +13,8 @@ from cloth_bench_ros.options import Option
 def _frame_or_detected(text: str, label: str) -> int | str:
     if text == 'detected':
         return 'detected'
-    return validation.frame_index(validation.parse_integer(text, label), label)
+    frame = validation.parse_integer(text, label)
+    return validation.integer(frame, label, 0, validation.MAX_FRAME)
 
 
 REFERENCES = ('mujoco', 'newton-vbd')
