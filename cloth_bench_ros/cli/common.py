@@ -168,7 +168,7 @@ def device(text: str) -> str:
         from cloth_bench_ros.engines import engine_device
 
         return engine_device('newton', {'device': name})
-    except ValueError as exc:  # InputError, or EngineError (also for Newton not installed)
+    except ClothBenchError as exc:  # InputError, or EngineError (also for Newton not installed)
         raise argparse.ArgumentTypeError(
             str(exc).removeprefix('--device: ').removeprefix('parameter device: ')
         ) from None

@@ -38,7 +38,7 @@ DEFAULT_SETTINGS_AXES: dict[str, list] = {
     'timestep': [None, 0.005, 0.01],
     'solver_iterations': [None, 5],
 }
-SETTINGS_RATE = 100.0
+SETTINGS_RATE = OPTIONS['rate_hz'].default
 SETTINGS_SEEDS = 2
 
 
