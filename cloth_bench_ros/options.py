@@ -4,18 +4,25 @@ Each user-facing value declared once: name, type, default, range, unit, help.
 A CLI flag (cli/common.add_option), a node parameter with its ParameterDescriptor
 (runtime.declare_option) and the check of either (Option.check, the validation layer) are all made
 from the one `Option` here. A flag's help shows the unit, the range and the default.
+
+OPTIONS are node parameters (most with a flag too); FLAGS are the command line's own, shared by
+several commands (--engine, --grid, --workers, --output, ...). A flag of one command only is
+declared beside its command, in cli/, as an `Option` too.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from typing import Any
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, METRICS
 from cloth_bench_ros.core.trajectory import PRIMITIVES
 from cloth_bench_ros.errors import InputError
 
 CLOTHS = ('towel', 'chequered', 'linen')  # the cloths the presets describe
+PACINGS = ('lockstep', 'realtime')
 
 
 @dataclass(frozen=True)
@@ -34,6 +41,21 @@ class Option:
     choices: tuple[str, ...] = ()
     unset: Any = None  # a node value that means "not given" (checked to None), e.g. -1
     metavar: str | None = None
+    # a running node cannot change it (its ParameterDescriptor says so): every node reads its
+    # parameters once, at start-up
+    read_only: bool = True
+    # a str value's own check, and the command line's of any type: `validate(value, label)` ->
+    # the value (e.g. parse_grid: a tuple); an InputError if it is not one
+    validate: Callable[[Any, str], Any] | None = None
+    # the command line only: '' (a value), 'store_true', 'append' or 'optional_bool' (--x/--no-x)
+    action: str = ''
+    dest: str | None = None
+    nargs: str | None = None
+    required: bool = False
+
+    def variant(self, **changes: Any) -> Option:
+        """Return this option with some fields changed (e.g. another command's help or action)."""
+        return replace(self, **changes)
 
     def check(self, value: Any, label: str | None = None) -> Any:
         """Return `value` checked against the declaration (InputError naming `label`)."""
@@ -54,11 +76,13 @@ class Option:
             return validation.boolean(value, label)
         if not isinstance(value, str):
             raise InputError(f'{label}: {value!r} is not a string')
-        return value
+        return self.validate(value, label) if self.validate else value
 
     def parse(self, text: str, label: str | None = None) -> Any:
         """Return the value of a command-line word, checked."""
         label = label or self.flag or self.name
+        if self.validate:
+            return self.validate(text, label)
         if self.type is float and not self.choices:
             return self.check(validation.parse_number(text, label), label)
         if self.type is int:
@@ -84,7 +108,11 @@ class Option:
             parts.append(f'range {self.range_text()}')
         elif self.unit:
             parts.append(f'in {self.unit}')
-        default = self.check(self.default)
+        if self.action in ('store_true', 'append') or 'default' in self.help:
+            return '; '.join(parts)  # a switch, a list, or a default the help explains itself
+        default = self.default
+        if default is not None and not self.validate:
+            default = self.check(default)
         if default not in (None, ''):
             parts.append(f'default {self._number(default) if self.type is float else default}')
         return '; '.join(parts)
@@ -165,7 +193,94 @@ OPTIONS = _declare(
         'the first engine) or onset (fitted to the task in the clouds, no engine)',
         flag='--align', choices=('simulation', 'onset'),
     ),
+    # how the graph runs
+    Option(
+        'pacing', str, 'lockstep', 'lockstep: each target waits for every engine; realtime: '
+        'targets on the wall clock', flag='--pacing', choices=PACINGS,
+    ),
+    Option(
+        'duration', float, 0.0, 'seconds of the trajectory to run (0: all; a shortened run is '
+        'not scored)', flag='--duration', low=0.0, unit='s',
+    ),
+    # the live view (docs/live.md)
+    Option(
+        'live', bool, False, 'serve the run to Foxglove while it goes (WebSocket; the error on '
+        'the cloth, CD/HD)', flag='--live', action='store_true',
+    ),
+    Option(
+        'live_host', str, '127.0.0.1', 'address the live view binds (127.0.0.1: this machine '
+        'only)', flag='--live-host', validate=validation.host,
+    ),
+    Option(
+        'live_port', int, 8765, "its port (8765: Foxglove's; 0: one the system picks)",
+        flag='--live-port', low=0, high=65535,
+    ),
+    Option(
+        'live_wait', float, 30.0, 'seconds a lockstep run waits for a first viewer before it '
+        'starts (then it goes on without one)', flag='--live-wait', low=0.0,
+        high=validation.MAX_WAIT_S, unit='s', metavar='S',
+    ),
 )
+
+# The command line's own options, shared by several commands (cli/common.add_option).
+FLAGS = _declare(
+    Option('engines', str, None, 'engine (repeat for several)', flag='--engine', action='append'),
+    Option(
+        'grid', str, None, "cloth mesh NXxNZ vertices, e.g. 6x8 (default: the engine's)",
+        flag='--grid', validate=validation.parse_grid,
+    ),
+    Option(
+        'presets', str, 'default', 'cloth parameters: default (config/presets), identified '
+        '(fitted to the bundled MuJoCo-made references), identified-newton-vbd (fitted to the '
+        'Newton VBD ones), or a directory of <engine>.yaml files (e.g. an identify --output)',
+        flag='--presets',
+    ),
+    Option('output', str, None, 'results directory', flag='--output'),
+    Option('bag', str, None, 'rosbag2 bag (default: the bundled one)', flag='--bag'),
+    Option(
+        'workers', int, None, 'local worker processes (default: all cores)', flag='--workers',
+        low=1,
+    ),
+    Option(
+        'scheduler', str, None, 'run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786',
+        flag='--scheduler',
+    ),
+    Option('no_progress', bool, False, 'no progress bar', flag='--no-progress',
+           action='store_true'),
+    Option(
+        'set', str, None, 'override an engine parameter (repeatable)', flag='--set',
+        action='append', metavar='ENGINE.PARAM=VALUE',
+    ),
+    Option(
+        'metric', str, DEFAULT_METRIC, "metric to rank and compare on (default cd: the paper's "
+        'CD; docs/metrics.md)', flag='--metric', choices=tuple(METRICS),
+    ),
+    Option('seeds', int, None, 'number of seeds', flag='--seeds', low=1),
+    Option('seed_start', int, 0, 'first seed', flag='--seed-start', low=0,
+           high=validation.MAX_SEED),
+    Option(
+        'max_frames', int, None, 'score only the first N frames of each window (faster)',
+        flag='--max-frames', low=1,
+    ),
+    # the settings recommendation's CD tolerance (report, hil)
+    Option(
+        'tolerance_rel', float, 0.05, 'recommendation: CD within this fraction of the best',
+        flag='--tolerance-rel', low=0.0,
+    ),
+    Option(
+        'tolerance_abs', float, 0.002, '... or this many metres, whichever is larger',
+        flag='--tolerance-abs', low=0.0, unit='m',
+    ),
+    Option('quiet', bool, False, 'no progress bar', flag='--quiet', action='store_true'),
+    Option('overwrite', bool, False, 'replace what exists', flag='--overwrite',
+           action='store_true'),
+)
+
+
+def declared(name: str) -> Option:
+    """Return the declaration of `name`: a node parameter's, else a shared flag's."""
+    return OPTIONS[name] if name in OPTIONS else FLAGS[name]
+
 
 # The recorder's parameters for a recording that does not say everything, in `run --help` order.
 REPLAY_OPTIONS = (

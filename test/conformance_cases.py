@@ -21,9 +21,11 @@ from cloth_bench_ros.runtime import (
     DiagnosticArray,
     DurabilityPolicy,
     EMBEDDED,
+    FloatingPointRange,
     GetParameters,
     GetParameterTypes,
     HistoryPolicy,
+    IntegerRange,
     ListParameters,
     Parameter,
     ParameterDescriptor,
@@ -320,6 +322,67 @@ def _callback_refuses() -> list:
         except Exception as exc:  # noqa: B902 (the outcome is the class)
             declared = _error(exc)
         return [changed, node.get_parameter('kept').value, declared]
+
+
+def _outcome(result: Any) -> list:
+    return [result.successful, result.reason]
+
+
+@case("a descriptor's range: ends, inside, outside, its step, and a declaration outside it")
+def _descriptor_ranges() -> dict:
+    with _Graph(['-p', 'far:=7', '-p', 'near:=1.0000001']) as graph:
+        node = graph.node
+        ints = ParameterDescriptor(integer_range=[IntegerRange(from_value=0, to_value=10, step=2)])
+        floats = ParameterDescriptor(
+            floating_point_range=[FloatingPointRange(from_value=1.0, to_value=2.5, step=0.0)]
+        )
+        node.declare_parameter('count', 4, ints)
+        node.declare_parameter('ratio', 1.5, floats)
+        node.declare_parameter('near', 2.0, floats)  # within rclpy's tolerance of an end
+        set_ = {
+            f'count {v}': _outcome(node.set_parameters([Parameter('count', value=v)])[0])
+            for v in (0, 10, 6, 5, 12, -2)
+        }
+        set_.update({
+            f'ratio {v}': _outcome(node.set_parameters([Parameter('ratio', value=v)])[0])
+            for v in (1.0, 2.5, 2.0, 0.5, 1e9)
+        })
+        try:
+            node.declare_parameter('far', 1, ints)
+            declared = 'ok'
+        except Exception as exc:  # noqa: B902 (the outcome is the class)
+            declared = _error(exc)
+        values = [node.get_parameter(n).value for n in ('count', 'ratio', 'near')]
+        return {'set': set_, 'declared outside': declared, 'values': values}
+
+
+@case('a read-only parameter: its override is taken, a change refused, atomically too')
+def _read_only() -> list:
+    with _Graph(['-p', 'fixed:=3']) as graph:
+        node = graph.node
+        node.declare_parameter('fixed', 1, ParameterDescriptor(read_only=True))
+        node.declare_parameter('free', 1)
+        one = node.set_parameters([Parameter('fixed', value=4), Parameter('free', value=5)])
+        both = node.set_parameters_atomically(
+            [Parameter('free', value=6), Parameter('fixed', value=4)]
+        )
+        values = [node.get_parameter(n).value for n in ('fixed', 'free')]
+        return [[_outcome(r) for r in one], _outcome(both), values]
+
+
+@case('a declared option is read-only and carries its range')
+def _declared_option() -> list:
+    from cloth_bench_ros.runtime import declare_option
+
+    with _Graph(['-p', 'rate_hz:=1000']) as graph:
+        node = graph.node
+        rate = declare_option(node, 'rate_hz')
+        nx = declare_option(node, 'grid_nx')
+        described = node.describe_parameter('grid_nx')
+        refused = node.set_parameters([Parameter('rate_hz', value=10.0)])[0]
+        side = described.integer_range[0]
+        return [rate, nx, described.read_only, [side.from_value, side.to_value],
+                _outcome(refused), node.get_parameter('rate_hz').value]
 
 
 @case('the trajectory publisher refuses changes on a running node')

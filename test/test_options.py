@@ -8,7 +8,7 @@ import re
 
 from cloth_bench_ros.cli import build_parser
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.options import Option, OPTIONS
+from cloth_bench_ros.options import FLAGS as FLAGS_DECLARED, Option, OPTIONS
 from cloth_bench_ros.runtime import declare_option
 from cloth_bench_ros.runtime import embedded as rclpy
 import pytest
@@ -24,7 +24,8 @@ NOT_YET = {
 # The same spelling for another value, and rank's replay flags (its own defaults for a recording)
 OTHER_VALUES = {
     ('cloth-bench synth', '--rate'),  # the reference's step rate (default: its file's)
-    ('cloth-bench bag import', '--clean'),  # a switch: clean before writing
+    ('cloth-bench import', '--clean'),  # a switch: clean before writing
+    ('cloth-bench converge', '--duration'),  # of the reference's quintic part, not of a run
     ('cloth-bench bag rewrite', '--change-of-phase-frame'),  # N or "detected"
     ('cloth-bench rank', '--topic'),
     ('cloth-bench rank', '--targets-topic'),
@@ -114,11 +115,14 @@ def test_declare_option_checks_by_the_declaration_and_takes_an_integer_for_a_flo
     )
     node = rclpy.create_node('probe', context=context)
     assert declare_option(node, 'rate_hz') == 1000.0
-    with pytest.raises(InputError, match=r'probe: parameter grid_nx: -3 is outside \[0, 201\]'):
+    # the descriptor's range refuses it, as rclpy's does (its reason, named by node and parameter)
+    refused = r'probe: parameter grid_nx: .*out of range. Min: 0, Max: 201'
+    with pytest.raises(InputError, match=refused):
         declare_option(node, 'grid_nx')
     with pytest.raises(InputError, match='probe: parameter voxel'):
         declare_option(node, 'voxel')
-    side = node.describe_parameter('grid_nx').integer_range[0]
+    assert declare_option(node, 'grid_nz') == 0
+    side = node.describe_parameter('grid_nz').integer_range[0]
     assert (side.from_value, side.to_value) == (0, 201)
 
 
@@ -131,25 +135,48 @@ def test_a_value_outside_the_declared_range_is_exit_2(argv, capsys):
     assert 'is outside' in capsys.readouterr().err
 
 
+def _literal(value) -> str | None:
+    """Return a pattern of a distinctive default as code writes it (not 0, '', False or None)."""
+    if isinstance(value, bool) or value in (None, '', 0):
+        return None
+    if isinstance(value, float):
+        whole = rf'|{value:g}\b(?!\.)' if value.is_integer() else ''
+        return re.escape(repr(value)) + r'\b' + whole
+    if isinstance(value, int):
+        return rf'{value}\b(?!\.)'
+    return rf"""['"]{re.escape(value)}['"]""" if isinstance(value, str) else None
+
+
 def test_no_literal_default_of_a_declared_option_outside_its_declaration():
-    """No node declares a declared option itself; no `rate_hz ... = 100.0` stands elsewhere."""
+    """
+    No module writes a declared option's default itself: they read the declaration.
+
+    Neither a node declaring a declared option by hand, nor `name: T = default`, `name=default`,
+    `'name': default` or `.get('name', default)` of any declared option anywhere in the package.
+    """
     names = '|'.join(OPTIONS)
-    declared_again = re.compile(rf"declare_(?:parameter|float)\(\s*\w+,?\s*'({names})'")
-    literal = re.compile(
-        r'\b(rate_hz|align_window|align_step|voxel|wanted_rate)\b\s*(?::\s*\w+\s*)?=\s*[\d.]+'
-    )
-    flag_default = re.compile(
-        r"'--(rate|seed|voxel|align-window|align-step)',[^)]*default=[\d.]+", re.S
-    )
+    declared = rf"declare_(?:parameter|float|fixed)\(\s*(?:\w+,\s*)?'({names})'"
+    patterns = [re.compile(declared)]
+    for option in [*OPTIONS.values(), *FLAGS_DECLARED.values()]:
+        literal = _literal(option.default)
+        if literal:
+            patterns.append(re.compile(
+                rf"""(\b{option.name}\s*:\s*[\w\[\]., |]+=\s*|\b{option.name}=|"""
+                rf"""['"]{option.name}['"]\s*[,:]\s*)({literal})"""
+            ))
+    assert len(patterns) > 15
     found = []
     for path in PACKAGE.rglob('*.py'):
         rel = path.relative_to(ROOT).as_posix()
         if rel in NOT_YET:
             continue
         text = path.read_text()
-        for pattern in (declared_again, literal, flag_default):
+        for pattern in patterns:
             found += [f'{rel}: {m.group(0)}' for m in pattern.finditer(text)]
     assert found == []
+    planted = ['rate_hz: float = 100.0', "r.get('pacing', 'lockstep')", 'live_port=8765',
+               "{'align_window': 1.0}", "self.declare_parameter('seed', 0)"]
+    assert [t for t in planted if not any(p.search(t) for p in patterns)] == []
 
 
 def _docs_table() -> dict[str, list[str]]:
@@ -177,7 +204,7 @@ def _same(option: Option, text: str) -> bool:
 def test_the_docs_parameter_table_agrees_with_the_declarations():
     table = _docs_table()
     checked = [name for name in OPTIONS if name in table]
-    assert {'rate_hz', 'seed', 'voxel', 'align_step', 'grid_nx', 'trial'} <= set(checked)
+    assert set(checked) == set(OPTIONS)  # every node parameter of options.py is in the table
     for name in checked:
         for text in table[name]:
             assert _same(OPTIONS[name], text), f'docs/ros2.md: {name} default {text}'
@@ -192,12 +219,125 @@ def test_the_launch_file_and_the_config_agree_with_the_declarations():
         and getattr(node.targets[0], 'id', '') == 'defaults'
     )
     launch = [name for name in defaults if name in OPTIONS]
-    assert {'rate_hz', 'seed', 'cloth', 'primitive'} <= set(launch)
+    assert {'rate_hz', 'seed', 'cloth', 'primitive', 'pacing', 'live_port'} <= set(launch)
     for name in launch:
         assert _same(OPTIONS[name], defaults[name]), f'launch: {name}'
-    config = yaml.safe_load((ROOT / 'config' / 'benchmark.yaml').read_text())
-    common = config['/**']['ros__parameters']
-    shared = [name for name in common if name in OPTIONS]
-    assert {'rate_hz', 'seed', 'topic', 'change_of_phase_frame'} <= set(shared)
-    for name in shared:
-        assert common[name] == OPTIONS[name].default, f'config/benchmark.yaml: {name}'
+    checked = set()
+    for path in sorted((ROOT / 'config').glob('*.yaml')):  # every parameter file, every section
+        for section, body in (yaml.safe_load(path.read_text()) or {}).items():
+            params = body.get('ros__parameters', {}) if isinstance(body, dict) else {}
+            for name in (n for n in params if n in OPTIONS):
+                checked.add(name)
+                assert params[name] == OPTIONS[name].default, f'{path.name} {section}: {name}'
+    assert {'rate_hz', 'seed', 'topic', 'change_of_phase_frame', 'pacing'} <= checked
+
+
+def test_every_parameter_of_every_node_is_read_only_and_a_change_is_refused(context):
+    """A running node reads its parameters once: each descriptor says read-only, rclpy refuses."""
+    from cloth_bench_ros.nodes.evaluator import Evaluator
+    from cloth_bench_ros.nodes.recorder import Recorder
+    from cloth_bench_ros.nodes.simulator import Simulator
+    from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
+    from cloth_bench_ros.paths import bundled_bag
+
+    bag = bundled_bag('towel', 'dynamic')
+    rclpy.init(args=['prog', '--ros-args', '-p', f'bag:={bag}', '-p', 'grid_nx:=4',
+                     '-p', 'grid_nz:=5'], context=context)
+    settable = {'use_sim_time'}  # rclpy's time source follows it
+    for node_class in (TrajectoryPublisher, Simulator, Evaluator, Recorder):
+        node = node_class(context=context)
+        try:
+            names = [n for n in node.list_parameters([], 0).names if n not in settable]
+            assert len(names) >= 4, node_class
+            for name in names:
+                assert node.describe_parameter(name).read_only, (node_class.__name__, name)
+            refused = node.set_parameters([rclpy.Parameter(names[0], value=0)])[0]
+            assert not refused.successful and 'read-only' in refused.reason
+        finally:
+            node.destroy_node()
+
+
+# Flags not made from a declaration: argparse's own --help, the global --verbose, and --device,
+# whose check asks Warp which devices this machine has (cli/common.device_option).
+UNDECLARED = {'--help', '--verbose', '--device'}
+
+
+def test_every_flag_of_every_command_is_made_from_a_declaration():
+    """No parser adds a flag by hand: each carries the Option it was made from."""
+    missing = [
+        f'{path} {action.option_strings or action.dest}'
+        for path, action in _actions(build_parser())
+        if not set(action.option_strings) & UNDECLARED and not hasattr(action, 'declared')
+    ]
+    assert missing == []
+
+
+def test_help_shows_every_declared_unit_and_range():
+    """`--help` of every command: each flag's help names its unit and its range."""
+    count = 0
+    for path, action in _actions(build_parser()):
+        option = getattr(action, 'declared', None)
+        if option is None or action.help is None:
+            continue
+        help_text = action.help.replace('%%', '%')
+        if option.range_text():
+            count += 1
+            assert f'range {option.range_text()}' in help_text, (path, action.option_strings)
+        elif option.unit:
+            assert option.unit in help_text, (path, action.option_strings)
+    assert count > 30
+    text = build_parser()._subparsers._group_actions[0].choices['hil'].format_help()
+    assert 'range [0, 3600] s; default 30' in ' '.join(text.split())  # --live-wait
+
+
+def _node_parameters(context) -> dict[str, list]:
+    """Return name -> [(node, descriptor, default)] of every declared option of every node."""
+    from cloth_bench_ros.nodes.evaluator import Evaluator
+    from cloth_bench_ros.nodes.recorder import Recorder
+    from cloth_bench_ros.nodes.simulator import Simulator
+    from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
+    from cloth_bench_ros.paths import bundled_bag
+
+    bag = bundled_bag('towel', 'dynamic')
+    rclpy.init(args=['prog', '--ros-args', '-p', f'bag:={bag}'], context=context)
+    found: dict[str, list] = {}
+    for node_class in (TrajectoryPublisher, Simulator, Evaluator, Recorder):
+        node = node_class(context=context)
+        try:
+            for name in node.list_parameters([], 0).names:
+                if name in OPTIONS:
+                    found.setdefault(name, []).append(
+                        (node.get_name(), node.describe_parameter(name),
+                         node.get_parameter(name).value)
+                    )
+        finally:
+            node.destroy_node()
+    return found
+
+
+def test_every_flag_that_is_a_node_parameter_has_its_default_range_and_help(context):
+    """The CLI flag and each node's ParameterDescriptor of one option say the same."""
+    nodes = _node_parameters(context)
+    flags = [(path, action) for path, action in _actions(build_parser())
+             if getattr(action, 'declared', None) is not None
+             and getattr(action, 'declared', None).name in nodes]
+    both = {action.declared.name for _, action in flags}
+    assert {'rate_hz', 'seed', 'cloth', 'primitive', 'pacing', 'voxel', 'live_port',
+            'duration', 'change_of_phase_frame', 'align_step'} <= both
+    for name in both:
+        option = OPTIONS[name]
+        for node, descriptor, value in nodes[name]:
+            assert descriptor.description == option.help_text(), (node, name)
+            assert value == option.default, (node, name)
+            ranges = descriptor.floating_point_range or descriptor.integer_range
+            if ranges:  # the declared range ('unset' -1 admitted below it)
+                assert ranges[0].to_value == option.high, (node, name)
+                assert ranges[0].from_value in (option.low, option.unset), (node, name)
+        for path, action in flags:
+            if action.declared is not option or (path, option.flag) in OTHER_VALUES:
+                continue  # a variant (sweep's repeatable --rate) is another value
+            assert action.default == option.check(option.default), (path, name)
+            tail = option.help_text().removeprefix(option.help)
+            assert action.help.replace('%%', '%').endswith(tail), (path, name)
+            if option.range_text():
+                assert f'range {option.range_text()}' in action.help, (path, name)

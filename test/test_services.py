@@ -87,7 +87,7 @@ def test_an_embedded_client_lists_reads_and_is_refused_by_a_node_process(publish
         results = _call(executor, node, SetParameters, f'{NODE}/set_parameters',
                         SetParameters.Request(parameters=[change]))
         assert not results.results[0].successful  # a running node takes no changes
-        assert '-p' in results.results[0].reason
+        assert results.results[0].reason == 'Trying to set a read-only parameter: rate_hz.'
         again = _call(executor, node, GetParameters, f'{NODE}/get_parameters',
                       GetParameters.Request(names=['rate_hz']))
         assert again.values[0].double_value == 250.0

@@ -3,16 +3,14 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from contextlib import closing
 from pathlib import Path
-from typing import Any
+from typing import Any, Union
 
-from cloth_bench_ros import validation
+from cloth_bench_ros import options, validation
 from cloth_bench_ros.errors import ClothBenchError
-from cloth_bench_ros.options import OPTIONS
-
-CLOTH_CHOICES = OPTIONS['cloth'].choices
+from cloth_bench_ros.options import Option
 
 
 class UserError(ClothBenchError):
@@ -32,60 +30,69 @@ def option(check: Callable[[str, str], Any], name: str) -> Callable[[str], Any]:
     def parse(text: str) -> Any:
         try:
             return check(text, name)
-        except validation.InputError as exc:  # argparse names the option already
+        except ClothBenchError as exc:  # argparse names the option already
             raise argparse.ArgumentTypeError(str(exc).removeprefix(f'{name}: ')) from None
 
     parse.__name__ = name  # argparse names the type in some messages
     return parse
 
 
-def number(check: Callable[..., float], name: str) -> Callable[[str], float]:
-    """Return an argparse type for a number checked by `check(value, name)`."""
-    return option(lambda t, n: check(validation.parse_number(t, n), n), name)
+Flag = Union[str, Option, tuple[str, dict[str, Any]]]
 
 
-def integer(name: str, low: int, high: int | None = None) -> Callable[[str], int]:
-    """Return an argparse type for an integer in [low, high]."""
-    return option(
-        lambda t, n: validation.integer(validation.parse_integer(t, n), n, low, high), name
-    )
+def add_option(parser: Any, name: str | Option, flag: str | None = None, **overrides: Any) -> None:
+    """
+    Add the flag of a declaration (options.declared(name), or an Option of one command).
 
-
-def factor(name: str) -> Callable[[str], float]:
-    """Return an argparse type for a finite factor > 1."""
-    return number(lambda v, n: validation.number(v, n, 1.0, None, low_open=True), name)
-
-
-rate = option(OPTIONS['rate_hz'].parse, '--rate')
-seed = option(OPTIONS['seed'].parse, '--seed')
-frame = option(
-    lambda t, n: validation.frame_index(validation.parse_integer(t, n), n),
-    '--change-of-phase-frame',
-)
-grid = option(validation.parse_grid, '--grid')
-workers = integer('--workers', 1)
-non_negative = number(validation.non_negative, 'value')
-
-
-def add_option(parser: Any, name: str, flag: str | None = None, **overrides: Any) -> None:
-    """Add the flag of options.OPTIONS[name]: its type, check, default, choices and help."""
-    declared = OPTIONS[name]
+    Its type, check, default, choices, action and help (with unit, range and default) come from
+    the declaration; `overrides` are argparse's keywords. A `help` override is another meaning:
+    the declared unit, range and default stay.
+    """
+    declared = name if isinstance(name, Option) else options.declared(name)
     flag = flag or declared.flag
-    assert flag, f'{name} has no flag'
-    kwargs: dict[str, Any] = {
-        'default': declared.check(declared.default),
-        'help': declared.help_text(),
-    }
-    if declared.choices:
-        kwargs['choices'] = declared.choices
+    assert flag, f'{declared.name} has no flag'
+    kwargs: dict[str, Any] = {'help': declared.help_text().replace('%', '%%')}
+    if declared.action == 'store_true':
+        kwargs['action'] = 'store_true'
     else:
-        kwargs['type'] = option(declared.parse, flag)
-    if declared.metavar:
-        kwargs['metavar'] = declared.metavar
+        if declared.action == 'optional_bool':
+            kwargs['action'] = argparse.BooleanOptionalAction
+        elif declared.action:
+            kwargs['action'] = declared.action
+        default = declared.default
+        if default is not None and declared.action != 'optional_bool' and not declared.validate:
+            default = declared.check(default)  # a validated default is a value already
+        kwargs['default'] = default
+        if declared.choices:
+            kwargs['choices'] = declared.choices
+        elif declared.type is not bool and (declared.type is not str or declared.validate):
+            kwargs['type'] = option(declared.parse, flag)
+    for key in ('metavar', 'dest', 'nargs'):
+        if getattr(declared, key):
+            kwargs[key] = getattr(declared, key)
+    if declared.required:
+        kwargs['required'] = True
     if 'help' in overrides:  # another meaning; the unit, range and default stay the declared
-        overrides['help'] = '; '.join([overrides['help'], *declared.help_text().split('; ')[1:]])
+        tail = declared.help_text().removeprefix(declared.help)
+        overrides['help'] = (overrides['help'] + tail).replace('%', '%%')
     kwargs.update(overrides)
     parser.add_argument(flag, **kwargs).declared = declared  # type: ignore[attr-defined]
+
+
+def add_options(parser: Any, flags: Iterable[Flag]) -> None:
+    """
+    Add flags in order: a declared name, an Option of this command, or (name, changes).
+
+    `changes` are fields of the declaration that differ for this command (its help, default,
+    action), e.g. ('engines', {'help': 'repeat (default mujoco)'}).
+    """
+    for item in flags:
+        if isinstance(item, tuple) and set(item[1]) == {'help'}:
+            add_option(parser, item[0], help=item[1]['help'])  # the declaration, another meaning
+        elif isinstance(item, tuple):
+            add_option(parser, options.declared(item[0]).variant(**item[1]))
+        else:
+            add_option(parser, item)
 
 
 def scheduler(text: str) -> str:
@@ -110,15 +117,7 @@ def scene_options(primitive: bool = True) -> argparse.ArgumentParser:
 def presets_options() -> argparse.ArgumentParser:
     """Parent parser: --presets, a named preset set or a directory of <engine>.yaml files."""
     parent = argparse.ArgumentParser(add_help=False)
-    parent.add_argument(
-        '--presets',
-        default='default',
-        help=(
-            'cloth parameters: default (config/presets), identified (fitted to the bundled '
-            'MuJoCo-made references), identified-newton-vbd (fitted to the Newton VBD ones), or '
-            'a directory of <engine>.yaml files (e.g. an identify --output)'
-        ),
-    )
+    add_option(parent, 'presets')
     return parent
 
 
@@ -131,37 +130,9 @@ def preset_set(args: argparse.Namespace) -> Any:
 
 def live_options() -> argparse.ArgumentParser:
     """Parent parser: --live and its server's address and wait (docs/live.md)."""
-    from cloth_bench_ros.data.live_view import DEFAULT_HOST, DEFAULT_PORT, DEFAULT_WAIT_S
-
     parent = argparse.ArgumentParser(add_help=False)
     group = parent.add_argument_group('live view in Foxglove (see docs/live.md)')
-    group.add_argument(
-        '--live',
-        action='store_true',
-        help='serve the run to Foxglove while it goes (WebSocket; the error on the cloth, CD/HD)',
-    )
-    group.add_argument(
-        '--live-host',
-        type=option(validation.host, '--live-host'),
-        default=DEFAULT_HOST,
-        help=f'address the live view binds (default {DEFAULT_HOST}: this machine only)',
-    )
-    group.add_argument(
-        '--live-port',
-        type=integer('--live-port', 0, 65535),
-        default=DEFAULT_PORT,
-        help=f"its port (default {DEFAULT_PORT}, Foxglove's)",
-    )
-    group.add_argument(
-        '--live-wait',
-        type=number(validation.wait_s, '--live-wait'),
-        default=DEFAULT_WAIT_S,
-        metavar='S',
-        help=(
-            f'seconds a lockstep run waits for a first viewer before it starts (default'
-            f' {DEFAULT_WAIT_S:g}; then it goes on without one)'
-        ),
-    )
+    add_options(group, ('live', 'live_host', 'live_port', 'live_wait'))
     return parent
 
 
@@ -180,15 +151,9 @@ def live_parameters(args: argparse.Namespace) -> dict:
 def executor_options() -> argparse.ArgumentParser:
     """Parent parser: where a study's cells run (local workers or Dask) and its progress bar."""
     parent = argparse.ArgumentParser(add_help=False)
-    parent.add_argument(
-        '--workers', type=workers, help='local worker processes (default: all cores)'
-    )
-    parent.add_argument(
-        '--scheduler',
-        type=scheduler,
-        help='run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786',
-    )
-    parent.add_argument('--no-progress', action='store_true', help='no progress bar')
+    add_option(parent, 'workers')
+    add_option(parent, 'scheduler', type=scheduler)
+    add_option(parent, 'no_progress')
     return parent
 
 
@@ -203,7 +168,7 @@ def device(text: str) -> str:
         from cloth_bench_ros.engines import engine_device
 
         return engine_device('newton', {'device': name})
-    except ValueError as exc:  # InputError, or EngineError (also for Newton not installed)
+    except ClothBenchError as exc:  # InputError, or EngineError (also for Newton not installed)
         raise argparse.ArgumentTypeError(
             str(exc).removeprefix('--device: ').removeprefix('parameter device: ')
         ) from None
@@ -241,7 +206,7 @@ def engine_override_option(
     parser: argparse.ArgumentParser, help: str  # noqa: A002  (argparse's own keyword)
 ) -> None:
     """--set ENGINE.PARAM=VALUE (repeatable), and --device for Newton."""
-    parser.add_argument('--set', action='append', metavar='ENGINE.PARAM=VALUE', help=help)
+    add_option(parser, options.declared('set').variant(help=help))
     device_option(parser)
 
 
@@ -308,12 +273,4 @@ def read_transform(path: str):
 
 def add_metric_option(parser: argparse.ArgumentParser) -> None:
     """Add `--metric`: what rankings and comparisons are made on (core/metric_choice.py)."""
-    from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, METRICS
-
-    parser.add_argument(
-        '--metric',
-        default=DEFAULT_METRIC,
-        choices=tuple(METRICS),
-        help=f"metric to rank and compare on (default {DEFAULT_METRIC}: the paper's CD;"
-        ' docs/metrics.md)',
-    )
+    add_option(parser, 'metric')

@@ -7,6 +7,81 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
+from cloth_bench_ros.options import Option
+
+
+def _frame_or_detected(text: str, label: str) -> int | str:
+    if text == 'detected':
+        return 'detected'
+    frame = validation.parse_integer(text, label)
+    return validation.integer(frame, label, 0, validation.MAX_FRAME)
+
+
+REFERENCES = ('mujoco', 'newton-vbd')
+IMPORT_FLAGS: tuple[common.Flag, ...] = (
+    Option(
+        'root', str, None, 'dataset root: <root>/<cloth>_rag_<trial>/<primitive>/cloud/'
+        '<NNNNN>.ply|.pcd', flag='root',
+    ),
+    ('output', {'flag': '--out', 'required': True, 'help': 'directory for the bags'}),
+    Option(
+        'transform', str, None, '4x4 matrix into the simulation frame (text file of 16 numbers, or'
+        ' .npy)', flag='--transform',
+    ),
+    ('overwrite', {'help': 'replace bags that exist'}),
+    Option(
+        'clean', bool, False, 'crop to the workspace, remove the table plane and outliers '
+        '(core.cleaning) before writing', flag='--clean', action='store_true',
+    ),
+    ('voxel', {'help': 'with --clean: voxel size (0: off)'}),
+    'quiet',
+)
+SYNTH_FLAGS: tuple[common.Flag, ...] = (
+    ('output', {'flag': '--out', 'help': 'bag directory (default <cloth>_<primitive>)'}),
+    ('seed', {'help': 'sensor noise and reference seed'}),
+    Option(
+        'reference', str, 'mujoco', 'reference model: mujoco (config/synth.yaml, default) or '
+        'newton-vbd (config/synth_newton_vbd.yaml); default bag name '
+        '<cloth>_<primitive>[_newton_vbd]', flag='--reference', choices=REFERENCES,
+    ),
+    Option(
+        'rate', float, None, "the reference's step rate, a multiple of 30 (default: the "
+        "reference file's)", flag='--rate', low=0.0, low_open=True, unit='Hz', metavar='HZ',
+    ),
+    ('overwrite', {'help': 'replace the bag if it exists'}),
+    'quiet',
+)
+CONVERGE_FLAGS: tuple[common.Flag, ...] = (
+    Option('reference', str, 'mujoco', 'the reference model', flag='--reference',
+           choices=REFERENCES),
+    Option(
+        'axis', str, None, 'setting to refine (repeatable; default all three)', flag='--axis',
+        action='append', choices=('iterations', 'rate', 'grid'),
+    ),
+    Option(
+        'levels', int, 1, 'refinements per axis: iterations and rate x2 each, grid spacing /1.5',
+        flag='--levels', low=1,
+    ),
+    Option(
+        'duration', float, None, 'seconds of the quintic part (default: the whole trial)',
+        flag='--duration', low=0.0, low_open=True, unit='s', metavar='S',
+    ),
+    Option(
+        'score', str, None, "score this engine's preset (tested grid) against every run "
+        '(repeatable)', flag='--score', action='append', metavar='ENGINE',
+    ),
+    ('output', {'help': 'directory: one .npz per run (reused) and convergence.json (default '
+                'results/convergence/<reference>_<cloth>_<primitive>)'}),
+)
+REWRITE_FLAGS: tuple[common.Flag, ...] = (
+    Option('src', str, None, 'bag to read', flag='src'),
+    Option('dst', str, None, 'new bag directory (must not exist or be empty)', flag='dst'),
+    Option(
+        'change_of_phase_frame', int, None, 'store this change-of-phase frame in the trial '
+        '(dynamic task), or the first table contact found in the clouds',
+        flag='--change-of-phase-frame', metavar='N|detected', validate=_frame_or_detected,
+    ),
+)
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -14,25 +89,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     imp = sub.add_parser(
         'import', help='turn the published dataset (PLY/PCD per frame) into one bag per trial'
     )
-    imp.add_argument(
-        'root', help='dataset root: <root>/<cloth>_rag_<trial>/<primitive>/cloud/<NNNNN>.ply|.pcd'
-    )
-    imp.add_argument('--out', required=True, help='directory for the bags')
-    imp.add_argument(
-        '--transform',
-        help='4x4 matrix into the simulation frame (text file of 16 numbers, or .npy)',
-    )
-    imp.add_argument('--overwrite', action='store_true', help='replace bags that exist')
-    imp.add_argument(
-        '--clean',
-        action='store_true',
-        help=(
-            'crop to the workspace, remove the table plane and outliers (core.cleaning) before'
-            ' writing'
-        ),
-    )
-    common.add_option(imp, 'voxel', help='with --clean: voxel size (0: off)')
-    imp.add_argument('--quiet', action='store_true', help='no progress bar')
+    common.add_options(imp, IMPORT_FLAGS)
     imp.set_defaults(func=cmd_import)
 
     synth = sub.add_parser(
@@ -40,25 +97,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         parents=[common.scene_options()],
         help='make a synthetic reference bag (reference simulation seen by a virtual Kinect)',
     )
-    synth.add_argument('--out', help='bag directory (default <cloth>_<primitive>)')
-    common.add_option(synth, 'seed', help='sensor noise and reference seed')
-    synth.add_argument(
-        '--reference',
-        default='mujoco',
-        choices=('mujoco', 'newton-vbd'),
-        help=(
-            'reference model: mujoco (config/synth.yaml, default) or newton-vbd '
-            '(config/synth_newton_vbd.yaml); default bag name <cloth>_<primitive>[_newton_vbd]'
-        ),
-    )
-    synth.add_argument(
-        '--rate',
-        type=common.number(validation.positive, '--rate'),
-        metavar='HZ',
-        help="the reference's step rate, a multiple of 30 (default: the reference file's)",
-    )
-    synth.add_argument('--overwrite', action='store_true', help='replace the bag if it exists')
-    synth.add_argument('--quiet', action='store_true', help='no progress bar')
+    common.add_options(synth, SYNTH_FLAGS)
     common.device_option(synth, with_set=False)
     synth.set_defaults(func=cmd_synth)
 
@@ -67,38 +106,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         parents=[common.scene_options(), common.executor_options()],
         help="a synthetic reference's convergence in iterations, step rate and mesh resolution",
     )
-    converge.add_argument(
-        '--reference', default='mujoco', choices=('mujoco', 'newton-vbd'), help='default mujoco'
-    )
-    converge.add_argument(
-        '--axis', action='append', choices=('iterations', 'rate', 'grid'),
-        help='setting to refine (repeatable; default all three)',
-    )
-    converge.add_argument(
-        '--levels', type=common.integer('--levels', 1), default=1,
-        help='refinements per axis: iterations and rate x2 each, grid spacing /1.5 (default 1)',
-    )
-    converge.add_argument(
-        '--duration', type=common.number(validation.positive, '--duration'), metavar='S',
-        help='seconds of the quintic part (default: the whole trial)',
-    )
-    converge.add_argument(
-        '--score',
-        action='append',
-        metavar='ENGINE',
-        help="score this engine's preset (tested grid) against every run (repeatable)",
-    )
-    converge.add_argument(
-        '--output', help='directory: one .npz per run (reused) and convergence.json'
-        ' (default results/convergence/<reference>_<cloth>_<primitive>)',
-    )
+    common.add_options(converge, CONVERGE_FLAGS)
     common.device_option(converge, with_set=False)
     converge.set_defaults(func=cmd_converge)
 
     bag = sub.add_parser('bag', help='bag tools')
     bag_sub = bag.add_subparsers(dest='bag_command', required=True, parser_class=common.Parser)
     info = bag_sub.add_parser('info', help='describe a bag: topics, frames, trial metadata')
-    info.add_argument('path')
+    common.add_option(info, Option('path', str, None, 'the bag', flag='path'))
     info.set_defaults(func=cmd_bag_info)
     rewrite = bag_sub.add_parser(
         'rewrite',
@@ -107,22 +122,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
             'metadata version 9, type hashes); messages and trial unchanged'
         ),
     )
-    rewrite.add_argument('src', help='bag to read')
-    rewrite.add_argument('dst', help='new bag directory (must not exist or be empty)')
-    rewrite.add_argument(
-        '--change-of-phase-frame',
-        metavar='N|detected',
-        type=_frame_or_detected,
-        help=(
-            'store this change-of-phase frame in the trial (dynamic task), or the first '
-            'table contact found in the clouds'
-        ),
-    )
+    common.add_options(rewrite, REWRITE_FLAGS)
     rewrite.set_defaults(func=cmd_bag_rewrite)
-
-
-def _frame_or_detected(text: str) -> int | str:
-    return 'detected' if text == 'detected' else common.frame(text)
 
 
 def cmd_import(args: argparse.Namespace) -> int:

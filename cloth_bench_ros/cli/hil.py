@@ -5,10 +5,78 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common, hil_rate
 from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.cli.studies import tolerance_options
+from cloth_bench_ros.options import Option, OPTIONS
+
+
+HIL_FLAGS: tuple[common.Flag, ...] = (
+    ('engines', {'help': 'repeat for several (default mujoco)'}),
+    OPTIONS['rate_hz'].variant(
+        action='append', default=None, help='repeat for several (default 100)'
+    ),
+    Option(
+        'config', str, 'preset', "preset (with --grid/--set) or the settings sweep's "
+        'recommendation for the rate', flag='--config', choices=('preset', 'recommended'),
+    ),
+    Option(
+        'settings', str, None, 'settings-sweep results for --config recommended (default '
+        'results/settings; without a result there: config/hil_recommended.yaml)',
+        flag='--settings',
+    ),
+    Option(
+        'budget', float, None, 'recommendation: step p99 under this fraction of the period '
+        '(default 0.5: the rest is the round trip)', flag='--deadline-budget', dest='budget',
+        low=0.0, low_open=True,
+    ),
+    'bag',
+    'seed',
+    ('grid', {'action': 'append', 'help': "cloth mesh NXxNZ (default: the engine's; several "
+              'with --find-rate)'}),
+)
+LAYOUT_FLAGS: tuple[common.Flag, ...] = (
+    Option(
+        'layout', str, 'auto', 'real-time layout: auto (default: the measured best this machine '
+        'allows: the step loop polling on a core of its own, the controller on SCHED_FIFO) or '
+        'none', flag='--layout', choices=('auto', 'none'),
+    ),
+    Option(
+        'cpu', int, None, "pin the simulator's step loop to this core (-1: not; default: from "
+        '--layout)', flag='--cpu', low=-1,
+    ),
+    Option(
+        'fifo', int, None, 'SCHED_FIFO priority for the simulator and the controller (1-99, 0: '
+        'not; default: from --layout)', flag='--fifo', low=0, high=99, metavar='PRIORITY',
+    ),
+    Option(
+        'no_freeze_gc', bool, False, 'keep automatic garbage collection in the simulator',
+        flag='--no-freeze-gc', action='store_true',
+    ),
+    Option(
+        'busy_wait', bool, None, 'the simulator polls for targets instead of sleeping (needs a '
+        'core of its own: --cpu; default: from --layout)', flag='--busy-wait',
+        action='optional_bool',
+    ),
+    Option(
+        'in_process', bool, False, 'all nodes in one process (intra-process transport)',
+        flag='--in-process', action='store_true',
+    ),
+    'duration',
+    Option(
+        'no_lockstep', bool, False, 'skip the lockstep run that gives the CD',
+        flag='--no-lockstep', action='store_true',
+    ),
+    ('output', {'help': 'results directory (default results/hil)'}),
+    Option(
+        'export_recommended', str, None, 'write the recommendation of every engine, task and rate '
+        'in --settings to FILE and exit', flag='--export-recommended', metavar='FILE',
+    ),
+    Option(
+        'note', str, None, "--export-recommended: a provenance note (e.g. the sweep's command)",
+        flag='--note',
+    ),
+)
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -23,107 +91,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         ],
         help='hardware in the loop: targets on the wall clock, the simulator in its own process',
     )
-    hil.add_argument('--engine', action='append', help='repeat for several (default mujoco)')
-    hil.add_argument(
-        '--rate', type=common.rate, action='append', help='Hz, repeat for several (default 100)'
-    )
-    hil.add_argument(
-        '--config',
-        default='preset',
-        choices=('preset', 'recommended'),
-        help="preset (with --grid/--set) or the settings sweep's recommendation for the rate",
-    )
-    hil.add_argument(
-        '--settings',
-        help=(
-            'settings-sweep results for --config recommended (default results/settings; '
-            'without a result there: config/hil_recommended.yaml)'
-        ),
-    )
-    hil.add_argument(
-        '--deadline-budget',
-        dest='budget',
-        type=common.number(validation.positive, '--deadline-budget'),
-        default=None,
-        help=(
-            'recommendation: step p99 under this fraction of the period (default 0.5: '
-            'the rest is the round trip)'
-        ),
-    )
-    hil.add_argument('--bag', help='rosbag2 bag (default: the bundled one)')
-    common.add_option(hil, 'seed')
-    hil.add_argument(
-        '--grid',
-        type=common.grid,
-        action='append',
-        help="cloth mesh NXxNZ (default: the engine's; several with --find-rate)",
-    )
+    common.add_options(hil, HIL_FLAGS)
     common.engine_override_option(hil, 'engine parameter override')
-    hil.add_argument(
-        '--layout',
-        default='auto',
-        choices=('auto', 'none'),
-        help=(
-            'real-time layout: auto (default: the measured best this machine allows: the step '
-            'loop polling on a core of its own, the controller on SCHED_FIFO) or none'
-        ),
-    )
-    hil.add_argument(
-        '--cpu',
-        type=common.integer('--cpu', -1),
-        default=None,
-        help="pin the simulator's step loop to this core (-1: not; default: from --layout)",
-    )
-    hil.add_argument(
-        '--fifo',
-        type=common.integer('--fifo', 0, 99),
-        default=None,
-        metavar='PRIORITY',
-        help=(
-            'SCHED_FIFO priority for the simulator and the controller (1-99, 0: not; default: '
-            'from --layout)'
-        ),
-    )
-    hil.add_argument(
-        '--no-freeze-gc',
-        action='store_true',
-        help='keep automatic garbage collection in the simulator',
-    )
-    hil.add_argument(
-        '--busy-wait',
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help=(
-            'the simulator polls for targets instead of sleeping (needs a core of its own: '
-            '--cpu; default: from --layout)'
-        ),
-    )
-    hil.add_argument(
-        '--in-process',
-        action='store_true',
-        help='all nodes in one process (intra-process transport)',
-    )
-    hil.add_argument(
-        '--duration',
-        type=common.number(validation.non_negative, '--duration'),
-        default=0.0,
-        help='s of the trajectory to run (default 0: all; a shortened run is not scored)',
-    )
-    hil.add_argument(
-        '--no-lockstep', action='store_true', help='skip the lockstep run that gives the CD'
-    )
-    hil.add_argument('--output', help='results directory (default results/hil)')
-    hil.add_argument(
-        '--export-recommended',
-        metavar='FILE',
-        help=(
-            'write the recommendation of every engine, task and rate in --settings to FILE and'
-            ' exit'
-        ),
-    )
-    hil.add_argument(
-        '--note', help="--export-recommended: a provenance note (e.g. the sweep's command)"
-    )
+    common.add_options(hil, LAYOUT_FLAGS)
     hil_rate.add_options(hil)
     hil.set_defaults(func=cmd_hil)
 
@@ -184,7 +154,8 @@ def cmd_hil(args: argparse.Namespace) -> int:
     remedies = []
     bases = []
     for engine, grid in ((e, g) for e in engines for g in grids):
-        for rate in args.rate or [args.rate_min if args.find_rate else 100.0]:
+        default = args.rate_min if args.find_rate else OPTIONS['rate_hz'].default
+        for rate in args.rate or [default]:
             user = dict(overrides.get(engine, {}))  # --set, on top of everything
             base = set_values(presets, engine, args.cloth, args.primitive)
             params = {**base, **user}

@@ -13,11 +13,11 @@ from dataclasses import replace
 import json
 from pathlib import Path
 
-from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.core.deadline import deadline_check, DeadlineCheck, holds_rate, MISS_THRESHOLD
 from cloth_bench_ros.core.table import Table
+from cloth_bench_ros.options import Option, OPTIONS
 from cloth_bench_ros.studies.hil_config import HilConfig
 from cloth_bench_ros.studies.hil_find_rate import (
     miss_fraction,
@@ -30,52 +30,37 @@ from cloth_bench_ros.studies.hil_find_rate import (
 FIND_RATE_FILE = 'find_rate.json'
 
 
+FIND_RATE_FLAGS: tuple[common.Flag, ...] = (
+    Option(
+        'find_rate', bool, False, 'find the highest rate each engine and --grid holds (misses '
+        'under --miss-threshold), by bisection on a log scale', flag='--find-rate',
+        action='store_true',
+    ),
+    Option(
+        'miss_threshold', float, MISS_THRESHOLD, 'a rate is held when under this share of '
+        'deadlines is missed; over it, a run ends with what would meet its rate',
+        flag='--miss-threshold', low=0.0, high=1.0, low_open=True,
+    ),
+    OPTIONS['rate_hz'].variant(
+        flag='--rate-min', default=RATE_MIN, help='--find-rate: the lowest rate tried'
+    ),
+    OPTIONS['rate_hz'].variant(
+        flag='--rate-max', default=RATE_MAX, help='--find-rate: the highest rate tried'
+    ),
+    Option(
+        'rate_tolerance', float, RATE_TOLERANCE, '--find-rate: stop when the bracket is within '
+        'this fraction', flag='--rate-tolerance', low=0.0, low_open=True,
+    ),
+    Option(
+        'repeats', int, REPEATS, '--find-rate: runs per rate, judged on their median',
+        flag='--repeats', low=1, high=99,
+    ),
+)
+
+
 def add_options(hil: argparse.ArgumentParser) -> None:
     """Register --find-rate and its options, and the miss threshold."""
-    hil.add_argument(
-        '--find-rate',
-        action='store_true',
-        help=(
-            'find the highest rate each engine and --grid holds (misses under --miss-threshold),'
-            ' by bisection on a log scale'
-        ),
-    )
-    hil.add_argument(
-        '--miss-threshold',
-        type=common.number(lambda v, n: validation.positive(v, n, 1.0), '--miss-threshold'),
-        default=MISS_THRESHOLD,
-        help=(
-            'a rate is held when under this share of deadlines is missed (default'
-            f' {MISS_THRESHOLD:g}); over it, a run ends with what would meet its rate'
-        ),
-    )
-    hil.add_argument(
-        '--rate-min',
-        type=common.rate,
-        default=RATE_MIN,
-        help=f'--find-rate: the lowest rate tried (default {RATE_MIN:g} Hz)',
-    )
-    hil.add_argument(
-        '--rate-max',
-        type=common.rate,
-        default=RATE_MAX,
-        help=f'--find-rate: the highest rate tried (default {RATE_MAX:g} Hz)',
-    )
-    hil.add_argument(
-        '--rate-tolerance',
-        type=common.number(validation.positive, '--rate-tolerance'),
-        default=RATE_TOLERANCE,
-        help=(
-            '--find-rate: stop when the bracket is within this fraction (default'
-            f' {RATE_TOLERANCE:g})'
-        ),
-    )
-    hil.add_argument(
-        '--repeats',
-        type=common.integer('--repeats', 1, 99),
-        default=REPEATS,
-        help=f'--find-rate: runs per rate, judged on their median (default {REPEATS})',
-    )
+    common.add_options(hil, FIND_RATE_FLAGS)
 
 
 def warmup_check(config: HilConfig, budget: float) -> tuple[DeadlineCheck, object]:

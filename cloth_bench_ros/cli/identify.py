@@ -5,20 +5,76 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
+from cloth_bench_ros.options import Option
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 
-def _trials(text: str) -> int:
+def trials_value(text: str, label: str = '--trials') -> int:
     """--trials: a count >= 1, or auto (the study's AUTO)."""
     from cloth_bench_ros.studies.identify import AUTO
 
     if text.strip().lower() == 'auto':
         return AUTO
     try:
-        return common.integer('--trials', 1)(text)
-    except argparse.ArgumentTypeError as exc:
-        raise argparse.ArgumentTypeError(f'{exc} (or auto)') from None
+        return validation.integer(validation.parse_integer(text, label), label, 1)
+    except validation.InputError as exc:
+        raise validation.InputError(f'{exc} (or auto)') from None
+
+
+SAMPLER = Option(
+    'sampler', str, 'both', 'cmaes, tpe (Bayesian optimisation), gp (Gaussian-process BO, needs '
+    'PyTorch) or both (CMA-ES and TPE, keep the best; default)', flag='--sampler',
+    choices=('cmaes', 'tpe', 'gp', 'both'),
+)
+TRIALS = Option(
+    'trials', int, 500, 'trials per sampler (default 500, as the paper), or auto: 32, then '
+    'doubling while a doubling improves the best by 2 % or more (at most 512)',
+    flag='--trials', low=1, validate=trials_value,
+)
+FIDELITY = Option(
+    'fidelity', str, 'full', 'full (default): every trial over the whole motion; prune: '
+    'multi-fidelity, a trial whose CD over the first quarter of the frames is above the best 30 % '
+    'stops there', flag='--fidelity', choices=('full', 'prune'),
+)
+IDENTIFY_FLAGS: tuple[common.Flag, ...] = (
+    Option('engine', str, 'mujoco', 'the engine to fit', flag='--engine'),
+    ('bag', {'help': 'rosbag2 bag to fit (default: the bundled one)'}),
+    SAMPLER,
+    TRIALS,
+    FIDELITY,
+    Option(
+        'objective', str, 'cd', 'metric of the task window', flag='--objective',
+        choices=('cd', 'hd'),
+    ),
+    Option(
+        'params', str, None, "comma-separated parameters to fit (default: the engine's identified "
+        'set)', flag='--params',
+    ),
+    ('seed', {'help': 'seed of every trial'}),
+    'rate_hz',
+    'grid',
+)
+FIT_FLAGS: tuple[common.Flag, ...] = (
+    Option(
+        'span', float, 10.0, 'log-scale ranges reach this factor either side of the preset',
+        flag='--span', low=1.0, low_open=True,
+    ),
+    ('max_frames', {'help': 'score only the first N frames of the window (faster)'}),
+    Option(
+        'batch', int, None, "trials in flight (default: the cluster's worker threads)",
+        flag='--batch', low=1,
+    ),
+    Option(
+        'validate_seeds', int, 5, 'held-out seeds to validate on', flag='--validate-seeds', low=0
+    ),
+    Option(
+        'bag_dir', str, None, "other trials' bags of the cloth and task for validation",
+        flag='--bag-dir',
+    ),
+    ('output', {'help': 'directory (default results/identify/<engine>_<cloth>_<primitive>)'}),
+)
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -28,74 +84,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         parents=[common.scene_options(), common.executor_options()],
         help="fit an engine's cloth parameters to a bag (CMA-ES and Bayesian optimisation)",
     )
-    ident.add_argument('--engine', default='mujoco', help='default mujoco')
-    ident.add_argument('--bag', help='rosbag2 bag to fit (default: the bundled one)')
-    ident.add_argument(
-        '--sampler',
-        default='both',
-        choices=('cmaes', 'tpe', 'gp', 'both'),
-        help=(
-            'cmaes, tpe (Bayesian optimisation), gp (Gaussian-process BO, needs PyTorch) or both '
-            '(CMA-ES and TPE, keep the best; default)'
-        ),
-    )
-    ident.add_argument(
-        '--trials',
-        type=_trials,
-        default=500,
-        help=(
-            'trials per sampler (default 500, as the paper), or auto: 32, then doubling while a '
-            'doubling improves the best by 2 %% or more (at most 512)'
-        ),
-    )
-    ident.add_argument(
-        '--fidelity',
-        default='full',
-        choices=('full', 'prune'),
-        help=(
-            'full (default): every trial over the whole motion; prune: multi-fidelity, a trial '
-            'whose CD over the first quarter of the frames is above the best 30 %% stops there'
-        ),
-    )
-    ident.add_argument(
-        '--objective',
-        default='cd',
-        choices=('cd', 'hd'),
-        help='metric of the task window (default cd)',
-    )
-    ident.add_argument(
-        '--params', help="comma-separated parameters to fit (default: the engine's identified set)"
-    )
-    common.add_option(ident, 'seed', help='seed of every trial')
-    common.add_option(ident, 'rate_hz')
-    ident.add_argument('--grid', type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
+    common.add_options(ident, IDENTIFY_FLAGS)
     common.engine_override_option(ident, 'fixed override, not fitted')
-    ident.add_argument(
-        '--span',
-        type=common.factor('--span'),
-        default=10.0,
-        help='log-scale ranges reach this factor either side of the preset (default 10)',
-    )
-    ident.add_argument(
-        '--max-frames',
-        type=common.integer('--max-frames', 1),
-        help='score only the first N frames of the window (faster)',
-    )
-    ident.add_argument(
-        '--batch',
-        type=common.integer('--batch', 1),
-        help="trials in flight (default: the cluster's worker threads)",
-    )
-    ident.add_argument(
-        '--validate-seeds',
-        type=common.integer('--validate-seeds', 0),
-        default=5,
-        help='held-out seeds to validate on (default 5)',
-    )
-    ident.add_argument('--bag-dir', help="other trials' bags of the cloth and task for validation")
-    ident.add_argument(
-        '--output', help='directory (default results/identify/<engine>_<cloth>_<primitive>)'
-    )
+    common.add_options(ident, FIT_FLAGS)
     ident.set_defaults(func=cmd_identify)
 
 

@@ -8,34 +8,60 @@ from pathlib import Path
 
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.cli.identify import _trials
+from cloth_bench_ros.cli.identify import FIDELITY, SAMPLER, TRIALS
 from cloth_bench_ros.cli.run import _replay_params
-from cloth_bench_ros.options import OPTIONS, REPLAY_OPTIONS
+from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.options import Option, OPTIONS, REPLAY_OPTIONS
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 RESULT_FILE = 'rank.json'
 
 
-def _entrant(text: str) -> tuple[str, dict]:
+def _entrant(text: str, label: str = '--engine') -> tuple[str, dict]:
     """--engine NAME or NAME:MODEL (newton:xpbd, newton:vbd)."""
     from cloth_bench_ros.engines import engine_class
 
     name, _, model = text.strip().partition(':')
-    try:
-        engine_class(name)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    engine_class(name)  # EngineError, one line, for an unknown engine
     return name, ({'model': model} if model else {})
 
 
-def _rates(text: str) -> list[float]:
+def _rates(text: str, label: str = '--rates') -> list[float]:
     try:
         values = [float(v) for v in text.split(',') if v.strip()]
     except ValueError:
-        raise argparse.ArgumentTypeError(f'--rates {text!r}: comma-separated Hz') from None
+        raise InputError(f'{label} {text!r}: comma-separated Hz') from None
     if not values or any(not v > 0 for v in values):
-        raise argparse.ArgumentTypeError(f'--rates {text!r}: rates must be > 0 Hz')
+        raise InputError(f'{label} {text!r}: rates must be > 0 Hz')
     return values
+
+
+RANK_FLAGS: tuple[common.Flag, ...] = (
+    Option(
+        'recordings', str, None, "rosbag2 bags, or folders of bags (the importer's output)",
+        flag='recordings', nargs='+', metavar='RECORDING',
+    ),
+    ('engines', {'validate': _entrant,
+                 'help': 'engine[:model] (repeat; default mujoco, bullet, newton:xpbd)'}),
+    TRIALS.variant(
+        default=0, help='identification trials per sampler, or auto (default auto)'
+    ),
+    SAMPLER.variant(help='cmaes, tpe, gp or both (default)'),
+    FIDELITY.variant(help='identification: full (default), or prune: multi-fidelity, as identify'),
+    ('seeds', {'default': 3, 'help': 'held-out seeds per held-out trial'}),
+    ('rate_hz', {'help': 'simulator rate of identification and scoring'}),
+    Option(
+        'rates', float, [10.0, 100.0, 1000.0], 'rates whose step times decide the recommendation '
+        '(default 10,100,1000)', flag='--rates', unit='Hz', validate=_rates,
+    ),
+    'grid',
+    'metric',  # cd/hd: also the identification objective (else cd)
+    'max_frames',
+    ('topic', {'help': 'PointCloud2 topic of plain recordings'}),
+    ('targets_topic', {'help': 'recorded PoseArray gripper targets'}),
+    'clean',
+    ('output', {'help': 'directory (default results/rank)'}),
+)
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -45,29 +71,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         parents=[common.scene_options(), common.executor_options()],
         help='rank the engines on your own recordings: identified, scored on held-out trials',
     )
-    rank.add_argument('recordings', nargs='+', metavar='RECORDING',
-                      help="rosbag2 bags, or folders of bags (the importer's output)")
-    rank.add_argument('--engine', action='append', type=_entrant,
-                      help='engine[:model] (repeat; default mujoco, bullet, newton:xpbd)')
-    rank.add_argument('--trials', type=_trials, default=0,
-                      help='identification trials per sampler, or auto (default auto)')
-    rank.add_argument('--sampler', default='both', choices=('cmaes', 'tpe', 'gp', 'both'))
-    rank.add_argument('--fidelity', default='full', choices=('full', 'prune'),
-                      help='identification: full (default), or prune: multi-fidelity, as identify')
-    rank.add_argument('--seeds', type=common.integer('--seeds', 1), default=3,
-                      help='held-out seeds per held-out trial (default 3)')
-    common.add_option(rank, 'rate_hz', help='simulator rate of identification and scoring')
-    rank.add_argument('--rates', type=_rates, default=[10.0, 100.0, 1000.0],
-                      help='rates whose step times decide the recommendation '
-                      '(default 10,100,1000)')
-    rank.add_argument('--grid', type=common.grid, help="cloth mesh NXxNZ (default: the engine's)")
-    common.add_metric_option(rank)  # cd/hd: also the identification objective (else cd)
-    rank.add_argument('--max-frames', type=common.integer('--max-frames', 1),
-                      help='score only the first N frames of each window (faster)')
-    rank.add_argument('--topic', help='PointCloud2 topic of plain recordings')
-    rank.add_argument('--targets-topic', help='recorded PoseArray gripper targets')
-    rank.add_argument('--clean', default='auto', choices=('auto', 'on', 'off'))
-    rank.add_argument('--output', help='directory (default results/rank)')
+    common.add_options(rank, RANK_FLAGS)
     common.engine_override_option(rank, 'fixed on every entrant of that engine, not fitted')
     rank.set_defaults(func=cmd_rank)
 

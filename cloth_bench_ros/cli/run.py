@@ -10,7 +10,39 @@ import time
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.options import OPTIONS, REPLAY_OPTIONS
+from cloth_bench_ros.options import Option, OPTIONS, REPLAY_OPTIONS
+
+
+RUN_FLAGS: tuple[common.Flag, ...] = (
+    ('engines', {'help': 'engine to run (repeat for several; default mujoco)'}),
+    'rate_hz',
+    ('bag', {'help': 'rosbag2 bag to score against (default: the bundled one)'}),
+    'seed',
+    'pacing',
+    Option(
+        'processes', bool, False, 'one OS process per node over DDS on loopback (default: all '
+        'nodes in this process)', flag='--processes', action='store_true',
+    ),
+    ('output', {
+        'help': 'report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)'
+    }),
+)
+# scoring your own recording (docs/own-recording.md)
+SCORING_FLAGS: tuple[common.Flag, ...] = (
+    *REPLAY_OPTIONS,
+    Option(
+        'transform', str, None, '4x4 matrix into world for every cloud, instead of tf',
+        flag='--transform', metavar='FILE',
+    ),
+    Option(
+        'record_comparison', str, None, 'write a comparison bag (Foxglove/RViz)',
+        flag='--record-comparison', metavar='DIR',
+    ),
+    Option(
+        'figures', bool, False, 'qualitative figure (paper Fig. 4) and animation in the report '
+        'directory', flag='--figures', action='store_true',
+    ),
+)
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -20,57 +52,24 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         parents=[common.scene_options(), common.presets_options(), common.live_options()],
         help='run the node graph on a bag and print the result table',
     )
-    run.add_argument(
-        '--engine', action='append', help='engine to run (repeat for several; default mujoco)'
-    )
-    common.add_option(run, 'rate_hz')
-    run.add_argument('--bag', help='rosbag2 bag to score against (default: the bundled one)')
-    common.add_option(run, 'seed')
-    run.add_argument('--pacing', default='lockstep', choices=('lockstep', 'realtime'))
-    run.add_argument(
-        '--processes',
-        action='store_true',
-        help='one OS process per node over DDS on loopback (default: all nodes in this process)',
-    )
-    run.add_argument(
-        '--output',
-        help='report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)',
-    )
+    common.add_options(run, RUN_FLAGS)
     scoring = run.add_argument_group('scoring your own recording (see docs/own-recording.md)')
-    for name in REPLAY_OPTIONS:
-        common.add_option(scoring, name)
-    scoring.add_argument(
-        '--transform', metavar='FILE', help='4x4 matrix into world for every cloud, instead of tf'
-    )
-    scoring.add_argument(
-        '--record-comparison', metavar='DIR', help='write a comparison bag (Foxglove/RViz)'
-    )
-    scoring.add_argument(
-        '--figures',
-        action='store_true',
-        help='qualitative figure (paper Fig. 4) and animation in the report directory',
-    )
-    run.add_argument(
-        '--grid',
-        type=common.grid,
-        help="cloth mesh NXxNZ vertices, e.g. 6x8 (default: the engine's, 11x15)",
-    )
+    common.add_options(scoring, SCORING_FLAGS)
+    common.add_option(run, 'grid')
     common.engine_override_option(
         run, 'override an engine parameter on top of the preset (repeatable)'
     )
     run.set_defaults(func=cmd_run)
 
     traj = sub.add_parser('trajectory', help='print the quintic part of a primitive as CSV')
-    common.add_option(traj, 'primitive')
-    common.add_option(traj, 'rate_hz')
+    common.add_options(traj, ('primitive', 'rate_hz'))
     traj.set_defaults(func=cmd_trajectory)
 
     engines = sub.add_parser('engines', help='list known engines, their availability and version')
-    engines.add_argument(
-        '--warm',
-        action='store_true',
-        help="also compile what makes an engine's first run slow (Newton: Warp's kernel cache)",
-    )
+    common.add_option(engines, Option(
+        'warm', bool, False, "also compile what makes an engine's first run slow (Newton: Warp's "
+        'kernel cache)', flag='--warm', action='store_true',
+    ))
     engines.set_defaults(func=cmd_engines)
 
 

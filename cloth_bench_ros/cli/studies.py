@@ -8,28 +8,109 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
-from cloth_bench_ros.core.trajectory import PRIMITIVES
+from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
+from cloth_bench_ros.options import FLAGS, Option, OPTIONS
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
-TOLERANCE_REL = 0.05  # settings recommendation: CD within this fraction of the best ...
-TOLERANCE_ABS = 0.002  # ... or within this many metres of it, whichever is larger
+TOLERANCE_REL = FLAGS['tolerance_rel'].default  # settings recommendation: CD within this ...
+TOLERANCE_ABS = FLAGS['tolerance_abs'].default  # ... fraction of the best, or these metres
+
+SWEEP_FLAGS: tuple[common.Flag, ...] = (
+    Option(
+        'mode', str, 'paper', "paper: the paper's layout (default); settings: sweep the settings "
+        'that cost time', flag='--mode', choices=('paper', 'settings'),
+    ),
+    ('engines', {'help': 'repeat for several (default: mujoco, bullet, newton)'}),
+    OPTIONS['rate_hz'].variant(
+        action='append', default=None,
+        help='repeat for several (default 10, 100, 1000; settings mode: one rate, default 100)',
+    ),
+    OPTIONS['cloth'].variant(
+        action='append', default=None, help='repeat (default all three; settings mode: towel)'
+    ),
+    OPTIONS['primitive'].variant(
+        action='append', default=None, help='task, repeat (default both)'
+    ),
+    ('seeds', {'help': 'number of seeds (default 20; settings mode 2)'}),
+    'seed_start',
+    ('output', {'help': 'results directory (default results/sweep or results/settings)'}),
+    Option(
+        'bag_dir', str, None, 'directory of <cloth>_<task> or <cloth>_<trial>_<task> bags '
+        '(default: the bundled bags)', flag='--bag-dir',
+    ),
+    ('grid', {'help': 'cloth mesh NXxNZ for every cell (paper mode)'}),
+)
+SWEEP_RUN_FLAGS: tuple[common.Flag, ...] = (
+    'pacing',
+    Option(
+        'step_per_target', bool, False, "internal time step = 1 / rate (the paper's frequency "
+        "study) instead of the preset's", flag='--step-per-target', action='store_true',
+    ),
+    Option(
+        'keep_frames', str, 'first', 'seeds whose per-frame CD/HD are kept for the plots (default:'
+        ' the first)', flag='--keep-frames', choices=('first', 'all', 'none'),
+    ),
+    Option(
+        'axis', str, None, 'settings mode: an axis of the factorial sweep, e.g. grid=6x8,11x15 or '
+        'timestep=preset,0.005 (replaces the default axes)', flag='--axis', action='append',
+        metavar='PARAM=V1,V2',
+    ),
+    Option(
+        'retry_errors', bool, False, 'run cells recorded as errors again', flag='--retry-errors',
+        action='store_true',
+    ),
+    Option(
+        'dry_run', bool, False, 'count the cells and estimate the time, run nothing',
+        flag='--dry-run', action='store_true',
+    ),
+    Option(
+        'report', bool, False, 'render the report into <output>/report afterwards',
+        flag='--report', action='store_true',
+    ),
+    'metric',
+)
+REPORT_FLAGS: tuple[common.Flag, ...] = (
+    Option('results', str, None, 'results.jsonl of a sweep, or its directory', flag='results'),
+    ('output', {'help': 'report directory (default <results dir>/report)'}),
+    Option(
+        'stress', str, None, 'stress.jsonl (or its directory) to include (default: stress.jsonl '
+        'next to the results, if any)', flag='--stress',
+    ),
+    ('rate_hz', {'help': 'rate of the Table III layout'}),
+    OPTIONS['cloth'].variant(flag='--fig5-cloth', help='cloth of the Fig. 5 layout'),
+    'metric',
+)
+ENGINES = ('engines', {'help': 'repeat for several (default: mujoco, bullet, newton)'})
+STRESS_FLAGS: tuple[common.Flag, ...] = (
+    ENGINES,
+    Option('case', str, None, 'only these cases (repeat; see --list)', flag='--case',
+           action='append'),
+    Option('list', bool, False, 'list the cases and exit', flag='--list', action='store_true'),
+    Option(
+        'max_wall_s', float, None, 'wall-time budget per case (default 120 s)',
+        flag='--max-wall-s', low=0.0, low_open=True, unit='s',
+    ),
+    ('output', {'help': 'results directory (default results/stress)'}),
+)
+XREF_FLAGS: tuple[common.Flag, ...] = (
+    ('cloth', {'help': 'the cloth; needs its <cloth>_<task>_newton_vbd bags'}),
+    OPTIONS['primitive'].variant(
+        action='append', default=None, help='task (repeatable; default both)'
+    ),
+    ('seeds', {'default': 5, 'help': 'seeds per engine'}),
+    ('seed_start', {'default': 1, 'help': 'first seed (1: identifications run on seed 0, so '
+                    'every seed is held out)'}),
+    'rate_hz',
+    ('output', {'default': 'results/cross_reference',
+                'help': 'results directory: results.jsonl (resumed) and cross_reference.md'}),
+    'metric',
+)
 
 
 def tolerance_options() -> argparse.ArgumentParser:
     """Parent parser: the settings recommendation's CD tolerance."""
     parent = argparse.ArgumentParser(add_help=False)
-    parent.add_argument(
-        '--tolerance-rel',
-        type=common.number(validation.non_negative, '--tolerance-rel'),
-        default=TOLERANCE_REL,
-        help=f'recommendation: CD within this fraction of the best (default {TOLERANCE_REL})',
-    )
-    parent.add_argument(
-        '--tolerance-abs',
-        type=common.number(validation.non_negative, '--tolerance-abs'),
-        default=TOLERANCE_ABS,
-        help=f'... or this many metres, whichever is larger (default {TOLERANCE_ABS})',
-    )
+    common.add_options(parent, ('tolerance_rel', 'tolerance_abs'))
     return parent
 
 
@@ -41,83 +122,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         parents=[executor, common.presets_options()],
         help='many runs in parallel: engines x rates x cloths x tasks x seeds',
     )
-    sweep.add_argument(
-        '--mode',
-        default='paper',
-        choices=('paper', 'settings'),
-        help="paper: the paper's layout (default); settings: sweep the settings that cost time",
-    )
-    sweep.add_argument(
-        '--engine', action='append', help='repeat for several (default: mujoco, bullet, newton)'
-    )
-    sweep.add_argument(
-        '--rate',
-        type=common.rate,
-        action='append',
-        help=(
-            'Hz, repeat for several (default 10, 100, 1000; settings mode: one rate, default 100)'
-        ),
-    )
-    sweep.add_argument(
-        '--cloth',
-        action='append',
-        choices=common.CLOTH_CHOICES,
-        help='repeat (default all three; settings mode: towel)',
-    )
-    sweep.add_argument(
-        '--primitive', action='append', choices=PRIMITIVES, help='task, repeat (default both)'
-    )
-    sweep.add_argument(
-        '--seeds',
-        type=common.integer('--seeds', 1),
-        help='number of seeds (default 20; settings mode 2)',
-    )
-    sweep.add_argument('--seed-start', type=common.seed, default=0, help='first seed (default 0)')
-    sweep.add_argument(
-        '--output', help='results directory (default results/sweep or results/settings)'
-    )
-    sweep.add_argument(
-        '--bag-dir',
-        help=(
-            'directory of <cloth>_<task> or <cloth>_<trial>_<task> bags '
-            '(default: the bundled bags)'
-        ),
-    )
-    sweep.add_argument(
-        '--grid', type=common.grid, help='cloth mesh NXxNZ for every cell (paper mode)'
-    )
+    common.add_options(sweep, SWEEP_FLAGS)
     common.engine_override_option(sweep, 'engine parameter override for every cell (repeatable)')
-    sweep.add_argument('--pacing', default='lockstep', choices=('lockstep', 'realtime'))
-    sweep.add_argument(
-        '--step-per-target',
-        action='store_true',
-        help="internal time step = 1 / rate (the paper's frequency study) instead of the preset's",
-    )
-    sweep.add_argument(
-        '--keep-frames',
-        default='first',
-        choices=('first', 'all', 'none'),
-        help='seeds whose per-frame CD/HD are kept for the plots (default: the first)',
-    )
-    sweep.add_argument(
-        '--axis',
-        action='append',
-        metavar='PARAM=V1,V2',
-        help=(
-            'settings mode: an axis of the factorial sweep, e.g. grid=6x8,11x15 or '
-            'timestep=preset,0.005 (replaces the default axes)'
-        ),
-    )
-    sweep.add_argument(
-        '--retry-errors', action='store_true', help='run cells recorded as errors again'
-    )
-    sweep.add_argument(
-        '--dry-run', action='store_true', help='count the cells and estimate the time, run nothing'
-    )
-    sweep.add_argument(
-        '--report', action='store_true', help='render the report into <output>/report afterwards'
-    )
-    common.add_metric_option(sweep)
+    common.add_options(sweep, SWEEP_RUN_FLAGS)
     sweep.set_defaults(func=cmd_sweep)
 
     report = sub.add_parser(
@@ -125,23 +132,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         parents=[tolerance_options()],
         help="render a sweep's tables, plots and Markdown/HTML report",
     )
-    report.add_argument('results', help='results.jsonl of a sweep, or its directory')
-    report.add_argument('--output', help='report directory (default <results dir>/report)')
-    report.add_argument(
-        '--stress',
-        help=(
-            'stress.jsonl (or its directory) to include '
-            '(default: stress.jsonl next to the results, if any)'
-        ),
-    )
-    common.add_option(report, 'rate_hz', help='rate of the Table III layout')
-    report.add_argument(
-        '--fig5-cloth',
-        default='towel',
-        choices=common.CLOTH_CHOICES,
-        help='cloth of the Fig. 5 layout (default towel)',
-    )
-    common.add_metric_option(report)
+    common.add_options(report, REPORT_FLAGS)
     report.set_defaults(func=cmd_report)
 
     stress = sub.add_parser(
@@ -149,17 +140,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         parents=[executor, common.presets_options()],
         help='run the suite of hard cases; reports divergence, never fails',
     )
-    stress.add_argument(
-        '--engine', action='append', help='repeat for several (default: mujoco, bullet, newton)'
-    )
-    stress.add_argument('--case', action='append', help='only these cases (repeat; see --list)')
-    stress.add_argument('--list', action='store_true', help='list the cases and exit')
-    stress.add_argument(
-        '--max-wall-s',
-        type=common.number(validation.positive, '--max-wall-s'),
-        help='wall-time budget per case (default 120 s)',
-    )
-    stress.add_argument('--output', help='results directory (default results/stress)')
+    common.add_options(stress, STRESS_FLAGS)
     common.device_option(stress, with_set=False)
     stress.set_defaults(func=cmd_stress)
 
@@ -168,29 +149,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         parents=[executor],
         help='score every engine against both synthetic references',
     )
-    common.add_option(xref, 'cloth', help='the cloth; needs its <cloth>_<task>_newton_vbd bags')
-    xref.add_argument(
-        '--primitive', action='append', choices=PRIMITIVES, help='task (repeatable; default both)'
-    )
-    xref.add_argument(
-        '--seeds',
-        type=common.integer('--seeds', 1),
-        default=5,
-        help='seeds per engine (default 5)',
-    )
-    xref.add_argument(
-        '--seed-start',
-        type=common.seed,
-        default=1,
-        help='first seed (default 1: identifications run on seed 0, so every seed is held out)',
-    )
-    common.add_option(xref, 'rate_hz')
-    xref.add_argument(
-        '--output',
-        default='results/cross_reference',
-        help='results directory: results.jsonl (resumed) and cross_reference.md',
-    )
-    common.add_metric_option(xref)
+    common.add_options(xref, XREF_FLAGS)
     common.device_option(xref, with_set=False)
     xref.set_defaults(func=cmd_cross_reference)
 
@@ -271,7 +230,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     )
     if args.report:
         return render(
-            out, out / 'report', None, 100.0, 'towel', TOLERANCE_REL, TOLERANCE_ABS, args.metric
+            out, out / 'report', None, OPTIONS['rate_hz'].default, OPTIONS['cloth'].default,
+            TOLERANCE_REL, TOLERANCE_ABS, args.metric,
         )
     return 0
 
@@ -284,7 +244,7 @@ def render(
     cloth: str,
     tol_rel: float,
     tol_abs: float,
-    metric: str = 'cd',
+    metric: str = DEFAULT_METRIC,
 ) -> int:
     """Render the report of `results` into `out` and print its headline tables."""
     from cloth_bench_ros.report.document import report_directory

@@ -25,11 +25,12 @@ from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.data import error_view, messages
 from cloth_bench_ros.data.comparison_bag import table_marker, target_poses
 from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
-DEFAULT_HOST = '127.0.0.1'
-DEFAULT_PORT = 8765
-DEFAULT_WAIT_S = 30.0
+DEFAULT_HOST = OPTIONS['live_host'].default
+DEFAULT_PORT = OPTIONS['live_port'].default
+DEFAULT_WAIT_S = OPTIONS['live_wait'].default
 BACKLOG = 256  # messages queued per viewer before the oldest are dropped
 CLOSE_GRACE_S = 0.25  # at the end, for the server's threads to send what is queued
 FLUSH_EVERY = 64  # step messages held at most before they go out without a frame

@@ -12,7 +12,6 @@ from cloth_bench_ros.runtime import (
     declare_option,
     EMBEDDED,
     rclpy,
-    SetParametersResult,
     SingleThreadedExecutor,
 )
 from cloth_bench_ros.runtime.topic_endpoint_info import UNKNOWN_NODE
@@ -59,30 +58,6 @@ def close_nodes(nodes: Sequence) -> None:
         if close:
             close()
         node.destroy_node()
-
-
-def parameters_fixed_at_start(node) -> None:
-    """
-    Refuse parameter changes on a running node: its parameters are read once, at start-up.
-
-    `ros2 param set` (or any set_parameters call) gets an unsuccessful result that says so, rather
-    than a success that changes nothing. Declarations still pass (rclpy runs these callbacks on
-    them too), and use_sim_time stays settable (rclpy's time source follows it).
-    """
-
-    def refuse(parameters) -> SetParametersResult:
-        names = [
-            p.name for p in parameters if p.name != 'use_sim_time' and node.has_parameter(p.name)
-        ]
-        if not names:
-            return SetParametersResult(successful=True)
-        return SetParametersResult(
-            successful=False,
-            reason=f'{", ".join(names)}: read at start-up; restart the node with '
-            f'-p {names[0]}:=<value> to change it',
-        )
-
-    node.add_on_set_parameters_callback(refuse)
 
 
 def node_grid(node) -> tuple[int, int]:

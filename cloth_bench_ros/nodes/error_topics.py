@@ -13,10 +13,9 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from cloth_bench_ros import validation
 from cloth_bench_ros.data import error_view
 from cloth_bench_ros.runtime import (
-    declare_float,
+    declare_option,
     Float64MultiArray,
     Header,
     make_qos,
@@ -26,26 +25,13 @@ from cloth_bench_ros.runtime import (
     PointField,
 )
 
+LIVE_OPTIONS = ('live', 'live_host', 'live_port', 'live_wait')
 SETTLE_S = 0.3  # after a first viewer's first subscription: the rest of its subscriptions
 
 
 def declare_live_parameters(node: Any) -> dict[str, Any]:
     """Declare and check the evaluator's live-view parameters (live, live_host, live_port, ...)."""
-    from cloth_bench_ros.data.live_view import DEFAULT_HOST, DEFAULT_PORT, DEFAULT_WAIT_S
-
-    node.declare_parameter('live', False)
-    node.declare_parameter('live_host', DEFAULT_HOST)
-    node.declare_parameter('live_port', DEFAULT_PORT)
-    declare_float(node, 'live_wait', DEFAULT_WAIT_S)
-    return validation.node_parameters(
-        node,
-        {
-            'live': validation.boolean,
-            'live_host': validation.host,
-            'live_port': validation.port,
-            'live_wait': validation.wait_s,
-        },
-    )
+    return {name: declare_option(node, name) for name in LIVE_OPTIONS}
 
 
 class ErrorTopics:

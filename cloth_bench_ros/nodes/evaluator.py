@@ -21,7 +21,6 @@ from cloth_bench_ros.data.trial import trial_from_message
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     node_grid,
-    parameters_fixed_at_start,
     publishers_matched,
     replay_stamps,
     run_node,
@@ -29,6 +28,7 @@ from cloth_bench_ros.nodes.common import (
 from cloth_bench_ros.nodes.comparison import write_comparison
 from cloth_bench_ros.nodes.error_topics import declare_live_parameters, ErrorTopics
 from cloth_bench_ros.runtime import (
+    declare_fixed,
     declare_float,
     declare_option,
     DiagnosticArray,
@@ -53,21 +53,20 @@ class Evaluator(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('evaluator', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
-        parameters_fixed_at_start(self)
-        self.declare_parameter('engines', ['mujoco'])
+        declare_fixed(self, 'engines', ['mujoco'])
         self.primitive = parse_primitive(declare_option(self, 'primitive'))
         rate_hz = declare_option(self, 'rate_hz')
         declare_float(self, 'time_offset', SETTLE_DURATION)
         cut = declare_option(self, 'change_of_phase_frame')
-        self.output_dir = self.declare_parameter('output_dir', '').value
-        self.comparison_bag = self.declare_parameter('record_comparison', '').value
-        self.declare_parameter('comparison_figures', False)
+        self.output_dir = declare_fixed(self, 'output_dir', '')
+        self.comparison_bag = declare_fixed(self, 'record_comparison', '')
+        declare_fixed(self, 'comparison_figures', False)
         cloth = declare_option(self, 'cloth')
         seed = declare_option(self, 'seed')
         # the simulators' grid (0: the default), whose triangles the surface metrics are on
         nx, nz = node_grid(self)
         # The engines' devices, comma-separated in the order of `engines` ('' : not recorded).
-        devices = str(self.declare_parameter('devices', '').value)
+        devices = str(declare_fixed(self, 'devices', ''))
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,
@@ -143,7 +142,7 @@ class Evaluator(Node):
         # Latency: lockstep measures from each target's arrival; realtime from the wall-clock
         # schedule the targets should have kept (first target + sim time), so a simulator that
         # falls behind shows its queueing delay too.
-        self.realtime = self.declare_parameter('pacing', 'lockstep').value == 'realtime'
+        self.realtime = declare_option(self, 'pacing') == 'realtime'
         self.create_subscription(PoseArray, 'targets', self.on_target, make_qos(100))
         self.period_s = 1.0 / rate_hz
         self.target_sent: dict[int, int] = {}  # stamp -> monotonic ns when the target arrived

@@ -34,13 +34,13 @@ from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     node_grid,
-    parameters_fixed_at_start,
     REPLAY_STATUS_NAME,
     run_node,
 )
 from cloth_bench_ros.options import REPLAY_OPTIONS
 from cloth_bench_ros.runtime import (
     Clock,
+    declare_fixed,
     declare_float,
     declare_option,
     DiagnosticArray,
@@ -75,8 +75,7 @@ class RecordingStopped(ClothBenchError, ValueError):
 class Recorder(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('recorder', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
-        parameters_fixed_at_start(self)
-        self.mode = self.declare_parameter('mode', 'replay').value
+        self.mode = declare_fixed(self, 'mode', 'replay')
         self.done = False
         self.writer: BagWriter | None = None
         self.bag: BagReader | None = None  # replay: closed by close()
@@ -90,16 +89,16 @@ class Recorder(Node):
     # --- replay ------------------------------------------------------------------------------
 
     def start_replay(self) -> None:
-        path = self.declare_parameter('bag', '').value
+        path = declare_fixed(self, 'bag', '')
         if not path:
             raise InputError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
         # Frames are stamped from the start of the quintic part; the run starts with the settle
         # phase.
         declare_float(self, 'time_offset', SETTLE_DURATION)
-        clock = self.declare_parameter('clock', 'sim').value
+        clock = declare_fixed(self, 'clock', 'sim')
         declare_float(self, 'rate_factor', 1.0)
         declare_float(self, 'start_offset', 0.0)
-        self.declare_parameter('loop', False)
+        declare_fixed(self, 'loop', False)
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,
@@ -151,7 +150,7 @@ class Recorder(Node):
 
     def replay_options(self) -> ReplayOptions:
         """Return what the bag does not say, from the node's parameters."""
-        transform = list(self.declare_parameter('transform', [0.0]).value)
+        transform = list(declare_fixed(self, 'transform', [0.0]))
         if transform != [0.0] and len(transform) != 16:
             raise InputError(
                 f'recorder: transform needs 16 numbers (a 4x4 matrix), got {len(transform)}'
@@ -170,7 +169,7 @@ class Recorder(Node):
             voxel=p['voxel'],
             table_plane=p['table_plane'],
             rate_hz=p['rate_hz'],
-            align_engine=self.declare_parameter('align_engine', 'mujoco').value,
+            align_engine=declare_fixed(self, 'align_engine', 'mujoco'),
             search=search,
             trial=p['trial'],
             align=p['align'],
@@ -260,8 +259,8 @@ class Recorder(Node):
     # --- record ------------------------------------------------------------------------------
 
     def start_recording(self) -> None:
-        output = self.declare_parameter('output', '').value
-        entries = list(self.declare_parameter('record_topics', ['']).value)
+        output = declare_fixed(self, 'output', '')
+        entries = list(declare_fixed(self, 'record_topics', ['']))
         if not output:
             raise InputError(
                 "recorder: parameter 'output' is empty (bag directory to record into)"

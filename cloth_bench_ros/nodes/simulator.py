@@ -24,12 +24,12 @@ from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     node_grid,
-    parameters_fixed_at_start,
     publish_serialises,
     run_node,
 )
 from cloth_bench_ros.nodes.message_pool import MessagePool
 from cloth_bench_ros.runtime import (
+    declare_fixed,
     declare_option,
     DiagnosticArray,
     DiagnosticStatus,
@@ -111,16 +111,15 @@ class Simulator(Node):
             namespace=kwargs.pop('namespace', NAMESPACE),
             **kwargs,
         )
-        parameters_fixed_at_start(self)
-        self.engine_name = self.declare_parameter('engine', 'mujoco').value
+        self.engine_name = declare_fixed(self, 'engine', 'mujoco')
         rate_hz = declare_option(self, 'rate_hz')
         cloth = declare_option(self, 'cloth')
         primitive = declare_option(self, 'primitive')
         self.seed = declare_option(self, 'seed')
-        self.declare_parameter('engine_params', '{}')
+        declare_fixed(self, 'engine_params', '{}')
         nx, nz = node_grid(self)
-        presets_dir = self.declare_parameter('presets_dir', '').value
-        self.declare_parameter('device', '')  # '' : engine_params' device, else the engine's
+        presets_dir = declare_fixed(self, 'presets_dir', '')
+        declare_fixed(self, 'device', '')  # '' : engine_params' device, else the engine's
         # Every value through the one validation layer; an error names the node and parameter.
         checked = validation.node_parameters(
             self,
@@ -164,9 +163,9 @@ class Simulator(Node):
         )
         self.prepared: np.ndarray | None = self.warm_up()
         self.realtime = realtime_process.apply(
-            int(self.declare_parameter('cpu', -1).value),
-            int(self.declare_parameter('realtime_priority', 0).value),
-            bool(self.declare_parameter('freeze_gc', False).value),
+            int(declare_fixed(self, 'cpu', -1)),
+            int(declare_fixed(self, 'realtime_priority', 0)),
+            bool(declare_fixed(self, 'freeze_gc', False)),
         )
         # Subscribed last, once start-up is done, so the first target finds the engine ready.
         # Keep-last 1, as a controller's command topic: a simulator that falls behind steps to the

@@ -10,12 +10,10 @@ from typing import Any
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.hil_timing import TargetTimeline
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
-from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     all_subscriptions_matched,
     NAMESPACE,
     node_keys,
-    parameters_fixed_at_start,
     publish_serialises,
     publishers_matched,
     run_node,
@@ -23,7 +21,7 @@ from cloth_bench_ros.nodes.common import (
 from cloth_bench_ros.nodes.message_pool import MessagePool
 from cloth_bench_ros.runtime import (
     Clock,
-    declare_float,
+    declare_fixed,
     declare_option,
     Header,
     make_qos,
@@ -37,7 +35,6 @@ from cloth_bench_ros.runtime import (
 )
 import numpy as np
 
-PACINGS = ('lockstep', 'realtime')
 PREROLL_RESEND_S = (
     0.5  # real time: the start-up handshake's target 0 is sent again after this long
 )
@@ -53,13 +50,12 @@ class TrajectoryPublisher(Node):
         super().__init__(
             'trajectory_publisher', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs
         )
-        parameters_fixed_at_start(self)
         primitive = parse_primitive(declare_option(self, 'primitive'))
         rate_hz = declare_option(self, 'rate_hz')
-        self.pacing = self.declare_parameter('pacing', 'lockstep').value
-        self.declare_parameter('engines', ['mujoco'])
-        self.declare_parameter('wait_for_recorder', True)
-        self.declare_parameter('wait_for_evaluator', True)
+        self.pacing = declare_option(self, 'pacing')
+        declare_fixed(self, 'engines', ['mujoco'])
+        declare_fixed(self, 'wait_for_recorder', True)
+        declare_fixed(self, 'wait_for_evaluator', True)
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,
@@ -74,10 +70,8 @@ class TrajectoryPublisher(Node):
             p['wait_for_recorder'],
             p['wait_for_evaluator'],
         )
-        if self.pacing not in PACINGS:
-            raise InputError(f'unknown pacing {self.pacing!r} (valid: {", ".join(PACINGS)})')
-        self.timing_log = self.declare_parameter('timing_log', '').value
-        duration = declare_float(self, 'duration', 0.0)
+        self.timing_log = declare_fixed(self, 'timing_log', '')
+        duration = declare_option(self, 'duration')
         self.targets = full_targets(primitive, rate_hz)
         # duration > 0: only the targets of the first `duration` seconds (short real-time checks).
         self.n_targets = (

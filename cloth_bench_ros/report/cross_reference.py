@@ -12,6 +12,7 @@ import math
 from typing import Sequence
 
 from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, metric as metric_choice
+from cloth_bench_ros.options import FLAGS
 from cloth_bench_ros.report.blocks import Table
 from cloth_bench_ros.report.ranking import (
     bootstrap_ranking,
@@ -47,7 +48,7 @@ MODEL_ENGINES = {engine for engine, overrides in DEFAULT_ENTRANTS if 'model' in 
 
 def _entrant(row: dict) -> tuple[str, str, str]:
     """Return (engine, model or '', kind) of a row; kind: preset or identified."""
-    kind = 'preset' if row.get('presets', 'default') == 'default' else 'identified'
+    kind = 'preset' if row.get('presets', FLAGS['presets'].default) == 'default' else 'identified'
     model = (row.get('params') or {}).get('model', '') if row['engine'] in MODEL_ENGINES else ''
     return row['engine'], model, kind
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import re
 from typing import Sequence
 
+from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.report import figures, time_figures
@@ -119,7 +120,8 @@ def paper_configs(rows: Sequence[dict]) -> list[str]:
     counts = Counter(
         r.get('config', 'preset')
         for r in rows
-        if r.get('mode', 'paper') == 'paper' and r.get('pacing', 'lockstep') == 'lockstep'
+        if r.get('mode', 'paper') == 'paper'
+        and r.get('pacing', OPTIONS['pacing'].default) == 'lockstep'
     )
     if not counts:
         return []
@@ -196,7 +198,8 @@ def speed_error_section(
     lockstep = [
         r
         for r in rows
-        if r.get('mode', 'paper') == 'paper' and r.get('pacing', 'lockstep') == 'lockstep'
+        if r.get('mode', 'paper') == 'paper'
+        and r.get('pacing', OPTIONS['pacing'].default) == 'lockstep'
     ]
     cloth = (
         wanted_cloth
@@ -315,7 +318,7 @@ def render_report(
     tol_abs: float = 0.002,
     title: str = 'cloth_bench_ros: speed against error',
     identifications: Sequence[dict] = (),
-    metric: str = 'cd',
+    metric: str = DEFAULT_METRIC,
 ) -> ReportOutcome:
     """Render every table and figure of the rows into out_dir (report.md, .html, .png, .csv)."""
     from cloth_bench_ros.report.cloth_error import cloth_error_section
@@ -365,7 +368,7 @@ def report_directory(
     fig5_cloth: str = 'towel',
     tol_rel: float = 0.05,
     tol_abs: float = 0.002,
-    metric: str = 'cd',
+    metric: str = DEFAULT_METRIC,
 ) -> ReportOutcome:
     """
     `cloth-bench report`: the report of a results.jsonl (or its directory), or of a rank directory.

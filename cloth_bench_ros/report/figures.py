@@ -24,6 +24,7 @@ from cloth_bench_ros.studies.aggregate import (
     group,
     stat,
 )
+from cloth_bench_ros.validation import parse_grid
 import matplotlib
 
 matplotlib.use('Agg')  # no display: figures are files
@@ -266,7 +267,7 @@ def plot_settings(
     fig, axes = plt.subplots(1, len(prims), figsize=(7.5 * len(prims), 5.5), squeeze=False)
     grids = sorted(
         {r.get('grid') or 'default' for r in rows},
-        key=lambda g: math.prod(int(v) for v in g.split('x')) if 'x' in g else 0,
+        key=lambda g: 0 if g == 'default' else math.prod(parse_grid(g)),
     )
     steps = sorted({str(r.get('params', {}).get('timestep', 'preset')) for r in rows})
     cmap = plt.get_cmap('viridis', max(2, len(grids)))

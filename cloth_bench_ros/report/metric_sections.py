@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Sequence
 
 from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, metric as metric_choice, METRICS
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.report.blocks import Block, heading, paragraph, Table, table_block
 from cloth_bench_ros.report.selections import engine_label
 from cloth_bench_ros.studies.aggregate import group, stat
@@ -103,7 +104,8 @@ def fig4_table(run_dir: Path) -> Table | None:
     frames, summary = run_dir / 'frames.csv', run_dir / 'summary.json'
     if not frames.is_file() or not summary.is_file():
         return None
-    primitive = json.loads(summary.read_text()).get('run', {}).get('primitive', 'dynamic')
+    run = json.loads(summary.read_text()).get('run', {})
+    primitive = run.get('primitive', OPTIONS['primitive'].default)
     times = FIG4_TIMES.get(primitive)
     rows = _frames(frames)
     if times is None or not rows:

@@ -10,6 +10,8 @@ from collections import Counter
 import math
 from typing import Iterable, Sequence
 
+from cloth_bench_ros.options import OPTIONS
+
 ENGINE_LABEL = {
     'mujoco': 'MuJoCo',
     'bullet': 'Bullet',
@@ -66,14 +68,14 @@ def fmt_sig(value, digits: int = 3) -> str:
 
 
 def paper_rows(
-    rows: Sequence[dict], config: str = 'preset', pacing: str = 'lockstep'
+    rows: Sequence[dict], config: str = 'preset', pacing: str = OPTIONS['pacing'].default
 ) -> list[dict]:
     return [
         r
         for r in rows
         if r.get('mode', 'paper') == 'paper'
         and r.get('config', 'preset') == config
-        and r.get('pacing', 'lockstep') == pacing
+        and r.get('pacing', OPTIONS['pacing'].default) == pacing
     ]
 
 

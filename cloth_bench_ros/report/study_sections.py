@@ -6,7 +6,7 @@ from functools import partial
 from pathlib import Path
 from typing import Sequence
 
-from cloth_bench_ros.core.metric_choice import metric as metric_choice
+from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, metric as metric_choice
 from cloth_bench_ros.report import figures
 from cloth_bench_ros.report.blocks import Block, figure_block, heading, paragraph, table_block
 from cloth_bench_ros.report.selections import engine_label, engines_of
@@ -76,7 +76,7 @@ def settings_section(
     return blocks
 
 
-def cross_reference_blocks(rows: Sequence[dict], metric: str = 'cd') -> list[Block]:
+def cross_reference_blocks(rows: Sequence[dict], metric: str = DEFAULT_METRIC) -> list[Block]:
     """Each engine against each synthetic reference (the reference's bias as numbers)."""
     from cloth_bench_ros.report.cross_reference import (
         cross_reference_section,

@@ -94,18 +94,22 @@ else:
 
 __all__ = [  # the API the nodes are written against, under either runtime
     'Clock',
+    'declare_fixed',
     'declare_float',
-    'deserialize_message',
+    'declare_option',
     'DescribeParameters',
+    'deserialize_message',
     'DiagnosticArray',
     'DiagnosticStatus',
     'DurabilityPolicy',
     'EMBEDDED',
     'Float64MultiArray',
+    'FloatingPointRange',
     'GetParameters',
     'GetParameterTypes',
     'Header',
     'HistoryPolicy',
+    'IntegerRange',
     'is_user_error',
     'KeyValue',
     'ListParameters',
@@ -193,7 +197,9 @@ is_user_error = is_rclpy_user_error
 def option_descriptor(option: Option) -> Any:
     """Return the ParameterDescriptor of a declared option: description (unit, range), range."""
     descriptor = ParameterDescriptor(
-        description=option.help_text(), dynamic_typing=option.type is float
+        description=option.help_text(),
+        dynamic_typing=option.type is float,
+        read_only=option.read_only,
     )
     if option.low is not None and option.high is not None and not option.low_open:
         low = option.low
@@ -231,6 +237,16 @@ def declare_option(node, name: str) -> Any:
     return option.check(value, label)
 
 
+def declare_fixed(node, name: str, default: Any) -> Any:
+    """
+    Declare a parameter that a running node cannot change (read-only) and return its value.
+
+    Every node reads its parameters once, at start-up: `ros2 param set` on one is refused, by
+    rclpy and the embedded runtime alike ('Trying to set a read-only parameter').
+    """
+    return node.declare_parameter(name, default, ParameterDescriptor(read_only=True)).value
+
+
 def declare_float(node, name: str, default: float) -> float:
     """
     Return a double parameter that also takes an integer (`-p rate_hz:=1000`).
@@ -241,7 +257,7 @@ def declare_float(node, name: str, default: float) -> float:
     typing, any type is accepted and this is the one place that keeps numbers and refuses the rest.
     """
     value = node.declare_parameter(
-        name, float(default), ParameterDescriptor(dynamic_typing=True)
+        name, float(default), ParameterDescriptor(dynamic_typing=True, read_only=True)
     ).value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(f'parameter {name}: expected a number (double or integer), got {value!r}')

@@ -9,6 +9,7 @@ and the `/parameter_events` publisher.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any, Callable, Sequence
 import warnings
 
@@ -22,12 +23,80 @@ from cloth_bench_ros.runtime.parameter_errors import (
 )
 from cloth_bench_ros.runtime.parameter_service import list_parameters
 from cloth_bench_ros.runtime.parameters import (
+    FloatingPointRange,
+    IntegerRange,
     Parameter,
     ParameterDescriptor,
     ParameterType,
     SetParametersResult,
 )
 from cloth_bench_ros.runtime.rosout import parameter_event
+
+PARAM_REL_TOL = 1e-6  # rclpy Node.PARAM_REL_TOL: a double this close to an end is in range
+
+
+def descriptor_result(
+    parameter: Parameter, descriptor: ParameterDescriptor, check_read_only: bool = True
+) -> SetParametersResult:
+    """
+    Return whether `descriptor` admits `parameter` (rclpy's _apply_descriptor).
+
+    Checked in rclpy's order: read-only, type, then an integer or floating-point range.
+
+    A declaration is checked without read-only (an override still sets a read-only parameter).
+    """
+    if check_read_only and descriptor.read_only:
+        return SetParametersResult(
+            False, f'Trying to set a read-only parameter: {parameter.name}.'
+        )
+    if not descriptor.dynamic_typing and parameter.type_ == ParameterType.NOT_SET:
+        if check_read_only:  # a change, not a declaration by type
+            return SetParametersResult(False, 'Static parameter cannot be undeclared')
+    elif not descriptor.dynamic_typing and parameter.type_ != descriptor.type:
+        return SetParametersResult(
+            False,
+            f"Wrong parameter type, expected 'Type.{ParameterType(descriptor.type).name}'"
+            f" got 'Type.{parameter.type_.name}'",
+        )
+    if parameter.type_ == ParameterType.INTEGER and descriptor.integer_range:
+        return _in_range(parameter, descriptor.integer_range[0])
+    if parameter.type_ == ParameterType.DOUBLE and descriptor.floating_point_range:
+        return _in_range(parameter, descriptor.floating_point_range[0])
+    return SetParametersResult(True)
+
+
+def _in_range(
+    parameter: Parameter, limits: IntegerRange | FloatingPointRange
+) -> SetParametersResult:
+    """Check a range as rclpy's _apply_integer_range/_apply_floating_point_range: ends in, step."""
+    low, high = sorted((limits.from_value, limits.to_value))
+    value = parameter.value
+    double = isinstance(limits, FloatingPointRange)
+    if double and any(math.isclose(value, end, rel_tol=PARAM_REL_TOL) for end in (low, high)):
+        return SetParametersResult(True)
+    if value in (low, high):
+        return SetParametersResult(True)
+    if not low < value < high:
+        return SetParametersResult(
+            False,
+            f'Parameter {parameter.name} out of range{" " if double else ". "}'
+            f'Min: {low}, Max: {high}, value: {value}',
+        )
+    if limits.step and not double and (value - low) % limits.step:
+        return SetParametersResult(
+            False,
+            f'The parameter value for {parameter.name} is not a valid step. Min: {low}, '
+            f'max: {high}, value: {value}, step: {limits.step}',
+        )
+    if limits.step and double:
+        steps = round((value - low) / limits.step)
+        if not math.isclose(low + steps * limits.step, value, rel_tol=PARAM_REL_TOL):
+            return SetParametersResult(
+                False,
+                f'The parameter value for {parameter.name} is not close enough to a valid '
+                f'step. Min: {low}, max: {high}, value: {value}, step: {limits.step}',
+            )
+    return SetParametersResult(True)
 
 
 class NodeParameters:
@@ -93,6 +162,9 @@ class NodeParameters:
         elif parameter.type_ != ParameterType.NOT_SET and parameter.type_ != descriptor.type:
             raise InvalidParameterTypeException(parameter, ParameterType(descriptor.type).name)
         descriptor.name = name
+        checked = descriptor_result(parameter, descriptor, check_read_only=False)
+        if not checked.successful:  # out of the descriptor's range
+            raise InvalidParameterValueException(name, parameter.value, checked.reason)
         for callback in self._on_set_callbacks:  # rclpy runs them on a declaration too
             result = callback([parameter])
             if not result.successful:
@@ -129,21 +201,13 @@ class NodeParameters:
         return [self.set_parameters_atomically([p]) for p in parameter_list]
 
     def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
-        """Set all or none: read-only and type checks, then the node's callbacks (rclpy)."""
+        """Set all or none: read-only, type and range checks, then the node's callbacks (rclpy)."""
         for parameter in parameter_list:
             if parameter.name not in self._parameters:
                 raise ParameterNotDeclaredException(parameter.name)
-            descriptor = self._descriptors[parameter.name]
-            if descriptor.read_only:
-                return SetParametersResult(
-                    False, f'Trying to set a read-only parameter: {parameter.name}.'
-                )
-            if not descriptor.dynamic_typing and parameter.type_ != descriptor.type:
-                return SetParametersResult(
-                    False,
-                    f"Wrong parameter type, expected 'Type.{ParameterType(descriptor.type).name}'"
-                    f" got 'Type.{parameter.type_.name}'",
-                )
+            result = descriptor_result(parameter, self._descriptors[parameter.name])
+            if not result.successful:
+                return result
         for callback in self._on_set_callbacks:
             result = callback(parameter_list)
             if not result.successful:

@@ -20,6 +20,7 @@ from typing import Iterable, Sequence
 
 from cloth_bench_ros.engines.presets import PresetSet
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
 
 DEFAULT_RATES = (10.0, 100.0, 1000.0)
@@ -37,7 +38,7 @@ DEFAULT_SETTINGS_AXES: dict[str, list] = {
     'timestep': [None, 0.005, 0.01],
     'solver_iterations': [None, 5],
 }
-SETTINGS_RATE = 100.0
+SETTINGS_RATE = OPTIONS['rate_hz'].default
 SETTINGS_SEEDS = 2
 
 
@@ -59,7 +60,7 @@ class Cell:
     config: str = PRESET  # name of the engine configuration (grid + overrides)
     grid: tuple[int, int] | None = None
     overrides: tuple[tuple[str, object], ...] = ()  # sorted (parameter, value) pairs
-    pacing: str = 'lockstep'
+    pacing: str = OPTIONS['pacing'].default
     keep_frames: bool = False  # write summary.json + frames.csv of this run (per-frame plots)
 
     def key(self) -> tuple:
@@ -201,7 +202,7 @@ def paper_cells(
     bag_dir: Path | None = None,
     grid: tuple[int, int] | None = None,
     overrides: dict[str, dict] | None = None,
-    pacing: str = 'lockstep',
+    pacing: str = OPTIONS['pacing'].default,
     step_per_target: bool = False,
     keep_frames_seeds: Iterable[int] | None = None,
     presets: PresetSet | None = None,

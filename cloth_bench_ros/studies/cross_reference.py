@@ -65,7 +65,7 @@ def identified_values(
 
 
 def cross_reference_cells(
-    cloth: str = 'towel',
+    cloth: str = OPTIONS['cloth'].default,
     primitives: Sequence[str] = ('dynamic', 'quasi_static'),
     seeds: Sequence[int] = tuple(range(SEED_START, SEED_START + 5)),
     rate_hz: float = OPTIONS['rate_hz'].default,

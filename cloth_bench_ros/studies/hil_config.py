@@ -6,6 +6,8 @@ from dataclasses import dataclass
 from pathlib import Path
 import re
 
+from cloth_bench_ros.options import OPTIONS
+
 TIMELINE = 'timeline_{engine}.csv'
 SIMULATOR_FILE = 'simulator.json'
 SUMMARY_FILE = 'summary.json'
@@ -18,8 +20,8 @@ class HilConfig:
     engine: str
     rate_hz: float
     bag: Path
-    cloth: str = 'towel'
-    primitive: str = 'dynamic'
+    cloth: str = OPTIONS['cloth'].default
+    primitive: str = OPTIONS['primitive'].default
     seed: int = 0
     grid: tuple[int, int] | None = None
     params: tuple[tuple[str, object], ...] = ()  # sorted engine parameter overrides

@@ -20,6 +20,7 @@ from pathlib import Path
 import sys
 from typing import Any, Callable, Sequence
 
+from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
@@ -60,7 +61,7 @@ class RankSpec:
     rate_hz: float = OPTIONS['rate_hz'].default
     rates: Sequence[float] = RATES
     grid: tuple[int, int] | None = None
-    metric: str = 'cd'  # the ranking metric (core.metric_choice); cd/hd: the objective too
+    metric: str = DEFAULT_METRIC  # the ranking metric; cd/hd: the objective too
     max_frames: int | None = None
     fixed: dict = field(default_factory=dict)  # per engine: overrides on every entrant of it
     fidelity: str = 'full'  # identification's: full, or prune (studies/identify_fidelity.py)

@@ -25,6 +25,7 @@ from cloth_bench_ros.core.deadline import (
 )
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.aggregate import compute_per_sim_second, finite, group, Stat, stat
+from cloth_bench_ros.validation import parse_grid
 import numpy as np
 
 RECOMMENDATION_KEYS = (
@@ -156,8 +157,7 @@ def _grid_params(rows: Sequence[dict], config: str) -> tuple[tuple[int, int] | N
     row = next(r for r in rows if r['config'] == config)
     grid = row.get('grid')
     if isinstance(grid, str):
-        nx, _, nz = grid.partition('x')
-        grid = (int(nx), int(nz))
+        grid = parse_grid(grid)
     return (tuple(grid) if grid else None), dict(row.get('params') or {})
 
 

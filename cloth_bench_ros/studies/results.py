@@ -21,6 +21,7 @@ import socket
 from typing import Any, Mapping, Sequence, TypedDict
 
 from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.safe_io import confined_path, read_text_bounded, safe_name, UnsafeInputError
 
 RESULTS_FILE = 'results.jsonl'
@@ -37,7 +38,7 @@ KEY_FIELDS: dict[str, Any] = {
     'primitive': None,
     'trial': 0,
     'seed': None,
-    'pacing': 'lockstep',
+    'pacing': OPTIONS['pacing'].default,
     'device': 'cpu',  # the engine's compute device (rows written before it existed ran on the CPU)
 }
 NAME_FIELDS = ('mode', 'engine', 'cloth', 'primitive', 'pacing')

@@ -13,10 +13,10 @@ class RunConfig:
     bag: Path
     engines: list[str] = field(default_factory=lambda: ['mujoco'])
     rate_hz: float = OPTIONS['rate_hz'].default
-    cloth: str = 'towel'
-    primitive: str = 'dynamic'
+    cloth: str = OPTIONS['cloth'].default
+    primitive: str = OPTIONS['primitive'].default
     seed: int = 0
-    pacing: str = 'lockstep'
+    pacing: str = OPTIONS['pacing'].default
     output_dir: Path | None = None
     engine_params: dict[str, dict] = field(default_factory=dict)  # engine -> parameter overrides
     grid: tuple[int, int] | None = None  # (nx, nz) vertices; None: the engine's default

@@ -24,7 +24,7 @@ class StressCase:
     name: str
     engine: str
     description: str
-    primitive: str = 'dynamic'
+    primitive: str = OPTIONS['primitive'].default
     rate_hz: float = OPTIONS['rate_hz'].default
     params: dict = field(default_factory=dict)  # overrides on top of the towel preset of the task
     grid: tuple[int, int] | None = None

@@ -27,6 +27,7 @@ from cloth_bench_ros.engines.presets import PresetSet
 
 # re-exported: the studies' one vocabulary
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
     config_label,
@@ -43,11 +44,7 @@ from cloth_bench_ros.studies.cells import (  # noqa: F401
     SETTINGS_RATE,
     SETTINGS_SEEDS,
 )
-from cloth_bench_ros.studies.dask_executor import (  # noqa: F401
-    default_workers,
-    open_client,
-    run_tasks,
-)
+from cloth_bench_ros.studies.dask_executor import default_workers, open_client, run_tasks
 from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
     parse_grid,
     parse_overrides,
@@ -336,7 +333,7 @@ class SweepPlan:
     bag_dir: Path | None = None
     grid: tuple[int, int] | None = None
     overrides: dict = field(default_factory=dict)
-    pacing: str = 'lockstep'
+    pacing: str = OPTIONS['pacing'].default
     step_per_target: bool = False
     keep_frames: str = 'first'  # first | all | none
     axes: Sequence[str] = ()  # settings mode: "name=v1,v2" strings
