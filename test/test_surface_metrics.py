@@ -3,6 +3,7 @@
 import csv
 import json
 import math
+from pathlib import Path
 
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.core.metric_choice import metric, METRICS
@@ -13,17 +14,24 @@ from cloth_bench_ros.core.surface_distance import grid_faces, point_to_surface
 from cloth_bench_ros.core.surface_metrics import (
     FSCORE_THRESHOLD_M,
     OT_SAMPLES,
+    REVERSE_SAMPLES,
     surface_samples,
     surface_scores,
     transport_distance,
 )
 from cloth_bench_ros.core.trajectory import Primitive
+from cloth_bench_ros.data.bag_reader import BagReader
 from cloth_bench_ros.validation import InputError
 import numpy as np
 import ot
 import pytest
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
+
+
+BUNDLED_FLING = Path(__file__).resolve().parents[1] / 'bags' / 'towel_dynamic'
+# the subsampled reverse CD and recall against every real point's (docs/metrics.md)
+CD_REVERSE_RTOL, RECALL_ATOL = 0.05, 0.02
 
 
 def _sheet(nx: int, nz: int) -> tuple[np.ndarray, np.ndarray]:
@@ -161,6 +169,7 @@ def test_summary_and_frames_csv_carry_every_metric(tmp_path):
     assert float(rows[0]['cd_two_sided']) == pytest.approx(core.scores[0].cd_two_sided)
     saved = json.loads((tmp_path / 'summary.json').read_text())['engines']['e']
     assert saved['surface_metrics']['ot_samples'] == OT_SAMPLES
+    assert saved['surface_metrics']['reverse_samples'] == REVERSE_SAMPLES
 
 
 def test_the_metric_choice_is_validated_and_orders_best_first():
@@ -181,3 +190,40 @@ def test_states_of_another_grid_are_not_scored_on_the_wrong_triangles():
     assert math.isnan(summary['CD_reverse_d']) and math.isfinite(summary['CD_d'])
     assert '30 vertices, the faces given 24' in summary['surface_metrics']['not_computed']
     assert summary['contact_onset_error_s'] is None
+
+
+def _check_reverse_against_every_point(points, vertices, faces):
+    s = surface_scores(RealCloud(points), vertices, faces)
+    exact = point_to_surface(points, vertices, faces)
+    assert len(points) > REVERSE_SAMPLES  # a subsample, not all of them
+    assert s.cd_reverse == pytest.approx(exact.mean(), rel=CD_REVERSE_RTOL, abs=1e-12)
+    assert s.recall == pytest.approx(np.mean(exact <= FSCORE_THRESHOLD_M), abs=RECALL_ATOL)
+    assert s.hd_reverse == exact.max()  # exact over every point
+    return s, exact
+
+
+def test_the_reverse_direction_on_a_subsample_is_within_its_tolerance_on_analytic_cases():
+    vertices, faces = _sheet(11, 15)
+    flat, _ = _check_reverse_against_every_point(_raster(), vertices, faces)
+    assert flat.cd_reverse == flat.hd_reverse == 0.0
+    shifted, _ = _check_reverse_against_every_point(_raster() + [0, 0.004, 0], vertices, faces)
+    assert shifted.cd_reverse == pytest.approx(0.004, abs=1e-12)
+    half = vertices.copy()
+    half[:, 2] = 1.0 - 0.5 * (1.0 - half[:, 2])
+    crumpled, exact = _check_reverse_against_every_point(_raster(), half, faces)
+    assert crumpled.cd_reverse != exact.mean()  # really a subsample
+    # a single real point far from the cloth is missed by the subsample, not by HD_reverse
+    stray = np.concatenate([_raster(), [[0.25, 0.3, 0.65]]])
+    s = surface_scores(RealCloud(stray), vertices, faces)
+    assert s.hd_reverse == pytest.approx(0.3, abs=1e-12) and s.cd_reverse == 0.0
+
+
+def test_the_reverse_direction_on_a_subsample_is_within_its_tolerance_on_the_bundled_fling():
+    """Every 8th real frame of the bundled towel fling against the cloth grid's rest mesh."""
+    frames = [points for _, points in BagReader(BUNDLED_FLING).clouds()][::8]
+    vertices, faces = _sheet(11, 15)
+    errors = []
+    for points in frames:
+        s, exact = _check_reverse_against_every_point(points, vertices, faces)
+        errors.append(abs(s.cd_reverse / exact.mean() - 1.0))
+    assert len(frames) >= 16 and max(errors) > 0  # subsampled, and still within tolerance
