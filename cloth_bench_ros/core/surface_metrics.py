@@ -7,9 +7,9 @@ between them. These run between the real points P and the simulated surface S (t
 triangles), in metres and the L1 norm like the paper's:
 
 - reverse: the real points' exact distances to S (core/surface_distance.py): CD_reverse (their
-  mean) and `recall` (the share within the threshold) over REVERSE_SAMPLES real points (a
-  fixed-seed subsample; all of a frame that has no more), HD_reverse (their max) over every real
-  point, exact (the subsample's max bounds which points can exceed it);
+  mean) and `recall` (the share within the threshold) over REVERSE_SAMPLES real points spread
+  evenly over the cloud (`spread_subsample`; all of a frame that has no more), HD_reverse (their
+  max) over every real point, exact (the subsample's max bounds which points can exceed it);
 - surface: SURFACE_SAMPLES points of S drawn uniformly by area with a fixed seed, each one's
   distance to the nearest real point; mean CD_surface, max HD_surface, the share within the
   threshold `precision`;
@@ -191,6 +191,7 @@ def settings() -> dict[str, float | int | str]:
         'surface_seed': SURFACE_SEED,
         'reverse_samples': REVERSE_SAMPLES,
         'reverse_seed': REVERSE_SEED,
+        'reverse_subsample': 'spread evenly: every (n / reverse_samples)-th in grid cell order',
         'hd_reverse': 'every real point, exact',
         'fscore_threshold_m': FSCORE_THRESHOLD_M,
         'ot_samples': OT_SAMPLES,
