@@ -128,8 +128,15 @@ def spread_subsample(grid: PointGrid, n: int, seed: int = REVERSE_SEED) -> np.nd
     size = len(grid.order)
     if size <= n:
         return np.arange(size)
-    offset = np.random.default_rng(seed).random()
-    return grid.order[((np.arange(n) + offset) * (size / n)).astype(np.int64)]
+    return grid.order[((_steps(n, seed)) * (size / n)).astype(np.int64)]
+
+
+@lru_cache(maxsize=8)
+def _steps(n: int, seed: int) -> np.ndarray:
+    """Return 0 .. n - 1 plus one offset in [0, 1) drawn with the seed (fixed: cached)."""
+    steps = np.arange(n) + np.random.default_rng(seed).random()
+    steps.setflags(write=False)
+    return steps
 
 
 def transport_distance(a: np.ndarray, b: np.ndarray) -> float:
