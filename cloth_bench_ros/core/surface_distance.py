@@ -15,6 +15,10 @@ overlaps); each point searches the cells in growing shells around its own, skipp
 triangles whose distance bound already exceeds the best found (as core/nearest.py does for
 points), starting from the triangle nearest to the previous point (real frames arrive in raster
 order, neighbours share a triangle).
+
+`TriangleMesh.farthest` finds the largest of many points' distances (HD from a cloud to the
+surface) without measuring all of them: upper bounds (any point of the surface bounds the
+distance) leave the few points that can exceed a known lower bound to the exact search.
 """
 
 from __future__ import annotations
