@@ -14,10 +14,13 @@ from cloth_bench_ros.core.surface_distance import grid_faces, point_to_surface
 from cloth_bench_ros.core.surface_metrics import (
     FSCORE_THRESHOLD_M,
     OT_SAMPLES,
+    OT_SEED,
     REVERSE_SAMPLES,
+    spread_subsample,
     surface_samples,
     surface_scores,
     transport_distance,
+    transport_samples,
 )
 from cloth_bench_ros.core.trajectory import Primitive
 from cloth_bench_ros.data.bag_reader import BagReader
@@ -68,7 +71,7 @@ def test_a_copy_shifted_by_d_is_d_away_in_every_distance():
     far = surface_scores(RealCloud(real + [0, FSCORE_THRESHOLD_M, 0]), vertices, faces)
     assert far.precision == far.recall == far.fscore == 0.0
     # the transport distance of the same shift: Jensen's bound d, reached by the shift itself
-    small = samples[:OT_SAMPLES] + [0.0, d, 0.0]
+    small = transport_samples(vertices, faces) + [0.0, d, 0.0]  # OT_SAMPLES: all of them
     assert surface_scores(RealCloud(small), vertices, faces).emd == pytest.approx(d, abs=1e-12)
 
 
@@ -115,11 +118,40 @@ def test_transport_distance_is_the_optimal_assignment():
 def test_the_frames_emd_is_pots_exact_emd_of_the_two_samples():
     vertices, faces = _sheet(5, 6)
     rng = np.random.default_rng(3)
-    real = rng.uniform([0, -0.05, 0.3], [0.5, 0.05, 1.0], size=(100, 3))  # fewer than OT_SAMPLES
-    surface = surface_samples(vertices, faces)[:OT_SAMPLES]
-    expected = ot.emd2(np.full(100, 0.01), np.full(len(surface), 1 / len(surface)),
-                       cdist(real, surface, 'cityblock'))
-    assert surface_scores(RealCloud(real), vertices, faces).emd == pytest.approx(expected)
+    real = rng.uniform([0, -0.05, 0.3], [0.5, 0.05, 1.0], size=(300, 3))
+    cloud = RealCloud(real)
+    spread = real[spread_subsample(cloud.grid, OT_SAMPLES, OT_SEED)]
+    surface = transport_samples(vertices, faces)
+    assert len(spread) == len(surface) == OT_SAMPLES
+    expected = ot.emd2(np.full(OT_SAMPLES, 1 / OT_SAMPLES), np.full(OT_SAMPLES, 1 / OT_SAMPLES),
+                       cdist(spread, surface, 'cityblock'))
+    assert surface_scores(cloud, vertices, faces).emd == pytest.approx(expected, abs=1e-12)
+    few = real[:50]  # fewer than OT_SAMPLES: all of them
+    expected = ot.emd2(np.full(50, 0.02), np.full(OT_SAMPLES, 1 / OT_SAMPLES),
+                       cdist(few, surface, 'cityblock'))
+    assert surface_scores(RealCloud(few), vertices, faces).emd == pytest.approx(expected)
+
+
+def test_the_transport_samples_are_one_per_equal_area_stratum():
+    vertices, faces = _sheet(11, 15)  # 14 rows of equal area, triangles row after row
+    samples = transport_samples(vertices, faces)
+    assert np.max(point_to_surface(samples, vertices, faces)) < 1e-12
+    rows = np.floor((vertices[:, 2].max() - samples[:, 2]) / 0.05).astype(int)
+    counts = np.bincount(np.minimum(rows, 13), minlength=14)
+    # OT_SAMPLES / 14 per row, +- the two strata a row boundary cuts (a random sample: 1 to 12)
+    assert counts.min() >= OT_SAMPLES // 14 - 1 and counts.max() <= -(-OT_SAMPLES // 14) + 1
+
+
+def test_the_spread_transport_floor_is_below_a_random_128_point_one():
+    # a sheet against points on its own surface: EMD is sampling noise only (docs/metrics.md)
+    real = _raster()
+    cloud = RealCloud(real)
+    for grid in [(11, 15), (21, 29)]:
+        vertices, faces = _sheet(*grid)
+        floor = surface_scores(cloud, vertices, faces).emd
+        random_real = real[np.random.default_rng(0).choice(len(real), 128, replace=False)]
+        random_128 = transport_distance(random_real, surface_samples(vertices, faces)[:128])
+        assert floor < 0.05 < random_128
 
 
 def _falling(evaluator, real_touch_frame, sim_touch_frame, frames=12):

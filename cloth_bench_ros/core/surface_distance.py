@@ -371,8 +371,11 @@ def _cross(u, w):
 def _beyond(points, order, starts, lo, cell, dims, at_centre, floor, norm):
     """Mark the points p whose bound at_centre[c] + ||p - c|| (c: their cell's centre) > floor."""
     far = np.zeros(points.shape[0], dtype=np.bool_)
+    # no point of a cell is farther than half its diagonal from its centre: a cell whose bound
+    # at that reach stays within floor is skipped without reading its points
+    half = _combine(0.5 * cell, 0.5 * cell, 0.5 * cell, norm) * (1.0 + 1e-9)
     for c in range(starts.shape[0] - 1):
-        if starts[c + 1] == starts[c]:
+        if starts[c + 1] == starts[c] or at_centre[c] + half <= floor:
             continue
         cx = lo[0] + (c % dims[0] + 0.5) * cell
         cy = lo[1] + ((c // dims[0]) % dims[1] + 0.5) * cell

@@ -16,8 +16,9 @@ triangles), in metres and the L1 norm like the paper's:
 - two-sided: CD_two_sided = (CD_reverse + CD_surface) / 2, HD_two_sided = the larger HD;
   F = 2 precision recall / (precision + recall) at FSCORE_THRESHOLD_M;
 - EMD: the optimal-transport (earth mover's) distance, L1 ground cost, uniform weights, between
-  OT_SAMPLES real points (a fixed-seed subsample) and the first OT_SAMPLES surface samples, exact
-  (POT's network simplex).
+  OT_SAMPLES real points spread evenly over the cloud (`spread_subsample`) and OT_SAMPLES points
+  of S stratified by area (`transport_samples`: one in each of OT_SAMPLES equal-area strata),
+  exact (POT's network simplex).
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ SURFACE_SEED = 0
 REVERSE_SAMPLES = 1000  # real points in CD_reverse and recall (HD_reverse: every point)
 REVERSE_SEED = 0
 FSCORE_THRESHOLD_M = 0.01  # L1
-OT_SAMPLES = 128  # points of each side in the optimal-transport problem (its floor: docs)
+OT_SAMPLES = 80  # points of each side in the optimal-transport problem, spread (floor: docs)
 OT_SEED = 0
 
 
@@ -66,8 +67,15 @@ NAN_SCORES = SurfaceScores(*([math.nan] * len(SURFACE_FIELDS)))
 
 @lru_cache(maxsize=8)
 def _uniforms(n: int, seed: int) -> np.ndarray:
-    """Return the fixed draws behind the surface samples: (n, 3) in [0, 1)."""
+    """
+    Return the fixed draws behind the surface samples: (n, 3) in [0, 1).
+
+    In increasing order of the triangle draw (column 0): the samples then come triangle after
+    triangle, neighbours next to each other, and the nearest-point searches for them read the
+    real cloud's grid in order (a fifth faster than in the order drawn; the same set of points).
+    """
     draws = np.random.default_rng(seed).random((n, 3))
+    draws = draws[np.argsort(draws[:, 0], kind='stable')]
     draws.setflags(write=False)
     return draws
 
@@ -109,12 +117,29 @@ def _area_samples(v, f, r):
     return out
 
 
+def transport_samples(
+    vertices: np.ndarray, faces: np.ndarray, n: int = OT_SAMPLES, seed: int = OT_SEED
+) -> np.ndarray:
+    """
+    Return n points of the mesh's surface stratified by area, from fixed draws.
+
+    The triangles, in their order, are cut into n strata of equal area and one point is drawn
+    uniformly by area in each (as `surface_samples`, its triangle pick confined to stratum i): a
+    sample spread over the whole surface, whose distance to another such sample of the same
+    surface (the optimal-transport floor) is far smaller than a random sample's.
+    """
+    v = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+    f = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    return _area_samples(v, f, _strata(int(n), int(seed)))
+
+
 @lru_cache(maxsize=8)
-def _subsample(size: int, n: int, seed: int) -> np.ndarray:
-    """Return fixed indices of n of `size` points (all of them when there are no more)."""
-    if size <= n:
-        return np.arange(size)
-    return np.sort(np.random.default_rng(seed).choice(size, n, replace=False))
+def _strata(n: int, seed: int) -> np.ndarray:
+    """Return `_uniforms(n, seed)`, the triangle draw of row i confined to [i / n, (i + 1) / n)."""
+    draws = np.array(_uniforms(n, seed))
+    draws[:, 0] = (np.arange(n) + draws[:, 0]) / n
+    draws.setflags(write=False)
+    return draws
 
 
 def spread_subsample(grid: PointGrid, n: int, seed: int = REVERSE_SEED) -> np.ndarray:
@@ -147,7 +172,8 @@ def transport_distance(a: np.ndarray, b: np.ndarray) -> float:
     cost = cdist(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64), 'cityblock')
     wa = np.full(len(a), 1.0 / len(a))
     wb = np.full(len(b), 1.0 / len(b))
-    return float(ot.emd2(wa, wb, cost, numItermax=1_000_000))
+    # the weights are uniform by construction: POT's check that their sums agree is skipped
+    return float(ot.emd2(wa, wb, cost, numItermax=1_000_000, check_marginals=False))
 
 
 def surface_scores(
@@ -174,8 +200,8 @@ def surface_scores(
     )
     emd = math.nan
     if transport:
-        real = cloud.points[_subsample(len(cloud.points), OT_SAMPLES, OT_SEED)]
-        emd = transport_distance(real, samples[:OT_SAMPLES])
+        real = cloud.points[spread_subsample(cloud.grid, OT_SAMPLES, OT_SEED)]
+        emd = transport_distance(real, transport_samples(vertices, faces))
     return SurfaceScores(
         cd_reverse=cd_r,
         hd_reverse=hd_r,
@@ -203,5 +229,7 @@ def settings() -> dict[str, float | int | str]:
         'fscore_threshold_m': FSCORE_THRESHOLD_M,
         'ot_samples': OT_SAMPLES,
         'ot_seed': OT_SEED,
+        'ot_subsample': 'real: spread evenly as reverse_subsample; surface: one per equal-area'
+        ' stratum',
         'ot_ground_cost': 'L1',
     }
