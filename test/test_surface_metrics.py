@@ -149,9 +149,13 @@ def test_the_spread_transport_floor_is_below_a_random_128_point_one():
     for grid in [(11, 15), (21, 29)]:
         vertices, faces = _sheet(*grid)
         floor = surface_scores(cloud, vertices, faces).emd
-        random_real = real[np.random.default_rng(0).choice(len(real), 128, replace=False)]
-        random_128 = transport_distance(random_real, surface_samples(vertices, faces)[:128])
-        assert floor < 0.05 < random_128
+        samples = surface_samples(vertices, faces)
+        random_128 = [
+            transport_distance(real[rng.choice(len(real), 128, replace=False)],
+                               samples[rng.choice(len(samples), 128, replace=False)])
+            for rng in map(np.random.default_rng, range(4))
+        ]
+        assert floor < 0.045 < min(random_128)  # 0.043 against 0.053-0.068 (docs/metrics.md)
 
 
 def _falling(evaluator, real_touch_frame, sim_touch_frame, frames=12):
