@@ -17,8 +17,7 @@ points), starting from the triangle nearest to the previous point (real frames a
 order, neighbours share a triangle).
 
 `TriangleMesh.farthest` finds the largest of many points' distances (HD from a cloud to the
-surface) without measuring all of them: upper bounds (any point of the surface bounds the
-distance) leave the few points that can exceed a known lower bound to the exact search.
+surface) exactly, measuring only the few whose upper bound can exceed a known lower bound.
 """
 
 from __future__ import annotations
@@ -84,9 +83,10 @@ class TriangleMesh:
         subsample). A point is measured exactly only if an upper bound of its distance can
         exceed `lower`: the surface is never farther than any point of it (the vertices and
         `on_surface`, e.g. area samples), and the distance grows by at most ||p - c|| from c to
-        p. The bound is taken at each occupied cell's centre c first (a nearest-neighbour
-        search, core/nearest.py, per cell), then at each point the cells leave: the few far
-        points get the exact triangle search, not all.
+        p. The bound is taken at each occupied cell's centre c first (loose: each anchor's
+        distance to its cell's centre carried along the grid; the nearest anchor, core/nearest.py,
+        where that is not enough; cells whose bound cannot exceed `lower` are skipped whole),
+        then at each point the cells leave: the few far points get the exact triangle search.
         """
         points = grid.points
         if len(self.a) == 0 or len(points) == 0:
@@ -95,11 +95,12 @@ class TriangleMesh:
             [self.vertices, np.asarray(on_surface, dtype=np.float64).reshape(-1, 3)]
         )
         near = PointGrid(anchors)  # L1 distances bound L2 ones too: ||x||_2 <= ||x||_1
-        centres, cells = _centres(grid.starts, grid.lo, grid.cell, grid.dims)
-        at_centre = np.zeros(len(grid.starts) - 1)
-        at_centre[cells] = near.nearest_l1(centres)
         # the bounds are computed in floating point: measure what comes within rounding of it
         floor = float(lower) - 1e-9 * (abs(float(lower)) + grid.cell)
+        at_centre = _carried(anchors, grid.lo, grid.cell, grid.dims)
+        centres, cells = _centres(grid.starts, grid.lo, grid.cell, grid.dims, at_centre, floor,
+                                  int(norm))
+        at_centre[cells] = np.minimum(at_centre[cells], near.nearest_l1(centres))
         far = np.flatnonzero(_beyond(
             points, grid.order, grid.starts, grid.lo, grid.cell, grid.dims, at_centre, floor,
             int(norm),
@@ -377,9 +378,7 @@ def _beyond(points, order, starts, lo, cell, dims, at_centre, floor, norm):
     for c in range(starts.shape[0] - 1):
         if starts[c + 1] == starts[c] or at_centre[c] + half <= floor:
             continue
-        cx = lo[0] + (c % dims[0] + 0.5) * cell
-        cy = lo[1] + ((c // dims[0]) % dims[1] + 0.5) * cell
-        cz = lo[2] + (c // (dims[0] * dims[1]) + 0.5) * cell
+        cx, cy, cz = _centre(c, lo, cell, dims)
         dc = at_centre[c]
         for j in range(starts[c], starts[c + 1]):
             q = order[j]
@@ -392,15 +391,46 @@ def _beyond(points, order, starts, lo, cell, dims, at_centre, floor, norm):
 
 
 @njit(cache=True)
-def _centres(starts, lo, cell, dims):
-    """Return the centres of the grid's cells that hold points, and those cells."""
-    cells = np.flatnonzero(starts[1:] > starts[:-1])
+def _centre(c, lo, cell, dims):
+    i, j, k = c % dims[0], (c // dims[0]) % dims[1], c // (dims[0] * dims[1])
+    return lo[0] + (i + 0.5) * cell, lo[1] + (j + 0.5) * cell, lo[2] + (k + 0.5) * cell
+
+
+@njit(cache=True)
+def _carried(anchors, lo, cell, dims):
+    """
+    Return an upper bound of each cell centre's L1 distance to the anchors (triangle inequality).
+
+    min over cells c' of (the anchors' distance to the centre of c' where they lie) +
+    ||centre(c) - centre(c')||_1: an L1 distance transform, one pass each way along each axis.
+    """
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    inv = 1.0 / cell
+    f = np.full(nx * ny * nz, np.inf)
+    for k in range(anchors.shape[0]):
+        ax, ay, az = anchors[k, 0], anchors[k, 1], anchors[k, 2]
+        c = (_cell_of(az, lo[2], inv, nz) * ny + _cell_of(ay, lo[1], inv, ny)) * nx
+        c += _cell_of(ax, lo[0], inv, nx)
+        x, y, z = _centre(c, lo, cell, dims)
+        f[c] = min(f[c], abs(ax - x) + abs(ay - y) + abs(az - z))
+    for stride, n in ((1, nx), (nx, ny), (nx * ny, nz)):
+        for c in range(nx * ny * nz):
+            if (c // stride) % n > 0:
+                f[c] = min(f[c], f[c - stride] + cell)
+        for c in range(nx * ny * nz - 1, -1, -1):
+            if (c // stride) % n < n - 1:
+                f[c] = min(f[c], f[c + stride] + cell)
+    return f
+
+
+@njit(cache=True)
+def _centres(starts, lo, cell, dims, at_centre, floor, norm):
+    """Return the centres of the cells that hold points and whose bound can exceed floor."""
+    half = _combine(0.5 * cell, 0.5 * cell, 0.5 * cell, norm) * (1.0 + 1e-9)
+    cells = np.flatnonzero((starts[1:] > starts[:-1]) & (at_centre + half > floor))
     centres = np.empty((cells.shape[0], 3))
     for k in range(cells.shape[0]):
-        c = cells[k]
-        centres[k, 0] = lo[0] + (c % dims[0] + 0.5) * cell
-        centres[k, 1] = lo[1] + ((c // dims[0]) % dims[1] + 0.5) * cell
-        centres[k, 2] = lo[2] + (c // (dims[0] * dims[1]) + 0.5) * cell
+        centres[k, 0], centres[k, 1], centres[k, 2] = _centre(cells[k], lo, cell, dims)
     return centres, cells
 
 
