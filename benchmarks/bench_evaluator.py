@@ -162,7 +162,8 @@ def all_metrics(n: int, V: np.ndarray, faces: np.ndarray, repeats: int, rng) -> 
         )[0],
         'EMD: POT network simplex (ot.emd2)': best_of(
             lambda: ot.emd2(
-                uniform, uniform, cost, numItermax=1_000_000, check_marginals=False
+                uniform, uniform, cost, numItermax=1_000_000, check_marginals=False,
+                center_dual=False,
             ),
             repeats,
         )[0],

@@ -172,8 +172,11 @@ def transport_distance(a: np.ndarray, b: np.ndarray) -> float:
     cost = cdist(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64), 'cityblock')
     wa = np.full(len(a), 1.0 / len(a))
     wb = np.full(len(b), 1.0 / len(b))
-    # the weights are uniform by construction: POT's check that their sums agree is skipped
-    return float(ot.emd2(wa, wb, cost, numItermax=1_000_000, check_marginals=False))
+    # the weights are uniform by construction: POT's check that their sums agree is skipped, and
+    # the dual potentials, which are not returned, are not centred
+    return float(ot.emd2(
+        wa, wb, cost, numItermax=1_000_000, check_marginals=False, center_dual=False
+    ))
 
 
 def surface_scores(
