@@ -413,13 +413,13 @@ def _carried(anchors, lo, cell, dims):
         c += _cell_of(ax, lo[0], inv, nx)
         x, y, z = _centre(c, lo, cell, dims)
         f[c] = min(f[c], abs(ax - x) + abs(ay - y) + abs(az - z))
-    for stride, n in ((1, nx), (nx, ny), (nx * ny, nz)):
-        for c in range(nx * ny * nz):
-            if (c // stride) % n > 0:
-                f[c] = min(f[c], f[c - stride] + cell)
-        for c in range(nx * ny * nz - 1, -1, -1):
-            if (c // stride) % n < n - 1:
-                f[c] = min(f[c], f[c + stride] + cell)
+    for stride, n in ((1, nx), (nx, ny), (nx * ny, nz)):  # each axis: its lines of n cells
+        for outer in range(0, nx * ny * nz, stride * n):
+            for first in range(outer, outer + stride):
+                for c in range(first + stride, first + n * stride, stride):
+                    f[c] = min(f[c], f[c - stride] + cell)
+                for c in range(first + (n - 2) * stride, first - 1, -stride):
+                    f[c] = min(f[c], f[c + stride] + cell)
     return f
 
 
