@@ -353,19 +353,19 @@ def _prepare(v, f):
             e2[t, k] = v[f[t, 2], k] - a[t, k]
             lo[t, k] = min(a[t, k], v[f[t, 1], k], v[f[t, 2], k])
             hi[t, k] = max(a[t, k], v[f[t, 1], k], v[f[t, 2], k])
-        n[t] = _cross(e1[t], e2[t])
+        _cross(e1[t], e2[t], 1.0, n[t])
         nn = n[t, 0] * n[t, 0] + n[t, 1] * n[t, 1] + n[t, 2] * n[t, 2]
         scale = 1.0 / nn if nn > 0.0 else 0.0
-        m1[t] = _cross(e2[t], n[t]) * scale
-        m2[t] = _cross(n[t], e1[t]) * scale
+        _cross(e2[t], n[t], scale, m1[t])
+        _cross(n[t], e1[t], scale, m2[t])
     return a, e1, e2, n, m1, m2, lo, hi
 
 
 @njit(cache=True)
-def _cross(u, w):
-    return np.array(
-        [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]]
-    )
+def _cross(u, w, scale, out):  # out = scale (u x w), no array allocated per triangle
+    out[0] = (u[1] * w[2] - u[2] * w[1]) * scale
+    out[1] = (u[2] * w[0] - u[0] * w[2]) * scale
+    out[2] = (u[0] * w[1] - u[1] * w[0]) * scale
 
 
 @njit(cache=True)
