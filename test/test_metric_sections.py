@@ -67,12 +67,15 @@ def test_the_run_table_shows_the_metrics_beside_the_papers():
     engine = {
         'CD_d': 0.03, 'HD_d': 0.1, 'L_s': 1e-4, 'step_time': timing, 'diverged': False,
         'CD_reverse_d': 0.0123, 'F_d': 0.5, 'contact_onset_error_s': None,
-        'surface_metrics': {'fscore_threshold_m': 0.01, 'ot_samples': 128},
+        'surface_metrics': {
+            'fscore_threshold_m': 0.01, 'ot_samples': 80, 'reverse_samples': 1000,
+        },
     }
     text = result_table({'run': {'primitive': 'dynamic'}, 'engines': {'mujoco': engine}})
     line = next(x for x in text.splitlines() if x.startswith('mujoco') and '0.0123' in x)
     assert '0.500' in line and line.rstrip().endswith('-')  # no onset: shown as -
-    assert 'P/R/F at 1 cm; EMD on 128 + 128 points' in text
+    assert 'P/R/F at 1 cm; EMD on 80 + 80 points spread over each' in text
+    assert 'CD rev and R on 1000 real points spread over the frame, HD rev on all' in text
     plain = {k: v for k, v in engine.items() if not k.startswith(('CD_r', 'F', 'contact'))}
     assert 'CD rev' not in result_table({'run': {'primitive': 'dynamic'}, 'engines': {'e': plain}})
     assert math.isfinite(engine['CD_d'])

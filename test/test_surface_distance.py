@@ -1,7 +1,14 @@
 """The exact point-to-surface distance against independent implementations."""
 
+from cloth_bench_ros.core.nearest import PointGrid
 from cloth_bench_ros.core.scene import ClothGrid
-from cloth_bench_ros.core.surface_distance import grid_faces, L1, L2, point_to_surface
+from cloth_bench_ros.core.surface_distance import (
+    grid_faces,
+    L1,
+    L2,
+    point_to_surface,
+    TriangleMesh,
+)
 import numpy as np
 import pytest
 from scipy.optimize import linprog
@@ -103,3 +110,20 @@ def test_degenerate_triangles_are_measured_by_their_edges():
     faces = np.array([[0, 1, 2]])
     d = point_to_surface(np.array([[0.5, 0.2, 0.1], [3.0, 0, 0]]), vertices, faces)
     np.testing.assert_allclose(d, [0.3, 1.0])
+
+
+@pytest.mark.parametrize('norm', [L1, L2])
+def test_the_farthest_point_is_the_exact_maximum_over_every_point(norm):
+    """HD from a cloud to the surface, pruned by bounds, equals the max of every exact distance."""
+    vertices, faces = _wavy_mesh()
+    mesh = TriangleMesh(vertices, faces)
+    rng = np.random.default_rng(7)
+    sheet = rng.uniform([0.0, -0.01, 0.3], [0.5, 0.01, 1.0], size=(20000, 3))
+    stray = np.array([[0.25, 0.12, 0.65], [0.7, 0.0, 0.5]])  # two points far off the cloth
+    for points in (sheet, np.concatenate([sheet[:9000], stray, sheet[9000:]])):
+        exact = mesh.distances(points, norm)
+        grid = PointGrid(points)
+        on_surface = _dense_samples(vertices, faces, 3)
+        for lower in (0.0, float(exact[::50].max()), float(exact.max())):
+            for anchors in (None, on_surface):
+                assert mesh.farthest(grid, lower, anchors, norm) == exact.max()

@@ -3,6 +3,7 @@
 import csv
 import json
 import math
+from pathlib import Path
 
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.core.metric_choice import metric, METRICS
@@ -13,17 +14,27 @@ from cloth_bench_ros.core.surface_distance import grid_faces, point_to_surface
 from cloth_bench_ros.core.surface_metrics import (
     FSCORE_THRESHOLD_M,
     OT_SAMPLES,
+    OT_SEED,
+    REVERSE_SAMPLES,
+    spread_subsample,
     surface_samples,
     surface_scores,
     transport_distance,
+    transport_samples,
 )
 from cloth_bench_ros.core.trajectory import Primitive
+from cloth_bench_ros.data.bag_reader import BagReader
 from cloth_bench_ros.validation import InputError
 import numpy as np
 import ot
 import pytest
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
+
+
+BUNDLED_FLING = Path(__file__).resolve().parents[1] / 'bags' / 'towel_dynamic'
+# the subsampled reverse CD and recall against every real point's (docs/metrics.md)
+CD_REVERSE_RTOL, RECALL_ATOL = 0.05, 0.02
 
 
 def _sheet(nx: int, nz: int) -> tuple[np.ndarray, np.ndarray]:
@@ -60,7 +71,7 @@ def test_a_copy_shifted_by_d_is_d_away_in_every_distance():
     far = surface_scores(RealCloud(real + [0, FSCORE_THRESHOLD_M, 0]), vertices, faces)
     assert far.precision == far.recall == far.fscore == 0.0
     # the transport distance of the same shift: Jensen's bound d, reached by the shift itself
-    small = samples[:OT_SAMPLES] + [0.0, d, 0.0]
+    small = transport_samples(vertices, faces) + [0.0, d, 0.0]  # OT_SAMPLES: all of them
     assert surface_scores(RealCloud(small), vertices, faces).emd == pytest.approx(d, abs=1e-12)
 
 
@@ -107,11 +118,44 @@ def test_transport_distance_is_the_optimal_assignment():
 def test_the_frames_emd_is_pots_exact_emd_of_the_two_samples():
     vertices, faces = _sheet(5, 6)
     rng = np.random.default_rng(3)
-    real = rng.uniform([0, -0.05, 0.3], [0.5, 0.05, 1.0], size=(100, 3))  # fewer than OT_SAMPLES
-    surface = surface_samples(vertices, faces)[:OT_SAMPLES]
-    expected = ot.emd2(np.full(100, 0.01), np.full(len(surface), 1 / len(surface)),
-                       cdist(real, surface, 'cityblock'))
-    assert surface_scores(RealCloud(real), vertices, faces).emd == pytest.approx(expected)
+    real = rng.uniform([0, -0.05, 0.3], [0.5, 0.05, 1.0], size=(300, 3))
+    cloud = RealCloud(real)
+    spread = real[spread_subsample(cloud.grid, OT_SAMPLES, OT_SEED)]
+    surface = transport_samples(vertices, faces)
+    assert len(spread) == len(surface) == OT_SAMPLES
+    expected = ot.emd2(np.full(OT_SAMPLES, 1 / OT_SAMPLES), np.full(OT_SAMPLES, 1 / OT_SAMPLES),
+                       cdist(spread, surface, 'cityblock'))
+    assert surface_scores(cloud, vertices, faces).emd == pytest.approx(expected, abs=1e-12)
+    few = real[:50]  # fewer than OT_SAMPLES: all of them
+    expected = ot.emd2(np.full(50, 0.02), np.full(OT_SAMPLES, 1 / OT_SAMPLES),
+                       cdist(few, surface, 'cityblock'))
+    assert surface_scores(RealCloud(few), vertices, faces).emd == pytest.approx(expected)
+
+
+def test_the_transport_samples_are_one_per_equal_area_stratum():
+    vertices, faces = _sheet(11, 15)  # 14 rows of equal area, triangles row after row
+    samples = transport_samples(vertices, faces)
+    assert np.max(point_to_surface(samples, vertices, faces)) < 1e-12
+    rows = np.floor((vertices[:, 2].max() - samples[:, 2]) / 0.05).astype(int)
+    counts = np.bincount(np.minimum(rows, 13), minlength=14)
+    # OT_SAMPLES / 14 per row, +- the two strata a row boundary cuts (a random sample: 1 to 12)
+    assert counts.min() >= OT_SAMPLES // 14 - 1 and counts.max() <= -(-OT_SAMPLES // 14) + 1
+
+
+def test_the_spread_transport_floor_is_below_a_random_128_point_one():
+    # a sheet against points on its own surface: EMD is sampling noise only (docs/metrics.md)
+    real = _raster()
+    cloud = RealCloud(real)
+    for grid in [(11, 15), (21, 29)]:
+        vertices, faces = _sheet(*grid)
+        floor = surface_scores(cloud, vertices, faces).emd
+        samples = surface_samples(vertices, faces)
+        random_128 = [
+            transport_distance(real[rng.choice(len(real), 128, replace=False)],
+                               samples[rng.choice(len(samples), 128, replace=False)])
+            for rng in map(np.random.default_rng, range(4))
+        ]
+        assert floor < 0.045 < min(random_128)  # 0.043 against 0.053-0.068 (docs/metrics.md)
 
 
 def _falling(evaluator, real_touch_frame, sim_touch_frame, frames=12):
@@ -161,6 +205,7 @@ def test_summary_and_frames_csv_carry_every_metric(tmp_path):
     assert float(rows[0]['cd_two_sided']) == pytest.approx(core.scores[0].cd_two_sided)
     saved = json.loads((tmp_path / 'summary.json').read_text())['engines']['e']
     assert saved['surface_metrics']['ot_samples'] == OT_SAMPLES
+    assert saved['surface_metrics']['reverse_samples'] == REVERSE_SAMPLES
 
 
 def test_the_metric_choice_is_validated_and_orders_best_first():
@@ -181,3 +226,40 @@ def test_states_of_another_grid_are_not_scored_on_the_wrong_triangles():
     assert math.isnan(summary['CD_reverse_d']) and math.isfinite(summary['CD_d'])
     assert '30 vertices, the faces given 24' in summary['surface_metrics']['not_computed']
     assert summary['contact_onset_error_s'] is None
+
+
+def _check_reverse_against_every_point(points, vertices, faces):
+    s = surface_scores(RealCloud(points), vertices, faces)
+    exact = point_to_surface(points, vertices, faces)
+    assert len(points) > REVERSE_SAMPLES  # a subsample, not all of them
+    assert s.cd_reverse == pytest.approx(exact.mean(), rel=CD_REVERSE_RTOL, abs=1e-12)
+    assert s.recall == pytest.approx(np.mean(exact <= FSCORE_THRESHOLD_M), abs=RECALL_ATOL)
+    assert s.hd_reverse == exact.max()  # exact over every point
+    return s, exact
+
+
+def test_the_reverse_direction_on_a_subsample_is_within_its_tolerance_on_analytic_cases():
+    vertices, faces = _sheet(11, 15)
+    flat, _ = _check_reverse_against_every_point(_raster(), vertices, faces)
+    assert flat.cd_reverse == flat.hd_reverse == 0.0
+    shifted, _ = _check_reverse_against_every_point(_raster() + [0, 0.004, 0], vertices, faces)
+    assert shifted.cd_reverse == pytest.approx(0.004, abs=1e-12)
+    half = vertices.copy()
+    half[:, 2] = 1.0 - 0.5 * (1.0 - half[:, 2])
+    crumpled, exact = _check_reverse_against_every_point(_raster(), half, faces)
+    assert crumpled.cd_reverse != exact.mean()  # really a subsample
+    # a single real point far from the cloth is missed by the subsample, not by HD_reverse
+    stray = np.concatenate([_raster(), [[0.25, 0.3, 0.65]]])
+    s = surface_scores(RealCloud(stray), vertices, faces)
+    assert s.hd_reverse == pytest.approx(0.3, abs=1e-12) and s.cd_reverse == 0.0
+
+
+def test_the_reverse_direction_on_a_subsample_is_within_its_tolerance_on_the_bundled_fling():
+    """Every 8th real frame of the bundled towel fling against the cloth grid's rest mesh."""
+    frames = [points for _, points in BagReader(BUNDLED_FLING).clouds()][::8]
+    vertices, faces = _sheet(11, 15)
+    errors = []
+    for points in frames:
+        s, exact = _check_reverse_against_every_point(points, vertices, faces)
+        errors.append(abs(s.cd_reverse / exact.mean() - 1.0))
+    assert len(frames) >= 16 and max(errors) > 0  # subsampled, and still within tolerance

@@ -33,6 +33,11 @@ class RealCloud:
         self.points = _points('P', points)
         self._grid = PointGrid(self.points)
 
+    @property
+    def grid(self) -> PointGrid:
+        """Return the uniform grid the points are bucketed on, for other searches over them."""
+        return self._grid
+
     @classmethod
     def of(cls, points: np.ndarray) -> 'RealCloud':
         """RealCloud(points), from the process's tree cache when `keep_trees` enabled it."""

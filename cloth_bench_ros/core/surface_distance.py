@@ -15,12 +15,16 @@ overlaps); each point searches the cells in growing shells around its own, skipp
 triangles whose distance bound already exceeds the best found (as core/nearest.py does for
 points), starting from the triangle nearest to the previous point (real frames arrive in raster
 order, neighbours share a triangle).
+
+`TriangleMesh.farthest` finds the largest of many points' distances (HD from a cloud to the
+surface) exactly, measuring only the few whose upper bound can exceed a known lower bound.
 """
 
 from __future__ import annotations
 
 from functools import lru_cache
 
+from cloth_bench_ros.core.nearest import PointGrid
 from numba import njit
 import numpy as np
 
@@ -44,25 +48,16 @@ class TriangleMesh:
     """A triangle mesh prepared once (edges, normals, boxes, a grid) for distance queries."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
-        v = np.ascontiguousarray(vertices, dtype=np.float64)
-        f = np.asarray(faces, dtype=np.int64)
-        a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-        self.a = np.ascontiguousarray(a)
-        self.e1 = np.ascontiguousarray(b - a)
-        self.e2 = np.ascontiguousarray(c - a)
-        self.n = np.ascontiguousarray(np.cross(self.e1, self.e2))
-        nn = np.einsum('ij,ij->i', self.n, self.n)
-        scale = np.divide(1.0, nn, out=np.zeros_like(nn), where=nn > 0)[:, None]
-        # barycentric coordinates of a point a + w of the plane: w . m1 (along e1), w . m2 (e2)
-        self.m1 = np.ascontiguousarray(np.cross(self.e2, self.n) * scale)
-        self.m2 = np.ascontiguousarray(np.cross(self.n, self.e1) * scale)
-        corners = np.stack([a, b, c])
-        self.lo = np.ascontiguousarray(corners.min(axis=0))
-        self.hi = np.ascontiguousarray(corners.max(axis=0))
+        v = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+        f = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+        # edges, normals, barycentric rows (a point a + w of the plane is at w . m1 along e1,
+        # w . m2 along e2) and boxes, in one compiled pass: numpy's took longer than the search
+        self.vertices = v
+        self.a, self.e1, self.e2, self.n, self.m1, self.m2, self.lo, self.hi = _prepare(v, f)
         glo, ghi = self.lo.min(axis=0), self.hi.max(axis=0)
         extent = np.maximum(ghi - glo, 1e-9)
         # cells about half a triangle's size: a cell holds few triangles, a triangle few cells
-        size = float(np.mean(np.abs(self.e1).sum(axis=1))) / 2.0 if len(f) else 1.0
+        size = float(np.abs(self.e1).sum()) / len(f) / 2.0 if len(f) else 1.0
         cell = max(size, float(extent.max()) / 256.0, 1e-6)
         dims = np.minimum(np.floor(extent / cell).astype(np.int64) + 1, 256)
         self.glo, self.cell, self.dims = glo, cell, dims
@@ -77,6 +72,47 @@ class TriangleMesh:
             p, self.a, self.e1, self.e2, self.n, self.m1, self.m2, self.lo, self.hi,
             self.order, self.starts, self.glo, self.cell, self.dims, int(norm),
         )
+
+    def farthest(
+        self, grid: PointGrid, lower: float, on_surface: np.ndarray | None = None, norm: int = L1
+    ) -> float:
+        """
+        Return max over the grid's points of their distance to the surface, exact.
+
+        `lower` is a distance some of the points are known to reach (the largest of an exact
+        subsample). A point is measured exactly only if an upper bound of its distance can
+        exceed `lower`: the surface is never farther than any point of it (the vertices and
+        `on_surface`, e.g. area samples), and the distance grows by at most ||p - c|| from c to
+        p. The bound is taken at each occupied cell's centre c first (loose: each anchor's
+        distance to its cell's centre carried along the grid; the nearest anchor, core/nearest.py,
+        where that is not enough; cells whose bound cannot exceed `lower` are skipped whole),
+        then at each point the cells leave: the few far points get the exact triangle search.
+        """
+        points = grid.points
+        if len(self.a) == 0 or len(points) == 0:
+            return float(np.inf) if len(points) else float(lower)
+        anchors = self.vertices if on_surface is None else np.concatenate(
+            [self.vertices, np.asarray(on_surface, dtype=np.float64).reshape(-1, 3)]
+        )
+        near = PointGrid(anchors)  # L1 distances bound L2 ones too: ||x||_2 <= ||x||_1
+        # the bounds are computed in floating point: measure what comes within rounding of it
+        floor = float(lower) - 1e-9 * (abs(float(lower)) + grid.cell)
+        at_centre = _carried(anchors, grid.lo, grid.cell, grid.dims)
+        centres, cells = _centres(grid.starts, grid.lo, grid.cell, grid.dims, at_centre, floor,
+                                  int(norm))
+        at_centre[cells] = np.minimum(at_centre[cells], near.nearest_l1(centres))
+        far = np.flatnonzero(_beyond(
+            points, grid.order, grid.starts, grid.lo, grid.cell, grid.dims, at_centre, floor,
+            int(norm),
+        ))
+        bound = near.nearest_l1(points[far])
+        # the highest bounds first: the largest distance found soon excludes most of the rest
+        by_bound = np.argsort(-bound, kind='stable')
+        return float(_largest(
+            points[far[by_bound]], bound[by_bound], float(lower), self.a, self.e1, self.e2,
+            self.n, self.m1, self.m2, self.lo, self.hi, self.order, self.starts, self.glo,
+            self.cell, self.dims, int(norm),
+        ))
 
 
 def point_to_surface(
@@ -301,3 +337,114 @@ def _query(points, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims,
         out[q] = best
         last = best_t
     return out
+
+
+@njit(cache=True)
+def _prepare(v, f):
+    """Return each triangle's a, e1 = b - a, e2 = c - a, normal, barycentric rows, box."""
+    m = f.shape[0]
+    a, e1, e2 = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    n, m1, m2 = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    lo, hi = np.empty((m, 3)), np.empty((m, 3))
+    for t in range(m):
+        for k in range(3):
+            a[t, k] = v[f[t, 0], k]
+            e1[t, k] = v[f[t, 1], k] - a[t, k]
+            e2[t, k] = v[f[t, 2], k] - a[t, k]
+            lo[t, k] = min(a[t, k], v[f[t, 1], k], v[f[t, 2], k])
+            hi[t, k] = max(a[t, k], v[f[t, 1], k], v[f[t, 2], k])
+        _cross(e1[t], e2[t], 1.0, n[t])
+        nn = n[t, 0] * n[t, 0] + n[t, 1] * n[t, 1] + n[t, 2] * n[t, 2]
+        scale = 1.0 / nn if nn > 0.0 else 0.0
+        _cross(e2[t], n[t], scale, m1[t])
+        _cross(n[t], e1[t], scale, m2[t])
+    return a, e1, e2, n, m1, m2, lo, hi
+
+
+@njit(cache=True)
+def _cross(u, w, scale, out):  # out = scale (u x w), no array allocated per triangle
+    out[0] = (u[1] * w[2] - u[2] * w[1]) * scale
+    out[1] = (u[2] * w[0] - u[0] * w[2]) * scale
+    out[2] = (u[0] * w[1] - u[1] * w[0]) * scale
+
+
+@njit(cache=True)
+def _beyond(points, order, starts, lo, cell, dims, at_centre, floor, norm):
+    """Mark the points p whose bound at_centre[c] + ||p - c|| (c: their cell's centre) > floor."""
+    far = np.zeros(points.shape[0], dtype=np.bool_)
+    # no point of a cell is farther than half its diagonal from its centre: a cell whose bound
+    # at that reach stays within floor is skipped without reading its points
+    half = _combine(0.5 * cell, 0.5 * cell, 0.5 * cell, norm) * (1.0 + 1e-9)
+    for c in range(starts.shape[0] - 1):
+        if starts[c + 1] == starts[c] or at_centre[c] + half <= floor:
+            continue
+        cx, cy, cz = _centre(c, lo, cell, dims)
+        dc = at_centre[c]
+        for j in range(starts[c], starts[c + 1]):
+            q = order[j]
+            reach = _combine(
+                abs(points[q, 0] - cx), abs(points[q, 1] - cy), abs(points[q, 2] - cz), norm
+            )
+            if dc + reach > floor:
+                far[q] = True
+    return far
+
+
+@njit(cache=True)
+def _centre(c, lo, cell, dims):
+    i, j, k = c % dims[0], (c // dims[0]) % dims[1], c // (dims[0] * dims[1])
+    return lo[0] + (i + 0.5) * cell, lo[1] + (j + 0.5) * cell, lo[2] + (k + 0.5) * cell
+
+
+@njit(cache=True)
+def _carried(anchors, lo, cell, dims):
+    """
+    Return an upper bound of each cell centre's L1 distance to the anchors (triangle inequality).
+
+    min over cells c' of (the anchors' distance to the centre of c' where they lie) +
+    ||centre(c) - centre(c')||_1: an L1 distance transform, one pass each way along each axis.
+    """
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    inv = 1.0 / cell
+    f = np.full(nx * ny * nz, np.inf)
+    for k in range(anchors.shape[0]):
+        ax, ay, az = anchors[k, 0], anchors[k, 1], anchors[k, 2]
+        c = (_cell_of(az, lo[2], inv, nz) * ny + _cell_of(ay, lo[1], inv, ny)) * nx
+        c += _cell_of(ax, lo[0], inv, nx)
+        x, y, z = _centre(c, lo, cell, dims)
+        f[c] = min(f[c], abs(ax - x) + abs(ay - y) + abs(az - z))
+    for stride, n in ((1, nx), (nx, ny), (nx * ny, nz)):  # each axis: its lines of n cells
+        for outer in range(0, nx * ny * nz, stride * n):
+            for first in range(outer, outer + stride):
+                for c in range(first + stride, first + n * stride, stride):
+                    f[c] = min(f[c], f[c - stride] + cell)
+                for c in range(first + (n - 2) * stride, first - 1, -stride):
+                    f[c] = min(f[c], f[c + stride] + cell)
+    return f
+
+
+@njit(cache=True)
+def _centres(starts, lo, cell, dims, at_centre, floor, norm):
+    """Return the centres of the cells that hold points and whose bound can exceed floor."""
+    half = _combine(0.5 * cell, 0.5 * cell, 0.5 * cell, norm) * (1.0 + 1e-9)
+    cells = np.flatnonzero((starts[1:] > starts[:-1]) & (at_centre + half > floor))
+    centres = np.empty((cells.shape[0], 3))
+    for k in range(cells.shape[0]):
+        centres[k, 0], centres[k, 1], centres[k, 2] = _centre(cells[k], lo, cell, dims)
+    return centres, cells
+
+
+@njit(cache=True)
+def _largest(
+    points, bounds, lower, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm
+):
+    """Return max(lower, the points' distances), measuring them in decreasing order of bound."""
+    best = lower
+    for q in range(points.shape[0]):
+        if bounds[q] <= best - 1e-9 * (abs(best) + cell):  # this one and the rest cannot exceed
+            break
+        d = _query(
+            points[q:q + 1], a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm
+        )[0]
+        best = max(best, d)
+    return best

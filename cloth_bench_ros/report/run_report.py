@@ -74,11 +74,12 @@ def surface_table(summary: dict) -> list[str]:
         )
         lines.append(f'{engine:<10}{cells}')
     lines.append(
-        "beside the paper's (docs/metrics.md): rev = real points -> simulated surface, surf ="
-        ' surface samples -> real points, 2s = two-sided; P/R/F at'
+        "beside the paper's (docs/metrics.md): rev = real points -> simulated surface (CD rev"
+        f' and R on {_setting(engines, "reverse_samples")} real points spread over the frame,'
+        ' HD rev on all), surf = surface samples -> real points, 2s = two-sided; P/R/F at'
         f' {_threshold(engines) * 100:g} cm; EMD on'
-        f' {_setting(engines, "ot_samples")} + {_setting(engines, "ot_samples")} points'
-        ' (its floor: a sheet that matches exactly scores about 0.06 m);'
+        f' {_setting(engines, "ot_samples")} + {_setting(engines, "ot_samples")} points spread'
+        ' over each (its floor: a sheet that matches exactly scores 0.04-0.07 m);'
         ' onset = simulated - real contact time (s, dynamic; - when either never touches).'
     )
     return lines
