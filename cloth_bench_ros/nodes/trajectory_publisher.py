@@ -8,12 +8,14 @@ import time
 from typing import Any
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.cloth_size import grasp_width
 from cloth_bench_ros.core.hil_timing import TargetTimeline
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     all_subscriptions_matched,
     NAMESPACE,
+    node_cloth_size,
     node_keys,
     parameters_fixed_at_start,
     publish_serialises,
@@ -78,7 +80,7 @@ class TrajectoryPublisher(Node):
             raise InputError(f'unknown pacing {self.pacing!r} (valid: {", ".join(PACINGS)})')
         self.timing_log = self.declare_parameter('timing_log', '').value
         duration = declare_float(self, 'duration', 0.0)
-        self.targets = full_targets(primitive, rate_hz)
+        self.targets = full_targets(primitive, rate_hz, grasp_width(node_cloth_size(self)))
         # duration > 0: only the targets of the first `duration` seconds (short real-time checks).
         self.n_targets = (
             min(len(self.targets), int(duration * rate_hz) + 1)
