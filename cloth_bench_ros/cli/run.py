@@ -58,6 +58,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.engine_override_option(
         run, 'override an engine parameter on top of the preset (repeatable)'
     )
+    common.add_option(run, 'cloth_size')
+    common.add_option(run, 'cloth_mass')
     run.set_defaults(func=cmd_run)
 
     traj = sub.add_parser('trajectory', help='print the quintic part of a primitive as CSV')
@@ -189,6 +191,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.run_report import result_table
+    from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses
     from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 
     engines = validation.unique(args.engine or ['mujoco'], '--engine')
@@ -200,6 +203,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic)
     overrides = common.engine_overrides(args.set, engines)
+    size, mass = cloth_choice(args.cloth_size, args.cloth_mass, overrides)
+    masses = engine_masses({  # before the run: an engine without a mass fails here, one line
+        name: {**load_preset(name, args.cloth, args.primitive, presets), **overrides.get(name, {})}
+        for name in engines
+    }, size, mass)
     replay = _replay_params(args)
     out = (
         Path(args.output)
@@ -222,6 +230,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         output_dir=out,
         engine_params=overrides,
         grid=args.grid,
+        cloth_size=size,
+        cloth_mass=mass,
         presets_dir=presets,
         replay=replay,
         change_of_phase_frame=args.change_of_phase_frame,
@@ -253,6 +263,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
         f' bag {bag}{on}'
     )
+    for line in cloth_lines(masses, size, mass, args.grid):
+        print(line)
     print(result_table(summary, realtime=args.pacing == 'realtime'))
     _print_real(summary)
     print(f'report: {out}/summary.json, {out}/frames.csv')
