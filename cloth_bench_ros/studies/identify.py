@@ -251,8 +251,8 @@ def trial_of(
     return Trial(
         spec.engine, spec.cloth, spec.primitive, str(spec.bag),
         tuple(sorted({**spec.fixed, **params}.items())), spec.objective, spec.seed, spec.rate_hz,
-        spec.grid, spec.max_frames, number, sampler, tuple(spec.also), *rung,
-        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
+        spec.grid, spec.max_frames, number, sampler, tuple(spec.also), rung=rung[0],
+        prune_above=rung[1], cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
     )
 
 
@@ -372,8 +372,8 @@ def identify(
 
     start = time.perf_counter()
     spec.output = check_output_dir(spec.output)
-    preset = load_preset(spec.engine, spec.cloth, spec.primitive)  # for the cloth's size, mass:
-    base = {**sized_params(spec.engine, preset, spec.cloth_size, spec.cloth_mass), **spec.fixed}
+    shipped = load_preset(spec.engine, spec.cloth, spec.primitive)  # for the cloth's size, mass:
+    base = {**sized_params(spec.engine, shipped, spec.cloth_size, spec.cloth_mass), **spec.fixed}
     names = list(spec.params) or [  # a given mass is the cloth's: not fitted
         n for n in default_params(spec.engine, base.get('model')) if n != 'mass'
         or spec.cloth_mass is None]

@@ -174,7 +174,7 @@ def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
     values.pop('device', None)  # a preset is of the cloth; the device is in the provenance
     provenance = provenance_text(spec, summary, version)
     size = getattr(spec, 'cloth_size', None)
-    if not is_benchmark(size) and 'mass' in values:  # a preset is of the benchmark's cloth:
+    if size is not None and not is_benchmark(size) and 'mass' in values:  # for the benchmark's:
         values['mass'] = float(values['mass']) * BENCHMARK_AREA / (size[0] * size[1])
         provenance += (
             f" Fitted on a {size_text(size)} cloth; its mass is restated for the benchmark's"
