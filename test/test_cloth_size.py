@@ -132,3 +132,23 @@ def test_the_benchmark_size_and_its_preset_mass_give_the_default_run_bit_for_bit
     strip = [[{k: v for k, v in r.items() if not k.startswith(drop)} for r in rows]
              for rows in runs.values()]
     assert strip[0] == strip[1] and len(strip[0]) > 0
+
+
+def test_a_recordings_gripper_targets_are_checked_against_the_cloths_width(tmp_path, capsys):
+    """Targets recorded 0.478 m apart (the benchmark's pre-grasp): a 0.4 m cloth differs."""
+    from camera_recording import CAMERA_TOPIC, make_repeated_recording, TARGETS_TOPIC
+    from cloth_bench_ros.paths import bundled_bag
+
+    bag = tmp_path / 'rec'
+    make_repeated_recording(bundled_bag('towel', 'dynamic'), bag, repetitions=1, rest_s=1.0,
+                            seed=5, targets_rate=30.0)
+    base = ['run', '--bag', str(bag), '--topic', CAMERA_TOPIC, '--targets-topic', TARGETS_TOPIC,
+            '--grid', '5x7']
+    assert cli.main([*base, '--output', str(tmp_path / 'a'), '--cloth-size', '0.4,0.6']) == 0
+    printed = capsys.readouterr().out
+    assert "grasp: the recording's gripper targets are 0.478 m apart, the simulated corners " \
+        '0.400 m (0.40 x 0.60 m cloth)' in printed, printed
+    summary = json.loads((tmp_path / 'a' / 'summary.json').read_text())
+    assert summary['real']['targets_grasp_m'] == pytest.approx(0.478)
+    assert cli.main([*base, '--output', str(tmp_path / 'b'), '--cloth-size', '0.5,0.7']) == 0
+    assert 'gripper targets are' not in capsys.readouterr().out  # they agree: nothing to say

@@ -102,6 +102,12 @@ def _print_real(summary: dict) -> None:
             f'start of the motion: bag time {start["bag_ns"] / 1e9:.3f} s, {start["method"]}, '
             f'precision +/- {start["precision_s"] * 1e3:.1f} ms'
         )
+    from cloth_bench_ros.core.cloth_size import targets_grasp_text
+
+    size = tuple(summary['run'].get('cloth_size') or ()) or None
+    grasp = targets_grasp_text(real.get('targets_grasp_m'), size)  # type: ignore[arg-type]
+    if grasp:
+        print(grasp)
     window = window_line(summary)
     if window:
         print(window)

@@ -7,7 +7,8 @@ A cloth of another size than the benchmark's 0.5 x 0.7 m: its mesh, its grasp an
   cloth's extent, and `engines.base.params_for_grid` scales the parameters for its spacing.
 - Grasp: the grippers hold the two top corners, at x = 0 and x = W. The benchmark's trajectories
   move the grippers in y and z only; its x positions (and the pre-grasp's inward moves of 20 mm
-  and 2 mm) are kept relative to those corners, so the right gripper moves by W - 0.5 m.
+  and 2 mm) are kept relative to those corners, so the right gripper moves by W - 0.5 m; a
+  recording's gripper targets are checked against that width (`targets_grasp_text`).
 - Heights: the trajectory's heights and the table are the recording's, whatever the cloth: a
   shorter cloth reaches the table later, or never (the change of phase is found in the recording),
   and the length is bounded so that the cloth hangs clear of the table at the start.
@@ -105,6 +106,29 @@ def mass_text(total: float, size: Size | None, mass: float | None, preset_mass: 
     return (
         f"{total:.4g} kg (the preset's {preset_mass / BENCHMARK_AREA:.4g} kg/m^2 times "
         f'{size_text(size)})'
+    )
+
+
+GRASP_TOLERANCE = 0.025  # m: a recording's targets at the start pose or the pre-grasp agree
+
+
+def targets_grasp_text(recorded: float | None, size: Size | None) -> str:
+    """
+    Return what a recording's gripper targets say of the grasp ('' when it has none).
+
+    `recorded`: the x distance of its first two targets; the task's pre-grasp holds the corners
+    W - 0.022 m apart (the start pose W).
+    """
+    if recorded is None:
+        return ''
+    width = float((size or BENCHMARK_SIZE)[0])
+    if abs(recorded - (width - 0.022)) <= GRASP_TOLERANCE:
+        return '' if is_benchmark(size) else (
+            f"grasp: the recording's gripper targets agree ({recorded:.3f} m apart)"
+        )
+    return (
+        f"grasp: the recording's gripper targets are {recorded:.3f} m apart, the simulated "
+        f'corners {width:.3f} m ({size_text(size)} cloth): give the width with --cloth-size W,L'
     )
 
 

@@ -10,6 +10,7 @@ add up to the frames on the topic; the evaluator then accounts for those it was 
 
 from __future__ import annotations
 
+from contextlib import closing
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -76,6 +77,7 @@ class ReplayPlan:
     change_of_phase: dict[str, Any] = field(default_factory=dict)  # see `change_of_phase`
     split: trials.Split | None = None  # the repetitions found (recordings without a start)
     trial_scored: int = 0  # which of them is scored (0: the recording as one trial)
+    targets_grasp_m: float | None = None  # x distance of the recorded grippers at their start
 
     def accounting(self) -> dict[str, Any]:
         """Return the recorder's share of the frame accounting, for the summary."""
@@ -86,6 +88,7 @@ class ReplayPlan:
             'start': self.start.as_dict(),
             'frames': self.frames_source,
             'change_of_phase': self.change_of_phase,
+            'targets_grasp_m': self.targets_grasp_m,
             'nan_points_dropped': self.nan_points_dropped,
             'irregular_intervals': self.irregular_intervals,
             'trials': None if self.split is None else {
@@ -231,6 +234,9 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
         split=split,
         trial_scored=chosen,
     )
+    targets_topic = options.targets_topic or ('' if project_bag else TARGETS_TOPIC)
+    if targets_topic and reader.topics.get(targets_topic) == POSE_ARRAY:
+        plan.targets_grasp_m = recorded_grasp(reader, targets_topic)
     counts = {'before_start': 0, 'after_trajectory': 0, 'empty_after_cleaning': 0, 'to_send': 0}
     if chosen:
         counts['other_trials'] = 0
@@ -260,6 +266,15 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     off = np.abs(steps.astype(np.float64) - period)
     plan.irregular_intervals = int(np.sum(off > IRREGULAR_TOLERANCE * period))
     return plan
+
+
+def recorded_grasp(reader: BagReader, topic: str) -> float | None:
+    """Return the x distance between the first two poses of a recording's first gripper targets."""
+    with closing(reader.messages([topic])) as messages:
+        for _, _, msg in messages:
+            poses = msg.poses
+            return abs(poses[1].position.x - poses[0].position.x) if len(poses) >= 2 else None
+    return None
 
 
 def change_of_phase(
