@@ -10,7 +10,6 @@ add up to the frames on the topic; the evaluator then accounts for those it was 
 
 from __future__ import annotations
 
-from contextlib import closing
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -270,11 +269,15 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
 
 def recorded_grasp(reader: BagReader, topic: str) -> float | None:
     """Return the x distance between the first two poses of a recording's first gripper targets."""
-    with closing(reader.messages([topic])) as messages:
-        for _, _, msg in messages:
-            poses = msg.poses
-            return abs(poses[1].position.x - poses[0].position.x) if len(poses) >= 2 else None
-    return None
+    messages = reader.messages([topic])
+    first = next(messages, None)
+    close = getattr(messages, 'close', None)
+    if close is not None:  # a generator: its file is let go now
+        close()
+    if first is None or len(first[2].poses) < 2:
+        return None
+    poses = first[2].poses
+    return abs(poses[1].position.x - poses[0].position.x)
 
 
 def change_of_phase(
