@@ -296,3 +296,21 @@ REPLAY_OPTIONS = (
     'trial',
     'align',
 )
+
+# A cloth of another size than the benchmark's 0.5 x 0.7 m, and its mass (docs/identification.md).
+OPTIONS.update(_declare(
+    Option(
+        'cloth_size', str, '',
+        'width (grasped edge) and hanging length of the cloth, W,L in metres: width in '
+        f'[{validation.CLOTH_WIDTH_RANGE[0]:g}, {validation.CLOTH_WIDTH_RANGE[1]:g}], length in '
+        f'[{validation.CLOTH_LENGTH_RANGE[0]:g}, {validation.CLOTH_LENGTH_RANGE[1]:g}] '
+        "(default: the benchmark's 0.5,0.7)",
+        flag='--cloth-size', metavar='W,L',
+    ),
+    Option(
+        'cloth_mass', float, 0.0,
+        "total mass of the cloth (0 or unset: the preset's mass per area times the cloth's area)",
+        flag='--cloth-mass', low=validation.CLOTH_MASS_RANGE[0],
+        high=validation.CLOTH_MASS_RANGE[1], unit='kg', unset=0.0, metavar='KG',
+    ),
+))

@@ -30,6 +30,12 @@ MAX_SEED = 2**63 - 1  # a ROS 2 integer parameter is int64
 MAX_FRAME = 10**7  # 90 hours at 30 fps
 MAX_ENGINE_PARAMS_BYTES = 64 * 1024  # the engine_params YAML string of a node
 MAX_TIME_OFFSET_S = 1e6  # s; keeps stamps well inside int64 nanoseconds
+# A cloth's size (docs/identification.md): its grasped edge lies on the table's x extent (-0.3 to
+# 0.8 m, corners at x = 0 and W), and it hangs clear of the table top (0.195 m) from the grippers'
+# start height (1.0 m) with 5 cm to spare.
+CLOTH_WIDTH_RANGE = (0.1, 0.8)  # m
+CLOTH_LENGTH_RANGE = (0.1, 0.75)  # m
+CLOTH_MASS_RANGE = (1e-4, 100.0)  # kg, the engines' own range of a cloth's mass
 
 
 def _is_number(value: object) -> bool:
@@ -218,6 +224,18 @@ def parse_grid(text: str, name: str = 'grid') -> tuple[int, int]:
     if not m:
         raise InputError(f'{name} {text!r} is not NXxNZ (e.g. 11x15)')
     return grid(int(m.group(1)), int(m.group(2)), f'{name} {text.strip()}')
+
+
+def parse_cloth_size(text: str, name: str = 'cloth size') -> tuple[float, float] | None:
+    """Parse "W,L" in metres -> (W, L) inside the cloth ranges; '' -> None (the benchmark's)."""
+    if not text.strip():
+        return None
+    parts = text.split(',')
+    if len(parts) != 2:
+        raise InputError(f'{name} {text!r} is not W,L in metres (e.g. 0.4,0.6)')
+    width = number(parse_number(parts[0], name), f'{name} width', *CLOTH_WIDTH_RANGE, unit='m')
+    length = number(parse_number(parts[1], name), f'{name} length', *CLOTH_LENGTH_RANGE, unit='m')
+    return width, length
 
 
 def parse_value(text: str) -> bool | int | float | str:

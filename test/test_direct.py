@@ -40,6 +40,12 @@ CELLS = {
     },
     'newton-1khz-hanging': {'engines': ['newton'], 'rate_hz': 1000.0, 'seed': 3},
     'mujoco-newton-1khz': {'engines': ['mujoco', 'newton'], 'rate_hz': 1000.0},
+    'resized-cloth-two-engines': {  # --cloth-size and --cloth-mass reach every node
+        'engines': ['mujoco', 'bullet'],
+        'rate_hz': 100.0,
+        'cloth_size': (0.4, 0.6),
+        'cloth_mass': 0.2,
+    },
     'two-engines-overrides': {
         'engines': ['mujoco', 'bullet'],
         'rate_hz': 100.0,

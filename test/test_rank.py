@@ -144,3 +144,26 @@ def test_one_trial_is_no_ranking(recordings, tmp_path, capsys):
     assert 'towel dynamic: 1 usable trial; left out (ranking needs 2)' in err.out
     assert err.err.strip().startswith('cloth-bench: error: rank: no cloth and task with two')
     assert len(err.err.strip().splitlines()) == 1
+
+
+def test_rank_of_a_resized_cloth_names_it_and_never_reuses_another_sizes_cells(tmp_path, capsys):
+    """--cloth-size/--cloth-mass: the group line names the cloth; another size runs anew."""
+    make_repeated_recording(bundled_bag('towel', 'dynamic'), tmp_path / 'rec' / 'two',
+                            repetitions=2, rest_s=1.0, seed=4)
+    out = tmp_path / 'rank'
+    command = ['rank', str(tmp_path / 'rec'), '--output', str(out), *TINY]
+    assert cli.main([*command, '--cloth-size', '0.4,0.6', '--cloth-mass', '0.2']) == 0
+    printed = capsys.readouterr().out
+    assert 'towel_dynamic: 2 trials of a 0.40 x 0.60 m, 0.2 kg cloth' in printed
+    assert 'towel_dynamic: cloth 0.40 x 0.60 m, mass 0.2 kg (--cloth-mass, not fitted)' in printed
+    result = json.loads((out / 'rank.json').read_text())
+    assert result['spec']['cloth_size'] == [0.4, 0.6] and result['spec']['cloth_mass'] == 0.2
+    group = result['groups']['towel_dynamic']
+    assert group['cloth_size'] == [0.4, 0.6] and group['floor']['vertices'] == 48  # --grid 6x8
+    assert all('mass' not in v['params'] for v in result['identified'].values())
+    cells = len(result['cells'])
+    assert cli.main([*command, '--cloth-size', '0.45,0.6']) == 0  # another cloth: nothing kept
+    printed = capsys.readouterr().out
+    assert f'cells: {cells} (0 kept from an earlier run)' in printed
+    assert 'mass the preset' in printed and '0.45 x 0.60 m' in printed
+    assert json.loads((out / 'rank.json').read_text())['spec']['cloth_size'] == [0.45, 0.6]

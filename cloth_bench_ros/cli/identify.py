@@ -87,6 +87,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.add_options(ident, IDENTIFY_FLAGS)
     common.engine_override_option(ident, 'fixed override, not fitted')
     common.add_options(ident, FIT_FLAGS)
+    common.add_option(ident, 'cloth_size')
+    common.add_option(ident, 'cloth_mass', help='total mass of the cloth, not fitted unless '
+                      "--params names mass (unset: the preset's mass per area times the area)")
     ident.set_defaults(func=cmd_identify)
 
 
@@ -101,12 +104,17 @@ def _budget_text(budget: dict) -> str:
 
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, validate on held-out seeds, write the preset and print the outcome."""
+    from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.paths import bundled_bag
+    from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses
     from cloth_bench_ros.studies.identify import identify, IdentifySpec, JOURNAL_FILE, TRIALS_FILE
 
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag)
     fixed = common.engine_overrides(args.set, [args.engine]).get(args.engine, {})
+    size, mass = cloth_choice(args.cloth_size, args.cloth_mass, {args.engine: fixed})
+    preset = {**load_preset(args.engine, args.cloth, args.primitive), **fixed}
+    masses = engine_masses({args.engine: preset}, size, mass)
     out = (
         Path(args.output)
         if args.output
@@ -132,6 +140,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         args.validate_seeds,
         Path(args.bag_dir) if args.bag_dir else None,
         fidelity=args.fidelity,
+        cloth_size=size,
+        cloth_mass=mass,
     )
     print(
         f'cloth-bench identify: {args.engine}, {args.cloth} {args.primitive},'
@@ -140,6 +150,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         f' output {out}',
         flush=True,
     )
+    for line in cloth_lines(masses, size, mass, args.grid):
+        print(line)
+    if mass is not None and 'mass' not in spec.params:
+        print(f"mass: {mass:g} kg, the cloth's own (--cloth-mass): not fitted")
     try:
         outcome = identify(spec, args.scheduler, args.workers, progress=not args.no_progress)
     except KeyboardInterrupt:

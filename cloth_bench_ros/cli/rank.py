@@ -73,6 +73,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     common.add_options(rank, RANK_FLAGS)
     common.engine_override_option(rank, 'fixed on every entrant of that engine, not fitted')
+    common.add_option(rank, 'cloth_size')
+    common.add_option(rank, 'cloth_mass', help='total mass of the cloth, not fitted')
     rank.set_defaults(func=cmd_rank)
 
 
@@ -80,9 +82,12 @@ def cmd_rank(args: argparse.Namespace) -> int:
     """Run the protocol, print the table and its sentences, write rank.json."""
     from cloth_bench_ros.data.replay import ReplayOptions
     from cloth_bench_ros.report.rank import rank_answer, rank_lines, rank_table
+    from cloth_bench_ros.studies.cloth import cloth_choice
     from cloth_bench_ros.studies.rank import CELLS_FILE, DEFAULT_ENTRANTS, run_rank, RankSpec
 
     entrants = args.engine or list(DEFAULT_ENTRANTS)
+    fixed = common.engine_overrides(args.set, sorted({e for e, _ in entrants}))
+    size, mass = cloth_choice(args.cloth_size, args.cloth_mass, fixed)
     out = Path(args.output) if args.output else Path('results') / 'rank'
     declared = {name: OPTIONS[name].default for name in REPLAY_OPTIONS}  # the replay's defaults
     params = _replay_params(argparse.Namespace(**{
@@ -96,8 +101,7 @@ def cmd_rank(args: argparse.Namespace) -> int:
     )
     spec = RankSpec(
         args.recordings, out, entrants, replay, args.trials, args.sampler, args.seeds, args.rate,
-        args.rates, args.grid, args.metric, args.max_frames,
-        common.engine_overrides(args.set, sorted({e for e, _ in entrants})), args.fidelity,
+        args.rates, args.grid, args.metric, args.max_frames, fixed, args.fidelity, size, mass,
     )
     print(f'cloth-bench rank: {", ".join(args.recordings)}; engines '
           f'{", ".join(e + (":" + o["model"] if o else "") for e, o in entrants)}; output {out}',

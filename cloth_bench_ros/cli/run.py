@@ -59,6 +59,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.engine_override_option(
         run, 'override an engine parameter on top of the preset (repeatable)'
     )
+    common.add_option(run, 'cloth_size')
+    common.add_option(run, 'cloth_mass')
     run.set_defaults(func=cmd_run)
 
     traj = sub.add_parser('trajectory', help='print the quintic part of a primitive as CSV')
@@ -99,6 +101,12 @@ def _print_real(summary: dict) -> None:
             f'start of the motion: bag time {start["bag_ns"] / 1e9:.3f} s, {start["method"]}, '
             f'precision +/- {start["precision_s"] * 1e3:.1f} ms'
         )
+    from cloth_bench_ros.core.cloth_size import targets_grasp_text
+
+    size = tuple(summary['run'].get('cloth_size') or ()) or None
+    grasp = targets_grasp_text(real.get('targets_grasp_m'), size)  # type: ignore[arg-type]
+    if grasp:
+        print(grasp)
     window = window_line(summary)
     if window:
         print(window)
@@ -188,6 +196,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.run_report import result_table
+    from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses
     from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 
     engines = validation.unique(args.engine or ['mujoco'], '--engine')
@@ -199,6 +208,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic)
     overrides = common.engine_overrides(args.set, engines)
+    size, mass = cloth_choice(args.cloth_size, args.cloth_mass, overrides)
+    masses = engine_masses({  # before the run: an engine without a mass fails here, one line
+        name: {**load_preset(name, args.cloth, args.primitive, presets), **overrides.get(name, {})}
+        for name in engines
+    }, size, mass)
     replay = _replay_params(args)
     out = (
         Path(args.output)
@@ -221,6 +235,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         output_dir=out,
         engine_params=overrides,
         grid=args.grid,
+        cloth_size=size,
+        cloth_mass=mass,
         presets_dir=presets,
         replay=replay,
         change_of_phase_frame=args.change_of_phase_frame,
@@ -252,6 +268,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
         f' bag {bag}{on}'
     )
+    for line in cloth_lines(masses, size, mass, args.grid):
+        print(line)
     print(result_table(summary, realtime=args.pacing == 'realtime'))
     _print_real(summary)
     print(f'report: {out}/summary.json, {out}/frames.csv')

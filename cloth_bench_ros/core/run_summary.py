@@ -53,6 +53,7 @@ def run_summary(
             'frames_from': replay.get('frames'),
             'cleaning': replay.get('cleaning'),
             'topic': replay.get('topic'),
+            'targets_grasp_m': replay.get('targets_grasp_m'),
             'change_of_phase': change_of_phase_used(core.change_of_phase_frame, replay),
         },
         'engines': engines,

@@ -243,8 +243,15 @@ def _settle(t: np.ndarray, start: np.ndarray, pregrasp: np.ndarray) -> np.ndarra
     return start + s * (pregrasp - start)
 
 
-def full_targets(primitive: Primitive | str, rate_hz: float) -> GripperTargets:
-    """Settle phase followed by the quintic part, sampled at t = k / rate from the run start."""
+def full_targets(
+    primitive: Primitive | str, rate_hz: float, width: float | None = None
+) -> GripperTargets:
+    """
+    Settle phase followed by the quintic part, sampled at t = k / rate from the run start.
+
+    `width`: the distance between the grasped corners of a cloth of another width than the
+    benchmark's (core/cloth_size.py); the right gripper's x moves by the difference.
+    """
     traj = quintic_part(primitive)
     t = sample_times(scene.SETTLE_DURATION + traj.duration, rate_hz)
     tq = t - scene.SETTLE_DURATION
@@ -257,6 +264,8 @@ def full_targets(primitive: Primitive | str, rate_hz: float) -> GripperTargets:
     right = np.stack([np.full(n, traj.right_x), y, z], axis=1)
     left[settle] = _settle(t[settle], scene.GRIPPER_START_LEFT, scene.PREGRASP_LEFT)
     right[settle] = _settle(t[settle], scene.GRIPPER_START_RIGHT, scene.PREGRASP_RIGHT)
+    if width is not None and width != scene.CLOTH_WIDTH:
+        right[:, 0] += width - scene.CLOTH_WIDTH
     return GripperTargets(
         t,
         left,

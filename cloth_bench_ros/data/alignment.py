@@ -88,10 +88,15 @@ def targets_start(stamps_ns: list[int], positions: list[np.ndarray], topic: str)
 
 
 def reference_motion(
-    engine, primitive: str, rate_hz: float, seconds: float, seed: int = 0
+    engine, primitive: str, rate_hz: float, seconds: float, seed: int = 0,
+    width: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(t, vertices): t in s from the start of the quintic part, through `seconds` of motion."""
-    targets = full_targets(primitive, rate_hz)
+    """
+    (t, vertices): t in s from the start of the quintic part, through `seconds` of motion.
+
+    `width`: the grasped corners' distance of a cloth of another size (core/cloth_size.py).
+    """
+    targets = full_targets(primitive, rate_hz, width)
     q0 = targets.quintic_index
     last = min(len(targets) - 1, q0 + int(np.ceil(seconds * rate_hz)))
     frames = [engine.reset(seed, targets.left[0], targets.right[0])]

@@ -76,6 +76,7 @@ class ReplayPlan:
     change_of_phase: dict[str, Any] = field(default_factory=dict)  # see `change_of_phase`
     split: trials.Split | None = None  # the repetitions found (recordings without a start)
     trial_scored: int = 0  # which of them is scored (0: the recording as one trial)
+    targets_grasp_m: float | None = None  # x distance of the recorded grippers at their start
 
     def accounting(self) -> dict[str, Any]:
         """Return the recorder's share of the frame accounting, for the summary."""
@@ -86,6 +87,7 @@ class ReplayPlan:
             'start': self.start.as_dict(),
             'frames': self.frames_source,
             'change_of_phase': self.change_of_phase,
+            'targets_grasp_m': self.targets_grasp_m,
             'nan_points_dropped': self.nan_points_dropped,
             'irregular_intervals': self.irregular_intervals,
             'trials': None if self.split is None else {
@@ -231,6 +233,9 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
         split=split,
         trial_scored=chosen,
     )
+    targets_topic = options.targets_topic or ('' if project_bag else TARGETS_TOPIC)
+    if targets_topic and reader.topics.get(targets_topic) == POSE_ARRAY:
+        plan.targets_grasp_m = recorded_grasp(reader, targets_topic)
     counts = {'before_start': 0, 'after_trajectory': 0, 'empty_after_cleaning': 0, 'to_send': 0}
     if chosen:
         counts['other_trials'] = 0
@@ -260,6 +265,19 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     off = np.abs(steps.astype(np.float64) - period)
     plan.irregular_intervals = int(np.sum(off > IRREGULAR_TOLERANCE * period))
     return plan
+
+
+def recorded_grasp(reader: BagReader, topic: str) -> float | None:
+    """Return the x distance between the first two poses of a recording's first gripper targets."""
+    messages = reader.messages([topic])
+    first = next(messages, None)
+    close = getattr(messages, 'close', None)
+    if close is not None:  # a generator: its file is let go now
+        close()
+    if first is None or len(first[2].poses) < 2:
+        return None
+    poses = first[2].poses
+    return abs(poses[1].position.x - poses[0].position.x)
 
 
 def change_of_phase(

@@ -239,3 +239,25 @@ def _merge_base(existing: Path, first: dict) -> dict:
                               'entry ("<cloth> <task>: ..." expected): not a merged set')
         doc['provenance'][key] = text
     return doc
+
+
+def sized_params(
+    engine: str, params: dict, size: tuple[float, float] | None, mass: float | None
+) -> dict:
+    """
+    Return an engine's `params` with the total mass of a cloth of `size` (core/cloth_size.py).
+
+    A given `mass`, else the preset's mass per area times the cloth's area; the benchmark's
+    cloth without a mass: `params` unchanged.
+    """
+    from cloth_bench_ros.core.cloth_size import is_benchmark, with_cloth_mass
+    from cloth_bench_ros.engines import engine_class
+
+    if mass is None and is_benchmark(size):
+        return dict(params)
+    schema = {p.name: p for p in engine_class(engine).params}
+    if 'mass' not in schema:
+        raise EngineError(
+            f'engine {engine} has no mass parameter: a --cloth-size or --cloth-mass needs one'
+        )
+    return with_cloth_mass(params, float(schema['mass'].default), size, mass)

@@ -81,6 +81,24 @@ def node_grid(node) -> tuple[int, int]:
     return nx, nz
 
 
+def node_cloth_size(node) -> tuple[float, float] | None:
+    """Declare cloth_size and return it checked: (W, L), or None: the benchmark's 0.5 x 0.7 m."""
+    from cloth_bench_ros.validation import parse_cloth_size
+
+    return parse_cloth_size(
+        declare_option(node, 'cloth_size'), f'{node.get_name()}: parameter cloth_size'
+    )
+
+
+def node_cloth(node) -> tuple[tuple[float, float] | None, float | None]:
+    """
+    Declare cloth_size and cloth_mass and return them checked: (W, L) or None, kg or None.
+
+    None: the benchmark's 0.5 x 0.7 m cloth, the preset's mass (core/cloth_size.py).
+    """
+    return node_cloth_size(node), declare_option(node, 'cloth_mass')
+
+
 def node_keys(infos: Iterable) -> set[tuple[str, str]]:
     """
     Return (namespace, name) of the nodes behind a get_*_info_by_topic answer.

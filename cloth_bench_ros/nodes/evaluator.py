@@ -9,6 +9,7 @@ import time
 from typing import Any
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.cloth_size import cloth_grid, cloth_record
 from cloth_bench_ros.core.evaluation import accounting_line, OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.core.run_files import write_run_report
@@ -20,6 +21,7 @@ from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data.trial import trial_from_message
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
+    node_cloth,
     node_grid,
     publishers_matched,
     replay_stamps,
@@ -65,6 +67,7 @@ class Evaluator(Node):
         seed = declare_option(self, 'seed')
         # the simulators' grid (0: the default), whose triangles the surface metrics are on
         nx, nz = node_grid(self)
+        size, mass = node_cloth(self)  # recorded in the summary; the mesh's extent
         # The engines' devices, comma-separated in the order of `engines` ('' : not recorded).
         devices = str(declare_fixed(self, 'devices', ''))
         # Every value through the one validation layer; an error names the node and parameter.
@@ -76,7 +79,7 @@ class Evaluator(Node):
                 'comparison_figures': validation.boolean,
             },
         )
-        grid = ClothGrid(nx, nz) if nx and nz else ClothGrid()
+        grid = cloth_grid((nx, nz) if nx and nz else None, size) or ClothGrid()
         self.engines, offset = p['engines'], p['time_offset']
         self.comparison_figures = p['comparison_figures']
         self.run_info = {
@@ -85,6 +88,7 @@ class Evaluator(Node):
             'engines': self.engines,
             'cloth': cloth,
             'seed': seed,
+            **cloth_record(size, mass),
         }
         if devices:
             names = [validation.device(d, 'parameter devices') for d in devices.split(',')]

@@ -21,18 +21,20 @@ import shutil
 import time
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.cloth_size import cloth_grid, grasp_width
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
-from cloth_bench_ros.core.scene import ClothGrid, SETTLE_DURATION
+from cloth_bench_ros.core.scene import SETTLE_DURATION
 from cloth_bench_ros.data import BagReader, BagWriter
 from cloth_bench_ros.data.alignment import reference_motion, SearchSettings
 from cloth_bench_ros.data.replay import plan_replay, ReplayOptions
 from cloth_bench_ros.data.trial import TRIAL_STATUS_NAME
 from cloth_bench_ros.engines import make_engine
-from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
+    node_cloth,
     node_grid,
     REPLAY_STATUS_NAME,
     run_node,
@@ -117,9 +119,10 @@ class Recorder(Node):
         self.bag = BagReader(path)
         options = self.replay_options()
         nx, nz = node_grid(self)  # 0, 0: the preset's grid
+        cloth = node_cloth(self)  # the size and mass of the alignment's reference cloth
         try:
             self.plan = plan_replay(
-                self.bag, options, partial(self.reference_motion, options, nx, nz)
+                self.bag, options, partial(self.reference_motion, options, nx, nz, cloth)
             )
         except BaseException:
             self.bag.close()  # a node that fails to start is never closed by its main
@@ -176,14 +179,21 @@ class Recorder(Node):
         )
 
     @staticmethod
-    def reference_motion(options: ReplayOptions, nx: int, nz: int, seconds: float):
+    def reference_motion(
+        options: ReplayOptions, nx: int, nz: int, cloth: tuple, seconds: float
+    ) -> tuple:
         """Return the reference simulation the automatic alignment compares the bag with."""
+        size, mass = cloth
         preset = load_preset(options.align_engine, options.cloth, options.primitive)
         engine = make_engine(
-            options.align_engine, options.rate_hz, preset, ClothGrid(nx, nz) if nx and nz else None
+            options.align_engine, options.rate_hz,
+            sized_params(options.align_engine, preset, size, mass),
+            cloth_grid((nx, nz) if nx and nz else None, size),
         )
         try:
-            return reference_motion(engine, options.primitive, options.rate_hz, seconds)
+            return reference_motion(
+                engine, options.primitive, options.rate_hz, seconds, width=grasp_width(size)
+            )
         finally:
             engine.close()
 

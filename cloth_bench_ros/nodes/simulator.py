@@ -16,13 +16,15 @@ import time
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core import realtime_process
+from cloth_bench_ros.core.cloth_size import cloth_grid, grasp_width
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
-from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.engines import make_engine
-from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.engines.presets import load_preset, sized_params
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
+    node_cloth,
     node_grid,
     publish_serialises,
     run_node,
@@ -118,6 +120,7 @@ class Simulator(Node):
         self.seed = declare_option(self, 'seed')
         declare_fixed(self, 'engine_params', '{}')
         nx, nz = node_grid(self)
+        size, mass = node_cloth(self)
         presets_dir = declare_fixed(self, 'presets_dir', '')
         declare_fixed(self, 'device', '')  # '' : engine_params' device, else the engine's
         # Every value through the one validation layer; an error names the node and parameter.
@@ -129,11 +132,16 @@ class Simulator(Node):
             },
         )
         overrides = checked['engine_params']
-        grid = ClothGrid(nx, nz) if nx and nz else None
+        if mass is not None and 'mass' in overrides:
+            raise InputError(
+                f'{self.get_name()}: parameters cloth_mass and engine_params mass both give the '
+                "cloth's mass; give one"
+            )
+        grid = cloth_grid((nx, nz) if nx and nz else None, size)
         preset = load_preset(
             self.engine_name, cloth, primitive, Path(presets_dir) if presets_dir else None
         )
-        params = {**preset, **overrides}
+        params = sized_params(self.engine_name, {**preset, **overrides}, size, mass)
         if checked['device']:  # the engine refuses it if it has no such parameter or device
             params['device'] = checked['device']
         self.engine = make_engine(self.engine_name, rate_hz, params, grid)
@@ -146,7 +154,7 @@ class Simulator(Node):
         self.step = -1
         self.skipped = 0
         self.reported_divergence = False
-        self.targets = full_targets(primitive, rate_hz)
+        self.targets = full_targets(primitive, rate_hz, grasp_width(size))
         self.stamps = np.array(
             [self.targets.stamp_ns(k) for k in range(len(self.targets))], dtype=np.int64
         )

@@ -8,11 +8,13 @@ import time
 from typing import Any
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.cloth_size import grasp_width
 from cloth_bench_ros.core.hil_timing import TargetTimeline
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
 from cloth_bench_ros.nodes.common import (
     all_subscriptions_matched,
     NAMESPACE,
+    node_cloth_size,
     node_keys,
     publish_serialises,
     publishers_matched,
@@ -72,7 +74,7 @@ class TrajectoryPublisher(Node):
         )
         self.timing_log = declare_fixed(self, 'timing_log', '')
         duration = declare_option(self, 'duration')
-        self.targets = full_targets(primitive, rate_hz)
+        self.targets = full_targets(primitive, rate_hz, grasp_width(node_cloth_size(self)))
         # duration > 0: only the targets of the first `duration` seconds (short real-time checks).
         self.n_targets = (
             min(len(self.targets), int(duration * rate_hz) + 1)

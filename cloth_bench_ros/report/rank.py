@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from cloth_bench_ros.core.cloth_size import BENCHMARK_SIZE, is_benchmark, size_text
 from cloth_bench_ros.core.metric_choice import Metric, metric as metric_of
 from cloth_bench_ros.core.table import Table
 from cloth_bench_ros.report.ranking import bootstrap_ranking, finite, Ranked
@@ -191,6 +192,14 @@ def rank_lines(result: dict[str, Any]) -> list[str]:
     m = metric_of(result['spec']['metric'])
     unit = f' {m.unit}' if m.unit else ''
     for group, a in result['answer'].items():
+        info = result['groups'].get(group, {})
+        size, mass = info.get('cloth_size') or BENCHMARK_SIZE, info.get('cloth_mass')
+        if not is_benchmark(size) or mass is not None:  # a cloth other than the benchmark's
+            lines.append(
+                f'{group}: cloth {size_text(size)}, mass '
+                + (f'{mass:g} kg (--cloth-mass, not fitted)' if mass is not None
+                   else "the preset's per area times the area")
+            )
         lines.append(f'{group}: {a["significance"]}')
         ref = a.get('within_reference_error')
         if ref:

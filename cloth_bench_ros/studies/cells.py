@@ -62,6 +62,8 @@ class Cell:
     overrides: tuple[tuple[str, object], ...] = ()  # sorted (parameter, value) pairs
     pacing: str = OPTIONS['pacing'].default
     keep_frames: bool = False  # write summary.json + frames.csv of this run (per-frame plots)
+    cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
+    cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
 
     def key(self) -> tuple:
         """Return what makes a cell unique in a results file (resume compares it with row_key)."""

@@ -17,6 +17,7 @@ import time
 from typing import Any
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.cloth_size import cloth_grid, cloth_record, grasp_width
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
 from cloth_bench_ros.core.run_files import write_run_report
@@ -31,7 +32,7 @@ from cloth_bench_ros.data.replay import plan_replay, ReplayOptions
 from cloth_bench_ros.data.trial import TrialInfo
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.base import ClothEngine
-from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.run_config import RunConfig
 import yaml
@@ -43,8 +44,9 @@ def _engine(config: RunConfig, name: str) -> ClothEngine:
         yaml.safe_dump(config.engine_params.get(name, {})), f'simulator_{name}: engine_params'
     )
     preset = load_preset(name, config.cloth, config.primitive, config.presets_dir)
-    grid = ClothGrid(*config.grid) if config.grid else None
-    return make_engine(name, float(config.rate_hz), {**preset, **overrides}, grid)
+    params = sized_params(name, {**preset, **overrides}, config.cloth_size, config.cloth_mass)
+    grid = cloth_grid(config.grid, config.cloth_size)
+    return make_engine(name, float(config.rate_hz), params, grid)
 
 
 def _step_engines(
@@ -98,19 +100,22 @@ def _replay(config: RunConfig, cut: int | None) -> tuple[Any, dict[str, Any]]:
         rate_hz=float(config.rate_hz),
         align_engine=config.engines[0],
     )
-    key = (_bag_identity(Path(config.bag)), options, config.grid)
+    size, mass = config.cloth_size, config.cloth_mass
+    key = (_bag_identity(Path(config.bag)), options, config.grid, size, mass)
     if key not in _PLANS:
-        nx, nz = config.grid or (0, 0)
 
         def motion(seconds: float) -> Any:
+            preset = load_preset(options.align_engine, options.cloth, options.primitive)
             engine = make_engine(
                 options.align_engine,
                 options.rate_hz,
-                load_preset(options.align_engine, options.cloth, options.primitive),
-                ClothGrid(nx, nz) if nx and nz else None,
+                sized_params(options.align_engine, preset, size, mass),
+                cloth_grid(config.grid, size),
             )
             try:
-                return reference_motion(engine, options.primitive, options.rate_hz, seconds)
+                return reference_motion(
+                    engine, options.primitive, options.rate_hz, seconds, width=grasp_width(size)
+                )
             finally:
                 engine.close()
 
@@ -137,12 +142,12 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
     plan, replay = _replay(config, cut)
     trial = TrialInfo.from_strings(plan.trial.to_strings())
     offset_ns = int(round(SETTLE_DURATION * 1e9))
-    grid = ClothGrid(*config.grid) if config.grid else ClothGrid()
+    grid = cloth_grid(config.grid, config.cloth_size) or ClothGrid()
     faces = grid_faces(grid.nx, grid.nz)
     core = OnlineEvaluator(list(config.engines), primitive, offset_ns, cut, REAL_FPS, faces=faces)
     if core.change_of_phase_frame is None:
         core.change_of_phase_frame = trial.change_of_phase_frame
-    targets = full_targets(primitive, rate_hz)
+    targets = full_targets(primitive, rate_hz, grasp_width(config.cloth_size))
     final_stamp = targets.stamp_ns(len(targets) - 1)
     for t, points in plan.frames:  # pending until the engines' states reach them
         if t + offset_ns <= final_stamp:
@@ -161,6 +166,7 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
         'engines': list(config.engines),
         'cloth': config.cloth,
         'seed': int(config.seed),
+        **cloth_record(config.cloth_size, config.cloth_mass),
         'devices': {name: engine.device for name, engine in engines.items()},
         'trial': trial.to_dict(),
     }

@@ -27,8 +27,10 @@ import time
 from typing import Any, Sequence
 import warnings
 
+from cloth_bench_ros.core.cloth_size import cloth_record
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.studies.cloth import cloth_name
 from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-exported)
     AUTO,
     AUTO_FIRST,
@@ -84,6 +86,8 @@ class IdentifySpec:
     bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
     also: tuple[str, ...] = ()  # more training bags: the objective is the mean over all of them
     fidelity: str = 'full'  # or prune: multi-fidelity (studies/identify_fidelity.py)
+    cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
+    cloth_mass: float | None = None  # kg, given: not fitted unless named in `params`
 
 
 def default_params(engine: str, model: str | None = None) -> list[str]:
@@ -227,8 +231,10 @@ def open_study(spec: IdentifySpec, sampler: str) -> Any:
     warnings.filterwarnings('ignore', category=optuna.exceptions.ExperimentalWarning)
     repair_journal(spec.output / JOURNAL_FILE)
     storage = JournalStorage(Backend(str(spec.output / JOURNAL_FILE)))
+    other = spec.cloth_size is not None or spec.cloth_mass is not None  # its own study
+    cloth = f'-{cloth_name(spec.cloth_size, spec.cloth_mass)}' if other else ''
     study = optuna.create_study(
-        study_name=f'{spec.engine}-{spec.cloth}-{spec.primitive}-{sampler}',
+        study_name=f'{spec.engine}-{spec.cloth}-{spec.primitive}-{sampler}{cloth}',
         storage=storage,
         sampler=make_sampler(sampler, spec.seed),
         direction='minimize',
@@ -243,20 +249,10 @@ def trial_of(
     spec: IdentifySpec, params: dict, number: int, sampler: str, rung: tuple = (None, None)
 ) -> Trial:
     return Trial(
-        spec.engine,
-        spec.cloth,
-        spec.primitive,
-        str(spec.bag),
-        tuple(sorted({**spec.fixed, **params}.items())),
-        spec.objective,
-        spec.seed,
-        spec.rate_hz,
-        spec.grid,
-        spec.max_frames,
-        number,
-        sampler,
-        tuple(spec.also),
-        *rung,
+        spec.engine, spec.cloth, spec.primitive, str(spec.bag),
+        tuple(sorted({**spec.fixed, **params}.items())), spec.objective, spec.seed, spec.rate_hz,
+        spec.grid, spec.max_frames, number, sampler, tuple(spec.also), rung=rung[0],
+        prune_above=rung[1], cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
     )
 
 
@@ -368,7 +364,7 @@ def identify(
     progress: bool = True,
 ) -> IdentifyOutcome:
     """Run the identification of `spec` and its validation; write the preset and its JSON."""
-    from cloth_bench_ros.engines.presets import load_preset
+    from cloth_bench_ros.engines.presets import load_preset, sized_params
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.dask_executor import open_client
     from cloth_bench_ros.studies.identify_output import validate, write_outputs
@@ -376,8 +372,11 @@ def identify(
 
     start = time.perf_counter()
     spec.output = check_output_dir(spec.output)
-    base = {**load_preset(spec.engine, spec.cloth, spec.primitive), **spec.fixed}
-    names = list(spec.params) or default_params(spec.engine, base.get('model'))
+    shipped = load_preset(spec.engine, spec.cloth, spec.primitive)  # for the cloth's size, mass:
+    base = {**sized_params(spec.engine, shipped, spec.cloth_size, spec.cloth_mass), **spec.fixed}
+    names = list(spec.params) or [  # a given mass is the cloth's: not fitted
+        n for n in default_params(spec.engine, base.get('model')) if n != 'mass'
+        or spec.cloth_mass is None]
     space = search_space(spec.engine, names, base, spec.span)
     samplers = samplers_of(spec.sampler)
     for s in samplers:
@@ -424,6 +423,7 @@ def summarise(
         'seed': spec.seed,
         'rate_hz': spec.rate_hz,
         'grid': list(spec.grid) if spec.grid else None,
+        **cloth_record(spec.cloth_size, spec.cloth_mass),
         'fixed': spec.fixed,
         'max_frames': spec.max_frames,
         'fidelity': spec.fidelity,

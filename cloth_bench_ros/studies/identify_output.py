@@ -14,6 +14,7 @@ from pathlib import Path
 import platform
 from typing import Any
 
+from cloth_bench_ros.core.cloth_size import BENCHMARK_AREA, is_benchmark, size_text
 from cloth_bench_ros.studies.cells import Cell, find_bags
 from cloth_bench_ros.studies.results import append_row, json_safe, load_rows, RESULTS_FILE
 import numpy as np
@@ -54,6 +55,8 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
                         config,
                         spec.grid,
                         tuple(sorted(params.items())),
+                        cloth_size=spec.cloth_size,
+                        cloth_mass=spec.cloth_mass,
                     )
                 )
     return cells
@@ -169,10 +172,18 @@ def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
     version = engine_class(spec.engine).version() or 'unknown'
     values = {**base, **{k: float(v) for k, v in summary['params'].items()}}
     values.pop('device', None)  # a preset is of the cloth; the device is in the provenance
+    provenance = provenance_text(spec, summary, version)
+    size = getattr(spec, 'cloth_size', None)
+    if size is not None and not is_benchmark(size) and 'mass' in values:  # for the benchmark's:
+        values['mass'] = float(values['mass']) * BENCHMARK_AREA / (size[0] * size[1])
+        provenance += (
+            f" Fitted on a {size_text(size)} cloth; its mass is restated for the benchmark's"
+            f' {size_text(None)} at the same mass per area (run --cloth-size gives it back).'
+        )
     document = {
         'engine': spec.engine,
         'engine_version': str(version),
-        'provenance': provenance_text(spec, summary, version),
+        'provenance': provenance,
         'presets': {spec.cloth: {spec.primitive: values}},
     }
     folder = spec.output / PRESETS_DIR

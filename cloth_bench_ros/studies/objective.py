@@ -53,6 +53,8 @@ class Trial:
     rung: float | None = None  # multi-fidelity: score this fraction of the frames first
     prune_above: float | None = None  # stop (pruned) where that partial value is above this
     all_metrics: bool = False  # also every metric the evaluator reports (given the mesh's faces)
+    cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
+    cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
 
 
 def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
@@ -101,17 +103,19 @@ def evaluate(trial: Trial) -> dict:
     engine = None
     try:
         from cloth_bench_ros.core.pointcloud2 import as_carried
-        from cloth_bench_ros.core.scene import ClothGrid, SETTLE_DURATION
+        from cloth_bench_ros.core.cloth_size import cloth_grid, grasp_width
+        from cloth_bench_ros.core.scene import SETTLE_DURATION
         from cloth_bench_ros.core.trajectory import full_targets
         from cloth_bench_ros.engines import make_engine
-        from cloth_bench_ros.engines.presets import load_preset
+        from cloth_bench_ros.engines.presets import load_preset, sized_params
 
         offset = int(round(SETTLE_DURATION * 1e9))
-        targets = full_targets(trial.primitive, trial.rate_hz)
-        params = {**load_preset(trial.engine, trial.cloth, trial.primitive), **dict(trial.params)}
-        engine = make_engine(
-            trial.engine, trial.rate_hz, params, ClothGrid(*trial.grid) if trial.grid else None
-        )
+        size = trial.cloth_size
+        targets = full_targets(trial.primitive, trial.rate_hz, grasp_width(size))
+        preset = load_preset(trial.engine, trial.cloth, trial.primitive)  # for this cloth's size:
+        preset = sized_params(trial.engine, preset, size, trial.cloth_mass)
+        params = {**preset, **dict(trial.params)}
+        engine = make_engine(trial.engine, trial.rate_hz, params, cloth_grid(trial.grid, size))
         faces = engine.faces if trial.all_metrics else None
         scored = [_scored_bag(trial, bag, offset, faces) for bag in (trial.bag, *trial.also)]
         cores = [(core, stamps[-1]) for core, stamps in scored]

@@ -20,10 +20,12 @@ from pathlib import Path
 import sys
 from typing import Any, Callable, Sequence
 
+from cloth_bench_ros.core.cloth_size import cloth_record, grid_vertices
 from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.studies.cloth import cloth_name
 from cloth_bench_ros.studies.objective import evaluate, OBJECTIVES, Trial
 from cloth_bench_ros.studies.rank_trials import (
     floor,
@@ -65,6 +67,8 @@ class RankSpec:
     max_frames: int | None = None
     fixed: dict = field(default_factory=dict)  # per engine: overrides on every entrant of it
     fidelity: str = 'full'  # identification's: full, or prune (studies/identify_fidelity.py)
+    cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
+    cloth_mass: float | None = None  # kg, the cloth's (not fitted); None: the preset's per area
 
 
 def entrant_key(engine: str, overrides: dict) -> str:
@@ -115,6 +119,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         'bags': bags, 'trials': spec.trials, 'sampler': spec.sampler, 'grid': spec.grid,
         'metric': objective(spec), 'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
         'fixed': {**spec.fixed.get(engine, {}), **overrides}, 'fidelity': spec.fidelity,
+        **cloth_record(spec.cloth_size, spec.cloth_mass),
     }))
     done = out / SUMMARY_FILE
     if done.exists():
@@ -129,6 +134,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         spec.trials, objective(spec), (), 0, spec.rate_hz, spec.grid,
         {**spec.fixed.get(engine, {}), **overrides}, validate_seeds=0,
         max_frames=spec.max_frames, also=tuple(bags[1:]), fidelity=spec.fidelity,
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
     )
     summary = identify(ident, scheduler, workers, progress).summary
     summary['rank_stamp'] = stamp
@@ -144,10 +150,13 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
     key = (
         f'{engine}|{sorted(params.items())}|{trial.bag}|{seed}|{rate:g}|{objective(spec)}|'
         f'{label}|{spec.grid}|{frames}' + ('|all' if every else '')
+        + ('' if spec.cloth_size is None and spec.cloth_mass is None  # another cloth: other cells
+           else f'|{spec.cloth_size}|{spec.cloth_mass}')
     )
     return key, Trial(
         engine, trial.cloth, trial.primitive, trial.bag, tuple(sorted(params.items())),
         objective(spec), seed, rate, spec.grid, frames, -1, label, all_metrics=every,
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
     )
 
 
@@ -164,7 +173,6 @@ def run_rank(
     say: Callable[[str], None] = print,
 ) -> dict[str, Any]:
     """Run the protocol (resumable) and return every number it produced (see module doc)."""
-    from cloth_bench_ros.core.scene import ClothGrid
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.dask_executor import open_client
     from cloth_bench_ros.studies.results import append_row, ResultsLock
@@ -184,6 +192,9 @@ def run_rank(
         todo: list[tuple[str, Trial, dict]] = []
         for (cloth, primitive), members in groups.items():
             group = f'{cloth}_{primitive}'
+            if spec.cloth_size is not None or spec.cloth_mass is not None:
+                say(f'{group}: {len(members)} trials of a '
+                    f'{cloth_name(spec.cloth_size, spec.cloth_mass)} cloth')
             for engine, overrides in spec.entrants:
                 name = entrant_key(engine, overrides)
                 preset = {**spec.fixed.get(engine, {}), **overrides}
@@ -239,7 +250,7 @@ def run_rank(
                     done[key] = row
                     bar.update(1)
                 bar.close()
-        vertices = (spec.grid[0] * spec.grid[1]) if spec.grid else ClothGrid().nx * ClothGrid().nz
+        vertices = grid_vertices(spec.grid, spec.cloth_size)
         return {
             'spec': {
                 'recordings': [str(r) for r in spec.recordings],
@@ -248,11 +259,13 @@ def run_rank(
                 'rate_hz': spec.rate_hz, 'rates': list(spec.rates), 'grid': spec.grid,
                 'metric': spec.metric, 'objective': objective(spec),
                 'max_frames': spec.max_frames, 'fidelity': spec.fidelity,
+                **cloth_record(spec.cloth_size, spec.cloth_mass),
             },
             'trials': [t.as_dict() for t in trials],
             'groups': {
                 f'{c}_{p}': {
                     'cloth': c, 'primitive': p, 'trials': [t.name for t in m],
+                    **cloth_record(spec.cloth_size, spec.cloth_mass),
                     'folds': [[m[i].name for i in held] for held in folds(len(m))],
                     'floor': floor(m, vertices),
                     'reference_error': reference_error(m),

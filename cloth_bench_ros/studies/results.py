@@ -290,9 +290,18 @@ def stale_cells(cells: Sequence[Any], existing: Sequence[dict]) -> dict[tuple, s
             fingerprints[cell.bag] = bag_fingerprint(cell.bag)
         if 'params' in row and row['params'] != params:
             stale[cell.key()] = f'{cell.ident()} (other parameters)'
+        elif any(row.get(k) != v for k, v in cloth_fields(cell, True).items()):
+            stale[cell.key()] = f'{cell.ident()} (a cloth of another size or mass)'
         elif row.get('bag_fingerprint') not in (None, fingerprints[cell.bag]):
             stale[cell.key()] = f'{cell.ident()} (another bag at {cell.bag})'
     return stale
+
+
+def cloth_fields(cell: Any, every: bool = False) -> dict[str, Any]:
+    """Return a cell's cloth_size and cloth_mass as a row keeps them (set ones, or `every`)."""
+    size, mass = getattr(cell, 'cloth_size', None), getattr(cell, 'cloth_mass', None)
+    fields = {'cloth_size': list(size) if size else None, 'cloth_mass': mass}
+    return {k: v for k, v in fields.items() if every or v is not None}
 
 
 def bag_fingerprint(bag: str) -> str | None:

@@ -41,10 +41,15 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
         'use_sim_time': True,
     }
     nx, nz = config.grid or (0, 0)
+    cloth = {  # the nodes' cloth_size and cloth_mass ('' and 0: the benchmark's, the preset's)
+        'cloth_size': ','.join(f'{v:.17g}' for v in config.cloth_size or ()),
+        'cloth_mass': float(config.cloth_mass or 0.0),
+    }
     nodes = {
         'trajectory_publisher': {
             'primitive': config.primitive,
             'rate_hz': float(config.rate_hz),
+            'cloth_size': cloth['cloth_size'],
             'engines': list(config.engines),
             'pacing': config.pacing,
         },
@@ -60,6 +65,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
             'change_of_phase_frame': _cut(config),
             'grid_nx': nx,
             'grid_nz': nz,
+            **cloth,
             **config.live,
             'devices': ','.join(run_devices(config).values()),
         },
@@ -72,6 +78,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
             'seed': int(config.seed),
             'grid_nx': nx,
             'grid_nz': nz,
+            **cloth,
             'presets_dir': str(config.presets_dir or ''),
             'engine_params': yaml.safe_dump(config.engine_params.get(engine, {})),
         }
@@ -83,6 +90,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
         'align_engine': config.engines[0],
         'grid_nx': nx,
         'grid_nz': nz,
+        **cloth,
         **config.replay,
     }
     return nodes

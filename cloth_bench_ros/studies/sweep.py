@@ -54,6 +54,7 @@ from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
 from cloth_bench_ros.studies.results import (  # noqa: F401
     append_row,
     bag_fingerprint,
+    cloth_fields,
     json_safe,
     load_rows,
     ResultRow,
@@ -136,6 +137,7 @@ def _cell_fields(cell: Cell) -> dict:
         fields['reference'] = cell.reference
     if cell.preset_set != 'default':
         fields['presets'] = cell.preset_set
+    fields.update(cloth_fields(cell))
     return fields
 
 
@@ -176,16 +178,10 @@ def error_row(cell: Cell, message: str, wall_s: float = math.nan) -> dict:
 def cell_config(cell: Cell, output_dir: Path | None) -> RunConfig:
     """Return the run a cell stands for."""
     return RunConfig(
-        bag=Path(cell.bag),
-        engines=[cell.engine],
-        rate_hz=cell.rate_hz,
-        cloth=cell.cloth,
-        primitive=cell.primitive,
-        seed=cell.seed,
-        pacing=cell.pacing,
-        output_dir=output_dir,
-        engine_params={cell.engine: cell.params},
-        grid=cell.grid,
+        bag=Path(cell.bag), engines=[cell.engine], rate_hz=cell.rate_hz, cloth=cell.cloth,
+        primitive=cell.primitive, seed=cell.seed, pacing=cell.pacing, output_dir=output_dir,
+        engine_params={cell.engine: cell.params}, grid=cell.grid, cloth_size=cell.cloth_size,
+        cloth_mass=cell.cloth_mass,
     )
 
 

@@ -1,0 +1,88 @@
+"""The cloth a command runs: `--cloth-size` and `--cloth-mass` checked, and the lines saying it."""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+from cloth_bench_ros import validation
+from cloth_bench_ros.core.cloth_size import (
+    BENCHMARK_SIZE,
+    cloth_grid,
+    grasp_text,
+    is_benchmark,
+    mass_text,
+    Size,
+    size_text,
+)
+from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.errors import InputError
+
+
+def cloth_choice(
+    size: str | None, mass: float | None, overrides: Mapping[str, Mapping] | None = None
+) -> tuple[Size | None, float | None]:
+    """
+    Return (W, L) or None and the mass of `--cloth-size` / `--cloth-mass`, checked.
+
+    A mass given twice (`--cloth-mass` and `--set ENGINE.mass`) is refused in one line.
+    """
+    parsed = validation.parse_cloth_size(size or '', '--cloth-size')
+    if mass is not None:
+        mass = validation.number(mass, '--cloth-mass', *validation.CLOTH_MASS_RANGE, unit='kg')
+        both = sorted(e for e, p in (overrides or {}).items() if 'mass' in p)
+        if both:
+            raise InputError(
+                f"--cloth-mass and --set {both[0]}.mass both give the cloth's mass; give one"
+            )
+    return parsed, mass
+
+
+def cloth_lines(
+    masses: Mapping[str, tuple[float, float]],
+    size: Size | None,
+    mass: float | None,
+    grid: tuple[int, int] | None,
+) -> list[str]:
+    """
+    Return what a run says of a cloth of another size or mass ([] for the benchmark's cloth).
+
+    `masses`: per engine, (the total mass it runs with, its preset's mass).
+    """
+    if mass is None and is_benchmark(size):
+        return []
+    mesh = cloth_grid(grid, size) or ClothGrid()
+    how = 'as --grid' if grid else "at the benchmark mesh's 5 cm spacing"
+    lines = [
+        f'cloth: {size_text(size)}{" (the benchmark)" if size is None else ""}, '
+        f'mesh {mesh.nx} x {mesh.nz} ({how}); mass '
+        + ', '.join(
+            f'{engine} {mass_text(total, size, mass, preset)}'
+            for engine, (total, preset) in masses.items()
+        )
+    ]
+    grasp = grasp_text(size)
+    if grasp:
+        lines.append(grasp)
+    return lines
+
+
+def cloth_name(size: Size | None, mass: float | None) -> str:
+    """Return a short label of the cloth, e.g. '0.40 x 0.60 m, 0.2 kg' (no mass: the size)."""
+    text = size_text(size if size is not None else BENCHMARK_SIZE)
+    return text + (f', {mass:g} kg' if mass is not None else '')
+
+
+def engine_masses(
+    params_of: Mapping[str, Mapping], size: Size | None, mass: float | None
+) -> dict[str, tuple[float, float]]:
+    """Return per engine (the cloth's total mass it runs with, the mass of its `params`)."""
+    from cloth_bench_ros.engines import engine_class
+    from cloth_bench_ros.engines.presets import sized_params
+
+    out = {}
+    for engine, params in params_of.items():
+        total = sized_params(engine, dict(params), size, mass).get('mass')
+        own = engine_class(engine).validate_params(dict(params)).get('mass')
+        if total is not None and own is not None:
+            out[engine] = (float(total), float(own))
+    return out
