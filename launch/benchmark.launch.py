@@ -2,7 +2,8 @@
 Launch the benchmark's node graph.
 
 ros2 launch cloth_bench_ros benchmark.launch.py [engines:=mujoco,bullet] [rate_hz:=100.0]
-[bag:=PATH] [live:=true] [live_port:=8765] [live_wait:=30.0] ...
+[bag:=PATH] [live:=true] [live_port:=8765] [live_wait:=30.0] [cloth_size:=W,L]
+[cloth_mass:=KG] ...
 
 The node graph (README, "The node graph"), one process per node, output on the screen; the launch
 ends when the evaluator has written its report. Launch arguments win over config/benchmark.yaml:
@@ -55,17 +56,26 @@ def _nodes(context):
         'cloth': cloth,
         'engines': engines,
     }
+    cloth_size = {  # a cloth of another size and its mass (docs/identification.md)
+        'cloth_size': arg('cloth_size'),
+        'cloth_mass': float(arg('cloth_mass')),
+    }
     nodes = [
         _node(
-            'trajectory_publisher', 'trajectory_publisher', params_file, common, {'pacing': pacing}
+            'trajectory_publisher',
+            'trajectory_publisher',
+            params_file,
+            common,
+            {'pacing': pacing, 'cloth_size': cloth_size['cloth_size']},
         ),
-        _node('recorder', 'recorder', params_file, {'bag': bag}),
+        _node('recorder', 'recorder', params_file, {'bag': bag}, cloth_size),
     ]
     evaluator = _node(
         'evaluator',
         'evaluator',
         params_file,
         common,
+        cloth_size,
         {'output_dir': arg('output_dir'), 'pacing': pacing, 'seed': seed},
         {  # the live view in Foxglove (docs/live.md)
             'live': arg('live').lower() == 'true',
@@ -80,6 +90,7 @@ def _nodes(context):
                 f'simulator_{engine}',
                 params_file,
                 common,
+                cloth_size,
                 {'engine': engine, 'seed': seed},
             )
         )
@@ -104,6 +115,8 @@ def generate_launch_description():
         'live': 'false',
         'live_port': '8765',
         'live_wait': '30.0',
+        'cloth_size': '',
+        'cloth_mass': '0.0',
     }
     return LaunchDescription(
         [DeclareLaunchArgument(name, default_value=value) for name, value in defaults.items()]

@@ -195,6 +195,8 @@ def test_every_launch_argument_reaches_its_node(monkeypatch, tmp_path):
         'bag': str(bag),
         'cloth': 'towel',
         'primitive': 'dynamic',
+        'cloth_size': '0.4,0.6',
+        'cloth_mass': '0.2',
     }
     started = {}
     try:
@@ -218,6 +220,11 @@ def test_every_launch_argument_reaches_its_node(monkeypatch, tmp_path):
             sim = started[f'simulator_{engine}'][0]
             assert (sim.engine_name, sim.seed, sim.get_namespace()) == (engine, 7, '/cloth_bench')
             assert sim.engine.dt == pytest.approx(1e-3)
+        assert tp.get_parameter('cloth_size').value == '0.4,0.6'
+        for name in ('recorder', 'evaluator', 'simulator_mujoco', 'simulator_bullet'):
+            instance = started[name][0]
+            sized = [instance.get_parameter(p).value for p in ('cloth_size', 'cloth_mass')]
+            assert sized == ['0.4,0.6', 0.2], name
     finally:
         for instance, context in started.values():
             getattr(instance, 'close', lambda: None)()

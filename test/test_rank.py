@@ -167,3 +167,14 @@ def test_rank_of_a_resized_cloth_names_it_and_never_reuses_another_sizes_cells(t
     assert f'cells: {cells} (0 kept from an earlier run)' in printed
     assert 'mass the preset' in printed and '0.45 x 0.60 m' in printed
     assert json.loads((out / 'rank.json').read_text())['spec']['cloth_size'] == [0.45, 0.6]
+
+
+@pytest.mark.parametrize(
+    'rates, message',
+    [('100,0.5', '0.5 Hz is outside [1, 10000]'), ('abc', "'abc' is not a number"),
+     (',', 'no rate in')],
+)
+def test_rates_are_checked_as_the_rate_option_is(rates, message, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(['rank', 'bags', '--rates', rates])
+    assert exit_.value.code == 2 and message in capsys.readouterr().err

@@ -27,12 +27,10 @@ def _entrant(text: str, label: str = '--engine') -> tuple[str, dict]:
 
 
 def _rates(text: str, label: str = '--rates') -> list[float]:
-    try:
-        values = [float(v) for v in text.split(',') if v.strip()]
-    except ValueError:
-        raise InputError(f'{label} {text!r}: comma-separated Hz') from None
-    if not values or any(not v > 0 for v in values):
-        raise InputError(f'{label} {text!r}: rates must be > 0 Hz')
+    """Comma-separated rates, each checked as --rate is (the one declaration of a rate)."""
+    values = [OPTIONS['rate_hz'].parse(v.strip(), label) for v in text.split(',') if v.strip()]
+    if not values:
+        raise InputError(f'no rate in {text!r} (comma-separated Hz)')
     return values
 
 
