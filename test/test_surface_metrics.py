@@ -1,9 +1,13 @@
 """The surface metrics, contact onset and metric choice: analytic cases, independent code."""
 
+from concurrent.futures import ThreadPoolExecutor
 import csv
 import json
 import math
+import os
 from pathlib import Path
+import subprocess
+import sys
 
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.core.metric_choice import metric, METRICS
@@ -13,9 +17,11 @@ from cloth_bench_ros.core.scene import ClothGrid, TABLE_TOP_Z
 from cloth_bench_ros.core.surface_distance import grid_faces, point_to_surface
 from cloth_bench_ros.core.surface_metrics import (
     FSCORE_THRESHOLD_M,
+    metric_threads,
     OT_SAMPLES,
     OT_SEED,
     REVERSE_SAMPLES,
+    set_threads,
     spread_subsample,
     surface_samples,
     surface_scores,
@@ -263,3 +269,43 @@ def test_the_reverse_direction_on_a_subsample_is_within_its_tolerance_on_the_bun
         s, exact = _check_reverse_against_every_point(points, vertices, faces)
         errors.append(abs(s.cd_reverse / exact.mean() - 1.0))
     assert len(frames) >= 16 and max(errors) > 0  # subsampled, and still within tolerance
+
+
+def test_two_threads_give_the_same_bits_as_one_also_called_from_several_threads():
+    rng = np.random.default_rng(5)
+    meshes = [_sheet(11, 15)[0] + rng.normal(0, 0.02, (165, 3)) for _ in range(6)]
+    faces = grid_faces(11, 15)
+    cloud = RealCloud(_raster() + rng.normal(0, 0.002, (101 * 141, 3)))
+    before = metric_threads()
+    try:
+        set_threads(1)
+        alone = [surface_scores(cloud, v, faces) for v in meshes]
+        set_threads(2)
+        paired = [surface_scores(cloud, v, faces) for v in meshes]
+        # as the evaluator node calls them: several engines' executor threads at once
+        with ThreadPoolExecutor(4) as callers:
+            crowded = list(callers.map(lambda v: surface_scores(cloud, v, faces), meshes))
+    finally:
+        set_threads(before)
+    assert len({s.emd for s in alone}) == len(meshes)  # six different frames
+    assert paired == alone and crowded == alone  # every field, bit for bit
+    with pytest.raises(ValueError):
+        set_threads(3)
+
+
+def test_the_environment_variable_chooses_the_threads():
+    code = (
+        'import threading; import numpy as np\n'
+        'from cloth_bench_ros.core.metrics import RealCloud\n'
+        'from cloth_bench_ros.core.surface_distance import grid_faces\n'
+        'from cloth_bench_ros.core.scene import ClothGrid\n'
+        'from cloth_bench_ros.core import surface_metrics as m\n'
+        'v = ClothGrid(5, 6).vertices()\n'
+        'm.surface_scores(RealCloud(v + 0.01), v, grid_faces(5, 6))\n'
+        'print(m.metric_threads(), threading.active_count())\n'
+    )
+    for value, expected in (('', ['1', '1']), ('1', ['1', '1']), ('2', ['2', '2'])):
+        env = {**os.environ, 'CLOTH_BENCH_METRIC_THREADS': value}
+        out = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
+                             text=True, check=True).stdout.split()
+        assert out == expected  # a worker thread only when asked for

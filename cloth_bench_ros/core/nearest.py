@@ -44,13 +44,13 @@ class PointGrid:
         )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cell_of(x: float, lo: float, inv: float, n: int) -> int:
     i = int((x - lo) * inv)
     return 0 if i < 0 else (n - 1 if i >= n else i)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bounds(points):
     lo = np.empty(3)
     hi = np.empty(3)
@@ -64,7 +64,7 @@ def _bounds(points):
     return lo, hi
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bucket(points, lo, inv, dims):
     """Return the points' indices ordered by cell and each cell's start in that order."""
     n = points.shape[0]
@@ -98,7 +98,7 @@ def _bucket(points, lo, inv, dims):
     return order, starts
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _gap(x: float, lo: float, cell: float, i: int) -> float:
     """Distance along one axis from x to cell i's slab (0 inside it)."""
     a = lo + i * cell
@@ -108,7 +108,7 @@ def _gap(x: float, lo: float, cell: float, i: int) -> float:
     return x - b if x > b else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _nearest(points, order, starts, lo, cell, dims, queries):
     inv = 1.0 / cell
     out = np.empty(queries.shape[0])

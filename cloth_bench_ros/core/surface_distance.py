@@ -122,13 +122,13 @@ def point_to_surface(
     return TriangleMesh(vertices, faces).distances(points, norm)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cell_of(x, lo, inv, n):
     i = int((x - lo) * inv)
     return 0 if i < 0 else (n - 1 if i >= n else i)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cell_range(t, lo, hi, glo, inv, dims):
     """Return the cells (first and last along x, y, z) that triangle t's box overlaps."""
     return (
@@ -138,7 +138,7 @@ def _cell_range(t, lo, hi, glo, inv, dims):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bucket_triangles(lo, hi, glo, cell, dims):
     """Return triangle indices ordered by cell (each in every cell its box overlaps), starts."""
     inv = 1.0 / cell
@@ -165,14 +165,14 @@ def _bucket_triangles(lo, hi, glo, cell, dims):
     return order, starts
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _combine(gx, gy, gz, norm):
     if norm == 1:
         return gx + gy + gz
     return np.sqrt(gx * gx + gy * gy + gz * gz)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _gap(x, a, b):
     """Distance along one axis from x to the interval [a, b] (0 inside it)."""
     if x < a:
@@ -180,7 +180,7 @@ def _gap(x, a, b):
     return x - b if x > b else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _segment(px, py, pz, ax, ay, az, dx, dy, dz, norm):
     """Distance from p to the segment a + s d, s in [0, 1]."""
     if norm == 2:
@@ -208,7 +208,7 @@ def _segment(px, py, pz, ax, ay, az, dx, dy, dz, norm):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _triangle(px, py, pz, t, a, e1, e2, n, m1, m2, norm, best):
     """
     Exact distance from p to triangle t, or a value >= best once it cannot be below best.
@@ -268,7 +268,7 @@ def _triangle(px, py, pz, t, a, e1, e2, n, m1, m2, norm, best):
     return d
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _query(points, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm):
     inv = 1.0 / cell
     m = a.shape[0]
@@ -339,7 +339,7 @@ def _query(points, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims,
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _prepare(v, f):
     """Return each triangle's a, e1 = b - a, e2 = c - a, normal, barycentric rows, box."""
     m = f.shape[0]
@@ -361,14 +361,14 @@ def _prepare(v, f):
     return a, e1, e2, n, m1, m2, lo, hi
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cross(u, w, scale, out):  # out = scale (u x w), no array allocated per triangle
     out[0] = (u[1] * w[2] - u[2] * w[1]) * scale
     out[1] = (u[2] * w[0] - u[0] * w[2]) * scale
     out[2] = (u[0] * w[1] - u[1] * w[0]) * scale
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _beyond(points, order, starts, lo, cell, dims, at_centre, floor, norm):
     """Mark the points p whose bound at_centre[c] + ||p - c|| (c: their cell's centre) > floor."""
     far = np.zeros(points.shape[0], dtype=np.bool_)
@@ -390,13 +390,13 @@ def _beyond(points, order, starts, lo, cell, dims, at_centre, floor, norm):
     return far
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _centre(c, lo, cell, dims):
     i, j, k = c % dims[0], (c // dims[0]) % dims[1], c // (dims[0] * dims[1])
     return lo[0] + (i + 0.5) * cell, lo[1] + (j + 0.5) * cell, lo[2] + (k + 0.5) * cell
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _carried(anchors, lo, cell, dims):
     """
     Return an upper bound of each cell centre's L1 distance to the anchors (triangle inequality).
@@ -423,7 +423,7 @@ def _carried(anchors, lo, cell, dims):
     return f
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _centres(starts, lo, cell, dims, at_centre, floor, norm):
     """Return the centres of the cells that hold points and whose bound can exceed floor."""
     half = _combine(0.5 * cell, 0.5 * cell, 0.5 * cell, norm) * (1.0 + 1e-9)
@@ -434,7 +434,7 @@ def _centres(starts, lo, cell, dims, at_centre, floor, norm):
     return centres, cells
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _largest(
     points, bounds, lower, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm
 ):
