@@ -7,6 +7,7 @@ import sys
 import threading
 from typing import Callable, Iterable, Sequence
 
+from cloth_bench_ros import validation
 from cloth_bench_ros.errors import InputError, is_user_error, one_line
 from cloth_bench_ros.runtime import (
     declare_option,
@@ -83,9 +84,7 @@ def node_grid(node) -> tuple[int, int]:
 
 def node_cloth_size(node) -> tuple[float, float] | None:
     """Declare cloth_size and return it checked: (W, L), or None: the benchmark's 0.5 x 0.7 m."""
-    from cloth_bench_ros.validation import parse_cloth_size
-
-    return parse_cloth_size(
+    return validation.parse_cloth_size(
         declare_option(node, 'cloth_size'), f'{node.get_name()}: parameter cloth_size'
     )
 
