@@ -101,10 +101,11 @@ class NewtonWorlds:
 
     def __init__(self, rate_hz: float, trials: list[dict]) -> None:
         import newton
-        from cloth_bench_ros.engines.newton_cloth import _move_grasps
+        from cloth_bench_ros.engines.newton_cloth import _move_grasps, NewtonCloth
         import warp as wp
 
         self._wp, self._move = wp, _move_grasps
+        self._engine_substeps = NewtonCloth._substeps  # the engine's loop, run on every world
         engines = [make_engine('newton', rate_hz, p) for p in trials]
         first = engines[0]
         for name in SHARED:
@@ -174,24 +175,7 @@ class NewtonWorlds:
         return self._states[0].particle_q.numpy().astype(float).reshape(self.worlds, self.n, 3)
 
     def _substeps(self) -> None:
-        wp = self._wp
-        a, b = self._states
-        for k in range(1, self.substeps + 1):
-            for s in (a, b):
-                wp.launch(
-                    self._move,
-                    dim=2 * self.worlds,
-                    inputs=[self._start, self._velocity, self._index, k * self.h],
-                    outputs=[s.particle_q, s.particle_qd],
-                    device=self.device,
-                )
-            a.clear_forces()
-            self._pipeline.collide(a, self._contacts)
-            self.solver.step(a, b, self._control, self._contacts, self.h)
-            a, b = b, a
-        if a is not self._states[0]:
-            wp.copy(self._states[0].particle_q, a.particle_q)
-            wp.copy(self._states[0].particle_qd, a.particle_qd)
+        self._engine_substeps(self, self._move, 2 * self.worlds)  # every world's two corners
 
     def step(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """Advance every world by dt, grippers to the same targets (as NewtonCloth.step)."""

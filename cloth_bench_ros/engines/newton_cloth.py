@@ -391,14 +391,14 @@ class NewtonCloth(ClothEngine):
 
     # -- stepping -----------------------------------------------------------------------------
 
-    def _substeps(self) -> None:
-        """All substeps of one engine step; the result ends in self._states[0]."""
+    def _substeps(self, move: Any = _move_grasps, grasps: int = 2) -> None:
+        """All substeps of one step (`grasps` corners moved by `move`); ends in _states[0]."""
         a, b = self._states
         for k in range(1, self.substeps + 1):
             for s in (a, b):
                 wp.launch(
-                    _move_grasps,
-                    dim=2,
+                    move,
+                    dim=grasps,
                     inputs=[self._start, self._velocity, self._index, k * self.h],
                     outputs=[s.particle_q, s.particle_qd],
                     device=self.device,
