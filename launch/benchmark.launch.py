@@ -68,7 +68,8 @@ def _nodes(context):
             common,
             {'pacing': pacing, 'cloth_size': cloth_size['cloth_size']},
         ),
-        _node('recorder', 'recorder', params_file, {'bag': bag}, cloth_size),
+        # The recorder sends the frames up to the last target at this rate and primitive.
+        _node('recorder', 'recorder', params_file, common, {'bag': bag}, cloth_size),
     ]
     evaluator = _node(
         'evaluator',

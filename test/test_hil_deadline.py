@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.core.deadline import (
@@ -97,6 +98,13 @@ def test_a_configuration_slower_than_the_period_is_said_before_the_run_with_a_re
     assert 'exceeds the 1 ms period at 1000 Hz' in lines[warm]
     remedy = lines[-1]  # the output ends with what would meet the rate
     assert remedy.startswith('to meet 1000 Hz with mujoco (') and 'over 1 %' in remedy
+    rows = [json.loads(line) for line in (tmp_path / 'o' / 'hil.jsonl').read_text().splitlines()]
+    said = re.search(r'\((\d+) of (\d+) targets late or skipped, ([\d.]+) %', remedy)
+    f = rows[-1]  # the count is the table's misses and skipped targets together
+    assert said and int(said[1]) == f['deadline_misses'] + f['skipped'] + f['lost'], remedy
+    assert int(said[2]) == f['targets'] and float(said[3]) == pytest.approx(
+        100 * int(said[1]) / f['targets'], abs=0.006
+    )
     assert 'a lower rate: this configuration meets the rule up to' in remedy
     assert '--find-rate --engine mujoco --grid 4x5' in remedy
 

@@ -209,6 +209,9 @@ def test_every_launch_argument_reaches_its_node(monkeypatch, tmp_path):
         assert tp.targets.rate_hz == 1000.0 and not tp.get_parameter('use_sim_time').value
         recorder = started['recorder'][0]
         assert Path(recorder.bag.path) == bag and recorder.get_parameter('use_sim_time').value
+        # its frames end at the run's last target, not at the params file's rate's
+        assert recorder.get_parameter('rate_hz').value == 1000.0
+        assert recorder.get_parameter('primitive').value == 'dynamic'
         ev = started['evaluator'][0]
         assert (ev.output_dir, ev.realtime, ev.run_info['seed'], ev.engines) == (
             str(tmp_path / 'out'),

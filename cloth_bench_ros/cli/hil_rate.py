@@ -21,6 +21,7 @@ from cloth_bench_ros.options import Option, OPTIONS
 from cloth_bench_ros.studies.hil_config import HilConfig
 from cloth_bench_ros.studies.hil_find_rate import (
     miss_fraction,
+    missed,
     RATE_MAX,
     RATE_MIN,
     RATE_TOLERANCE,
@@ -134,8 +135,9 @@ def remedy_line(
         ' it holds)'
     )
     return (
-        f'to meet {rate:g} Hz with {config.engine} ({100 * share:.2f} % of the deadlines missed,'
-        f' over {100 * args.miss_threshold:g} %): ' + '; or '.join(ways)
+        f'to meet {rate:g} Hz with {config.engine} ({missed(result)} of'
+        f' {result.figures.targets} targets late or skipped, {100 * share:.2f} %, over'
+        f' {100 * args.miss_threshold:g} %): ' + '; or '.join(ways)
     )
 
 

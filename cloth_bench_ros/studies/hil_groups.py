@@ -97,7 +97,9 @@ def _parameters(config: HilConfig, group: str, run_dir: Path) -> list[tuple[str,
                 **dict(config.live),
             },
         ),
-        ('recorder', {'bag': str(config.bag), 'use_sim_time': True}),
+        # The run's rate: the recording's frames after the last target are not sent (at a rate
+        # whose last target falls before the motion's end they would never come due).
+        ('recorder', {**common, 'bag': str(config.bag), 'use_sim_time': True}),
     ]
 
 
@@ -131,11 +133,27 @@ def _finished(group: str, nodes: list) -> bool:
     """
     Return the groups' ends: controller once its timeline is written, observer once scored.
 
-    The observer ends once the evaluator reported; the simulator runs until it is told to stop.
+    The observer ends once the evaluator reported (it has every frame due by the last target,
+    whatever the recorder has left); the simulator runs until it is told to stop.
     """
+    from cloth_bench_ros.nodes.evaluator import Evaluator
+
     if group == 'simulator':
         return False
+    if group == 'observer':
+        return all(n.done for n in nodes if isinstance(n, Evaluator))
     return all(getattr(n, 'done', True) for n in nodes)
+
+
+def _waiting(nodes: list) -> str:
+    """Say which nodes have not ended and what the evaluator still waits for."""
+    parts = []
+    for node in nodes:
+        if getattr(node, 'done', True):
+            continue
+        waiting = getattr(node, 'waiting_for', lambda: [])()
+        parts.append(node.get_name() + (f' ({"; ".join(waiting)})' if waiting else ''))
+    return ', '.join(parts) or 'nothing'
 
 
 def _write_simulator_file(run_dir: Path, nodes: list, notes: Sequence[str] = ()) -> None:
@@ -197,7 +215,10 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
         deadline = time.monotonic() + _time_budget(config)
         while not all(_finished(g, n) for g, n in groups if g in _waited(config)):
             if time.monotonic() > deadline:
-                raise RuntimeError(f'HIL {config.ident()}: the run did not finish in time')
+                raise RuntimeError(
+                    f'HIL {config.ident()}: the run did not finish in time, waiting for '
+                    + _waiting([n for g, nodes in groups if g in _waited(config) for n in nodes])
+                )
             executor.spin_once(timeout_sec=0.01)
         _write_simulator_file(run_dir, [n for _, nodes in groups for n in nodes])
     finally:
