@@ -183,9 +183,9 @@ def load_preset(
         values = dict(entries.get(runs) or entries.get(None) or {})
         if not values:
             raise EngineError(
-                f'preset file {path}: no {engine} {runs} entry for {cloth} {primitive} (it has'
-                f' {", ".join(str(m) for m in entries)}): name one of those models '
-                f'({engine}.model), or run {runs} with the shipped presets'
+                f'preset file {path}: no {engine} {runs} entry for {cloth} {primitive} (it has:'
+                f' {", ".join(str(m) for m in entries)}); run one of those ({engine}.model, e.g.'
+                f' --set {engine}.model={next(iter(entries))}) or {runs} with the shipped presets'
             )
         if runs is not None:  # an entry for any model runs the model decided, never the default
             values.setdefault('model', runs)
