@@ -1,8 +1,9 @@
 """
 Preset sets hold one entry per engine model; `--presets` gives the entry of the model that runs.
 
-Real Newton runs on the coarse 6 x 8 mesh, a real (two-trial) Newton VBD identification merged
-beside the shipped XPBD entry, and malformed layouts refused in one line.
+Real Newton runs on the coarse 6 x 8 mesh (XPBD from the shipped set, VBD from a set where a
+Newton VBD identification, as the identification writes it, was merged beside the shipped XPBD
+entry), and malformed layouts refused in one line.
 """
 
 from __future__ import annotations
@@ -14,9 +15,10 @@ import shutil
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines import presets
 from cloth_bench_ros.engines.base import EngineError
-from cloth_bench_ros.studies.identify import identify, IdentifySpec
+from cloth_bench_ros.paths import share_dir
+from cloth_bench_ros.studies.identify import IdentifySpec
+from cloth_bench_ros.studies.identify_output import write_outputs
 from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
-from identify_target import write_engine_target_bag
 import pytest
 import yaml
 
@@ -80,22 +82,25 @@ def test_vbd_without_a_vbd_entry_is_refused_in_one_line_before_anything_runs(
     assert cell.params['mass'] == pytest.approx(0.1212612700311451) and cell.model == 'xpbd'
 
 
-def test_a_vbd_identification_merges_beside_the_xpbd_entry(tmp_path, capsys):
-    target = write_engine_target_bag(
-        tmp_path / 'target', 'newton', {'model': 'vbd', 'mass': 0.2}, GRID, 15
-    )
-    outcome = identify(
-        IdentifySpec('newton', 'towel', 'dynamic', target, tmp_path / 'ident', 'tpe', 2, 'cd',
-                     ['mass'], grid=GRID, validate_seeds=0, batch=1),
-        workers=1, progress=False,
-    )
-    fitted = presets.read_preset_file(outcome.preset_file)['presets']['towel']['dynamic']
+def _vbd_identification(out: Path) -> Path:
+    """Return the preset file a Newton VBD identification writes (its own writer, mass fitted)."""
+    spec = IdentifySpec('newton', 'towel', 'dynamic', share_dir('bags') / 'towel_dynamic_newton_vbd', out,
+                        'tpe', 8, 'cd', ['mass'], grid=GRID, validate_seeds=0)
+    summary = {'params': {'mass': 0.2}, 'value': 0.031, 'preset_value': 0.036,
+               'best_sampler': 'tpe', 'per_sampler': {'tpe': {'trials': 8}}}
+    out.mkdir()
+    return write_outputs(spec, presets.load_preset('newton', 'towel', 'dynamic'), summary)
+
+
+def test_a_vbd_identification_merges_beside_the_xpbd_entry(hanging_bag, tmp_path, capsys):
+    identified = _vbd_identification(tmp_path / 'ident')
+    fitted = presets.read_preset_file(identified)['presets']['towel']['dynamic']
     assert fitted['model'] == 'vbd'
     folder = tmp_path / 'set'
     folder.mkdir()
     shutil.copy(SHIPPED, folder / 'newton.yaml')
     before = presets.read_preset_file(folder / 'newton.yaml')
-    assert presets.merge_identified([outcome.preset_file], folder) == [folder / 'newton.yaml']
+    assert presets.merge_identified([identified], folder) == [folder / 'newton.yaml']
     after = presets.read_preset_file(folder / 'newton.yaml')
     dynamic = after['presets']['towel']['dynamic']
     assert list(dynamic) == ['xpbd', 'vbd'] and dynamic['vbd'] == fitted
@@ -112,8 +117,14 @@ def test_a_vbd_identification_merges_beside_the_xpbd_entry(tmp_path, capsys):
         presets.load_preset('newton', 'towel', 'quasi_static', folder)
     # merged again: the same file
     text = (folder / 'newton.yaml').read_text()
-    presets.merge_identified([outcome.preset_file], folder)
+    presets.merge_identified([identified], folder)
     assert (folder / 'newton.yaml').read_text() == text
+    # a run of the default model with that set: VBD, with its identified entry
+    assert main(_run(hanging_bag, tmp_path / 'run', '--presets', str(folder))) == 0
+    assert capsys.readouterr().out.splitlines()[0].endswith('newton (vbd) on cpu')
+    summary = json.loads((tmp_path / 'run' / 'summary.json').read_text())
+    assert summary['run']['models'] == {'newton': 'vbd'}
+    assert 0 < summary['engines']['newton']['CD_d'] < 1
 
 
 @pytest.mark.parametrize('entry, message', [
