@@ -84,8 +84,9 @@ def test_vbd_without_a_vbd_entry_is_refused_in_one_line_before_anything_runs(
 
 def _vbd_identification(out: Path) -> Path:
     """Return the preset file a Newton VBD identification writes (its own writer, mass fitted)."""
-    spec = IdentifySpec('newton', 'towel', 'dynamic', share_dir('bags') / 'towel_dynamic_newton_vbd', out,
-                        'tpe', 8, 'cd', ['mass'], grid=GRID, validate_seeds=0)
+    bag = share_dir('bags') / 'towel_dynamic_newton_vbd'
+    spec = IdentifySpec('newton', 'towel', 'dynamic', bag, out, 'tpe', 8, 'cd', ['mass'],
+                        grid=GRID, validate_seeds=0)
     summary = {'params': {'mass': 0.2}, 'value': 0.031, 'preset_value': 0.036,
                'best_sampler': 'tpe', 'per_sampler': {'tpe': {'trials': 8}}}
     out.mkdir()
