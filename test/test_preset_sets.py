@@ -59,7 +59,8 @@ def test_merged_identifications_keep_each_task_and_its_provenance(identified):
     assert presets.load_preset('mujoco', 'towel', 'dynamic', identified)['mass'] == 0.2
     assert presets.load_preset('mujoco', 'towel', 'quasi_static', identified)['mass'] == 0.3
     text = (identified / 'mujoco.yaml').read_text()
-    assert 'towel dynamic: fitted dynamic' in text and 'towel quasi_static: fitted' in text
+    assert 'towel dynamic (shell): fitted dynamic' in text
+    assert 'towel quasi_static (shell): fitted' in text
     with pytest.raises(EngineError, match='no preset for linen dynamic'):
         presets.load_preset('mujoco', 'linen', 'dynamic', identified)
 
@@ -72,7 +73,7 @@ def test_a_new_identification_extends_a_merged_set_and_replaces_its_entry(identi
     assert presets.load_preset('mujoco', 'towel', 'quasi_static', identified)['mass'] == 0.3
     doc = presets.read_preset_file(identified / 'mujoco.yaml')
     assert doc['provenance'].splitlines() == [
-        'towel dynamic: fitted dynamic', 'towel quasi_static: fitted quasi_static']
+        'towel dynamic (shell): fitted dynamic', 'towel quasi_static (shell): fitted quasi_static']
     presets.merge_identified([again], identified)  # the same again: the same file
     first = _identified_file(tmp_path / 'd', 'mujoco', 'dynamic', {'mass': 0.2})
     presets.merge_identified([first], identified)
@@ -89,7 +90,8 @@ def test_the_shipped_identified_sets_are_merged_sets():
         folder = presets.config_dir() / 'presets' / name
         for path in sorted(folder.glob('*.yaml')):
             doc = presets.read_preset_file(path)
-            entries = [f'{c} {p}' for c, tasks in doc['presets'].items() for p in tasks]
+            entries = [f'{c} {p} ({m})' for c, tasks in doc['presets'].items()
+                       for p, models in tasks.items() for m in models]
             keys = [line.split(': ')[0] for line in doc['provenance'].splitlines()]
             assert keys == entries, path
 

@@ -157,7 +157,7 @@ def cmd_hil(args: argparse.Namespace) -> int:
         default = args.rate_min if args.find_rate else OPTIONS['rate_hz'].default
         for rate in args.rate or [default]:
             user = dict(overrides.get(engine, {}))  # --set, on top of everything
-            base = set_values(presets, engine, args.cloth, args.primitive)
+            base = set_values(presets, engine, args.cloth, args.primitive, user.get('model'))
             params = {**base, **user}
             label = set_label(presets, config_label(grid, user))
             config = hil.HilConfig(

@@ -203,16 +203,22 @@ def cmd_run(args: argparse.Namespace) -> int:
     for name in engines:
         engine_class(name)
     presets = common.preset_set(args).directory
-    for name in engines:  # a missing set, malformed preset file or bad value fails here, one line
-        load_preset(name, args.cloth, args.primitive, presets)
+    overrides = common.engine_overrides(args.set, engines)
+    # The model that runs first (--set E.model=M, else the shipped preset's), then its entry of
+    # the set: a missing set or entry, malformed preset file or bad value fails here, one line.
+    params = {
+        name: {
+            **load_preset(
+                name, args.cloth, args.primitive, presets, overrides.get(name, {}).get('model')
+            ),
+            **overrides.get(name, {}),
+        }
+        for name in engines
+    }
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic)
-    overrides = common.engine_overrides(args.set, engines)
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, overrides)
-    masses = engine_masses({  # before the run: an engine without a mass fails here, one line
-        name: {**load_preset(name, args.cloth, args.primitive, presets), **overrides.get(name, {})}
-        for name in engines
-    }, size, mass)
+    masses = engine_masses(params, size, mass)  # an engine without a mass fails here, one line
     replay = _replay_params(args)
     out = (
         Path(args.output)
@@ -263,7 +269,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if summary is None:
         raise RuntimeError('the node graph ended before the evaluator finished')
     devices = summary['run'].get('devices', {})
-    on = ''.join(f', {name} on {device}' for name, device in devices.items())
+    models = summary['run'].get('models', {})
+    on = ''.join(
+        f', {name}{f" ({models[name]})" if models.get(name) else ""} on {device}'
+        for name, device in devices.items()
+    )
     print(
         f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
         f' bag {bag}{on}'

@@ -6,6 +6,13 @@ A preset file reads
     engine_version: "4.0.0"
     provenance: "<where the numbers come from; what was changed for this engine version>"
     presets: {towel: {dynamic: {param: value, ...}, quasi_static: {...}}, chequered: ...}
+An entry stands for the engine model it names (`model: xpbd`), or for any model if it names none.
+A preset set (`--presets identified`, a user's directory) may hold one entry per model instead:
+    presets: {towel: {dynamic: {xpbd: {model: xpbd, ...}, vbd: {model: vbd, ...}}}}
+The model that runs is decided first (a `model` override, else the shipped preset's model), then
+the set gives that model's entry; a set without one is an error, never another model's values.
+The shipped presets (config/presets/<engine>.yaml) are the base of every model: an override of
+`model` runs that model with their physical values.
 Every problem with a file (missing keys, wrong types, unknown or out-of-range parameters) is an
 EngineError of one line naming the file.
 """
@@ -87,11 +94,37 @@ def read_preset_file(path: Path) -> dict:
                     f'preset file {path}: unknown primitive {primitive!r} in presets.{cloth} '
                     f'(valid: {", ".join(PRIMITIVES)})'
                 )
-            if not isinstance(values, dict) or not all(isinstance(k, str) for k in values):
-                raise EngineError(
-                    f'preset file {path}: presets.{cloth}.{primitive} must map parameter -> value'
-                )
+            model_entries(values, path, f'{cloth}.{primitive}')
     return data
+
+
+def model_entries(entry: object, path: Path, where: str) -> dict[str | None, dict]:
+    """
+    Return an entry's parameters by the model they stand for (None: any model).
+
+    An entry is one parameter mapping or one per model ({xpbd: {...}, vbd: {...}}); EngineError
+    (one line naming the file) for anything else.
+    """
+    shape = f'preset file {path}: presets.{where} must map parameter -> value, or model -> ' \
+            'parameters'
+    if not isinstance(entry, dict) or not entry or not all(isinstance(k, str) for k in entry):
+        raise EngineError(shape)
+    nested = [isinstance(v, dict) for v in entry.values()]
+    if not any(nested):
+        model = entry.get('model')
+        return {None if model is None else str(model): entry}
+    if not all(nested):
+        raise EngineError(f'{shape}, not both')
+    for model, values in entry.items():
+        if not values or not all(isinstance(k, str) for k in values):
+            raise EngineError(f'preset file {path}: presets.{where}.{model} must map parameter ->'
+                              ' value')
+        if any(isinstance(v, dict) for v in values.values()):
+            raise EngineError(shape)
+        if values.get('model', model) != model:
+            raise EngineError(f'preset file {path}: presets.{where}.{model} has model '
+                              f'{values["model"]!r}')
+    return {model: {'model': model, **values} for model, values in entry.items()}
 
 
 _PRESET_FILES: dict[tuple, dict] = {}  # parsed preset files, by path, size and modification time
@@ -108,11 +141,20 @@ def _read_preset_file_cached(path: Path) -> dict:
     return copy.deepcopy(_PRESET_FILES[key])  # callers own what they get
 
 
-def load_preset(engine: str, cloth: str, primitive: str, config_dir: Path | None = None) -> dict:
+def load_preset(
+    engine: str,
+    cloth: str,
+    primitive: str,
+    config_dir: Path | None = None,
+    model: str | None = None,
+) -> dict:
     """
     Parameters of `engine` for `cloth` and `primitive`, checked against the engine's schema.
 
-    An engine without a preset file (e.g. one added by another package) gets {} (its defaults).
+    config_dir: a preset set's directory (None: the shipped presets). model: the model that runs
+    (None: the shipped preset's); a set gives that model's entry or an EngineError saying it has
+    none. An engine without a preset file (e.g. one added by another package) gets {} (its
+    defaults).
     """
     if cloth not in CLOTHS:
         raise EngineError(f'unknown cloth {cloth!r} (valid: {", ".join(CLOTHS)})')
@@ -127,11 +169,43 @@ def load_preset(engine: str, cloth: str, primitive: str, config_dir: Path | None
         return {}
     presets = _read_preset_file_cached(path)['presets']
     try:
-        values = dict(presets[cloth][primitive])
+        entry = presets[cloth][primitive]
     except KeyError:
         raise EngineError(f'preset file {path}: no preset for {cloth} {primitive}') from None
-    _check_against_engine(engine, values, path, f'{cloth}.{primitive}')
+    where = f'{cloth}.{primitive}'
+    entries = model_entries(entry, path, where)
+    if config_dir is None and len(entries) == 1:
+        values = dict(next(iter(entries.values())))  # the shipped preset: the base of any model
+    else:
+        runs = model or (
+            default_model(engine, cloth, primitive) if config_dir else next(iter(entries))
+        )
+        values = dict(entries.get(runs) or entries.get(None) or {})
+        if not values:
+            raise EngineError(
+                f'preset file {path}: no {engine} {runs} entry for {cloth} {primitive} (it has:'
+                f' {", ".join(str(m) for m in entries)}); run one of those ({engine}.model, e.g.'
+                f' --set {engine}.model={next(iter(entries))}) or {runs} with the shipped presets'
+            )
+        if runs is not None:  # an entry for any model runs the model decided, never the default
+            values.setdefault('model', runs)
+        where = f'{where}.{runs}' if runs in entries else where
+    _check_against_engine(engine, values, path, where)
     return values
+
+
+def default_model(engine: str, cloth: str, primitive: str) -> str | None:
+    """Return the model an engine runs without an override: its shipped preset's, or default."""
+    from cloth_bench_ros.engines import engine_class  # late: the registry imports engines
+
+    model = load_preset(engine, cloth, primitive).get('model')
+    if model is not None:
+        return str(model)
+    try:
+        schema = {p.name: p for p in engine_class(engine).params}
+    except EngineError:
+        return None
+    return str(schema['model'].default) if 'model' in schema else None
 
 
 def _check_against_engine(engine: str, values: dict, path: Path, where: str) -> None:
@@ -195,49 +269,72 @@ def merge_identified(preset_files: list[Path], out_dir: Path) -> list[Path]:
     """
     Merge identification outputs (<output>/presets/<engine>.yaml) into one file per engine.
 
-    A file already in out_dir is extended: each cloth and task given replaces its entry and its
-    provenance paragraph, every other entry stays. Returns the files written.
+    Each identified entry goes under its model (presets.<cloth>.<task>.<model>), with its
+    provenance paragraph "<cloth> <task> (<model>): ...". A file already in out_dir is extended:
+    an entry of the same cloth, task and model is replaced, every other entry stays (a Newton VBD
+    identification sits beside the XPBD one). Returns the files written.
     """
-    from cloth_bench_ros.safe_io import atomic_write_text
-    import yaml
-
     merged: dict[str, dict] = {}
     for path in preset_files:
         data = read_preset_file(path)
-        doc = merged.get(data['engine'])
+        engine = data['engine']
+        doc = merged.get(engine)
         if doc is None:
-            doc = merged[data['engine']] = _merge_base(out_dir / f'{data["engine"]}.yaml', data)
+            doc = merged[engine] = _merge_base(out_dir / f'{engine}.yaml', data)
         doc['engine_version'] = data['engine_version']
         for cloth, tasks in data['presets'].items():
-            for primitive, values in tasks.items():
-                doc['presets'].setdefault(cloth, {})[primitive] = values
-                doc['provenance'][f'{cloth} {primitive}'] = data['provenance']
+            for primitive, entry in tasks.items():
+                for model, values in model_entries(entry, path, f'{cloth}.{primitive}').items():
+                    model = model or default_model(engine, cloth, primitive)
+                    doc['presets'].setdefault(cloth, {}).setdefault(primitive, {})[model] = {
+                        'model': model, **values}
+                    doc['provenance'][f'{cloth} {primitive} ({model})'] = data['provenance']
+    return [write_merged_set(doc, out_dir) for _, doc in sorted(merged.items())]
+
+
+def write_merged_set(doc: dict, out_dir: Path) -> Path:
+    """Write a merged set's file (provenance as {entry: paragraph}); return its path."""
+    from cloth_bench_ros.safe_io import atomic_write_text
+    import yaml
+
     out_dir.mkdir(parents=True, exist_ok=True)
-    written = []
-    for engine, doc in sorted(merged.items()):
-        doc['provenance'] = '\n'.join(f'{k}: {v}' for k, v in doc['provenance'].items())
-        target = out_dir / f'{engine}.yaml'
-        atomic_write_text(target, yaml.safe_dump(doc, sort_keys=False, width=100))
-        read_preset_file(target)  # what was written must load
-        written.append(target)
-    return written
+    text = {**doc, 'provenance': '\n'.join(f'{k}: {v}' for k, v in doc['provenance'].items())}
+    target = out_dir / f'{doc["engine"]}.yaml'
+    atomic_write_text(target, yaml.safe_dump(text, sort_keys=False, width=100))
+    read_preset_file(target)  # what was written must load
+    return target
 
 
 def _merge_base(existing: Path, first: dict) -> dict:
-    """Return the merge's start: an existing merged file's entries, keyed provenance, or empty."""
+    """
+    Return the merge's start: an existing merged file's entries by model, keyed provenance.
+
+    Empty without a file. A set written before entries were kept per model ("<cloth> <task>: "
+    paragraphs, one entry each) is read too, each entry under the model it names.
+    """
     doc = {'engine': first['engine'], 'engine_version': first['engine_version'],
            'provenance': {}, 'presets': {}}
     if not existing.is_file():
         return doc
     data = read_preset_file(existing)
-    doc['presets'] = copy.deepcopy(data['presets'])
-    entries = {f'{c} {p}' for c, tasks in data['presets'].items() for p in tasks}
+    doc['engine_version'] = data['engine_version']
+    keys = {}  # a provenance paragraph's key -> the entry's key "<cloth> <task> (<model>)"
+    for cloth, tasks in data['presets'].items():
+        for primitive, entry in tasks.items():
+            entries = model_entries(entry, existing, f'{cloth}.{primitive}')
+            for model, values in entries.items():
+                model = model or default_model(first['engine'], cloth, primitive)
+                doc['presets'].setdefault(cloth, {}).setdefault(primitive, {})[model] = {
+                    'model': model, **values}
+                keys[f'{cloth} {primitive} ({model})'] = f'{cloth} {primitive} ({model})'
+                if len(entries) == 1:
+                    keys[f'{cloth} {primitive}'] = f'{cloth} {primitive} ({model})'
     for paragraph in str(data['provenance']).split('\n'):
         key, _, text = paragraph.partition(': ')
-        if key not in entries:
+        if key not in keys:
             raise EngineError(f'{existing}: provenance paragraph {paragraph[:40]!r}... names no '
-                              'entry ("<cloth> <task>: ..." expected): not a merged set')
-        doc['provenance'][key] = text
+                              'entry ("<cloth> <task> (<model>): ..." expected): not a merged set')
+        doc['provenance'][keys[key]] = text
     return doc
 
 

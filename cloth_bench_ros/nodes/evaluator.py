@@ -70,6 +70,7 @@ class Evaluator(Node):
         size, mass = node_cloth(self)  # recorded in the summary; the mesh's extent
         # The engines' devices, comma-separated in the order of `engines` ('' : not recorded).
         devices = str(declare_fixed(self, 'devices', ''))
+        models = str(declare_fixed(self, 'models', ''))  # the engines' models, likewise
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,
@@ -98,6 +99,14 @@ class Evaluator(Node):
                     f' {len(self.engines)} engines'
                 )
             self.run_info['devices'] = dict(zip(self.engines, names))
+        if models:
+            names = models.split(',')
+            if len(names) != len(self.engines):
+                raise validation.InputError(
+                    f'evaluator: parameter models: {len(names)} models for'
+                    f' {len(self.engines)} engines'
+                )
+            self.run_info['models'] = dict(zip(self.engines, names))
         if self.output_dir:  # an unwritable report directory is found now, not after the run
             try:
                 check_output_dir(self.output_dir)

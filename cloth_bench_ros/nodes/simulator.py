@@ -138,8 +138,12 @@ class Simulator(Node):
                 "cloth's mass; give one"
             )
         grid = cloth_grid((nx, nz) if nx and nz else None, size)
-        preset = load_preset(
-            self.engine_name, cloth, primitive, Path(presets_dir) if presets_dir else None
+        preset = load_preset(  # the model that runs first, then its entry of the set
+            self.engine_name,
+            cloth,
+            primitive,
+            Path(presets_dir) if presets_dir else None,
+            overrides.get('model'),
         )
         params = sized_params(self.engine_name, {**preset, **overrides}, size, mass)
         if checked['device']:  # the engine refuses it if it has no such parameter or device

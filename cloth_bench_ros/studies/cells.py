@@ -95,6 +95,19 @@ class Cell:
             return str(self.params.get('device', 'cpu'))
 
     @property
+    def model(self) -> str:
+        """Return the model the cell's engine runs (its overrides' on its shipped preset's)."""
+        from cloth_bench_ros.engines import engine_class
+        from cloth_bench_ros.engines.presets import load_preset
+        from cloth_bench_ros.errors import ClothBenchError
+
+        try:
+            params = {**load_preset(self.engine, self.cloth, self.primitive), **self.params}
+            return str(engine_class(self.engine).validate_params(params).get('model', ''))
+        except ClothBenchError:  # an engine not on this machine: as the cell names it
+            return str(self.params.get('model', ''))
+
+    @property
     def reference(self) -> str | None:
         """Return the synthetic reference a cross-reference cell is scored against."""
         if self.mode != CROSS_REFERENCE:
@@ -117,17 +130,20 @@ def _shown(value: object) -> str:
     return f'{value:g}' if isinstance(value, float) else str(value)
 
 
-def set_values(presets: PresetSet | None, engine: str, cloth: str, primitive: str) -> dict:
+def set_values(
+    presets: PresetSet | None, engine: str, cloth: str, primitive: str, model: str | None = None
+) -> dict:
     """
     Return a preset set's values as overrides of the shipped preset ({} for the shipped set).
 
-    A cell carries its preset as overrides, so its run, key and results row say what it ran.
+    model: the model that runs (an override's; None: the shipped preset's), whose entry the set
+    gives. A cell carries its preset as overrides, so its run, key and results row say what it ran.
     """
     from cloth_bench_ros.engines.presets import load_preset
 
     if presets is None or presets.is_default:
         return {}
-    return load_preset(engine, cloth, primitive, presets.directory)
+    return load_preset(engine, cloth, primitive, presets.directory, model)
 
 
 def set_label(presets: PresetSet | None, label: str) -> str:
@@ -228,7 +244,10 @@ def paper_cells(
                 if step_per_target:
                     params.update(timestep=1.0 / float(rate), substeps=1)
                     label = 'step=1/rate' if label == PRESET else f'{label},step=1/rate'
-                params = {**set_values(presets, engine, cloth, primitive), **params}
+                params = {
+                    **set_values(presets, engine, cloth, primitive, params.get('model')),
+                    **params,
+                }
                 label = set_label(presets, label)
                 cells.append(
                     Cell(
@@ -294,7 +313,8 @@ def settings_cells(
                 )
         for cloth, primitive in product(cloths, primitives):
             for trial, bag in find_bags(bag_dir, cloth, primitive):
-                base = set_values(presets, engine, cloth, primitive)
+                model = overrides.get(engine, {}).get('model')
+                base = set_values(presets, engine, cloth, primitive, model)
                 for (label, grid, params), seed in product(combos, seeds):
                     cells.append(
                         Cell(

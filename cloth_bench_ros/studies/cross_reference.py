@@ -51,15 +51,13 @@ def identified_values(
     """
     Return an entrant's parameters identified against `reference`, or None if there are none.
 
-    None too when the identified model is another than the entrant's (Newton XPBD values do not
-    stand for Newton VBD).
+    None too when the set has no entry of the entrant's model (Newton XPBD values do not stand
+    for Newton VBD).
     """
     try:
         directory = preset_set(identified_set_of(reference)).directory
-        values = load_preset(engine, cloth, primitive, directory)
+        values = load_preset(engine, cloth, primitive, directory, overrides.get('model'))
     except EngineError:
-        return None
-    if 'model' in overrides and values.get('model') != overrides['model']:
         return None
     return {**values, **overrides}
 

@@ -43,7 +43,9 @@ def _engine(config: RunConfig, name: str) -> ClothEngine:
     overrides = validation.parameter_mapping(
         yaml.safe_dump(config.engine_params.get(name, {})), f'simulator_{name}: engine_params'
     )
-    preset = load_preset(name, config.cloth, config.primitive, config.presets_dir)
+    preset = load_preset(
+        name, config.cloth, config.primitive, config.presets_dir, overrides.get('model')
+    )
     params = sized_params(name, {**preset, **overrides}, config.cloth_size, config.cloth_mass)
     grid = cloth_grid(config.grid, config.cloth_size)
     return make_engine(name, float(config.rate_hz), params, grid)
@@ -168,6 +170,7 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
         'seed': int(config.seed),
         **cloth_record(config.cloth_size, config.cloth_mass),
         'devices': {name: engine.device for name, engine in engines.items()},
+        'models': {name: str(engine.config.get('model', '')) for name, engine in engines.items()},
         'trial': trial.to_dict(),
     }
     summary = run_summary(core, replay, run, 1.0 / rate_hz, wall_s, final_stamp)

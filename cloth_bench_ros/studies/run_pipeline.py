@@ -7,7 +7,8 @@ import os
 from pathlib import Path
 import random
 
-from cloth_bench_ros.engines import engine_device
+from cloth_bench_ros.engines import engine_class, engine_device
+from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.nodes.common import close_nodes
 from cloth_bench_ros.nodes.evaluator import Evaluator
 from cloth_bench_ros.nodes.recorder import Recorder
@@ -30,6 +31,19 @@ def run_devices(config: RunConfig) -> dict[str, str]:
     """Return the device each engine of the run runs on (its overrides' device, or its default)."""
     params = config.engine_params
     return {name: engine_device(name, params.get(name, {})) for name in config.engines}
+
+
+def run_models(config: RunConfig) -> dict[str, str]:
+    """Return the model each engine of the run runs ('' for an engine without models)."""
+    models = {}
+    for name in config.engines:
+        overrides = config.engine_params.get(name, {})
+        preset = load_preset(
+            name, config.cloth, config.primitive, config.presets_dir, overrides.get('model')
+        )
+        models[name] = str(engine_class(name).validate_params({**preset, **overrides}).get(
+            'model', ''))
+    return models
 
 
 def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[str, dict]:
@@ -68,6 +82,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
             **cloth,
             **config.live,
             'devices': ','.join(run_devices(config).values()),
+            'models': ','.join(run_models(config).values()),
         },
     }
     for engine in config.engines:

@@ -204,7 +204,8 @@ def select_cases(
         if not (math.isfinite(max_wall_s) and max_wall_s > 0):
             raise InputError(f'--max-wall-s must be a number of seconds > 0, got {max_wall_s}')
         cases = [replace(c, max_wall_s=max_wall_s) for c in cases]
-    # A preset set's values go in as overrides of the towel preset, under each case's own.
+    # A preset set's values (its entry of the preset's model) go in as overrides of the towel
+    # preset, under each case's own (a case may switch the model: that is what it stresses).
     return [
         replace(c, params={**set_values(presets, c.engine, 'towel', c.primitive), **c.params})
         for c in cases

@@ -128,6 +128,7 @@ def _cell_fields(cell: Cell) -> dict:
         'seed': int(cell.seed),
         'pacing': cell.pacing,
         'device': cell.device,
+        'model': cell.model,
         'bag': cell.bag,
         'grid': f'{cell.grid[0]}x{cell.grid[1]}' if cell.grid else None,
         'params': cell.params,
@@ -425,7 +426,8 @@ class SweepPlan:
         gaps = set()
         for engine, cloth, primitive in product(self.engines, cloths, primitives):
             try:
-                load_preset(engine, cloth, primitive, self.presets.directory)
+                model = self.overrides.get(engine, {}).get('model')
+                load_preset(engine, cloth, primitive, self.presets.directory, model)
             except EngineError:
                 gaps.add((engine, cloth, primitive))
         return gaps
