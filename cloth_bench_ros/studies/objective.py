@@ -7,7 +7,9 @@ same CD/HD as `cloth-bench run`), stopping after the last real frame the objecti
 change of phase of a dynamic trial; `max_frames` cuts it shorter). A worker decodes a bag's
 clouds once and keeps them, with their k-d trees, for every later trial on that bag. With a `rung`
 (multi-fidelity identification), the value over that first fraction of each bag's frames is
-reported as `partial`, and the trial stops there, `pruned`, where it is above `prune_above`.
+reported as `partial`, and the trial stops there, `pruned`, where it is above `prune_above`; with
+a `rung_grid`, the partial value is the whole window's on that (coarser) mesh, and the trial is
+then run whole on its own mesh unless that value is above `prune_above`.
 The evaluator core is given no mesh faces here, so a trial computes the paper's CD/HD (its
 objective) and none of the metrics beside them (docs/metrics.md), which would cost it tens of
 milliseconds per frame; `all_metrics` gives it the mesh's faces, and the trial returns every
@@ -16,7 +18,7 @@ metric of core.metric_choice (`metrics`: rank's held-out cells).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 import os
 from pathlib import Path
@@ -52,6 +54,7 @@ class Trial:
     also: tuple[str, ...] = ()  # more bags of the task: the value is the mean over every bag
     rung: float | None = None  # multi-fidelity: score this fraction of the frames first
     prune_above: float | None = None  # stop (pruned) where that partial value is above this
+    rung_grid: tuple[int, int] | None = None  # multi-fidelity: score on this mesh first
     all_metrics: bool = False  # also every metric the evaluator reports (given the mesh's faces)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
@@ -87,6 +90,25 @@ def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]
 
 def evaluate(trial: Trial) -> dict:
     """Run one trial; never raises. status ok (value finite), diverged (reason, step) or error."""
+    if trial.rung_grid is None:
+        return _evaluate(trial)
+    low = _evaluate(replace(trial, grid=trial.rung_grid, rung_grid=None, prune_above=None))
+    partial = low['value'] if low['status'] == 'ok' else math.inf
+    if trial.prune_above is not None and not partial <= trial.prune_above:
+        low.update(
+            status='pruned', reason='partial value above the threshold', partial=partial,
+            value=math.nan, CD=math.nan, HD=math.nan, frames=0, step=None,
+        )
+        for key in ('step_p50_ms', 'step_p99_ms'):  # the coarse mesh's, not the trial's
+            low.pop(key, None)
+        return low
+    out = _evaluate(replace(trial, rung_grid=None, prune_above=None))
+    out.update(partial=partial, cpu_s=out['cpu_s'] + low['cpu_s'],
+               wall_s=out['wall_s'] + low['wall_s'])
+    return out
+
+
+def _evaluate(trial: Trial) -> dict:
     start, cpu_start = time.perf_counter(), time.process_time()
     out: dict[str, Any] = {
         'number': trial.number,
