@@ -9,11 +9,13 @@ full, as a `full` trial is. The rungs:
 
 - prune: the first RUNG of each bag's frames of the window, on the trial's own mesh; a kept trial
   runs on from there. Pruned above the KEEP quantile of every partial value so far.
-- coarse: the whole window on a coarser mesh (`coarse_grid`: half the vertices along each side;
-  the engines scale their spacing-dependent parameters, so it is the same material); a kept trial
-  is then run whole on its own mesh, so its value is the one `full` gives. Pruned above the
-  COARSE_KEEP quantile of the last COARSE_WINDOW partial values (the sampler's later trials are
-  better than its first, so a quantile over every value so far would keep more and more).
+- coarse: the whole window on coarser meshes first (`coarse_grids`: a ladder of up to
+  COARSE_RUNGS meshes, each with half the vertices along each side of the next finer one; the
+  engines scale their spacing-dependent parameters, so it is the same material), coarsest first;
+  a trial kept at every rung is then run whole on its own mesh, so its value is the one `full`
+  gives. Pruned at a rung above the COARSE_KEEP quantile of that rung's last COARSE_WINDOW values
+  (the sampler's later trials are better than its first, so a quantile over every value so far
+  would keep more and more).
 
 A pruned trial counts toward the trial budget (`--trials N` or auto) and is in the convergence
 curve without a value. `full` (the default) is the sampler as before: every trial over the whole
@@ -30,24 +32,36 @@ import numpy as np
 
 FIDELITIES = ('full', 'prune', 'coarse')
 RUNG, KEEP, STARTUP = 0.25, 0.3, 8
-COARSE_KEEP, COARSE_WINDOW = 0.2, 16
+COARSE_KEEP, COARSE_WINDOW, COARSE_RUNGS = 0.2, 16, 2
 
 
-def coarse_grid(
+def coarse_grids(
     grid: tuple[int, int] | None, size: tuple[float, float] | None = None
-) -> tuple[int, int]:
-    """Return the rung's mesh for `coarse`: (nx + 1) // 2 by (nz + 1) // 2, at least 3 x 3."""
+) -> tuple[tuple[int, int], ...]:
+    """
+    Return the rungs' meshes for `coarse`, coarsest first.
+
+    Each is (nx + 1) // 2 by (nz + 1) // 2 of the next finer one (at least 3 x 3) where that has at
+    most half its vertices. InputError where the mesh has none.
+    """
     from cloth_bench_ros.core.cloth_size import cloth_grid
     from cloth_bench_ros.core.scene import ClothGrid
 
     mesh = cloth_grid(grid, size) or ClothGrid()
-    coarse = (max(3, (mesh.nx + 1) // 2), max(3, (mesh.nz + 1) // 2))
-    if coarse[0] * coarse[1] >= mesh.nx * mesh.nz:
+    ladder = [(mesh.nx, mesh.nz)]
+    while len(ladder) <= COARSE_RUNGS:
+        nx, nz = ladder[-1]
+        coarse = (max(3, (nx + 1) // 2), max(3, (nz + 1) // 2))
+        if 2 * coarse[0] * coarse[1] > nx * nz:
+            break
+        ladder.append(coarse)
+    if len(ladder) == 1:
         raise InputError(
             f'--fidelity coarse: the {mesh.nx} x {mesh.nz} mesh has no coarser one to screen on '
-            '(at least 4 x 4 vertices); use --fidelity prune or full'
+            '(one with at most half its vertices; 3 x 3 is the coarsest); use --fidelity prune '
+            'or full'
         )
-    return coarse
+    return tuple(reversed(ladder[1:]))
 
 
 def check_fidelity(
@@ -57,7 +71,7 @@ def check_fidelity(
     if fidelity not in FIDELITIES:
         raise InputError(f'unknown fidelity {fidelity!r} (valid: {", ".join(FIDELITIES)})')
     if fidelity == 'coarse':
-        coarse_grid(grid, size)
+        coarse_grids(grid, size)
 
 
 class Pruner:
@@ -68,35 +82,42 @@ class Pruner:
         size: tuple[float, float] | None = None,
     ) -> None:
         self.fidelity = fidelity
-        self.coarse = coarse_grid(grid, size) if fidelity == 'coarse' else None
-        self.partials: list[float] = []
+        self.grids = coarse_grids(grid, size) if fidelity == 'coarse' else ()
+        self.partials: dict[int, list[float]] = {}  # per rung (step)
         for t in sorted(study.get_trials(deepcopy=False), key=lambda t: t.number):
-            # a resumed study keeps its partial values
-            self.partials.extend(v for v in t.intermediate_values.values() if math.isfinite(v))
+            self._keep(t.intermediate_values)  # a resumed study keeps its partial values
+
+    def _keep(self, values: dict) -> None:
+        for step, v in values.items():
+            if math.isfinite(v):
+                self.partials.setdefault(int(step), []).append(float(v))
+
+    def _above(self, step: int) -> float | None:
+        values = self.partials.get(step, [])
+        if len(self.partials.get(0, [])) < STARTUP or not values:
+            return None  # the first trials run whole, their partial values measured
+        if self.grids:
+            return float(np.quantile(values[-COARSE_WINDOW:], COARSE_KEEP))
+        return float(np.quantile(values, KEEP))
 
     def rung(self) -> dict[str, Any]:
         """Return the next trial's rung fields (objective.Trial): {} when not multi-fidelity."""
         if self.fidelity == 'full':
             return {}
-        rung: dict[str, Any] = (
-            {'rung_grid': self.coarse} if self.coarse is not None else {'rung': RUNG}
-        )
-        if len(self.partials) < STARTUP:
-            return rung  # the first trials run whole, their partial values measured
-        if self.coarse is not None:
-            above = np.quantile(self.partials[-COARSE_WINDOW:], COARSE_KEEP)
-        else:
-            above = np.quantile(self.partials, KEEP)
-        return {**rung, 'prune_above': float(above)}
+        if self.grids:
+            return {'ladder': tuple((g, self._above(i)) for i, g in enumerate(self.grids))}
+        return {'rung': RUNG, 'prune_above': self._above(0)}
 
     def tell(self, study: Any, trial: Any, result: dict) -> bool:
         """Tell Optuna a trial's result; True where it was handled (pruned or complete)."""
         from optuna.trial import TrialState
 
-        partial = result.get('partial')
-        if partial is not None and math.isfinite(partial):
-            self.partials.append(float(partial))
-            trial.report(float(partial), 0)
+        partials = result.get('partials', [result.get('partial')])
+        values = {i: float(v) for i, v in enumerate(partials) if v is not None}
+        self._keep(values)
+        for step, value in values.items():
+            if math.isfinite(value):
+                trial.report(value, step)
         if result['status'] == 'pruned':
             study.tell(trial, state=TrialState.PRUNED)
             return True

@@ -8,8 +8,9 @@ change of phase of a dynamic trial; `max_frames` cuts it shorter). A worker deco
 clouds once and keeps them, with their k-d trees, for every later trial on that bag. With a `rung`
 (multi-fidelity identification), the value over that first fraction of each bag's frames is
 reported as `partial`, and the trial stops there, `pruned`, where it is above `prune_above`; with
-a `rung_grid`, the partial value is the whole window's on that (coarser) mesh, and the trial is
-then run whole on its own mesh unless that value is above `prune_above`.
+a `ladder` of coarser meshes, the whole window is scored on each (`partials`, coarsest first), and
+the trial stops, `pruned`, at the first whose value is above its threshold, else it is run whole
+on its own mesh.
 The evaluator core is given no mesh faces here, so a trial computes the paper's CD/HD (its
 objective) and none of the metrics beside them (docs/metrics.md), which would cost it tens of
 milliseconds per frame; `all_metrics` gives it the mesh's faces, and the trial returns every
@@ -54,7 +55,7 @@ class Trial:
     also: tuple[str, ...] = ()  # more bags of the task: the value is the mean over every bag
     rung: float | None = None  # multi-fidelity: score this fraction of the frames first
     prune_above: float | None = None  # stop (pruned) where that partial value is above this
-    rung_grid: tuple[int, int] | None = None  # multi-fidelity: score on this mesh first
+    ladder: tuple[tuple[tuple[int, int], float | None], ...] = ()  # (mesh, prune above) first
     all_metrics: bool = False  # also every metric the evaluator reports (given the mesh's faces)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
@@ -90,21 +91,27 @@ def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]
 
 def evaluate(trial: Trial) -> dict:
     """Run one trial; never raises. status ok (value finite), diverged (reason, step) or error."""
-    if trial.rung_grid is None:
+    if not trial.ladder:
         return _evaluate(trial)
-    low = _evaluate(replace(trial, grid=trial.rung_grid, rung_grid=None, prune_above=None))
-    partial = low['value'] if low['status'] == 'ok' else math.inf
-    if trial.prune_above is not None and not partial <= trial.prune_above:
-        low.update(
-            status='pruned', reason='partial value above the threshold', partial=partial,
-            value=math.nan, CD=math.nan, HD=math.nan, frames=0, step=None,
-        )
-        for key in ('step_p50_ms', 'step_p99_ms'):  # the coarse mesh's, not the trial's
-            low.pop(key, None)
-        return low
-    out = _evaluate(replace(trial, rung_grid=None, prune_above=None))
-    out.update(partial=partial, cpu_s=out['cpu_s'] + low['cpu_s'],
-               wall_s=out['wall_s'] + low['wall_s'])
+    partials: list[float] = []
+    cpu_s = wall_s = 0.0  # the rungs', before the trial's own run
+    for grid, above in trial.ladder:
+        low = _evaluate(replace(trial, grid=grid, ladder=()))
+        partials.append(low['value'] if low['status'] == 'ok' else math.inf)
+        if above is not None and not partials[-1] <= above:
+            low.update(
+                status='pruned', reason=f'partial value on the {grid[0]} x {grid[1]} mesh above '
+                'the threshold', value=math.nan, CD=math.nan, HD=math.nan, frames=0, step=None,
+            )
+            for key in ('step_p50_ms', 'step_p99_ms'):  # the coarse mesh's, not the trial's
+                low.pop(key, None)
+            out = low
+            break
+        cpu_s, wall_s = cpu_s + low['cpu_s'], wall_s + low['wall_s']
+    else:
+        out = _evaluate(replace(trial, ladder=()))
+    out.update(partial=partials[-1], partials=partials, cpu_s=out['cpu_s'] + cpu_s,
+               wall_s=out['wall_s'] + wall_s)
     return out
 
 
