@@ -13,7 +13,7 @@ import json
 from cloth_bench_ros import cli
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.identify import identify, IdentifySpec, TRIALS_FILE
-from cloth_bench_ros.studies.identify_fidelity import coarse_grid, STARTUP
+from cloth_bench_ros.studies.identify_fidelity import coarse_grids, STARTUP
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from identify_target import write_engine_target_bag
 import pytest
@@ -67,22 +67,29 @@ def test_a_pruned_study_counts_pruned_trials_in_its_budget_and_tells_optuna(targ
     assert (tmp_path / 'out' / 'report' / 'report.md').stat().st_size > 0
 
 
-def test_a_coarse_rung_scores_the_whole_window_on_the_coarser_mesh_and_keeps_the_full_value(
+def test_coarse_rungs_score_the_whole_window_on_coarser_meshes_and_keep_the_full_value(
     target,
 ):
-    assert coarse_grid(GRID) == (3, 3) and coarse_grid(None) == (6, 8)  # 11 x 15: 6 x 8
-    assert coarse_grid((3, 4)) == (3, 3)
-    with pytest.raises(InputError, match='3 x 3 mesh has no coarser one'):
-        coarse_grid((3, 3))
+    assert coarse_grids(GRID) == ((3, 3),) and coarse_grids((6, 8)) == ((3, 4),)
+    assert coarse_grids(None) == ((3, 4), (6, 8))  # the default 11 x 15 mesh: two rungs
+    assert coarse_grids((41, 57)) == ((11, 15), (21, 29))  # at most two
+    for mesh in ((3, 4), (3, 3)):  # 3 x 3 has more than half of 3 x 4's vertices
+        with pytest.raises(InputError, match=f'{mesh[0]} x {mesh[1]} mesh has no coarser one'):
+            coarse_grids(mesh)
     whole = evaluate(_trial(target))
     low = evaluate(replace(_trial(target), grid=(3, 3)))
-    kept = evaluate(_trial(target, rung_grid=(3, 3), prune_above=low['value'] * 1.01))
+    kept = evaluate(_trial(target, ladder=(((3, 3), low['value'] * 1.01),)))
     assert kept['status'] == 'ok' and kept['frames'] == 40
     assert kept['value'] == whole['value'] and kept['partial'] == low['value'] != whole['value']
+    assert kept['partials'] == [low['value']]
     assert kept['cpu_s'] > low['cpu_s'] and kept['step_p50_ms'] > 0
-    pruned = evaluate(_trial(target, rung_grid=(3, 3), prune_above=low['value'] * 0.99))
+    pruned = evaluate(_trial(target, ladder=(((3, 3), low['value'] * 0.99),)))
     assert pruned['status'] == 'pruned' and pruned['partial'] == low['value']
     assert pruned['frames'] == 0 and pruned['cpu_s'] > 0 and 'step_p50_ms' not in pruned
+    assert '3 x 3 mesh' in pruned['reason']
+    two = evaluate(_trial(target, ladder=(((3, 3), None), ((4, 5), 0.0))))  # pruned at the 2nd
+    assert two['status'] == 'pruned' and two['partials'][0] == low['value']
+    assert len(two['partials']) == 2 and '4 x 5 mesh' in two['reason']
 
 
 def _rows(out):
