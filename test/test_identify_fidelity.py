@@ -1,5 +1,5 @@
 """
-Multi-fidelity identification: a trial pruned on the first part of the motion, and a pruned study.
+Multi-fidelity identification: trials pruned early or screened on a coarser mesh, told in order.
 
 Real MuJoCo on a target bag the engine made itself (short, coarse), real Optuna, a real Dask
 LocalCluster.
@@ -7,11 +7,13 @@ LocalCluster.
 
 from __future__ import annotations
 
+from dataclasses import replace
 import json
 
 from cloth_bench_ros import cli
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.identify import identify, IdentifySpec, TRIALS_FILE
-from cloth_bench_ros.studies.identify_fidelity import STARTUP
+from cloth_bench_ros.studies.identify_fidelity import coarse_grids, STARTUP
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from identify_target import write_engine_target_bag
 import pytest
@@ -63,3 +65,63 @@ def test_a_pruned_study_counts_pruned_trials_in_its_budget_and_tells_optuna(targ
     assert [row[1] is None for row in curve] == [st != 'ok' for st in statuses]
     assert cli.main(['report', str(tmp_path / 'out')]) == 0  # the report takes pruned trials
     assert (tmp_path / 'out' / 'report' / 'report.md').stat().st_size > 0
+
+
+def test_coarse_rungs_score_the_whole_window_on_coarser_meshes_and_keep_the_full_value(
+    target,
+):
+    assert coarse_grids(GRID) == ((3, 3),) and coarse_grids((6, 8)) == ((3, 4),)
+    assert coarse_grids(None) == ((3, 4), (6, 8))  # the default 11 x 15 mesh: two rungs
+    assert coarse_grids((41, 57)) == ((11, 15), (21, 29))  # at most two
+    for mesh in ((3, 4), (3, 3)):  # 3 x 3 has more than half of 3 x 4's vertices
+        with pytest.raises(InputError, match=f'{mesh[0]} x {mesh[1]} mesh has no coarser one'):
+            coarse_grids(mesh)
+    whole = evaluate(_trial(target))
+    low = evaluate(replace(_trial(target), grid=(3, 3)))
+    kept = evaluate(_trial(target, ladder=(((3, 3), low['value'] * 1.01),)))
+    assert kept['status'] == 'ok' and kept['frames'] == 40
+    assert kept['value'] == whole['value'] and kept['partial'] == low['value'] != whole['value']
+    assert kept['partials'] == [low['value']]
+    assert kept['cpu_s'] > low['cpu_s'] and kept['step_p50_ms'] > 0
+    pruned = evaluate(_trial(target, ladder=(((3, 3), low['value'] * 0.99),)))
+    assert pruned['status'] == 'pruned' and pruned['partial'] == low['value']
+    assert pruned['frames'] == 0 and pruned['cpu_s'] > 0 and 'step_p50_ms' not in pruned
+    assert '3 x 3 mesh' in pruned['reason']
+    two = evaluate(_trial(target, ladder=(((3, 3), None), ((4, 5), 0.0))))  # pruned at the 2nd
+    assert two['status'] == 'pruned' and two['partials'][0] == low['value']
+    assert len(two['partials']) == 2 and '4 x 5 mesh' in two['reason']
+
+
+def _rows(out):
+    lines = (out / TRIALS_FILE).read_text().splitlines()
+    return [json.loads(line) for line in lines]
+
+
+def test_a_coarse_study_is_told_in_trial_order_and_gives_the_same_trials_again(target, tmp_path):
+    def run(out):
+        spec = IdentifySpec(
+            'mujoco', 'towel', 'dynamic', target, out, 'tpe', STARTUP + 6, 'cd',
+            ['damping', 'young'], grid=GRID, fixed={'timestep': 0.01}, batch=3,
+            validate_seeds=0, fidelity='coarse',
+        )
+        return identify(spec, workers=2, progress=False).summary
+
+    first, again = run(tmp_path / 'a'), run(tmp_path / 'b')
+    rows, rows_again = _rows(tmp_path / 'a'), _rows(tmp_path / 'b')
+    assert [r['number'] for r in rows] == list(range(STARTUP + 6))  # told in order
+    key = [(r['params'], r['status'], r['value'], r['partial']) for r in rows]
+    assert key == [(r['params'], r['status'], r['value'], r['partial']) for r in rows_again]
+    statuses = [r['status'] for r in rows]
+    assert statuses[:STARTUP] == ['ok'] * STARTUP and 'pruned' in statuses
+    assert first['fidelity'] == 'coarse' and first['params'] == again['params']
+    assert first['per_sampler']['tpe']['pruned'] == statuses.count('pruned')
+
+
+def test_cli_refuses_coarse_fidelity_on_the_coarsest_mesh_in_one_line(target, tmp_path, capsys):
+    code = cli.main([
+        'identify', '--bag', str(target), '--output', str(tmp_path), '--no-progress',
+        '--grid', '3x3', '--fidelity', 'coarse', '--trials', '2',
+    ])
+    err = capsys.readouterr().err
+    assert code == 2 and 'has no coarser one' in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / TRIALS_FILE).exists()

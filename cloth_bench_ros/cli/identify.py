@@ -34,9 +34,11 @@ TRIALS = Option(
     flag='--trials', low=1, validate=trials_value,
 )
 FIDELITY = Option(
-    'fidelity', str, 'full', 'full (default): every trial over the whole motion; prune: '
-    'multi-fidelity, a trial whose CD over the first quarter of the frames is above the best 30 % '
-    'stops there', flag='--fidelity', choices=('full', 'prune'),
+    'fidelity', str, 'full', 'full (default): every trial over the whole motion; multi-fidelity: '
+    'prune: a trial whose CD over the first quarter of the frames is above the best 30 % stops '
+    'there; coarse: a trial is scored first on a mesh of half the vertices per side, and run on '
+    'its own mesh only where that CD is in the best 20 % of the last 16', flag='--fidelity',
+    choices=('full', 'prune', 'coarse'),
 )
 IDENTIFY_FLAGS: tuple[common.Flag, ...] = (
     Option('engine', str, 'mujoco', 'the engine to fit', flag='--engine'),

@@ -45,7 +45,9 @@ RANK_FLAGS: tuple[common.Flag, ...] = (
         default=0, help='identification trials per sampler, or auto (default auto)'
     ),
     SAMPLER.variant(help='cmaes, tpe, gp or both (default)'),
-    FIDELITY.variant(help='identification: full (default), or prune: multi-fidelity, as identify'),
+    FIDELITY.variant(
+        help='identification: full (default), or prune, coarse: multi-fidelity, as identify'
+    ),
     ('seeds', {'default': 3, 'help': 'held-out seeds per held-out trial'}),
     ('rate_hz', {'help': 'simulator rate of identification and scoring'}),
     Option(

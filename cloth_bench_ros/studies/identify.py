@@ -17,6 +17,7 @@ seeds (and the other trials' bags) against the engine's preset through the full 
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field, replace
 from functools import partial
 import json
@@ -85,7 +86,7 @@ class IdentifySpec:
     validate_seeds: int = 5
     bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
     also: tuple[str, ...] = ()  # more training bags: the objective is the mean over all of them
-    fidelity: str = 'full'  # or prune: multi-fidelity (studies/identify_fidelity.py)
+    fidelity: str = 'full'  # or prune, coarse: multi-fidelity (studies/identify_fidelity.py)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, given: not fitted unless named in `params`
 
@@ -246,67 +247,60 @@ def open_study(spec: IdentifySpec, sampler: str) -> Any:
 
 
 def trial_of(
-    spec: IdentifySpec, params: dict, number: int, sampler: str, rung: tuple = (None, None)
+    spec: IdentifySpec, params: dict, number: int, sampler: str, rung: dict | None = None
 ) -> Trial:
+    """Return the objective's trial of `params`; `rung`: the Pruner's rung fields, if any."""
     return Trial(
         spec.engine, spec.cloth, spec.primitive, str(spec.bag),
         tuple(sorted({**spec.fixed, **params}.items())), spec.objective, spec.seed, spec.rate_hz,
-        spec.grid, spec.max_frames, number, sampler, tuple(spec.also), rung=rung[0],
-        prune_above=rung[1], cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
+        spec.grid, spec.max_frames, number, sampler, tuple(spec.also),
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, **(rung or {}),
     )
 
 
 def run_sampler(
     client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool
 ) -> Any:
-    """Ask and tell until the study holds `spec.trials` finished trials, a batch in flight."""
+    """
+    Ask and tell until the study holds `spec.trials` finished trials, a batch in flight.
+
+    Told in trial-number order, trial n + batch asked once trial n is told: the same history
+    whatever order the workers finish in, so the same trials and automatic budget every time.
+    """
     from cloth_bench_ros.studies.dask_executor import worker_slots
     from cloth_bench_ros.studies.identify_fidelity import Pruner
-    from distributed import as_completed
     from optuna.trial import TrialState
     from tqdm import tqdm
 
     study = open_study(spec, sampler)
     done = (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED)
     finished = len(study.get_trials(deepcopy=False, states=done))
-    pruner = Pruner(spec.fidelity, study)
+    pruner = Pruner(spec.fidelity, study, spec.grid, spec.cloth_size)
     left = max(0, spec.trials - finished)
     batch = spec.batch or worker_slots(client)
     bar = tqdm(
-        total=spec.trials,
-        initial=spec.trials - left,
-        desc=f'identify {sampler}',
-        unit='trial',
-        disable=not progress,
-        file=sys.stderr,
-        dynamic_ncols=True,
+        total=spec.trials, initial=spec.trials - left, desc=f'identify {sampler}', unit='trial',
+        disable=not progress, file=sys.stderr, dynamic_ncols=True,
     )
-    running = as_completed()
-    asked: dict[str, Any] = {}
+    running: deque = deque()  # (trial, future), in the order asked
 
     def ask() -> None:
         nonlocal left
         trial = study.ask(space)
         task = trial_of(spec, trial.params, trial.number, sampler, pruner.rung())
-        future = client.submit(evaluate, task, pure=False)
-        asked[future.key] = trial
-        running.add(future)
+        running.append((trial, client.submit(evaluate, task, pure=False)))
         left -= 1
 
     for _ in range(min(batch, left)):
         ask()
-    for future in running:
-        trial = asked.pop(future.key)
+    while running:
+        trial, future = running.popleft()
         try:
             result = future.result()
         except Exception as exc:  # the trial killed every worker that tried it
             result = {
-                'number': trial.number,
-                'sampler': sampler,
-                'params': trial.params,
-                'value': math.nan,
-                'status': 'error',
-                'reason': f'{type(exc).__name__}: {exc}',
+                'number': trial.number, 'sampler': sampler, 'params': trial.params,
+                'value': math.nan, 'status': 'error', 'reason': f'{type(exc).__name__}: {exc}',
                 'step': None,
             }
         future.release()
@@ -367,6 +361,7 @@ def identify(
     from cloth_bench_ros.engines.presets import load_preset, sized_params
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.dask_executor import open_client
+    from cloth_bench_ros.studies.identify_fidelity import check_fidelity
     from cloth_bench_ros.studies.identify_output import validate, write_outputs
     from cloth_bench_ros.studies.results import append_row, ResultsLock
 
@@ -381,6 +376,7 @@ def identify(
     samplers = samplers_of(spec.sampler)
     for s in samplers:
         make_sampler(s, spec.seed)  # a missing dependency fails before any work
+    check_fidelity(spec.fidelity, spec.grid, spec.cloth_size)
     with (
         ResultsLock(spec.output, 'identify'),
         open_client(scheduler, workers, spec.output / 'workers.log') as client,

@@ -1,13 +1,25 @@
 """
-Multi-fidelity identification (`--fidelity prune`): trials cut short early in the motion.
+Multi-fidelity identification (`--fidelity prune` or `coarse`): most trials stopped at a rung.
 
-Every trial is scored first over the first RUNG of each bag's frames of the window (its `partial`
-value, reported to Optuna as the trial's intermediate value). Once STARTUP trials have a partial
-value, a trial whose partial value is above the KEEP quantile of the partial values seen so far
-stops there and is told to Optuna as pruned (TPE uses a pruned trial's intermediate value, CMA-ES
-leaves it out); the others run to the end of the window, as a `full` trial does. A pruned trial
-counts toward the trial budget (`--trials N` or auto) and is in the convergence curve without a
-value. `full` (the default) is the sampler as before: every trial over the whole motion.
+Every trial is scored first at a cheaper rung (its `partial` value, reported to Optuna as the
+trial's intermediate value). Once STARTUP trials have a partial value, a trial whose partial value
+is above a quantile of the partial values seen so far stops there and is told to Optuna as pruned
+(TPE uses a pruned trial's intermediate value, CMA-ES leaves it out); the others are scored in
+full, as a `full` trial is. The rungs:
+
+- prune: the first RUNG of each bag's frames of the window, on the trial's own mesh; a kept trial
+  runs on from there. Pruned above the KEEP quantile of every partial value so far.
+- coarse: the whole window on coarser meshes first (`coarse_grids`: a ladder of up to
+  COARSE_RUNGS meshes, each with half the vertices along each side of the next finer one; the
+  engines scale their spacing-dependent parameters, so it is the same material), coarsest first;
+  a trial kept at every rung is then run whole on its own mesh, so its value is the one `full`
+  gives. Pruned at a rung above the COARSE_KEEP quantile of that rung's last COARSE_WINDOW values
+  (the sampler's later trials are better than its first, so a quantile over every value so far
+  would keep more and more).
+
+A pruned trial counts toward the trial budget (`--trials N` or auto) and is in the convergence
+curve without a value. `full` (the default) is the sampler as before: every trial over the whole
+motion on its own mesh.
 """
 
 from __future__ import annotations
@@ -15,37 +27,97 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from cloth_bench_ros.errors import InputError
 import numpy as np
 
-FIDELITIES = ('full', 'prune')
+FIDELITIES = ('full', 'prune', 'coarse')
 RUNG, KEEP, STARTUP = 0.25, 0.3, 8
+COARSE_KEEP, COARSE_WINDOW, COARSE_RUNGS = 0.2, 16, 2
+
+
+def coarse_grids(
+    grid: tuple[int, int] | None, size: tuple[float, float] | None = None
+) -> tuple[tuple[int, int], ...]:
+    """
+    Return the rungs' meshes for `coarse`, coarsest first.
+
+    Each is (nx + 1) // 2 by (nz + 1) // 2 of the next finer one (at least 3 x 3) where that has at
+    most half its vertices. InputError where the mesh has none.
+    """
+    from cloth_bench_ros.core.cloth_size import cloth_grid
+    from cloth_bench_ros.core.scene import ClothGrid
+
+    mesh = cloth_grid(grid, size) or ClothGrid()
+    ladder = [(mesh.nx, mesh.nz)]
+    while len(ladder) <= COARSE_RUNGS:
+        nx, nz = ladder[-1]
+        coarse = (max(3, (nx + 1) // 2), max(3, (nz + 1) // 2))
+        if 2 * coarse[0] * coarse[1] > nx * nz:
+            break
+        ladder.append(coarse)
+    if len(ladder) == 1:
+        raise InputError(
+            f'--fidelity coarse: the {mesh.nx} x {mesh.nz} mesh has no coarser one to screen on '
+            '(one with at most half its vertices; 3 x 3 is the coarsest); use --fidelity prune '
+            'or full'
+        )
+    return tuple(reversed(ladder[1:]))
+
+
+def check_fidelity(
+    fidelity: str, grid: tuple[int, int] | None, size: tuple[float, float] | None = None
+) -> None:
+    """Raise InputError for an unknown fidelity, or for `coarse` on a mesh with no coarser one."""
+    if fidelity not in FIDELITIES:
+        raise InputError(f'unknown fidelity {fidelity!r} (valid: {", ".join(FIDELITIES)})')
+    if fidelity == 'coarse':
+        coarse_grids(grid, size)
 
 
 class Pruner:
-    """The partial values of a sampler's study, and the threshold a new trial is pruned above."""
+    """The partial values of a sampler's study, and the rung and threshold of the next trial."""
 
-    def __init__(self, fidelity: str, study: Any) -> None:
-        self.active = fidelity == 'prune'
-        self.partials: list[float] = []
-        for t in study.get_trials(deepcopy=False):  # a resumed study keeps its partial values
-            self.partials.extend(v for v in t.intermediate_values.values() if math.isfinite(v))
+    def __init__(
+        self, fidelity: str, study: Any, grid: tuple[int, int] | None = None,
+        size: tuple[float, float] | None = None,
+    ) -> None:
+        self.fidelity = fidelity
+        self.grids = coarse_grids(grid, size) if fidelity == 'coarse' else ()
+        self.partials: dict[int, list[float]] = {}  # per rung (step)
+        for t in sorted(study.get_trials(deepcopy=False), key=lambda t: t.number):
+            self._keep(t.intermediate_values)  # a resumed study keeps its partial values
 
-    def rung(self) -> tuple[float | None, float | None]:
-        """Return (rung, prune_above) for the next trial: (None, None) when not multi-fidelity."""
-        if not self.active:
-            return None, None
-        if len(self.partials) < STARTUP:
-            return RUNG, None  # the first trials run whole, their partial values measured
-        return RUNG, float(np.quantile(self.partials, KEEP))
+    def _keep(self, values: dict) -> None:
+        for step, v in values.items():
+            if math.isfinite(v):
+                self.partials.setdefault(int(step), []).append(float(v))
+
+    def _above(self, step: int) -> float | None:
+        values = self.partials.get(step, [])
+        if len(self.partials.get(0, [])) < STARTUP or not values:
+            return None  # the first trials run whole, their partial values measured
+        if self.grids:
+            return float(np.quantile(values[-COARSE_WINDOW:], COARSE_KEEP))
+        return float(np.quantile(values, KEEP))
+
+    def rung(self) -> dict[str, Any]:
+        """Return the next trial's rung fields (objective.Trial): {} when not multi-fidelity."""
+        if self.fidelity == 'full':
+            return {}
+        if self.grids:
+            return {'ladder': tuple((g, self._above(i)) for i, g in enumerate(self.grids))}
+        return {'rung': RUNG, 'prune_above': self._above(0)}
 
     def tell(self, study: Any, trial: Any, result: dict) -> bool:
         """Tell Optuna a trial's result; True where it was handled (pruned or complete)."""
         from optuna.trial import TrialState
 
-        partial = result.get('partial')
-        if partial is not None and math.isfinite(partial):
-            self.partials.append(float(partial))
-            trial.report(float(partial), 0)
+        partials = result.get('partials', [result.get('partial')])
+        values = {i: float(v) for i, v in enumerate(partials) if v is not None}
+        self._keep(values)
+        for step, value in values.items():
+            if math.isfinite(value):
+                trial.report(value, step)
         if result['status'] == 'pruned':
             study.tell(trial, state=TrialState.PRUNED)
             return True
