@@ -20,6 +20,7 @@ from cloth_bench_ros.core.deadline import (
     holds_rate,
     within_tolerance,
 )
+from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.studies.hil_config import HilConfig
 from cloth_bench_ros.studies.hil_warmup import coarser_grids, warmup
 from cloth_bench_ros.studies.recommend import meets_deadline
@@ -178,3 +179,21 @@ def test_the_remedy_names_the_recommended_configuration_when_it_meets_the_rule(
     remedy = out.splitlines()[-1]
     assert remedy.startswith('to meet 100 Hz with mujoco ('), out
     assert '`--config recommended` (grid=9x12' in remedy and 'warm-up step p99' in remedy
+
+
+def test_a_whole_run_ends_when_its_last_target_falls_before_the_motions_end(
+    hanging_bag, tmp_path, capsys
+):
+    # At 15.3993 Hz the last target is 4.338 s into the motion, before the recording's last frame
+    # (4.367 s): that frame is after the trajectory, not a frame the run waits for forever.
+    rate = 15.3993
+    targets = full_targets('dynamic', rate)
+    last_s = targets.stamp_ns(len(targets) - 1) / 1e9 - targets.quintic_start
+    assert last_s < 131 / 30
+    code = main(_hil(hanging_bag, tmp_path, '--rate', str(rate)))
+    out = capsys.readouterr().out
+    assert code == 0, out
+    (summary,) = (tmp_path / 'o').glob('*/summary.json')
+    accounting = json.loads(summary.read_text())['real']['accounting']
+    assert accounting['adds_up'] and accounting['not_received'] == 0, accounting
+    assert accounting['after_trajectory'] == 1 and accounting['scored'] > 100, accounting
