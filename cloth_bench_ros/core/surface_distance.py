@@ -17,7 +17,7 @@ points), starting from the triangle nearest to the previous point (real frames a
 order, neighbours share a triangle).
 
 `TriangleMesh.farthest` finds the largest of many points' distances (HD from a cloud to the
-surface) exactly, measuring only the few whose upper bound can exceed a known lower bound.
+surface) exactly, measuring only the few whose upper bound can exceed the largest found.
 """
 
 from __future__ import annotations
@@ -79,15 +79,10 @@ class TriangleMesh:
         """
         Return max over the grid's points of their distance to the surface, exact.
 
-        `lower` is a distance some of the points are known to reach (the largest of an exact
-        subsample; 0 for none). A point is measured exactly only if an upper bound of its
-        distance can exceed the largest distance found so far: the distance grows by at most
-        ||p - c|| from c to p. Per cell of the grid first, loose: the surface is never farther
-        from the cell's centre c than any point of it (the vertices and `on_surface`, e.g. area
-        samples), each anchor's distance to its cell's centre carried along the grid. The cells
-        are visited in decreasing order of that bound, so the largest distance is found early
-        and excludes the rest; in a cell that may exceed it, c's exact distance d_c, and then
-        the exact distance of each point whose bound d_c + ||p - c|| may.
+        `lower`: a distance some of the points reach (0 for none). A point is measured only if
+        an upper bound of its distance can exceed the largest found: per grid cell (centre c),
+        loosely, each anchor's (a vertex or `on_surface` point) distance to its cell's centre
+        carried along the grid, then c's exact distance d_c, then d_c + ||p - c|| per point.
         """
         points = grid.points
         if len(self.a) == 0 or len(points) == 0:
@@ -275,11 +270,7 @@ def _nearest(
     px, py, pz, last, stamp, seen, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims,
     norm,
 ):
-    """
-    Return p's distance to the surface and the nearest triangle, starting from triangle `last`.
-
-    seen[t] == stamp marks the triangles already measured for p (stamp: unique per query).
-    """
+    """Return p's distance and nearest triangle from triangle `last` (seen[t] == stamp: done)."""
     inv = 1.0 / cell
     reach = max(dims[0], max(dims[1], dims[2]))
     slack = 1e-9 * cell
@@ -411,40 +402,48 @@ def _farthest(
     """
     Return max(lower, every point's distance to the surface), measuring few of them exactly.
 
-    The real grid's occupied cells in decreasing order of their loose bound (at_centre[c] plus
-    half the cell's diagonal); in each whose bound can still exceed the largest distance found,
-    the centre's exact distance d_c, and then, where d_c + ||p - c|| can, point p's own.
+    The cells whose bound (at_centre + half a diagonal) can exceed the largest distance found:
+    the 8 highest first (the largest is found early), then the rest in the grid's order (each
+    search starting from the previous one's nearest triangle, a neighbour's).
     """
     half = _combine(0.5 * pcell, 0.5 * pcell, 0.5 * pcell, norm) * (1.0 + 1e-9)
-    best = lower
-    floor = best - 1e-9 * (abs(best) + pcell)  # bounds are computed: measure what comes close
-    cells = np.flatnonzero((pstarts[1:] > pstarts[:-1]) & (at_centre + half > floor))
+    cells = np.flatnonzero(
+        (pstarts[1:] > pstarts[:-1]) & (at_centre + half > lower - 1e-9 * (abs(lower) + pcell))
+    )
     bounds = at_centre[cells] + half
     seen = np.full(a.shape[0], -1, dtype=np.int64)
-    stamp, last = 0, 0
-    for i in np.argsort(-bounds):
-        if bounds[i] <= floor:  # this cell and the rest cannot exceed the largest found
-            break
-        c = cells[i]
-        cx, cy, cz = _centre(c, plo, pcell, pdims)
-        dc, last = _nearest(
-            cx, cy, cz, last, stamp, seen, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo,
-            cell, dims, norm,
-        )
-        stamp += 1
-        if dc + half <= floor:
-            continue
+    state = np.array([lower, 0.0, 0.0])  # the largest distance, the last triangle, the stamp
+    for i in np.concatenate((np.argsort(-bounds)[:8], np.arange(cells.shape[0]))):
+        bound, bounds[i] = bounds[i], -np.inf  # each cell once
+        _cell_max(cells[i], bound, state, seen, points, porder, pstarts, plo, pcell, pdims, half,
+                  a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm)
+    return state[0]
+
+
+@njit(cache=True, nogil=True)
+def _cell_max(
+    c, bound, state, seen, points, porder, pstarts, plo, pcell, pdims, half,
+    a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm,
+):
+    """Raise state[0] to the largest distance of cell c's points where its bound can exceed it."""
+    floor = state[0] - 1e-9 * (abs(state[0]) + pcell)  # bounds are computed: measure what's close
+    if bound <= floor:
+        return
+    last, stamp = int(state[1]), int(state[2])
+    cx, cy, cz = _centre(c, plo, pcell, pdims)
+    dc, last = _nearest(cx, cy, cz, last, stamp, seen, a, e1, e2, n, m1, m2, lo, hi, order,
+                        starts, glo, cell, dims, norm)
+    stamp += 1
+    if dc + half > floor:
         for j in range(pstarts[c], pstarts[c + 1]):
             q = porder[j]
             px, py, pz = points[q, 0], points[q, 1], points[q, 2]
             if dc + _combine(abs(px - cx), abs(py - cy), abs(pz - cz), norm) <= floor:
                 continue
-            d, last = _nearest(
-                px, py, pz, last, stamp, seen, a, e1, e2, n, m1, m2, lo, hi, order, starts,
-                glo, cell, dims, norm,
-            )
+            d, last = _nearest(px, py, pz, last, stamp, seen, a, e1, e2, n, m1, m2, lo, hi,
+                               order, starts, glo, cell, dims, norm)
             stamp += 1
-            if d > best:
-                best = d
-                floor = best - 1e-9 * (abs(best) + pcell)
-    return best
+            if d > state[0]:
+                state[0] = d
+                floor = d - 1e-9 * (abs(d) + pcell)
+    state[1], state[2] = last, stamp
