@@ -402,9 +402,8 @@ def _farthest(
     """
     Return max(lower, every point's distance to the surface), measuring few of them exactly.
 
-    The cells whose bound (at_centre + half a diagonal) can exceed the largest distance found:
-    the 8 highest first (the largest is found early), then the rest in the grid's order (each
-    search starting from the previous one's nearest triangle, a neighbour's).
+    The cells whose bound (at_centre + half a diagonal) can exceed the largest distance found,
+    highest bound first: the largest distance is found early and excludes most of the rest.
     """
     half = _combine(0.5 * pcell, 0.5 * pcell, 0.5 * pcell, norm) * (1.0 + 1e-9)
     cells = np.flatnonzero(
@@ -413,10 +412,11 @@ def _farthest(
     bounds = at_centre[cells] + half
     seen = np.full(a.shape[0], -1, dtype=np.int64)
     state = np.array([lower, 0.0, 0.0])  # the largest distance, the last triangle, the stamp
-    for i in np.concatenate((np.argsort(-bounds)[:8], np.arange(cells.shape[0]))):
-        bound, bounds[i] = bounds[i], -np.inf  # each cell once
-        _cell_max(cells[i], bound, state, seen, points, porder, pstarts, plo, pcell, pdims, half,
-                  a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm)
+    for i in np.argsort(-bounds):
+        if bounds[i] <= state[0] - 1e-9 * (abs(state[0]) + pcell):
+            break  # this cell and the rest cannot exceed the largest distance found
+        _cell_max(cells[i], bounds[i], state, seen, points, porder, pstarts, plo, pcell, pdims,
+                  half, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm)
     return state[0]
 
 
