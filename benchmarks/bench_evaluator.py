@@ -149,7 +149,8 @@ def all_metrics(n: int, V: np.ndarray, faces: np.ndarray, repeats: int, rng) -> 
     samples = stratified_samples(V, faces, SURFACE_SAMPLES, SURFACE_SEED)
     mesh = TriangleMesh(V, faces)
     sub = P[spread_subsample(cloud.grid, REVERSE_SAMPLES)]
-    lower = float(mesh.distances(sub).max())
+    to_sub = mesh.distances(sub)
+    lower = float(to_sub.max())
     real_ot = P[spread_subsample(cloud.grid, OT_SAMPLES, OT_SEED)]
     surface_ot = stratified_samples(V, faces, OT_SAMPLES, OT_SEED)
     parts = {
@@ -162,7 +163,7 @@ def all_metrics(n: int, V: np.ndarray, faces: np.ndarray, repeats: int, rng) -> 
             lambda: mesh.distances(sub), repeats
         )[0],
         'real -> triangles, max of all (HD_rev)': best_of(
-            lambda: mesh.farthest(cloud.grid, lower, samples), repeats
+            lambda: mesh.farthest(cloud.grid, lower, samples, measured=(sub, to_sub)), repeats
         )[0],
         f'EMD: subsamples + {OT_SAMPLES}x{OT_SAMPLES} L1 costs': best_of(
             lambda: cdist(

@@ -14,10 +14,7 @@ The triangles are bucketed once per mesh on a uniform grid (each in every cell i
 overlaps); each point searches the cells in growing shells around its own, skipping cells and
 triangles whose distance bound already exceeds the best found (as core/nearest.py does for
 points), starting from the triangle nearest to the previous point (real frames arrive in raster
-order, neighbours share a triangle).
-
-`TriangleMesh.farthest` finds the largest of many points' distances (HD from a cloud to the
-surface) exactly, measuring only the few whose upper bound can exceed the largest found.
+order, neighbours share a triangle). `TriangleMesh.farthest`: the largest distance, exact.
 """
 
 from __future__ import annotations
@@ -74,24 +71,28 @@ class TriangleMesh:
         )
 
     def farthest(
-        self, grid: PointGrid, lower: float, on_surface: np.ndarray | None = None, norm: int = L1
+        self, grid: PointGrid, lower: float, on_surface: np.ndarray | None = None, norm: int = L1,
+        measured: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> float:
         """
         Return max over the grid's points of their distance to the surface, exact.
 
-        `lower`: a distance some of the points reach (0 for none). A point is measured only if
-        an upper bound of its distance can exceed the largest found: per grid cell (centre c),
-        loosely, each anchor's (a vertex or `on_surface` point) distance to its cell's centre
-        carried along the grid, then c's exact distance d_c, then d_c + ||p - c|| per point.
+        `lower`: a distance some points reach (0: none). A point is measured only if a bound can
+        exceed the largest found: per grid cell (centre c), loosely, the anchors' (vertices,
+        `on_surface`, `measured` points) known distance + their distance to c carried along the
+        grid, then c's exact distance d_c, then d_c + ||p - c|| per point.
         """
         points = grid.points
         if len(self.a) == 0 or len(points) == 0:
             return float(np.inf) if len(points) else float(lower)
-        anchors = self.vertices if on_surface is None else np.concatenate(
-            [self.vertices, np.asarray(on_surface, dtype=np.float64).reshape(-1, 3)]
-        )
-        # L1 distances bound L2 ones too: ||x||_2 <= ||x||_1
-        at_centre = _carried(anchors, grid.lo, grid.cell, grid.dims)
+        # anchors of known distance (0 on the surface; `measured`: (points, their distances))
+        parts = [np.asarray(x, dtype=np.float64).reshape(-1, 3)
+                 for x in [self.vertices] + ([] if on_surface is None else [on_surface])]
+        known = np.zeros(sum(len(x) for x in parts))
+        if measured is not None:
+            parts.append(np.asarray(measured[0], dtype=np.float64).reshape(-1, 3))
+            known = np.concatenate([known, np.asarray(measured[1], dtype=np.float64)])
+        at_centre = _carried(np.concatenate(parts), known, grid.lo, grid.cell, grid.dims)
         return float(_farthest(
             points, grid.order, grid.starts, grid.lo, grid.cell, grid.dims, at_centre,
             float(lower), self.a, self.e1, self.e2, self.n, self.m1, self.m2, self.lo, self.hi,
@@ -368,11 +369,11 @@ def _centre(c, lo, cell, dims):
 
 
 @njit(cache=True, nogil=True)
-def _carried(anchors, lo, cell, dims):
+def _carried(anchors, known, lo, cell, dims):
     """
-    Return an upper bound of each cell centre's L1 distance to the anchors (triangle inequality).
+    Return an upper bound of each cell centre's distance to the surface (triangle inequality).
 
-    min over cells c' of (the anchors' distance to the centre of c' where they lie) +
+    min over cells c' of (known[k] + anchor k's distance to the centre of c' where it lies) +
     ||centre(c) - centre(c')||_1: an L1 distance transform, one pass each way along each axis.
     """
     nx, ny, nz = dims[0], dims[1], dims[2]
@@ -383,7 +384,7 @@ def _carried(anchors, lo, cell, dims):
         c = (_cell_of(az, lo[2], inv, nz) * ny + _cell_of(ay, lo[1], inv, ny)) * nx
         c += _cell_of(ax, lo[0], inv, nx)
         x, y, z = _centre(c, lo, cell, dims)
-        f[c] = min(f[c], abs(ax - x) + abs(ay - y) + abs(az - z))
+        f[c] = min(f[c], known[k] + abs(ax - x) + abs(ay - y) + abs(az - z))
     for stride, n in ((1, nx), (nx, ny), (nx * ny, nz)):  # each axis: its lines of n cells
         for outer in range(0, nx * ny * nz, stride * n):
             for first in range(outer, outer + stride):

@@ -278,8 +278,11 @@ def surface_scores(
 
     surface_part = _start(from_surface)
     mesh = TriangleMesh(vertices, faces)
-    to_surface = mesh.distances(cloud.points[spread_subsample(cloud.grid, REVERSE_SAMPLES)])
-    hd_r = mesh.farthest(cloud.grid, float(to_surface.max()), samples)
+    reverse = cloud.points[spread_subsample(cloud.grid, REVERSE_SAMPLES)]
+    to_surface = mesh.distances(reverse)
+    hd_r = mesh.farthest(
+        cloud.grid, float(to_surface.max()), samples, measured=(reverse, to_surface)
+    )
     to_real, emd = surface_part()
     cd_s, hd_s = float(to_real.mean()), float(to_real.max())
     cd_r = float(to_surface.mean())
