@@ -23,10 +23,12 @@ from cloth_bench_ros.core.surface_metrics import (
     REVERSE_SAMPLES,
     set_threads,
     spread_subsample,
+    stratified_samples,
+    SURFACE_SAMPLES,
     surface_samples,
     surface_scores,
+    SURFACE_SEED,
     transport_distance,
-    transport_samples,
 )
 from cloth_bench_ros.core.trajectory import Primitive
 from cloth_bench_ros.data.bag_reader import BagReader
@@ -40,7 +42,7 @@ from scipy.spatial.distance import cdist
 
 BUNDLED_FLING = Path(__file__).resolve().parents[1] / 'bags' / 'towel_dynamic'
 # the subsampled reverse CD and recall against every real point's (docs/metrics.md)
-CD_REVERSE_RTOL, RECALL_ATOL = 0.05, 0.02
+CD_REVERSE_RTOL, RECALL_ATOL = 0.05, 0.03
 
 
 def _sheet(nx: int, nz: int) -> tuple[np.ndarray, np.ndarray]:
@@ -66,7 +68,7 @@ def test_a_flat_sheet_against_points_on_its_own_surface(grid):
 def test_a_copy_shifted_by_d_is_d_away_in_every_distance():
     d = 0.004
     vertices, faces = _sheet(11, 15)
-    samples = surface_samples(vertices, faces)
+    samples = stratified_samples(vertices, faces, SURFACE_SAMPLES, SURFACE_SEED)  # A
     real = np.concatenate([vertices, samples]) + [0.0, d, 0.0]  # off the sheet by d
     s = surface_scores(RealCloud(real), vertices, faces)
     paper = RealCloud(real).chamfer_hausdorff(vertices)
@@ -77,7 +79,7 @@ def test_a_copy_shifted_by_d_is_d_away_in_every_distance():
     far = surface_scores(RealCloud(real + [0, FSCORE_THRESHOLD_M, 0]), vertices, faces)
     assert far.precision == far.recall == far.fscore == 0.0
     # the transport distance of the same shift: Jensen's bound d, reached by the shift itself
-    small = transport_samples(vertices, faces) + [0.0, d, 0.0]  # OT_SAMPLES: all of them
+    small = stratified_samples(vertices, faces, OT_SAMPLES, OT_SEED) + [0.0, d, 0.0]  # all used
     assert surface_scores(RealCloud(small), vertices, faces).emd == pytest.approx(d, abs=1e-12)
 
 
@@ -127,7 +129,7 @@ def test_the_frames_emd_is_pots_exact_emd_of_the_two_samples():
     real = rng.uniform([0, -0.05, 0.3], [0.5, 0.05, 1.0], size=(300, 3))
     cloud = RealCloud(real)
     spread = real[spread_subsample(cloud.grid, OT_SAMPLES, OT_SEED)]
-    surface = transport_samples(vertices, faces)
+    surface = stratified_samples(vertices, faces, OT_SAMPLES, OT_SEED)
     assert len(spread) == len(surface) == OT_SAMPLES
     expected = ot.emd2(np.full(OT_SAMPLES, 1 / OT_SAMPLES), np.full(OT_SAMPLES, 1 / OT_SAMPLES),
                        cdist(spread, surface, 'cityblock'))
@@ -140,7 +142,7 @@ def test_the_frames_emd_is_pots_exact_emd_of_the_two_samples():
 
 def test_the_transport_samples_are_one_per_equal_area_stratum():
     vertices, faces = _sheet(11, 15)  # 14 rows of equal area, triangles row after row
-    samples = transport_samples(vertices, faces)
+    samples = stratified_samples(vertices, faces, OT_SAMPLES, OT_SEED)
     assert np.max(point_to_surface(samples, vertices, faces)) < 1e-12
     rows = np.floor((vertices[:, 2].max() - samples[:, 2]) / 0.05).astype(int)
     counts = np.bincount(np.minimum(rows, 13), minlength=14)

@@ -8,8 +8,9 @@ only every third real frame falls on a simulator step).
 
 Given the mesh's faces, every scored frame also gets the surface metrics (core/surface_metrics.py)
 and, for the dynamic task, the contact-onset error: the same rule (core/phase.py `in_contact`)
-applied to the real points and to the simulated surface's area samples at every scored real
-frame. Without faces (identification trials) only the paper's CD/HD are computed.
+applied to the real points and to 1000 points drawn on the simulated surface uniformly by area
+(`surface_samples`) at every scored real frame. Without faces (identification trials) only the
+paper's CD/HD are computed.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from cloth_bench_ros.core.phase import (
 )
 from cloth_bench_ros.core.scene import TABLE_TOP_Z
 from cloth_bench_ros.core.surface_metrics import (
+    CONTACT_SAMPLES,
     NAN_SCORES,
     settings as surface_settings,
     SURFACE_FIELDS,
@@ -250,9 +252,9 @@ class OnlineEvaluator:
                 if self.faces is not None and len(vertices) != self.mesh_vertices:
                     e.mesh_mismatch = len(vertices)  # another grid than the faces': not scored
                 elif self.faces is not None:
-                    samples = surface_samples(vertices, self.faces)
-                    surface = surface_scores(cloud, vertices, self.faces, samples=samples)
-                    sim_touch = in_contact(samples) if self.contact_rule else None
+                    surface = surface_scores(cloud, vertices, self.faces)
+                    if self.contact_rule:
+                        sim_touch = in_contact(surface_samples(vertices, self.faces))
             if real_touch is not None:
                 e.contact.append((t, bool(sim_touch)))
             self.scores.append(
@@ -360,8 +362,9 @@ class OnlineEvaluator:
 CONTACT_RULE = (
     f'in contact: at least max({CONTACT_MIN_POINTS}, {CONTACT_MIN_FRACTION * 100:g} %) of the'
     f' points within {CONTACT_MARGIN * 100:g} cm above the table top (z {TABLE_TOP_Z:g} m);'
-    " real: the frame's points; simulated: the surface's area samples; checked at every scored"
-    ' real frame (30 fps); a sequence in contact from its first frame gives no onset'
+    f" real: the frame's points; simulated: {CONTACT_SAMPLES} points drawn on its surface"
+    ' uniformly by area; checked at every scored real frame (30 fps); a sequence in contact'
+    ' from its first frame gives no onset'
 )
 
 

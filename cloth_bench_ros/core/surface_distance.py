@@ -14,10 +14,7 @@ The triangles are bucketed once per mesh on a uniform grid (each in every cell i
 overlaps); each point searches the cells in growing shells around its own, skipping cells and
 triangles whose distance bound already exceeds the best found (as core/nearest.py does for
 points), starting from the triangle nearest to the previous point (real frames arrive in raster
-order, neighbours share a triangle).
-
-`TriangleMesh.farthest` finds the largest of many points' distances (HD from a cloud to the
-surface) exactly, measuring only the few whose upper bound can exceed a known lower bound.
+order, neighbours share a triangle). `TriangleMesh.farthest`: the largest distance, exact.
 """
 
 from __future__ import annotations
@@ -74,44 +71,32 @@ class TriangleMesh:
         )
 
     def farthest(
-        self, grid: PointGrid, lower: float, on_surface: np.ndarray | None = None, norm: int = L1
+        self, grid: PointGrid, lower: float, on_surface: np.ndarray | None = None, norm: int = L1,
+        measured: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> float:
         """
         Return max over the grid's points of their distance to the surface, exact.
 
-        `lower` is a distance some of the points are known to reach (the largest of an exact
-        subsample). A point is measured exactly only if an upper bound of its distance can
-        exceed `lower`: the surface is never farther than any point of it (the vertices and
-        `on_surface`, e.g. area samples), and the distance grows by at most ||p - c|| from c to
-        p. The bound is taken at each occupied cell's centre c first (loose: each anchor's
-        distance to its cell's centre carried along the grid; the nearest anchor, core/nearest.py,
-        where that is not enough; cells whose bound cannot exceed `lower` are skipped whole),
-        then at each point the cells leave: the few far points get the exact triangle search.
+        `lower`: a distance some points reach (0: none). A point is measured only if a bound can
+        exceed the largest found: per grid cell (centre c), loosely, the anchors' (vertices,
+        `on_surface`, `measured` points) known distance + their distance to c carried along the
+        grid, then c's exact distance d_c, then d_c + ||p - c|| per point.
         """
         points = grid.points
         if len(self.a) == 0 or len(points) == 0:
             return float(np.inf) if len(points) else float(lower)
-        anchors = self.vertices if on_surface is None else np.concatenate(
-            [self.vertices, np.asarray(on_surface, dtype=np.float64).reshape(-1, 3)]
-        )
-        near = PointGrid(anchors)  # L1 distances bound L2 ones too: ||x||_2 <= ||x||_1
-        # the bounds are computed in floating point: measure what comes within rounding of it
-        floor = float(lower) - 1e-9 * (abs(float(lower)) + grid.cell)
-        at_centre = _carried(anchors, grid.lo, grid.cell, grid.dims)
-        centres, cells = _centres(grid.starts, grid.lo, grid.cell, grid.dims, at_centre, floor,
-                                  int(norm))
-        at_centre[cells] = np.minimum(at_centre[cells], near.nearest_l1(centres))
-        far = np.flatnonzero(_beyond(
-            points, grid.order, grid.starts, grid.lo, grid.cell, grid.dims, at_centre, floor,
-            int(norm),
-        ))
-        bound = near.nearest_l1(points[far])
-        # the highest bounds first: the largest distance found soon excludes most of the rest
-        by_bound = np.argsort(-bound, kind='stable')
-        return float(_largest(
-            points[far[by_bound]], bound[by_bound], float(lower), self.a, self.e1, self.e2,
-            self.n, self.m1, self.m2, self.lo, self.hi, self.order, self.starts, self.glo,
-            self.cell, self.dims, int(norm),
+        # anchors of known distance (0 on the surface; `measured`: (points, their distances))
+        parts = [np.asarray(x, dtype=np.float64).reshape(-1, 3)
+                 for x in [self.vertices] + ([] if on_surface is None else [on_surface])]
+        known = np.zeros(sum(len(x) for x in parts))
+        if measured is not None:
+            parts.append(np.asarray(measured[0], dtype=np.float64).reshape(-1, 3))
+            known = np.concatenate([known, np.asarray(measured[1], dtype=np.float64)])
+        at_centre = _carried(np.concatenate(parts), known, grid.lo, grid.cell, grid.dims)
+        return float(_farthest(
+            points, grid.order, grid.starts, grid.lo, grid.cell, grid.dims, at_centre,
+            float(lower), self.a, self.e1, self.e2, self.n, self.m1, self.m2, self.lo, self.hi,
+            self.order, self.starts, self.glo, self.cell, self.dims, int(norm),
         ))
 
 
@@ -122,7 +107,7 @@ def point_to_surface(
     return TriangleMesh(vertices, faces).distances(points, norm)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _cell_of(x, lo, inv, n):
     i = int((x - lo) * inv)
     return 0 if i < 0 else (n - 1 if i >= n else i)
@@ -165,14 +150,14 @@ def _bucket_triangles(lo, hi, glo, cell, dims):
     return order, starts
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _combine(gx, gy, gz, norm):
     if norm == 1:
         return gx + gy + gz
     return np.sqrt(gx * gx + gy * gy + gz * gz)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _gap(x, a, b):
     """Distance along one axis from x to the interval [a, b] (0 inside it)."""
     if x < a:
@@ -180,7 +165,7 @@ def _gap(x, a, b):
     return x - b if x > b else 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _segment(px, py, pz, ax, ay, az, dx, dy, dz, norm):
     """Distance from p to the segment a + s d, s in [0, 1]."""
     if norm == 2:
@@ -208,7 +193,7 @@ def _segment(px, py, pz, ax, ay, az, dx, dy, dz, norm):
     return best
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _triangle(px, py, pz, t, a, e1, e2, n, m1, m2, norm, best):
     """
     Exact distance from p to triangle t, or a value >= best once it cannot be below best.
@@ -270,73 +255,82 @@ def _triangle(px, py, pz, t, a, e1, e2, n, m1, m2, norm, best):
 
 @njit(cache=True, nogil=True)
 def _query(points, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm):
-    inv = 1.0 / cell
-    m = a.shape[0]
-    seen = np.full(m, -1, dtype=np.int64)
+    seen = np.full(a.shape[0], -1, dtype=np.int64)
     out = np.empty(points.shape[0])
-    reach = max(dims[0], max(dims[1], dims[2]))
-    slack = 1e-9 * cell
     last = 0
     for q in range(points.shape[0]):
-        px, py, pz = points[q, 0], points[q, 1], points[q, 2]
-        # the previous point's nearest triangle first: a close bound from the start
-        best = _triangle(px, py, pz, last, a, e1, e2, n, m1, m2, norm, np.inf)
-        seen[last] = q
-        best_t = last
-        cx = _cell_of(px, glo[0], inv, dims[0])
-        cy = _cell_of(py, glo[1], inv, dims[1])
-        cz = _cell_of(pz, glo[2], inv, dims[2])
-        # outside the grid's box, every cell of shell r is at least `off` (the distance to the
-        # box) combined with r - 1 cells away: far points stop after a few shells
-        ox = _gap(px, glo[0], glo[0] + cell * dims[0])
-        oy = _gap(py, glo[1], glo[1] + cell * dims[1])
-        oz = _gap(pz, glo[2], glo[2] + cell * dims[2])
-        for r in range(reach + 1):
-            shell = max(r - 1, 0) * cell
-            if norm == 1:
-                bound = ox + oy + oz + shell
-            else:
-                bound = np.sqrt(ox * ox + oy * oy + oz * oz + shell * shell)
-            if bound > best + slack:  # nothing in this shell or beyond can be closer
-                break
-            for iz in range(max(cz - r, 0), min(cz + r, dims[2] - 1) + 1):
-                z0 = glo[2] + iz * cell
-                gz = _gap(pz, z0, z0 + cell)
-                if gz > best + slack:
-                    continue
-                for iy in range(max(cy - r, 0), min(cy + r, dims[1] - 1) + 1):
-                    y0 = glo[1] + iy * cell
-                    gy = _gap(py, y0, y0 + cell)
-                    if _combine(0.0, gy, gz, norm) > best + slack:
-                        continue
-                    on_face = abs(iz - cz) == r or abs(iy - cy) == r
-                    step = 1 if on_face else 2 * r
-                    ix = max(cx - r, 0) if on_face else cx - r
-                    while ix <= min(cx + r, dims[0] - 1):
-                        x0 = glo[0] + ix * cell
-                        gap = _combine(_gap(px, x0, x0 + cell), gy, gz, norm)
-                        if ix >= 0 and gap <= best + slack:
-                            c = (iz * dims[1] + iy) * dims[0] + ix
-                            for j in range(starts[c], starts[c + 1]):
-                                t = order[j]
-                                if seen[t] == q:
-                                    continue
-                                seen[t] = q
-                                bound = _combine(
-                                    _gap(px, lo[t, 0], hi[t, 0]),
-                                    _gap(py, lo[t, 1], hi[t, 1]),
-                                    _gap(pz, lo[t, 2], hi[t, 2]),
-                                    norm,
-                                )
-                                if bound >= best:
-                                    continue
-                                d = _triangle(px, py, pz, t, a, e1, e2, n, m1, m2, norm, best)
-                                if d < best:
-                                    best, best_t = d, t
-                        ix += step
-        out[q] = best
-        last = best_t
+        out[q], last = _nearest(
+            points[q, 0], points[q, 1], points[q, 2], last, q, seen, a, e1, e2, n, m1, m2, lo,
+            hi, order, starts, glo, cell, dims, norm,
+        )
     return out
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _nearest(
+    px, py, pz, last, stamp, seen, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims,
+    norm,
+):
+    """Return p's distance and nearest triangle from triangle `last` (seen[t] == stamp: done)."""
+    inv = 1.0 / cell
+    reach = max(dims[0], max(dims[1], dims[2]))
+    slack = 1e-9 * cell
+    # the previous point's nearest triangle first: a close bound from the start
+    best = _triangle(px, py, pz, last, a, e1, e2, n, m1, m2, norm, np.inf)
+    seen[last] = stamp
+    best_t = last
+    cx = _cell_of(px, glo[0], inv, dims[0])
+    cy = _cell_of(py, glo[1], inv, dims[1])
+    cz = _cell_of(pz, glo[2], inv, dims[2])
+    # outside the grid's box, every cell of shell r is at least `off` (the distance to the
+    # box) combined with r - 1 cells away: far points stop after a few shells
+    ox = _gap(px, glo[0], glo[0] + cell * dims[0])
+    oy = _gap(py, glo[1], glo[1] + cell * dims[1])
+    oz = _gap(pz, glo[2], glo[2] + cell * dims[2])
+    for r in range(reach + 1):
+        shell = max(r - 1, 0) * cell
+        if norm == 1:
+            bound = ox + oy + oz + shell
+        else:
+            bound = np.sqrt(ox * ox + oy * oy + oz * oz + shell * shell)
+        if bound > best + slack:  # nothing in this shell or beyond can be closer
+            break
+        for iz in range(max(cz - r, 0), min(cz + r, dims[2] - 1) + 1):
+            z0 = glo[2] + iz * cell
+            gz = _gap(pz, z0, z0 + cell)
+            if gz > best + slack:
+                continue
+            for iy in range(max(cy - r, 0), min(cy + r, dims[1] - 1) + 1):
+                y0 = glo[1] + iy * cell
+                gy = _gap(py, y0, y0 + cell)
+                if _combine(0.0, gy, gz, norm) > best + slack:
+                    continue
+                on_face = abs(iz - cz) == r or abs(iy - cy) == r
+                step = 1 if on_face else 2 * r
+                ix = max(cx - r, 0) if on_face else cx - r
+                while ix <= min(cx + r, dims[0] - 1):
+                    x0 = glo[0] + ix * cell
+                    gap = _combine(_gap(px, x0, x0 + cell), gy, gz, norm)
+                    if ix >= 0 and gap <= best + slack:
+                        c = (iz * dims[1] + iy) * dims[0] + ix
+                        for j in range(starts[c], starts[c + 1]):
+                            t = order[j]
+                            if seen[t] == stamp:
+                                continue
+                            seen[t] = stamp
+                            bound = _combine(
+                                _gap(px, lo[t, 0], hi[t, 0]),
+                                _gap(py, lo[t, 1], hi[t, 1]),
+                                _gap(pz, lo[t, 2], hi[t, 2]),
+                                norm,
+                            )
+                            if bound >= best:
+                                continue
+                            d = _triangle(px, py, pz, t, a, e1, e2, n, m1, m2, norm, best)
+                            if d < best:
+                                best, best_t = d, t
+                    ix += step
+    return best, best_t
 
 
 @njit(cache=True, nogil=True)
@@ -369,39 +363,17 @@ def _cross(u, w, scale, out):  # out = scale (u x w), no array allocated per tri
 
 
 @njit(cache=True, nogil=True)
-def _beyond(points, order, starts, lo, cell, dims, at_centre, floor, norm):
-    """Mark the points p whose bound at_centre[c] + ||p - c|| (c: their cell's centre) > floor."""
-    far = np.zeros(points.shape[0], dtype=np.bool_)
-    # no point of a cell is farther than half its diagonal from its centre: a cell whose bound
-    # at that reach stays within floor is skipped without reading its points
-    half = _combine(0.5 * cell, 0.5 * cell, 0.5 * cell, norm) * (1.0 + 1e-9)
-    for c in range(starts.shape[0] - 1):
-        if starts[c + 1] == starts[c] or at_centre[c] + half <= floor:
-            continue
-        cx, cy, cz = _centre(c, lo, cell, dims)
-        dc = at_centre[c]
-        for j in range(starts[c], starts[c + 1]):
-            q = order[j]
-            reach = _combine(
-                abs(points[q, 0] - cx), abs(points[q, 1] - cy), abs(points[q, 2] - cz), norm
-            )
-            if dc + reach > floor:
-                far[q] = True
-    return far
-
-
-@njit(cache=True, nogil=True)
 def _centre(c, lo, cell, dims):
     i, j, k = c % dims[0], (c // dims[0]) % dims[1], c // (dims[0] * dims[1])
     return lo[0] + (i + 0.5) * cell, lo[1] + (j + 0.5) * cell, lo[2] + (k + 0.5) * cell
 
 
 @njit(cache=True, nogil=True)
-def _carried(anchors, lo, cell, dims):
+def _carried(anchors, known, lo, cell, dims):
     """
-    Return an upper bound of each cell centre's L1 distance to the anchors (triangle inequality).
+    Return an upper bound of each cell centre's distance to the surface (triangle inequality).
 
-    min over cells c' of (the anchors' distance to the centre of c' where they lie) +
+    min over cells c' of (known[k] + anchor k's distance to the centre of c' where it lies) +
     ||centre(c) - centre(c')||_1: an L1 distance transform, one pass each way along each axis.
     """
     nx, ny, nz = dims[0], dims[1], dims[2]
@@ -412,7 +384,7 @@ def _carried(anchors, lo, cell, dims):
         c = (_cell_of(az, lo[2], inv, nz) * ny + _cell_of(ay, lo[1], inv, ny)) * nx
         c += _cell_of(ax, lo[0], inv, nx)
         x, y, z = _centre(c, lo, cell, dims)
-        f[c] = min(f[c], abs(ax - x) + abs(ay - y) + abs(az - z))
+        f[c] = min(f[c], known[k] + abs(ax - x) + abs(ay - y) + abs(az - z))
     for stride, n in ((1, nx), (nx, ny), (nx * ny, nz)):  # each axis: its lines of n cells
         for outer in range(0, nx * ny * nz, stride * n):
             for first in range(outer, outer + stride):
@@ -424,27 +396,55 @@ def _carried(anchors, lo, cell, dims):
 
 
 @njit(cache=True, nogil=True)
-def _centres(starts, lo, cell, dims, at_centre, floor, norm):
-    """Return the centres of the cells that hold points and whose bound can exceed floor."""
-    half = _combine(0.5 * cell, 0.5 * cell, 0.5 * cell, norm) * (1.0 + 1e-9)
-    cells = np.flatnonzero((starts[1:] > starts[:-1]) & (at_centre + half > floor))
-    centres = np.empty((cells.shape[0], 3))
-    for k in range(cells.shape[0]):
-        centres[k, 0], centres[k, 1], centres[k, 2] = _centre(cells[k], lo, cell, dims)
-    return centres, cells
+def _farthest(
+    points, porder, pstarts, plo, pcell, pdims, at_centre, lower,
+    a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm,
+):
+    """
+    Return max(lower, every point's distance to the surface), measuring few of them exactly.
+
+    The cells whose bound (at_centre + half a diagonal) can exceed the largest distance found,
+    highest bound first: the largest distance is found early and excludes most of the rest.
+    """
+    half = _combine(0.5 * pcell, 0.5 * pcell, 0.5 * pcell, norm) * (1.0 + 1e-9)
+    cells = np.flatnonzero(
+        (pstarts[1:] > pstarts[:-1]) & (at_centre + half > lower - 1e-9 * (abs(lower) + pcell))
+    )
+    bounds = at_centre[cells] + half
+    seen = np.full(a.shape[0], -1, dtype=np.int64)
+    state = np.array([lower, 0.0, 0.0])  # the largest distance, the last triangle, the stamp
+    for i in np.argsort(-bounds):
+        if bounds[i] <= state[0] - 1e-9 * (abs(state[0]) + pcell):
+            break  # this cell and the rest cannot exceed the largest distance found
+        _cell_max(cells[i], bounds[i], state, seen, points, porder, pstarts, plo, pcell, pdims,
+                  half, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm)
+    return state[0]
 
 
 @njit(cache=True, nogil=True)
-def _largest(
-    points, bounds, lower, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm
+def _cell_max(
+    c, bound, state, seen, points, porder, pstarts, plo, pcell, pdims, half,
+    a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm,
 ):
-    """Return max(lower, the points' distances), measuring them in decreasing order of bound."""
-    best = lower
-    for q in range(points.shape[0]):
-        if bounds[q] <= best - 1e-9 * (abs(best) + cell):  # this one and the rest cannot exceed
-            break
-        d = _query(
-            points[q:q + 1], a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims, norm
-        )[0]
-        best = max(best, d)
-    return best
+    """Raise state[0] to the largest distance of cell c's points where its bound can exceed it."""
+    floor = state[0] - 1e-9 * (abs(state[0]) + pcell)  # bounds are computed: measure what's close
+    if bound <= floor:
+        return
+    last, stamp = int(state[1]), int(state[2])
+    cx, cy, cz = _centre(c, plo, pcell, pdims)
+    dc, last = _nearest(cx, cy, cz, last, stamp, seen, a, e1, e2, n, m1, m2, lo, hi, order,
+                        starts, glo, cell, dims, norm)
+    stamp += 1
+    if dc + half > floor:
+        for j in range(pstarts[c], pstarts[c + 1]):
+            q = porder[j]
+            px, py, pz = points[q, 0], points[q, 1], points[q, 2]
+            if dc + _combine(abs(px - cx), abs(py - cy), abs(pz - cz), norm) <= floor:
+                continue
+            d, last = _nearest(px, py, pz, last, stamp, seen, a, e1, e2, n, m1, m2, lo, hi,
+                               order, starts, glo, cell, dims, norm)
+            stamp += 1
+            if d > state[0]:
+                state[0] = d
+                floor = d - 1e-9 * (abs(d) + pcell)
+    state[1], state[2] = last, stamp
