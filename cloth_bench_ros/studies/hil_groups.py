@@ -151,7 +151,7 @@ def _waiting(nodes: list) -> str:
     for node in nodes:
         if getattr(node, 'done', True):
             continue
-        waiting = getattr(node, 'waiting_for', lambda: [])()
+        waiting: list[str] = getattr(node, 'waiting_for', list)()
         parts.append(node.get_name() + (f' ({"; ".join(waiting)})' if waiting else ''))
     return ', '.join(parts) or 'nothing'
 
