@@ -368,6 +368,10 @@ def test_malformed_preset_file_names_the_file(tmp_path, text, words):
 
 def test_good_preset_file_in_a_custom_directory(tmp_path):
     (tmp_path / 'mujoco.yaml').write_text(GOOD_PRESET)
-    assert load_preset('mujoco', 'towel', 'dynamic', config_dir=tmp_path) == {'mass': 0.3}
+    # an entry that names no model is for the model that runs (the shipped preset's: shell)
+    assert load_preset('mujoco', 'towel', 'dynamic', config_dir=tmp_path) == {
+        'mass': 0.3,
+        'model': 'shell',
+    }
     with pytest.raises(EngineError, match='no preset for towel quasi_static'):
         load_preset('mujoco', 'towel', 'quasi_static', config_dir=tmp_path)
