@@ -74,6 +74,11 @@ def engine_device(name: str, params: Mapping[str, Any] | None = None) -> str:
     return engine_class(name).device_for(params or {})
 
 
+def engine_model(name: str, params: Mapping[str, Any] | None = None) -> str:
+    """Return the model engine `name` runs with `params` ('' for an engine without models)."""
+    return str(engine_class(name).validate_params(dict(params or {})).get('model', ''))
+
+
 def make_engine(
     name: str,
     rate_hz: float,

@@ -91,22 +91,18 @@ class Evaluator(Node):
             'seed': seed,
             **cloth_record(size, mass),
         }
-        if devices:
-            names = [validation.device(d, 'parameter devices') for d in devices.split(',')]
+        for key, text in (('devices', devices), ('models', models)):
+            if not text:
+                continue
+            names = text.split(',')
+            if key == 'devices':
+                names = [validation.device(d, 'parameter devices') for d in names]
             if len(names) != len(self.engines):
                 raise validation.InputError(
-                    f'evaluator: parameter devices: {len(names)} devices for'
+                    f'evaluator: parameter {key}: {len(names)} {key} for'
                     f' {len(self.engines)} engines'
                 )
-            self.run_info['devices'] = dict(zip(self.engines, names))
-        if models:
-            names = models.split(',')
-            if len(names) != len(self.engines):
-                raise validation.InputError(
-                    f'evaluator: parameter models: {len(names)} models for'
-                    f' {len(self.engines)} engines'
-                )
-            self.run_info['models'] = dict(zip(self.engines, names))
+            self.run_info[key] = dict(zip(self.engines, names))
         if self.output_dir:  # an unwritable report directory is found now, not after the run
             try:
                 check_output_dir(self.output_dir)

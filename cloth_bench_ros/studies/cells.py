@@ -97,13 +97,13 @@ class Cell:
     @property
     def model(self) -> str:
         """Return the model the cell's engine runs (its overrides' on its shipped preset's)."""
-        from cloth_bench_ros.engines import engine_class
+        from cloth_bench_ros.engines import engine_model
         from cloth_bench_ros.engines.presets import load_preset
         from cloth_bench_ros.errors import ClothBenchError
 
         try:
-            params = {**load_preset(self.engine, self.cloth, self.primitive), **self.params}
-            return str(engine_class(self.engine).validate_params(params).get('model', ''))
+            preset = load_preset(self.engine, self.cloth, self.primitive)
+            return engine_model(self.engine, {**preset, **self.params})
         except ClothBenchError:  # an engine not on this machine: as the cell names it
             return str(self.params.get('model', ''))
 

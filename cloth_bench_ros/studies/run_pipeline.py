@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 import random
 
-from cloth_bench_ros.engines import engine_class, engine_device
+from cloth_bench_ros.engines import engine_device, engine_model
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.nodes.common import close_nodes
 from cloth_bench_ros.nodes.evaluator import Evaluator
@@ -41,8 +41,7 @@ def run_models(config: RunConfig) -> dict[str, str]:
         preset = load_preset(
             name, config.cloth, config.primitive, config.presets_dir, overrides.get('model')
         )
-        models[name] = str(engine_class(name).validate_params({**preset, **overrides}).get(
-            'model', ''))
+        models[name] = engine_model(name, {**preset, **overrides})
     return models
 
 
