@@ -123,3 +123,8 @@ def test_identified_provenance_names_the_device_and_the_preset_does_not(tmp_path
     }
     text = provenance_text(spec, summary, '1.8.0')
     assert 'on device cpu' in text and 'fixed model = xpbd;' in text
+    assert 'trials: tpe 3; seed 0' in text  # a full-fidelity study says nothing of rungs
+    spec.fidelity = 'coarse'
+    summary['per_sampler']['tpe']['pruned'] = 2
+    text = provenance_text(spec, summary, '1.8.0')
+    assert 'trials: tpe 3; multi-fidelity coarse, 2 stopped at a rung; seed 0' in text

@@ -55,22 +55,36 @@ def test_the_identified_set_gives_the_xpbd_entry_when_xpbd_runs(hanging_bag, tmp
     assert 0 < cd < 1 and cd != plain['engines']['newton']['CD_d']
 
 
+def _xpbd_only_set(folder: Path) -> Path:
+    """Write the shipped identified set with its Newton VBD entries left out; return the folder."""
+    folder.mkdir()
+    for source in SHIPPED.parent.glob('*.yaml'):
+        data = presets.read_preset_file(source)
+        if source.name == 'newton.yaml':
+            for tasks in data['presets'].values():
+                for entries in tasks.values():
+                    entries.pop('vbd', None)
+        (folder / source.name).write_text(yaml.safe_dump(data, sort_keys=False))
+    return folder
+
+
 def test_vbd_without_a_vbd_entry_is_refused_in_one_line_before_anything_runs(
     hanging_bag, tmp_path, capsys
 ):
     """The shipped preset's model (VBD) runs: the set has only XPBD, so no values stand for it."""
     assert presets.default_model('newton', 'towel', 'dynamic') == 'vbd'
-    assert main(_run(hanging_bag, tmp_path / 'vbd', '--presets', 'identified')) == 2
+    xpbd_only = _xpbd_only_set(tmp_path / 'xpbd_only')
+    assert main(_run(hanging_bag, tmp_path / 'vbd', '--presets', str(xpbd_only))) == 2
     err = _one_line_error(capsys)
-    assert 'no newton vbd entry for towel dynamic (it has: xpbd)' in err and str(SHIPPED) in err
-    assert '--set newton.model=xpbd' in err
+    assert 'no newton vbd entry for towel dynamic (it has: xpbd)' in err
+    assert str(xpbd_only / 'newton.yaml') in err and '--set newton.model=xpbd' in err
     assert not (tmp_path / 'vbd').exists()
     # the same in a sweep that names the cloth and task; the default sweep leaves it out, saying so
-    assert main(['sweep', '--dry-run', '--engine', 'newton', '--presets', 'identified-newton-vbd',
+    assert main(['sweep', '--dry-run', '--engine', 'newton', '--presets', str(xpbd_only),
                  '--cloth', 'towel', '--primitive', 'dynamic']) == 2
     assert 'no newton vbd entry' in _one_line_error(capsys)
     assert main(['sweep', '--dry-run', '--engine', 'newton', '--engine', 'mujoco', '--presets',
-                 'identified', '--seeds', '1', '--rate', '100', '--output',
+                 str(xpbd_only), '--seeds', '1', '--rate', '100', '--output',
                  str(tmp_path / 'sweep')]) == 0
     assert 'no values for mujoco chequered dynamic' in capsys.readouterr().out
     # and with the model named, the sweep's cells carry the XPBD entry and name the model

@@ -139,6 +139,10 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
     fixed = ', '.join(f'{k} = {v}' for k, v in spec.fixed.items() if k != 'device')
     fixed = f'fixed {fixed}; ' if fixed else ''
     trials = ', '.join(f'{s} {r["trials"]}' for s, r in summary['per_sampler'].items())
+    fidelity = getattr(spec, 'fidelity', 'full')
+    if fidelity != 'full':  # the budget counts trials stopped at a rung: say how many
+        pruned = sum(r.get('pruned', 0) for r in summary['per_sampler'].values())
+        trials += f'; multi-fidelity {fidelity}, {pruned} stopped at a rung'
     held_out = '; '.join(
         f'{Path(v["bag"]).name}: preset {v["preset"]["mean"]:.4f} m, identified'
         f' {v["identified"]["mean"]:.4f} m ({v["identified"]["ok"]} seeds)'
