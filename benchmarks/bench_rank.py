@@ -1,0 +1,105 @@
+"""
+The whole `cloth-bench rank` command on three camera-like recordings, timed.
+
+The recordings are those of the rank tests, written by rosbags (not by the project's writer):
+one MCAP bag of one towel fling, one sqlite3 bag of one, one MCAP bag of three with rest between
+them; five trials, each a noisy camera-like copy of the bundled fling. The command runs as a user
+types it (default entrants MuJoCo, PyBullet and Newton XPBD, `--trials auto`, both samplers,
+leave-one-trial-out, 3 held-out seeds, rates 10/100/1000 Hz) on `--workers` local processes; the
+script prints the wall time against the goal (30 min on two cores), the process tree's CPU time,
+the ranking with its intervals and the floor.
+
+    .venv/bin/python benchmarks/bench_rank.py                      # the full command (long)
+    .venv/bin/python benchmarks/bench_rank.py --fidelity coarse    # multi-fidelity identification
+    .venv/bin/python benchmarks/bench_rank.py --quick              # a tiny budget: a smoke check
+    .venv/bin/python benchmarks/bench_rank.py --keep DIR           # recordings and output kept
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+import resource
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))  # the tests' recorder
+
+from camera_recording import (  # noqa: E402
+    CAMERA_TOPIC, make_camera_recording, make_repeated_recording)
+from cloth_bench_ros import cli  # noqa: E402
+from cloth_bench_ros.paths import bundled_bag  # noqa: E402
+
+GOAL_S = 30 * 60
+QUICK = ['--trials', '2', '--sampler', 'tpe', '--seeds', '1', '--grid', '6x8', '--rates', '100',
+         '--max-frames', '6']
+
+
+def recordings(root: Path) -> Path:
+    """Write the three recordings, five trials, in a folder under root; return the folder."""
+    folder = root / 'recordings'
+    if folder.is_dir():
+        return folder
+    source = bundled_bag('towel', 'dynamic')
+    make_camera_recording(source, folder / 'one_mcap', seed=1, pre_roll=30, noise=0.002)
+    make_camera_recording(
+        source, folder / 'one_sqlite', seed=2, pre_roll=30, noise=0.002, storage='sqlite3'
+    )
+    make_repeated_recording(source, folder / 'three', rest_s=1.0, seed=3)
+    return folder
+
+
+def cpu_seconds() -> float:
+    """Return this process's and its finished children's user + system time."""
+    own, children = (resource.getrusage(w) for w in (resource.RUSAGE_SELF,
+                                                     resource.RUSAGE_CHILDREN))
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def summary(out: Path) -> list[str]:
+    """Return the lines that answer: per group, the ranking with intervals and the floor."""
+    result = json.loads((out / 'rank.json').read_text())
+    lines = [f'trials: {len(result["trials"])}']
+    for group, answer in result['answer'].items():
+        floor = answer.get('floor') or {}
+        low, mean, high = (floor.get(k, float('nan')) for k in ('min', 'mean', 'max'))
+        lines.append(f'{group}: floor {mean:.4f} m [{low:.4f}, {high:.4f}]')
+        for r in answer['ranking']:
+            lines.append(f'  {r["name"]:<14} {r["mean"]:.4f} m [{r["low"]:.4f}, {r["high"]:.4f}]'
+                         f' n={r["n"]}')
+    return lines
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--workers', type=int, default=2, help='local worker processes')
+    parser.add_argument('--fidelity', default='full', help='full, prune or coarse')
+    parser.add_argument('--quick', action='store_true', help='a tiny budget (smoke check)')
+    parser.add_argument('--keep', type=Path, help='write recordings and output here (resumable)')
+    args, extra = parser.parse_known_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        root = args.keep or Path(tmp)
+        root.mkdir(parents=True, exist_ok=True)
+        folder, out = recordings(root), root / 'rank'
+        argv = ['rank', str(folder), '--topic', CAMERA_TOPIC, '--output', str(out),
+                '--workers', str(args.workers), '--fidelity', args.fidelity, '--no-progress',
+                *(QUICK if args.quick else []), *extra]
+        print('cloth-bench ' + ' '.join(argv), flush=True)
+        start, cpu = time.perf_counter(), cpu_seconds()
+        code = cli.main(argv)
+        wall, cpu = time.perf_counter() - start, cpu_seconds() - cpu
+        if code != 0:
+            print(f'rank exited {code} after {wall:.0f} s')
+            return code
+        print('\n'.join(summary(out)))
+        verdict = 'meets' if wall <= GOAL_S else 'does NOT meet'
+        budget = ' (quick budget)' if args.quick else ''
+        print(f'wall {wall / 60:.1f} min, CPU {cpu / 60:.1f} core-min ({args.workers} workers): '
+              f'{verdict} the goal of {GOAL_S / 60:.0f} min{budget}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
