@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-import shutil
 
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines import presets
@@ -55,6 +54,21 @@ def test_the_identified_set_gives_the_xpbd_entry_when_xpbd_runs(hanging_bag, tmp
     assert 0 < cd < 1 and cd != plain['engines']['newton']['CD_d']
 
 
+def test_the_shipped_sets_give_newton_vbd_its_identified_entry_where_one_was_fitted():
+    """The default model (VBD) runs with the set's VBD entry; its provenance says how."""
+    for name in ('identified',):
+        folder = presets.config_dir() / 'presets' / name
+        data = presets.read_preset_file(folder / 'newton.yaml')
+        shipped = data['presets']['towel']['dynamic']
+        assert set(shipped) == {'xpbd', 'vbd'} and shipped['vbd']['model'] == 'vbd'
+        assert presets.load_preset('newton', 'towel', 'dynamic', folder) == shipped['vbd']
+        assert presets.load_preset('newton', 'towel', 'dynamic', folder, 'xpbd') == shipped['xpbd']
+        paragraph = next(p for p in data['provenance'].splitlines()
+                         if p.startswith('towel dynamic (vbd): '))
+        assert 'multi-fidelity coarse' in paragraph and 'Held-out seeds (CD)' in paragraph
+        assert 'on device cpu' in paragraph
+
+
 def _xpbd_only_set(folder: Path) -> Path:
     """Write the shipped identified set with its Newton VBD entries left out; return the folder."""
     folder.mkdir()
@@ -64,6 +78,8 @@ def _xpbd_only_set(folder: Path) -> Path:
             for tasks in data['presets'].values():
                 for entries in tasks.values():
                     entries.pop('vbd', None)
+            data['provenance'] = '\n'.join(
+                p for p in data['provenance'].splitlines() if '(vbd): ' not in p)
         (folder / source.name).write_text(yaml.safe_dump(data, sort_keys=False))
     return folder
 
@@ -111,9 +127,7 @@ def test_a_vbd_identification_merges_beside_the_xpbd_entry(hanging_bag, tmp_path
     identified = _vbd_identification(tmp_path / 'ident')
     fitted = presets.read_preset_file(identified)['presets']['towel']['dynamic']
     assert fitted['model'] == 'vbd'
-    folder = tmp_path / 'set'
-    folder.mkdir()
-    shutil.copy(SHIPPED, folder / 'newton.yaml')
+    folder = _xpbd_only_set(tmp_path / 'set')
     before = presets.read_preset_file(folder / 'newton.yaml')
     assert presets.merge_identified([identified], folder) == [folder / 'newton.yaml']
     after = presets.read_preset_file(folder / 'newton.yaml')
@@ -122,9 +136,9 @@ def test_a_vbd_identification_merges_beside_the_xpbd_entry(hanging_bag, tmp_path
     assert dynamic['xpbd'] == before['presets']['towel']['dynamic']['xpbd']
     assert after['presets']['towel']['quasi_static'] == before['presets']['towel']['quasi_static']
     paragraphs = after['provenance'].splitlines()
-    assert [p.partition(': ')[0] for p in paragraphs] == [
-        'towel dynamic (xpbd)', 'towel quasi_static (xpbd)', 'towel dynamic (vbd)']
-    assert paragraphs[:2] == before['provenance'].splitlines()
+    assert [p.partition(': ')[0] for p in paragraphs] == [  # in the entries' order
+        'towel dynamic (xpbd)', 'towel dynamic (vbd)', 'towel quasi_static (xpbd)']
+    assert [paragraphs[0], paragraphs[2]] == before['provenance'].splitlines()
     # the model that runs picks its entry: VBD by default, XPBD when named
     assert presets.load_preset('newton', 'towel', 'dynamic', folder)['mass'] == fitted['mass']
     assert presets.load_preset('newton', 'towel', 'dynamic', folder, 'xpbd') == dynamic['xpbd']

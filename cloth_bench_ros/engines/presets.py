@@ -298,7 +298,11 @@ def write_merged_set(doc: dict, out_dir: Path) -> Path:
     import yaml
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    text = {**doc, 'provenance': '\n'.join(f'{k}: {v}' for k, v in doc['provenance'].items())}
+    entries = [f'{cloth} {task} ({model})' for cloth, tasks in doc['presets'].items()
+               for task, models in tasks.items() for model in models]
+    order = {key: k for k, key in enumerate(entries)}  # paragraphs in the entries' order
+    paragraphs = sorted(doc['provenance'].items(), key=lambda kv: order.get(kv[0], len(order)))
+    text = {**doc, 'provenance': '\n'.join(f'{k}: {v}' for k, v in paragraphs)}
     target = out_dir / f'{doc["engine"]}.yaml'
     atomic_write_text(target, yaml.safe_dump(text, sort_keys=False, width=100))
     read_preset_file(target)  # what was written must load
