@@ -56,7 +56,7 @@ def test_the_identified_set_gives_the_xpbd_entry_when_xpbd_runs(hanging_bag, tmp
 
 def test_the_shipped_sets_give_newton_vbd_its_identified_entry_where_one_was_fitted():
     """The default model (VBD) runs with the set's VBD entry; its provenance says how."""
-    for name in ('identified',):
+    for name in presets.IDENTIFIED_SETS:
         folder = presets.config_dir() / 'presets' / name
         data = presets.read_preset_file(folder / 'newton.yaml')
         shipped = data['presets']['towel']['dynamic']
