@@ -197,3 +197,15 @@ def test_a_whole_run_ends_when_its_last_target_falls_before_the_motions_end(
     accounting = json.loads(summary.read_text())['real']['accounting']
     assert accounting['adds_up'] and accounting['not_received'] == 0, accounting
     assert accounting['after_trajectory'] == 1 and accounting['scored'] > 100, accounting
+
+
+def test_a_run_that_does_not_finish_in_time_is_one_line_not_a_bug(tmp_path, capsys, monkeypatch):
+    """A starved process (a loaded machine) is said as such, never as an internal error."""
+    from cloth_bench_ros.studies import hil_groups
+
+    monkeypatch.setattr(hil_groups, '_time_budget', lambda config: 0.0)
+    code = main(['hil', '--engine', 'mujoco', '--rate', '100', '--grid', '4x5', '--no-lockstep',
+                 '--output', str(tmp_path / 'hil')])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert 'did not finish in time' in err and 'internal error' not in err

@@ -337,9 +337,15 @@ def _run_processes(config: HilConfig, run_dir: Path) -> None:
         for group in _waited(config):
             try:
                 code = procs[group].wait(max(0.0, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                raise RuntimeError(
-                    f'HIL {config.ident()}: the {group} process did not finish in time '
+            except subprocess.TimeoutExpired:  # the machine's doing, not a bug: say so
+                from cloth_bench_ros.studies.processes import ProcessRunError
+
+                busy = (' (the observer runs at nice 19, off the critical path, so other work on'
+                        ' this machine can starve it: load average '
+                        f'{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)'
+                        if group == 'observer' else '')
+                raise ProcessRunError(
+                    f'HIL {config.ident()}: the {group} process did not finish in time{busy} '
                     f'(see {run_dir / (group + ".log")})'
                 ) from None
             if code != 0:
