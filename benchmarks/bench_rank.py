@@ -27,8 +27,7 @@ import time
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))  # the tests' recorder
 
-from camera_recording import (  # noqa: E402
-    CAMERA_TOPIC, make_camera_recording, make_repeated_recording)
+from camera_recording import CAMERA_TOPIC, make_rank_recordings  # noqa: E402
 from cloth_bench_ros import cli  # noqa: E402
 from cloth_bench_ros.paths import bundled_bag  # noqa: E402
 
@@ -42,13 +41,7 @@ def recordings(root: Path) -> Path:
     folder = root / 'recordings'
     if folder.is_dir():
         return folder
-    source = bundled_bag('towel', 'dynamic')
-    make_camera_recording(source, folder / 'one_mcap', seed=1, pre_roll=30, noise=0.002)
-    make_camera_recording(
-        source, folder / 'one_sqlite', seed=2, pre_roll=30, noise=0.002, storage='sqlite3'
-    )
-    make_repeated_recording(source, folder / 'three', rest_s=1.0, seed=3)
-    return folder
+    return make_rank_recordings(bundled_bag('towel', 'dynamic'), folder)
 
 
 def cpu_seconds() -> float:

@@ -245,3 +245,13 @@ def make_repeated_recording(
                 bag.write(CAMERA_TOPIC, POINTCLOUD2, stamp, serialize(cloud))
             t += len(frames) * period
     return starts
+
+
+def make_rank_recordings(source: Path, folder: Path) -> Path:
+    """One MCAP and one sqlite3 bag of one trial, one MCAP bag of three: five trials in folder."""
+    make_camera_recording(source, folder / 'one_mcap', seed=1, pre_roll=30, noise=0.002)
+    make_camera_recording(
+        source, folder / 'one_sqlite', seed=2, pre_roll=30, noise=0.002, storage='sqlite3'
+    )
+    make_repeated_recording(source, folder / 'three', rest_s=1.0, seed=3)
+    return folder

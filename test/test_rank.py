@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from camera_recording import CAMERA_TOPIC, make_camera_recording, make_repeated_recording
+from camera_recording import CAMERA_TOPIC, make_rank_recordings, make_repeated_recording
 from cloth_bench_ros import cli
 from cloth_bench_ros.core.metric_choice import metric
 from cloth_bench_ros.paths import bundled_bag
@@ -23,14 +23,8 @@ TINY = ['--topic', CAMERA_TOPIC, '--engine', 'mujoco', '--trials', '2', '--sampl
 @pytest.fixture(scope='module')
 def recordings(tmp_path_factory) -> Path:
     """One MCAP and one sqlite3 bag of one fling, one MCAP bag of three: five trials."""
-    root = tmp_path_factory.mktemp('recordings')
-    source = bundled_bag('towel', 'dynamic')
-    make_camera_recording(source, root / 'one_mcap', seed=1, pre_roll=30, noise=0.002)
-    make_camera_recording(
-        source, root / 'one_sqlite', seed=2, pre_roll=30, noise=0.002, storage='sqlite3'
-    )
-    make_repeated_recording(source, root / 'three', rest_s=1.0, seed=3)
-    return root
+    return make_rank_recordings(bundled_bag('towel', 'dynamic'),
+                                tmp_path_factory.mktemp('recordings'))
 
 
 def test_folds_leave_one_trial_out_up_to_five_then_five_folds():
