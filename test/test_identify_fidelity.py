@@ -13,7 +13,7 @@ import json
 from cloth_bench_ros import cli
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.identify import identify, IdentifySpec, TRIALS_FILE
-from cloth_bench_ros.studies.identify_fidelity import coarse_grids, STARTUP
+from cloth_bench_ros.studies.identify_fidelity import coarse_grids, Pruner, STARTUP
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from identify_target import write_engine_target_bag
 import pytest
@@ -65,6 +65,17 @@ def test_a_pruned_study_counts_pruned_trials_in_its_budget_and_tells_optuna(targ
     assert [row[1] is None for row in curve] == [st != 'ok' for st in statuses]
     assert cli.main(['report', str(tmp_path / 'out')]) == 0  # the report takes pruned trials
     assert (tmp_path / 'out' / 'report' / 'report.md').stat().st_size > 0
+
+
+def test_pybullet_is_screened_on_one_halving_of_its_mesh_the_others_on_two():
+    import optuna
+
+    study = optuna.create_study()
+    assert Pruner('coarse', study, None, None, 'mujoco').grids == ((3, 4), (6, 8))
+    assert Pruner('coarse', study, None, None, 'newton').grids == ((3, 4), (6, 8))
+    assert Pruner('coarse', study, None, None, 'bullet').grids == ((6, 8),)
+    assert Pruner('coarse', study, (6, 8), None, 'bullet').grids == ((3, 4),)
+    assert Pruner('full', study, None, None, 'bullet').grids == ()
 
 
 def test_coarse_rungs_score_the_whole_window_on_coarser_meshes_and_keep_the_full_value(

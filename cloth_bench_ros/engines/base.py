@@ -121,6 +121,8 @@ class ClothEngine(abc.ABC):
 
     name: ClassVar[str]
     params: ClassVar[tuple[Param, ...]]
+    # Multi-fidelity `coarse`: how many halvings of the mesh still rank parameters as it does.
+    screen_halvings: ClassVar[int] = 2
     device: str = 'cpu'  # the compute device this engine runs on (`device_for` its params)
 
     def __init__(

@@ -275,7 +275,7 @@ def run_sampler(
     study = open_study(spec, sampler)
     done = (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED)
     finished = len(study.get_trials(deepcopy=False, states=done))
-    pruner = Pruner(spec.fidelity, study, spec.grid, spec.cloth_size)
+    pruner = Pruner(spec.fidelity, study, spec.grid, spec.cloth_size, spec.engine)
     left = max(0, spec.trials - finished)
     batch = spec.batch or worker_slots(client)
     bar = tqdm(
@@ -376,7 +376,7 @@ def identify(
     samplers = samplers_of(spec.sampler)
     for s in samplers:
         make_sampler(s, spec.seed)  # a missing dependency fails before any work
-    check_fidelity(spec.fidelity, spec.grid, spec.cloth_size)
+    check_fidelity(spec.fidelity, spec.grid, spec.cloth_size, spec.engine)
     with (
         ResultsLock(spec.output, 'identify'),
         open_client(scheduler, workers, spec.output / 'workers.log') as client,

@@ -10,7 +10,8 @@ full, as a `full` trial is. The rungs:
 - prune: the first RUNG of each bag's frames of the window, on the trial's own mesh; a kept trial
   runs on from there. Pruned above the KEEP quantile of every partial value so far.
 - coarse: the whole window on coarser meshes first (`coarse_grids`: a ladder of up to
-  COARSE_RUNGS meshes, each with half the vertices along each side of the next finer one; the
+  COARSE_RUNGS meshes, fewer where the engine says its `screen_halvings` are fewer (PyBullet:
+  one), each with half the vertices along each side of the next finer one; the
   engines scale their spacing-dependent parameters, so it is the same material), coarsest first;
   a trial kept at every rung is then run whole on its own mesh, so its value is the one `full`
   gives. Pruned at a rung above the COARSE_KEEP quantile of that rung's last COARSE_WINDOW values
@@ -36,10 +37,11 @@ COARSE_KEEP, COARSE_WINDOW, COARSE_RUNGS = 0.2, 16, 2
 
 
 def coarse_grids(
-    grid: tuple[int, int] | None, size: tuple[float, float] | None = None
+    grid: tuple[int, int] | None, size: tuple[float, float] | None = None,
+    rungs: int = COARSE_RUNGS,
 ) -> tuple[tuple[int, int], ...]:
     """
-    Return the rungs' meshes for `coarse`, coarsest first.
+    Return the rungs' meshes for `coarse`, coarsest first: at most `rungs` (halvings of the mesh).
 
     Each is (nx + 1) // 2 by (nz + 1) // 2 of the next finer one (at least 3 x 3) where that has at
     most half its vertices. InputError where the mesh has none.
@@ -49,7 +51,7 @@ def coarse_grids(
 
     mesh = cloth_grid(grid, size) or ClothGrid()
     ladder = [(mesh.nx, mesh.nz)]
-    while len(ladder) <= COARSE_RUNGS:
+    while len(ladder) <= rungs:
         nx, nz = ladder[-1]
         coarse = (max(3, (nx + 1) // 2), max(3, (nz + 1) // 2))
         if 2 * coarse[0] * coarse[1] > nx * nz:
@@ -64,14 +66,22 @@ def coarse_grids(
     return tuple(reversed(ladder[1:]))
 
 
+def screen_rungs(engine: str) -> int:
+    """Return how many coarser meshes `coarse` screens `engine`'s trials on (its halvings)."""
+    from cloth_bench_ros.engines import engine_class
+
+    return min(COARSE_RUNGS, engine_class(engine).screen_halvings)
+
+
 def check_fidelity(
-    fidelity: str, grid: tuple[int, int] | None, size: tuple[float, float] | None = None
+    fidelity: str, grid: tuple[int, int] | None, size: tuple[float, float] | None = None,
+    engine: str = 'mujoco',
 ) -> None:
     """Raise InputError for an unknown fidelity, or for `coarse` on a mesh with no coarser one."""
     if fidelity not in FIDELITIES:
         raise InputError(f'unknown fidelity {fidelity!r} (valid: {", ".join(FIDELITIES)})')
     if fidelity == 'coarse':
-        coarse_grids(grid, size)
+        coarse_grids(grid, size, screen_rungs(engine))
 
 
 class Pruner:
@@ -79,10 +89,10 @@ class Pruner:
 
     def __init__(
         self, fidelity: str, study: Any, grid: tuple[int, int] | None = None,
-        size: tuple[float, float] | None = None,
+        size: tuple[float, float] | None = None, engine: str = 'mujoco',
     ) -> None:
         self.fidelity = fidelity
-        self.grids = coarse_grids(grid, size) if fidelity == 'coarse' else ()
+        self.grids = coarse_grids(grid, size, screen_rungs(engine)) if fidelity == 'coarse' else ()
         self.partials: dict[int, list[float]] = {}  # per rung (step)
         for t in sorted(study.get_trials(deepcopy=False), key=lambda t: t.number):
             self._keep(t.intermediate_values)  # a resumed study keeps its partial values
