@@ -69,6 +69,13 @@ def _wait(predicate, timeout: float, what: str) -> None:
         time.sleep(0.2)
 
 
+def _scheduler_address(info: Path) -> str:
+    try:
+        return json.loads(info.read_text())['address']
+    except (OSError, ValueError, KeyError):
+        return ''
+
+
 def _rows(out: Path) -> list[dict]:
     path = out / sw.RESULTS_FILE
     return [json.loads(line) for line in path.read_text().splitlines()] if path.exists() else []
@@ -103,8 +110,9 @@ def test_sweep_and_identify_on_an_external_scheduler_survive_a_killed_worker(bag
     )
     procs = [scheduler]
     try:
-        _wait(info.exists, 60, 'the scheduler file')
-        address = json.loads(info.read_text())['address']
+        # dask creates the file before it writes it: wait for its whole JSON
+        _wait(lambda: _scheduler_address(info), 60, 'the scheduler file')
+        address = _scheduler_address(info)
         assert address.startswith('tcp://127.0.0.1:')
         workers = [
             subprocess.Popen(
