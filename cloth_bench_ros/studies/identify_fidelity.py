@@ -74,8 +74,7 @@ def screen_rungs(engine: str) -> int:
 
 
 def check_fidelity(
-    fidelity: str, grid: tuple[int, int] | None, size: tuple[float, float] | None = None,
-    engine: str = 'mujoco',
+    fidelity: str, grid: tuple[int, int] | None, size: tuple[float, float] | None, engine: str,
 ) -> None:
     """Raise InputError for an unknown fidelity, or for `coarse` on a mesh with no coarser one."""
     if fidelity not in FIDELITIES:
@@ -88,8 +87,8 @@ class Pruner:
     """The partial values of a sampler's study, and the rung and threshold of the next trial."""
 
     def __init__(
-        self, fidelity: str, study: Any, grid: tuple[int, int] | None = None,
-        size: tuple[float, float] | None = None, engine: str = 'mujoco',
+        self, fidelity: str, study: Any, grid: tuple[int, int] | None,
+        size: tuple[float, float] | None, engine: str,
     ) -> None:
         self.fidelity = fidelity
         self.grids = coarse_grids(grid, size, screen_rungs(engine)) if fidelity == 'coarse' else ()
