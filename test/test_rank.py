@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 import json
 from pathlib import Path
 
@@ -11,8 +12,10 @@ from cloth_bench_ros.core.metric_choice import metric
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.report.rank import deadline_ms, significance, within_reference_error
 from cloth_bench_ros.report.ranking import Ranked
-from cloth_bench_ros.studies.rank import folds
+from cloth_bench_ros.studies.objective import evaluate, Trial
+from cloth_bench_ros.studies.rank import folds, SHARED_FILE
 from cloth_bench_ros.studies.rank_trials import RankTrial, reference_error
+from cloth_bench_ros.studies.shared_simulations import fold_result, SharedSimulations
 import pytest
 
 TINY = ['--topic', CAMERA_TOPIC, '--engine', 'mujoco', '--trials', '2', '--sampler', 'tpe',
@@ -74,6 +77,7 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
     assert cells[4] == f'[{ranked["low"]:.4f}, {ranked["high"]:.4f}]'
     assert cells[8] == f'{floor["mean"]:.4f}' and cells[9] == f'{timing["step_p99_ms"]:.2f}'
     assert 'towel_dynamic at 100 Hz (p99 < 5.00 ms): ' in printed
+    _check_shared_simulations(out, result)
     # The same command again: every identification and cell is kept.
     assert cli.main(['rank', str(recordings), '--output', str(out), *TINY]) == 0
     again = capsys.readouterr().out
@@ -103,6 +107,47 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
     for figure in ('rank_towel_dynamic.png', 'rank_speed_towel_dynamic.png'):
         assert (out / 'report' / figure).stat().st_size > 1000 and figure in md
     assert '| towel_dynamic | 1 | mujoco |' in printed and '2 plots' in printed
+
+
+def _check_shared_simulations(out: Path, result: dict) -> None:
+    """Later folds reuse the first's simulations, and a reused value is the one a run gives."""
+    bags = {t['name']: t['bag'] for t in result['trials']}
+    folder = out / 'identify' / 'towel_dynamic' / 'mujoco'
+    kept = [json.loads(line) for line in (folder / SHARED_FILE).read_text().splitlines()]
+    assert len(kept) == 3 and all(len(k['bags']) == 5 for k in kept)  # preset + 2 trials
+    for fold in (1, 2):
+        summary = json.loads((folder / f'fold{fold}' / 'identification.json').read_text())
+        rows = [json.loads(line) for line in (folder / f'fold{fold}' / 'trials.jsonl')
+                .read_text().splitlines()]
+        assert summary['shared_simulations'] == (
+            {'reused': 0, 'run': 3} if fold == 1 else {'reused': 3, 'run': 0})
+        assert all(r['reused'] == (fold > 1) for r in rows)
+        train = [bags[n] for n in result['identified'][f'towel_dynamic|mujoco|{fold}']['training']]
+        row = rows[-1]
+        direct = evaluate(Trial('mujoco', 'towel', 'dynamic', train[0],
+                                tuple(sorted(row['params'].items())), grid=(6, 8), max_frames=6,
+                                number=row['number'], sampler='tpe', also=tuple(train[1:])))
+        for key in ('value', 'CD', 'HD', 'frames', 'status', 'per_bag'):
+            assert row[key] == direct[key], key
+        assert direct['cpu_s'] > 0 and (row['cpu_s'] == 0) == (fold > 1)
+
+
+def test_a_simulation_is_shared_only_whole_and_on_the_groups_trials(tmp_path):
+    path = tmp_path / SHARED_FILE
+    path.write_text('{"key": "torn')  # an interrupted write: that simulation runs again
+    shared = SharedSimulations(path, ('a', 'b', 'c'))
+    assert shared.rows == {}
+    trial = Trial('mujoco', 'towel', 'dynamic', 'a', (), also=('b',))
+    assert shared.applies(trial)
+    assert not shared.applies(replace(trial, also=('elsewhere',)))
+    assert not shared.applies(replace(trial, rung=0.25))
+    assert not shared.applies(replace(trial, ladder=(((3, 4), None),)))
+    assert not shared.applies(replace(trial, all_metrics=True))
+    row = {'key': 'k', 'bags': {'a': [0.01, 0.1, 10], 'b': [None, None, 0], 'c': [0.03, 0.3, 9]},
+           'diverged': ['nan in the state', 40], 'cpu_s': 2.0}
+    assert fold_result(replace(trial, also=('c',)), row, reused=True)['value'] == 0.02
+    lost = fold_result(trial, row, reused=False)
+    assert lost['status'] == 'diverged' and lost['step'] == 40 and lost['cpu_s'] == 2.0
 
 
 def test_report_of_a_damaged_rank_directory_is_one_line(tmp_path, capsys):

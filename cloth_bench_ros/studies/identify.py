@@ -28,7 +28,6 @@ import time
 from typing import Any, Sequence
 import warnings
 
-from cloth_bench_ros.core.cloth_size import cloth_record
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cloth import cloth_name
@@ -44,6 +43,7 @@ from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-ex
     importance,
 )
 from cloth_bench_ros.studies.objective import evaluate, Trial
+from cloth_bench_ros.studies.shared_simulations import SharedSimulations
 
 SAMPLERS = ('cmaes', 'tpe', 'gp', 'both')
 DEFAULT_TRIALS = 500
@@ -89,6 +89,8 @@ class IdentifySpec:
     fidelity: str = 'full'  # or prune, coarse: multi-fidelity (studies/identify_fidelity.py)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, given: not fitted unless named in `params`
+    pool: tuple[str, ...] = ()  # rank's: every trial of the group, scored by each simulation
+    shared: Path | None = None  # rank's: the folds' simulations (studies.shared_simulations)
 
 
 def default_params(engine: str, model: str | None = None) -> list[str]:
@@ -258,14 +260,22 @@ def trial_of(
     )
 
 
+def submit(client: Any, task: Trial, shared: SharedSimulations | None = None) -> Any:
+    """Return the trial's future on the workers, or its result where `shared` already has it."""
+    return shared.submit(client, evaluate, task) if shared else client.submit(
+        evaluate, task, pure=False)
+
+
 def run_sampler(
-    client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool
+    client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool,
+    shared: SharedSimulations | None = None,
 ) -> Any:
     """
     Ask and tell until the study holds `spec.trials` finished trials, a batch in flight.
 
     Told in trial-number order, trial n + batch asked once trial n is told: the same history
     whatever order the workers finish in, so the same trials and automatic budget every time.
+    `shared` (a SharedSimulations): a simulation another fold ran already is not run again.
     """
     from cloth_bench_ros.studies.dask_executor import worker_slots
     from cloth_bench_ros.studies.identify_fidelity import Pruner
@@ -288,15 +298,16 @@ def run_sampler(
         nonlocal left
         trial = study.ask(space)
         task = trial_of(spec, trial.params, trial.number, sampler, pruner.rung())
-        running.append((trial, client.submit(evaluate, task, pure=False)))
+        running.append((trial, task, submit(client, task, shared)))
         left -= 1
 
     for _ in range(min(batch, left)):
         ask()
     while running:
-        trial, future = running.popleft()
+        trial, task, future = running.popleft()
         try:
             result = future.result()
+            result = shared.finish(task, result) if shared else result
         except Exception as exc:  # the trial killed every worker that tried it
             result = {
                 'number': trial.number, 'sampler': sampler, 'params': trial.params,
@@ -319,14 +330,17 @@ def run_sampler(
 
 
 def run_budgeted(
-    client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool
+    client: Any, spec: IdentifySpec, sampler: str, space: dict, record: Any, progress: bool,
+    shared: SharedSimulations | None = None,
 ) -> tuple[Any, dict]:
     """Run a sampler to spec.trials, or (AUTO) doubling from AUTO_FIRST until budget_reached."""
+    run = partial(run_sampler, client, sampler=sampler, space=space, record=record,
+                  progress=progress, shared=shared)
     if spec.trials != AUTO:
-        return run_sampler(client, spec, sampler, space, record, progress), {'rule': 'fixed'}
+        return run(spec=spec), {'rule': 'fixed'}
     n, steps = AUTO_FIRST, []
     while True:
-        study = run_sampler(client, replace(spec, trials=n), sampler, space, record, progress)
+        study = run(spec=replace(spec, trials=n))
         if n == AUTO_FIRST:
             n *= 2
             continue
@@ -362,7 +376,7 @@ def identify(
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.dask_executor import open_client
     from cloth_bench_ros.studies.identify_fidelity import check_fidelity
-    from cloth_bench_ros.studies.identify_output import validate, write_outputs
+    from cloth_bench_ros.studies.identify_output import summarise, validate, write_outputs
     from cloth_bench_ros.studies.results import append_row, ResultsLock
 
     start = time.perf_counter()
@@ -381,9 +395,13 @@ def identify(
         ResultsLock(spec.output, 'identify'),
         open_client(scheduler, workers, spec.output / 'workers.log') as client,
     ):
-        before = client.submit(evaluate, trial_of(spec, {}, -1, 'preset'), pure=False).result()
+        shared = SharedSimulations(spec.shared, spec.pool) if spec.shared else None
+        preset_trial = trial_of(spec, {}, -1, 'preset')
+        before = submit(client, preset_trial, shared).result()
+        before = shared.finish(preset_trial, before) if shared else before
         record = partial(append_row, spec.output / TRIALS_FILE)
-        budgets = {s: run_budgeted(client, spec, s, space, record, progress) for s in samplers}
+        budgets = {s: run_budgeted(client, spec, s, space, record, progress, shared)
+                   for s in samplers}
         studies = {s: study for s, (study, _) in budgets.items()}
         best = min(studies, key=lambda s: finite_or_inf(best_value(studies[s])))
         if not math.isfinite(best_value(studies[best])):
@@ -395,52 +413,8 @@ def identify(
         summary = summarise(spec, space, base, before, studies, best, validation)
         for s, (_, budget) in budgets.items():
             summary['per_sampler'][s]['budget'] = budget
+        if shared:
+            summary['shared_simulations'] = {'reused': shared.reused, 'run': shared.simulated}
         summary['wall_s'] = time.perf_counter() - start
         preset = write_outputs(spec, base, summary)
     return IdentifyOutcome(summary, preset, summary['wall_s'])
-
-
-def summarise(
-    spec: IdentifySpec,
-    space: dict,
-    base: dict,
-    before: dict,
-    studies: dict,
-    best: str,
-    validation: list,
-) -> dict:
-    """Return what identification.json keeps: problem, samplers' results, choice, validation."""
-    return {
-        'engine': spec.engine,
-        'cloth': spec.cloth,
-        'primitive': spec.primitive,
-        'bag': str(spec.bag),
-        'objective': spec.objective,
-        'seed': spec.seed,
-        'rate_hz': spec.rate_hz,
-        'grid': list(spec.grid) if spec.grid else None,
-        **cloth_record(spec.cloth_size, spec.cloth_mass),
-        'fixed': spec.fixed,
-        'max_frames': spec.max_frames,
-        'fidelity': spec.fidelity,
-        'space': {n: [d.low, d.high, d.log] for n, d in space.items()},
-        'samplers': list(studies),
-        'best_sampler': best,
-        'params': dict(studies[best].best_params),
-        'value': best_value(studies[best]),
-        'preset_params': {n: base.get(n) for n in space},
-        'preset_value': before['value'],
-        'preset_status': before['status'],
-        'per_sampler': {
-            s: {
-                'value': best_value(st),
-                'params': st.best_params if math.isfinite(best_value(st)) else {},
-                'convergence': convergence(st),
-                'importance': importance(st),
-                'trials': len(convergence(st)),
-                'pruned': sum(t.state.name == 'PRUNED' for t in st.get_trials(deepcopy=False)),
-            }
-            for s, st in studies.items()
-        },
-        'validation': validation,
-    }

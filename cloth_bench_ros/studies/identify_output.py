@@ -14,8 +14,9 @@ from pathlib import Path
 import platform
 from typing import Any
 
-from cloth_bench_ros.core.cloth_size import BENCHMARK_AREA, is_benchmark, size_text
+from cloth_bench_ros.core.cloth_size import BENCHMARK_AREA, cloth_record, is_benchmark, size_text
 from cloth_bench_ros.studies.cells import Cell, find_bags
+from cloth_bench_ros.studies.identify_curve import best_value, convergence, importance
 from cloth_bench_ros.studies.results import append_row, json_safe, load_rows, RESULTS_FILE
 import numpy as np
 
@@ -203,3 +204,49 @@ def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
         spec.output / 'identification.json', json.dumps(json_safe(summary), indent=1) + '\n'
     )
     return preset
+
+
+def summarise(
+    spec: Any,
+    space: dict,
+    base: dict,
+    before: dict,
+    studies: dict,
+    best: str,
+    validation: list,
+) -> dict:
+    """Return what identification.json keeps: problem, samplers' results, choice, validation."""
+    return {
+        'engine': spec.engine,
+        'cloth': spec.cloth,
+        'primitive': spec.primitive,
+        'bag': str(spec.bag),
+        'objective': spec.objective,
+        'seed': spec.seed,
+        'rate_hz': spec.rate_hz,
+        'grid': list(spec.grid) if spec.grid else None,
+        **cloth_record(spec.cloth_size, spec.cloth_mass),
+        'fixed': spec.fixed,
+        'max_frames': spec.max_frames,
+        'fidelity': spec.fidelity,
+        'space': {n: [d.low, d.high, d.log] for n, d in space.items()},
+        'samplers': list(studies),
+        'best_sampler': best,
+        'params': dict(studies[best].best_params),
+        'value': best_value(studies[best]),
+        'preset_params': {n: base.get(n) for n in space},
+        'preset_value': before['value'],
+        'preset_status': before['status'],
+        'per_sampler': {
+            s: {
+                'value': best_value(st),
+                'params': st.best_params if math.isfinite(best_value(st)) else {},
+                'convergence': convergence(st),
+                'importance': importance(st),
+                'trials': len(convergence(st)),
+                'pruned': sum(t.state.name == 'PRUNED' for t in st.get_trials(deepcopy=False)),
+            }
+            for s, st in studies.items()
+        },
+        'validation': validation,
+    }

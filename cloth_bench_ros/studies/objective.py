@@ -191,8 +191,12 @@ def _evaluate(trial: Trial) -> dict:
                 name: float(np.mean([metric.value(b, trial.primitive) for b in per_bag]))
                 for name, metric in METRICS.items()
             }
-        if trial.also:
+        if trial.also:  # per bag too (studies.shared_simulations keeps them for other folds)
             out['per_bag'] = [_num(b[f'CD_{suffix}']) for b in per_bag]
+            out['per_bag_hd'] = [_num(b[f'HD_{suffix}']) for b in per_bag]
+            out['per_bag_frames'] = [int(b['frames_in_window']) for b in per_bag]
+            out['diverged'] = [m['diverged_reason'], m['diverged_at_step']] if m['diverged'] \
+                else None
         out['value'] = out['CD'] if trial.objective == 'cd' else out['HD']
         if rung is not None:  # the window ended at the rung: the partial value is the whole one
             out['partial'] = out['value']

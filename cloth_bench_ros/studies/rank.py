@@ -43,6 +43,7 @@ DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
 RATES = (10.0, 100.0, 1000.0)
 MAX_FOLDS = 5
 CELLS_FILE = 'cells.jsonl'
+SHARED_FILE = 'simulations.jsonl'
 
 
 class RankError(ClothBenchError, ValueError):
@@ -109,9 +110,15 @@ def _read_cells(path: Path) -> dict[str, dict]:
     return rows
 
 
-def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTrial], out: Path,
-              scheduler: str | None, workers: int | None, progress: bool) -> dict:
-    """Return the identified parameters of one fold (resumed or reused when already done)."""
+def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTrial],
+              group: list[RankTrial], out: Path, scheduler: str | None, workers: int | None,
+              progress: bool) -> dict:
+    """
+    Return the identified parameters of one fold (resumed or reused when already done).
+
+    The folds of an entrant share their simulations (studies.shared_simulations), kept beside
+    the folds' folders: the same values, engine time spent once per parameter set.
+    """
     from cloth_bench_ros.studies.identify import identify, IdentifySpec, SUMMARY_FILE
 
     bags = [t.bag for t in train]
@@ -135,6 +142,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         {**spec.fixed.get(engine, {}), **overrides}, validate_seeds=0,
         max_frames=spec.max_frames, also=tuple(bags[1:]), fidelity=spec.fidelity,
         cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
+        pool=tuple(t.bag for t in group), shared=out.parent / SHARED_FILE,
     )
     summary = identify(ident, scheduler, workers, progress).summary
     summary['rank_stamp'] = stamp
@@ -201,7 +209,7 @@ def run_rank(
                 for k, held in enumerate(folds(len(members))):
                     train = [t for i, t in enumerate(members) if i not in held]
                     say(f'identify {name} on {group} fold {k + 1}: {len(train)} training trials')
-                    summary = _identify(spec, engine, overrides, train,
+                    summary = _identify(spec, engine, overrides, train, members,
                                         out / 'identify' / group / name / f'fold{k + 1}',
                                         scheduler, workers, progress)
                     fitted = {**preset, **summary['params']}

@@ -1,0 +1,125 @@
+"""
+Simulations that the folds of one ranking share (studies.rank's identifications).
+
+A trial's simulation depends on the engine, its parameters, the seed, the rate, the mesh and the
+cloth, never on the recording it is scored against: every trial of a cloth and task is driven
+along the same targets. So a fold's identification runs each simulation once, scored on every
+trial of the group (held-out ones too, written down but never part of its objective), and keeps
+the per-trial values in one file. Another fold that asks for the same parameters, as a seeded
+sampler does as long as the folds' values order the trials alike, takes its objective (the mean
+over its own training trials) from that file instead of simulating again: the same numbers, no
+engine time. Trials with a rung or a coarse ladder (multi-fidelity) are not shared.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+import json
+import math
+from pathlib import Path
+from typing import Any, Sequence
+
+from cloth_bench_ros.studies.objective import Trial
+import numpy as np
+
+
+@dataclass
+class KnownResult:
+    """A finished result that stands where a Dask future would (result() and release())."""
+
+    value: dict
+
+    def result(self) -> dict:
+        return self.value
+
+    def release(self) -> None:
+        pass
+
+
+class SharedSimulations:
+    """The group's simulations, each scored on every trial of `pool`, kept in `path` (JSONL)."""
+
+    def __init__(self, path: Path, pool: Sequence[str]) -> None:
+        self.path, self.pool = Path(path), tuple(pool)
+        self.rows: dict[str, dict] = {}
+        self.reused = self.simulated = 0
+        if self.path.exists():
+            for line in self.path.read_text().splitlines():
+                try:
+                    row = json.loads(line)
+                    self.rows[row['key']] = row
+                except (ValueError, KeyError, TypeError):
+                    continue  # a torn last line: that simulation runs again
+
+    def applies(self, trial: Trial) -> bool:
+        """Whether the trial's simulation can be shared: whole, and scored on bags of the pool."""
+        bags = (trial.bag, *trial.also)
+        return (trial.rung is None and not trial.ladder and not trial.all_metrics
+                and all(b in self.pool for b in bags))
+
+    def submit(self, client: Any, evaluate: Any, trial: Trial) -> Any:
+        """Return the trial's result: known already, else the pool's simulation submitted."""
+        if not self.applies(trial):
+            return client.submit(evaluate, trial, pure=False)
+        row = self.rows.get(_key(trial))
+        if row is not None:
+            self.reused += 1
+            return KnownResult(fold_result(trial, row, reused=True))
+        pooled = replace(trial, bag=self.pool[0], also=self.pool[1:])
+        return client.submit(evaluate, pooled, pure=False)
+
+    def finish(self, trial: Trial, result: dict) -> dict:
+        """Return the trial's own result from the pool's; keep the pool's per-trial values."""
+        if not self.applies(trial) or result.get('reused'):
+            return result
+        self.simulated += 1
+        if 'per_bag' not in result:  # it could not even run: nothing per trial to keep
+            return result
+        key = _key(trial)
+        row: dict[str, Any] = {
+            'key': key,
+            'bags': {
+                bag: [cd, hd, frames] for bag, cd, hd, frames in zip(
+                    self.pool, result['per_bag'], result['per_bag_hd'], result['per_bag_frames'])
+            },
+            **{k: result.get(k) for k in ('diverged', 'step_p50_ms', 'step_p99_ms', 'cpu_s',
+                                          'wall_s')},
+        }
+        self.rows[key] = row
+        from cloth_bench_ros.studies.results import append_row
+
+        append_row(self.path, row)
+        return fold_result(trial, row, reused=False)
+
+
+def fold_result(trial: Trial, row: dict, reused: bool) -> dict:
+    """Return what evaluate() gives for the trial's own bags, from a pooled simulation's row."""
+    per = [row['bags'][b] for b in (trial.bag, *trial.also)]
+    cd = float(np.mean([p[0] if p[0] is not None else math.nan for p in per]))
+    hd = float(np.mean([p[1] if p[1] is not None else math.nan for p in per]))
+    value = cd if trial.objective == 'cd' else hd
+    out = {
+        'number': trial.number, 'sampler': trial.sampler, 'params': dict(trial.params),
+        'value': value, 'CD': cd, 'HD': hd, 'frames': int(sum(p[2] for p in per)),
+        'status': 'ok', 'reason': '', 'step': None,
+        'step_p50_ms': row.get('step_p50_ms'), 'step_p99_ms': row.get('step_p99_ms'),
+        'per_bag': [p[0] for p in per], 'reused': reused,
+        # a reused simulation costs no engine time; the first fold's pays for it
+        'cpu_s': 0.0 if reused else row.get('cpu_s'),
+        'wall_s': 0.0 if reused else row.get('wall_s'),
+    }
+    if trial.also == ():
+        out.pop('per_bag')
+    diverged = row.get('diverged')
+    if not math.isfinite(value):
+        if diverged:
+            out.update(status='diverged', reason=diverged[0], step=diverged[1])
+        else:
+            out.update(status='error', reason='no frame could be scored')
+    return out
+
+
+def _key(trial: Trial) -> str:
+    """Return what a simulation depends on: every field but the bags and the trial's labels."""
+    fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='', objective='cd'))
+    return json.dumps(fields, sort_keys=True, default=str)
