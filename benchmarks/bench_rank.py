@@ -4,7 +4,7 @@ The whole `cloth-bench rank` command on three camera-like recordings, timed.
 The recordings are those of the rank tests, written by rosbags (not by the project's writer):
 one MCAP bag of one towel fling, one sqlite3 bag of one, one MCAP bag of three with rest between
 them; five trials, each a noisy camera-like copy of the bundled fling. The command runs as a user
-types it (default entrants MuJoCo, PyBullet and Newton XPBD, `--trials auto`, both samplers,
+types it (default entrants MuJoCo, PyBullet and Newton XPBD, `--trials auto`, TPE,
 leave-one-trial-out, 3 held-out seeds, rates 10/100/1000 Hz) on `--workers` local processes; the
 script prints the wall time against the goal (30 min on two cores), the process tree's CPU time,
 the ranking with its intervals and the floor.

@@ -59,7 +59,7 @@ class RankSpec:
     entrants: Sequence[tuple[str, dict]] = DEFAULT_ENTRANTS
     replay: ReplayOptions = field(default_factory=ReplayOptions)  # cloth, task, topic, ...
     trials: int = 0  # identification budget per sampler (AUTO: from the convergence curve)
-    sampler: str = 'both'
+    sampler: str = 'tpe'  # both (CMA-ES too) doubles the cost (docs/identification.md)
     seeds: int = 3  # held-out seeds 1..seeds
     rate_hz: float = OPTIONS['rate_hz'].default
     rates: Sequence[float] = RATES
