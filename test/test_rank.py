@@ -4,7 +4,10 @@ from __future__ import annotations
 
 from dataclasses import replace
 import json
+import math
+import os
 from pathlib import Path
+import time
 
 from camera_recording import CAMERA_TOPIC, make_rank_recordings, make_repeated_recording
 from cloth_bench_ros import cli
@@ -12,10 +15,11 @@ from cloth_bench_ros.core.metric_choice import metric
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.report.rank import deadline_ms, significance, within_reference_error
 from cloth_bench_ros.report.ranking import Ranked
+from cloth_bench_ros.studies import objective
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from cloth_bench_ros.studies.rank import folds, SHARED_FILE
 from cloth_bench_ros.studies.rank_trials import RankTrial, reference_error
-from cloth_bench_ros.studies.shared_simulations import fold_result, SharedSimulations
+from cloth_bench_ros.studies.shared_simulations import SharedSimulations
 import pytest
 
 TINY = ['--topic', CAMERA_TOPIC, '--engine', 'mujoco', '--trials', '2', '--sampler', 'tpe',
@@ -107,6 +111,14 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
     for figure in ('rank_towel_dynamic.png', 'rank_speed_towel_dynamic.png'):
         assert (out / 'report' / figure).stat().st_size > 1000 and figure in md
     assert '| towel_dynamic | 1 | mujoco |' in printed and '2 plots' in printed
+    # A recording written again: the folds trained on its trial, and its held-out cells, anew.
+    (db,) = (recordings / 'one_sqlite').glob('*.db3')
+    os.utime(db, ns=(db.stat().st_atime_ns, db.stat().st_mtime_ns + 10**9))
+    assert cli.main(['rank', str(recordings), '--output', str(out), *TINY]) == 0
+    printed = capsys.readouterr().out
+    assert printed.count('changed since it was identified: identified again') == 4
+    assert 'fold2: its trials' not in printed  # the fold that holds that trial out
+    assert 'cells: 11 (9 kept from an earlier run)' in printed
 
 
 def _check_shared_simulations(out: Path, result: dict) -> None:
@@ -130,24 +142,43 @@ def _check_shared_simulations(out: Path, result: dict) -> None:
         for key in ('value', 'CD', 'HD', 'frames', 'status', 'per_bag'):
             assert row[key] == direct[key], key
         assert direct['cpu_s'] > 0 and (row['cpu_s'] == 0) == (fold > 1)
+    # A worker keeps every bag a trial is scored on: five are decoded once, not every trial.
+    pool = list(bags.values())
+    evaluate(Trial('mujoco', 'towel', 'dynamic', pool[0], (), grid=(6, 8), max_frames=6,
+                   also=tuple(pool[1:])))
+    kept = {key[0] for key in objective._BAG_CACHE}
+    assert {str(Path(b).resolve()) for b in pool} <= kept
 
 
-def test_a_simulation_is_shared_only_whole_and_on_the_groups_trials(tmp_path):
+def test_a_simulation_is_shared_only_whole_on_the_groups_trials_as_they_were(tmp_path):
+    bags = []
+    for name in 'abc':
+        (tmp_path / name).write_bytes(name.encode())
+        bags.append(str(tmp_path / name))
+    a, b, c = bags
     path = tmp_path / SHARED_FILE
     path.write_text('{"key": "torn')  # an interrupted write: that simulation runs again
-    shared = SharedSimulations(path, ('a', 'b', 'c'))
+    shared = SharedSimulations(path, bags)
     assert shared.rows == {}
-    trial = Trial('mujoco', 'towel', 'dynamic', 'a', (), also=('b',))
-    assert shared.applies(trial)
+    trial = Trial('mujoco', 'towel', 'dynamic', a, (('young', 1e4),), also=(b,))
+    assert shared.applies(trial) and shared.known(trial) is None
     assert not shared.applies(replace(trial, also=('elsewhere',)))
     assert not shared.applies(replace(trial, rung=0.25))
     assert not shared.applies(replace(trial, ladder=(((3, 4), None),)))
     assert not shared.applies(replace(trial, all_metrics=True))
-    row = {'key': 'k', 'bags': {'a': [0.01, 0.1, 10], 'b': [None, None, 0], 'c': [0.03, 0.3, 9]},
-           'diverged': ['nan in the state', 40], 'cpu_s': 2.0}
-    assert fold_result(replace(trial, also=('c',)), row, reused=True)['value'] == 0.02
-    lost = fold_result(trial, row, reused=False)
+    pooled = {'per_bag': [0.01, math.nan, 0.03], 'per_bag_hd': [0.1, math.nan, 0.3],
+              'per_bag_frames': [10, 0, 9], 'diverged': ['nan in the state', 40], 'cpu_s': 2.0}
+    lost = shared.finish(trial, pooled)  # b's frames all came after the divergence
     assert lost['status'] == 'diverged' and lost['step'] == 40 and lost['cpu_s'] == 2.0
+    other_fold = replace(trial, bag=c, also=(a,), number=7, objective='hd')
+    again = SharedSimulations(path, bags).known(other_fold)  # read back from the file
+    assert again['value'] == pytest.approx(0.2) and again['CD'] == pytest.approx(0.02)
+    assert again['reused'] and again['cpu_s'] == 0 and again['number'] == 7
+    assert SharedSimulations(path, bags).known(replace(trial, params=())) is None
+    time.sleep(0.01)
+    (tmp_path / 'b').write_bytes(b'recorded again')
+    rewritten = SharedSimulations(path, bags)
+    assert rewritten.known(trial) is None and rewritten.known(other_fold) is not None
 
 
 def test_report_of_a_damaged_rank_directory_is_one_line(tmp_path, capsys):

@@ -44,7 +44,7 @@ RANK_FLAGS: tuple[common.Flag, ...] = (
     TRIALS.variant(
         default=0, help='identification trials per sampler, or auto (default auto)'
     ),
-    SAMPLER.variant(default='tpe', help='tpe (default), cmaes, gp, or both: the paper\'s pair, '
+    SAMPLER.variant(default='tpe', help="tpe (default), cmaes, gp, or both: the paper's pair, "
                     'about twice the time'),
     FIDELITY.variant(
         help='identification: full (default), or prune, coarse: multi-fidelity, as identify'

@@ -61,8 +61,15 @@ class Trial:
     cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
 
 
-def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
-    """Return a bag's change-of-phase frame and (stamp ns, points, NaN dropped), decoded once."""
+def bag_clouds(
+    bag: str, keep: int = _BAG_CACHE_SIZE
+) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]:
+    """
+    Return a bag's change-of-phase frame and (stamp ns, points, NaN dropped), decoded once.
+
+    The worker keeps the `keep` bags used last: a trial scored on more bags than the cache held
+    would decode every one of them again each trial.
+    """
     from cloth_bench_ros.core.phase import first_table_contact
     from cloth_bench_ros.core.pointcloud2 import drop_nan
     from cloth_bench_ros.data import BagReader
@@ -83,9 +90,10 @@ def bag_clouds(bag: str) -> tuple[int | None, list[tuple[int, np.ndarray, int]]]
             trial is None or trial.primitive == 'dynamic'
         ):  # found in the data, as a run does
             cop = first_table_contact(points for _, points, _ in frames).index
-        while len(_BAG_CACHE) >= _BAG_CACHE_SIZE:
+        while len(_BAG_CACHE) >= keep:
             _BAG_CACHE.pop(next(iter(_BAG_CACHE)))
         _BAG_CACHE[key] = (cop, frames)
+    _BAG_CACHE[key] = _BAG_CACHE.pop(key)  # the least recently used goes first
     return _BAG_CACHE[key]
 
 
@@ -247,7 +255,7 @@ def _scored_bag(
     from cloth_bench_ros.core.evaluation import OnlineEvaluator
     from cloth_bench_ros.core.trajectory import Primitive
 
-    cut, frames = bag_clouds(bag)
+    cut, frames = bag_clouds(bag, max(_BAG_CACHE_SIZE, 1 + len(trial.also)))
     core = OnlineEvaluator(
         [trial.engine], Primitive(trial.primitive), offset, cut, FPS, faces=faces
     )

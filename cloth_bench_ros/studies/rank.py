@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import json
 from pathlib import Path
+import shutil
 import sys
 from typing import Any, Callable, Sequence
 
@@ -28,6 +29,7 @@ from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cloth import cloth_name
 from cloth_bench_ros.studies.objective import evaluate, OBJECTIVES, Trial
 from cloth_bench_ros.studies.rank_trials import (
+    file_identity,
     floor,
     prepare_trials,
     RankTrial,
@@ -44,6 +46,7 @@ RATES = (10.0, 100.0, 1000.0)
 MAX_FOLDS = 5
 CELLS_FILE = 'cells.jsonl'
 SHARED_FILE = 'simulations.jsonl'
+PROBLEM_FILE = 'rank_problem.json'
 
 
 class RankError(ClothBenchError, ValueError):
@@ -98,6 +101,13 @@ def groups_of(trials: Sequence[RankTrial], say: Callable[[str], None]) -> dict:
     return kept
 
 
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except ValueError:
+        return None  # damaged: as if another problem
+
+
 def _read_cells(path: Path) -> dict[str, dict]:
     rows = {}
     if path.exists():
@@ -112,7 +122,7 @@ def _read_cells(path: Path) -> dict[str, dict]:
 
 def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTrial],
               group: list[RankTrial], out: Path, scheduler: str | None, workers: int | None,
-              progress: bool) -> dict:
+              progress: bool, say: Callable[[str], None]) -> dict:
     """
     Return the identified parameters of one fold (resumed or reused when already done).
 
@@ -128,6 +138,17 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         'fixed': {**spec.fixed.get(engine, {}), **overrides}, 'fidelity': spec.fidelity,
         **cloth_record(spec.cloth_size, spec.cloth_mass),
     }))
+    # What the fold's journal was fitted to: another problem (its trials recorded again, another
+    # grid, rate, metric...) starts afresh; another budget or sampler resumes it.
+    problem = {**{k: v for k, v in stamp.items() if k not in ('trials', 'sampler')},
+               'data': json.loads(json.dumps([file_identity(Path(b)) for b in bags]))}
+    marker = out / PROBLEM_FILE
+    if marker.exists() and _read_json(marker) != problem:
+        say(f'{out.name}: its trials or settings changed since it was identified: identified '
+            'again')
+        shutil.rmtree(out)
+    out.mkdir(parents=True, exist_ok=True)
+    marker.write_text(json.dumps(problem))
     done = out / SUMMARY_FILE
     if done.exists():
         try:
@@ -156,7 +177,8 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
     frames = None if label == 'timing' else spec.max_frames
     every = label != 'timing' and spec.metric not in OBJECTIVES  # the faces: every metric
     key = (
-        f'{engine}|{sorted(params.items())}|{trial.bag}|{seed}|{rate:g}|{objective(spec)}|'
+        f'{engine}|{sorted(params.items())}|{trial.bag}|{file_identity(Path(trial.bag))}|'
+        f'{seed}|{rate:g}|{objective(spec)}|'
         f'{label}|{spec.grid}|{frames}' + ('|all' if every else '')
         + ('' if spec.cloth_size is None and spec.cloth_mass is None  # another cloth: other cells
            else f'|{spec.cloth_size}|{spec.cloth_mass}')
@@ -211,7 +233,7 @@ def run_rank(
                     say(f'identify {name} on {group} fold {k + 1}: {len(train)} training trials')
                     summary = _identify(spec, engine, overrides, train, members,
                                         out / 'identify' / group / name / f'fold{k + 1}',
-                                        scheduler, workers, progress)
+                                        scheduler, workers, progress, say)
                     fitted = {**preset, **summary['params']}
                     identified[f'{group}|{name}|{k + 1}'] = {
                         'group': group, 'entrant': name, 'fold': k + 1,

@@ -41,6 +41,9 @@ class SharedSimulations:
 
     def __init__(self, path: Path, pool: Sequence[str]) -> None:
         self.path, self.pool = Path(path), tuple(pool)
+        # A row's per-trial values name each bag with its files' sizes and times: a trial
+        # written again (its recording changed) or one the row never saw is simulated again.
+        self.names = {bag: bag_identity(bag) for bag in self.pool}
         self.rows: dict[str, dict] = {}
         self.reused = self.simulated = 0
         if self.path.exists():
@@ -61,12 +64,19 @@ class SharedSimulations:
         """Return the trial's result: known already, else the pool's simulation submitted."""
         if not self.applies(trial):
             return client.submit(evaluate, trial, pure=False)
-        row = self.rows.get(_key(trial))
-        if row is not None:
+        known = self.known(trial)
+        if known is not None:
             self.reused += 1
-            return KnownResult(fold_result(trial, row, reused=True))
+            return KnownResult(known)
         pooled = replace(trial, bag=self.pool[0], also=self.pool[1:])
         return client.submit(evaluate, pooled, pure=False)
+
+    def known(self, trial: Trial) -> dict | None:
+        """Return the trial's result where a kept simulation has values for all its bags."""
+        row = self.rows.get(_key(trial))
+        if row is None or not all(self.names[b] in row['bags'] for b in (trial.bag, *trial.also)):
+            return None
+        return fold_result(trial, row, reused=True, names=self.names)
 
     def finish(self, trial: Trial, result: dict) -> dict:
         """Return the trial's own result from the pool's; keep the pool's per-trial values."""
@@ -79,7 +89,7 @@ class SharedSimulations:
         row: dict[str, Any] = {
             'key': key,
             'bags': {
-                bag: [cd, hd, frames] for bag, cd, hd, frames in zip(
+                self.names[bag]: [cd, hd, frames] for bag, cd, hd, frames in zip(
                     self.pool, result['per_bag'], result['per_bag_hd'], result['per_bag_frames'])
             },
             **{k: result.get(k) for k in ('diverged', 'step_p50_ms', 'step_p99_ms', 'cpu_s',
@@ -89,12 +99,19 @@ class SharedSimulations:
         from cloth_bench_ros.studies.results import append_row
 
         append_row(self.path, row)
-        return fold_result(trial, row, reused=False)
+        return fold_result(trial, row, reused=False, names=self.names)
 
 
-def fold_result(trial: Trial, row: dict, reused: bool) -> dict:
+def bag_identity(bag: str) -> str:
+    """Return a bag's path with its files' sizes and modification times."""
+    from cloth_bench_ros.studies.rank_trials import file_identity
+
+    return json.dumps([bag, *file_identity(Path(bag))])
+
+
+def fold_result(trial: Trial, row: dict, reused: bool, names: dict | None = None) -> dict:
     """Return what evaluate() gives for the trial's own bags, from a pooled simulation's row."""
-    per = [row['bags'][b] for b in (trial.bag, *trial.also)]
+    per = [row['bags'][(names or {}).get(b, b)] for b in (trial.bag, *trial.also)]
     cd = float(np.mean([p[0] if p[0] is not None else math.nan for p in per]))
     hd = float(np.mean([p[1] if p[1] is not None else math.nan for p in per]))
     value = cd if trial.objective == 'cd' else hd
