@@ -62,6 +62,24 @@ def summary(out: Path) -> list[str]:
         for r in answer['ranking']:
             lines.append(f'  {r["name"]:<14} {r["mean"]:.4f} m [{r["low"]:.4f}, {r["high"]:.4f}]'
                          f' n={r["n"]}')
+    lines.extend(identification_costs(out))
+    return lines
+
+
+def identification_costs(out: Path) -> list[str]:
+    """Return per group and engine: trials per fold, simulations run and reused, engine-min."""
+    lines = []
+    for engine in sorted(out.glob('identify/*/*')):
+        trials, run, reused, cpu = [], 0, 0, 0.0
+        for fold in sorted(engine.glob('fold*')):
+            summary = json.loads((fold / 'identification.json').read_text())
+            trials.append('+'.join(str(s['trials']) for s in summary['per_sampler'].values()))
+            shared = summary.get('shared_simulations', {})
+            run, reused = run + shared.get('run', 0), reused + shared.get('reused', 0)
+            for line in (fold / 'trials.jsonl').read_text().splitlines():
+                cpu += json.loads(line).get('cpu_s') or 0.0
+        lines.append(f'{engine.parent.name} {engine.name}: trials per fold {", ".join(trials)}; '
+                     f'simulations run {run}, reused {reused}; {cpu / 60:.1f} engine-min')
     return lines
 
 
