@@ -23,13 +23,13 @@ from typing import Any, Callable, Sequence
 
 from cloth_bench_ros.core.cloth_size import cloth_record, grid_vertices
 from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
+from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cloth import cloth_name
 from cloth_bench_ros.studies.objective import evaluate, OBJECTIVES, Trial
 from cloth_bench_ros.studies.rank_trials import (
-    file_identity,
     floor,
     prepare_trials,
     RankTrial,
@@ -141,7 +141,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
     # What the fold's journal was fitted to: another problem (its trials recorded again, another
     # grid, rate, metric...) starts afresh; another budget or sampler resumes it.
     problem = {**{k: v for k, v in stamp.items() if k not in ('trials', 'sampler')},
-               'data': json.loads(json.dumps([file_identity(Path(b)) for b in bags]))}
+               'data': [fingerprint(Path(b)) for b in bags]}
     marker = out / PROBLEM_FILE
     if marker.exists() and _read_json(marker) != problem:
         say(f'{out.name}: its trials or settings changed since it was identified: identified '
@@ -177,7 +177,7 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
     frames = None if label == 'timing' else spec.max_frames
     every = label != 'timing' and spec.metric not in OBJECTIVES  # the faces: every metric
     key = (
-        f'{engine}|{sorted(params.items())}|{trial.bag}|{file_identity(Path(trial.bag))}|'
+        f'{engine}|{sorted(params.items())}|{trial.bag}|{fingerprint(Path(trial.bag))}|'
         f'{seed}|{rate:g}|{objective(spec)}|'
         f'{label}|{spec.grid}|{frames}' + ('|all' if every else '')
         + ('' if spec.cloth_size is None and spec.cloth_mass is None  # another cloth: other cells

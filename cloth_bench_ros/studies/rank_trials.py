@@ -87,8 +87,7 @@ def recordings_of(paths: Sequence[str]) -> list[Path]:
     return bags
 
 
-def file_identity(path: Path) -> list:
-    """Return a bag's (or a folder's) files with their sizes and modification times."""
+def _identity(path: Path) -> list:
     files = sorted(path.iterdir()) if path.is_dir() else [path]
     return [[f.name, f.stat().st_size, f.stat().st_mtime_ns] for f in files if f.is_file()]
 
@@ -152,7 +151,7 @@ def _split_one(
     reader: BagReader, path: Path, base: str, options: ReplayOptions, out: Path, say: Any
 ) -> list[RankTrial]:
     """Split one plain recording into trials written as bags under `out`."""
-    stamp = {'recording': file_identity(path), 'options': repr(options)}
+    stamp = {'recording': _identity(path), 'options': repr(options)}
     done = out / 'trials.json'
     if done.exists():
         try:

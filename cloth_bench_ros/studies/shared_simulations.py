@@ -41,8 +41,8 @@ class SharedSimulations:
 
     def __init__(self, path: Path, pool: Sequence[str]) -> None:
         self.path, self.pool = Path(path), tuple(pool)
-        # A row's per-trial values name each bag with its files' sizes and times: a trial
-        # written again (its recording changed) or one the row never saw is simulated again.
+        # A row's per-trial values name each bag with its fingerprint: a trial written again
+        # with other data (its recording changed), or one the row never saw, is simulated again.
         self.names = {bag: bag_identity(bag) for bag in self.pool}
         self.rows: dict[str, dict] = {}
         self.reused = self.simulated = 0
@@ -103,15 +103,15 @@ class SharedSimulations:
 
 
 def bag_identity(bag: str) -> str:
-    """Return a bag's path with its files' sizes and modification times."""
-    from cloth_bench_ros.studies.rank_trials import file_identity
+    """Return a bag's path with its fingerprint (data.bag_layout: its files' names and data)."""
+    from cloth_bench_ros.data.bag_layout import fingerprint
 
-    return json.dumps([bag, *file_identity(Path(bag))])
+    return f'{bag}|{fingerprint(Path(bag))}'
 
 
-def fold_result(trial: Trial, row: dict, reused: bool, names: dict | None = None) -> dict:
+def fold_result(trial: Trial, row: dict, reused: bool, names: dict[str, str]) -> dict:
     """Return what evaluate() gives for the trial's own bags, from a pooled simulation's row."""
-    per = [row['bags'][(names or {}).get(b, b)] for b in (trial.bag, *trial.also)]
+    per = [row['bags'][names[b]] for b in (trial.bag, *trial.also)]
     cd = float(np.mean([p[0] if p[0] is not None else math.nan for p in per]))
     hd = float(np.mean([p[1] if p[1] is not None else math.nan for p in per]))
     value = cd if trial.objective == 'cd' else hd
