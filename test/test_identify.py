@@ -7,12 +7,22 @@ section and user errors; real MuJoCo and PyBullet, real Optuna, a real Dask Loca
 
 from __future__ import annotations
 
+from dataclasses import replace
 import json
 import math
+import shutil
 
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines.presets import load_preset
-from cloth_bench_ros.studies.identify import budget_reached, identify, IdentifySpec, search_space
+from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.studies.identify import (
+    budget_reached,
+    identify,
+    IdentifySpec,
+    JOURNAL_FILE,
+    search_space,
+)
+from cloth_bench_ros.studies.identify_problem import changed_keys, identify_problem, PROBLEM_FILE
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from identify_target import write_engine_target_bag
 import pytest
@@ -277,3 +287,70 @@ def test_an_automatic_budget_doubles_until_the_curve_flattens(target, tmp_path, 
     gains = [g for _, _, g in budget['doublings']]
     assert budget['reached'] == (gains[-1] < 0.02) and all(g >= 0.02 for g in gains[:-1])
     assert budget['reached'] or budget['trials'] == 32
+
+
+def _rows(out) -> int:
+    return len((out / 'trials.jsonl').read_text().splitlines())
+
+
+def test_a_journal_resumes_only_the_problem_it_was_fitted_to(target, tmp_path):
+    """Another rate or bag data is refused before any trial; more trials resume the journal."""
+    bag = shutil.copytree(target, tmp_path / 'bag')
+    out = tmp_path / 'out'
+    spec = replace(_spec(bag, out, 'tpe', 2, ['damping'], batch=1), max_frames=5)
+    identify(spec, workers=1, progress=False)
+    journal, problem = (out / JOURNAL_FILE).read_bytes(), (out / PROBLEM_FILE).read_text()
+    assert _rows(out) == 2 and json.loads(problem)['mujoco-towel-dynamic']['rate_hz'] == 100.0
+    with pytest.raises(InputError, match=r'holds an identification of another problem '
+                       r'\(rate_hz changed\); give another --output'):
+        identify(replace(spec, rate_hz=50.0), workers=1, progress=False)
+    with pytest.raises(InputError, match=r'\(bags changed\)'):  # another bag, the same data
+        identify(replace(spec, bag=target), workers=1, progress=False)
+    shutil.rmtree(bag)  # the same bag recorded again, differently
+    write_engine_target_bag(bag, 'mujoco', {**FIXED, 'damping': 2.0}, GRID, 45)
+    with pytest.raises(InputError, match=r'\(bag data changed\)'):
+        identify(spec, workers=1, progress=False)
+    # Refused: the journal and its problem are untouched.
+    assert (out / JOURNAL_FILE).read_bytes() == journal and _rows(out) == 2
+    assert (out / PROBLEM_FILE).read_text() == problem
+    # The same problem with a larger budget resumes it: the two trials are kept, one more runs.
+    again = replace(spec, bag=target, trials=3)
+    (out / PROBLEM_FILE).unlink()  # a journal made before problems were kept resumes, and gets one
+    s = identify(again, workers=1, progress=False).summary
+    assert s['per_sampler']['tpe']['trials'] == 3 and _rows(out) == 3
+    recorded = json.loads((out / PROBLEM_FILE).read_text())['mujoco-towel-dynamic']
+    assert recorded == identify_problem(again, search_space(
+        'mujoco', ['damping'], {**load_preset('mujoco', 'towel', 'dynamic'), **FIXED}, 5.0))
+
+
+def test_the_changes_of_a_problem_are_named(target, tmp_path):
+    spec = _spec(target, tmp_path, 'tpe', 2, ['young'], batch=1)
+    base = {**load_preset('mujoco', 'towel', 'dynamic'), **FIXED}
+
+    def problem(**changes) -> dict:
+        s = replace(spec, **changes)
+        return identify_problem(s, search_space('mujoco', s.params, base, s.span))
+
+    old = problem()
+    # Neither the budget, the sampler nor rank's pool of shared simulations is the problem.
+    assert problem(trials=9, sampler='cmaes', pool=('x',), shared=tmp_path / 's') == old
+    assert changed_keys(old, problem(span=2.0)) == ['bounds of young']
+    assert changed_keys(old, problem(params=['damping'])) == ['params']
+    assert changed_keys(old, problem(grid=(6, 8), max_frames=3, seed=1)) == [
+        'grid', 'max_frames', 'seed']
+    assert changed_keys(old, problem(also=(str(target),), objective='hd')) == ['bags', 'objective']
+    assert changed_keys(old, problem(fixed={**FIXED, 'friction': 0.5})) == ['fixed values']
+    assert changed_keys(old, problem(fidelity='prune')) == ['fidelity']
+
+
+def test_cli_identify_refuses_a_journal_of_another_problem_in_one_line(target, tmp_path, capsys):
+    argv = ['identify', '--bag', str(target), '--output', str(tmp_path), '--no-progress',
+            '--sampler', 'tpe', '--trials', '1', '--params', 'damping', '--grid', '5x6',
+            '--max-frames', '5', '--validate-seeds', '0', '--workers', '1']
+    assert main(argv) == 0
+    capsys.readouterr()
+    assert main([*argv, '--rate', '50']) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err, err
+    assert f'{tmp_path} holds an identification of another problem (rate_hz changed)' in err
+    assert _rows(tmp_path) == 1

@@ -30,7 +30,6 @@ import warnings
 
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import OPTIONS
-from cloth_bench_ros.studies.cloth import cloth_name
 from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-exported)
     AUTO,
     AUTO_FIRST,
@@ -41,6 +40,12 @@ from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-ex
     convergence,
     finite_or_inf,
     importance,
+)
+from cloth_bench_ros.studies.identify_problem import (
+    check_problem,
+    identify_problem,
+    record_problem,
+    study_key,
 )
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from cloth_bench_ros.studies.shared_simulations import SharedSimulations
@@ -216,6 +221,12 @@ def repair_journal(path: Path) -> int:
     return dropped
 
 
+def study_name(spec: IdentifySpec, sampler: str) -> str:
+    """Return the sampler's study name: a cloth of another size or mass has its own study."""
+    stem, cloth = f'{spec.engine}-{spec.cloth}-{spec.primitive}', study_key(spec)
+    return f'{stem}-{sampler}{cloth[len(stem):]}'
+
+
 def open_study(spec: IdentifySpec, sampler: str) -> Any:
     """
     Return the sampler's study in the journal beside the results (created, or loaded).
@@ -234,10 +245,8 @@ def open_study(spec: IdentifySpec, sampler: str) -> Any:
     warnings.filterwarnings('ignore', category=optuna.exceptions.ExperimentalWarning)
     repair_journal(spec.output / JOURNAL_FILE)
     storage = JournalStorage(Backend(str(spec.output / JOURNAL_FILE)))
-    other = spec.cloth_size is not None or spec.cloth_mass is not None  # its own study
-    cloth = f'-{cloth_name(spec.cloth_size, spec.cloth_mass)}' if other else ''
     study = optuna.create_study(
-        study_name=f'{spec.engine}-{spec.cloth}-{spec.primitive}-{sampler}{cloth}',
+        study_name=study_name(spec, sampler),
         storage=storage,
         sampler=make_sampler(sampler, spec.seed),
         direction='minimize',
@@ -391,10 +400,13 @@ def identify(
     for s in samplers:
         make_sampler(s, spec.seed)  # a missing dependency fails before any work
     check_fidelity(spec.fidelity, spec.grid, spec.cloth_size, spec.engine)
+    problem = identify_problem(spec, space)  # the journal resumes only the problem it fitted
+    check_problem(spec, problem, spec.output / JOURNAL_FILE)
     with (
         ResultsLock(spec.output, 'identify'),
         open_client(scheduler, workers, spec.output / 'workers.log') as client,
     ):
+        record_problem(spec, problem, spec.output / JOURNAL_FILE)
         shared = SharedSimulations(spec.shared, spec.pool) if spec.shared else None
         preset_trial = trial_of(spec, {}, -1, 'preset')
         before = submit(client, preset_trial, shared).result()

@@ -1,0 +1,136 @@
+"""
+The problem an identification's journal was fitted to, so that a resumed one is the same problem.
+
+Everything a trial's value depends on except the budget and the sampler (another `--trials` or
+`--sampler` resumes the journal) and the cloth's size and mass (their study has its own name in
+the journal): the bags and their data (`data.bag_layout.fingerprint`), the metric, seed, rate,
+grid, frames, fixed values, search space and fidelity. Kept in `<output>/problem.json`, one entry
+per study of the journal; `identify` refuses, in one line, to resume a journal of another problem.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, TYPE_CHECKING
+
+from cloth_bench_ros.errors import InputError
+
+if TYPE_CHECKING:
+    from cloth_bench_ros.studies.identify import IdentifySpec
+
+PROBLEM_FILE = 'problem.json'
+# How a changed key is named to the user (others: the key itself).
+LABELS = {'fixed': 'fixed values'}
+
+
+def study_key(spec: IdentifySpec) -> str:
+    """Return the name of the spec's studies in the journal, less the sampler."""
+    from cloth_bench_ros.studies.cloth import cloth_name
+
+    other = spec.cloth_size is not None or spec.cloth_mass is not None  # its own study
+    cloth = f'-{cloth_name(spec.cloth_size, spec.cloth_mass)}' if other else ''
+    return f'{spec.engine}-{spec.cloth}-{spec.primitive}{cloth}'
+
+
+def _json(value: Any) -> Any:
+    """Return `value` as it reads back from JSON (tuples as lists), to compare with a file's."""
+    return json.loads(json.dumps(value, sort_keys=True, default=str))
+
+
+def identify_problem(spec: IdentifySpec, space: dict) -> dict:
+    """
+    Return the problem `spec` identifies over `space` (name -> Optuna distribution), as JSON.
+
+    Not in it: the budget, the samplers, the cloth's size and mass, and rank's `pool` and
+    `shared` (they change no value).
+    """
+    from cloth_bench_ros.data.bag_layout import fingerprint
+    from optuna.distributions import distribution_to_json
+
+    bags = [Path(b) for b in (spec.bag, *spec.also)]
+    return _json({
+        'engine': spec.engine,
+        'cloth': spec.cloth,
+        'primitive': spec.primitive,
+        'bags': [{'bag': str(b.resolve()), 'fingerprint': fingerprint(b)} for b in bags],
+        'objective': spec.objective,
+        'seed': spec.seed,
+        'rate_hz': float(spec.rate_hz),
+        'grid': spec.grid,
+        'max_frames': spec.max_frames,
+        'fixed': dict(spec.fixed),
+        'space': {name: json.loads(distribution_to_json(d)) for name, d in space.items()},
+        'fidelity': spec.fidelity,
+    })
+
+
+def changed_keys(old: dict, new: dict) -> list[str]:
+    """
+    Return what differs between two problems, readable: e.g. ['bag data', 'rate_hz'].
+
+    Bags: `bags` where their paths differ, `bag data` where only their fingerprints do. Space:
+    `params` where other parameters are fitted, `bounds of <name>` where a range changed.
+    """
+    changed = []
+    for key in sorted(set(old) | set(new), key=lambda k: (k != 'bags', k)):
+        a, b = old.get(key), new.get(key)
+        if a == b:
+            continue
+        if key == 'bags' and isinstance(a, list) and isinstance(b, list):
+            paths_differ = [x.get('bag') if isinstance(x, dict) else x for x in a] != [
+                x.get('bag') if isinstance(x, dict) else x for x in b]
+            changed.append('bags' if paths_differ else 'bag data')
+        elif key == 'space' and isinstance(a, dict) and isinstance(b, dict):
+            if sorted(a) != sorted(b):
+                changed.append('params')
+            else:
+                changed.append('bounds of ' + ', '.join(n for n in sorted(a) if a[n] != b[n]))
+        else:
+            changed.append(LABELS.get(key, key))
+    return changed
+
+
+def _read_problems(path: Path) -> dict:
+    """Return the study -> problem entries of `path` ({} where there is none)."""
+    from cloth_bench_ros.safe_io import read_text_bounded
+
+    if not path.exists():
+        return {}
+    try:
+        problems = json.loads(read_text_bounded(path))
+    except ValueError:
+        problems = None
+    if not isinstance(problems, dict) or not all(isinstance(p, dict) for p in problems.values()):
+        raise InputError(
+            f'identify: {path} is damaged (not the JSON object identify writes); delete its '
+            'folder to start afresh, or give another --output'
+        )
+    return problems
+
+
+def check_problem(spec: IdentifySpec, problem: dict, journal: Path) -> None:
+    """
+    Refuse, in one line, to resume `journal` where it was fitted to another problem.
+
+    A journal without a problem recorded for this study (made before problems were kept) resumes.
+    """
+    if not journal.exists():
+        return
+    old = _read_problems(spec.output / PROBLEM_FILE).get(study_key(spec))
+    if old is not None and old != problem:
+        raise InputError(
+            f'identify: {spec.output} holds an identification of another problem '
+            f'({", ".join(changed_keys(old, problem))} changed); give another --output, or '
+            'delete that folder to start afresh'
+        )
+
+
+def record_problem(spec: IdentifySpec, problem: dict, journal: Path) -> None:
+    """Write `problem` as the study's in `<output>/problem.json` (alone, where no journal is)."""
+    from cloth_bench_ros.safe_io import atomic_write_text
+
+    path = spec.output / PROBLEM_FILE
+    problems = _read_problems(path) if journal.exists() else {}
+    problems[study_key(spec)] = problem
+    atomic_write_text(path, json.dumps(problems, indent=1, sort_keys=True) + '\n')
