@@ -12,20 +12,17 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, TYPE_CHECKING
+from typing import Any
 
 from cloth_bench_ros.errors import InputError
-
-if TYPE_CHECKING:
-    from cloth_bench_ros.studies.identify import IdentifySpec
 
 PROBLEM_FILE = 'problem.json'
 # How a changed key is named to the user (others: the key itself).
 LABELS = {'fixed': 'fixed values'}
 
 
-def study_key(spec: IdentifySpec) -> str:
-    """Return the name of the spec's studies in the journal, less the sampler."""
+def study_key(spec: Any) -> str:
+    """Return the name of an IdentifySpec's studies in the journal, less the sampler."""
     from cloth_bench_ros.studies.cloth import cloth_name
 
     other = spec.cloth_size is not None or spec.cloth_mass is not None  # its own study
@@ -38,9 +35,9 @@ def _json(value: Any) -> Any:
     return json.loads(json.dumps(value, sort_keys=True, default=str))
 
 
-def identify_problem(spec: IdentifySpec, space: dict) -> dict:
+def identify_problem(spec: Any, space: dict) -> dict:
     """
-    Return the problem `spec` identifies over `space` (name -> Optuna distribution), as JSON.
+    Return the problem an IdentifySpec identifies over `space` (name -> distribution), as JSON.
 
     Not in it: the budget, the samplers, the cloth's size and mass, and rank's `pool` and
     `shared` (they change no value).
@@ -109,7 +106,7 @@ def _read_problems(path: Path) -> dict:
     return problems
 
 
-def check_problem(spec: IdentifySpec, problem: dict, journal: Path) -> None:
+def check_problem(spec: Any, problem: dict, journal: Path) -> None:
     """
     Refuse, in one line, to resume `journal` where it was fitted to another problem.
 
@@ -126,7 +123,7 @@ def check_problem(spec: IdentifySpec, problem: dict, journal: Path) -> None:
         )
 
 
-def record_problem(spec: IdentifySpec, problem: dict, journal: Path) -> None:
+def record_problem(spec: Any, problem: dict, journal: Path) -> None:
     """Write `problem` as the study's in `<output>/problem.json` (alone, where no journal is)."""
     from cloth_bench_ros.safe_io import atomic_write_text
 
