@@ -87,6 +87,7 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
     assert cells[8] == f'{floor["mean"]:.4f}' and cells[9] == f'{timing["step_p99_ms"]:.2f}'
     assert 'towel_dynamic at 100 Hz (p99 < 5.00 ms): ' in printed
     _check_shared_simulations(out, result)
+    _check_pooled_cells(result)
     # The same command again: every identification and cell is kept.
     assert cli.main(['rank', str(recordings), '--output', str(out), *TINY]) == 0
     again = capsys.readouterr().out
@@ -157,6 +158,24 @@ def _check_shared_simulations(out: Path, result: dict) -> None:
                    also=tuple(pool[1:])))
     kept = {key[0] for key in objective._BAG_CACHE}
     assert {str(Path(b).resolve()) for b in pool} <= kept
+
+
+def _check_pooled_cells(result: dict) -> None:
+    """Check that the preset's held-out cells share one simulation, each with a run's value."""
+    preset = [c for c in result['cells'] if c['kind'] == 'held_out' and c['config'] == 'preset']
+    assert len(preset) == 5 and all(c['pooled'] == 5 for c in preset)
+    assert sum(c['cpu_s'] > 0 for c in preset) == 1  # the simulation's time counted once
+    bags = {t['name']: t['bag'] for t in result['trials']}
+    for cell in preset[1:3]:
+        direct = evaluate(Trial('mujoco', 'towel', 'dynamic', bags[cell['trial']], (), seed=1,
+                                grid=(6, 8), max_frames=6, sampler='preset'))
+        for key in ('value', 'CD', 'HD', 'frames', 'status'):
+            assert cell[key] == direct[key], key
+    identified = [c for c in result['cells'] if c['config'] == 'identified']
+    for cell in identified:  # folds that identified the same parameters share their simulation
+        assert cell['pooled'] == sum(c['params'] == cell['params'] for c in identified)
+    timing = [c for c in result['cells'] if c['kind'] == 'timing']
+    assert len(timing) == 1 and timing[0]['pooled'] == 1
 
 
 def test_a_simulation_is_shared_only_whole_on_the_groups_trials_as_they_were(tmp_path):

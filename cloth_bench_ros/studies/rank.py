@@ -190,6 +190,44 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
     )
 
 
+def _run_cells(client: Any, left: list[tuple[str, Trial, dict]], path: Path, done: dict,
+               progress: bool) -> None:
+    """
+    Run the cells, each row appended as it finishes (Ctrl-C keeps them).
+
+    Cells that differ only in their trial share one simulation (shared_simulations.pool_cells).
+    The timing cells run last, one at a time: a step time is not shared with another cell.
+    """
+    from cloth_bench_ros.studies.results import append_row
+    from cloth_bench_ros.studies.shared_simulations import pool_cells, split_pooled
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(left), desc='rank cells', unit='cell', disable=not progress,
+               file=sys.stderr, dynamic_ncols=True)
+
+    def keep(members: list[tuple[str, Trial, dict]], pooled: Trial, result: dict) -> None:
+        for (key, cell, meta), one in zip(members, split_pooled(
+                pooled, result, [c for _, c, _ in members])):
+            row = {'key': key, **meta, 'engine': cell.engine, 'seed': cell.seed,
+                   'rate_hz': cell.rate_hz, 'config': cell.sampler, **one}
+            append_row(path, row)
+            done[key] = row
+        bar.update(len(members))
+
+    scored = [c for c in left if c[2]['kind'] != 'timing']
+    futures = {}
+    for pooled, members in pool_cells([c for _, c, _ in scored]):
+        futures[client.submit(evaluate, pooled, pure=False)] = (
+            pooled, [scored[i] for i in members])
+    for future in as_completed(futures):
+        pooled, members = futures[future]
+        keep(members, pooled, future.result())
+    for timing in (c for c in left if c[2]['kind'] == 'timing'):
+        keep([timing], timing[1], client.submit(evaluate, timing[1], pure=False).result())
+    bar.close()
+
+
 def objective(spec: RankSpec) -> str:
     """Return what identification minimises: the ranking metric if it is cd or hd, else cd."""
     return spec.metric if spec.metric in OBJECTIVES else 'cd'
@@ -205,9 +243,7 @@ def run_rank(
     """Run the protocol (resumable) and return every number it produced (see module doc)."""
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.dask_executor import open_client
-    from cloth_bench_ros.studies.results import append_row, ResultsLock
-    from distributed import as_completed
-    from tqdm import tqdm
+    from cloth_bench_ros.studies.results import ResultsLock
 
     out = check_output_dir(spec.output)
     with ResultsLock(out, 'rank'):
@@ -268,18 +304,7 @@ def run_rank(
         say(f'cells: {len(todo)} ({len(todo) - len(left)} kept from an earlier run)')
         if left:
             with open_client(scheduler, workers, out / 'workers.log') as client:
-                futures = {client.submit(evaluate, c, pure=False): (k, c, m) for k, c, m in left}
-                bar = tqdm(total=len(left), desc='rank cells', unit='cell',
-                           disable=not progress, file=sys.stderr, dynamic_ncols=True)
-                for future in as_completed(futures):
-                    key, cell, meta = futures[future]
-                    result = future.result()
-                    row = {'key': key, **meta, 'engine': cell.engine, 'seed': cell.seed,
-                           'rate_hz': cell.rate_hz, 'config': cell.sampler, **result}
-                    append_row(out / CELLS_FILE, row)
-                    done[key] = row
-                    bar.update(1)
-                bar.close()
+                _run_cells(client, left, out / CELLS_FILE, done, progress)
         vertices = grid_vertices(spec.grid, spec.cloth_size)
         return {
             'spec': {

@@ -9,6 +9,10 @@ the per-trial values in one file. Another fold that asks for the same parameters
 sampler does as long as the folds' values order the trials alike, takes its objective (the mean
 over its own training trials) from that file instead of simulating again: the same numbers, no
 engine time. Trials with a rung or a coarse ladder (multi-fidelity) are not shared.
+
+The scoring cells of a ranking do the same within one run (pool_cells, split_pooled): cells that
+differ only in the trial they score (a preset's seed on every held-out trial, one fold's
+parameters on its several held-out trials) run one simulation scored on each of their trials.
 """
 
 from __future__ import annotations
@@ -100,6 +104,43 @@ class SharedSimulations:
 
         append_row(self.path, row)
         return fold_result(trial, row, reused=False, names=self.names)
+
+
+def pool_cells(trials: Sequence[Trial]) -> list[tuple[Trial, list[int]]]:
+    """
+    Return one trial per simulation with the indices of the trials that run it.
+
+    Trials that differ only in their bag (and labels) share it: it is scored on each one's bag.
+    """
+    groups: dict[str, list[int]] = {}
+    for i, trial in enumerate(trials):
+        shareable = trial.rung is None and not trial.ladder and not trial.all_metrics
+        groups.setdefault(_key(trial) if shareable else f'alone {i}', []).append(i)
+    pooled = []
+    for members in groups.values():
+        bags = list(dict.fromkeys(trials[i].bag for i in members))
+        pooled.append((replace(trials[members[0]], bag=bags[0], also=tuple(bags[1:])), members))
+    return pooled
+
+
+def split_pooled(pooled: Trial, result: dict, trials: Sequence[Trial]) -> list[dict]:
+    """Return each trial's result from its pooled simulation's (the first one pays its time)."""
+    if not pooled.also or 'per_bag' not in result:  # alone, or it could not even run
+        return [{**result, 'number': t.number, 'sampler': t.sampler,
+                 'pooled': 1 + len(pooled.also)} for t in trials]
+    row = {
+        'bags': {bag: [cd, hd, frames] for bag, cd, hd, frames in zip(
+            (pooled.bag, *pooled.also), result['per_bag'], result['per_bag_hd'],
+            result['per_bag_frames'])},
+        **{k: result.get(k) for k in ('diverged', 'step_p50_ms', 'step_p99_ms', 'cpu_s',
+                                      'wall_s')},
+    }
+    names = {bag: bag for bag in row['bags']}
+    out = [fold_result(t, row, reused=i > 0, names=names) for i, t in enumerate(trials)]
+    for one in out:
+        one.pop('reused')
+        one['pooled'] = len(names)  # trials scored on this one simulation
+    return out
 
 
 def bag_identity(bag: str) -> str:
