@@ -319,17 +319,19 @@ def test_a_journal_resumes_only_the_problem_it_was_fitted_to(target, tmp_path):
     s = identify(again, workers=1, progress=False).summary
     assert s['per_sampler']['tpe']['trials'] == 3 and _rows(out) == 3
     recorded = json.loads((out / PROBLEM_FILE).read_text())['mujoco-towel-dynamic']
-    assert recorded == identify_problem(again, search_space(
-        'mujoco', ['damping'], {**load_preset('mujoco', 'towel', 'dynamic'), **FIXED}, 5.0))
+    preset = load_preset('mujoco', 'towel', 'dynamic')
+    assert recorded == identify_problem(
+        again, search_space('mujoco', ['damping'], {**preset, **FIXED}, 5.0), preset)
 
 
 def test_the_changes_of_a_problem_are_named(target, tmp_path):
     spec = _spec(target, tmp_path, 'tpe', 2, ['young'], batch=1)
-    base = {**load_preset('mujoco', 'towel', 'dynamic'), **FIXED}
+    preset = load_preset('mujoco', 'towel', 'dynamic')
+    base = {**preset, **FIXED}
 
     def problem(**changes) -> dict:
         s = replace(spec, **changes)
-        return identify_problem(s, search_space('mujoco', s.params, base, s.span))
+        return identify_problem(s, search_space('mujoco', s.params, base, s.span), preset)
 
     old = problem()
     # Neither the budget, the sampler nor rank's pool of shared simulations is the problem.
@@ -341,6 +343,8 @@ def test_the_changes_of_a_problem_are_named(target, tmp_path):
     assert changed_keys(old, problem(also=(str(target),), objective='hd')) == ['bags', 'objective']
     assert changed_keys(old, problem(fixed={**FIXED, 'friction': 0.5})) == ['fixed values']
     assert changed_keys(old, problem(fidelity='prune')) == ['fidelity']
+    preset['bending'] *= 2  # a preset shipped with other values: trials of other values
+    assert changed_keys(old, problem()) == ['preset values']
 
 
 def test_cli_identify_refuses_a_journal_of_another_problem_in_one_line(target, tmp_path, capsys):

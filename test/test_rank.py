@@ -126,7 +126,7 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
                           pre_roll=30, noise=0.002, storage='sqlite3')
     assert cli.main(['rank', str(again), '--output', str(out), *TINY]) == 0
     printed = capsys.readouterr().out
-    assert printed.count('changed since it was identified: identified again') == 4
+    assert printed.count('changed since it was identified (bag data): identified again') == 4
     assert 'fold2: its trials' not in printed  # the fold that holds that trial out
     assert 'cells: 11 (9 kept from an earlier run)' in printed
 

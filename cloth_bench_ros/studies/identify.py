@@ -391,7 +391,8 @@ def identify(
     start = time.perf_counter()
     spec.output = check_output_dir(spec.output)
     shipped = load_preset(spec.engine, spec.cloth, spec.primitive)  # for the cloth's size, mass:
-    base = {**sized_params(spec.engine, shipped, spec.cloth_size, spec.cloth_mass), **spec.fixed}
+    sized = sized_params(spec.engine, shipped, spec.cloth_size, spec.cloth_mass)
+    base = {**sized, **spec.fixed}
     names = list(spec.params) or [  # a given mass is the cloth's: not fitted
         n for n in default_params(spec.engine, base.get('model')) if n != 'mass'
         or spec.cloth_mass is None]
@@ -400,7 +401,7 @@ def identify(
     for s in samplers:
         make_sampler(s, spec.seed)  # a missing dependency fails before any work
     check_fidelity(spec.fidelity, spec.grid, spec.cloth_size, spec.engine)
-    problem = identify_problem(spec, space)  # the journal resumes only the problem it fitted
+    problem = identify_problem(spec, space, sized)  # a journal resumes only the problem it fit
     check_problem(spec, problem, spec.output / JOURNAL_FILE)
     with (
         ResultsLock(spec.output, 'identify'),

@@ -4,8 +4,9 @@ The problem an identification's journal was fitted to, so that a resumed one is 
 Everything a trial's value depends on except the budget and the sampler (another `--trials` or
 `--sampler` resumes the journal) and the cloth's size and mass (their study has its own name in
 the journal): the bags and their data (`data.bag_layout.fingerprint`), the metric, seed, rate,
-grid, frames, fixed values, search space and fidelity. Kept in `<output>/problem.json`, one entry
-per study of the journal; `identify` refuses, in one line, to resume a journal of another problem.
+grid, frames, the preset's values, fixed values, search space and fidelity. Kept in
+`<output>/problem.json`, one entry per study of the journal; `identify` refuses, in one line, to
+resume a journal of another problem (ProblemChanged; `rank` identifies such a fold afresh).
 """
 
 from __future__ import annotations
@@ -18,7 +19,15 @@ from cloth_bench_ros.errors import InputError
 
 PROBLEM_FILE = 'problem.json'
 # How a changed key is named to the user (others: the key itself).
-LABELS = {'fixed': 'fixed values'}
+LABELS = {'fixed': 'fixed values', 'preset': 'preset values'}
+
+
+class ProblemChanged(InputError):
+    """An output's journal was fitted to another problem; `changed` names what changed."""
+
+    def __init__(self, message: str, changed: str) -> None:
+        super().__init__(message)
+        self.changed = changed
 
 
 def study_key(spec: Any) -> str:
@@ -35,9 +44,11 @@ def _json(value: Any) -> Any:
     return json.loads(json.dumps(value, sort_keys=True, default=str))
 
 
-def identify_problem(spec: Any, space: dict) -> dict:
+def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
     """
     Return the problem an IdentifySpec identifies over `space` (name -> distribution), as JSON.
+
+    `preset`: the engine's preset for the cloth (sized), on which trials set their parameters.
 
     Not in it: the budget, the samplers, the cloth's size and mass, and rank's `pool` and
     `shared` (they change no value).
@@ -56,6 +67,7 @@ def identify_problem(spec: Any, space: dict) -> dict:
         'rate_hz': float(spec.rate_hz),
         'grid': spec.grid,
         'max_frames': spec.max_frames,
+        'preset': dict(preset),
         'fixed': dict(spec.fixed),
         'space': {name: json.loads(distribution_to_json(d)) for name, d in space.items()},
         'fidelity': spec.fidelity,
@@ -116,11 +128,10 @@ def check_problem(spec: Any, problem: dict, journal: Path) -> None:
         return
     old = _read_problems(spec.output / PROBLEM_FILE).get(study_key(spec))
     if old is not None and old != problem:
-        raise InputError(
-            f'identify: {spec.output} holds an identification of another problem '
-            f'({", ".join(changed_keys(old, problem))} changed); give another --output, or '
-            'delete that folder to start afresh'
-        )
+        changed = ', '.join(changed_keys(old, problem))
+        raise ProblemChanged(
+            f'identify: {spec.output} holds an identification of another problem ({changed} '
+            'changed); give another --output, or delete that folder to start afresh', changed)
 
 
 def record_problem(spec: Any, problem: dict, journal: Path) -> None:

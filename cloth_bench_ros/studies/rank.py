@@ -46,7 +46,6 @@ RATES = (10.0, 100.0, 1000.0)
 MAX_FOLDS = 5
 CELLS_FILE = 'cells.jsonl'
 SHARED_FILE = 'simulations.jsonl'
-PROBLEM_FILE = 'rank_problem.json'
 
 
 class RankError(ClothBenchError, ValueError):
@@ -101,13 +100,6 @@ def groups_of(trials: Sequence[RankTrial], say: Callable[[str], None]) -> dict:
     return kept
 
 
-def _read_json(path: Path) -> Any:
-    try:
-        return json.loads(path.read_text())
-    except ValueError:
-        return None  # damaged: as if another problem
-
-
 def _read_cells(path: Path) -> dict[str, dict]:
     rows = {}
     if path.exists():
@@ -127,28 +119,20 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
     Return the identified parameters of one fold (resumed or reused when already done).
 
     The folds of an entrant share their simulations (studies.shared_simulations), kept beside
-    the folds' folders: the same values, engine time spent once per parameter set.
+    the folds' folders: the same values, engine time spent once per parameter set. A fold whose
+    journal was fitted to another problem (studies.identify_problem) is identified afresh.
     """
     from cloth_bench_ros.studies.identify import identify, IdentifySpec, SUMMARY_FILE
+    from cloth_bench_ros.studies.identify_problem import ProblemChanged
 
     bags = [t.bag for t in train]
     stamp = json.loads(json.dumps({
-        'bags': bags, 'trials': spec.trials, 'sampler': spec.sampler, 'grid': spec.grid,
-        'metric': objective(spec), 'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
+        'bags': bags, 'data': [fingerprint(Path(b)) for b in bags], 'trials': spec.trials,
+        'sampler': spec.sampler, 'grid': spec.grid, 'metric': objective(spec),
+        'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
         'fixed': {**spec.fixed.get(engine, {}), **overrides}, 'fidelity': spec.fidelity,
         **cloth_record(spec.cloth_size, spec.cloth_mass),
     }))
-    # What the fold's journal was fitted to: another problem (its trials recorded again, another
-    # grid, rate, metric...) starts afresh; another budget or sampler resumes it.
-    problem = {**{k: v for k, v in stamp.items() if k not in ('trials', 'sampler')},
-               'data': [fingerprint(Path(b)) for b in bags]}
-    marker = out / PROBLEM_FILE
-    if marker.exists() and _read_json(marker) != problem:
-        say(f'{out.name}: its trials or settings changed since it was identified: identified '
-            'again')
-        shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
-    marker.write_text(json.dumps(problem))
     done = out / SUMMARY_FILE
     if done.exists():
         try:
@@ -165,7 +149,13 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
         pool=tuple(t.bag for t in group), shared=out.parent / SHARED_FILE,
     )
-    summary = identify(ident, scheduler, workers, progress).summary
+    try:
+        summary = identify(ident, scheduler, workers, progress).summary
+    except ProblemChanged as exc:  # its trials recorded again, another grid, rate, preset...
+        say(f'{out.name}: its trials or settings changed since it was identified '
+            f'({exc.changed}): identified again')
+        shutil.rmtree(out)
+        summary = identify(ident, scheduler, workers, progress).summary
     summary['rank_stamp'] = stamp
     done.write_text(json.dumps(summary, indent=1, default=str))
     return summary
