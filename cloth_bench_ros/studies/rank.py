@@ -206,13 +206,13 @@ def _run_cells(client: Any, left: list[tuple[str, Trial, dict]], path: Path, don
         bar.update(len(members))
 
     scored = [c for c in left if c[2]['kind'] != 'timing']
-    futures = {}
-    for pooled, members in pool_cells([c for _, c, _ in scored]):
+    futures: dict[Any, tuple[Trial, list[tuple[str, Trial, dict]]]] = {}
+    for pooled, indices in pool_cells([c for _, c, _ in scored]):
         futures[client.submit(evaluate, pooled, pure=False)] = (
-            pooled, [scored[i] for i in members])
+            pooled, [scored[i] for i in indices])
     for future in as_completed(futures):
-        pooled, members = futures[future]
-        keep(members, pooled, future.result())
+        trial, members = futures[future]
+        keep(members, trial, future.result())
     for timing in (c for c in left if c[2]['kind'] == 'timing'):
         keep([timing], timing[1], client.submit(evaluate, timing[1], pure=False).result())
     bar.close()

@@ -128,14 +128,12 @@ def split_pooled(pooled: Trial, result: dict, trials: Sequence[Trial]) -> list[d
     if not pooled.also or 'per_bag' not in result:  # alone, or it could not even run
         return [{**result, 'number': t.number, 'sampler': t.sampler,
                  'pooled': 1 + len(pooled.also)} for t in trials]
-    row = {
-        'bags': {bag: [cd, hd, frames] for bag, cd, hd, frames in zip(
-            (pooled.bag, *pooled.also), result['per_bag'], result['per_bag_hd'],
-            result['per_bag_frames'])},
-        **{k: result.get(k) for k in ('diverged', 'step_p50_ms', 'step_p99_ms', 'cpu_s',
-                                      'wall_s')},
-    }
-    names = {bag: bag for bag in row['bags']}
+    bags = {bag: [cd, hd, frames] for bag, cd, hd, frames in zip(
+        (pooled.bag, *pooled.also), result['per_bag'], result['per_bag_hd'],
+        result['per_bag_frames'])}
+    row = {'bags': bags, **{k: result.get(k) for k in ('diverged', 'step_p50_ms', 'step_p99_ms',
+                                                       'cpu_s', 'wall_s')}}
+    names = {bag: bag for bag in bags}
     out = [fold_result(t, row, reused=i > 0, names=names) for i, t in enumerate(trials)]
     for one in out:
         one.pop('reused')
