@@ -15,7 +15,10 @@ def share_dir(name: str) -> Path:
     if (here.parent.parent / 'package.xml').is_file() and source.is_dir():
         return source
     # Installed: <prefix>/lib/pythonX.Y/site-packages/cloth_bench_ros/paths.py (colcon or pip).
-    for prefix in (here.parents[4], Path(sys.prefix)):
+    prefixes = [Path(sys.prefix)]
+    if len(here.parents) > 4:  # a package at a shallower path is not such an install
+        prefixes.insert(0, here.parents[4])
+    for prefix in prefixes:
         candidate = prefix / 'share' / PACKAGE / name
         if candidate.is_dir():
             return candidate

@@ -207,3 +207,14 @@ def test_nothing_points_outside_the_repository():
         assert not pattern.search(
             path.read_text()
         ), f'{path.relative_to(ROOT)} points outside the repository'
+
+
+def test_share_dir_of_a_package_at_a_shallow_path(monkeypatch, tmp_path):
+    """A package with fewer than four folders above it is no <prefix>/lib/... install: no crash."""
+    import cloth_bench_ros.paths as paths
+
+    monkeypatch.setattr(paths, '__file__', '/pkg/cloth_bench_ros/paths.py')
+    monkeypatch.setattr(sys, 'prefix', str(tmp_path))
+    assert paths.share_dir('config') == Path('/pkg/config')
+    (tmp_path / 'share' / 'cloth_bench_ros' / 'config').mkdir(parents=True)
+    assert paths.share_dir('config') == tmp_path / 'share' / 'cloth_bench_ros' / 'config'
