@@ -40,9 +40,10 @@ install_python() {
     "$VENV/bin/python" -m pip install -q --upgrade pip
     "$VENV/bin/python" -m pip install -q -r requirements.txt
     "$VENV/bin/python" -m pip install -q -e .
-    # Newton's Warp kernels compile on first use (about a minute per solver): compile them now,
-    # into Warp's kernel cache (~/.cache/warp), so that no run or test pays for it.
-    echo "quickstart: compiling engine kernels (Warp kernel cache)"
+    # Newton's Warp kernels (about a minute per solver) and the metrics' numba kernels (about
+    # 30 s) compile on first use: compile them now, into Warp's kernel cache (~/.cache/warp) and
+    # numba's (beside the code), so that no run or test pays for it.
+    echo "quickstart: compiling engine and metric kernels (Warp and numba caches)"
     "$VENV/bin/cloth-bench" engines --warm >/dev/null
     touch "$stamp"
   fi

@@ -311,3 +311,22 @@ def test_the_environment_variable_chooses_the_threads():
         out = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
                              text=True, check=True).stdout.split()
         assert out == expected  # a worker thread only when asked for
+
+
+def test_engines_warm_leaves_a_run_nothing_to_compile(tmp_path):
+    """`engines --warm` (the quickstart's install step) compiles each kernel of a run's metrics."""
+    env = {**os.environ, 'NUMBA_CACHE_DIR': str(tmp_path / 'numba')}  # empty: a new install
+    cli = [sys.executable, '-m', 'cloth_bench_ros.cli']
+    warm = subprocess.run(
+        [*cli, 'engines', '--warm'], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert warm.returncode == 0, warm.stderr
+    assert 'compiled the metric kernels in' in warm.stdout
+    run = subprocess.run(
+        [*cli, 'run', '--grid', '6x8', '--output', str(tmp_path / 'run')],
+        env={**env, 'NUMBA_DEBUG_CACHE': '1'}, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    log = run.stdout + run.stderr
+    assert 'data loaded from' in log  # the run did use the cache
+    assert [line for line in log.splitlines() if 'data saved to' in line] == []

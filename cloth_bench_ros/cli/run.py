@@ -69,8 +69,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
     engines = sub.add_parser('engines', help='list known engines, their availability and version')
     common.add_option(engines, Option(
-        'warm', bool, False, "also compile what makes an engine's first run slow (Newton: Warp's "
-        'kernel cache)', flag='--warm', action='store_true',
+        'warm', bool, False, "also compile what makes a first run slow (Newton: Warp's kernel "
+        "cache; the metrics' numba kernels)", flag='--warm', action='store_true',
     ))
     engines.set_defaults(func=cmd_engines)
 
@@ -307,6 +307,7 @@ def cmd_trajectory(args: argparse.Namespace) -> int:
 
 def cmd_engines(args: argparse.Namespace) -> int:
     """List the engines; with --warm, compile what makes their first run slow."""
+    from cloth_bench_ros.core.surface_metrics import compile_kernels
     from cloth_bench_ros.engines import engine_class, known_engines
 
     print(f'{"engine":<10} {"available":<10} {"version":<10} reason')
@@ -327,4 +328,7 @@ def cmd_engines(args: argparse.Namespace) -> int:
                 start = time.perf_counter()
                 engine_class(info.name).warm()
                 print(f'warmed {info.name} in {time.perf_counter() - start:.1f} s')
+        start = time.perf_counter()
+        compile_kernels()
+        print(f'compiled the metric kernels in {time.perf_counter() - start:.1f} s')
     return 0

@@ -165,7 +165,10 @@ def _gap(x, a, b):
     return x - b if x > b else 0.0
 
 
-@njit(cache=True, nogil=True, inline='always')
+# Numba inlines `inline='always'` functions in its own IR and types them again at every call site:
+# _segment (9 calls in _triangle) and _nearest (in _query and twice in _cell_max) inlined took
+# 280 s to compile on a fresh install against 20 s as plain calls, for a few % of their run time.
+@njit(cache=True, nogil=True)
 def _segment(px, py, pz, ax, ay, az, dx, dy, dz, norm):
     """Distance from p to the segment a + s d, s in [0, 1]."""
     if norm == 2:
@@ -266,7 +269,7 @@ def _query(points, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims,
     return out
 
 
-@njit(cache=True, nogil=True, inline='always')
+@njit(cache=True, nogil=True)
 def _nearest(
     px, py, pz, last, stamp, seen, a, e1, e2, n, m1, m2, lo, hi, order, starts, glo, cell, dims,
     norm,
