@@ -13,6 +13,7 @@ import math
 import shutil
 
 from cloth_bench_ros.cli import main
+from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.studies.identify import (
@@ -324,7 +325,7 @@ def test_a_journal_resumes_only_the_problem_it_was_fitted_to(target, tmp_path):
         again, search_space('mujoco', ['damping'], {**preset, **FIXED}, 5.0), preset)
 
 
-def test_the_changes_of_a_problem_are_named(target, tmp_path):
+def test_the_changes_of_a_problem_are_named(target, tmp_path, monkeypatch):
     spec = _spec(target, tmp_path, 'tpe', 2, ['young'], batch=1)
     preset = load_preset('mujoco', 'towel', 'dynamic')
     base = {**preset, **FIXED}
@@ -345,6 +346,11 @@ def test_the_changes_of_a_problem_are_named(target, tmp_path):
     assert changed_keys(old, problem(fidelity='prune')) == ['fidelity']
     preset['poisson'] = 0.3  # a preset shipped with other values: trials of other values
     assert changed_keys(old, problem()) == ['preset values']
+    preset['poisson'] = old['preset']['poisson']
+    monkeypatch.setattr(MujocoCloth, 'version', classmethod(lambda cls: '99.0'))  # an upgrade
+    assert changed_keys(old, problem()) == ['engine version']
+    # A problem recorded before the engine's version was kept: unknown, not a change (resumes).
+    assert changed_keys({k: v for k, v in old.items() if k != 'engine_version'}, problem()) == []
 
 
 def test_cli_identify_refuses_a_journal_of_another_problem_in_one_line(target, tmp_path, capsys):

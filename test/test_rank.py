@@ -17,10 +17,11 @@ from camera_recording import (
 )
 from cloth_bench_ros import cli
 from cloth_bench_ros.core.metric_choice import metric
+from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.report.rank import deadline_ms, significance, within_reference_error
 from cloth_bench_ros.report.ranking import Ranked
-from cloth_bench_ros.studies import objective
+from cloth_bench_ros.studies import identify_problem, objective
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from cloth_bench_ros.studies.rank import folds, SHARED_FILE
 from cloth_bench_ros.studies.rank_trials import RankTrial, reference_error
@@ -30,6 +31,16 @@ import pytest
 TINY = ['--topic', CAMERA_TOPIC, '--engine', 'mujoco', '--trials', '2', '--sampler', 'tpe',
         '--seeds', '1', '--grid', '6x8', '--rates', '100', '--max-frames', '6', '--workers', '2',
         '--no-progress']
+
+
+@pytest.fixture
+def mujoco_upgraded(monkeypatch):
+    """Report another version of MuJoCo, as a pip upgrade would."""
+    monkeypatch.setattr(MujocoCloth, 'version', classmethod(lambda cls: '99.0'))
+    identify_problem._simulated_model.cache_clear()
+    yield
+    monkeypatch.undo()
+    identify_problem._simulated_model.cache_clear()
 
 
 @pytest.fixture(scope='module')
@@ -56,7 +67,7 @@ def test_significance_says_which_neighbours_differ():
     assert significance(more_is_better) == 'significant (95 % intervals apart): a < b'
 
 
-def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
+def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys, request):
     out = tmp_path / 'rank'
     assert cli.main(['rank', str(recordings), '--output', str(out), *TINY]) == 0
     printed = capsys.readouterr().out
@@ -129,6 +140,12 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys):
     assert printed.count('changed since it was identified (bag data): identified again') == 4
     assert 'fold2: its trials' not in printed  # the fold that holds that trial out
     assert 'cells: 11 (9 kept from an earlier run)' in printed
+    # Another version of the engine: every fold, simulation and cell anew.
+    request.getfixturevalue('mujoco_upgraded')
+    assert cli.main(['rank', str(again), '--output', str(out), *TINY]) == 0
+    printed = capsys.readouterr().out
+    assert printed.count('changed since it was identified (engine version)') == 5, printed
+    assert 'cells: 11 (0 kept from an earlier run)' in printed
 
 
 def _check_shared_simulations(out: Path, result: dict) -> None:
@@ -207,6 +224,20 @@ def test_a_simulation_is_shared_only_whole_on_the_groups_trials_as_they_were(tmp
     (tmp_path / 'b').write_bytes(b'recorded again')
     rewritten = SharedSimulations(path, bags)
     assert rewritten.known(trial) is None and rewritten.known(other_fold) is not None
+
+
+def test_a_simulation_of_another_engine_version_is_not_reused(tmp_path, request):
+    bags = []
+    for name in 'ab':
+        (tmp_path / name).write_bytes(name.encode())
+        bags.append(str(tmp_path / name))
+    trial = Trial('mujoco', 'towel', 'dynamic', bags[0], (('young', 1e4),), also=(bags[1],))
+    pooled = {'per_bag': [0.01, 0.03], 'per_bag_hd': [0.1, 0.3], 'per_bag_frames': [10, 9],
+              'diverged': None, 'cpu_s': 2.0}
+    SharedSimulations(tmp_path / SHARED_FILE, bags).finish(trial, pooled)
+    assert SharedSimulations(tmp_path / SHARED_FILE, bags).known(trial) is not None
+    request.getfixturevalue('mujoco_upgraded')
+    assert SharedSimulations(tmp_path / SHARED_FILE, bags).known(trial) is None
 
 
 def test_report_of_a_damaged_rank_directory_is_one_line(tmp_path, capsys):

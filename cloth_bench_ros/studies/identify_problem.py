@@ -4,13 +4,19 @@ The problem an identification's journal was fitted to, so that a resumed one is 
 Everything a trial's value depends on except the budget and the sampler (another `--trials` or
 `--sampler` resumes the journal) and the cloth's size and mass (their study has its own name in
 the journal): the bags and their data (`data.bag_layout.fingerprint`), the metric, seed, rate,
-grid, frames, the preset's values, fixed values, search space and fidelity. Kept in
-`<output>/problem.json`, one entry per study of the journal; `identify` refuses, in one line, to
-resume a journal of another problem (ProblemChanged; `rank` identifies such a fold afresh).
+grid, frames, the engine's version, the preset's values, fixed values, search space and fidelity.
+Kept in `<output>/problem.json`, one entry per study of the journal; `identify` refuses, in one
+line, to resume a journal of another problem (ProblemChanged; `rank` identifies such a fold
+afresh). A key that a recorded problem lacks (kept before that key was) is not a change.
+
+`simulated_model` is the part of it that every stored simulation depends on beyond its own
+parameters (the engine's version and the preset they are set on): rank's kept simulations and
+cells carry it, so a project or engine update never reuses a result of the one before.
 """
 
 from __future__ import annotations
 
+from functools import lru_cache
 import json
 from pathlib import Path
 from typing import Any
@@ -19,7 +25,7 @@ from cloth_bench_ros.errors import InputError
 
 PROBLEM_FILE = 'problem.json'
 # How a changed key is named to the user (others: the key itself).
-LABELS = {'fixed': 'fixed values', 'preset': 'preset values'}
+LABELS = {'engine_version': 'engine version', 'fixed': 'fixed values', 'preset': 'preset values'}
 
 
 class ProblemChanged(InputError):
@@ -44,6 +50,23 @@ def _json(value: Any) -> Any:
     return json.loads(json.dumps(value, sort_keys=True, default=str))
 
 
+@lru_cache(maxsize=64)
+def _simulated_model(engine: str, cloth: str, primitive: str, size: Any, mass: Any) -> str:
+    from cloth_bench_ros.engines import engine_class
+    from cloth_bench_ros.engines.presets import load_preset, sized_params
+
+    preset = sized_params(engine, load_preset(engine, cloth, primitive), size, mass)
+    return json.dumps({'engine_version': engine_class(engine).version(), 'preset': preset},
+                      sort_keys=True, default=str)
+
+
+def simulated_model(engine: str, cloth: str, primitive: str, cloth_size: Any = None,
+                    cloth_mass: Any = None) -> dict:
+    """Return the engine's version and the (sized) preset a trial's parameters are set on."""
+    size = tuple(cloth_size) if cloth_size is not None else None
+    return json.loads(_simulated_model(engine, cloth, primitive, size, cloth_mass))
+
+
 def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
     """
     Return the problem an IdentifySpec identifies over `space` (name -> distribution), as JSON.
@@ -54,6 +77,7 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
     `shared` (they change no value).
     """
     from cloth_bench_ros.data.bag_layout import fingerprint
+    from cloth_bench_ros.engines import engine_class
     from optuna.distributions import distribution_to_json
 
     bags = [Path(b) for b in (spec.bag, *spec.also)]
@@ -67,6 +91,7 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
         'rate_hz': float(spec.rate_hz),
         'grid': spec.grid,
         'max_frames': spec.max_frames,
+        'engine_version': engine_class(spec.engine).version(),
         'preset': dict(preset),
         'fixed': dict(spec.fixed),
         'space': {name: json.loads(distribution_to_json(d)) for name, d in space.items()},
@@ -76,13 +101,13 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
 
 def changed_keys(old: dict, new: dict) -> list[str]:
     """
-    Return what differs between two problems, readable: e.g. ['bag data', 'rate_hz'].
+    Return what differs between two problems in the keys both hold: e.g. ['bag data', 'rate_hz'].
 
     Bags: `bags` where their paths differ, `bag data` where only their fingerprints do. Space:
     `params` where other parameters are fitted, `bounds of <name>` where a range changed.
     """
     changed = []
-    for key in sorted(set(old) | set(new), key=lambda k: (k != 'bags', k)):
+    for key in sorted(set(old) & set(new), key=lambda k: (k != 'bags', k)):
         a, b = old.get(key), new.get(key)
         if a == b:
             continue
@@ -122,13 +147,14 @@ def check_problem(spec: Any, problem: dict, journal: Path) -> None:
     """
     Refuse, in one line, to resume `journal` where it was fitted to another problem.
 
-    A journal without a problem recorded for this study (made before problems were kept) resumes.
+    A journal without a problem recorded for this study (made before problems were kept) resumes,
+    as does one whose problem lacks a key kept since.
     """
     if not journal.exists():
         return
     old = _read_problems(spec.output / PROBLEM_FILE).get(study_key(spec))
-    if old is not None and old != problem:
-        changed = ', '.join(changed_keys(old, problem))
+    changed = ', '.join(changed_keys(old, problem)) if old is not None else ''
+    if changed:
         raise ProblemChanged(
             f'identify: {spec.output} holds an identification of another problem ({changed} '
             'changed); give another --output, or delete that folder to start afresh', changed)

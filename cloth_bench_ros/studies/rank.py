@@ -15,6 +15,7 @@ The ranking itself is the report's (report.rank): this module computes, it does 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import hashlib
 import json
 from pathlib import Path
 import shutil
@@ -28,6 +29,7 @@ from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cloth import cloth_name
+from cloth_bench_ros.studies.identify_problem import simulated_model
 from cloth_bench_ros.studies.objective import evaluate, OBJECTIVES, Trial
 from cloth_bench_ros.studies.rank_trials import (
     floor,
@@ -132,6 +134,8 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
         'fixed': {**spec.fixed.get(engine, {}), **overrides}, 'fidelity': spec.fidelity,
         **cloth_record(spec.cloth_size, spec.cloth_mass),
+        'model': simulated_model(engine, train[0].cloth, train[0].primitive, spec.cloth_size,
+                                 spec.cloth_mass),
     }))
     done = out / SUMMARY_FILE
     if done.exists():
@@ -166,12 +170,15 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
     # A timing cell runs the whole motion: step times of the settle phase alone say little.
     frames = None if label == 'timing' else spec.max_frames
     every = label != 'timing' and spec.metric not in OBJECTIVES  # the faces: every metric
+    model = simulated_model(engine, trial.cloth, trial.primitive, spec.cloth_size,
+                            spec.cloth_mass)  # another engine version or preset: other cells
     key = (
         f'{engine}|{sorted(params.items())}|{trial.bag}|{fingerprint(Path(trial.bag))}|'
         f'{seed}|{rate:g}|{objective(spec)}|'
         f'{label}|{spec.grid}|{frames}' + ('|all' if every else '')
         + ('' if spec.cloth_size is None and spec.cloth_mass is None  # another cloth: other cells
            else f'|{spec.cloth_size}|{spec.cloth_mass}')
+        + '|' + hashlib.sha256(json.dumps(model, sort_keys=True).encode()).hexdigest()[:16]
     )
     return key, Trial(
         engine, trial.cloth, trial.primitive, trial.bag, tuple(sorted(params.items())),
