@@ -32,7 +32,7 @@ only where a second core is idle (docs/metrics.md).
 from __future__ import annotations
 
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from functools import lru_cache
 import math
 import os
@@ -103,7 +103,8 @@ class SurfaceScores:
     emd: float
 
     def as_dict(self) -> dict[str, float]:
-        return asdict(self)
+        # Not dataclasses.asdict: it deep-copies field by field, and this runs for every frame.
+        return {name: getattr(self, name) for name in SURFACE_FIELDS}
 
 
 SURFACE_FIELDS = tuple(SurfaceScores.__dataclass_fields__)
