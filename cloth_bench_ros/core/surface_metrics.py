@@ -334,6 +334,4 @@ def compile_kernels() -> None:
     vertices = np.stack([x.ravel(), np.full(x.size, 0.5), z.ravel()], axis=1)
     faces = grid_faces(4, 5)
     cloud = RealCloud(vertices[rng.integers(0, len(vertices), 200)] + 0.01 * rng.random((200, 3)))
-    cloud.nearest_l1(vertices)
-    surface_samples(vertices, faces, CONTACT_SAMPLES, SURFACE_SEED)
-    surface_scores(cloud, vertices, faces)
+    surface_scores(cloud, vertices, faces)  # the nearest-point and area-sample kernels too
