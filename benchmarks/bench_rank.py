@@ -7,7 +7,7 @@ them; five trials, each a noisy camera-like copy of the bundled fling. The comma
 types it (default entrants MuJoCo, PyBullet and Newton XPBD, `--trials auto`, TPE,
 leave-one-trial-out, 3 held-out seeds, rates 10/100/1000 Hz) on `--workers` local processes; the
 script prints the wall time against the goal (30 min on two cores), the process tree's CPU time,
-the ranking with its intervals and the floor.
+the ranking with its intervals, diverged runs and paired differences, and the floor.
 
     .venv/bin/python benchmarks/bench_rank.py                      # the full command (long)
     .venv/bin/python benchmarks/bench_rank.py --fidelity coarse    # multi-fidelity identification
@@ -59,11 +59,27 @@ def summary(out: Path) -> list[str]:
         floor = answer.get('floor') or {}
         low, mean, high = (floor.get(k, float('nan')) for k in ('min', 'mean', 'max'))
         lines.append(f'{group}: floor {mean:.4f} m [{low:.4f}, {high:.4f}]')
+        boot = answer.get('bootstrap')
+        if boot:
+            lines.append(f'  paired bootstrap: {boot["trials"]} held-out trials x'
+                         f' {boot["seeds_per_trial"]} seeds, {boot["replicates"]} replicates'
+                         f' (seed {boot["seed"]})')
         for r in answer['ranking']:
-            lines.append(f'  {r["name"]:<14} {r["mean"]:.4f} m [{r["low"]:.4f}, {r["high"]:.4f}]'
-                         f' n={r["n"]}')
+            lines.append(f'  {r["name"]:<14} {_m(r["mean"])} m [{_m(r["low"])}, {_m(r["high"])}]'
+                         f' n={r["n"]} diverged {r.get("diverged", "-")}/{r.get("runs", "-")}'
+                         f' P(rank) {r["p_rank"]:.2f}')
+        for d in answer.get('differences', []):
+            lines.append(f'  {d["behind"]} - {d["ahead"]}: {_m(d["mean"], "+")} m'
+                         f' [{_m(d["low"], "+")}, {_m(d["high"], "+")}] over {d["paired"]}'
+                         f' paired runs ({d["decided_by"]}'
+                         f'{", significant" if d["significant"] else ", not told apart"})')
+        lines.append(f'  {answer["significance"]}')
     lines.extend(identification_costs(out))
     return lines
+
+
+def _m(value: float | None, sign: str = '') -> str:
+    return '-' if value is None else f'{value:{sign}.4f}'
 
 
 def identification_costs(out: Path) -> list[str]:

@@ -209,32 +209,43 @@ def _row(engine, reference, cd, seed, presets='identified', model=None):
     }
 
 
-def test_ranking_has_bootstrap_intervals_and_says_whether_it_holds_across_references():
-    from cloth_bench_ros.report.ranking import bootstrap_ranking
+def test_ranking_has_paired_intervals_and_says_whether_it_holds_across_references():
+    from cloth_bench_ros.studies.ranking_stats import HeldOutRun, rank_runs
 
-    apart = bootstrap_ranking({'a': [0.030, 0.031, 0.029], 'b': [0.050, 0.052, 0.049]})
+    def ranked(samples):  # one reference bag: seeds 1, 2, ...
+        return rank_runs({n: [HeldOutRun('bag', s, v) for s, v in enumerate(vs, 1)]
+                          for n, vs in samples.items()}).ranked
+
+    apart = ranked({'a': [0.030, 0.031, 0.029], 'b': [0.050, 0.052, 0.049]})
     assert [(r.name, r.rank, r.p_rank) for r in apart] == [('a', 1, 1.0), ('b', 2, 1.0)]
     for r, values in zip(apart, ([0.030, 0.031, 0.029], [0.050, 0.052, 0.049])):
         assert min(values) <= r.low <= r.mean <= r.high <= max(values)
         assert r.mean == pytest.approx(np.mean(values)) and r.n == 3
-    close = bootstrap_ranking({'a': [0.030, 0.040, 0.035], 'b': [0.036, 0.033, 0.038]})
+    close = ranked({'a': [0.030, 0.040, 0.035], 'b': [0.036, 0.033, 0.038]})
     assert 0.2 < close[0].p_rank < 0.9  # overlapping seeds: the order is not settled
-    assert bootstrap_ranking({'a': [0.03, float('nan')], 'b': [None]})[0].n == 1  # diverged seeds
+    (kept,) = ranked({'a': [0.03, float('nan')], 'b': [None]})  # no value: not ranked
+    assert (kept.name, kept.n) == ('a', 1)
 
     rows = [_row('mujoco', 'mujoco', 0.020 + 0.001 * s, s) for s in range(3)]
     rows += [_row('bullet', 'mujoco', 0.040 + 0.001 * s, s) for s in range(3)]
     rows += [_row('mujoco', 'newton-vbd', 0.050 + 0.001 * s, s) for s in range(3)]
     rows += [_row('bullet', 'newton-vbd', 0.030 + 0.001 * s, s) for s in range(3)]
     rows += [_row('bullet', 'mujoco', 0.01, s, presets='default') for s in range(3)]  # not ranked
+    rows.append({**_row('bullet', 'mujoco', None, 3), 'status': 'diverged'})
     rankings = report_xr.identified_rankings(rows)
-    assert [r.name for r in rankings[('mujoco', 'dynamic')]] == ['MuJoCo', 'Bullet']
-    assert [r.name for r in rankings[('newton-vbd', 'dynamic')]] == ['Bullet', 'MuJoCo']
-    (line,) = report_xr.ranking_statements(rankings)
+    assert [r.name for r in rankings[('mujoco', 'dynamic')].ranked] == ['MuJoCo', 'Bullet']
+    assert [r.name for r in rankings[('newton-vbd', 'dynamic')].ranked] == ['Bullet', 'MuJoCo']
+    bullet = rankings[('mujoco', 'dynamic')].ranked[1]
+    assert (bullet.diverged, bullet.runs, bullet.n) == (1, 4, 3)  # seed 3 diverged
+    *told, line = report_xr.ranking_statements(rankings)
+    assert told[1] == ('Newton VBD ref. dynamic: significant (the 95 % paired interval excludes'
+                       ' 0): Bullet < MuJoCo (+0.0200 [+0.0200, +0.0200])')
     assert line.startswith('dynamic: the ranking changes between references')
     same = [r for r in rows if not (r['reference'] == 'newton-vbd')] + [
         {**r, 'reference': 'newton-vbd'} for r in rows if r['reference'] == 'mujoco'
     ]
-    (line,) = report_xr.ranking_statements(report_xr.identified_rankings(same))
+    *_, line = report_xr.ranking_statements(report_xr.identified_rankings(same))
     assert 'holds across references: MuJoCo < Bullet' in line
     md = report_xr.cross_reference_markdown(rows)
     assert 'Bullet, identified' in md and '95 % CI' in md and 'changes between' in md
+    assert '| mujoco | dynamic | 2 | Bullet | 0.0410 | 1/4 |' in md

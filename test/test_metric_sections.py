@@ -5,8 +5,8 @@ import math
 from cloth_bench_ros.core.evaluation import FrameScore
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.report.metric_sections import fig4_table, metrics_table, PAPER_FIG4
-from cloth_bench_ros.report.ranking import bootstrap_ranking
 from cloth_bench_ros.report.run_report import result_table
+from cloth_bench_ros.studies.ranking_stats import HeldOutRun, rank_runs
 
 
 def _row(engine: str, seed: int, cd: float, fscore: float, onset: float | None) -> dict:
@@ -37,12 +37,17 @@ def test_the_metrics_table_ranks_on_the_chosen_metric():
     assert metrics_table(paper_only) is None
 
 
-def test_bootstrap_ranking_orders_by_direction():
+def test_the_ranking_orders_by_direction():
+    def ranked(samples: dict[str, list[float]], **how: bool) -> list[str]:
+        runs = {n: [HeldOutRun(f't{i}', 1, v) for i, v in enumerate(vs)]
+                for n, vs in samples.items()}
+        return [r.name for r in rank_runs(runs, **how).ranked]
+
     samples = {'a': [0.3, 0.31], 'b': [0.5, 0.52]}
-    assert [r.name for r in bootstrap_ranking(samples)] == ['a', 'b']
-    assert [r.name for r in bootstrap_ranking(samples, higher_is_better=True)] == ['b', 'a']
+    assert ranked(samples) == ['a', 'b']
+    assert ranked(samples, higher_is_better=True) == ['b', 'a']
     signed = {'late': [0.2, 0.2], 'early': [-0.1, -0.1]}
-    assert [r.name for r in bootstrap_ranking(signed, absolute=True)] == ['early', 'late']
+    assert ranked(signed, absolute=True) == ['early', 'late']
 
 
 def test_fig4_table_puts_ours_beside_the_papers_values(tmp_path):

@@ -19,12 +19,12 @@ from cloth_bench_ros import cli
 from cloth_bench_ros.core.metric_choice import metric
 from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.report.rank import deadline_ms, significance, within_reference_error
-from cloth_bench_ros.report.ranking import Ranked
+from cloth_bench_ros.report.rank import deadline_ms, within_reference_error
 from cloth_bench_ros.studies import identify_problem, objective
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from cloth_bench_ros.studies.rank import folds, SHARED_FILE
 from cloth_bench_ros.studies.rank_trials import RankTrial, reference_error
+from cloth_bench_ros.studies.ranking_stats import Ranked
 from cloth_bench_ros.studies.shared_simulations import SharedSimulations
 import pytest
 
@@ -55,16 +55,8 @@ def test_folds_leave_one_trial_out_up_to_five_then_five_folds():
     assert folds(7) == [[0, 5], [1, 6], [2], [3], [4]]
 
 
-def test_significance_says_which_neighbours_differ():
-    ranked = [Ranked('a', 1, 1.0, 0.9, 1.1, 1.0, 5), Ranked('b', 2, 2.0, 1.9, 2.1, 1.0, 5),
-              Ranked('c', 3, 2.05, 2.0, 2.2, 0.6, 5)]
-    assert significance(ranked) == (
-        'significant (95 % intervals apart): a < b; not told apart (intervals overlap): b < c'
-    )
+def test_deadline_is_half_the_period():
     assert deadline_ms(1000.0) == pytest.approx(0.5)
-    more_is_better = [Ranked('a', 1, 0.9, 0.85, 0.95, 1.0, 5),
-                      Ranked('b', 2, 0.5, 0.45, 0.55, 1.0, 5)]
-    assert significance(more_is_better) == 'significant (95 % intervals apart): a < b'
 
 
 def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys, request):
@@ -91,14 +83,21 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys, 
     row = next(line for line in printed.splitlines() if line.startswith('| towel_dynamic'))
     cells = [c.strip() for c in row.strip('|').split('|')]
     timing = group['entrants']['mujoco']['timing']['100']
-    assert cells[3] == f'{ranked["mean"]:.4f}' and cells[7] == (
+    assert cells[3] == f'{ranked["mean"]:.4f}' and cells[8] == (
         f'{group["entrants"]["mujoco"]["preset"]["mean"]:.4f}'
     )
-    assert cells[4] == f'[{ranked["low"]:.4f}, {ranked["high"]:.4f}]'
-    assert cells[8] == f'{floor["mean"]:.4f}' and cells[9] == f'{timing["step_p99_ms"]:.2f}'
+    assert cells[4] == f'{ranked["diverged"]}/5' and ranked['runs'] == 5
+    assert cells[5] == f'[{ranked["low"]:.4f}, {ranked["high"]:.4f}]'
+    assert cells[9] == f'{floor["mean"]:.4f}' and cells[10] == f'{timing["step_p99_ms"]:.2f}'
     assert 'towel_dynamic at 100 Hz (p99 < 5.00 ms): ' in printed
     _check_shared_simulations(out, result)
     _check_pooled_cells(result)
+    # Two engines, two seeds: mujoco's identifications and seed-1 cells are kept.
+    assert cli.main(['rank', str(recordings), '--output', str(out), *TINY, '--engine', 'bullet',
+                     '--seeds', '2']) == 0
+    printed = capsys.readouterr().out
+    assert 'cells: 42 (11 kept from an earlier run)' in printed
+    _check_paired_ranking(json.loads((out / 'rank.json').read_text()), printed)
     # The same command again: every identification and cell is kept.
     assert cli.main(['rank', str(recordings), '--output', str(out), *TINY]) == 0
     again = capsys.readouterr().out
@@ -146,6 +145,32 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys, 
     printed = capsys.readouterr().out
     assert printed.count('changed since it was identified (engine version)') == 5, printed
     assert 'cells: 11 (0 kept from an earlier run)' in printed
+
+
+def _check_paired_ranking(result: dict, printed: str) -> None:
+    """Check two engines ranked on the same five held-out trials x two seeds, paired."""
+    group = result['answer']['towel_dynamic']
+    assert {k: v for k, v in group['bootstrap'].items() if k != 'resampled'} == {
+        'trials': 5, 'seeds_per_trial': 2, 'replicates': 4000, 'seed': 0, 'confidence': 0.95}
+    assert sorted(r['name'] for r in group['ranking']) == ['bullet', 'mujoco']
+    held = [c for c in result['cells'] if c['kind'] == 'held_out' and c['config'] == 'identified']
+    assert len(held) == 20 and {c['seed'] for c in held} == {1, 2}
+    value = {(c['entrant'], c['trial'], c['seed']): c['value'] for c in held}
+    for r in group['ranking']:
+        lost = sum(c['status'] == 'diverged' for c in held if c['entrant'] == r['name'])
+        assert (r['runs'], r['trials'], r['diverged'], r['n']) == (10, 5, lost, 10 - lost)
+        assert r['divergence_rate'] == lost / 10
+        assert f'| {r["name"]} | {r["mean"]:.4f} | {lost}/10 |' in printed
+    (d,) = group['differences']
+    assert [d['ahead'], d['behind']] == [r['name'] for r in group['ranking']]
+    gaps = [value[(d['behind'], t, s)] - value[(d['ahead'], t, s)]
+            for (e, t, s) in value if e == d['ahead']
+            if all(math.isfinite(value[(n, t, s)] or math.nan) for n in ('mujoco', 'bullet'))]
+    assert d['paired'] == len(gaps) and d['mean'] == pytest.approx(sum(gaps) / len(gaps))
+    assert min(gaps) <= d['low'] <= d['mean'] <= d['high'] <= max(gaps)
+    assert f'towel_dynamic: {group["significance"]}' in printed
+    assert ('towel_dynamic: 95 % intervals from 4000 paired bootstrap replicates (seed 0) over 5'
+            ' held-out trials x 2 seeds each') in printed
 
 
 def _check_shared_simulations(out: Path, result: dict) -> None:
@@ -257,9 +282,9 @@ def test_differences_under_a_bundled_references_numerical_error_are_said_to_be_s
     assert reference_error([vbd, vbd])['error_m'] > reference_error(mujoco)['error_m']
     assert reference_error([mujoco[0], vbd]) is None  # two references: no single error
     assert reference_error([trial(recordings / 'one_mcap', 'clouds')]) is None
-    ranked = [Ranked('a', 1, 0.0300, 0.0299, 0.0301, 1.0, 5),
-              Ranked('b', 2, 0.0320, 0.0319, 0.0321, 1.0, 5),
-              Ranked('c', 3, 0.0400, 0.0399, 0.0401, 1.0, 5)]
+    ranked = [Ranked('a', 1, 0.0300, 0.0299, 0.0301, 1.0, 5, 5, 0, 0.0, 5),
+              Ranked('b', 2, 0.0320, 0.0319, 0.0321, 1.0, 5, 5, 0, 0.0, 5),
+              Ranked('c', 3, 0.0400, 0.0399, 0.0401, 1.0, 5, 5, 0, 0.0, 5)]
     said = within_reference_error(ranked, reference_error(mujoco), metric('cd'))
     assert [p['pair'] for p in said['pairs']] == [['a', 'b']]  # 2 mm < 3 mm; 8 mm is not
     assert said['pairs'][0]['difference_m'] == pytest.approx(0.002)

@@ -3,7 +3,8 @@ Cross-reference: every engine's CD_d / CD_q against every synthetic reference, a
 
 An engine of the reference's own family should win on its own reference, and by how much is the
 point (the cells are studies/cross_reference.py's). Engines identified against a reference are
-ranked on it with bootstrap intervals over seeds (report/ranking.py).
+ranked on it by studies.ranking_stats (the code `rank` ranks with: one reference bag is one
+trial, so the paired bootstrap draws its seeds; divergence rate first, then the metric).
 """
 
 from __future__ import annotations
@@ -14,15 +15,11 @@ from typing import Sequence
 from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, metric as metric_choice
 from cloth_bench_ros.options import FLAGS
 from cloth_bench_ros.report.blocks import Table
-from cloth_bench_ros.report.ranking import (
-    bootstrap_ranking,
-    order_agreement,
-    Ranked,
-    ranking_table,
-)
+from cloth_bench_ros.report.ranking import ranking_table
 from cloth_bench_ros.report.selections import engine_label
 from cloth_bench_ros.studies.aggregate import stat
 from cloth_bench_ros.studies.cross_reference import DEFAULT_ENTRANTS, KINDS, MODE, REFERENCES
+from cloth_bench_ros.studies.ranking_stats import HeldOutRun, order_agreement, rank_runs, Ranking
 
 REFERENCE_LABEL = {'mujoco': 'MuJoCo shell ref.', 'newton-vbd': 'Newton VBD ref.'}
 NOTE = (
@@ -104,30 +101,41 @@ def cross_reference_table(
 
 def identified_rankings(
     rows: Sequence[dict], metric: str = DEFAULT_METRIC
-) -> dict[tuple[str, str], list[Ranked]]:
+) -> dict[tuple[str, str], Ranking]:
     """Return {(reference, task): identified engines ranked on it by the metric, bootstrapped."""
     chosen = metric_choice(metric)
     sel = [r for r in _selected(rows) if _entrant(r)[2] == 'identified']
     out = {}
     for ref in REFERENCES:
         for task in ('dynamic', 'quasi_static'):
-            samples: dict[str, list[float | None]] = {}
+            runs: dict[str, list[HeldOutRun]] = {}
             for r in sel:
                 if r['reference'] == ref and r['primitive'] == task:
                     engine, model, _ = _entrant(r)
                     name = entrant_name(engine, {'model': model} if model else {})
                     value = chosen.row_value(r) if r.get('status') == 'ok' else None
-                    samples.setdefault(name, []).append(value)
-            if samples:
-                out[(ref, task)] = bootstrap_ranking(
-                    samples, higher_is_better=chosen.higher_is_better, absolute=chosen.absolute
+                    runs.setdefault(name, []).append(HeldOutRun(
+                        str(r.get('bag', ref)), int(r['seed']), value,
+                        r.get('status') == 'diverged',
+                    ))
+            if runs:
+                out[(ref, task)] = rank_runs(
+                    runs, higher_is_better=chosen.higher_is_better, absolute=chosen.absolute
                 )
     return out
 
 
-def ranking_statements(rankings: dict[tuple[str, str], list[Ranked]]) -> list[str]:
-    """Return one line per task: whether the identified engines' order holds across references."""
-    lines = []
+def ranking_statements(rankings: dict[tuple[str, str], Ranking]) -> list[str]:
+    """
+    Return the lines said under the ranking table.
+
+    Per reference and task, which neighbours are told apart; per task, whether the identified
+    engines' order holds across references.
+    """
+    lines = [
+        f'{REFERENCE_LABEL[ref]} {task}: {ranking.significance()}'
+        for (ref, task), ranking in rankings.items() if len(ranking.ranked) > 1
+    ]
     for task in ('dynamic', 'quasi_static'):
         per_ref = {REFERENCE_LABEL[ref]: r for (ref, t), r in rankings.items() if t == task}
         if per_ref:

@@ -1,13 +1,13 @@
 """
 The answer of `cloth-bench rank`: per cloth and task, the engines on held-out trials, ranked.
 
-From the study's numbers (studies.rank): each entrant's held-out values over trials and seeds,
-ranked with the cross-reference study's bootstrap (report.ranking: intervals, P(rank)); one
-sentence on which neighbours in the ranking differ significantly (their 95 % intervals do not
-overlap); the preset beside the identified figure; the floor; step times and, per rate, the most
-accurate entrant that meets the rate's deadline (studies.recommend's one rule: step p99 under
-DEADLINE_BUDGET of the period); the Pareto front of error against step time; the cross-task
-check.
+From the study's numbers (studies.rank): each entrant's held-out runs over trials and seeds,
+ranked by studies.ranking_stats (the cross-reference study's code: divergence rate first, then
+the metric; paired bootstrap over trials and seeds for the intervals, P(rank) and the paired
+differences; one sentence on which neighbours in the ranking are told apart); the preset beside
+the identified figure; the floor; step times and, per rate, the most accurate entrant that meets
+the rate's deadline (studies.recommend's one rule: step p99 under DEADLINE_BUDGET of the
+period); the Pareto front of error against step time; the cross-task check.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Any
 from cloth_bench_ros.core.cloth_size import BENCHMARK_SIZE, is_benchmark, size_text
 from cloth_bench_ros.core.metric_choice import Metric, metric as metric_of
 from cloth_bench_ros.core.table import Table
-from cloth_bench_ros.report.ranking import bootstrap_ranking, finite, Ranked
+from cloth_bench_ros.studies.ranking_stats import HeldOutRun, rank_runs, Ranked, ranking_record
 from cloth_bench_ros.studies.recommend import DEADLINE_BUDGET
 import numpy as np
 
@@ -35,30 +35,26 @@ def cell_value(cell: dict, m: Metric) -> float | None:
     return cell.get('value') if m.name in ('cd', 'hd') else None
 
 
-def _values(cells: list[dict], group: str, entrant: str, config: str,
-            m: Metric) -> list[float | None]:
+def finite(values: list[float | None]) -> np.ndarray:
+    """Return the finite values as a float array (a diverged run has none)."""
+    a = np.asarray([v for v in values if v is not None], dtype=float)
+    return a[np.isfinite(a)]
+
+
+def _held_out(cells: list[dict], group: str, entrant: str, config: str) -> list[dict]:
     return [
-        cell_value(c, m)
-        for c in cells
+        c for c in cells
         if c.get('kind') == 'held_out' and c['group'] == group and c['entrant'] == entrant
         and c['config'] == config
     ]
 
 
-def significance(ranked: list[Ranked]) -> str:
-    """Return one sentence: which neighbours in the ranking differ (intervals apart) or not."""
-    if len(ranked) < 2:
-        return 'one engine ranked: nothing to compare'
-    apart: list[str] = []
-    together: list[str] = []
-    for a, b in zip(ranked, ranked[1:]):  # either direction: more may be better
-        (apart if a.high < b.low or b.high < a.low else together).append(f'{a.name} < {b.name}')
-    parts = []
-    if apart:
-        parts.append('significant (95 % intervals apart): ' + ', '.join(apart))
-    if together:
-        parts.append('not told apart (intervals overlap): ' + ', '.join(together))
-    return '; '.join(parts)
+def held_out_runs(cells: list[dict], m: Metric) -> list[HeldOutRun]:
+    """Return the cells as the ranking reads them: trial, seed, value, diverged."""
+    return [
+        HeldOutRun(c['trial'], int(c['seed']), cell_value(c, m), c.get('status') == 'diverged')
+        for c in cells
+    ]
 
 
 def within_reference_error(ranked: list[Ranked], error: dict | None,
@@ -74,7 +70,7 @@ def within_reference_error(ranked: list[Ranked], error: dict | None,
     pairs = [
         {'pair': [a.name, b.name], 'difference_m': abs(b.mean - a.mean)}
         for a, b in zip(ranked, ranked[1:])
-        if abs(b.mean - a.mean) < error['error_m']
+        if a.mean is not None and b.mean is not None and abs(b.mean - a.mean) < error['error_m']
     ]
     return {**error, 'pairs': pairs}
 
@@ -116,7 +112,8 @@ def rank_answer(raw: dict[str, Any]) -> dict[str, Any]:
         entries: dict[str, dict] = {}
         for entrant in raw['spec']['entrants']:
             ident, preset = (
-                _values(cells, group, entrant, k, m) for k in ('identified', 'preset')
+                [cell_value(c, m) for c in _held_out(cells, group, entrant, k)]
+                for k in ('identified', 'preset')
             )
             fi, fp = finite(ident), finite(preset)
             entries[entrant] = {
@@ -126,15 +123,17 @@ def rank_answer(raw: dict[str, Any]) -> dict[str, Any]:
                            'ok': len(fp), 'n': len(preset)},
                 'timing': _timing(cells, group, entrant),
             }
-        ranked = bootstrap_ranking(
-            {n: e['identified']['values'] for n, e in entries.items()},
+        ranking = rank_runs(
+            {n: held_out_runs(_held_out(cells, group, n, 'identified'), m) for n in entries},
             higher_is_better=m.higher_is_better, absolute=m.absolute,
         )
+        ranked = ranking.ranked
         recommendation = {}
         for rate in raw['spec']['rates']:
             key = f'{rate:g}'
             timing = {n: e['timing'].get(key, {}) for n, e in entries.items()}
-            fit = [r for r in ranked if timing[r.name].get('meets_deadline')]
+            fit = [r for r in ranked
+                   if r.mean is not None and timing[r.name].get('meets_deadline')]
             recommendation[key] = (
                 {'entrant': fit[0].name, 'mean': fit[0].mean,
                  'step_p99_ms': entries[fit[0].name]['timing'][key]['step_p99_ms']}
@@ -146,8 +145,7 @@ def rank_answer(raw: dict[str, Any]) -> dict[str, Any]:
             for c in cells if c.get('kind') == 'cross_task' and c['group'] == group
         ]
         answer[group] = {
-            'ranking': [r.__dict__ for r in ranked],
-            'significance': significance(ranked),
+            **ranking_record(ranking),
             'within_reference_error': within_reference_error(
                 ranked, info.get('reference_error'), m
             ),
@@ -177,13 +175,36 @@ def rank_table(result: dict[str, Any]) -> Table:
             e = a['entrants'][r['name']]
             t = e['timing'].get(rate, {})
             body.append([
-                group, str(r['rank']), r['name'], _f(r['mean']),
+                group, str(r['rank']), r['name'], _f(r['mean']), _diverged(r),
                 f'[{_f(r["low"])}, {_f(r["high"])}]', f'{r["p_rank"]:.2f}', str(r['n']),
                 _f(e['preset']['mean']), _f(floor), _f(t.get('step_p99_ms'), 2),
             ])
-    headers = ['cloth_task', 'rank', 'engine', f'{metric} held-out{unit}', '95 % CI', 'P(rank)',
-               'runs', f'{metric} preset{unit}', 'floor CD (m)', f'step p99 at {rate} Hz (ms)']
-    return Table('rank', headers, body, 'lrlrrrrrrr')
+    headers = ['cloth_task', 'rank', 'engine', f'{metric} held-out{unit}', 'diverged', '95 % CI',
+               'P(rank)', 'runs', f'{metric} preset{unit}', 'floor CD (m)',
+               f'step p99 at {rate} Hz (ms)']
+    return Table('rank', headers, body, 'lrlrrrrrrrr')
+
+
+def _diverged(ranked: dict) -> str:
+    """Return an engine's diverged runs of its held-out runs, e.g. 0/15 (a rank.json before)."""
+    if 'diverged' not in ranked:
+        return '-'
+    return f'{ranked["diverged"]}/{ranked["runs"]}'
+
+
+def bootstrap_line(group: str, answer: dict) -> str | None:
+    """Return what a group's intervals rest on: trials, seeds, replicates, the paired draw."""
+    boot = answer.get('bootstrap')
+    if not boot:
+        return None
+    trials = boot['trials']
+    return (
+        f'{group}: {boot["confidence"] * 100:g} % intervals from {boot["replicates"]} paired'
+        f' bootstrap replicates (seed {boot["seed"]}) over {trials} held-out'
+        f' trial{"s" if trials != 1 else ""} x {boot["seeds_per_trial"]} seed'
+        f'{"s" if boot["seeds_per_trial"] != 1 else ""} each ({boot["resampled"]});'
+        ' ranked by divergence rate, then by the metric'
+    )
 
 
 def rank_lines(result: dict[str, Any]) -> list[str]:
@@ -200,6 +221,9 @@ def rank_lines(result: dict[str, Any]) -> list[str]:
                 + (f'{mass:g} kg (--cloth-mass, not fitted)' if mass is not None
                    else "the preset's per area times the area")
             )
+        said = bootstrap_line(group, a)
+        if said:
+            lines.append(said)
         lines.append(f'{group}: {a["significance"]}')
         ref = a.get('within_reference_error')
         if ref:
@@ -220,7 +244,8 @@ def rank_lines(result: dict[str, Any]) -> list[str]:
             )
         elif floor['mean'] is not None:
             above = [
-                r['name'] for r in a['ranking'] if r['low'] > floor['max']
+                r['name'] for r in a['ranking']
+                if r['low'] is not None and r['low'] > floor['max']
             ]
             lines.append(
                 f'{group}: floor (repeated real trials, {floor["vertices"]} points) '

@@ -3,9 +3,10 @@
 
 Reads `<dir>/rank.json` (everything `rank` printed, and the numbers under it) and writes
 report.md / report.html with the table and sentences `rank` printed, and per cloth and task two
-figures: the ranking (held-out mean with its 95 % bootstrap interval per engine, the preset's
-held-out mean beside it, the floor as a band) and speed against error (step time p50 at the
-ranking's rate against the held-out mean, the Pareto front marked, the deadline of that rate).
+figures: the ranking (held-out mean with its 95 % paired bootstrap interval and its diverged runs
+per engine, the preset's held-out mean beside it, the floor as a band) and speed against error
+(step time p50 at the ranking's rate against the held-out mean, the Pareto front marked, the
+deadline of that rate).
 """
 
 from __future__ import annotations
@@ -55,8 +56,10 @@ def plot_ranking(result: dict, group: str, path: Path) -> Path | None:
     fig, ax = plt.subplots(figsize=(7, 1.2 + 0.6 * len(ranked)))
     ys = list(range(len(ranked)))[::-1]
     for y, r in zip(ys, ranked):
-        ax.errorbar(r['mean'], y, xerr=[[r['mean'] - r['low']], [r['high'] - r['mean']]],
-                    fmt='o', color='C0', capsize=4, label='identified' if y == ys[0] else None)
+        if r['mean'] is not None and r['low'] is not None:  # None: every run diverged
+            ax.errorbar(r['mean'], y, xerr=[[r['mean'] - r['low']], [r['high'] - r['mean']]],
+                        fmt='o', color='C0', capsize=4,
+                        label='identified' if y == ys[0] else None)
         preset = a['entrants'][r['name']]['preset']['mean']
         if preset is not None:
             ax.plot(preset, y, 'x', color='C1', label='preset' if y == ys[0] else None)
@@ -65,9 +68,11 @@ def plot_ranking(result: dict, group: str, path: Path) -> Path | None:
         ax.axvspan(floor['min'], floor['max'], color='0.85', label='floor (trials to trials)')
         ax.axvline(floor['mean'], color='0.5', lw=1)
     ax.set_yticks(ys)
-    ax.set_yticklabels([f'{r["rank"]}. {r["name"]} (P {r["p_rank"]:.2f})' for r in ranked])
+    ax.set_yticklabels([f'{r["rank"]}. {r["name"]} (P {r["p_rank"]:.2f}'
+                        + (f', diverged {r["diverged"]}/{r["runs"]})' if 'diverged' in r else ')')
+                        for r in ranked])
     ax.set_xlabel(_axis_label(result))
-    ax.set_title(f'{group}: held-out trials, 95 % bootstrap intervals')
+    ax.set_title(f'{group}: held-out trials, 95 % paired bootstrap intervals')
     ax.legend(loc='best', fontsize=8)
     return save_figure(fig, path)
 

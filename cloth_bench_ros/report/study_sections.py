@@ -83,7 +83,8 @@ def cross_reference_blocks(rows: Sequence[dict], metric: str = DEFAULT_METRIC) -
         identified_rankings,
         ranking_statements,
     )
-    from cloth_bench_ros.report.ranking import ranking_table, REPLICATES
+    from cloth_bench_ros.report.ranking import ranking_table
+    from cloth_bench_ros.studies.ranking_stats import REPLICATES
 
     xref = cross_reference_section(rows, metric)
     if xref is None:
@@ -95,10 +96,12 @@ def cross_reference_blocks(rows: Sequence[dict], metric: str = DEFAULT_METRIC) -
             heading(3, 'Ranking of the identified engines, with bootstrap intervals'),
             paragraph(
                 'Each engine with the parameters identified against the reference it is scored'
-                ' on, over held-out seeds (the identification ran on seed 0). 95 % interval of'
-                f' the mean {metric_choice(metric).label} from {REPLICATES} bootstrap replicates'
-                ' of the seeds; P(rank): the'
-                ' share of replicates in which the engine holds its rank. '
+                ' on, over held-out seeds (the identification ran on seed 0), ranked by the share'
+                f' of its seeds that diverged, then by the mean {metric_choice(metric).label}.'
+                f' 95 % interval from {REPLICATES} paired bootstrap replicates of the seeds (a'
+                ' reference bag is one trial; every engine takes the same draw); P(rank): the'
+                ' share of replicates in which the engine holds its rank; two engines are told'
+                ' apart when the 95 % interval of their paired difference excludes 0. '
                 + ' '.join(s[0].upper() + s[1:] + '.' for s in ranking_statements(rankings))
             ),
             table_block(ranking_table('ranking', rankings)),
