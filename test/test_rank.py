@@ -19,7 +19,14 @@ from cloth_bench_ros import cli
 from cloth_bench_ros.core.metric_choice import metric
 from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.report.rank import deadline_ms, within_reference_error
+from cloth_bench_ros.report.rank import (
+    deadline_ms,
+    rank_answer,
+    rank_lines,
+    rank_table,
+    within_reference_error,
+)
+from cloth_bench_ros.report.rank_report import plot_ranking
 from cloth_bench_ros.studies import identify_problem, objective
 from cloth_bench_ros.studies.objective import evaluate, Trial
 from cloth_bench_ros.studies.rank import folds, SHARED_FILE
@@ -57,6 +64,38 @@ def test_folds_leave_one_trial_out_up_to_five_then_five_folds():
 
 def test_deadline_is_half_the_period():
     assert deadline_ms(1000.0) == pytest.approx(0.5)
+
+
+def test_a_diverged_held_out_run_ranks_its_engine_behind_one_that_did_not(tmp_path):
+    """Fragile is better on the runs it finished, but diverged on one: ranked behind, printed."""
+    def cell(entrant: str, trial: str, seed: int, value: float | None) -> dict:
+        return {'kind': 'held_out', 'group': 'towel_dynamic', 'entrant': entrant,
+                'config': 'identified', 'trial': trial, 'seed': seed, 'value': value,
+                'status': 'ok' if value is not None else 'diverged'}
+
+    cells = []
+    for trial in ('a', 'b', 'c'):
+        for seed in (1, 2):
+            cells.append(cell('steady', trial, seed, 0.040 + 0.001 * seed))
+            cells.append(cell('fragile', trial, seed,
+                              None if (trial, seed) == ('a', 2) else 0.020 + 0.001 * seed))
+            cells.append(cell('gone', trial, seed, None))
+    raw = {'spec': {'metric': 'cd', 'entrants': ['fragile', 'gone', 'steady'], 'rates': [100.0],
+                    'rate_hz': 100.0},
+           'groups': {'towel_dynamic': {'floor': {'mean': None}, 'reference_error': None}},
+           'cells': cells}
+    result = json.loads(json.dumps(rank_answer(raw), allow_nan=False))
+    answer = result['answer']['towel_dynamic']
+    assert [r['name'] for r in answer['ranking']] == ['steady', 'fragile', 'gone']
+    assert answer['bootstrap']['trials'] == 3 and answer['bootstrap']['seeds_per_trial'] == 2
+    table = rank_table(result).markdown()
+    assert '| towel_dynamic | 2 | fragile | 0.0214 | 1/6 |' in table
+    assert '| towel_dynamic | 3 | gone | - | 6/6 | [-, -] |' in table
+    lines = rank_lines(result)
+    assert 'towel_dynamic: 95 % intervals from 4000 paired bootstrap replicates (seed 0) over 3' \
+           ' held-out trials x 2 seeds each' in lines[0]
+    assert 'steady < fragile (fragile diverged in 1/6 runs, steady in 0/6' in lines[1]
+    assert plot_ranking(result, 'towel_dynamic', tmp_path / 'rank.png').stat().st_size > 1000
 
 
 def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys, request):
