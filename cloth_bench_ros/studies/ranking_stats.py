@@ -99,17 +99,15 @@ class Ranking:
             return 'one engine ranked: nothing to compare'
         apart: list[str] = []
         together: list[str] = []
-        by_name = {r.name: r for r in self.ranked}
         for a, b in zip(self.ranked, self.ranked[1:]):
             d = self.difference(a.name, b.name)
             if d.decided_by == 'divergence':
-                said = (f'{b.name} diverged in {by_name[b.name].diverged}/{by_name[b.name].runs}'
-                        f' runs, {a.name} in {a.diverged}/{a.runs}: rate'
-                        f' {_signed(d.rate_mean, 2)} [{_signed(d.rate_low, 2)},'
-                        f' {_signed(d.rate_high, 2)}]')
+                said = (f'{b.name} diverged in {b.diverged}/{b.runs} runs, {a.name} in'
+                        f' {a.diverged}/{a.runs}: rate {_signed(d.rate_mean, 2)}'
+                        f' [{_signed(d.rate_low, 2)}, {_signed(d.rate_high, 2)}]')
             else:
-                said = f'{_signed(d.mean, digits)} [{_signed(d.low, digits)}, ' \
-                       f'{_signed(d.high, digits)}]'
+                said = (f'{_signed(d.mean, digits)} [{_signed(d.low, digits)},'
+                        f' {_signed(d.high, digits)}]')
             (apart if d.significant else together).append(f'{a.name} < {b.name} ({said})')
         percent = f'{self.confidence * 100:g} %'
         parts = []
