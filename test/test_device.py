@@ -21,8 +21,10 @@ from cloth_bench_ros.studies.cells import Cell
 from cloth_bench_ros.studies.direct import run_direct
 from cloth_bench_ros.studies.identify import IdentifySpec
 from cloth_bench_ros.studies.identify_output import write_outputs
+from cloth_bench_ros.studies.results import row_key
 from cloth_bench_ros.studies.run_config import RunConfig
 from cloth_bench_ros.studies.run_pipeline import node_parameters
+from cloth_bench_ros.studies.sweep import error_row
 import numpy as np
 import pytest
 import warp as wp
@@ -108,6 +110,9 @@ def test_runs_and_result_keys_name_the_device():
     assert summary['run']['devices'] == {'newton': 'cpu'}
     cell = Cell('newton', 100.0, 'towel', 'dynamic', 0, 'bag', overrides=(('device', 'cpu'),))
     assert cell.device == 'cpu' and 'cpu' in cell.key()
+    row = error_row(cell, 'not run')  # a sweep's row names it, and resumes by it
+    assert row['device'] == 'cpu' and row_key(row) == cell.key()
+    assert Cell('newton', 100.0, 'towel', 'dynamic', 0, 'bag').device == AUTO
     assert Cell('mujoco', 100.0, 'towel', 'dynamic', 0, 'bag').device == 'cpu'
 
 

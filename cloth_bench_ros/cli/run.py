@@ -332,8 +332,9 @@ def cmd_engines(args: argparse.Namespace) -> int:
         for info in known_engines():
             if info.available:
                 start = time.perf_counter()
-                engine_class(info.name).warm()
-                print(f'warmed {info.name} in {time.perf_counter() - start:.1f} s')
+                engine_class(info.name).warm()  # on every device the engine has here
+                on = ', '.join(engine_class(info.name).devices())
+                print(f'warmed {info.name} on {on} in {time.perf_counter() - start:.1f} s')
         start = time.perf_counter()
         compile_kernels()
         print(f'compiled the metric kernels in {time.perf_counter() - start:.1f} s')
