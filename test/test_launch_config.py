@@ -249,7 +249,7 @@ def test_the_default_launch_replays_the_bundled_bag_of_the_task(monkeypatch, tmp
 def test_the_device_argument_reaches_newtons_simulator_and_the_evaluator_names_each(
     monkeypatch, tmp_path
 ):
-    """device:= is Newton's (as --device); the evaluator records every engine's, `auto` resolved."""
+    """device:= is Newton's (as --device); the evaluator records each engine's, `auto` resolved."""
     import warp as wp
 
     auto = 'cuda:0' if wp.get_cuda_device_count() else 'cpu'  # what Warp finds here

@@ -45,7 +45,7 @@ def mujoco_upgraded(monkeypatch):
 
 @pytest.fixture
 def mujoco_on_cuda(monkeypatch):
-    """Resolve MuJoCo's device as cuda:0, as a machine with another device would (it runs alike)."""
+    """Resolve MuJoCo's device as cuda:0, as on a machine of another device (it runs alike)."""
     monkeypatch.setattr(MujocoCloth, 'device_for', classmethod(lambda cls, params: 'cuda:0'))
     identify_problem._device.cache_clear()
     yield
