@@ -11,13 +11,14 @@ import json
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import build_parser, main
+from cloth_bench_ros.cli.studies import say_fitted_elsewhere
 from cloth_bench_ros.core.scene import ClothGrid, GRIPPER_START_LEFT, GRIPPER_START_RIGHT
 from cloth_bench_ros.engines import engine_device, make_engine
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.engines.newton_cloth import available_devices, NewtonCloth, resolve_device
-from cloth_bench_ros.engines.presets import fitted_device, load_preset
+from cloth_bench_ros.engines.presets import fitted_device, load_preset, preset_set
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.studies.cells import Cell
+from cloth_bench_ros.studies.cells import Cell, paper_cells
 from cloth_bench_ros.studies.direct import run_direct
 from cloth_bench_ros.studies.identify import IdentifySpec
 from cloth_bench_ros.studies.identify_output import write_outputs
@@ -179,8 +180,14 @@ def test_a_preset_fitted_on_another_device_says_so_in_one_line(hanging_bag, tmp_
                  '--output', str(tmp_path / 'run'), '--presets', str(preset.parent),
                  '--device', 'cpu']) == 0
     said = [line for line in capsys.readouterr().out.splitlines() if 'fitted on' in line]
-    assert said == ['newton: its preset was fitted on cuda:0, this run is on cpu: the device'
+    assert said == ['newton: its preset was fitted on cuda:0, it runs on cpu here: the device'
                     ' changes the numbers (docs/engines.md, "Device")']
+    # A sweep's cells with that set: the same line, once for the engine (two seeds, one line).
+    cells = paper_cells(['newton'], [100.0], ['towel'], ['dynamic'], [0, 1],
+                        overrides={'newton': {'device': 'cpu'}},
+                        presets=preset_set(str(preset.parent)))
+    say_fitted_elsewhere(cells, preset.parent)
+    assert capsys.readouterr().out.splitlines() == said
 
 
 @pytest.mark.slow

@@ -193,7 +193,7 @@ def _checked_output(path: Path, option: str) -> Path:
 def cmd_run(args: argparse.Namespace) -> int:
     """Run the node graph on a bag and print the result table."""
     from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.engines.presets import fitted_device, load_preset
+    from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere, load_preset
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.run_report import result_table
     from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses
@@ -280,10 +280,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     for name, device in devices.items():
         model = params[name].get('model')
-        fitted = fitted_device(name, args.cloth, args.primitive, presets, model)
-        if fitted is not None and fitted != device:
-            print(f'{name}: its preset was fitted on {fitted}, this run is on {device}: the device'
-                  ' changes the numbers (docs/engines.md, "Device")')
+        note = fitted_elsewhere(
+            name, device, [fitted_device(name, args.cloth, args.primitive, presets, model)])
+        if note:
+            print(note)
     for line in cloth_lines(masses, size, mass, args.grid):
         print(line)
     print(result_table(summary, realtime=args.pacing == 'realtime'))

@@ -23,6 +23,7 @@ import copy
 from dataclasses import dataclass
 from pathlib import Path
 import re
+from typing import Iterable
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.trajectory import PRIMITIVES
@@ -222,6 +223,15 @@ def fitted_device(
         text = ' '.join(paragraphs)
     found = _FITTED_ON.findall(text)
     return found[-1] if found else None
+
+
+def fitted_elsewhere(engine: str, device: str, fitted: Iterable[str | None]) -> str | None:
+    """Return the one line that says an engine's presets were fitted on another device, or None."""
+    other = sorted({f for f in fitted if f is not None and f != device})
+    if not other:
+        return None
+    return (f'{engine}: its preset was fitted on {", ".join(other)}, it runs on {device} here: the'
+            ' device changes the numbers (docs/engines.md, "Device")')
 
 
 def default_model(engine: str, cloth: str, primitive: str) -> str | None:
