@@ -23,7 +23,7 @@ refused by `validate_params`, before anything runs. The device changes the numbe
 kernels in another order), so a run names its device. `deterministic` is Warp's deterministic
 mode for the solvers' atomics (and Newton's sorted contacts): `run_to_run` makes a CUDA run give
 the same numbers every time, `gpu_to_gpu` on every GPU architecture; on the CPU, which runs the
-kernels in order, it changes nothing but the cost (docs/engines.md, "Device").
+kernels in order, it changes no number (docs/engines.md, "Deterministic atomics").
 
 Warp compiles its kernels on first use (about 35 s per solver on one core) and caches them in its
 kernel cache (by default ~/.cache/warp); `cloth-bench engines --warm` fills it.
