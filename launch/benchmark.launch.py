@@ -3,12 +3,14 @@ Launch the benchmark's node graph.
 
 ros2 launch cloth_bench_ros benchmark.launch.py [engines:=mujoco,bullet] [rate_hz:=100.0]
 [bag:=PATH] [live:=true] [live_port:=8765] [live_wait:=30.0] [cloth_size:=W,L]
-[cloth_mass:=KG] ...
+[cloth_mass:=KG] [device:=cpu|cuda|cuda:N|auto] ...
 
 The node graph (README, "The node graph"), one process per node, output on the screen; the launch
 ends when the evaluator has written its report. Launch arguments win over config/benchmark.yaml:
 every node has a name and a namespace, so launch_ros writes its dict parameters under the node's
 full name into a params file passed after benchmark.yaml, and rclpy applies that key last.
+`device` is Newton's, as `--device` on the command line (empty: its default, the first CUDA
+device Warp finds, else the CPU); the evaluator records the device each engine runs on.
 """
 
 import os
@@ -56,6 +58,14 @@ def _nodes(context):
         'cloth': cloth,
         'engines': engines,
     }
+    device = arg('device')
+    if device and 'newton' not in engines:
+        raise ValueError(f'launch argument device:={device} is the device of engine newton, '
+                         f'which is not among engines:={arg("engines")}')
+    from cloth_bench_ros.engines import engine_device  # here: Warp starts only for a launch
+
+    devices = {e: engine_device(e, {'device': device} if e == 'newton' and device else {})
+               for e in engines}  # `auto` resolved as the simulator resolves it, on this machine
     cloth_size = {  # a cloth of another size and its mass (docs/identification.md)
         'cloth_size': arg('cloth_size'),
         'cloth_mass': float(arg('cloth_mass')),
@@ -77,7 +87,8 @@ def _nodes(context):
         params_file,
         common,
         cloth_size,
-        {'output_dir': arg('output_dir'), 'pacing': pacing, 'seed': seed},
+        {'output_dir': arg('output_dir'), 'pacing': pacing, 'seed': seed,
+         'devices': ','.join(devices.values())},
         {  # the live view in Foxglove (docs/live.md)
             'live': arg('live').lower() == 'true',
             'live_port': int(arg('live_port')),
@@ -92,7 +103,8 @@ def _nodes(context):
                 params_file,
                 common,
                 cloth_size,
-                {'engine': engine, 'seed': seed},
+                {'engine': engine, 'seed': seed,
+                 **({'device': device} if engine == 'newton' and device else {})},
             )
         )
     shutdown = RegisterEventHandler(
@@ -118,6 +130,7 @@ def generate_launch_description():
         'live_wait': '30.0',
         'cloth_size': '',
         'cloth_mass': '0.0',
+        'device': '',
     }
     return LaunchDescription(
         [DeclareLaunchArgument(name, default_value=value) for name, value in defaults.items()]

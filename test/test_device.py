@@ -1,24 +1,38 @@
-"""Newton's device: `--device cpu|cuda[:N]|auto` on every command, refused when absent, named."""
+"""
+Newton's device: `--device cpu|cuda[:N]|auto` on every command, refused when absent, named.
+
+The expectations follow what Warp finds here (CUDA), so the same tests pass on a machine with a
+GPU and still fail where `auto` resolves to anything but Warp's first CUDA device, else the CPU.
+"""
 
 from __future__ import annotations
 
+import json
+
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import build_parser, main
+from cloth_bench_ros.cli.studies import say_fitted_elsewhere
 from cloth_bench_ros.core.scene import ClothGrid, GRIPPER_START_LEFT, GRIPPER_START_RIGHT
 from cloth_bench_ros.engines import engine_device, make_engine
 from cloth_bench_ros.engines.base import EngineError
-from cloth_bench_ros.engines.newton_cloth import available_devices, resolve_device
+from cloth_bench_ros.engines.newton_cloth import available_devices, NewtonCloth, resolve_device
+from cloth_bench_ros.engines.presets import fitted_device, load_preset, preset_set
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.studies.cells import Cell
+from cloth_bench_ros.studies.cells import Cell, paper_cells
 from cloth_bench_ros.studies.direct import run_direct
+from cloth_bench_ros.studies.identify import IdentifySpec
+from cloth_bench_ros.studies.identify_output import write_outputs
+from cloth_bench_ros.studies.results import row_key
 from cloth_bench_ros.studies.run_config import RunConfig
 from cloth_bench_ros.studies.run_pipeline import node_parameters
+from cloth_bench_ros.studies.sweep import error_row
 import numpy as np
 import pytest
 import warp as wp
 
 CUDA = wp.get_cuda_device_count()
 ABSENT = f'cuda:{CUDA}'  # one past the last CUDA device: never on this machine
+AUTO = 'cuda:0' if CUDA else 'cpu'  # where `auto` must run, from what Warp reports
 
 
 def test_device_spelling_is_checked_in_the_validation_layer():
@@ -31,7 +45,7 @@ def test_device_spelling_is_checked_in_the_validation_layer():
 
 def test_default_is_cuda_when_warp_finds_one_else_cpu():
     assert available_devices()[0] == 'cpu'
-    assert resolve_device('auto') == ('cuda:0' if CUDA else 'cpu')
+    assert resolve_device('auto') == AUTO
     assert engine_device('newton') == resolve_device('auto')
     assert engine_device('mujoco') == 'cpu'
 
@@ -69,12 +83,12 @@ def test_device_option_becomes_newtons_engine_override():
     assert main(['run', '--engine', 'mujoco', '--device', 'cpu']) == 2  # no Newton in the run
 
 
-def test_cpu_device_runs_what_the_default_cpu_engine_runs():
-    """On a machine without CUDA, `auto` and `cpu` are the same engine, bit for bit."""
+def test_auto_runs_on_warps_first_cuda_device_else_the_same_engine_as_cpu():
+    """`auto` is cuda:0 where Warp finds CUDA; without it, the `cpu` engine bit for bit."""
     runs = []
-    for params in ({'model': 'xpbd'}, {'model': 'xpbd', 'device': 'cpu'}):
+    for params, device in (({'model': 'xpbd'}, AUTO), ({'model': 'xpbd', 'device': 'cpu'}, 'cpu')):
         engine = make_engine('newton', 100.0, params, ClothGrid(4, 5))
-        assert engine.device == 'cpu'
+        assert engine.device == device
         vertices = engine.start(0, GRIPPER_START_LEFT, GRIPPER_START_RIGHT)
         for _ in range(5):
             vertices = engine.step(GRIPPER_START_LEFT, GRIPPER_START_RIGHT)
@@ -97,6 +111,9 @@ def test_runs_and_result_keys_name_the_device():
     assert summary['run']['devices'] == {'newton': 'cpu'}
     cell = Cell('newton', 100.0, 'towel', 'dynamic', 0, 'bag', overrides=(('device', 'cpu'),))
     assert cell.device == 'cpu' and 'cpu' in cell.key()
+    row = error_row(cell, 'not run')  # a sweep's row names it, and resumes by it
+    assert row['device'] == 'cpu' and row_key(row) == cell.key()
+    assert Cell('newton', 100.0, 'towel', 'dynamic', 0, 'bag').device == AUTO
     assert Cell('mujoco', 100.0, 'towel', 'dynamic', 0, 'bag').device == 'cpu'
 
 
@@ -128,3 +145,67 @@ def test_identified_provenance_names_the_device_and_the_preset_does_not(tmp_path
     summary['per_sampler']['tpe']['pruned'] = 2
     text = provenance_text(spec, summary, '1.8.0')
     assert 'trials: tpe 3; multi-fidelity coarse, 2 stopped at a rung; seed 0' in text
+
+
+def test_engines_warm_compiles_newton_on_every_device_warp_finds(monkeypatch):
+    warmed = []
+    reset = NewtonCloth.reset
+
+    def noted(self, *args):
+        warmed.append((self.device, self.config['model'], self.config['self_collision']))
+        return reset(self, *args)
+
+    monkeypatch.setattr(NewtonCloth, 'reset', noted)
+    NewtonCloth.warm()
+    assert sorted(warmed) == sorted(
+        (device, model, collide) for device in available_devices()
+        for model in ('xpbd', 'vbd') for collide in (False, True))
+
+
+def test_a_preset_fitted_on_another_device_says_so_in_one_line(hanging_bag, tmp_path, capsys):
+    """The identification's provenance names its device; a run elsewhere says so, once."""
+    spec = IdentifySpec('newton', 'towel', 'dynamic', hanging_bag, tmp_path / 'ident', 'tpe', 8,
+                        'cd', ['mass'], grid=(6, 8), validate_seeds=0, fixed={'device': 'cpu'})
+    summary = {'params': {'mass': 0.2}, 'value': 0.031, 'preset_value': 0.036,
+               'best_sampler': 'tpe', 'per_sampler': {'tpe': {'trials': 8}}}
+    spec.output.mkdir()
+    preset = write_outputs(spec, load_preset('newton', 'towel', 'dynamic'), summary)
+    assert fitted_device('newton', 'towel', 'dynamic', preset.parent, 'vbd') == 'cpu'
+    assert json.loads((spec.output / 'identification.json').read_text())['device'] == 'cpu'
+    # As if it had been fitted on a GPU: the recorded device changed in the file.
+    preset.write_text(preset.read_text().replace('on device cpu;', 'on device cuda:0;'))
+    assert fitted_device('newton', 'towel', 'dynamic', preset.parent, 'vbd') == 'cuda:0'
+    assert fitted_device('newton', 'towel', 'dynamic') is None  # hand-set: no device named
+    assert main(['run', '--engine', 'newton', '--grid', '6x8', '--bag', str(hanging_bag),
+                 '--output', str(tmp_path / 'run'), '--presets', str(preset.parent),
+                 '--device', 'cpu']) == 0
+    said = [line for line in capsys.readouterr().out.splitlines() if 'fitted on' in line]
+    assert said == ['newton: its preset was fitted on cuda:0, it runs on cpu here: the device'
+                    ' changes the numbers (docs/engines.md, "Device")']
+    # A sweep's cells with that set: the same line, once for the engine (two seeds, one line).
+    cells = paper_cells(['newton'], [100.0], ['towel'], ['dynamic'], [0, 1],
+                        overrides={'newton': {'device': 'cpu'}},
+                        presets=preset_set(str(preset.parent)))
+    say_fitted_elsewhere(cells, preset.parent)
+    assert capsys.readouterr().out.splitlines() == said
+
+
+@pytest.mark.slow
+def test_the_deterministic_option_runs_and_changes_nothing_on_the_cpu():
+    """Warp orders no atomics on the CPU: the same numbers; on CUDA it is unmeasured here."""
+    for model in ('xpbd', 'vbd'):
+        runs = []
+        for mode in ('off', 'run_to_run'):
+            engine = make_engine('newton', 100.0, {'model': model, 'device': 'cpu',
+                                                   'deterministic': mode}, ClothGrid(4, 5))
+            vertices = engine.start(0, GRIPPER_START_LEFT, GRIPPER_START_RIGHT)
+            for _ in range(5):
+                vertices = engine.step(GRIPPER_START_LEFT + 0.01, GRIPPER_START_RIGHT + 0.01)
+            runs.append(vertices)
+            engine.close()
+        assert np.isfinite(runs[0]).all() and np.array_equal(runs[0], runs[1]), model
+    with pytest.raises(EngineError, match='parameter deterministic'):
+        make_engine('newton', 100.0, {'deterministic': 'always'}, ClothGrid(3, 3))
+    cell = Cell('newton', 100.0, 'towel', 'dynamic', 0, 'bag', config='deterministic=run_to_run',
+                overrides=(('deterministic', 'run_to_run'),))
+    assert cell.key() != Cell('newton', 100.0, 'towel', 'dynamic', 0, 'bag').key()

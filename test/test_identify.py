@@ -305,6 +305,15 @@ def test_a_journal_resumes_only_the_problem_it_was_fitted_to(target, tmp_path):
     with pytest.raises(InputError, match=r'holds an identification of another problem '
                        r'\(rate_hz changed\); give another --output'):
         identify(replace(spec, rate_hz=50.0), workers=1, progress=False)
+    # The device it ran on is part of the problem and of every trial's row: a journal resumed
+    # on another device (as if fitted on a GPU: the recorded device changed) is refused.
+    assert json.loads(problem)['mujoco-towel-dynamic']['device'] == 'cpu'
+    rows = [json.loads(line) for line in (out / 'trials.jsonl').read_text().splitlines()]
+    assert [r['device'] for r in rows] == ['cpu', 'cpu']
+    (out / PROBLEM_FILE).write_text(problem.replace('"device": "cpu"', '"device": "cuda:0"'))
+    with pytest.raises(InputError, match=r'another problem \(device changed\)'):
+        identify(spec, workers=1, progress=False)
+    (out / PROBLEM_FILE).write_text(problem)
     with pytest.raises(InputError, match=r'\(bags changed\)'):  # another bag, the same data
         identify(replace(spec, bag=target), workers=1, progress=False)
     shutil.rmtree(bag)  # the same bag recorded again, differently
@@ -351,6 +360,10 @@ def test_the_changes_of_a_problem_are_named(target, tmp_path, monkeypatch):
     assert changed_keys(old, problem()) == ['engine version']
     # A problem recorded before the engine's version was kept: unknown, not a change (resumes).
     assert changed_keys({k: v for k, v in old.items() if k != 'engine_version'}, problem()) == []
+    # Likewise the device: named where it changed, unknown (not a change) where not recorded.
+    assert old['device'] == 'cpu'
+    assert changed_keys({**old, 'device': 'cuda:0'}, old) == ['device']
+    assert changed_keys({k: v for k, v in old.items() if k != 'device'}, old) == []
 
 
 def test_cli_identify_refuses_a_journal_of_another_problem_in_one_line(target, tmp_path, capsys):

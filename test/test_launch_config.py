@@ -246,6 +246,32 @@ def test_the_default_launch_replays_the_bundled_bag_of_the_task(monkeypatch, tmp
         context.shutdown()
 
 
+def test_the_device_argument_reaches_newtons_simulator_and_the_evaluator_names_each(
+    monkeypatch, tmp_path
+):
+    """device:= is Newton's (as --device); the evaluator records each engine's, `auto` resolved."""
+    import warp as wp
+
+    auto = 'cuda:0' if wp.get_cuda_device_count() else 'cpu'  # what Warp finds here
+    for device, newton in (('', auto), ('cpu', 'cpu')):
+        nodes = {n.kwargs['name']: n for n in _launched_nodes(
+            monkeypatch, {'engines': 'newton,mujoco', 'device': device})}
+        started = {}
+        try:
+            for name in ('evaluator', 'simulator_newton'):
+                started[name] = _start(nodes[name], tmp_path)
+            assert started['evaluator'][0].run_info['devices'] == {
+                'newton': newton, 'mujoco': 'cpu'}
+            assert started['simulator_newton'][0].engine.device == newton
+        finally:
+            for instance, context in started.values():
+                getattr(instance, 'close', lambda: None)()
+                context.shutdown()
+    with pytest.raises(ValueError, match='device:=cpu is the device of engine newton, which is '
+                       'not among engines:=mujoco'):
+        _launched_nodes(monkeypatch, {'engines': 'mujoco', 'device': 'cpu'})
+
+
 def test_ros2_run_with_the_params_file_lets_the_command_line_win(tmp_path):
     """Check that `-p bag:=...` after a params file lands in the file's `/**` entry."""
     from cloth_bench_ros.nodes.recorder import Recorder

@@ -14,6 +14,7 @@ from pathlib import Path
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines import presets
 from cloth_bench_ros.engines.base import EngineError
+from cloth_bench_ros.engines.newton_cloth import resolve_device
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.studies.identify import IdentifySpec
 from cloth_bench_ros.studies.identify_output import write_outputs
@@ -22,6 +23,7 @@ import pytest
 import yaml
 
 GRID = (6, 8)
+AUTO = resolve_device('auto')  # where Newton runs by default here
 SHIPPED = presets.config_dir() / 'presets' / 'identified' / 'newton.yaml'
 
 
@@ -43,7 +45,7 @@ def test_the_identified_set_gives_the_xpbd_entry_when_xpbd_runs(hanging_bag, tmp
     assert main(_run(hanging_bag, tmp_path / 'ident', '--presets', 'identified',
                      '--set', 'newton.model=xpbd')) == 0
     header = capsys.readouterr().out.splitlines()[0]
-    assert header.endswith('newton (xpbd) on cpu'), header
+    assert header.endswith(f'newton (xpbd) on {AUTO}'), header
     summary = json.loads((tmp_path / 'ident' / 'summary.json').read_text())
     assert summary['run']['models'] == {'newton': 'xpbd'}
     # The set's values reached the engine: the shipped preset's XPBD scores otherwise.
@@ -150,7 +152,9 @@ def test_a_vbd_identification_merges_beside_the_xpbd_entry(hanging_bag, tmp_path
     assert (folder / 'newton.yaml').read_text() == text
     # a run of the default model with that set: VBD, with its identified entry
     assert main(_run(hanging_bag, tmp_path / 'run', '--presets', str(folder))) == 0
-    assert capsys.readouterr().out.splitlines()[0].endswith('newton (vbd) on cpu')
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].endswith(f'newton (vbd) on {AUTO}')
+    assert not any('fitted on' in line for line in printed)  # here, where it was fitted
     summary = json.loads((tmp_path / 'run' / 'summary.json').read_text())
     assert summary['run']['models'] == {'newton': 'vbd'}
     assert 0 < summary['engines']['newton']['CD_d'] < 1

@@ -50,6 +50,16 @@ def mujoco_upgraded(monkeypatch):
     identify_problem._simulated_model.cache_clear()
 
 
+@pytest.fixture
+def mujoco_on_cuda(monkeypatch):
+    """Resolve MuJoCo's device as cuda:0, as on a machine of another device (it runs alike)."""
+    monkeypatch.setattr(MujocoCloth, 'device_for', classmethod(lambda cls, params: 'cuda:0'))
+    identify_problem._device.cache_clear()
+    yield
+    monkeypatch.undo()
+    identify_problem._device.cache_clear()
+
+
 @pytest.fixture(scope='module')
 def recordings(tmp_path_factory) -> Path:
     """One MCAP and one sqlite3 bag of one fling, one MCAP bag of three: five trials."""
@@ -108,6 +118,8 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys, 
     assert 'change of phase at frame 10' in printed
     result = json.loads((out / 'rank.json').read_text())
     assert len(result['trials']) == 5
+    assert result['spec']['devices'] == {'mujoco': 'cpu'}  # where each entrant ran
+    assert {c['device'] for c in result['cells']} == {'cpu'}
     group = result['answer']['towel_dynamic']
     assert len(result['groups']['towel_dynamic']['folds']) == 5
     assert len([k for k in result['identified'] if k.startswith('towel_dynamic|mujoco|')]) == 5
@@ -178,12 +190,16 @@ def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys, 
     assert printed.count('changed since it was identified (bag data): identified again') == 4
     assert 'fold2: its trials' not in printed  # the fold that holds that trial out
     assert 'cells: 11 (9 kept from an earlier run)' in printed
-    # Another version of the engine: every fold, simulation and cell anew.
+    # Another version of the engine, on another device: every fold, simulation and cell anew.
     request.getfixturevalue('mujoco_upgraded')
+    request.getfixturevalue('mujoco_on_cuda')
     assert cli.main(['rank', str(again), '--output', str(out), *TINY]) == 0
     printed = capsys.readouterr().out
-    assert printed.count('changed since it was identified (engine version)') == 5, printed
+    assert printed.count('changed since it was identified (device, engine version)') == 5, printed
     assert 'cells: 11 (0 kept from an earlier run)' in printed
+    result = json.loads((out / 'rank.json').read_text())
+    assert result['spec']['devices'] == {'mujoco': 'cuda:0'}
+    assert {c['device'] for c in result['cells']} == {'cuda:0'}
 
 
 def _check_paired_ranking(result: dict, printed: str) -> None:
@@ -302,6 +318,27 @@ def test_a_simulation_of_another_engine_version_is_not_reused(tmp_path, request)
     assert SharedSimulations(tmp_path / SHARED_FILE, bags).known(trial) is not None
     request.getfixturevalue('mujoco_upgraded')
     assert SharedSimulations(tmp_path / SHARED_FILE, bags).known(trial) is None
+
+
+def test_a_simulation_or_cell_of_another_device_is_not_reused(tmp_path, request):
+    from cloth_bench_ros.studies.rank import _cell, RankSpec
+
+    bags = []
+    for name in 'ab':
+        (tmp_path / name).write_bytes(name.encode())
+        bags.append(str(tmp_path / name))
+    trial = Trial('mujoco', 'towel', 'dynamic', bags[0], (('young', 1e4),), also=(bags[1],))
+    pooled = {'per_bag': [0.01, 0.03], 'per_bag_hd': [0.1, 0.3], 'per_bag_frames': [10, 9],
+              'diverged': None, 'cpu_s': 2.0}
+    SharedSimulations(tmp_path / SHARED_FILE, bags).finish(trial, pooled)
+    held = RankTrial('t', 'towel', 'dynamic', bags[0], bags[0], 0, 'metadata', 0.0, 132, 104)
+    cell = _cell(RankSpec([bags[0]], tmp_path), 'mujoco', {'young': 1e4}, held, 1, 100.0, 'preset')
+    assert SharedSimulations(tmp_path / SHARED_FILE, bags).known(trial) is not None
+    request.getfixturevalue('mujoco_on_cuda')
+    assert SharedSimulations(tmp_path / SHARED_FILE, bags).known(trial) is None
+    again = _cell(RankSpec([bags[0]], tmp_path), 'mujoco', {'young': 1e4}, held, 1, 100.0,
+                  'preset')
+    assert again[0] != cell[0] and again[1] == cell[1]  # another key for the same simulation
 
 
 def test_report_of_a_damaged_rank_directory_is_one_line(tmp_path, capsys):

@@ -193,7 +193,7 @@ def _checked_output(path: Path, option: str) -> Path:
 def cmd_run(args: argparse.Namespace) -> int:
     """Run the node graph on a bag and print the result table."""
     from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.engines.presets import load_preset
+    from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere, load_preset
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.run_report import result_table
     from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses
@@ -278,6 +278,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
         f' bag {bag}{on}'
     )
+    for name, device in devices.items():
+        model = params[name].get('model')
+        note = fitted_elsewhere(
+            name, device, [fitted_device(name, args.cloth, args.primitive, presets, model)])
+        if note:
+            print(note)
     for line in cloth_lines(masses, size, mass, args.grid):
         print(line)
     print(result_table(summary, realtime=args.pacing == 'realtime'))
@@ -326,8 +332,9 @@ def cmd_engines(args: argparse.Namespace) -> int:
         for info in known_engines():
             if info.available:
                 start = time.perf_counter()
-                engine_class(info.name).warm()
-                print(f'warmed {info.name} in {time.perf_counter() - start:.1f} s')
+                engine_class(info.name).warm()  # on every device the engine has here
+                on = ', '.join(engine_class(info.name).devices())
+                print(f'warmed {info.name} on {on} in {time.perf_counter() - start:.1f} s')
         start = time.perf_counter()
         compile_kernels()
         print(f'compiled the metric kernels in {time.perf_counter() - start:.1f} s')

@@ -154,6 +154,20 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     xref.set_defaults(func=cmd_cross_reference)
 
 
+def say_fitted_elsewhere(cells: list, presets: Path | None) -> None:
+    """Print, per engine and device, one line where the cells' presets were fitted elsewhere."""
+    from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere
+
+    fitted: dict[tuple[str, str], set] = {}
+    for cell in cells:
+        fitted.setdefault((cell.engine, cell.device), set()).add(
+            fitted_device(cell.engine, cell.cloth, cell.primitive, presets, cell.model or None))
+    for (engine, device), devices in sorted(fitted.items()):
+        note = fitted_elsewhere(engine, device, devices)
+        if note:
+            print(note)
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run a sweep's cells on the executor, resuming what is done."""
     from cloth_bench_ros.studies import sweep as sw
@@ -207,6 +221,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         + f' = {len(cells)} cells -> {out / sw.RESULTS_FILE} on {where}',
         flush=True,
     )
+    say_fitted_elsewhere(cells, plan.presets.directory if plan.presets else None)
     try:
         outcome = sw.run_sweep(
             cells,

@@ -20,7 +20,10 @@ once as a Warp graph and replayed; the targets are read from device arrays by a 
 Device: `device` (`--device` on every command) is `cpu`, `cuda`, `cuda:N` or `auto` (the default:
 the first CUDA device if Warp finds one, else the CPU); a device that is not on the machine is
 refused by `validate_params`, before anything runs. The device changes the numbers (float32
-kernels in another order), so a run names its device.
+kernels in another order), so a run names its device. `deterministic` is Warp's deterministic
+mode for the solvers' atomics (and Newton's sorted contacts): `run_to_run` makes a CUDA run give
+the same numbers every time, `gpu_to_gpu` on every GPU architecture; on the CPU, which runs the
+kernels in order, it changes no number (docs/engines.md, "Deterministic atomics").
 
 Warp compiles its kernels on first use (about 35 s per solver on one core) and caches them in its
 kernel cache (by default ~/.cache/warp); `cloth-bench engines --warm` fills it.
@@ -46,6 +49,11 @@ from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param  # noqa
 import newton  # noqa: E402
 
 MODELS = ('xpbd', 'vbd')
+DETERMINISTIC = {  # the `deterministic` parameter's values: Warp's modes
+    'off': wp.DeterministicMode.NOT_GUARANTEED,
+    'run_to_run': wp.DeterministicMode.RUN_TO_RUN,
+    'gpu_to_gpu': wp.DeterministicMode.GPU_TO_GPU,
+}
 
 
 def available_devices() -> tuple[str, ...]:
@@ -217,6 +225,14 @@ class NewtonCloth(ClothEngine):
             doc='cpu, cuda, cuda:N, or auto (the first CUDA device Warp finds, else cpu)',
             check=validation.device,
         ),
+        Param(
+            'deterministic',
+            'off',
+            '',
+            doc="Warp's deterministic atomics on CUDA: off, run_to_run (the same numbers every run"
+            ' on one GPU) or gpu_to_gpu (on every GPU architecture)',
+            choices=tuple(DETERMINISTIC),
+        ),
     )
 
     @classmethod
@@ -262,15 +278,17 @@ class NewtonCloth(ClothEngine):
 
     @classmethod
     def warm(cls) -> None:
-        """Compile every kernel of both models (with and without self-collision) into the cache."""
+        """Compile every kernel of both models (self-collision or not) on every device here."""
         grid = ClothGrid(3, 3)
         left, right = grid.vertices()[grid.left_corner], grid.vertices()[grid.right_corner]
-        for model in MODELS:
-            for self_collision in (False, True):
-                engine = cls(100.0, {'model': model, 'self_collision': self_collision}, grid)
-                engine.reset(0, left, right)
-                engine.step(left, right)
-                engine.close()
+        for device in available_devices():  # Warp compiles for each: CPU code, then CUDA code
+            for model in MODELS:
+                for self_collision in (False, True):
+                    engine = cls(100.0, {'model': model, 'self_collision': self_collision,
+                                         'device': device}, grid)
+                    engine.reset(0, left, right)
+                    engine.step(left, right)
+                    engine.close()
 
     def __init__(
         self,
@@ -286,7 +304,9 @@ class NewtonCloth(ClothEngine):
             self.model = self._build_model()
             self._states = (self.model.state(), self.model.state())
             self._control = self.model.control()
-            self._pipeline = newton.CollisionPipeline(self.model)
+            self._pipeline = newton.CollisionPipeline(
+                self.model, deterministic=c['deterministic'] != 'off'
+            )
             self._contacts = self._pipeline.contacts()
             self.solver = self._make_solver()
             self._start = wp.zeros(2, dtype=wp.vec3)
@@ -386,8 +406,13 @@ class NewtonCloth(ClothEngine):
                 particle_enable_self_contact=bool(c['self_collision']),
                 particle_self_contact_margin=2 * radius,  # two cloth layers touch
                 particle_self_contact_gap=2 * radius,
+                deterministic=DETERMINISTIC[c['deterministic']],
             )
-        return newton.solvers.SolverXPBD(self.model, iterations=int(c['solver_iterations']))
+        return newton.solvers.SolverXPBD(
+            self.model,
+            iterations=int(c['solver_iterations']),
+            deterministic=DETERMINISTIC[c['deterministic']],
+        )
 
     # -- stepping -----------------------------------------------------------------------------
 

@@ -22,6 +22,8 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass
 from pathlib import Path
+import re
+from typing import Iterable
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.trajectory import PRIMITIVES
@@ -192,6 +194,44 @@ def load_preset(
         where = f'{where}.{runs}' if runs in entries else where
     _check_against_engine(engine, values, path, where)
     return values
+
+
+# How a provenance names the device a preset was fitted on (studies.identify_output writes it).
+_FITTED_ON = re.compile(r'\bon device (cpu|cuda(?::\d+)?)\b')
+_ENTRY_KEY = re.compile(r'\w+ \w+(?: \(\w+\))?$')  # a merged set's "<cloth> <task> (<model>)"
+
+
+def fitted_device(
+    engine: str, cloth: str, primitive: str, config_dir: Path | None = None,
+    model: str | None = None,
+) -> str | None:
+    """
+    Return the device the preset an engine runs was fitted on, as its provenance says; else None.
+
+    A merged set names it in the entry's paragraph, an identification's preset file in its one
+    provenance; hand-set presets and fits made before the device was written name none.
+    """
+    path = preset_file(engine, config_dir)
+    if not path.is_file():
+        return None
+    paragraphs = str(_read_preset_file_cached(path)['provenance']).split('\n')
+    keyed = {p.partition(': ')[0]: p for p in paragraphs}
+    text = keyed.get(f'{cloth} {primitive} ({model})') or keyed.get(f'{cloth} {primitive}')
+    if text is None:
+        if any(_ENTRY_KEY.match(key) for key in keyed):  # a merged set without this entry's
+            return None
+        text = ' '.join(paragraphs)
+    found = _FITTED_ON.findall(text)
+    return found[-1] if found else None
+
+
+def fitted_elsewhere(engine: str, device: str, fitted: Iterable[str | None]) -> str | None:
+    """Return the one line that says an engine's presets were fitted on another device, or None."""
+    other = sorted({f for f in fitted if f is not None and f != device})
+    if not other:
+        return None
+    return (f'{engine}: its preset was fitted on {", ".join(other)}, it runs on {device} here: the'
+            ' device changes the numbers (docs/engines.md, "Device")')
 
 
 def default_model(engine: str, cloth: str, primitive: str) -> str | None:

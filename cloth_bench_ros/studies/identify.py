@@ -367,6 +367,13 @@ def run_budgeted(
     }
 
 
+def record_trial(path: Path, device: str, result: dict) -> None:
+    """Append a trial's result to trials.jsonl with the device it ran on."""
+    from cloth_bench_ros.studies.results import append_row
+
+    append_row(path, {**result, 'device': device})
+
+
 @dataclass
 class IdentifyOutcome:
     summary: dict
@@ -386,7 +393,7 @@ def identify(
     from cloth_bench_ros.studies.dask_executor import open_client
     from cloth_bench_ros.studies.identify_fidelity import check_fidelity
     from cloth_bench_ros.studies.identify_output import summarise, validate, write_outputs
-    from cloth_bench_ros.studies.results import append_row, ResultsLock
+    from cloth_bench_ros.studies.results import ResultsLock
 
     start = time.perf_counter()
     spec.output = check_output_dir(spec.output)
@@ -412,7 +419,7 @@ def identify(
         preset_trial = trial_of(spec, {}, -1, 'preset')
         before = submit(client, preset_trial, shared).result()
         before = shared.finish(preset_trial, before) if shared else before
-        record = partial(append_row, spec.output / TRIALS_FILE)
+        record = partial(record_trial, spec.output / TRIALS_FILE, problem['device'])
         budgets = {s: run_budgeted(client, spec, s, space, record, progress, shared)
                    for s in samplers}
         studies = {s: study for s, (study, _) in budgets.items()}

@@ -4,14 +4,16 @@ The problem an identification's journal was fitted to, so that a resumed one is 
 Everything a trial's value depends on except the budget and the sampler (another `--trials` or
 `--sampler` resumes the journal) and the cloth's size and mass (their study has its own name in
 the journal): the bags and their data (`data.bag_layout.fingerprint`), the metric, seed, rate,
-grid, frames, the engine's version, the preset's values, fixed values, search space and fidelity.
-Kept in `<output>/problem.json`, one entry per study of the journal; `identify` refuses, in one
-line, to resume a journal of another problem (ProblemChanged; `rank` identifies such a fold
-afresh). A key that a recorded problem lacks (kept before that key was) is not a change.
+grid, frames, the engine's version, the device it runs on (`auto` resolved on this machine), the
+preset's values, fixed values, search space and fidelity. Kept in `<output>/problem.json`, one
+entry per study of the journal; `identify` refuses, in one line, to resume a journal of another
+problem (ProblemChanged; `rank` identifies such a fold afresh). A key that a recorded problem
+lacks (kept before that key was) is not a change.
 
 `simulated_model` is the part of it that every stored simulation depends on beyond its own
-parameters (the engine's version and the preset they are set on): rank's kept simulations and
-cells carry it, so a project or engine update never reuses a result of the one before.
+parameters (the engine's version, the preset they are set on and the device): rank's kept
+simulations and cells carry it, so a project or engine update, or another machine whose `auto`
+is another device, never reuses a result of the one before.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from __future__ import annotations
 from functools import lru_cache
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 from cloth_bench_ros.errors import InputError
 
@@ -60,11 +62,30 @@ def _simulated_model(engine: str, cloth: str, primitive: str, size: Any, mass: A
                       sort_keys=True, default=str)
 
 
+@lru_cache(maxsize=64)
+def _device(engine: str, device: str | None) -> str:
+    from cloth_bench_ros.engines import engine_device
+
+    return engine_device(engine, {} if device is None else {'device': device})
+
+
+def resolved_device(engine: str, params: Mapping[str, Any]) -> str:
+    """Return the device `engine` runs on here with `params` (`auto` resolved; `cpu` if none)."""
+    device = params.get('device')
+    return _device(engine, None if device is None else str(device))
+
+
 def simulated_model(engine: str, cloth: str, primitive: str, cloth_size: Any = None,
-                    cloth_mass: Any = None) -> dict:
-    """Return the engine's version and the (sized) preset a trial's parameters are set on."""
+                    cloth_mass: Any = None, params: Mapping[str, Any] | None = None) -> dict:
+    """
+    Return the engine's version, the (sized) preset a trial's parameters are set on, and device.
+
+    The device is the one the engine runs on here with `params` (the trial's overrides).
+    """
     size = tuple(cloth_size) if cloth_size is not None else None
-    return json.loads(_simulated_model(engine, cloth, primitive, size, cloth_mass))
+    model = json.loads(_simulated_model(engine, cloth, primitive, size, cloth_mass))
+    model['device'] = resolved_device(engine, {**model['preset'], **(params or {})})
+    return model
 
 
 def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
@@ -92,6 +113,7 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
         'grid': spec.grid,
         'max_frames': spec.max_frames,
         'engine_version': engine_class(spec.engine).version(),
+        'device': resolved_device(spec.engine, {**preset, **spec.fixed}),
         'preset': dict(preset),
         'fixed': dict(spec.fixed),
         'space': {name: json.loads(distribution_to_json(d)) for name, d in space.items()},

@@ -29,7 +29,7 @@ from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cloth import cloth_name
-from cloth_bench_ros.studies.identify_problem import simulated_model
+from cloth_bench_ros.studies.identify_problem import resolved_device, simulated_model
 from cloth_bench_ros.studies.objective import evaluate, OBJECTIVES, Trial
 from cloth_bench_ros.studies.rank_trials import (
     floor,
@@ -135,7 +135,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         'fixed': {**spec.fixed.get(engine, {}), **overrides}, 'fidelity': spec.fidelity,
         **cloth_record(spec.cloth_size, spec.cloth_mass),
         'model': simulated_model(engine, train[0].cloth, train[0].primitive, spec.cloth_size,
-                                 spec.cloth_mass),
+                                 spec.cloth_mass, {**spec.fixed.get(engine, {}), **overrides}),
     }))
     done = out / SUMMARY_FILE
     if done.exists():
@@ -171,7 +171,7 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
     frames = None if label == 'timing' else spec.max_frames
     every = label != 'timing' and spec.metric not in OBJECTIVES  # the faces: every metric
     model = simulated_model(engine, trial.cloth, trial.primitive, spec.cloth_size,
-                            spec.cloth_mass)  # another engine version or preset: other cells
+                            spec.cloth_mass, params)  # another version, preset, device: others
     key = (
         f'{engine}|{sorted(params.items())}|{trial.bag}|{fingerprint(Path(trial.bag))}|'
         f'{seed}|{rate:g}|{objective(spec)}|'
@@ -274,7 +274,8 @@ def run_rank(
                         'value': summary['value'], 'best_sampler': summary['best_sampler'],
                         'trials': {s: v['trials'] for s, v in summary['per_sampler'].items()},
                     }
-                    meta = {'group': group, 'entrant': name, 'fold': k + 1}
+                    meta = {'group': group, 'entrant': name, 'fold': k + 1,
+                            'device': resolved_device(engine, preset)}
                     for i in held:
                         for seed in range(1, spec.seeds + 1):
                             for label, params in (('identified', fitted), ('preset', preset)):
@@ -307,6 +308,8 @@ def run_rank(
             'spec': {
                 'recordings': [str(r) for r in spec.recordings],
                 'entrants': [entrant_key(e, o) for e, o in spec.entrants],
+                'devices': {entrant_key(e, o): resolved_device(e, {**spec.fixed.get(e, {}), **o})
+                            for e, o in spec.entrants},
                 'trials': spec.trials, 'sampler': spec.sampler, 'seeds': spec.seeds,
                 'rate_hz': spec.rate_hz, 'rates': list(spec.rates), 'grid': spec.grid,
                 'metric': spec.metric, 'objective': objective(spec),

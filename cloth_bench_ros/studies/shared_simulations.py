@@ -179,12 +179,12 @@ def _key(trial: Trial) -> str:
     """
     Return what a simulation depends on, as the key of its row.
 
-    Every field but the bags and the trial's labels, and the engine's version and preset (another
-    project or engine version simulates again).
+    Every field but the bags and the trial's labels, and the engine's version, preset and device
+    (another project or engine version, or another device, simulates again).
     """
     from cloth_bench_ros.studies.identify_problem import simulated_model
 
     fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='', objective='cd'))
     fields['model'] = simulated_model(trial.engine, trial.cloth, trial.primitive,
-                                      trial.cloth_size, trial.cloth_mass)
+                                      trial.cloth_size, trial.cloth_mass, dict(trial.params))
     return json.dumps(fields, sort_keys=True, default=str)
