@@ -16,6 +16,7 @@ from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
 WORKSPACE_MARGIN = 0.10  # m around the reach of the cloth
+TABLE_PLANE_DISTANCE = 0.01  # m: points this close to the table's plane are removed with it
 
 
 @dataclass(frozen=True)
@@ -25,7 +26,7 @@ class CleaningConfig:
     box_min: tuple[float, float, float] | None = None
     box_max: tuple[float, float, float] | None = None
     table_plane: bool = True  # remove the table's plane (RANSAC, near-horizontal, near the table)
-    table_distance: float = 0.01  # m: points this close to the plane belong to it
+    table_distance: float = TABLE_PLANE_DISTANCE  # m: points this close to the plane belong to it
     sor_neighbors: int = 20
     sor_std_ratio: float = 3.0  # gentle: a cloud cleaned once already keeps its edges
     voxel: float = OPTIONS['voxel'].default  # m; 0: no down-sampling
