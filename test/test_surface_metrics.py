@@ -140,6 +140,30 @@ def test_the_frames_emd_is_pots_exact_emd_of_the_two_samples():
     assert surface_scores(RealCloud(few), vertices, faces).emd == pytest.approx(expected)
 
 
+def test_the_direct_solver_equals_ot_emd2_on_frames_of_the_real_size():
+    # transport_distance calls POT's compiled solver directly (`emd_c`, private): on the 80 + 80
+    # points of every 4th frame of the bundled fling against the rest mesh, and on frames with
+    # fewer real points than that (all of them), it gives ot.emd2's value
+    from cloth_bench_ros.core.surface_metrics import _transport_solver
+
+    assert _transport_solver().__name__ == 'direct'  # this POT has it: the call is tested
+    vertices, faces = _sheet(11, 15)
+    vertices = vertices + [0.0, 0.0, TABLE_TOP_Z + 0.72 - vertices[:, 2].max()]
+    surface = stratified_samples(vertices, faces, OT_SAMPLES, OT_SEED)
+    frames = [points for k, (_, points) in enumerate(BagReader(BUNDLED_FLING).clouds())
+              if k % 4 == 0]
+    rng = np.random.default_rng(8)
+    frames += [frames[-1][rng.choice(len(frames[-1]), n, replace=False)] for n in (5, 50, 79)]
+    for points in frames:
+        cloud = RealCloud(points)
+        real = points[spread_subsample(cloud.grid, OT_SAMPLES, OT_SEED)]
+        assert len(real) == min(len(points), OT_SAMPLES)
+        cost = cdist(real, surface, 'cityblock')
+        expected = ot.emd2(np.full(len(real), 1 / len(real)), np.full(OT_SAMPLES, 1 / OT_SAMPLES),
+                           cost, numItermax=1_000_000)
+        assert transport_distance(real, surface) == pytest.approx(expected, rel=1e-12, abs=0)
+
+
 def test_the_transport_samples_are_one_per_equal_area_stratum():
     vertices, faces = _sheet(11, 15)  # 14 rows of equal area, triangles row after row
     samples = stratified_samples(vertices, faces, OT_SAMPLES, OT_SEED)
