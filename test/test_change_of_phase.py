@@ -86,8 +86,8 @@ def test_the_band_starts_where_the_cleaning_plane_band_ends():
 
     # Cloth points within the plane band are removed with the table: the band starts above them.
     assert CONTACT_FLOOR == CleaningConfig().table_distance < CONTACT_MARGIN
-    on_table = np.column_stack([np.zeros(50), np.zeros(50), TABLE_TOP_Z + np.linspace(0, 0.03, 50)])
-    heights = on_table[:, 2] - TABLE_TOP_Z
+    heights = np.linspace(0, 0.03, 50)
+    on_table = np.column_stack([np.zeros(50), np.zeros(50), TABLE_TOP_Z + heights])
     assert contact_points(on_table) == np.count_nonzero((heights > 0.01) & (heights <= 0.02))
 
 

@@ -1,8 +1,8 @@
 """
-`pip install .` as the README offers it, with each extra, in a fresh venv: the main job runs and a
-camera-like recording scores; an engine whose extra is missing is one line naming it, exit 2.
+`pip install .` as the README offers it, with each extra, in a fresh venv.
 
-Slow (minutes per install: pip from its cache or the index); `-m slow` runs them.
+The main job runs and a camera-like recording scores; an engine whose extra is missing is one
+line naming it, exit 2. Slow (minutes per install: pip from its cache or the index): `-m slow`.
 """
 
 from __future__ import annotations
@@ -85,8 +85,8 @@ def test_pip_install_runs_the_main_job_and_scores_a_camera_recording(extra, tmp_
     engine = 'newton' if extra == 'newton' else 'mujoco'
     # the README's main job: the bundled bag, from the installed share folder
     out = work / 'bundled'
-    scored(_cloth_bench(bin_dir, work, 'run', '--engine', engine, *FAST, '--output', str(out)),
-            out, engine)
+    run = _cloth_bench(bin_dir, work, 'run', '--engine', engine, *FAST, '--output', str(out))
+    scored(run, out, engine)
     # a camera recording: organized clouds in the camera's frame, table and background in view,
     # no project metadata: cleaned by default
     out = work / 'camera_run'

@@ -240,14 +240,14 @@ def test_contact_onset_is_the_same_rule_on_both_sides():
 
 
 def _hanging_sheet(bottom: float, nz: int = 15) -> tuple[np.ndarray, np.ndarray]:
-    """A vertical 0.50 x 0.70 m sheet (11 x nz vertices) whose lower edge is `bottom` m up."""
+    """Return a vertical 0.50 x 0.70 m sheet (11 x nz vertices), its lower edge `bottom` m up."""
     vertices, faces = _sheet(11, nz)
     vertices[:, 2] += TABLE_TOP_Z + bottom - vertices[:, 2].min()
     return vertices, faces
 
 
 def _camera_points(vertices, faces, n, rng) -> np.ndarray:
-    """n points on the sheet as a camera sees it, the table top (2,000 points) beside it."""
+    """Return n points on the sheet as a camera sees it, the table top (2,000 points) beside."""
     table = np.column_stack([rng.uniform(-0.3, 0.8, 2000), rng.uniform(-0.5, 0.5, 2000),
                              TABLE_TOP_Z + rng.normal(0.0, 0.001, 2000)])
     cloth = surface_samples(vertices, faces, n, int(rng.integers(1000, 2000)))

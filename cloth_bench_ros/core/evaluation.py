@@ -9,8 +9,8 @@ only every third real frame falls on a simulator step).
 Given the mesh's faces, every scored frame also gets the surface metrics (core/surface_metrics.py)
 and, for the dynamic task, the contact-onset error: the same rule (core/phase.py `in_contact`)
 applied to the real points and to as many points drawn on the simulated surface uniformly by area
-(`surface_samples`, at most 2000: `contact_samples`) at every scored real frame. Without faces (identification trials) only the
-paper's CD/HD are computed.
+(`surface_samples`, at most 2000: `contact_samples`) at every scored real frame. Without faces
+(identification trials) only the paper's CD/HD are computed.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ UNAVAILABLE = {
 }
 
 
-# The extra of this package that installs an engine's own dependencies, named when they are missing.
+# The extra of this package that installs an engine's dependencies, named when they are missing.
 ENGINE_EXTRAS = {'newton': 'newton'}
 
 
