@@ -256,8 +256,9 @@ def _camera_points(vertices, faces, n, rng) -> np.ndarray:
 
 def test_the_contact_band_is_what_the_cleaning_leaves_of_the_cloth():
     # the lower edge 3 mm above the table: the cleaning removes the cloth's lowest centimetre
-    # with the table, so the band counts the same points of the cloth before and after it
-    # (before, it counted 0-2 cm: the sheet alone had twice the points the cleaned cloud had)
+    # with the table, so the band counts nearly the same points of the cloth before and after it
+    # (the plane refit to its inliers, the cloth's lowest 7 mm among them, lies 0.5 mm higher and
+    # takes a few more); before, it counted 0-2 cm: the sheet alone had twice the cleaned points
     from cloth_bench_ros.core.cleaning import clean, CleaningConfig
     from cloth_bench_ros.core.phase import contact_points
 
@@ -267,7 +268,8 @@ def test_the_contact_band_is_what_the_cleaning_leaves_of_the_cloth():
     table = _camera_points(vertices, faces, 0, rng)
     cleaned = clean(np.concatenate([cloth, table]), CleaningConfig(sor_neighbors=0))
     in_band = contact_points(cloth)
-    assert in_band == contact_points(cleaned) and 200 < in_band < 400  # 1 cm of 70: 1.4 %
+    assert 200 < in_band < 400  # 1 cm of 70: 1.4 %
+    assert 0.85 * in_band <= contact_points(cleaned) <= in_band
 
 
 @pytest.mark.parametrize('camera_points', [3000, 20000])
