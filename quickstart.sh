@@ -6,7 +6,8 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 VENV="${CLOTH_BENCH_VENV:-.venv}"
-# Shared libraries that open3d loads at import time, and venv support for Debian's python3.
+# Shared libraries that open3d (the tests check the cleaning against it) loads at import time,
+# and venv support for Debian's python3.
 SYSTEM_PACKAGES=(python3-venv libusb-1.0-0 libgl1 libegl1 libx11-6 libudev1 libgomp1)
 # The tests' own: headless Chromium opens `cloth-bench report`'s HTML (test/test_report_browser.py).
 TEST_SYSTEM_PACKAGES=(chromium)

@@ -27,7 +27,6 @@ INSTALL_REQUIRES = [
     'foxglove-sdk>=0.30',
 ]
 EXTRAS_REQUIRE = {
-    'synth': ['open3d>=0.18'],  # `cloth-bench synth` only (virtual camera outlier removal); large
     'newton': ['warp-lang>=1.17', 'newton>=1.8'],  # the third engine (Warp on the CPU)
     'test': [
         'pytest>=7.0',
@@ -45,6 +44,7 @@ EXTRAS_REQUIRE = {
         'flake8-quotes>=3.3',
         'pydocstyle>=6.3',
         'mypy>=1.8',
+        'open3d>=0.18',  # the cleaning's numpy/scipy steps checked against open3d's
     ],
 }
 

@@ -8,7 +8,13 @@ from pathlib import Path
 
 from camera_recording import CAMERA_TOPIC, EPOCH_START_NS, make_camera_recording
 from cloth_bench_ros import cli
-from cloth_bench_ros.core.phase import CONTACT_MARGIN, first_table_contact, in_contact
+from cloth_bench_ros.core.phase import (
+    CONTACT_FLOOR,
+    CONTACT_MARGIN,
+    contact_points,
+    first_table_contact,
+    in_contact,
+)
 from cloth_bench_ros.core.scene import TABLE_TOP_Z
 from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.data.replay import plan_replay, ReplayOptions
@@ -65,17 +71,24 @@ def test_no_contact_and_a_visible_table_give_no_frame():
     table = np.column_stack(
         [rng.uniform(-0.2, 0.7, 500), rng.uniform(-0.8, 0.8, 500), np.full(500, TABLE_TOP_Z)]
     )
+    # the table top itself is below the contact band: an uncleaned cloud finds the cloth
     with_table = [np.concatenate([f, table]) for f in falling(rng, 10)]
-    found = first_table_contact(with_table)
+    assert first_table_contact(with_table).index == 10
+    # a table 1.5 cm higher than the scene's is in the band from the first frame: no answer
+    higher = [np.concatenate([f, table + [0, 0, 0.015]]) for f in falling(rng, 10)]
+    found = first_table_contact(higher)
     assert found.index is None and 'first frame' in found.reason
     assert first_table_contact([]).index is None
 
 
-def test_margin_is_above_the_cleaning_plane_band():
+def test_the_band_starts_where_the_cleaning_plane_band_ends():
     from cloth_bench_ros.core.cleaning import CleaningConfig
 
-    # Cloth points within the plane band are removed with the table; contact must show above it.
-    assert CONTACT_MARGIN > CleaningConfig().table_distance
+    # Cloth points within the plane band are removed with the table: the band starts above them.
+    assert CONTACT_FLOOR == CleaningConfig().table_distance < CONTACT_MARGIN
+    heights = np.linspace(0, 0.03, 50)
+    on_table = np.column_stack([np.zeros(50), np.zeros(50), TABLE_TOP_Z + heights])
+    assert contact_points(on_table) == np.count_nonzero((heights > 0.01) & (heights <= 0.02))
 
 
 def _dynamic_bags() -> list[Path]:

@@ -85,6 +85,26 @@ def test_installed_node_reports_bad_parameters_in_one_line(install, tmp_path):
     assert 'missing' in result.stderr and 'Traceback' not in result.stderr
 
 
+@pytest.mark.slow
+def test_the_installed_cli_runs_the_main_job_and_scores_a_camera_recording(install, tmp_path):
+    from test_install import camera_run, FAST, scored
+
+    cli = install / 'cloth_bench_ros' / 'lib' / 'cloth_bench_ros' / 'cloth-bench'
+    for name, args in (('bundled', ['run', *FAST]), ('camera', camera_run(tmp_path))):
+        out = tmp_path / name
+        run = subprocess.run(
+            [str(cli), *args, '--output', str(out)],
+            cwd=tmp_path,
+            env=_installed_env(install),
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
+        summary = scored(run, out, 'mujoco')
+        if name == 'camera':  # cleaned by default: no project metadata
+            assert summary['real']['cleaning']['table_plane'] > 0
+
+
 def test_installed_package_reads_its_installed_config(install, tmp_path):
     code = (
         "import cloth_bench_ros.paths as p; print(p.share_dir('config')); from"

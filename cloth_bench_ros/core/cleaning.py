@@ -2,9 +2,11 @@
 The one cloud-cleaning pipeline (the paper's pre-processing, segmentation aside).
 
 In order: drop non-finite points (organized clouds mark missing pixels with NaN), crop to a box
-around the cloth's workspace, remove the table plane, statistical outlier removal (open3d), and
-optional voxel down-sampling. `run`, `import` and `synth` all clean through `clean`; every step
-counts what it removed in a `CleaningStats`, so the summary can say so.
+around the cloth's workspace, remove the table plane (RANSAC over near-horizontal planes near the
+known table height), statistical outlier removal, and optional voxel down-sampling: numpy and
+scipy's k-d tree, open3d's definitions (docs/own-recording.md says how close they come to open3d's
+own). `run`, `import` and `synth` all clean through `clean`; every step counts what it removed in
+a `CleaningStats`, so the summary can say so.
 """
 
 from __future__ import annotations
@@ -16,6 +18,10 @@ from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
 WORKSPACE_MARGIN = 0.10  # m around the reach of the cloth
+TABLE_PLANE_DISTANCE = 0.01  # m: points this close to the table's plane are removed with it
+TABLE_SEARCH = 0.1  # m: the plane is searched among the points this close to the table height
+TABLE_MIN_NORMAL_Z = 0.95  # |n_z| of a table's unit normal: at most 18 degrees from horizontal
+RANSAC_ITERATIONS = 200
 
 
 @dataclass(frozen=True)
@@ -25,7 +31,7 @@ class CleaningConfig:
     box_min: tuple[float, float, float] | None = None
     box_max: tuple[float, float, float] | None = None
     table_plane: bool = True  # remove the table's plane (RANSAC, near-horizontal, near the table)
-    table_distance: float = 0.01  # m: points this close to the plane belong to it
+    table_distance: float = TABLE_PLANE_DISTANCE  # m: points this close to the plane belong to it
     sor_neighbors: int = 20
     sor_std_ratio: float = 3.0  # gentle: a cloud cleaned once already keeps its edges
     voxel: float = OPTIONS['voxel'].default  # m; 0: no down-sampling
@@ -80,34 +86,84 @@ def scene_cleaning(
 
 def _remove_table(points: np.ndarray, distance: float) -> np.ndarray:
     """Keep-mask without the largest near-horizontal plane close to the known table height."""
-    import open3d as o3d
-
-    near = np.abs(points[:, 2] - scene.TABLE_TOP_Z) < 0.1
-    if near.sum() < 50:
-        return np.ones(len(points), dtype=bool)
-    idx = np.nonzero(near)[0]
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[idx]))
-    o3d.utility.random.seed(0)  # RANSAC: the same cloud gives the same plane
-    (a, b, c, d), inliers = cloud.segment_plane(
-        distance_threshold=distance, ransac_n=3, num_iterations=200
-    )
+    near = np.abs(points[:, 2] - scene.TABLE_TOP_Z) < TABLE_SEARCH
     keep = np.ones(len(points), dtype=bool)
-    if abs(c) < 0.95 or len(inliers) < 0.2 * len(idx):  # not the table: vertical or too small
+    if near.sum() < 50:
         return keep
-    plane_distance = np.abs(points @ np.array([a, b, c]) + d) / np.linalg.norm([a, b, c])
-    keep[plane_distance <= distance] = False
+    candidates = points[near]
+    plane = _table_plane(candidates, distance)
+    if plane is None:
+        return keep
+    normal, offset = plane
+    inliers = np.abs(candidates @ normal + offset) <= distance
+    if inliers.sum() < 0.2 * len(candidates):  # not the table: too small a part of what is there
+        return keep
+    keep[np.abs(points @ normal + offset) <= distance] = False
     return keep
 
 
-def remove_outliers(points: np.ndarray, neighbors: int, std_ratio: float) -> np.ndarray:
-    """open3d statistical outlier removal: drop points whose mean neighbour distance is unusual."""
-    import open3d as o3d
+def _table_plane(points: np.ndarray, distance: float) -> tuple[np.ndarray, float] | None:
+    """
+    Return the unit normal and offset of the near-horizontal plane with the most inliers.
 
-    if neighbors <= 0 or len(points) <= neighbors:
-        return points
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, float)))
-    _, keep = cloud.remove_statistical_outlier(nb_neighbors=neighbors, std_ratio=std_ratio)
-    return np.asarray(points)[np.asarray(keep, dtype=np.int64)]
+    RANSAC from fixed draws (the same cloud gives the same plane): RANSAC_ITERATIONS planes
+    through three points, those steeper than a table's skipped (a cloth hanging near the table
+    can have more points than the table but is no table), the best refit to its inliers by least
+    squares, as open3d's `segment_plane` refits its best plane.
+    """
+    rng = np.random.default_rng(0)
+    triples = points[rng.integers(0, len(points), (RANSAC_ITERATIONS, 3))]
+    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
+    length = np.linalg.norm(normals, axis=1)
+    flat = np.abs(normals[:, 2]) >= TABLE_MIN_NORMAL_Z * length
+    flat &= length > 0
+    if not flat.any():
+        return None
+    normals = normals[flat] / length[flat, None]
+    offsets = -np.einsum('ij,ij->i', normals, triples[flat, 0])
+    counts = np.zeros(len(normals), dtype=np.int64)
+    for start in range(0, len(points), 16384):  # (points x planes) distances, a block at a time
+        block = points[start:start + 16384] @ normals.T + offsets
+        counts += np.count_nonzero(np.abs(block) <= distance, axis=0)
+    best = int(np.argmax(counts))
+    members = points[np.abs(points @ normals[best] + offsets[best]) <= distance]
+    centre = members.mean(axis=0)
+    normal = np.linalg.svd(members - centre, full_matrices=False)[2][-1]
+    if abs(normal[2]) < TABLE_MIN_NORMAL_Z:  # the refit tilted away from horizontal
+        return None
+    return normal, float(-normal @ centre)
+
+
+def remove_outliers(points: np.ndarray, neighbors: int, std_ratio: float) -> np.ndarray:
+    """
+    Statistical outlier removal: drop points whose mean neighbour distance is unusual.
+
+    open3d's rule: a point's mean distance to its `neighbors` nearest points (itself among
+    them) must be positive and below the mean of those distances plus `std_ratio` standard
+    deviations (Bessel-corrected).
+    """
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, dtype=np.float64)
+    if neighbors <= 0 or len(pts) <= neighbors:
+        return pts
+    distances, _ = cKDTree(pts).query(pts, k=neighbors)
+    mean = distances.mean(axis=1)
+    positive = mean > 0
+    cloud_mean = mean[positive].sum() / len(mean)
+    std = np.sqrt(np.square(mean[positive] - cloud_mean).sum() / (len(mean) - 1))
+    return pts[positive & (mean < cloud_mean + std_ratio * std)]
+
+
+def voxel_down_sample(points: np.ndarray, voxel: float) -> np.ndarray:
+    """Return the mean of the points in each occupied voxel (open3d's grid), in voxel order."""
+    lowest = points.min(axis=0) - 0.5 * voxel
+    index = np.floor((points - lowest) / voxel).astype(np.int64)
+    _, cell, counts = np.unique(index, axis=0, return_inverse=True, return_counts=True)
+    cell = cell.reshape(-1)
+    sums = np.zeros((len(counts), 3))
+    np.add.at(sums, cell, points)
+    return sums / counts[:, None]
 
 
 def clean(
@@ -133,11 +189,8 @@ def clean(
     pts = remove_outliers(pts, config.sor_neighbors, config.sor_std_ratio)
     stats.outliers += n - len(pts)
     if config.voxel > 0 and len(pts):
-        import open3d as o3d
-
         n = len(pts)
-        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-        pts = np.asarray(cloud.voxel_down_sample(config.voxel).points)
+        pts = voxel_down_sample(pts, config.voxel)
         stats.voxel_merged += n - len(pts)
     stats.points_out += len(pts)
     return pts

@@ -8,9 +8,9 @@ only every third real frame falls on a simulator step).
 
 Given the mesh's faces, every scored frame also gets the surface metrics (core/surface_metrics.py)
 and, for the dynamic task, the contact-onset error: the same rule (core/phase.py `in_contact`)
-applied to the real points and to 1000 points drawn on the simulated surface uniformly by area
-(`surface_samples`) at every scored real frame. Without faces (identification trials) only the
-paper's CD/HD are computed.
+applied to the real points and to as many points drawn on the simulated surface uniformly by area
+(`surface_samples`, at most 2000: `contact_samples`) at every scored real frame. Without faces
+(identification trials) only the paper's CD/HD are computed.
 """
 
 from __future__ import annotations
@@ -23,15 +23,17 @@ from typing import Callable
 from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.core.metrics import latency_stats, RealCloud, StabilityAccumulator
 from cloth_bench_ros.core.phase import (
+    CONTACT_FLOOR,
     CONTACT_MARGIN,
     CONTACT_MIN_FRACTION,
     CONTACT_MIN_POINTS,
+    CONTACT_SAMPLES,
+    contact_samples,
     first_contact,
     in_contact,
 )
 from cloth_bench_ros.core.scene import TABLE_TOP_Z
 from cloth_bench_ros.core.surface_metrics import (
-    CONTACT_SAMPLES,
     NAN_SCORES,
     settings as surface_settings,
     SURFACE_FIELDS,
@@ -254,7 +256,8 @@ class OnlineEvaluator:
                 elif self.faces is not None:
                     surface = surface_scores(cloud, vertices, self.faces)
                     if self.contact_rule:
-                        sim_touch = in_contact(surface_samples(vertices, self.faces))
+                        drawn = contact_samples(len(cloud.points))
+                        sim_touch = in_contact(surface_samples(vertices, self.faces, drawn))
             if real_touch is not None:
                 e.contact.append((t, bool(sim_touch)))
             self.scores.append(
@@ -361,10 +364,11 @@ class OnlineEvaluator:
 
 CONTACT_RULE = (
     f'in contact: at least max({CONTACT_MIN_POINTS}, {CONTACT_MIN_FRACTION * 100:g} %) of the'
-    f' points within {CONTACT_MARGIN * 100:g} cm above the table top (z {TABLE_TOP_Z:g} m);'
-    f" real: the frame's points; simulated: {CONTACT_SAMPLES} points drawn on its surface"
-    ' uniformly by area; checked at every scored real frame (30 fps); a sequence in contact'
-    ' from its first frame gives no onset'
+    f' points {CONTACT_FLOOR * 100:g}-{CONTACT_MARGIN * 100:g} cm above the table top'
+    f' (z {TABLE_TOP_Z:g} m; the cleaning removes the lowest {CONTACT_FLOOR * 100:g} cm with the'
+    " table); real: the frame's points; simulated: as many points drawn on its surface"
+    f' uniformly by area, at most {CONTACT_SAMPLES} (the same share on both sides); checked at'
+    ' every scored real frame (30 fps); a sequence in contact from its first frame gives no onset'
 )
 
 

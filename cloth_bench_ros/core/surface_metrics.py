@@ -19,8 +19,8 @@ triangles), in metres and the L1 norm like the paper's:
   OT_SAMPLES real points spread evenly over the cloud (`spread_subsample`) and OT_SAMPLES points
   of S stratified by area (`stratified_samples`), exact (POT's network simplex).
 
-The simulated cloth's table contact (core/evaluation.py) is checked on CONTACT_SAMPLES points
-drawn uniformly by area (`surface_samples`).
+The simulated cloth's table contact (core/evaluation.py) is checked on points drawn uniformly by
+area (`surface_samples`), as many as the real frame has up to core.phase.CONTACT_SAMPLES.
 
 One thread by default. `CLOTH_BENCH_METRIC_THREADS=2` in the environment (or `set_threads(2)`)
 runs the parts that do not depend on each other at once: the area samples to the real points and
@@ -41,13 +41,13 @@ from typing import Callable, TypeVar
 
 from cloth_bench_ros.core.metrics import RealCloud
 from cloth_bench_ros.core.nearest import PointGrid
+from cloth_bench_ros.core.phase import CONTACT_SAMPLES
 from cloth_bench_ros.core.surface_distance import grid_faces, TriangleMesh
 from numba import njit
 import numpy as np
 
 SURFACE_SAMPLES = 500  # points of the simulated surface, one per equal-area stratum
 SURFACE_SEED = 0
-CONTACT_SAMPLES = 1000  # points drawn on the simulated surface uniformly by area, for contact
 REVERSE_SAMPLES = 500  # real points in CD_reverse and recall (HD_reverse: every point)
 REVERSE_SEED = 0
 FSCORE_THRESHOLD_M = 0.01  # L1
@@ -182,8 +182,13 @@ def stratified_samples(
 
 @lru_cache(maxsize=8)
 def _strata(n: int, seed: int) -> np.ndarray:
-    """Return `_uniforms(n, seed)`, the triangle draw of row i confined to [i / n, (i + 1) / n)."""
-    draws = np.array(_uniforms(n, seed))
+    """
+    Return fixed draws (n, 3) in [0, 1), the triangle draw of row i in [i / n, (i + 1) / n).
+
+    In the order drawn, not `_uniforms`' sorted one: a sorted offset would rise from 0 to 1
+    across the strata instead of being uniform within each.
+    """
+    draws = np.random.default_rng(seed).random((n, 3))
     draws[:, 0] = (np.arange(n) + draws[:, 0]) / n
     draws.setflags(write=False)
     return draws
@@ -313,7 +318,7 @@ def settings() -> dict[str, float | int | str]:
         'surface_samples': SURFACE_SAMPLES,
         'surface_sampling': 'one per equal-area stratum of the triangles in their order',
         'surface_seed': SURFACE_SEED,
-        'contact_samples': CONTACT_SAMPLES,
+        'contact_samples': f'as many as the real frame has, at most {CONTACT_SAMPLES}',
         'reverse_samples': REVERSE_SAMPLES,
         'reverse_seed': REVERSE_SEED,
         'reverse_subsample': 'spread evenly: every (n / reverse_samples)-th in grid cell order',

@@ -27,6 +27,10 @@ UNAVAILABLE = {
 }
 
 
+# The extra of this package that installs an engine's dependencies, named when they are missing.
+ENGINE_EXTRAS = {'newton': 'newton'}
+
+
 @dataclass(frozen=True)
 class EngineInfo:
     name: str
@@ -47,7 +51,7 @@ def engine_class(name: str) -> type[ClothEngine]:
         try:
             return eps[name].load()
         except ImportError as exc:
-            raise EngineError(f'engine {name} is not available: {exc}') from None
+            raise EngineError(f'engine {name} is not available: {_missing(name, exc)}') from None
     if name in UNAVAILABLE:
         raise EngineError(f'engine {name} is not available: {UNAVAILABLE[name]}')
     known = sorted(set(eps) | set(UNAVAILABLE))
@@ -62,11 +66,19 @@ def known_engines() -> list[EngineInfo]:
             cls = ep.load()
             infos.append(EngineInfo(name, True, cls.version(), ''))
         except ImportError as exc:
-            infos.append(EngineInfo(name, False, '', f'import failed: {exc}'))
+            infos.append(EngineInfo(name, False, '', _missing(name, exc)))
     for name, reason in UNAVAILABLE.items():
         if name not in {i.name for i in infos}:
             infos.append(EngineInfo(name, False, '', reason))
     return infos
+
+
+def _missing(name: str, exc: ImportError) -> str:
+    """Return why engine `name` did not import, with the extra that installs what it lacks."""
+    extra = ENGINE_EXTRAS.get(name)
+    if extra is None:
+        return f'import failed: {exc}'
+    return f"{exc} (install it with: pip install 'cloth_bench_ros[{extra}]')"
 
 
 def engine_device(name: str, params: Mapping[str, Any] | None = None) -> str:

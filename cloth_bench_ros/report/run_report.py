@@ -79,7 +79,7 @@ def surface_table(summary: dict) -> list[str]:
         ' HD rev on all), surf = surface samples -> real points, 2s = two-sided; P/R/F at'
         f' {_threshold(engines) * 100:g} cm; EMD on'
         f' {_setting(engines, "ot_samples")} + {_setting(engines, "ot_samples")} points spread'
-        ' over each (its floor: a sheet that matches exactly scores 0.04-0.07 m);'
+        ' over each (its floor: a sheet that matches exactly scores 0.05-0.09 m);'
         ' onset = simulated - real contact time (s, dynamic; - when either never touches).'
     )
     return lines

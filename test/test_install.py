@@ -1,0 +1,101 @@
+"""
+`pip install .` as the README offers it, with each extra, in a fresh venv.
+
+The main job runs and a camera-like recording scores; an engine whose extra is missing is one
+line naming it, exit 2. Slow (minutes per install: pip from its cache or the index): `-m slow`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+import shutil
+import subprocess
+import sys
+
+from camera_recording import CAMERA_TOPIC, EPOCH_START_NS, make_camera_recording
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+INSTALL_TIMEOUT_S = 1500
+RUN_TIMEOUT_S = 900
+FAST = ['--grid', '6x8']
+
+
+def _source_copy(target: Path) -> Path:
+    """Copy the repository's files (as a fresh clone has them) to `target`."""
+    files = subprocess.run(
+        ['git', 'ls-files', '-co', '--exclude-standard'],
+        cwd=REPO, capture_output=True, text=True, check=True,
+    ).stdout.split()
+    for rel in files:
+        if (REPO / rel).is_file():
+            (target / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(REPO / rel, target / rel)
+    return target
+
+
+def _fresh_venv(tmp_path: Path, extra: str) -> Path:
+    """Return the bin folder of a new venv with `pip install <copy>[extra]` done."""
+    source = _source_copy(tmp_path / 'src')
+    venv = tmp_path / 'venv'
+    subprocess.run([sys.executable, '-m', 'venv', str(venv)], check=True, timeout=300)
+    spec = f'{source}[{extra}]' if extra else str(source)
+    done = subprocess.run(
+        [str(venv / 'bin' / 'python'), '-m', 'pip', 'install', '-q', spec],
+        capture_output=True, text=True, timeout=INSTALL_TIMEOUT_S,
+    )
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    return venv / 'bin'
+
+
+def _cloth_bench(bin_dir: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k not in ('PYTHONPATH', 'VIRTUAL_ENV')}
+    env['PATH'] = f'{bin_dir}:{env.get("PATH", "")}'
+    return subprocess.run(
+        [str(bin_dir / 'cloth-bench'), *args],
+        cwd=cwd, env=env, capture_output=True, text=True, timeout=RUN_TIMEOUT_S,
+    )
+
+
+def scored(run: subprocess.CompletedProcess, out: Path, engine: str) -> dict:
+    """Return the summary of a `cloth-bench run` that exited 0 and scored `engine`."""
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    summary = json.loads((out / 'summary.json').read_text())
+    scores = summary['engines'][engine]
+    assert scores['frames_scored'] > 0 and 0 < scores['CD_d'] < 0.2, scores
+    return summary
+
+
+def camera_run(folder: Path) -> list[str]:
+    """Write a camera-like copy of the bundled fling in `folder`; return the run's arguments."""
+    camera = folder / 'camera'
+    make_camera_recording(REPO / 'bags' / 'towel_dynamic', camera, seed=3, noise=0.002)
+    return ['run', '--bag', str(camera), '--topic', CAMERA_TOPIC,
+            '--start-time', f'{EPOCH_START_NS / 1e9:.9f}', *FAST]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('extra', ['', 'newton', 'test'])
+def test_pip_install_runs_the_main_job_and_scores_a_camera_recording(extra, tmp_path):
+    bin_dir = _fresh_venv(tmp_path, extra)
+    work = tmp_path / 'work'
+    work.mkdir()
+    engine = 'newton' if extra == 'newton' else 'mujoco'
+    # the README's main job: the bundled bag, from the installed share folder
+    out = work / 'bundled'
+    run = _cloth_bench(bin_dir, work, 'run', '--engine', engine, *FAST, '--output', str(out))
+    scored(run, out, engine)
+    # a camera recording: organized clouds in the camera's frame, table and background in view,
+    # no project metadata: cleaned by default
+    out = work / 'camera_run'
+    run = _cloth_bench(bin_dir, work, *camera_run(work), '--engine', engine, '--output', str(out))
+    summary = scored(run, out, engine)
+    assert summary['real']['cleaning']['table_plane'] > 0  # the cleaning ran, table and all
+    if not extra:  # the third engine's extra is missing: one line naming it
+        run = _cloth_bench(bin_dir, work, 'run', '--engine', 'newton', *FAST,
+                           '--output', str(work / 'no_newton'))
+        assert run.returncode == 2, run.stderr
+        assert run.stderr.count('\n') == 1 and 'Traceback' not in run.stderr
+        assert "pip install 'cloth_bench_ros[newton]'" in run.stderr
