@@ -36,18 +36,21 @@ def _source_copy(target: Path) -> Path:
     return target
 
 
-def _fresh_venv(tmp_path: Path, extra: str) -> Path:
-    """Return the bin folder of a new venv with `pip install <copy>[extra]` done."""
+def _fresh_venv(tmp_path: Path) -> tuple[Path, Path]:
+    """Return the bin folder of a new venv and a copy of the repository to install from."""
     source = _source_copy(tmp_path / 'src')
     venv = tmp_path / 'venv'
     subprocess.run([sys.executable, '-m', 'venv', str(venv)], check=True, timeout=300)
-    spec = f'{source}[{extra}]' if extra else str(source)
+    return venv / 'bin', source
+
+
+def _pip_install(bin_dir: Path, spec: str) -> None:
+    """`pip install spec` into the venv of `bin_dir`."""
     done = subprocess.run(
-        [str(venv / 'bin' / 'python'), '-m', 'pip', 'install', '-q', spec],
+        [str(bin_dir / 'python'), '-m', 'pip', 'install', '-q', spec],
         capture_output=True, text=True, timeout=INSTALL_TIMEOUT_S,
     )
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
-    return venv / 'bin'
 
 
 def _cloth_bench(bin_dir: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
@@ -71,31 +74,40 @@ def scored(run: subprocess.CompletedProcess, out: Path, engine: str) -> dict:
 def camera_run(folder: Path) -> list[str]:
     """Write a camera-like copy of the bundled fling in `folder`; return the run's arguments."""
     camera = folder / 'camera'
-    make_camera_recording(REPO / 'bags' / 'towel_dynamic', camera, seed=3, noise=0.002)
+    if not camera.exists():
+        make_camera_recording(REPO / 'bags' / 'towel_dynamic', camera, seed=3, noise=0.002)
     return ['run', '--bag', str(camera), '--topic', CAMERA_TOPIC,
             '--start-time', f'{EPOCH_START_NS / 1e9:.9f}', *FAST]
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize('extra', ['', 'newton', 'test'])
-def test_pip_install_runs_the_main_job_and_scores_a_camera_recording(extra, tmp_path):
-    bin_dir = _fresh_venv(tmp_path, extra)
-    work = tmp_path / 'work'
-    work.mkdir()
-    engine = 'newton' if extra == 'newton' else 'mujoco'
-    # the README's main job: the bundled bag, from the installed share folder
-    out = work / 'bundled'
+def _main_job_and_camera(bin_dir: Path, work: Path, engine: str) -> None:
+    """The README's main job on the bundled bag, then a camera-like recording: both score."""
+    out = work / f'bundled_{engine}'
     run = _cloth_bench(bin_dir, work, 'run', '--engine', engine, *FAST, '--output', str(out))
     scored(run, out, engine)
-    # a camera recording: organized clouds in the camera's frame, table and background in view,
-    # no project metadata: cleaned by default
-    out = work / 'camera_run'
+    # organized clouds in the camera's frame, table and background in view, no project
+    # metadata: cleaned by default
+    out = work / f'camera_{engine}'
     run = _cloth_bench(bin_dir, work, *camera_run(work), '--engine', engine, '--output', str(out))
     summary = scored(run, out, engine)
     assert summary['real']['cleaning']['table_plane'] > 0  # the cleaning ran, table and all
-    if not extra:  # the third engine's extra is missing: one line naming it
-        run = _cloth_bench(bin_dir, work, 'run', '--engine', 'newton', *FAST,
-                           '--output', str(work / 'no_newton'))
-        assert run.returncode == 2, run.stderr
-        assert run.stderr.count('\n') == 1 and 'Traceback' not in run.stderr
-        assert "pip install 'cloth_bench_ros[newton]'" in run.stderr
+
+
+@pytest.mark.slow
+def test_pip_install_and_each_extra_run_the_main_job_and_score_a_camera_recording(tmp_path):
+    # One venv, the extras added one at a time (each install adds only its own packages): the
+    # plain install first, so it is checked without any extra's packages.
+    bin_dir, source = _fresh_venv(tmp_path)
+    work = tmp_path / 'work'
+    work.mkdir()
+    _pip_install(bin_dir, str(source))
+    _main_job_and_camera(bin_dir, work, 'mujoco')
+    run = _cloth_bench(bin_dir, work, 'run', '--engine', 'newton', *FAST,
+                       '--output', str(work / 'no_newton'))  # its extra is missing: one line
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.count('\n') == 1 and 'Traceback' not in run.stderr
+    assert "pip install 'cloth_bench_ros[newton]'" in run.stderr
+    _pip_install(bin_dir, f'{source}[test]')
+    _main_job_and_camera(bin_dir, work, 'bullet')
+    _pip_install(bin_dir, f'{source}[newton]')
+    _main_job_and_camera(bin_dir, work, 'newton')
