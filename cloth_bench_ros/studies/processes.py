@@ -31,6 +31,28 @@ class ProcessRunError(ClothBenchError, RuntimeError):
     """A node process failed or the run did not end in time; str() names the node and its line."""
 
 
+class RunTimeout(ProcessRunError):
+    """A run that did not end in time: the machine's load or a stuck graph, not a result."""
+
+
+class NodeCrashed(RuntimeError):
+    """A node process that ended on an uncaught exception (a bug: exit 1), or on a signal."""
+
+
+class NodeOutput(Exception):
+    """What a crashed node process printed (its traceback), the cause of NodeCrashed."""
+
+
+def node_failed(node: str, status: int, log: Path) -> Exception:
+    """Return the error of a node that exited with `status`: 2 is bad input, any other a bug."""
+    message = f'node {node} exited with status {status}: {_last_line(log)}'
+    if status == 2:  # the nodes' mains: a user error is one line and exit status 2
+        return ProcessRunError(message)
+    crashed = NodeCrashed(message)
+    crashed.__cause__ = NodeOutput(log.read_text(errors='replace').rstrip())
+    return crashed
+
+
 def _command(name: str, params_file: Path) -> list[str]:
     module = 'simulator' if name.startswith('simulator_') else name
     return [
@@ -83,18 +105,12 @@ def run_processes(config: RunConfig, timeout_s: float = 900.0) -> dict:
             while procs['evaluator'].poll() is None:
                 for node, proc in procs.items():
                     if proc.poll() not in (None, 0):
-                        raise ProcessRunError(
-                            f'node {node} exited with status {proc.returncode}: '
-                            f'{_last_line(logs[node])}'
-                        )
+                        raise node_failed(node, proc.returncode, logs[node])
                 if time.monotonic() > deadline:
-                    raise ProcessRunError(f'the run did not end within {timeout_s:.0f} s')
+                    raise RunTimeout(f'the run did not end within {timeout_s:.0f} s')
                 time.sleep(0.05)
             if procs['evaluator'].returncode != 0:
-                raise ProcessRunError(
-                    f'node evaluator exited with status {procs["evaluator"].returncode}: '
-                    f'{_last_line(logs["evaluator"])}'
-                )
+                raise node_failed('evaluator', procs['evaluator'].returncode, logs['evaluator'])
             return json.loads((output_dir / 'summary.json').read_text())
         finally:
             for proc in procs.values():
