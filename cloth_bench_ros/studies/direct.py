@@ -17,6 +17,7 @@ import time
 from typing import Any
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.errors import user_path
 from cloth_bench_ros.core.cloth_size import cloth_grid, cloth_record, grasp_width
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
@@ -85,8 +86,10 @@ _PLANS_KEPT = 4
 
 def _bag_identity(bag: Path) -> tuple:
     """Return what tells a changed bag from the one planned: its path, sizes and times."""
-    files = sorted(bag.iterdir()) if bag.is_dir() else [bag]
-    return (str(bag.resolve()), *((f.name, f.stat().st_size, f.stat().st_mtime_ns) for f in files))
+    with user_path(bag):  # a bag that is not there is bad input, named in one line
+        files = sorted(bag.iterdir()) if bag.is_dir() else [bag]
+        stats = [(f.name, f.stat().st_size, f.stat().st_mtime_ns) for f in files]
+    return (str(bag.resolve()), *stats)
 
 
 def _replay(config: RunConfig, cut: int | None) -> tuple[Any, dict[str, Any]]:
