@@ -123,7 +123,8 @@ def test_stress_with_a_bug_exits_1(tmp_path):
 @pytest.mark.slow
 def test_identify_with_a_bug_exits_1_and_records_no_diverged_trial(tmp_path):
     out = tmp_path / 'identify'
-    result = planted('identify', '--engine', 'mujoco', '--bag', str(bundled_bag('towel', 'dynamic')),
+    bag = str(bundled_bag('towel', 'dynamic'))
+    result = planted('identify', '--engine', 'mujoco', '--bag', bag,
                      '--sampler', 'tpe', '--trials', '2', '--params', 'damping', '--grid', '5x6',
                      '--max-frames', '5', '--validate-seeds', '0', '--workers', '1',
                      '--no-progress', '--output', str(out))

@@ -352,7 +352,7 @@ class MujocoCloth(ClothEngine):
         for w in _INSTABILITY_WARNINGS:
             if d.warning[w].number:
                 # MuJoCo has already reset the state: report it rather than return the reset.
-                raise Instability(f'MuJoCo {w.name[5:]}: the state went NaN, Inf or huge')
+                raise Instability(f'MuJoCo {w.name}: the state went NaN, Inf or huge')
         self._target[:] = self._goal
         return self._vertices_now()
 

@@ -108,8 +108,9 @@ def _read_cells(path: Path) -> dict[str, dict]:
         for line in path.read_text().splitlines():
             try:
                 row = json.loads(line)
-                rows[row['key']] = row
-            except (ValueError, KeyError, TypeError):
+                if row.get('status') != 'error':  # a failed cell kept by an older version: again
+                    rows[row['key']] = row
+            except (ValueError, KeyError, TypeError, AttributeError):
                 continue  # a torn last line: that cell runs again
     return rows
 
