@@ -97,7 +97,7 @@ def test_a_simulator_node_process_with_a_bug_fails_as_a_bug_not_a_divergence(tmp
     result = planted('run', '--processes', '--engine', 'mujoco', *SMALL,
                      '--output', str(tmp_path / 'run'))
     assert result.returncode == 1, result.stderr[-3000:]
-    assert 'internal error (a bug): NodeCrashed: node simulator_mujoco exited with status 1: ' \
+    assert 'internal error (a bug): RuntimeError: node simulator_mujoco exited with status 1: ' \
         f'ValueError: {PLANTED}' in result.stderr
     assert 'diverged' not in result.stdout + result.stderr
 

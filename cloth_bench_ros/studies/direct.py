@@ -17,7 +17,6 @@ import time
 from typing import Any
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.errors import user_path
 from cloth_bench_ros.core.cloth_size import cloth_grid, cloth_record, grasp_width
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
@@ -35,6 +34,7 @@ from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.base import ClothEngine
 from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.errors import user_path
 from cloth_bench_ros.studies.run_config import RunConfig
 import yaml
 

@@ -349,7 +349,7 @@ def _run_processes(config: HilConfig, run_dir: Path) -> None:
                     f'(see {run_dir / (group + ".log")})'
                 ) from None
             if code != 0:  # a bad input (2) or a bug (any other status) in that process
-                raise node_failed(f'HIL {config.ident()}: the {group} group', code,
+                raise node_failed(f'HIL {config.ident()}: the {group} process', code,
                                   run_dir / f'{group}.log')
     finally:
         for (
@@ -364,7 +364,7 @@ def _run_processes(config: HilConfig, run_dir: Path) -> None:
                 proc.kill()
                 proc.wait()
     if procs['simulator'].returncode != 0:
-        raise node_failed(f'HIL {config.ident()}: the simulator group',
+        raise node_failed(f'HIL {config.ident()}: the simulator process',
                           procs['simulator'].returncode, run_dir / 'simulator.log')
 
 

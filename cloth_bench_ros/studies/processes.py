@@ -35,21 +35,19 @@ class RunTimeout(ProcessRunError):
     """A run that did not end in time: the machine's load or a stuck graph, not a result."""
 
 
-class NodeCrashed(RuntimeError):
-    """A node process that ended on an uncaught exception (a bug: exit 1), or on a signal."""
+def node_failed(what: str, status: int, log: Path) -> Exception:
+    """
+    Return the error of a process (`what`, e.g. `node evaluator`) that exited with `status`.
 
+    Status 2 is bad input (the nodes' mains: one line), any other a bug.
 
-class NodeOutput(Exception):
-    """What a crashed node process printed (its traceback), the cause of NodeCrashed."""
-
-
-def node_failed(node: str, status: int, log: Path) -> Exception:
-    """Return the error of a node that exited with `status`: 2 is bad input, any other a bug."""
-    message = f'node {node} exited with status {status}: {_last_line(log)}'
-    if status == 2:  # the nodes' mains: a user error is one line and exit status 2
+    A bug's cause holds what the process printed (its traceback), shown under `--verbose`.
+    """
+    message = f'{what} exited with status {status}: {_last_line(log)}'
+    if status == 2:
         return ProcessRunError(message)
-    crashed = NodeCrashed(message)
-    crashed.__cause__ = NodeOutput(log.read_text(errors='replace').rstrip())
+    crashed = RuntimeError(message)
+    crashed.__cause__ = RuntimeError(log.read_text(errors='replace').rstrip())
     return crashed
 
 
@@ -105,12 +103,13 @@ def run_processes(config: RunConfig, timeout_s: float = 900.0) -> dict:
             while procs['evaluator'].poll() is None:
                 for node, proc in procs.items():
                     if proc.poll() not in (None, 0):
-                        raise node_failed(node, proc.returncode, logs[node])
+                        raise node_failed(f'node {node}', proc.returncode, logs[node])
                 if time.monotonic() > deadline:
                     raise RunTimeout(f'the run did not end within {timeout_s:.0f} s')
                 time.sleep(0.05)
             if procs['evaluator'].returncode != 0:
-                raise node_failed('evaluator', procs['evaluator'].returncode, logs['evaluator'])
+                raise node_failed('node evaluator', procs['evaluator'].returncode,
+                                  logs['evaluator'])
             return json.loads((output_dir / 'summary.json').read_text())
         finally:
             for proc in procs.values():
