@@ -21,8 +21,12 @@ import pytest
 
 PACKAGE = Path(cloth_bench_ros.__file__).parent
 EXCEPTION_BASES = {'Exception', 'ValueError', 'RuntimeError', 'OSError', 'ClothBenchError'}
-# Not an error: a study stopped by Ctrl-C, which the CLI reports with exit status 130.
-NOT_ERRORS = {('cloth_bench_ros.studies.errors', 'StudyInterrupted')}
+# Not errors: a study stopped by Ctrl-C, which the CLI reports with exit status 130; an engine's
+# instability signal, which its step turns into a divergence.
+NOT_ERRORS = {
+    ('cloth_bench_ros.studies.errors', 'StudyInterrupted'),
+    ('cloth_bench_ros.engines.base', 'Instability'),
+}
 
 
 def error_classes() -> list[tuple[str, str]]:

@@ -89,9 +89,19 @@ class Divergence:
     reason: str
 
 
+class Instability(Exception):
+    """An engine's own report that its state went unstable: a divergence, never a bug."""
+
+
 # Divergence thresholds: a cloth vertex this far from the grippers, or this fast, has exploded.
 MAX_DISTANCE_FROM_GRIPPERS = 5.0  # m (the cloth is 0.86 m across its diagonal)
 MAX_VERTEX_SPEED = 100.0  # m/s
+# What every engine's state is checked for after each step (`check_divergence`).
+STATE_CHECKS = (
+    'non-finite vertex positions',
+    f'a vertex more than {MAX_DISTANCE_FROM_GRIPPERS:g} m from the grippers',
+    f'a vertex faster than {MAX_VERTEX_SPEED:g} m/s',
+)
 
 
 def check_divergence(
@@ -117,10 +127,16 @@ class ClothEngine(abc.ABC):
     Subclasses set `name` and `params`, build the scene, put the cloth in the task's initial
     state in `_reset` and advance it in `_step`. The task's set-up (grasped corners, the seeded
     initial state) is core/task.py's: engines only apply it and step the physics.
+
+    A divergence is what `instability_signals` names: the state checks, and whatever the engine
+    itself reports as unstable, raised from `_step` as `Instability`. Any other exception of
+    `_step` is a bug and goes to the caller.
     """
 
     name: ClassVar[str]
     params: ClassVar[tuple[Param, ...]]
+    # The engine's own signals that it went unstable, besides STATE_CHECKS (docs, `engines`).
+    instability_signals: ClassVar[tuple[str, ...]] = ()
     # Multi-fidelity `coarse`: how many halvings of the mesh still rank parameters as it does.
     screen_halvings: ClassVar[int] = 2
     device: str = 'cpu'  # the compute device this engine runs on (`device_for` its params)
@@ -250,8 +266,8 @@ class ClothEngine(abc.ABC):
         left, right = np.asarray(left_xyz, float), np.asarray(right_xyz, float)
         try:
             vertices = self._step(left, right)
-        except Exception as exc:  # an engine's own failure (e.g. a solver error) is a divergence
-            self.divergence = Divergence(self.steps, f'{type(exc).__name__}: {exc}')
+        except Instability as exc:  # only the engine's own signal; any other exception is a bug
+            self.divergence = Divergence(self.steps, str(exc))
             return self._vertices
         reason = self._check(vertices, left, right)
         if reason is not None:
@@ -290,7 +306,8 @@ class ClothEngine(abc.ABC):
         """Return the cloth's vertices at rest + `displacement`, grippers at left and right."""
 
     @abc.abstractmethod
-    def _step(self, left: np.ndarray, right: np.ndarray) -> np.ndarray: ...
+    def _step(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """Return the vertices after dt; Instability on the engine's own instability signal."""
 
     def close(self) -> None:
         """Free the simulator's resources."""

@@ -33,7 +33,7 @@ from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros.core import scene
 from cloth_bench_ros.core.scene import ClothGrid
-from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param
+from cloth_bench_ros.engines.base import ClothEngine, EngineError, Instability, Param
 import mujoco
 import numpy as np
 
@@ -92,6 +92,10 @@ class MujocoCloth(ClothEngine):
     """
 
     name: ClassVar[str] = 'mujoco'
+    instability_signals: ClassVar[tuple[str, ...]] = tuple(
+        f'MuJoCo warning {w.name} (NaN, Inf or huge state; MuJoCo resets it)'
+        for w in _INSTABILITY_WARNINGS
+    )
     params: ClassVar[tuple[Param, ...]] = (
         Param(
             'model',
@@ -348,7 +352,7 @@ class MujocoCloth(ClothEngine):
         for w in _INSTABILITY_WARNINGS:
             if d.warning[w].number:
                 # MuJoCo has already reset the state: report it rather than return the reset.
-                raise FloatingPointError(f'MuJoCo {w.name[5:]}: the state went NaN, Inf or huge')
+                raise Instability(f'MuJoCo {w.name}: the state went NaN, Inf or huge')
         self._target[:] = self._goal
         return self._vertices_now()
 

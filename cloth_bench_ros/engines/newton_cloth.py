@@ -101,6 +101,9 @@ class NewtonCloth(ClothEngine):
     """
 
     name: ClassVar[str] = 'newton'
+    # Newton and Warp report no instability of their own: a blown-up cloth's particle state goes
+    # non-finite or out of bounds, which the state checks see.
+    instability_signals: ClassVar[tuple[str, ...]] = ()
     params: ClassVar[tuple[Param, ...]] = (
         Param(
             'model',

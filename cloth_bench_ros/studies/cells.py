@@ -19,7 +19,7 @@ import re
 from typing import Iterable, Sequence
 
 from cloth_bench_ros.engines.presets import PresetSet
-from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.errors import ClothBenchError, InputError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
 
@@ -197,7 +197,7 @@ def _bag_trial(path: Path) -> int:
     try:
         with BagReader(path) as reader:
             trial = reader.trial
-    except Exception:  # an unreadable bag is reported by the cell that runs it
+    except ClothBenchError:  # an unreadable bag is reported by the cell that runs it
         return 0
     return int(trial.trial) if trial is not None else 0
 

@@ -189,6 +189,7 @@ def run_tasks(
     A worker that dies counts against every task it held, so a task beside the one that kills its
     workers can be declared killed too. Killed tasks run again at the end, one at a time: an
     innocent one then finishes, and only the one that kills its workers alone goes to on_crash.
+    An exception a task raises (a bug: the tasks return their failures as results) is raised here.
     """
     from distributed import as_completed, KilledWorker
 
@@ -208,11 +209,9 @@ def run_tasks(
     for future in futures:
         item = owner.pop(future.key)
         try:
-            result = future.result()
+            result = future.result()  # a task's exception (a bug) is raised here, as it is
         except KilledWorker:
             suspects.append(item)
-        except Exception as exc:  # a task that cannot even be sent or unpickled, and the like
-            on_crash(item, _crash_message(exc))
         else:
             on_result(item, result)
         finally:
@@ -223,20 +222,13 @@ def run_tasks(
         future = client.submit(func, item, *args, pure=False)
         try:
             result = future.result()
-        except Exception as exc:
-            on_crash(item, _crash_message(exc))
+        except KilledWorker:
+            on_crash(item, 'the worker process died while running this case (on every worker that'
+                     ' tried it)')
         else:
             on_result(item, result)
         finally:
             future.release()
-
-
-def _crash_message(exc: BaseException) -> str:
-    from distributed import KilledWorker
-
-    if isinstance(exc, KilledWorker):
-        return 'the worker process died while running this case (on every worker that tried it)'
-    return f'{type(exc).__name__}: {exc}'
 
 
 def host_label() -> str:

@@ -34,6 +34,7 @@ from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.base import ClothEngine
 from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.errors import user_path
 from cloth_bench_ros.studies.run_config import RunConfig
 import yaml
 
@@ -85,8 +86,10 @@ _PLANS_KEPT = 4
 
 def _bag_identity(bag: Path) -> tuple:
     """Return what tells a changed bag from the one planned: its path, sizes and times."""
-    files = sorted(bag.iterdir()) if bag.is_dir() else [bag]
-    return (str(bag.resolve()), *((f.name, f.stat().st_size, f.stat().st_mtime_ns) for f in files))
+    with user_path(bag):  # a bag that is not there is bad input, named in one line
+        files = sorted(bag.iterdir()) if bag.is_dir() else [bag]
+        stats = [(f.name, f.stat().st_size, f.stat().st_mtime_ns) for f in files]
+    return (str(bag.resolve()), *stats)
 
 
 def _replay(config: RunConfig, cut: int | None) -> tuple[Any, dict[str, Any]]:

@@ -25,6 +25,7 @@ from cloth_bench_ros.core.deadline import (
 from cloth_bench_ros.studies.hil import HilResult, lockstep_cd, run_hil
 from cloth_bench_ros.studies.hil_config import HilConfig
 from cloth_bench_ros.studies.hil_warmup import warmup
+from cloth_bench_ros.studies.processes import RunTimeout
 
 RATE_MIN = 10.0  # Hz
 RATE_MAX = 10_000.0  # Hz
@@ -140,7 +141,7 @@ def find_rate(
             config = replace(base, rate_hz=rate, config=f'{base.config},find-rate,{i}')
             try:
                 run = run_hil(config, out_dir, lockstep=False)
-            except RuntimeError as exc:  # a run that did not finish in time holds nothing
+            except RunTimeout as exc:  # a run that did not finish in time holds nothing
                 failures.append(str(exc))
                 fractions.append(math.nan)
                 continue

@@ -201,6 +201,7 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
     """All three groups in one process, one executor, the embedded intra-process transport."""
     from cloth_bench_ros.nodes.common import close_nodes
     from cloth_bench_ros.runtime import rclpy, SingleThreadedExecutor
+    from cloth_bench_ros.studies.processes import RunTimeout
 
     context = rclpy.Context()
     rclpy.init(args=[], context=context, transport='intra')
@@ -215,7 +216,7 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
         deadline = time.monotonic() + _time_budget(config)
         while not all(_finished(g, n) for g, n in groups if g in _waited(config)):
             if time.monotonic() > deadline:
-                raise RuntimeError(
+                raise RunTimeout(
                     f'HIL {config.ident()}: the run did not finish in time, waiting for '
                     + _waiting([n for g, nodes in groups if g in _waited(config) for n in nodes])
                 )
@@ -304,6 +305,7 @@ def _config_from_json(text: str) -> HilConfig:
 def _run_processes(config: HilConfig, run_dir: Path) -> None:
     """Run the three groups as OS processes; the simulator is stopped once the others are done."""
     from cloth_bench_ros.runtime.dds import loopback_environment
+    from cloth_bench_ros.studies.processes import node_failed, RunTimeout
 
     # As `cloth-bench run --processes`: DDS on loopback only, on ROS_DOMAIN_ID or a random domain.
     domain = (
@@ -338,21 +340,17 @@ def _run_processes(config: HilConfig, run_dir: Path) -> None:
             try:
                 code = procs[group].wait(max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:  # the machine's doing, not a bug: say so
-                from cloth_bench_ros.studies.processes import ProcessRunError
-
                 busy = (' (the observer runs at nice 19, off the critical path, so other work on'
                         ' this machine can starve it: load average '
                         f'{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)'
                         if group == 'observer' else '')
-                raise ProcessRunError(
+                raise RunTimeout(
                     f'HIL {config.ident()}: the {group} process did not finish in time{busy} '
                     f'(see {run_dir / (group + ".log")})'
                 ) from None
-            if code != 0:
-                raise RuntimeError(
-                    f'HIL {config.ident()}: the {group} process failed with exit status {code} '
-                    f'(see {run_dir / (group + ".log")})'
-                )
+            if code != 0:  # a bad input (2) or a bug (any other status) in that process
+                raise node_failed(f'HIL {config.ident()}: the {group} process', code,
+                                  run_dir / f'{group}.log')
     finally:
         for (
             proc
@@ -366,10 +364,8 @@ def _run_processes(config: HilConfig, run_dir: Path) -> None:
                 proc.kill()
                 proc.wait()
     if procs['simulator'].returncode != 0:
-        raise RuntimeError(
-            f'HIL {config.ident()}: the simulator process failed with exit status '
-            f'{procs["simulator"].returncode} (see {run_dir / "simulator.log"})'
-        )
+        raise node_failed(f'HIL {config.ident()}: the simulator process',
+                          procs['simulator'].returncode, run_dir / 'simulator.log')
 
 
 def run_groups(config: HilConfig, run_dir: Path) -> None:

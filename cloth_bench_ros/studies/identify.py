@@ -10,7 +10,9 @@ default BO: no extra dependency) or with a Gaussian process (`GPSampler`, only w
 installed); `both` runs CMA-ES and BO and keeps the better, as the paper did. Optuna's study stays
 with the client (ask and tell, a batch of trials in flight on the Dask workers); every trial is
 kept in an Optuna journal file beside the results, so an interrupted identification resumes.
-A diverged trial is a failed trial with its reason and step. The result is a preset file in the
+A diverged trial is a failed trial with its reason and step; so is a trial the engine refuses
+(status error: a project error, such as parameters the engine's compiler rejects). Any other
+exception in a trial is a bug and ends the study (exit 1). The result is a preset file in the
 config/presets format (`cloth-bench run --presets DIR`) with its provenance, validated on other
 seeds (and the other trials' bags) against the engine's preset through the full node graph.
 """
@@ -288,6 +290,7 @@ def run_sampler(
     """
     from cloth_bench_ros.studies.dask_executor import worker_slots
     from cloth_bench_ros.studies.identify_fidelity import Pruner
+    from distributed import KilledWorker
     from optuna.trial import TrialState
     from tqdm import tqdm
 
@@ -317,7 +320,7 @@ def run_sampler(
         try:
             result = future.result()
             result = shared.finish(task, result) if shared else result
-        except Exception as exc:  # the trial killed every worker that tried it
+        except KilledWorker as exc:  # the trial killed every worker that tried it (a bug raises)
             result = {
                 'number': trial.number, 'sampler': sampler, 'params': trial.params,
                 'value': math.nan, 'status': 'error', 'reason': f'{type(exc).__name__}: {exc}',
@@ -425,9 +428,12 @@ def identify(
         studies = {s: study for s, (study, _) in budgets.items()}
         best = min(studies, key=lambda s: finite_or_inf(best_value(studies[s])))
         if not math.isfinite(best_value(studies[best])):
+            failed = [t.user_attrs.get('status') for st in studies.values()
+                      for t in st.get_trials(deepcopy=False)]
             raise InputError(
-                f'identify: no trial of {", ".join(samplers)} finished without diverging '
-                f'(see {spec.output / TRIALS_FILE})'
+                f'identify: no trial of {", ".join(samplers)} finished: '
+                f'{failed.count("diverged")} diverged, {failed.count("error")} refused by the '
+                f'engine (see {spec.output / TRIALS_FILE})'
             )
         validation = validate(client, spec, {**spec.fixed, **studies[best].best_params}, progress)
         summary = summarise(spec, space, base, before, studies, best, validation)

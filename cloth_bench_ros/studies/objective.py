@@ -27,6 +27,7 @@ import time
 from typing import Any
 
 from cloth_bench_ros.data.errors import BagError
+from cloth_bench_ros.errors import ClothBenchError, one_line
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
@@ -98,7 +99,12 @@ def bag_clouds(
 
 
 def evaluate(trial: Trial) -> dict:
-    """Run one trial; never raises. status ok (value finite), diverged (reason, step) or error."""
+    """
+    Run one trial: status ok (value finite), diverged (reason, step) or error (refused input).
+
+    Only the engine's own instability signals make it diverged, and only the project's
+    user-facing errors make it an error; any other exception is a bug and is raised.
+    """
     if not trial.ladder:
         return _evaluate(trial)
     partials: list[float] = []
@@ -214,16 +220,11 @@ def _evaluate(trial: Trial) -> dict:
             out.update(status='error', reason='no frame could be scored')
         else:
             out['status'] = 'ok'
-    except (
-        Exception
-    ) as exc:  # a trial that cannot even run is a failed trial, never a crash of the study
-        out.update(status='error', reason=f'{type(exc).__name__}: {exc}')
-    finally:
+    except ClothBenchError as exc:  # parameters the engine refuses, a bag without frames: failed
+        out.update(status='error', reason=one_line(exc, with_type=True))
+    finally:  # any other exception is a bug: it ends the study (exit 1), after the close
         if engine is not None:
-            try:
-                engine.close()
-            except Exception:
-                pass
+            engine.close()
         out['wall_s'] = time.perf_counter() - start  # a pruned trial's too
         out['cpu_s'] = time.process_time() - cpu_start  # what the trial costs on an idle core
     return out

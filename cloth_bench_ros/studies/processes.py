@@ -31,6 +31,26 @@ class ProcessRunError(ClothBenchError, RuntimeError):
     """A node process failed or the run did not end in time; str() names the node and its line."""
 
 
+class RunTimeout(ProcessRunError):
+    """A run that did not end in time: the machine's load or a stuck graph, not a result."""
+
+
+def node_failed(what: str, status: int, log: Path) -> Exception:
+    """
+    Return the error of a process (`what`, e.g. `node evaluator`) that exited with `status`.
+
+    Status 2 is bad input (the nodes' mains: one line), any other a bug.
+
+    A bug's cause holds what the process printed (its traceback), shown under `--verbose`.
+    """
+    message = f'{what} exited with status {status}: {_last_line(log)}'
+    if status == 2:
+        return ProcessRunError(message)
+    crashed = RuntimeError(message)
+    crashed.__cause__ = RuntimeError(log.read_text(errors='replace').rstrip())
+    return crashed
+
+
 def _command(name: str, params_file: Path) -> list[str]:
     module = 'simulator' if name.startswith('simulator_') else name
     return [
@@ -83,18 +103,13 @@ def run_processes(config: RunConfig, timeout_s: float = 900.0) -> dict:
             while procs['evaluator'].poll() is None:
                 for node, proc in procs.items():
                     if proc.poll() not in (None, 0):
-                        raise ProcessRunError(
-                            f'node {node} exited with status {proc.returncode}: '
-                            f'{_last_line(logs[node])}'
-                        )
+                        raise node_failed(f'node {node}', proc.returncode, logs[node])
                 if time.monotonic() > deadline:
-                    raise ProcessRunError(f'the run did not end within {timeout_s:.0f} s')
+                    raise RunTimeout(f'the run did not end within {timeout_s:.0f} s')
                 time.sleep(0.05)
             if procs['evaluator'].returncode != 0:
-                raise ProcessRunError(
-                    f'node evaluator exited with status {procs["evaluator"].returncode}: '
-                    f'{_last_line(logs["evaluator"])}'
-                )
+                raise node_failed('node evaluator', procs['evaluator'].returncode,
+                                  logs['evaluator'])
             return json.loads((output_dir / 'summary.json').read_text())
         finally:
             for proc in procs.values():

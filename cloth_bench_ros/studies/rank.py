@@ -108,8 +108,9 @@ def _read_cells(path: Path) -> dict[str, dict]:
         for line in path.read_text().splitlines():
             try:
                 row = json.loads(line)
-                rows[row['key']] = row
-            except (ValueError, KeyError, TypeError):
+                if row.get('status') != 'error':  # a failed cell kept by an older version: again
+                    rows[row['key']] = row
+            except (ValueError, KeyError, TypeError, AttributeError):
                 continue  # a torn last line: that cell runs again
     return rows
 
@@ -193,7 +194,9 @@ def _run_cells(client: Any, left: list[tuple[str, Trial, dict]], path: Path, don
     Run the cells, each row appended as it finishes (Ctrl-C keeps them).
 
     Cells that differ only in their trial share one simulation (shared_simulations.pool_cells).
-    The timing cells run last, one at a time: a step time is not shared with another cell.
+    The timing cells run last, one at a time: a step time is not shared with another cell. A cell
+    that cannot run (status error) ends the command: exit 2 for input it refuses, and a bug in a
+    worker is raised as it is (exit 1); either way it is never counted as a divergence.
     """
     from cloth_bench_ros.studies.results import append_row
     from cloth_bench_ros.studies.shared_simulations import pool_cells, split_pooled
@@ -206,6 +209,9 @@ def _run_cells(client: Any, left: list[tuple[str, Trial, dict]], path: Path, don
     def keep(members: list[tuple[str, Trial, dict]], pooled: Trial, result: dict) -> None:
         for (key, cell, meta), one in zip(members, split_pooled(
                 pooled, result, [c for _, c, _ in members])):
+            if one['status'] == 'error':  # never a gap in the ranking, nor a divergence
+                raise RankError(f'rank: {cell.engine} on {meta["trial"]} (seed {cell.seed}, '
+                                f'{cell.sampler}) could not run: {one["reason"]}')
             row = {'key': key, **meta, 'engine': cell.engine, 'seed': cell.seed,
                    'rate_hz': cell.rate_hz, 'config': cell.sampler, **one}
             append_row(path, row)

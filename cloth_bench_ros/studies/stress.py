@@ -6,15 +6,17 @@ possibly transformed: time-compressed, pushed lower, a gripper jump) with parame
 top of the engine's towel preset, and reports:
 
 - diverged, at which step (the engine's own divergence flag: non-finite vertices, a vertex more
-  than 5 m from the grippers or faster than 100 m/s, or an exception inside the engine), why;
+  than 5 m from the grippers or faster than 100 m/s, or the engine's own instability signal,
+  `ClothEngine.instability_signals`), why;
 - L_s over the states of the quintic part up to the divergence (as the evaluator computes it);
 - the largest vertex speed max_t max_v |v_t - v_{t-1}| / dt over the run (the divergence step
   included when its state is finite);
 - the step time (mean, p99, max) and the number of steps run.
 
-A case runs in a worker process: an exception is an "error" row, a worker that dies (a crash in
-the engine's C code) a "crashed" row, a case that exceeds its wall-time budget is stopped and
-reported ("time limit"). Nothing a case does ends the suite.
+A case runs in a worker process: a case the engine refuses (a project error) is an "error" row,
+a worker that dies (a crash in the engine's C code) a "crashed" row, a case that exceeds its
+wall-time budget is stopped and reported ("time limit"). Any other exception is a bug in the
+project or an engine, never a divergence: it ends the suite (exit 1).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import time
 from typing import Sequence
 
 from cloth_bench_ros.core.table import Table
-from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.errors import ClothBenchError, InputError, one_line
 from cloth_bench_ros.studies.stress_cases import case_targets, StressCase
 import numpy as np
 
@@ -34,7 +36,7 @@ STRESS_FILE = 'stress.jsonl'
 
 
 def run_case(case: StressCase) -> dict:
-    """Run one case to its end, its divergence or its wall-time budget; never raises."""
+    """Run one case to its end, its divergence or its wall-time budget; raises only on a bug."""
     from cloth_bench_ros.core.metrics import StabilityAccumulator
     from cloth_bench_ros.core.scene import ClothGrid
     from cloth_bench_ros.engines import make_engine
@@ -117,15 +119,12 @@ def run_case(case: StressCase) -> dict:
             step_time_max=float(s.max()) if len(s) else math.nan,
         )
         row['substeps'] = getattr(engine, 'substeps', None)
-    except Exception as exc:  # a case that cannot even be built is a result too
+    except ClothBenchError as exc:  # a case the engine refuses is a result; a bug ends the suite
         row['status'] = 'error'
-        row['error'] = f'{type(exc).__name__}: {exc}'
+        row['error'] = one_line(exc, with_type=True)
     finally:
         if engine is not None:
-            try:
-                engine.close()
-            except Exception:
-                pass
+            engine.close()
     row['wall_s'] = time.perf_counter() - start
     return row
 

@@ -5,9 +5,10 @@ A cell (studies/cells.py) is one run: `run_direct` in lockstep (the node graph's
 its nodes), `run_pipeline` in realtime. Results go to <out>/results.jsonl, appended as each cell
 finishes (an interrupted sweep loses at most the cells in flight), under the directory's lock (a
 second study there refuses with one line). A new run over the same directory skips every cell
-already present: it resumes. A diverged run is a result (NaN metrics, status "diverged"); an
-exception in a cell is an "error" row; a worker that dies mid-cell is replaced and the cell runs
-again elsewhere.
+already present: it resumes. A diverged run is a result (NaN metrics, status "diverged"); input
+a cell cannot run on (a project error: an unreadable bag, refused parameters) is an "error" row;
+any other exception is a bug and ends the sweep (exit 1); a worker that dies mid-cell is replaced
+and the cell runs again elsewhere.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.engines.presets import PresetSet
 
 # re-exported: the studies' one vocabulary
-from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.errors import ClothBenchError, InputError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
@@ -151,7 +152,7 @@ def _substeps(cell: Cell) -> int | None:
         config = engine_class(cell.engine).validate_params(
             {**load_preset(cell.engine, cell.cloth, cell.primitive), **cell.params}
         )
-    except Exception:
+    except ClothBenchError:  # an engine or parameters the cell's error row names already
         return None
     if 'timestep' not in config:
         return None
@@ -187,7 +188,7 @@ def cell_config(cell: Cell, output_dir: Path | None) -> RunConfig:
 
 
 def run_cell(cell: Cell, out_dir: str) -> dict:
-    """Run one cell (in a worker process); never raises for a failure of the run itself."""
+    """Run one cell (in a worker process); input it cannot run on is an error row, a bug raises."""
     start = time.perf_counter()
     frames_dir = Path(out_dir) / 'frames' / cell.ident() if cell.keep_frames else None
     try:
@@ -205,7 +206,7 @@ def run_cell(cell: Cell, out_dir: str) -> dict:
         row['status'] = 'diverged' if row['diverged'] else 'ok'
         row['error'] = ''
         row['engine_version'] = engine_class(cell.engine).version()
-    except Exception as exc:  # a failure of this cell is a result row, never a crash of the sweep
+    except ClothBenchError as exc:  # input this cell cannot run on is a row; a bug ends the sweep
         last = traceback.extract_tb(exc.__traceback__)[-1:] if exc.__traceback__ else []
         where = f' ({Path(last[0].filename).name}:{last[0].lineno})' if last else ''
         return error_row(cell, f'{type(exc).__name__}: {exc}{where}', time.perf_counter() - start)
