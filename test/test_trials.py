@@ -8,8 +8,8 @@ from pathlib import Path
 from camera_recording import CAMERA_TOPIC, make_camera_recording, make_repeated_recording
 from cloth_bench_ros import cli
 from cloth_bench_ros.core.trajectory import sample_quintic
-from cloth_bench_ros.data.alignment import AlignmentError
 from cloth_bench_ros.data import BagReader
+from cloth_bench_ros.data.alignment import AlignmentError
 from cloth_bench_ros.data.replay import choose_trial, read_frames, ReplayOptions, split_recording
 from cloth_bench_ros.data.trials import (
     MAX_TARGET_RESIDUAL,
