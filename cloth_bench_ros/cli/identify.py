@@ -126,7 +126,7 @@ def _trial_bag(bag: Path, args: argparse.Namespace, out: Path) -> Path:
     replay = ReplayOptions(
         cloth=args.cloth, primitive=args.primitive, topic=args.topic or OPTIONS['topic'].default,
         targets_topic=args.targets_topic or OPTIONS['targets_topic'].default,
-        clean=args.clean or OPTIONS['clean'].default, rate_hz=args.rate, align='onset',
+        clean=args.clean or OPTIONS['clean'].default, rate_hz=args.rate,
     )
     found = prepare_trials([bag], replay, out / 'trials')
     if not found:
