@@ -139,3 +139,20 @@ def test_the_slow_drag_splits_into_its_one_trial_with_its_start(pre_roll, noise,
     lines: list[str] = []  # rank takes it as the rank's own recordings (2 mm noise, 1 s of rest)
     found = prepare_trials([path], options, tmp_path / 'rank', lines.append)
     assert len(found) == 1 and found[0].frames == trial.frames, lines
+
+
+def test_a_split_is_kept_only_while_the_splitter_is_the_same(tmp_path, monkeypatch):
+    from cloth_bench_ros.data import trials
+
+    path = tmp_path / 'fling'
+    make_camera_recording(bundled_bag('towel', 'dynamic'), path, pre_roll=10)
+    options = ReplayOptions(primitive='dynamic', topic=CAMERA_TOPIC)
+
+    def written() -> int:
+        (found,) = prepare_trials([path], options, tmp_path / 'rank', lambda line: None)
+        return (Path(found.bag) / 'metadata.yaml').stat().st_mtime_ns
+
+    first = written()
+    assert written() == first  # read back
+    monkeypatch.setattr(trials, 'CORNER_POINTS', trials.CORNER_POINTS + 1)
+    assert written() != first  # another splitter: split again

@@ -129,6 +129,11 @@ def _finite(value: float) -> float | None:
     return float(value) if np.isfinite(value) else None
 
 
+def settings() -> dict[str, Any]:
+    """Return every threshold and step of the split (a split kept by rank is kept while equal)."""
+    return {name: value for name, value in globals().items() if name.isupper()}
+
+
 def task_displacement(primitive: str) -> tuple[np.ndarray, np.ndarray]:
     """(t, d): the grippers' mid-point displacement (n, 3) from its start over the task."""
     targets = sample_quintic(primitive, TEMPLATE_RATE)
