@@ -3,8 +3,8 @@ How much the way the start of the motion is found moves each engine's CD.
 
 A plain recording of the bundled towel fling (its clouds with sensor noise, after a second of the
 cloth hanging still) has its start found three ways: the recorded gripper targets (exact here),
-the engine-free onset fitted in the clouds (data.trials, what `rank` uses without targets), and
-the automatic search against a MuJoCo simulation (`run`'s default for cloud-only recordings). Each
+the engine-free onset fitted in the clouds (data.trials: the default of `run`, `identify` and
+`rank` without targets), and the search against a MuJoCo simulation (`--align simulation`). Each
 start cuts the trial that every engine (preset, seed 0) is then scored on; the script prints each
 start's error and each engine's CD with its change against the true start.
 

@@ -189,9 +189,9 @@ OPTIONS = _declare(
         flag='--trial', low=0, metavar='N',
     ),
     Option(
-        'align', str, 'simulation', 'start of a cloud-only recording: simulation (search against '
-        'the first engine) or onset (fitted to the task in the clouds, no engine)',
-        flag='--align', choices=('simulation', 'onset'),
+        'align', str, 'onset', 'start of a cloud-only recording: onset (fitted to the task in '
+        'the clouds, no engine: every engine scored on the same frames) or simulation (searched '
+        'against the first engine)', flag='--align', choices=('onset', 'simulation'),
     ),
     # how the graph runs
     Option(

@@ -377,3 +377,29 @@ def test_cli_identify_refuses_a_journal_of_another_problem_in_one_line(target, t
     assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err, err
     assert f'{tmp_path} holds an identification of another problem (rate_hz changed)' in err
     assert _rows(tmp_path) == 1
+
+
+def test_cli_identify_fits_a_plain_recording_on_its_trial_found_without_an_engine(
+    tmp_path, capsys
+):
+    from camera_recording import CAMERA_TOPIC, make_camera_recording
+    from cloth_bench_ros.data import BagReader
+    from cloth_bench_ros.paths import bundled_bag
+
+    camera = tmp_path / 'camera'
+    make_camera_recording(bundled_bag('towel', 'dynamic'), camera, pre_roll=10, noise=0.002)
+    out = tmp_path / 'out'
+    argv = ['identify', '--bag', str(camera), '--topic', CAMERA_TOPIC, '--output', str(out),
+            '--no-progress', '--sampler', 'tpe', '--trials', '1', '--params', 'damping',
+            '--grid', '5x6', '--max-frames', '5', '--validate-seeds', '0', '--workers', '1']
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert f'{camera}: trial 1: bag time 0.' in printed and 'start +/- ' in printed
+    fitted = out / 'trials' / camera.name / 'trial1'
+    assert f'identify: fitting trial 1 of {camera} ({fitted})' in printed
+    with BagReader(fitted) as reader:  # the trial from its start: the project's layout
+        assert reader.trial.primitive == 'dynamic' and reader.trial.change_of_phase_frame
+        stamps = [s for s, _ in reader.clouds()]
+    assert 0 <= stamps[0] < 34e6 and 130 <= len(stamps) <= 132
+    problem = json.loads((out / PROBLEM_FILE).read_text())
+    assert str(fitted) in json.dumps(problem)

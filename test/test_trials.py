@@ -5,17 +5,19 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from camera_recording import CAMERA_TOPIC, make_repeated_recording
+from camera_recording import CAMERA_TOPIC, make_camera_recording, make_repeated_recording
 from cloth_bench_ros import cli
 from cloth_bench_ros.core.trajectory import sample_quintic
+from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.data.alignment import AlignmentError
-from cloth_bench_ros.data.replay import choose_trial
+from cloth_bench_ros.data.replay import choose_trial, read_frames, ReplayOptions, split_recording
 from cloth_bench_ros.data.trials import (
     MAX_TARGET_RESIDUAL,
     split_clouds,
     split_targets,
 )
 from cloth_bench_ros.paths import bundled_bag
+from cloth_bench_ros.studies.rank_trials import prepare_trials
 import numpy as np
 import pytest
 
@@ -111,3 +113,46 @@ def test_run_scores_the_chosen_repetition_and_accounts_for_the_others(
         'trial 2' in printed
     assert 'trial 2: bag time 7.' in printed and '132 frames, start +/- ' in printed
     assert 'other trials' in printed and '(adds up)' in printed
+
+
+@pytest.mark.parametrize(
+    'pre_roll, noise', [(5, 0.0), pytest.param(30, 0.002, marks=pytest.mark.slow)]
+)
+def test_the_slow_drag_splits_into_its_one_trial_with_its_start(pre_roll, noise, tmp_path):
+    # The drag's first second lowers the cloth 5 cm in its own plane, which the clouds barely
+    # show: they move visibly only some 4 s in, and its last 3 s are as slow.
+    path = tmp_path / 'drag'
+    true_ns = make_camera_recording(
+        bundled_bag('towel', 'quasi_static'), path, seed=1, pre_roll=pre_roll, noise=noise
+    )
+    options = ReplayOptions(primitive='quasi_static', topic=CAMERA_TOPIC)
+    with BagReader(path) as reader:
+        frames = read_frames(reader, options)
+        split = split_recording(reader, options, frames.stamps, frames.clouds)
+    assert [t.usable for t in split.trials] == [True], split.as_dict()
+    (trial,) = split.trials
+    assert (trial.first_ns - true_ns) / 1e9 > 2.0  # the first moving frame, seconds late
+    assert abs(trial.start.bag_ns - true_ns) <= 50e6, (trial.start.bag_ns - true_ns) / 1e6
+    assert abs(trial.frames - 420) <= 1 and trial.residual_m < 0.015  # 30 Hz over 14 s
+    if not noise:
+        return
+    lines: list[str] = []  # rank takes it as the rank's own recordings (2 mm noise, 1 s of rest)
+    found = prepare_trials([path], options, tmp_path / 'rank', lines.append)
+    assert len(found) == 1 and found[0].frames == trial.frames, lines
+
+
+def test_a_split_is_kept_only_while_the_splitter_is_the_same(tmp_path, monkeypatch):
+    from cloth_bench_ros.data import trials
+
+    path = tmp_path / 'fling'
+    make_camera_recording(bundled_bag('towel', 'dynamic'), path, pre_roll=10)
+    options = ReplayOptions(primitive='dynamic', topic=CAMERA_TOPIC)
+
+    def written() -> int:
+        (found,) = prepare_trials([path], options, tmp_path / 'rank', lambda line: None)
+        return (Path(found.bag) / 'metadata.yaml').stat().st_mtime_ns
+
+    first = written()
+    assert written() == first  # read back
+    monkeypatch.setattr(trials, 'CORNER_POINTS', trials.CORNER_POINTS + 1)
+    assert written() != first  # another splitter: split again

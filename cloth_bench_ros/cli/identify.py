@@ -7,7 +7,8 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
-from cloth_bench_ros.options import Option
+from cloth_bench_ros.cli.common import UserError
+from cloth_bench_ros.options import Option, OPTIONS
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 
@@ -76,6 +77,10 @@ FIT_FLAGS: tuple[common.Flag, ...] = (
         flag='--bag-dir',
     ),
     ('output', {'help': 'directory (default results/identify/<engine>_<cloth>_<primitive>)'}),
+    # a plain recording is split as rank splits it: its first usable trial is fitted
+    ('topic', {'help': 'PointCloud2 topic of a plain recording'}),
+    ('targets_topic', {'help': 'its recorded PoseArray gripper targets'}),
+    'clean',
 )
 
 
@@ -104,6 +109,32 @@ def _budget_text(budget: dict) -> str:
     return f' (budget: the doubling {before} -> {after} improved {gain:.1%}{verdict})'
 
 
+def _trial_bag(bag: Path, args: argparse.Namespace, out: Path) -> Path:
+    """
+    Return the bag to fit: a project bag as it is, else the recording's first usable trial.
+
+    A plain recording is split as `rank` splits it, without an engine; the trial is written
+    under `out`.
+    """
+    from cloth_bench_ros.data import BagReader
+    from cloth_bench_ros.data.replay import ReplayOptions
+    from cloth_bench_ros.studies.rank_trials import prepare_trials
+
+    with BagReader(bag) as reader:
+        if reader.trial is not None:
+            return bag
+    replay = ReplayOptions(
+        cloth=args.cloth, primitive=args.primitive, topic=args.topic or OPTIONS['topic'].default,
+        targets_topic=args.targets_topic or OPTIONS['targets_topic'].default,
+        clean=args.clean or OPTIONS['clean'].default, rate_hz=args.rate,
+    )
+    found = prepare_trials([bag], replay, out / 'trials')
+    if not found:
+        raise UserError(f'identify: bag {bag} holds no usable trial of the task (above)')
+    print(f'identify: fitting trial {found[0].number} of {bag} ({found[0].bag})')
+    return Path(found[0].bag)
+
+
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, validate on held-out seeds, write the preset and print the outcome."""
     from cloth_bench_ros.engines.presets import load_preset
@@ -112,7 +143,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies.identify import identify, IdentifySpec, JOURNAL_FILE, TRIALS_FILE
 
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
-    common.check_bag(bag)
+    common.check_bag(bag, args.topic or None)
     fixed = common.engine_overrides(args.set, [args.engine]).get(args.engine, {})
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, {args.engine: fixed})
     preset = {**load_preset(args.engine, args.cloth, args.primitive), **fixed}
@@ -122,6 +153,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         if args.output
         else (Path('results') / 'identify' / f'{args.engine}_{args.cloth}_{args.primitive}')
     )
+    bag = _trial_bag(bag, args, out)
     spec = IdentifySpec(
         args.engine,
         args.cloth,

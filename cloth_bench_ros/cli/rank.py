@@ -93,13 +93,12 @@ def cmd_rank(args: argparse.Namespace) -> int:
     declared = {name: OPTIONS[name].default for name in REPLAY_OPTIONS}  # the replay's defaults
     params = _replay_params(argparse.Namespace(**{
         **declared, 'topic': args.topic, 'start_time': None, 'targets_topic': args.targets_topic,
-        'clean': args.clean, 'align': 'onset', 'transform': None, 'trial': None,
+        'clean': args.clean, 'transform': None, 'trial': None,
     }))
     replay = ReplayOptions(
         cloth=args.cloth, primitive=args.primitive, topic=params['topic'],
         targets_topic=params['targets_topic'], clean=params['clean'], rate_hz=args.rate,
-        align='onset',
-    )
+    )  # the split never simulates: its starts are fitted in the recordings (--align onset)
     spec = RankSpec(
         args.recordings, out, entrants, replay, args.trials, args.sampler, args.seeds, args.rate,
         args.rates, args.grid, args.metric, args.max_frames, fixed, args.fidelity, size, mass,

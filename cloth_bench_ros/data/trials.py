@@ -12,16 +12,25 @@ A recording of a robot doing the task a few times holds several trials, with res
   longest still phase plus `MERGE_MARGIN_S` are one motion. A motion shorter than `MIN_MOTION_S`
   is a jump (the cloth put back by hand between takes, a glitch), not a trial.
 - start: the task's gripper path is known (core.trajectory), so the start of each motion is
-  fitted, not thresholded. In the clouds: the grasped corners move as the grippers do, so the
-  cloud points nearest the task's grippers at rest (its corners) are moved along the grippers'
-  path from a candidate start, and the start is the one that keeps them on the cloud: the least
-  sum of squared distances (each at most `CORNER_CAP`) from the moved corners to each frame's
-  cloud, over the rest before the motion and `CORNER_FIT_S` of it. In recorded targets: their
-  mid-point's displacement from rest is least-squares fitted by the task's, over the whole
-  motion. Either way the precision is where the sum of squares rises by one noise variance (a
-  1-sigma interval, at least half the fine step). On camera-like copies of the bundled fling
-  (2 mm noise, cleaned) the clouds' start is 10 +/- 1 ms late against the truth (the corners
-  lag their grippers a little), against a stated 1-sigma of 3 ms; targets give it exactly.
+  fitted, not thresholded. In the clouds: the grasped corners move as the grippers do, so each
+  corner (the mean of the `CORNER_POINTS` cloud points nearest a task's gripper, in the frames at
+  rest) is moved along the grippers' path from a candidate start, and the start is the one that
+  keeps them on the cloud: the least sum of squared distances (each at most `CORNER_CAP`) from
+  the moved corners to each frame's cloud, over the rest before the motion and `CORNER_FIT_S`
+  past the latest start searched. A gentle start is seen late (the clouds show a motion once
+  the grippers are some 0.1 m from rest: 0.9 s into the fling, 3.9 s into the slow drag), so
+  the start is searched from the time the task's grippers take to move `LEAD_DISTANCE` before
+  the first moving frame (its `detection_lead`). A corner a few cm inside the cloth, not its
+  edge point, because a corner moved within the cloth's own plane stays on the cloud: the edge
+  point would let the drag's first second (straight down) pull the start 0.1-0.2 s early. In
+  recorded targets: their mid-point's displacement from rest is least-squares fitted by the
+  task's, over the whole motion. Either way the precision is where the sum of squares rises by
+  one noise variance (a 1-sigma interval, at least half the fine step). On camera-like copies
+  of the bundled towel (cleaned) the clouds' start is 9-12 ms late on the fling with 0-5 mm
+  noise (the cloth by its corners lags the grippers during the fling's accelerations; stated
+  1-sigma 2-3 ms) and 8-18 ms early on the drag with 0-2 mm (stated 1-sigma 11-18 ms; with
+  5 mm its slow motion falls apart into pieces the task does not match); targets give it
+  exactly.
 - a motion is a usable trial only when it matches the task: the fit's RMS residual at most
   `MAX_RESIDUAL` (targets: `MAX_TARGET_RESIDUAL`), the targets' scale within `SCALE_RANGE`, its
   duration at least `MIN_DURATION_FRACTION` of the task's (targets: within
@@ -45,10 +54,12 @@ MOTION_FACTOR = 2.5  # x the rest level
 MOTION_FLOOR = 0.004  # m above the rest level
 MERGE_MARGIN_S = 0.5  # s added to the task's longest still phase
 MIN_MOTION_S = 0.2  # s: shorter motions are jumps, not trials
-CORNER_FIT_S = 1.0  # s of the task's motion the cloud fit covers
+CORNER_FIT_S = 2.0  # s past the latest start searched that the cloud fit covers
 CORNER_CAP = 0.05  # m: a corner further from the cloud than this counts as this far
 CORNER_GAP = 0.1  # m: at rest the cloud's nearest point to a gripper is at most this far
+CORNER_POINTS = 30  # cloud points nearest each gripper at rest whose mean is its corner
 FIT_PRE_S = 1.0  # s of rest before the motion the fit covers (at most)
+LEAD_DISTANCE = 0.2  # m from rest the grippers have moved, at most, when the clouds show motion
 MAX_RESIDUAL = 0.025  # m RMS, clouds
 MAX_TARGET_RESIDUAL = 0.005  # m RMS, recorded targets
 SCALE_RANGE = (0.5, 2.0)
@@ -118,6 +129,11 @@ def _finite(value: float) -> float | None:
     return float(value) if np.isfinite(value) else None
 
 
+def settings() -> dict[str, Any]:
+    """Return every threshold and step of the split (a split kept by rank is kept while equal)."""
+    return {name: value for name, value in globals().items() if name.isupper()}
+
+
 def task_displacement(primitive: str) -> tuple[np.ndarray, np.ndarray]:
     """(t, d): the grippers' mid-point displacement (n, 3) from its start over the task."""
     targets = sample_quintic(primitive, TEMPLATE_RATE)
@@ -130,6 +146,12 @@ def motion_lag(primitive: str) -> float:
     t, d = task_displacement(primitive)
     path = float(np.sum(np.linalg.norm(np.diff(d, axis=0), axis=1)))
     return float(np.clip(LAG_DISTANCE * t[-1] / path, *LAG_RANGE_S))
+
+
+def detection_lead(primitive: str) -> float:
+    """Return how long (s) the clouds' first moving frame may follow the task's start."""
+    t, d = task_displacement(primitive)
+    return float(t[np.argmax(np.linalg.norm(d, axis=1) >= LEAD_DISTANCE)])
 
 
 def longest_still(primitive: str) -> float:
@@ -303,6 +325,13 @@ class _CornerFit:
         self.t_ref, self.d_ref = task_displacement(primitive)
         task = sample_quintic(primitive, TEMPLATE_RATE)
         self.grippers = np.array([task.left[0], task.right[0]])
+        self.lead = detection_lead(primitive)
+
+    def _patch_centres(self, frame: int) -> np.ndarray:
+        """Return the mean of the CORNER_POINTS cloud points nearest each gripper (2, 3)."""
+        tree = self.trees[frame]
+        _, index = tree.query(self.grippers, [*range(1, min(CORNER_POINTS, tree.n) + 1)])
+        return tree.data[index].mean(axis=1)
 
     def _sse(self, frames: np.ndarray, corners: np.ndarray, starts: np.ndarray) -> np.ndarray:
         """Return the sum of squared corner distances for each candidate start."""
@@ -320,17 +349,19 @@ class _CornerFit:
         """Return (start, 1-sigma precision, RMS residual, NaN scale), or why it cannot fit."""
         times = self.times
         frames = np.nonzero((times >= low) & (times <= high + CORNER_FIT_S))[0]
-        rest = frames[times[frames] < times[first]]
-        if len(rest) < 2:
+        before = frames[times[frames] < times[first]]
+        if len(before) < 2:
             return 'no rest before its motion to fit its start to'
-        nearest = [self.trees[f].query(self.grippers) for f in rest]
-        gap = float(np.mean([d for d, _ in nearest]))
+        # The corners at rest: the frames a lead before the first moving one, else the first two.
+        rest = before[times[before] < times[first] - self.lead]
+        rest = rest if len(rest) >= 2 else before[:2]
+        gap = float(np.mean([self.trees[f].query(self.grippers)[0] for f in rest]))
         if gap > CORNER_GAP:
             return (
                 f"the cloud is {gap * 1e3:.0f} mm from the task's grippers at rest "
                 f'(at most {CORNER_GAP * 1e3:g} mm): not the task (or the cloud not in world)'
             )
-        corners = np.mean([self.trees[f].data[i] for f, (_, i) in zip(rest, nearest)], axis=0)
+        corners = np.mean([self._patch_centres(f) for f in rest], axis=0)
         coarse = np.arange(low, high + COARSE_STEP_S / 2, COARSE_STEP_S)
         best = float(coarse[int(np.argmin(self._sse(frames, corners, coarse)))])
         reach = 4 * COARSE_STEP_S
@@ -360,7 +391,9 @@ def _split(
         number = len(split.trials) + 1
         trial = FoundTrial(number, base_ns + _ns(times[first]), base_ns + _ns(times[last]), None)
         split.trials.append(trial)
-        low = max(times[first] - FIT_PRE_S, previous_end)
+        # Targets move from the start on; the clouds show a motion up to a lead after it.
+        lead = 0.0 if targets else detection_lead(primitive)
+        low = max(times[first] - lead - FIT_PRE_S, previous_end)
         previous_end = times[last]
         # The first moving sample is after the start; clouds flag a move up to a lag early.
         fitted = fit(first, low, times[first] + (0.0 if targets else motion_lag(primitive)), last)

@@ -26,6 +26,7 @@ from cloth_bench_ros.data.bag_layout import locate
 from cloth_bench_ros.data.errors import BagError
 from cloth_bench_ros.data.replay import read_frames, ReplayOptions, split_recording
 from cloth_bench_ros.data.trial import CLOUD_TOPIC, TrialInfo
+from cloth_bench_ros.data.trials import settings as split_settings
 from cloth_bench_ros.errors import ClothBenchError
 import numpy as np
 
@@ -98,8 +99,8 @@ def prepare_trials(
     """
     Return every usable trial of the recordings; say one line per trial found or left out.
 
-    Split recordings are written under `out` once (kept while the recording and the options are
-    the same: a rerun reads them back).
+    Split recordings are written under `out` once (kept while the recording, the options and the
+    split's thresholds are the same: a rerun reads them back).
     """
     trials: list[RankTrial] = []
     names: set[str] = set()
@@ -151,7 +152,7 @@ def _split_one(
     reader: BagReader, path: Path, base: str, options: ReplayOptions, out: Path, say: Any
 ) -> list[RankTrial]:
     """Split one plain recording into trials written as bags under `out`."""
-    stamp = {'recording': _identity(path), 'options': repr(options)}
+    stamp = {'recording': _identity(path), 'options': repr(options), 'split': split_settings()}
     done = out / 'trials.json'
     if done.exists():
         try:
