@@ -81,7 +81,7 @@ def camera_run(folder: Path) -> list[str]:
 
 
 def _main_job_and_camera(bin_dir: Path, work: Path, engine: str) -> None:
-    """The README's main job on the bundled bag, then a camera-like recording: both score."""
+    """Run the README's main job on the bundled bag, then a camera-like recording: both score."""
     out = work / f'bundled_{engine}'
     run = _cloth_bench(bin_dir, work, 'run', '--engine', engine, *FAST, '--output', str(out))
     scored(run, out, engine)
