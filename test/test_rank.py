@@ -67,6 +67,7 @@ def test_significance_says_which_neighbours_differ():
     assert significance(more_is_better) == 'significant (95 % intervals apart): a < b'
 
 
+@pytest.mark.slow
 def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys, request):
     out = tmp_path / 'rank'
     assert cli.main(['rank', str(recordings), '--output', str(out), *TINY]) == 0

@@ -121,6 +121,7 @@ def test_sigint_and_sigterm_stop_a_real_rclpy_node_cleanly(sig):
     assert 'Traceback' not in err and 'ExternalShutdownException' not in err
 
 
+@pytest.mark.slow
 def test_two_in_process_runs_at_once_do_not_hear_each_other(tmp_path):
     script = (
         ' & '.join(
@@ -259,6 +260,7 @@ def _assert_same_metrics(summary: dict, reference: dict) -> None:
         assert summary['engines']['mujoco'][key] == reference['engines']['mujoco'][key], key
 
 
+@pytest.mark.slow
 def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(
     tmp_path, embedded_reference
 ):
@@ -273,6 +275,7 @@ def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(
     _assert_same_metrics(_summary(tmp_path / 'ros'), embedded_reference)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('real', [{'evaluator'}, {'simulator'}, {'trajectory_publisher'}])
 def test_mixed_graphs_of_real_and_embedded_nodes_give_the_embedded_metrics(
     tmp_path, embedded_reference, real
@@ -282,6 +285,7 @@ def test_mixed_graphs_of_real_and_embedded_nodes_give_the_embedded_metrics(
     _assert_same_metrics(_summary(tmp_path / 'ros'), embedded_reference)
 
 
+@pytest.mark.slow
 def test_the_launch_files_command_lines_give_the_same_metrics_on_both_runtimes(
     monkeypatch, tmp_path
 ):
@@ -364,6 +368,7 @@ print(json.dumps({
 """
 
 
+@pytest.mark.slow
 def test_a_real_rclpy_node_reads_the_embedded_nodes_rosout_and_parameter_events(tmp_path):
     """An embedded node on Cyclone DDS, a real rclpy node on Fast DDS: logs, events, names."""
     domain = random.randint(1, 101)
@@ -450,6 +455,7 @@ print(json.dumps([[i.node_name, i.node_namespace, i.topic_type, int(i.qos_profil
 """
 
 
+@pytest.mark.slow
 def test_graph_introspection_both_ways_between_real_and_embedded_nodes(tmp_path):
     """Each side names the other's node, its topic's type and its QoS (Fast DDS <-> Cyclone)."""
     domain = random.randint(1, 101)
