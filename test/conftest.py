@@ -1,7 +1,9 @@
-"""Fixtures shared by the tests: small real MCAP bags made on the spot."""
+"""Shared fixtures: small real bags made on the spot, DDS on loopback, one Dask cluster."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+import contextlib
 import os
 from pathlib import Path
 import random
@@ -37,3 +39,50 @@ def dds_on_loopback():
             os.environ.pop(key, None)
         else:
             os.environ[key] = value
+
+
+@pytest.fixture(scope='session')
+def dask_cluster_address(tmp_path_factory) -> Iterator[Callable[[], str]]:
+    """
+    Return a function giving the session's one Dask LocalCluster address, started on first call.
+
+    The cluster is the one a study starts (cloth_bench_ros.studies.dask_executor.open_client:
+    worker processes on 127.0.0.1), kept for the whole session; its workers write to workers.log.
+    """
+    from cloth_bench_ros.studies import dask_executor
+
+    start_cluster = dask_executor._cluster_client  # before any test points it here
+    with contextlib.ExitStack() as stack:
+        addresses: list[str] = []
+
+        def address() -> str:
+            if not addresses:
+                log = tmp_path_factory.mktemp('dask') / 'workers.log'
+                plugin = dask_executor._WorkerSetup(str(log), local=True)
+                client = stack.enter_context(start_cluster(None, None, plugin))
+                addresses.append(client.scheduler.address)
+            return addresses[0]
+
+        yield address
+
+
+@pytest.fixture(autouse=True)
+def studies_on_one_dask_cluster(request, monkeypatch):
+    """
+    Run every study a test starts in this process on the session's one Dask cluster.
+
+    As `--scheduler ADDRESS` would: a study without a scheduler connects to it instead of starting
+    a LocalCluster of its own (a second or more per study, then per test, without it). A test
+    that kills workers or checks the cluster itself is marked `own_dask_cluster`.
+    """
+    if request.node.get_closest_marker('own_dask_cluster'):
+        return
+    from cloth_bench_ros.studies import dask_executor
+
+    start_cluster = dask_executor._cluster_client
+    address = request.getfixturevalue('dask_cluster_address')
+
+    def on_the_session_cluster(scheduler, workers, plugin):
+        return start_cluster(scheduler or address(), workers, plugin)
+
+    monkeypatch.setattr(dask_executor, '_cluster_client', on_the_session_cluster)

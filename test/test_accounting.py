@@ -22,6 +22,7 @@ def _bag(path: Path, frames: int, fps: float, with_trial: bool, first_ns: int = 
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     'frames,fps,sim_rate,expected',
     [
@@ -65,6 +66,7 @@ def test_counts_add_up(tmp_path, capsys, frames, fps, sim_rate, expected):
     )
 
 
+@pytest.mark.slow
 def test_plain_bag_at_7_hz_with_a_given_start(tmp_path):
     bag = _bag(tmp_path / 'bag', 50, 7.0, with_trial=False, first_ns=EPOCH)
     out = tmp_path / 'out'

@@ -211,6 +211,7 @@ def _score(bag: Path, tmp_path: Path) -> dict:
     return json.loads((out / 'summary.json').read_text())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('variant', list(VARIANTS))
 def test_a_lossless_variant_scores_exactly_like_the_original(variant, original, tmp_path):
     bag = VARIANTS[variant](tmp_path / 'variant')
@@ -246,6 +247,7 @@ def test_a_killed_recording_without_metadata_reads_its_files(storage, original, 
     assert scores(_score(bag, tmp_path)) == scores(original)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
 def test_a_killed_split_recording_is_read_in_file_number_order(storage, original, tmp_path):
     bag = write_split(tmp_path / 'killed', storage, parts=12)
@@ -289,6 +291,7 @@ def test_a_damaged_compressed_bag_is_one_line(compression, tmp_path, capsys):
     assert len(err.splitlines()) == 1 and str(bag) in err and 'internal error' not in err
 
 
+@pytest.mark.slow
 def test_a_bare_mcap_from_the_mcap_writer_scores_like_the_original(original, tmp_path):
     path = write_bare_mcap(tmp_path / 'bare')
     assert scores(_score(path, tmp_path)) == scores(original)
@@ -352,6 +355,7 @@ def _open_fds() -> dict[int, str]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     'storage, compression', [('sqlite3', None), ('sqlite3', 'file'), ('mcap', 'file')]
 )

@@ -110,6 +110,7 @@ def test_every_bundled_dynamic_bag_has_its_first_contact_as_change_of_phase():
         ), bag
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('bag_name', [bag.name for bag in _dynamic_bags()])
 def test_camera_like_copies_give_the_same_change_of_phase(bag_name, tmp_path):
     source = share_dir('bags') / bag_name
@@ -129,6 +130,7 @@ def test_camera_like_copies_give_the_same_change_of_phase(bag_name, tmp_path):
     assert plan.trial.change_of_phase_frame == cop['frame']
 
 
+@pytest.mark.slow
 def test_a_plain_recording_is_scored_up_to_the_detected_change_of_phase(tmp_path, capsys):
     camera = tmp_path / 'camera'
     make_camera_recording(bundled_bag('towel', 'dynamic'), camera, noise=0.002)
@@ -170,6 +172,7 @@ def test_a_plain_recording_is_scored_up_to_the_detected_change_of_phase(tmp_path
     assert summary2['engines']['mujoco']['frames_in_window'] == 80
 
 
+@pytest.mark.slow
 def test_no_contact_scores_every_frame_and_says_so(tmp_path, capsys):
     camera = tmp_path / 'camera'
     make_camera_recording(bundled_bag('towel', 'dynamic'), camera, frames=60, pre_roll=0)
@@ -201,6 +204,7 @@ def test_no_contact_scores_every_frame_and_says_so(tmp_path, capsys):
     assert m['frames_in_window'] == m['frames_scored'] == 60
 
 
+@pytest.mark.slow
 def test_quasi_static_is_scored_over_its_whole_length(tmp_path, capsys):
     out = tmp_path / 'run'
     assert cli.main(['run', '--primitive', 'quasi_static', '--output', str(out), *FAST]) == 0
@@ -211,6 +215,7 @@ def test_quasi_static_is_scored_over_its_whole_length(tmp_path, capsys):
     assert m['frames_in_window'] == m['frames_scored']
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('storage, compression', [('sqlite3', 'message'), ('mcap', 'file')])
 def test_the_same_recording_in_another_storage_scores_exactly_alike(
     storage, compression, tmp_path

@@ -31,6 +31,7 @@ def test_missing_bag(tmp_path):
     assert_one_line_error(cli('run', '--bag', str(tmp_path / 'nope')), 'nope')
 
 
+@pytest.mark.slow
 def test_random_bytes_bag(tmp_path):
     bag = tmp_path / 'random.mcap'
     bag.write_bytes(os.urandom(4096))
@@ -113,6 +114,7 @@ def test_import_command_refuses_a_bad_transform(tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_engines_lists_available_and_unavailable_engines_with_reasons():
     result = cli('engines')
     assert result.returncode == 0
@@ -136,6 +138,7 @@ def test_cloud_without_xyz_names_the_bag(tmp_path):
     assert_one_line_error(cli('run', '--bag', str(path)), 'no_z', 'no z field')
 
 
+@pytest.mark.slow
 def test_nan_points_empty_clouds_and_irregular_frames_are_counted_and_reported(tmp_path):
     from cloth_bench_ros.core.scene import ClothGrid
     from cloth_bench_ros.data import BagWriter, TrialInfo

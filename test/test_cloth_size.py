@@ -134,6 +134,7 @@ def test_the_benchmark_size_and_its_preset_mass_give_the_default_run_bit_for_bit
     assert strip[0] == strip[1] and len(strip[0]) > 0
 
 
+@pytest.mark.slow
 def test_a_recordings_gripper_targets_are_checked_against_the_cloths_width(tmp_path, capsys):
     """Targets recorded 0.478 m apart (the benchmark's pre-grasp): a 0.4 m cloth differs."""
     from camera_recording import CAMERA_TOPIC, make_repeated_recording, TARGETS_TOPIC

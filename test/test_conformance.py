@@ -82,6 +82,7 @@ def intra() -> dict:
     return _embedded('intra')
 
 
+@pytest.mark.slow
 def test_the_embedded_transports_agree_case_by_case(intra):
     dds = _embedded('dds')
     assert intra['_runtime'] == dds['_runtime'] == 'embedded'
@@ -89,6 +90,7 @@ def test_the_embedded_transports_agree_case_by_case(intra):
     assert _differences(intra, dds) == []
 
 
+@pytest.mark.slow
 @pytest.mark.real_ros
 def test_the_embedded_runtime_behaves_as_real_rclpy_case_by_case(intra):
     require_real_ros()

@@ -65,6 +65,7 @@ def short_bags(tmp_path_factory) -> dict[str, str]:
     return bags
 
 
+@pytest.mark.slow
 def test_newton_reference_bag_names_its_model(short_bags):
     reader = BagReader(short_bags['newton-vbd'])
     assert reader.trial.source.startswith(
@@ -74,6 +75,7 @@ def test_newton_reference_bag_names_its_model(short_bags):
     assert len(clouds) == 6 and all(len(p) > 200 for _, p in clouds)
 
 
+@pytest.mark.slow
 def test_cross_reference_table_scores_every_engine_on_every_reference(short_bags, tmp_path):
     entrants = [('mujoco', {}), ('newton', {'model': 'vbd'})]
     cells = [

@@ -88,6 +88,7 @@ def _stop(procs) -> None:
         p.wait(timeout=30)
 
 
+@pytest.mark.slow
 def test_sweep_and_identify_on_an_external_scheduler_survive_a_killed_worker(bag_dir, tmp_path):
     info = tmp_path / 'scheduler.json'
     scheduler = subprocess.Popen(
@@ -207,6 +208,7 @@ def test_sweep_and_identify_on_an_external_scheduler_survive_a_killed_worker(bag
         _stop(procs)
 
 
+@pytest.mark.slow
 def test_two_sweeps_on_one_directory_run_every_cell_once(bag_dir, tmp_path):
     out = tmp_path / 'shared'
     first = subprocess.Popen(
@@ -252,6 +254,7 @@ def _python_children(parent: psutil.Process) -> list:
     return out
 
 
+@pytest.mark.slow
 def test_killing_the_client_leaves_no_worker_process(bag_dir, tmp_path):
     client = subprocess.Popen(
         _sweep_argv(bag_dir, tmp_path / 'killed', 8, '--workers', '2'),
@@ -292,6 +295,7 @@ def test_a_worker_keeps_the_trees_of_the_clouds_it_has_scored():
     assert metrics.RealCloud.of(a) is not metrics.RealCloud.of(a)  # off outside workers
 
 
+@pytest.mark.own_dask_cluster
 def test_the_local_cluster_listens_on_loopback_only():
     from cloth_bench_ros.studies.dask_executor import open_client
 

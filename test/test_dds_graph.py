@@ -215,6 +215,7 @@ def graph_run(hanging_bag, tmp_path_factory):
     return summary, payloads, matched
 
 
+@pytest.mark.slow
 def test_four_kinds_of_process_give_the_in_process_metrics(graph_run, hanging_bag, tmp_path):
     summary, _, _ = graph_run
     reference = run_pipeline(_config(hanging_bag, tmp_path / 'in_process'))

@@ -54,7 +54,9 @@ CELLS = {
 }
 
 
-@pytest.mark.parametrize('name', list(CELLS))
+@pytest.mark.parametrize('name', [  # the quick tier compares the first cell; the others are slow
+    pytest.param(name, marks=() if k == 0 else pytest.mark.slow) for k, name in enumerate(CELLS)
+])
 def test_direct_cell_equals_the_node_graph(name, hanging_bag, tmp_path):
     if 'newton' in CELLS[name]['engines']:
         pytest.importorskip('newton')

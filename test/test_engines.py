@@ -52,8 +52,16 @@ DIVERGING: dict[str, dict] = {
     'newton': {'model': 'xpbd', 'spring_stiffness': 1e6, 'spring_damping': 0.0, 'timestep': 0.1},
 }
 
+# The models whose cases take long (PyBullet's FEM at 1 kHz internal steps, Newton's VBD): slow;
+# the quick tier runs each engine on its other model.
+SLOW_MODELS = {('bullet', 'neo_hookean'), ('newton', 'vbd')}
 VARIANTS = [
-    pytest.param(name, params, id=f'{name}-{params.get("model", "default")}')
+    pytest.param(
+        name,
+        params,
+        id=f'{name}-{params.get("model", "default")}',
+        marks=pytest.mark.slow if (name, params.get('model')) in SLOW_MODELS else (),
+    )
     for name in ENGINES
     for params in MODELS.get(name, [{}])
 ]
@@ -90,7 +98,9 @@ def run_engine(
     )
 
 
-@pytest.fixture(scope='module', params=[pytest.param(v.values, id=v.id) for v in VARIANTS])
+@pytest.fixture(
+    scope='module', params=[pytest.param(v.values, id=v.id, marks=v.marks) for v in VARIANTS]
+)
 def fling(request) -> Run:
     """Return the full dynamic primitive at 100 Hz, settle phase included."""
     name, params = request.param

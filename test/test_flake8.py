@@ -11,6 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 LINTED = ['cloth_bench_ros', 'test', 'benchmarks', 'launch', 'setup.py']
 
 
+@pytest.mark.slow
 @pytest.mark.flake8
 @pytest.mark.linter
 def test_flake8(monkeypatch):

@@ -301,6 +301,7 @@ def _escaped(tmp_path: Path) -> list[Path]:
     return [p for p in tmp_path.parent.rglob('*fuzz_escape*') if report not in p.parents]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('command,index', list(_cases()))
 def test_corrupted_input_ends_cleanly(command, index, base_bag, base_results, tmp_path, capsys):
     argv, what = _variant(command, index, base_bag, base_results, tmp_path)

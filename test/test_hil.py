@@ -55,6 +55,7 @@ def dds_loopback(monkeypatch) -> None:
     monkeypatch.delenv('ROS_STATIC_PEERS', raising=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('layout', ['sleeping', 'pinned_polling'])
 def test_short_realtime_run_in_three_processes_accounts_for_every_target(
     dds_loopback, hanging_bag, tmp_path, layout

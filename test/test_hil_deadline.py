@@ -119,6 +119,7 @@ def test_a_configuration_well_within_the_period_gets_neither_line(hanging_bag, t
     assert 'to meet 10 Hz' not in out
 
 
+@pytest.mark.slow
 def test_find_rate_bisects_to_the_highest_rate_held_for_each_mesh(hanging_bag, tmp_path, capsys):
     code = main(
         _hil(
@@ -164,6 +165,7 @@ def test_find_rate_bisects_to_the_highest_rate_held_for_each_mesh(hanging_bag, t
                      '--rate-max', '50')) == 2
 
 
+@pytest.mark.slow
 def test_the_remedy_names_the_recommended_configuration_when_it_meets_the_rule(
     hanging_bag, tmp_path, capsys
 ):
@@ -181,6 +183,7 @@ def test_the_remedy_names_the_recommended_configuration_when_it_meets_the_rule(
     assert '`--config recommended` (grid=9x12' in remedy and 'warm-up step p99' in remedy
 
 
+@pytest.mark.slow
 def test_a_whole_run_ends_when_its_last_target_falls_before_the_motions_end(
     hanging_bag, tmp_path, capsys
 ):

@@ -51,6 +51,7 @@ def test_flags_override_the_layout_and_none_is_none():
     assert auto == choose_layout(usable_cpus(), fifo_permitted())
 
 
+@pytest.mark.slow
 def test_the_default_hil_command_prints_its_layout_and_the_observer_misses_no_state(
     tmp_path, capsys
 ):

@@ -90,6 +90,7 @@ def test_the_objective_is_zero_at_the_truth_and_grows_away_from_it(target):
     assert at['value'] < 1e-7 < 1e-6 < off['value']  # float32 clouds: the noise floor is ~2e-8 m
 
 
+@pytest.mark.slow
 def test_identification_recovers_known_parameters_with_both_samplers_and_resumes(target, tmp_path):
     spec = _spec(target, tmp_path, 'both', 50, ['damping', 'young'], batch=2)
     outcome = identify(spec, workers=2, progress=False)
@@ -136,6 +137,7 @@ def test_identification_recovers_known_parameters_with_both_samplers_and_resumes
     )
 
 
+@pytest.mark.slow
 def test_validation_runs_again_when_more_trials_fitted_other_values(target, tmp_path):
     """A resumed identification validates the values it has now, never the last run's."""
     from cloth_bench_ros.studies.dask_executor import open_client
@@ -273,6 +275,7 @@ def test_the_automatic_budget_stops_at_the_first_doubling_worth_less_than_2_perc
     assert budget_reached(failed, 4) == (False, 1.0)  # nothing finished in the first half
 
 
+@pytest.mark.slow
 def test_an_automatic_budget_doubles_until_the_curve_flattens(target, tmp_path, monkeypatch):
     import cloth_bench_ros.studies.identify as identify_module
 
@@ -366,6 +369,7 @@ def test_the_changes_of_a_problem_are_named(target, tmp_path, monkeypatch):
     assert changed_keys({k: v for k, v in old.items() if k != 'device'}, old) == []
 
 
+@pytest.mark.slow
 def test_cli_identify_refuses_a_journal_of_another_problem_in_one_line(target, tmp_path, capsys):
     argv = ['identify', '--bag', str(target), '--output', str(tmp_path), '--no-progress',
             '--sampler', 'tpe', '--trials', '1', '--params', 'damping', '--grid', '5x6',

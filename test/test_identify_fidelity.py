@@ -47,6 +47,7 @@ def test_a_trial_reports_its_partial_value_and_stops_where_it_is_above_the_thres
     assert pruned['cpu_s'] > 0 and pruned['frames'] == 0
 
 
+@pytest.mark.slow
 def test_a_pruned_study_counts_pruned_trials_in_its_budget_and_tells_optuna(target, tmp_path):
     spec = IdentifySpec(
         'mujoco', 'towel', 'dynamic', target, tmp_path / 'out', 'tpe', STARTUP + 8, 'cd',
@@ -67,6 +68,7 @@ def test_a_pruned_study_counts_pruned_trials_in_its_budget_and_tells_optuna(targ
     assert (tmp_path / 'out' / 'report' / 'report.md').stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_pybullet_is_screened_on_one_halving_of_its_mesh_the_others_on_two():
     import optuna
 
@@ -108,6 +110,7 @@ def _rows(out):
     return [json.loads(line) for line in lines]
 
 
+@pytest.mark.slow
 def test_a_coarse_study_is_told_in_trial_order_and_gives_the_same_trials_again(target, tmp_path):
     def run(out):
         spec = IdentifySpec(

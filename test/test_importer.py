@@ -143,6 +143,7 @@ def test_transform_is_applied_and_recorded(tmp_path: Path) -> None:
     np.testing.assert_allclose(pts, ref @ t[:3, :3].T + t[:3, 3], atol=1e-6)
 
 
+@pytest.mark.slow
 def test_readers_agree_with_open3d(tmp_path: Path) -> None:
     o3d = pytest.importorskip('open3d')
     pts = np.random.default_rng(4).uniform(-2, 2, (300, 3))

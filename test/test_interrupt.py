@@ -52,6 +52,7 @@ def interrupt_after_first_row(
     return proc.returncode, err
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_a_sweep_keeps_finished_cells_and_resumes(tmp_path):
     out = tmp_path / 'sweep'
     args = [
@@ -119,6 +120,7 @@ def interrupted_identification(tmp_path_factory) -> tuple[Path, int, str]:
     return out, code, err
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_identify_is_one_line_and_exit_130(interrupted_identification):
     out, code, err = interrupted_identification
     assert code == 130, err
@@ -130,6 +132,7 @@ def test_ctrl_c_during_identify_is_one_line_and_exit_130(interrupted_identificat
     assert not any(word in err for word in NOISE), err
 
 
+@pytest.mark.slow
 def test_a_torn_journal_is_repaired_and_identify_resumes(interrupted_identification):
     out, _, _ = interrupted_identification
     journal = out / 'study.journal'

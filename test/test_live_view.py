@@ -144,6 +144,7 @@ def watched(tmp_path_factory):
     return out, seen, stdout, stderr
 
 
+@pytest.mark.slow
 def test_the_client_sees_every_channel_and_the_run_said_it_waited(watched):
     _, seen, _, stderr = watched
     topics = {c['topic']: c for c in seen['channels']}
@@ -208,6 +209,7 @@ def test_metric_numbers_equal_frames_csv_and_the_summary(watched):
     assert [v[0] for _, v in steps] == sorted(v[0] for _, v in steps)  # t in step order
 
 
+@pytest.mark.slow
 def test_metrics_are_identical_without_live(watched, tmp_path):
     out, _, _, _ = watched
     plain = tmp_path / 'plain'
@@ -223,6 +225,7 @@ def test_metrics_are_identical_without_live(watched, tmp_path):
     assert 'live view' not in done.stderr
 
 
+@pytest.mark.slow
 def test_a_port_in_use_is_one_line_and_exit_2(tmp_path):
     with socket.socket() as held:
         held.bind(('127.0.0.1', 0))
@@ -241,6 +244,7 @@ def test_a_port_in_use_is_one_line_and_exit_2(tmp_path):
     assert len(lines) == 1 and f'127.0.0.1:{port}' in lines[0] and 'Traceback' not in done.stderr
 
 
+@pytest.mark.slow
 def test_a_viewer_that_leaves_or_stops_reading_never_stalls_the_run(tmp_path):
     # One viewer subscribes to everything and never reads again; the run must end on its own.
     port = _free_port()
@@ -339,6 +343,7 @@ def test_the_streams_shortcut_encodings_are_rosbags_cdr_byte_for_byte():
         np.testing.assert_array_equal(array.data, values)
 
 
+@pytest.mark.slow
 def test_hil_live_is_stamped_in_wall_time_and_never_waits(tmp_path):
     port = _free_port()
     started = time.time_ns()

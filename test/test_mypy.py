@@ -8,6 +8,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow
 @pytest.mark.linter
 @pytest.mark.mypy
 def test_mypy(monkeypatch, tmp_path):

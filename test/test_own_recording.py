@@ -25,6 +25,7 @@ def camera_bag(tmp_path_factory) -> tuple[Path, int]:
     return path, make_camera_recording(bundled_bag('towel', 'dynamic'), path)
 
 
+@pytest.mark.slow
 def test_camera_recording_is_scored_with_automatic_alignment(camera_bag, tmp_path, capsys):
     path, true_start = camera_bag
     # the default mesh: a coarse one is a scaled, softer-edged cloth whose CD moves more with the

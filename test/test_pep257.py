@@ -9,6 +9,7 @@ ROOT = Path(__file__).resolve().parents[1]
 LINTED = ['cloth_bench_ros', 'test', 'benchmarks', 'launch']
 
 
+@pytest.mark.slow
 @pytest.mark.linter
 @pytest.mark.pep257
 def test_pep257(monkeypatch):

@@ -38,6 +38,7 @@ def _one_line_error(capsys) -> str:
     return err
 
 
+@pytest.mark.slow
 def test_the_identified_set_gives_the_xpbd_entry_when_xpbd_runs(hanging_bag, tmp_path, capsys):
     entry = presets.load_preset('newton', 'towel', 'dynamic', SHIPPED.parent, 'xpbd')
     shipped = presets.read_preset_file(SHIPPED)['presets']['towel']['dynamic']['xpbd']
@@ -125,6 +126,7 @@ def _vbd_identification(out: Path) -> Path:
     return write_outputs(spec, presets.load_preset('newton', 'towel', 'dynamic'), summary)
 
 
+@pytest.mark.slow
 def test_a_vbd_identification_merges_beside_the_xpbd_entry(hanging_bag, tmp_path, capsys):
     identified = _vbd_identification(tmp_path / 'ident')
     fitted = presets.read_preset_file(identified)['presets']['towel']['dynamic']

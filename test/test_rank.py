@@ -108,6 +108,7 @@ def test_a_diverged_held_out_run_ranks_its_engine_behind_one_that_did_not(tmp_pa
     assert plot_ranking(result, 'towel_dynamic', tmp_path / 'rank.png').stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_rank_splits_identifies_ranks_and_resumes(recordings, tmp_path, capsys, request):
     out = tmp_path / 'rank'
     assert cli.main(['rank', str(recordings), '--output', str(out), *TINY]) == 0

@@ -121,6 +121,7 @@ def test_sigint_and_sigterm_stop_a_real_rclpy_node_cleanly(sig):
     assert 'Traceback' not in err and 'ExternalShutdownException' not in err
 
 
+@pytest.mark.slow
 def test_two_in_process_runs_at_once_do_not_hear_each_other(tmp_path):
     script = (
         ' & '.join(
@@ -202,7 +203,8 @@ def _node_graph(tmp_path, real: set[str], nodes: dict[str, tuple[str, str]]) -> 
     `nodes`: name -> (executable, its command-line arguments). The nodes named in `real` run on
     real rclpy over Fast DDS, the others on the embedded runtime over Cyclone DDS (loopback); the
     evaluator ends the run, the others are then stopped with SIGINT (as the launch file's
-    OnProcessExit or a user would). Every process must exit 0.
+    OnProcessExit or a user would). Every process must exit 0 (one still running 30 s after SIGINT
+    is killed); a simulator that ends before the evaluator fails the case at once.
     """
     domain = random.randint(1, 101)
     embedded_env = ' '.join(
@@ -212,30 +214,43 @@ def _node_graph(tmp_path, real: set[str], nodes: dict[str, tuple[str, str]]) -> 
         name: f'{ROS_PYTHON}' if name in real else f'env {embedded_env} {_embedded_python()[0]}'
         for name in nodes
     }
+    files = {name: {kind: tmp_path / f'{name}.{kind}' for kind in ('log', 'pid', 'status')}
+             for name in nodes}
     launches = [
+        # $! is this node's `timeout`; the node is its only child
         f'(timeout 300 {pythons[name]} -m cloth_bench_ros.nodes.{executable} {args}'
-        f' > {tmp_path / name}.log 2>&1; echo $? > {tmp_path / name}.status)'
+        f' > {files[name]["log"]} 2>&1 & echo $! > {files[name]["pid"]}; wait $!;'
+        f' echo $? > {files[name]["status"]}) &'
         for name, (executable, args) in nodes.items()
     ]
-    either_python = f'({ROS_PYTHON}|{_embedded_python()[0]})'
+    # The simulators serve until stopped: one that ends before the evaluator was stopped from
+    # outside, and the evaluator would wait for its frames until `timeout`.
+    watched = ['evaluator', *(name for name, (e, _) in nodes.items() if e == 'simulator')]
+    ended = ' || '.join(f'[ -f {files[name]["status"]} ]' for name in watched)
+    running = ' || '.join(f'[ ! -f {files[name]["status"]} ]' for name in nodes)
+
+    def signal_all(sig: str) -> str:
+        # only this graph's nodes: a pattern (pkill -f) would stop another graph's on the machine
+        return ' '.join(f'pkill -{sig} -P $(cat {files[name]["pid"]});' for name in nodes)
+
     script = (
-        ' & '.join(launches)
-        + f' & while [ ! -f {tmp_path / "evaluator.status"} ]; do sleep 0.2; done; '
-        + ' '.join(
-            # the node, not this shell nor `timeout`
-            f"pkill -INT -f '^{either_python} -m cloth_bench_ros.nodes.{executable} ';"
-            for executable in sorted({e for e, _ in nodes.values()} - {'evaluator'})
-        )
-        + ' wait'
+        ' '.join(launches)
+        + f' until {ended}; do sleep 0.2; done;'
+        + ' { ' + ' '.join(f'[ -f {files[name]["status"]} ] && echo {name};' for name in watched)
+        + f' true; }} > {tmp_path / "ended_first"}; {signal_all("INT")}'
+        + f' i=0; while [ $i -lt 150 ] && {{ {running}; }}; do sleep 0.2; i=$((i + 1)); done;'
+        + f' {signal_all("KILL")} wait'
     )
     env = ros_env(ROS_DOMAIN_ID=str(domain))
     if len(real) < len(nodes):  # Fast DDS meets Cyclone's unicast discovery on loopback
         env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     subprocess.run(ros_script(script), env=env, timeout=600)
-    for name in nodes:
-        assert (tmp_path / f'{name}.status').read_text().strip() == '0', (
-            tmp_path / f'{name}.log'
-        ).read_text()
+    early = [n for n in (tmp_path / 'ended_first').read_text().split() if n != 'evaluator']
+    assert not early, f'{", ".join(early)} ended before the evaluator: ' + '\n'.join(
+        files[name]['log'].read_text() for name in early
+    )
+    for name in nodes:  # 137: still running 30 s after SIGINT, killed
+        assert files[name]['status'].read_text().strip() == '0', files[name]['log'].read_text()
 
 
 def _assert_same_metrics(summary: dict, reference: dict) -> None:
@@ -245,6 +260,7 @@ def _assert_same_metrics(summary: dict, reference: dict) -> None:
         assert summary['engines']['mujoco'][key] == reference['engines']['mujoco'][key], key
 
 
+@pytest.mark.slow
 def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(
     tmp_path, embedded_reference
 ):
@@ -259,6 +275,7 @@ def test_the_nodes_as_separate_real_rclpy_processes_give_the_embedded_metrics(
     _assert_same_metrics(_summary(tmp_path / 'ros'), embedded_reference)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('real', [{'evaluator'}, {'simulator'}, {'trajectory_publisher'}])
 def test_mixed_graphs_of_real_and_embedded_nodes_give_the_embedded_metrics(
     tmp_path, embedded_reference, real
@@ -268,6 +285,7 @@ def test_mixed_graphs_of_real_and_embedded_nodes_give_the_embedded_metrics(
     _assert_same_metrics(_summary(tmp_path / 'ros'), embedded_reference)
 
 
+@pytest.mark.slow
 def test_the_launch_files_command_lines_give_the_same_metrics_on_both_runtimes(
     monkeypatch, tmp_path
 ):
@@ -350,6 +368,7 @@ print(json.dumps({
 """
 
 
+@pytest.mark.slow
 def test_a_real_rclpy_node_reads_the_embedded_nodes_rosout_and_parameter_events(tmp_path):
     """An embedded node on Cyclone DDS, a real rclpy node on Fast DDS: logs, events, names."""
     domain = random.randint(1, 101)
@@ -436,6 +455,7 @@ print(json.dumps([[i.node_name, i.node_namespace, i.topic_type, int(i.qos_profil
 """
 
 
+@pytest.mark.slow
 def test_graph_introspection_both_ways_between_real_and_embedded_nodes(tmp_path):
     """Each side names the other's node, its topic's type and its QoS (Fast DDS <-> Cyclone)."""
     domain = random.randint(1, 101)

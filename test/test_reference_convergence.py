@@ -54,6 +54,7 @@ def test_the_surface_passes_through_the_vertices_and_between_them():
     assert change[0] == pytest.approx(0.01)
 
 
+@pytest.mark.slow
 def test_a_study_on_a_coarse_reference_compares_each_run_with_the_one_before(tmp_path: Path):
     study = rc.ConvergenceStudy(
         'mujoco', 'towel', 'dynamic', axes=('iterations', 'rate'), levels=1, duration=0.1,
@@ -98,6 +99,7 @@ def test_the_grid_axis_runs_at_the_rate_its_finest_edges_need():
     assert rc.grid_rate_level(vbd, 2) == 0  # no edge constraints: no faster rate needed
 
 
+@pytest.mark.slow
 def test_a_finer_grid_with_scaled_edges_is_the_same_cloth():
     """The hanging length of the shell: the same time constant stretches the finer cloth more."""
     base = reference_config('towel', 'dynamic', grid=(7, 9), rate_hz=300.0, duration=0.05)
@@ -122,6 +124,7 @@ def test_engine_scores_are_the_cd_of_its_vertices_to_the_runs_surface():
     assert scores['off'] == pytest.approx(0.005)
 
 
+@pytest.mark.slow
 def test_a_study_scores_engines_against_every_run(tmp_path: Path, capsys):
     study = rc.ConvergenceStudy(
         'mujoco', 'towel', 'dynamic', axes=('iterations',), levels=1, duration=0.1,

@@ -64,6 +64,7 @@ def _csv(path):
         return list(csv.reader(f))
 
 
+@pytest.mark.slow
 def test_the_small_sweep_runs_every_cell(small_sweep):
     _, out, outcome = small_sweep
     assert outcome.cells == outcome.ran == 16 and outcome.errors == 0

@@ -65,6 +65,7 @@ def test_a_diverging_case_reports_its_step_speed_and_reason():
     assert row['step_time_mean'] > 0
 
 
+@pytest.mark.slow
 def test_cli_stress_finds_a_diverging_case_per_engine_and_exits_0(tmp_path, capsys):
     code = main(
         [

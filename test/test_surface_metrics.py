@@ -393,6 +393,7 @@ def test_two_threads_give_the_same_bits_as_one_also_called_from_several_threads(
         set_threads(3)
 
 
+@pytest.mark.slow
 def test_the_environment_variable_chooses_the_threads():
     code = (
         'import threading; import numpy as np\n'
@@ -411,6 +412,7 @@ def test_the_environment_variable_chooses_the_threads():
         assert out == expected  # a worker thread only when asked for
 
 
+@pytest.mark.slow
 def test_engines_warm_leaves_a_run_nothing_to_compile(tmp_path):
     """`engines --warm` (the quickstart's install step) compiles each kernel of a run's metrics."""
     env = {**os.environ, 'NUMBA_CACHE_DIR': str(tmp_path / 'numba')}  # empty: a new install

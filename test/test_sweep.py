@@ -230,6 +230,8 @@ def _square_or_die(x: int) -> int:
     return x * x
 
 
+@pytest.mark.slow
+@pytest.mark.own_dask_cluster
 def test_a_task_that_kills_its_workers_is_retried_then_recorded_and_the_rest_finish():
     from cloth_bench_ros.studies.dask_executor import open_client, run_tasks
     import dask

@@ -225,6 +225,7 @@ def mean_cd(vertex_frames: list[np.ndarray], clouds: list[np.ndarray]) -> float:
     return float(np.mean([chamfer_l1(v, p) for v, p in zip(vertex_frames, clouds)]))
 
 
+@pytest.mark.slow
 def test_reference_scores_at_the_noise_floor_and_wrong_models_clearly_worse():
     cfg = quick('towel', 'dynamic', duration=1.2)
     frames = list(synth.synthetic_frames(cfg))

@@ -86,6 +86,7 @@ def three_flings(tmp_path_factory) -> tuple[Path, list[int]]:
     return path, starts
 
 
+@pytest.mark.slow
 def test_run_scores_the_chosen_repetition_and_accounts_for_the_others(
     three_flings, tmp_path, capsys
 ):
