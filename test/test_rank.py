@@ -307,7 +307,8 @@ def test_a_simulation_is_shared_only_whole_on_the_groups_trials_as_they_were(tmp
     assert rewritten.known(trial) is None and rewritten.known(other_fold) is not None
 
 
-def test_a_simulation_of_another_engine_version_is_not_reused(tmp_path, request):
+def _one_shared_simulation(tmp_path: Path) -> tuple[list[str], Trial]:
+    """Write two small bags and one finished shared simulation of MuJoCo on them."""
     bags = []
     for name in 'ab':
         (tmp_path / name).write_bytes(name.encode())
@@ -316,6 +317,11 @@ def test_a_simulation_of_another_engine_version_is_not_reused(tmp_path, request)
     pooled = {'per_bag': [0.01, 0.03], 'per_bag_hd': [0.1, 0.3], 'per_bag_frames': [10, 9],
               'diverged': None, 'cpu_s': 2.0}
     SharedSimulations(tmp_path / SHARED_FILE, bags).finish(trial, pooled)
+    return bags, trial
+
+
+def test_a_simulation_of_another_engine_version_is_not_reused(tmp_path, request):
+    bags, trial = _one_shared_simulation(tmp_path)
     assert SharedSimulations(tmp_path / SHARED_FILE, bags).known(trial) is not None
     request.getfixturevalue('mujoco_upgraded')
     assert SharedSimulations(tmp_path / SHARED_FILE, bags).known(trial) is None
@@ -324,14 +330,7 @@ def test_a_simulation_of_another_engine_version_is_not_reused(tmp_path, request)
 def test_a_simulation_or_cell_of_another_device_is_not_reused(tmp_path, request):
     from cloth_bench_ros.studies.rank import _cell, RankSpec
 
-    bags = []
-    for name in 'ab':
-        (tmp_path / name).write_bytes(name.encode())
-        bags.append(str(tmp_path / name))
-    trial = Trial('mujoco', 'towel', 'dynamic', bags[0], (('young', 1e4),), also=(bags[1],))
-    pooled = {'per_bag': [0.01, 0.03], 'per_bag_hd': [0.1, 0.3], 'per_bag_frames': [10, 9],
-              'diverged': None, 'cpu_s': 2.0}
-    SharedSimulations(tmp_path / SHARED_FILE, bags).finish(trial, pooled)
+    bags, trial = _one_shared_simulation(tmp_path)
     held = RankTrial('t', 'towel', 'dynamic', bags[0], bags[0], 0, 'metadata', 0.0, 132, 104)
     cell = _cell(RankSpec([bags[0]], tmp_path), 'mujoco', {'young': 1e4}, held, 1, 100.0, 'preset')
     assert SharedSimulations(tmp_path / SHARED_FILE, bags).known(trial) is not None
