@@ -258,7 +258,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         _checked_output(config.record_comparison, '--record-comparison')
     summary: dict | None
     if args.processes:
-        from cloth_bench_ros.studies.processes import ProcessRunError, run_processes
+        from cloth_bench_ros.studies.errors import ProcessRunError
+        from cloth_bench_ros.studies.processes import run_processes
 
         try:
             summary = run_processes(config)

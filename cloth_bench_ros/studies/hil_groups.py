@@ -201,7 +201,7 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
     """All three groups in one process, one executor, the embedded intra-process transport."""
     from cloth_bench_ros.nodes.common import close_nodes
     from cloth_bench_ros.runtime import rclpy, SingleThreadedExecutor
-    from cloth_bench_ros.studies.processes import RunTimeout
+    from cloth_bench_ros.studies.errors import RunTimeout
 
     context = rclpy.Context()
     rclpy.init(args=[], context=context, transport='intra')
@@ -305,7 +305,8 @@ def _config_from_json(text: str) -> HilConfig:
 def _run_processes(config: HilConfig, run_dir: Path) -> None:
     """Run the three groups as OS processes; the simulator is stopped once the others are done."""
     from cloth_bench_ros.runtime.dds import loopback_environment
-    from cloth_bench_ros.studies.processes import node_failed, RunTimeout
+    from cloth_bench_ros.studies.errors import RunTimeout
+    from cloth_bench_ros.studies.processes import node_failed
 
     # As `cloth-bench run --processes`: DDS on loopback only, on ROS_DOMAIN_ID or a random domain.
     domain = (

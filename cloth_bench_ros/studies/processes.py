@@ -20,19 +20,11 @@ import sys
 import tempfile
 import time
 
-from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.nodes.common import NAMESPACE
 from cloth_bench_ros.runtime.dds import loopback_environment
+from cloth_bench_ros.studies.errors import ProcessRunError, RunTimeout
 from cloth_bench_ros.studies.run_pipeline import node_parameters, RunConfig
 import yaml
-
-
-class ProcessRunError(ClothBenchError, RuntimeError):
-    """A node process failed or the run did not end in time; str() names the node and its line."""
-
-
-class RunTimeout(ProcessRunError):
-    """A run that did not end in time: the machine's load or a stuck graph, not a result."""
 
 
 def node_failed(what: str, status: int, log: Path) -> Exception:
