@@ -341,6 +341,26 @@ def test_a_simulation_or_cell_of_another_device_is_not_reused(tmp_path, request)
     assert again[0] != cell[0] and again[1] == cell[1]  # another key for the same simulation
 
 
+def test_a_cell_scored_on_every_metric_is_not_kept_across_a_surface_metrics_revision(
+    tmp_path, monkeypatch
+):
+    from cloth_bench_ros.studies import rank
+    from cloth_bench_ros.studies.rank import _cell, RankSpec
+
+    (tmp_path / 'a').write_bytes(b'a')
+    bag = str(tmp_path / 'a')
+    held = RankTrial('t', 'towel', 'dynamic', bag, bag, 0, 'metadata', 0.0, 132, 104)
+
+    def key(metric: str) -> str:
+        spec = RankSpec([bag], tmp_path, metric=metric)
+        return _cell(spec, 'mujoco', {'young': 1e4}, held, 1, 100.0, 'preset')[0]
+
+    paper, surface = key('cd'), key('emd')
+    monkeypatch.setattr(rank, 'SURFACE_REVISION', rank.SURFACE_REVISION + 1)
+    assert key('cd') == paper  # the paper's CD does not read the surface metrics
+    assert key('emd') != surface
+
+
 def test_report_of_a_damaged_rank_directory_is_one_line(tmp_path, capsys):
     (tmp_path / 'rank.json').write_text('{"spec": {}}')
     assert cli.main(['report', str(tmp_path)]) == 2

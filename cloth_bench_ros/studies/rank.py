@@ -24,6 +24,7 @@ from typing import Any, Callable, Sequence
 
 from cloth_bench_ros.core.cloth_size import cloth_record, grid_vertices
 from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
+from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
 from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.errors import ClothBenchError
@@ -176,7 +177,8 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
     key = (
         f'{engine}|{sorted(params.items())}|{trial.bag}|{fingerprint(Path(trial.bag))}|'
         f'{seed}|{rate:g}|{objective(spec)}|'
-        f'{label}|{spec.grid}|{frames}' + ('|all' if every else '')
+        f'{label}|{spec.grid}|{frames}'
+        + (f'|all{SURFACE_REVISION}' if every else '')  # surface metrics of that revision
         + ('' if spec.cloth_size is None and spec.cloth_mass is None  # another cloth: other cells
            else f'|{spec.cloth_size}|{spec.cloth_mass}')
         + '|' + hashlib.sha256(json.dumps(model, sort_keys=True).encode()).hexdigest()[:16]
