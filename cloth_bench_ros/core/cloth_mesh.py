@@ -31,7 +31,7 @@ DEGENERATE_AREA = 1e-6  # a triangle under this fraction of the mean triangle ar
 # The mesh's area and its spacing ratio are rounded to these, so that a mesh of the benchmark's
 # grid is that grid's cloth exactly (a sum of triangle areas differs in the last bits).
 AREA_DIGITS = 12  # decimals of m^2
-RATIO_DIGITS = 9
+RATIO_DIGITS = 6  # a float32 file (PLY, STL) of a 5 cm mesh is the 5 cm material
 
 
 @dataclass(frozen=True, eq=False)
