@@ -28,7 +28,7 @@ MODELS = [('mujoco', 'shell'), ('mujoco', 'edges'), ('bullet', 'mass_spring'),
 
 def t_shirt(cell: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
     """
-    A T-shirt outline hanging in the x-z plane from its sleeve ends at LEFT and RIGHT.
+    Return a T-shirt outline hanging in the x-z plane from its sleeve ends at LEFT and RIGHT.
 
     Sleeves: the full 0.5 m width, 0.15 m down; body: x in [0.1, 0.4] down to 0.6 m. Grid cells of
     `cell`, two triangles each, unused grid points dropped.
@@ -172,7 +172,8 @@ def test_each_bad_mesh_is_one_line_and_exit_2(tmp_path, capsys):
         assert f'cloth mesh {path}' in err or name == 'no such file', err
     good = write_mesh(tmp_path / 'shirt.obj', *t_shirt())
     for other in (['--grid', '6x8'], ['--cloth-size', '0.5,0.6']):
-        code = cli.main(['run', '--cloth-mesh', str(good), *other, '--output', str(tmp_path / 'o')])
+        code = cli.main(['run', '--cloth-mesh', str(good), *other,
+                         '--output', str(tmp_path / 'o')])
         err = capsys.readouterr().err
         assert code == 2 and f'--cloth-mesh and {other[0]}' in err, err
 
@@ -218,7 +219,8 @@ def test_the_rectangle_mesh_scores_as_the_grid_and_the_summary_records_the_mesh(
     for name, mesh in (('grid', None), ('mesh', str(rect))):
         run_direct(RunConfig(bag=hanging_bag, cloth_mesh=mesh, output_dir=tmp_path / name))
         with open(tmp_path / name / 'frames.csv') as f:
-            rows[name] = [{k: v for k, v in r.items() if not k.startswith(('step_time', 'latency'))}
+            timing = ('step_time', 'latency')
+            rows[name] = [{k: v for k, v in r.items() if not k.startswith(timing)}
                           for r in csv.DictReader(f)]
     assert rows['grid'] == rows['mesh'] and rows['grid']
     run = json.loads((tmp_path / 'mesh' / 'summary.json').read_text())['run']

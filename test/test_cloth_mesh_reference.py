@@ -44,7 +44,8 @@ def reference_states(vertices: np.ndarray, faces: np.ndarray, start_seed: int | 
 <mujoco>
   <option timestep="{h}" gravity="0 0 -9.81" integrator="Euler" solver="Newton" iterations="50"/>
   <worldbody>
-    <geom type="box" size="0.55 0.9 0.025" pos="0.25 0 0.17" friction="{p['friction']} 0.005 0.0001"/>
+    <geom type="box" size="0.55 0.9 0.025" pos="0.25 0 0.17"
+          friction="{p['friction']} 0.005 0.0001"/>
     <flexcomp name="shirt" type="direct" dim="2" radius="0.004" mass="{mass}"
               point="{' '.join(map(repr, vertices.ravel().tolist()))}"
               element="{' '.join(map(str, faces.ravel().tolist()))}">
@@ -101,8 +102,10 @@ def write_reference_bag(path: Path, states: np.ndarray, faces: np.ndarray, other
     """
     rng = np.random.default_rng(seed)
     store = get_typestore(Stores.ROS2_JAZZY)
-    pc2, field = store.types['sensor_msgs/msg/PointCloud2'], store.types['sensor_msgs/msg/PointField']
-    header, stamp_t = store.types['std_msgs/msg/Header'], store.types['builtin_interfaces/msg/Time']
+    pc2 = store.types['sensor_msgs/msg/PointCloud2']
+    field = store.types['sensor_msgs/msg/PointField']
+    header = store.types['std_msgs/msg/Header']
+    stamp_t = store.types['builtin_interfaces/msg/Time']
     floors = []
     frames = int((len(states) - 2) / RATE_HZ * FPS - SETTLE_S * FPS)
     t0 = 1_700_000_000 * 10**9
@@ -115,7 +118,8 @@ def write_reference_bag(path: Path, states: np.ndarray, faces: np.ndarray, other
             floors.append(np.mean(cKDTree(points).query(at_frame(other, k), p=1)[0]))
             ns = t0 + round(k * 1e9 / FPS)
             msg = pc2(
-                header=header(stamp=stamp_t(sec=ns // 10**9, nanosec=ns % 10**9), frame_id='world'),
+                header=header(stamp=stamp_t(sec=ns // 10**9, nanosec=ns % 10**9),
+                              frame_id='world'),
                 height=1, width=len(points),
                 fields=[field(name=n, offset=4 * j, datatype=7, count=1)
                         for j, n in enumerate('xyz')],
@@ -128,7 +132,7 @@ def write_reference_bag(path: Path, states: np.ndarray, faces: np.ndarray, other
 
 @pytest.fixture(scope='module')
 def garment(tmp_path_factory) -> tuple[Path, Path, np.ndarray]:
-    """The T-shirt's mesh file, its reference bag and the bag's noise floor."""
+    """Return the T-shirt's mesh file, its reference bag and the bag's noise floor per frame."""
     folder = tmp_path_factory.mktemp('garment')
     vertices, faces = t_shirt()
     mesh = write_mesh(folder / 'shirt.obj', vertices, faces)

@@ -218,8 +218,8 @@ def _grasped(vertices: np.ndarray, start: np.ndarray, side: str, name: str) -> i
     if distance[index] > GRASP_REACH:
         where = ', '.join(f'{v:.3f}' for v in start)
         raise InputError(
-            f'{name}: no vertex within {GRASP_REACH * 100:g} cm of the {side} gripper\'s start '
-            f'({where}) m: the nearest is {distance[index] * 1000:.1f} mm away'
+            f'{name}: no vertex within {GRASP_REACH * 100:g} cm of the {side} gripper'
+            f"'s start ({where}) m: the nearest is {distance[index] * 1000:.1f} mm away"
         )
     return index
 

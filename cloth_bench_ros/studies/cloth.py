@@ -1,4 +1,4 @@
-"""The cloth a command runs: `--cloth-size`, `--cloth-mass`, `--cloth-mesh` checked, and its lines."""
+"""The cloth a command runs: `--cloth-size`, `--cloth-mass`, `--cloth-mesh` checked; its lines."""
 
 from __future__ import annotations
 
