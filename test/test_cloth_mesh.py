@@ -227,3 +227,26 @@ def test_the_rectangle_mesh_scores_as_the_grid_and_the_summary_records_the_mesh(
     assert run['cloth_mesh'] == {'file': str(rect), 'sha256': read_cloth_mesh(
         rect, LEFT, RIGHT).sha256}
     assert 'cloth_mesh' not in json.loads((tmp_path / 'grid' / 'summary.json').read_text())['run']
+
+
+def test_the_launch_argument_gives_the_mesh_to_the_simulators_recorder_and_evaluator(
+        monkeypatch, tmp_path):
+    """`ros2 launch ... cloth_mesh:=FILE`: each node's parameter, the simulator's engine on it."""
+    from test_launch_config import _launched_nodes, _start
+
+    mesh = write_mesh(tmp_path / 'shirt.ply', *t_shirt())
+    args = {'engines': 'mujoco', 'output_dir': str(tmp_path / 'out'), 'cloth_mesh': str(mesh)}
+    started = {}
+    try:
+        for node in _launched_nodes(monkeypatch, args):
+            instance, context = _start(node, tmp_path)
+            started[instance.get_name()] = (instance, context)
+        for name in ('recorder', 'evaluator', 'simulator_mujoco'):
+            assert started[name][0].get_parameter('cloth_mesh').value == str(mesh), name
+        engine = started['simulator_mujoco'][0].engine
+        assert isinstance(engine.grid, ClothMesh) and len(engine.grid.rest) == len(t_shirt()[0])
+        assert started['evaluator'][0].run_info['cloth_mesh']['file'] == str(mesh)
+    finally:
+        for instance, context in started.values():
+            getattr(instance, 'close', lambda: None)()
+            context.shutdown()

@@ -55,7 +55,7 @@ class ClothMesh:
 
     @property
     def area(self) -> float:
-        """The mesh's area in m^2 (rounded to AREA_DIGITS decimals)."""
+        """Return the mesh's area in m^2 (rounded to AREA_DIGITS decimals)."""
         return round(float(triangle_areas(self.rest, self.triangles).sum()), AREA_DIGITS)
 
     @property
@@ -66,7 +66,7 @@ class ClothMesh:
     @property
     def spacing(self) -> tuple[float, float]:
         """
-        The (dx, dz) of the benchmark grid scaled by this mesh's `spacing_ratio`.
+        Return the (dx, dz) of the benchmark grid scaled by this mesh's `spacing_ratio`.
 
         The mesh is then given the material of a grid of that spacing (engines/base.py
         `params_for_grid`, one rule for `--grid` and `--cloth-mesh`).
