@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import hashlib
 import math
 from pathlib import Path
+from typing import Any
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.scene import ClothGrid
@@ -152,8 +153,9 @@ def _load(data: bytes, suffix: str, name: str) -> tuple[np.ndarray, np.ndarray]:
     import trimesh
 
     try:
-        loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], force='mesh', process=False)
-        vertices = np.asarray(loaded.vertices, dtype=float)
+        loaded: Any = trimesh.load(
+            io.BytesIO(data), file_type=suffix[1:], force='mesh', process=False)
+        vertices = np.asarray(loaded.vertices, dtype=np.float64)
         faces = np.asarray(loaded.faces, dtype=np.int64)
     except Exception as exc:  # the reader's failure on a file is that file's fault
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__

@@ -86,11 +86,11 @@ def cloth_lines(
         )]
     if mass is None and is_benchmark(size):
         return []
-    mesh = cloth_grid(grid, size) or ClothGrid()
+    made = cloth_grid(grid, size) or ClothGrid()
     how = 'as --grid' if grid else "at the benchmark mesh's 5 cm spacing"
     lines = [
         f'cloth: {size_text(size)}{" (the benchmark)" if size is None else ""}, '
-        f'mesh {mesh.nx} x {mesh.nz} ({how}); mass '
+        f'mesh {made.nx} x {made.nz} ({how}); mass '
         + ', '.join(
             f'{engine} {mass_text(total, size, mass, preset)}'
             for engine, (total, preset) in masses.items()
