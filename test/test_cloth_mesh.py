@@ -225,7 +225,8 @@ def test_the_rectangle_mesh_scores_as_the_grid_and_the_summary_records_the_mesh(
     assert rows['grid'] == rows['mesh'] and rows['grid']
     run = json.loads((tmp_path / 'mesh' / 'summary.json').read_text())['run']
     assert run['cloth_mesh'] == {'file': str(rect), 'sha256': read_cloth_mesh(
-        rect, LEFT, RIGHT).sha256}
+        rect, LEFT, RIGHT).sha256, 'vertices': 165, 'triangles': 280, 'area_m2': 0.35}
+    assert run['cloth_size'] is None  # a mesh has no W x L
     assert 'cloth_mesh' not in json.loads((tmp_path / 'grid' / 'summary.json').read_text())['run']
 
 

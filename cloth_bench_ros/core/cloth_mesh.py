@@ -110,9 +110,10 @@ class ClothMesh:
             return grid
         return None
 
-    def record(self) -> dict[str, str]:
-        """Return what a summary records of the mesh: its file and content hash."""
-        return {'file': self.source, 'sha256': self.sha256}
+    def record(self) -> dict[str, Any]:
+        """Return what a summary records of the mesh: its file, content hash, size and area."""
+        return {'file': self.source, 'sha256': self.sha256, 'vertices': len(self.rest),
+                'triangles': len(self.triangles), 'area_m2': self.area}
 
 
 Cloth = ClothGrid | ClothMesh
@@ -254,9 +255,11 @@ def mesh_area(cloth: Cloth | None) -> float | None:
     return cloth.area if isinstance(cloth, ClothMesh) else None
 
 
-def mesh_record(cloth: Cloth | None) -> dict[str, dict[str, str]]:
-    """Return what a summary records of a `--cloth-mesh` ({} for a grid)."""
-    return {'cloth_mesh': cloth.record()} if isinstance(cloth, ClothMesh) else {}
+def mesh_record(cloth: Cloth | None) -> dict[str, Any]:
+    """Return what a summary records of a `--cloth-mesh` ({} for a grid): no W x L size."""
+    if not isinstance(cloth, ClothMesh):
+        return {}
+    return {'cloth_mesh': cloth.record(), 'cloth_size': None}
 
 
 def cloth_faces(cloth: Cloth) -> np.ndarray:
