@@ -25,12 +25,12 @@ INSTALL_REQUIRES = [
     'dask[distributed]>=2024.1',
     'matplotlib>=3.6',
     'foxglove-sdk>=0.30',
+    'trimesh>=4.0',
 ]
 EXTRAS_REQUIRE = {
     'newton': ['warp-lang>=1.17', 'newton>=1.8'],  # the third engine (Warp on the CPU)
     'test': [
         'pytest>=7.0',
-        'trimesh>=4.0',
         'mcap-ros2-support>=0.5',
         'colcon-common-extensions>=0.3',
         'websockets>=12',

@@ -313,4 +313,10 @@ OPTIONS.update(_declare(
         flag='--cloth-mass', low=validation.CLOTH_MASS_RANGE[0],
         high=validation.CLOTH_MASS_RANGE[1], unit='kg', unset=0.0, metavar='KG',
     ),
+    Option(
+        'cloth_mesh', str, '',
+        'the cloth as a triangle mesh file (OBJ, PLY or STL) in its start placement, grasped at '
+        "the vertices nearest the grippers' start (docs/own-recording.md; default: the grid)",
+        flag='--cloth-mesh', metavar='FILE',
+    ),
 ))

@@ -3,7 +3,7 @@ Launch the benchmark's node graph.
 
 ros2 launch cloth_bench_ros benchmark.launch.py [engines:=mujoco,bullet] [rate_hz:=100.0]
 [bag:=PATH] [live:=true] [live_port:=8765] [live_wait:=30.0] [cloth_size:=W,L]
-[cloth_mass:=KG] [device:=cpu|cuda|cuda:N|auto] ...
+[cloth_mass:=KG] [cloth_mesh:=FILE] [device:=cpu|cuda|cuda:N|auto] ...
 
 The node graph (README, "The node graph"), one process per node, output on the screen; the launch
 ends when the evaluator has written its report. Launch arguments win over config/benchmark.yaml:
@@ -66,9 +66,10 @@ def _nodes(context):
 
     devices = {e: engine_device(e, {'device': device} if e == 'newton' and device else {})
                for e in engines}  # `auto` resolved as the simulator resolves it, on this machine
-    cloth_size = {  # a cloth of another size and its mass (docs/identification.md)
+    cloth_size = {  # a cloth of another size or mesh, its mass (docs/own-recording.md)
         'cloth_size': arg('cloth_size'),
         'cloth_mass': float(arg('cloth_mass')),
+        'cloth_mesh': arg('cloth_mesh'),
     }
     nodes = [
         _node(
@@ -130,6 +131,7 @@ def generate_launch_description():
         'live_wait': '30.0',
         'cloth_size': '',
         'cloth_mass': '0.0',
+        'cloth_mesh': '',
         'device': '',
     }
     return LaunchDescription(

@@ -39,6 +39,7 @@ ROSDEP_KEYS = {
     'python3-mujoco-pip',
     'python3-pybullet-pip',
     'python3-rosbags-pip',
+    'python3-trimesh',
     'python3-open3d-pip',
     'python3-pytest',
     'mcap-ros2-support',
@@ -74,6 +75,7 @@ IMPORT_TO_KEY = {
     'mujoco': 'python3-mujoco-pip',
     'pybullet': 'python3-pybullet-pip',
     'rosbags': 'python3-rosbags-pip',
+    'trimesh': 'python3-trimesh',
     'open3d': 'python3-open3d-pip',
 }
 

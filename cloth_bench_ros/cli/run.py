@@ -61,6 +61,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     common.add_option(run, 'cloth_size')
     common.add_option(run, 'cloth_mass')
+    common.add_option(run, 'cloth_mesh')
     run.set_defaults(func=cmd_run)
 
     traj = sub.add_parser('trajectory', help='print the quintic part of a primitive as CSV')
@@ -196,7 +197,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere, load_preset
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.run_report import result_table
-    from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses
+    from cloth_bench_ros.studies.cloth import (
+        cloth_choice, cloth_lines, engine_masses, mesh_choice,
+    )
     from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 
     engines = validation.unique(args.engine or ['mujoco'], '--engine')
@@ -218,7 +221,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic)
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, overrides)
-    masses = engine_masses(params, size, mass)  # an engine without a mass fails here, one line
+    mesh = mesh_choice(args.cloth_mesh, args.grid, size, args.primitive, args.rate)
+    # an engine without a mass fails here, one line
+    masses = engine_masses(params, size, mass, mesh.area if mesh else None)
     replay = _replay_params(args)
     out = (
         Path(args.output)
@@ -243,6 +248,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         grid=args.grid,
         cloth_size=size,
         cloth_mass=mass,
+        cloth_mesh=args.cloth_mesh or None,
         presets_dir=presets,
         replay=replay,
         change_of_phase_frame=args.change_of_phase_frame,
@@ -285,7 +291,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             name, device, [fitted_device(name, args.cloth, args.primitive, presets, model)])
         if note:
             print(note)
-    for line in cloth_lines(masses, size, mass, args.grid):
+    for line in cloth_lines(masses, size, mass, args.grid, mesh):
         print(line)
     print(result_table(summary, realtime=args.pacing == 'realtime'))
     _print_real(summary)

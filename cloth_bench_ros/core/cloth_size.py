@@ -13,7 +13,8 @@ A cloth of another size than the benchmark's 0.5 x 0.7 m: its mesh, its grasp an
   shorter cloth reaches the table later, or never (the change of phase is found in the recording),
   and the length is bounded so that the cloth hangs clear of the table at the start.
 - Mass: the engines' `mass` is the whole cloth's; a given total mass replaces it, else the
-  preset's mass per area times the cloth's area.
+  preset's mass per area times the cloth's area (W L, or a `--cloth-mesh`'s area,
+  core/cloth_mesh.py): one rule for both.
 The benchmark's size gives exactly what no size gives.
 """
 
@@ -64,24 +65,41 @@ def grasp_width(size: Size | None) -> float | None:
     return None if is_benchmark(size) else float(size[0])  # type: ignore[index]
 
 
-def cloth_mass(preset_mass: float, size: Size | None, mass: float | None) -> float:
-    """Return the cloth's total mass: `mass` if given, else the preset's per area times area."""
+def is_benchmark_cloth(size: Size | None, area: float | None = None) -> bool:
+    """Return whether a cloth of `size`, or a mesh of `area` m^2, has the benchmark's area."""
+    return is_benchmark(size) if area is None else float(area) == BENCHMARK_AREA
+
+
+def cloth_mass(
+    preset_mass: float, size: Size | None, mass: float | None, area: float | None = None
+) -> float:
+    """
+    Return the cloth's total mass: `mass` if given, else the preset's per area times area.
+
+    The area is a mesh's `area` (`--cloth-mesh`) if given, else the size's W L.
+    """
     if mass is not None:
         return float(mass)
-    if is_benchmark(size):
+    if is_benchmark_cloth(size, area):
         return float(preset_mass)
+    if area is not None:
+        return float(preset_mass) / BENCHMARK_AREA * float(area)
     assert size is not None
     return float(preset_mass) / BENCHMARK_AREA * (float(size[0]) * float(size[1]))
 
 
 def with_cloth_mass(
-    params: Mapping[str, Any], default_mass: float, size: Size | None, mass: float | None
+    params: Mapping[str, Any],
+    default_mass: float,
+    size: Size | None,
+    mass: float | None,
+    area: float | None = None,
 ) -> dict[str, Any]:
     """Return engine `params` with the cloth's total `mass` (unchanged for the benchmark cloth)."""
     out = dict(params)
-    if mass is None and is_benchmark(size):
+    if mass is None and is_benchmark_cloth(size, area):
         return out
-    out['mass'] = cloth_mass(float(out.get('mass', default_mass)), size, mass)
+    out['mass'] = cloth_mass(float(out.get('mass', default_mass)), size, mass, area)
     return out
 
 
@@ -97,16 +115,20 @@ def size_text(size: Size | None) -> str:
     return f'{width:.2f} x {length:.2f} m'
 
 
-def mass_text(total: float, size: Size | None, mass: float | None, preset_mass: float) -> str:
+def mass_text(
+    total: float,
+    size: Size | None,
+    mass: float | None,
+    preset_mass: float,
+    area: float | None = None,
+) -> str:
     """Return where a cloth's total mass comes from, e.g. '0.2 kg (--cloth-mass)'."""
     if mass is not None:
         return f'{total:.4g} kg (--cloth-mass)'
-    if is_benchmark(size):
+    if is_benchmark_cloth(size, area):
         return f'{total:.4g} kg (the preset)'
-    return (
-        f"{total:.4g} kg (the preset's {preset_mass / BENCHMARK_AREA:.4g} kg/m^2 times "
-        f'{size_text(size)})'
-    )
+    what = f"the mesh's {area:.4g} m^2" if area is not None else size_text(size)
+    return f"{total:.4g} kg (the preset's {preset_mass / BENCHMARK_AREA:.4g} kg/m^2 times {what})"
 
 
 GRASP_TOLERANCE = 0.025  # m: a recording's targets at the start pose or the pre-grasp agree

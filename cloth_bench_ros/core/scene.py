@@ -83,3 +83,7 @@ class ClothGrid:
     @property
     def spacing(self) -> tuple[float, float]:
         return self.width / (self.nx - 1), self.length / (self.nz - 1)
+
+    def grasp_weights(self) -> np.ndarray:
+        """Per vertex, 0 at the left corner's column to 1 at the right's (its column's share)."""
+        return np.tile(np.linspace(0.0, 1.0, self.nx), self.nz)

@@ -13,6 +13,7 @@ from functools import lru_cache
 from importlib.metadata import entry_points
 from typing import Any, Mapping
 
+from cloth_bench_ros.core.cloth_mesh import Cloth
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.engines.base import ClothEngine, EngineError, params_for_grid
 
@@ -95,7 +96,7 @@ def make_engine(
     name: str,
     rate_hz: float,
     params: dict | None = None,
-    grid: ClothGrid | None = None,
+    grid: Cloth | None = None,
     params_grid: ClothGrid | None = None,
 ) -> ClothEngine:
     """

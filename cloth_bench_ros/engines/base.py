@@ -8,6 +8,7 @@ import math
 from typing import Any, Callable, ClassVar, Mapping
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.cloth_mesh import Cloth
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.task import grasped_corners, initial_displacement
 from cloth_bench_ros.errors import ClothBenchError
@@ -52,8 +53,12 @@ def _int_bound(bound: float | None) -> int | None:
     return None if bound is None else int(bound)
 
 
-def spacing_ratio(grid: ClothGrid, params_grid: ClothGrid) -> float:
-    """Return the mesh spacing of `grid` over that of `params_grid` (geometric mean of x and z)."""
+def spacing_ratio(grid: Cloth, params_grid: ClothGrid) -> float:
+    """
+    Return the mesh spacing of `grid` over that of `params_grid` (geometric mean of x and z).
+
+    A `--cloth-mesh`'s spacing is a grid's (core/cloth_mesh.py `ClothMesh.spacing`).
+    """
     (dx, dz), (px, pz) = grid.spacing, params_grid.spacing
     return math.sqrt((dx / px) * (dz / pz))
 
@@ -62,7 +67,7 @@ def params_for_grid(
     cls: type[ClothEngine],
     params: Mapping[str, Any],
     rate_hz: float,
-    grid: ClothGrid | None,
+    grid: Cloth | None,
     params_grid: ClothGrid | None = None,
 ) -> dict[str, Any]:
     """
@@ -145,13 +150,13 @@ class ClothEngine(abc.ABC):
         self,
         rate_hz: float,
         params: Mapping[str, Any] | None = None,
-        grid: ClothGrid | None = None,
+        grid: Cloth | None = None,
     ) -> None:
         try:
             self.rate_hz = validation.rate_hz(rate_hz)
         except validation.InputError as exc:
             raise EngineError(str(exc)) from None
-        self.grid = grid or ClothGrid()
+        self.grid: Cloth = grid or ClothGrid()
         self.config = self.validate_params(params or {})
         self.divergence: Divergence | None = None
         self.steps = 0

@@ -6,8 +6,9 @@ Two cloth models, chosen by the `model` parameter:
 - "mass_spring" (the reference implementation's model): the grid's triangles loaded as a soft
   body with structural springs (`elastic`, `damping`) and bending springs (`bending`).
 - "neo_hookean" (FEM): Bullet's Neo-Hookean force acts on tetrahedra only, so the cloth is a
-  slab of `fem_thickness` made of two layers of the grid, each cell split into six tetrahedra;
-  a cloth vertex is the midpoint of its two layer nodes.
+  slab of `fem_thickness` made of two layers of the grid, each cell split into six tetrahedra
+  (a `--cloth-mesh`: two layers along the vertex normals, three tetrahedra per triangle); a cloth
+  vertex is the midpoint of its two layer nodes.
 
 Each engine owns a DIRECT physics client (no GUI, no rendering), so that several engines can
 live in one process. A grasped corner is anchored to a massless (kinematic) body that is moved
@@ -29,7 +30,7 @@ with quiet_c_output():  # pybullet prints its build time on import
     import pybullet as pb
 
 from cloth_bench_ros.core import scene  # noqa: I100  (after pybullet's quiet import)
-from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.cloth_mesh import Cloth, ClothMesh
 from cloth_bench_ros.engines.base import ClothEngine, Param
 
 MODELS = ('mass_spring', 'neo_hookean')
@@ -43,15 +44,24 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
     path.write_text('\n'.join(lines) + '\n')
 
 
-def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.ndarray]:
+def slab_tetrahedra(grid: Cloth, thickness: float) -> tuple[np.ndarray, np.ndarray]:
     """
     Return the cloth as a slab: nodes (2n, 3) and positively oriented tetrahedra.
 
     Layer 0 is at y = -t/2, then layer 1 at +t/2; 6 tetrahedra per grid cell (Kuhn split,
-    conforming across cells).
+    conforming across cells). A mesh's layers are half the thickness either side along each
+    vertex's normal, 3 tetrahedra per triangle (`prism_tetrahedra`).
     """
+    if isinstance(grid, ClothMesh) and grid.grid is not None:  # a grid's own slab
+        return slab_tetrahedra(grid.grid, thickness)
     rest = grid.vertices()
     n = len(rest)
+    if isinstance(grid, ClothMesh):
+        import trimesh
+
+        normals = trimesh.Trimesh(rest, grid.faces(), process=False).vertex_normals
+        nodes = np.concatenate([rest - normals * thickness / 2, rest + normals * thickness / 2])
+        return nodes, prism_tetrahedra(nodes, grid.faces())
     half = np.array([0.0, thickness / 2, 0.0])
     nodes = np.concatenate([rest - half, rest + half])
     tets = []
@@ -75,6 +85,26 @@ def slab_tetrahedra(grid: ClothGrid, thickness: float) -> tuple[np.ndarray, np.n
                     tet[1], tet[2] = tet[2], tet[1]
                 tets.append(tet)
     return nodes, np.asarray(tets, dtype=np.int64)
+
+
+def prism_tetrahedra(nodes: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """
+    Return 3 positively oriented tetrahedra per triangle's prism between the two layers.
+
+    With a triangle's vertices sorted (a < b < c), each side of the prism is cut along the
+    diagonal from its lower-numbered bottom vertex to the other's top, so neighbours conform.
+    """
+    n = len(nodes) // 2
+    a, b, c = np.sort(faces, axis=1).T
+    tets = np.concatenate([
+        np.stack([a, b, c, c + n], axis=1),
+        np.stack([a, b, b + n, c + n], axis=1),
+        np.stack([a, a + n, b + n, c + n], axis=1),
+    ])
+    p0, p1, p2, p3 = (nodes[tets[:, k]] for k in range(4))
+    flip = np.einsum('ij,ij->i', np.cross(p1 - p0, p2 - p0), p3 - p0) < 0
+    tets[flip, 1], tets[flip, 2] = tets[flip, 2], tets[flip, 1].copy()
+    return tets
 
 
 def write_vtk(path: Path, nodes: np.ndarray, tets: np.ndarray) -> None:
@@ -179,7 +209,7 @@ class BulletCloth(ClothEngine):
         self,
         rate_hz: float,
         params: Mapping[str, Any] | None = None,
-        grid: ClothGrid | None = None,
+        grid: Cloth | None = None,
     ) -> None:
         super().__init__(rate_hz, params, grid)
         c = self.config

@@ -15,7 +15,8 @@ Two cloth models, chosen by the `model` parameter:
   applies (with an internal step short enough for it) whenever a mesh is not the one the
   parameters were set for.
 - "edges" (mass-spring): a net of springs on the grid, structural, shear (both diagonals) and
-  bending (every second vertex), all of stiffness `edge_stiffness` and damping `damping`.
+  bending (every second vertex), all of stiffness `edge_stiffness` and damping `damping`; on a
+  `--cloth-mesh`, every triangle edge and a spring across every pair of adjacent triangles.
   MuJoCo >= 4.0 gives passive edge stiffness only to 1D flexes, so the net is a 1D flex whose
   elements are these springs (they collide as capsules of `radius`).
 
@@ -32,7 +33,7 @@ import math
 from typing import Any, ClassVar, Mapping
 
 from cloth_bench_ros.core import scene
-from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.cloth_mesh import Cloth, ClothMesh
 from cloth_bench_ros.engines.base import ClothEngine, EngineError, Instability, Param
 import mujoco
 import numpy as np
@@ -69,8 +70,10 @@ def mesh_consistent_timeconst(timeconst: float, spacing_ratio: float) -> float:
     return timeconst * spacing_ratio
 
 
-def spring_edges(grid: ClothGrid) -> np.ndarray:
+def spring_edges(grid: Cloth) -> np.ndarray:
     """Vertex pairs of a mass-spring cloth: structural, shear and bending springs, shape (m, 2)."""
+    if isinstance(grid, ClothMesh):  # a grid's own net where the mesh is one
+        return mesh_spring_edges(grid.faces()) if grid.grid is None else spring_edges(grid.grid)
     nx, nz = grid.nx, grid.nz
     index = np.arange(nx * nz).reshape(nz, nx)
     pairs = [
@@ -82,6 +85,35 @@ def spring_edges(grid: ClothGrid) -> np.ndarray:
         (index[:-2, :], index[2:, :]),  # bending, along z
     ]
     return np.concatenate([np.stack([a.ravel(), b.ravel()], axis=1) for a, b in pairs])
+
+
+def mesh_spring_edges(faces: np.ndarray) -> np.ndarray:
+    """
+    Springs of a triangle mesh: every triangle edge, then across every pair of triangles.
+
+    The second set joins the two vertices opposite a shared edge (shear on a quad's diagonal,
+    bending across a fold), as Newton's XPBD cloth does; each pair once, in first-seen order.
+    """
+    corners = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    opposite = faces[:, [2, 0, 1]].reshape(-1)
+    key = np.sort(corners, axis=1)
+    edges, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    structural = edges[np.argsort(first)]
+    inverse = inverse.ravel()
+    across = []
+    order = np.argsort(inverse, kind='stable')
+    grouped = inverse[order]
+    starts = np.flatnonzero(np.r_[True, grouped[1:] != grouped[:-1]])
+    for lo, hi in zip(starts, np.r_[starts[1:], len(order)]):
+        if hi - lo == 2:  # an interior edge (check_mesh allows at most two triangles per edge)
+            a, b = opposite[order[lo]], opposite[order[lo + 1]]
+            across.append((min(a, b), max(a, b)))
+    if not across:
+        return structural
+    bends = np.unique(np.asarray(across, dtype=np.int64), axis=0)
+    known = {tuple(e) for e in structural.tolist()}
+    bends = np.array([e for e in bends.tolist() if tuple(e) not in known], dtype=np.int64)
+    return np.concatenate([structural, bends.reshape(-1, 2)])
 
 
 class MujocoCloth(ClothEngine):
@@ -226,7 +258,7 @@ class MujocoCloth(ClothEngine):
         self,
         rate_hz: float,
         params: Mapping[str, Any] | None = None,
-        grid: ClothGrid | None = None,
+        grid: Cloth | None = None,
     ) -> None:
         super().__init__(rate_hz, params, grid)
         try:

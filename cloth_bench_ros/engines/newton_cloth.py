@@ -44,6 +44,7 @@ with quiet_c_output():  # Warp's C++ init warns on stderr that there is no CUDA 
     wp.init()
 from cloth_bench_ros import validation  # noqa: E402, I100  (after Warp's quiet init)
 from cloth_bench_ros.core import scene  # noqa: E402
+from cloth_bench_ros.core.cloth_mesh import Cloth, ClothMesh  # noqa: E402
 from cloth_bench_ros.core.scene import ClothGrid  # noqa: E402
 from cloth_bench_ros.engines.base import ClothEngine, EngineError, Param  # noqa: E402
 import newton  # noqa: E402
@@ -297,7 +298,7 @@ class NewtonCloth(ClothEngine):
         self,
         rate_hz: float,
         params: Mapping[str, Any] | None = None,
-        grid: ClothGrid | None = None,
+        grid: Cloth | None = None,
     ) -> None:
         super().__init__(rate_hz, params, grid)
         c = self.config
@@ -343,7 +344,8 @@ class NewtonCloth(ClothEngine):
             cfg=table,
             label='table',
         )
-        area = self.grid.width * self.grid.length
+        grid = self.grid
+        area = grid.area if isinstance(grid, ClothMesh) else grid.width * grid.length
         xpbd = not self._vbd
         builder.add_cloth_mesh(
             pos=wp.vec3(0.0, 0.0, 0.0),
@@ -393,6 +395,7 @@ class NewtonCloth(ClothEngine):
         k 2a/3 across the straight edges and (k/2) a sqrt(2)/3 across the diagonals; VBD's energy
         1/2 ke |e| theta^2 per edge then sums to 1/2 (0.523 ke a) k^2 per area, so ke = 1.91 D / a.
         XPBD's bending constraint has no |e| factor (energy 1/2 ke theta^2), hence ke = 1.91 D.
+        A `--cloth-mesh` takes the a of its `spacing` (core/cloth_mesh.py).
         """
         dx, dz = self.grid.spacing
         a = float(np.sqrt(dx * dz))

@@ -383,22 +383,26 @@ def _merge_base(existing: Path, first: dict) -> dict:
 
 
 def sized_params(
-    engine: str, params: dict, size: tuple[float, float] | None, mass: float | None
+    engine: str,
+    params: dict,
+    size: tuple[float, float] | None,
+    mass: float | None,
+    area: float | None = None,
 ) -> dict:
     """
     Return an engine's `params` with the total mass of a cloth of `size` (core/cloth_size.py).
 
-    A given `mass`, else the preset's mass per area times the cloth's area; the benchmark's
-    cloth without a mass: `params` unchanged.
+    A given `mass`, else the preset's mass per area times the cloth's area (a mesh's `area` if
+    given); the benchmark's cloth without a mass: `params` unchanged.
     """
-    from cloth_bench_ros.core.cloth_size import is_benchmark, with_cloth_mass
+    from cloth_bench_ros.core.cloth_size import is_benchmark_cloth, with_cloth_mass
     from cloth_bench_ros.engines import engine_class
 
-    if mass is None and is_benchmark(size):
+    if mass is None and is_benchmark_cloth(size, area):
         return dict(params)
     schema = {p.name: p for p in engine_class(engine).params}
     if 'mass' not in schema:
         raise EngineError(
             f'engine {engine} has no mass parameter: a --cloth-size or --cloth-mass needs one'
         )
-    return with_cloth_mass(params, float(schema['mass'].default), size, mass)
+    return with_cloth_mass(params, float(schema['mass'].default), size, mass, area)

@@ -89,6 +89,11 @@ def node_cloth_size(node) -> tuple[float, float] | None:
     )
 
 
+def node_cloth_mesh(node) -> str | None:
+    """Declare cloth_mesh and return it: a mesh file, or None: the grid (core/cloth_mesh.py)."""
+    return declare_option(node, 'cloth_mesh') or None
+
+
 def node_cloth(node) -> tuple[tuple[float, float] | None, float | None]:
     """
     Declare cloth_size and cloth_mass and return them checked: (W, L) or None, kg or None.

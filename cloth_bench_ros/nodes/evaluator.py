@@ -9,19 +9,20 @@ import time
 from typing import Any
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.cloth_size import cloth_grid, cloth_record
+from cloth_bench_ros.core.cloth_mesh import cloth_faces, mesh_record, run_cloth
+from cloth_bench_ros.core.cloth_size import cloth_record, grasp_width
 from cloth_bench_ros.core.evaluation import accounting_line, OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
-from cloth_bench_ros.core.surface_distance import grid_faces
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
 from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data.trial import trial_from_message
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     node_cloth,
+    node_cloth_mesh,
     node_grid,
     publishers_matched,
     replay_stamps,
@@ -80,7 +81,9 @@ class Evaluator(Node):
                 'comparison_figures': validation.boolean,
             },
         )
-        grid = cloth_grid((nx, nz) if nx and nz else None, size) or ClothGrid()
+        targets = full_targets(self.primitive, rate_hz, grasp_width(size))
+        grid = run_cloth((nx, nz) if nx and nz else None, size, node_cloth_mesh(self),
+                         (targets.left[0], targets.right[0])) or ClothGrid()
         self.engines, offset = p['engines'], p['time_offset']
         self.comparison_figures = p['comparison_figures']
         self.run_info = {
@@ -90,6 +93,7 @@ class Evaluator(Node):
             'cloth': cloth,
             'seed': seed,
             **cloth_record(size, mass),
+            **mesh_record(grid),
         }
         for key, text in (('devices', devices), ('models', models)):
             if not text:
@@ -108,7 +112,6 @@ class Evaluator(Node):
                 check_output_dir(self.output_dir)
             except UnsafeInputError as exc:
                 raise validation.InputError(f'evaluator: parameter output_dir: {exc}') from None
-        targets = full_targets(self.primitive, rate_hz)
         self.final_stamp = targets.stamp_ns(len(targets) - 1)
         self.core = OnlineEvaluator(
             self.engines,
@@ -117,7 +120,7 @@ class Evaluator(Node):
             cut,
             REAL_FPS,
             keep_pairs=bool(self.comparison_bag or self.comparison_figures),
-            faces=grid_faces(grid.nx, grid.nz),
+            faces=cloth_faces(grid),
         )
         self.replay: dict = {}  # the recorder's frame accounting, from the trial message
         self.expected_real_frames: int | None = None  # as announced by the recorder

@@ -21,7 +21,8 @@ import shutil
 import time
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.cloth_size import cloth_grid, grasp_width
+from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth, task_starts
+from cloth_bench_ros.core.cloth_size import grasp_width
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.core.scene import SETTLE_DURATION
 from cloth_bench_ros.data import BagReader, BagWriter
@@ -35,6 +36,7 @@ from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     node_cloth,
+    node_cloth_mesh,
     node_grid,
     REPLAY_STATUS_NAME,
     run_node,
@@ -119,7 +121,8 @@ class Recorder(Node):
         self.bag = BagReader(path)
         options = self.replay_options()
         nx, nz = node_grid(self)  # 0, 0: the preset's grid
-        cloth = node_cloth(self)  # the size and mass of the alignment's reference cloth
+        # the size, mass and mesh of the alignment's reference cloth
+        cloth = (*node_cloth(self), node_cloth_mesh(self))
         try:
             self.plan = plan_replay(
                 self.bag, options, partial(self.reference_motion, options, nx, nz, cloth)
@@ -183,12 +186,13 @@ class Recorder(Node):
         options: ReplayOptions, nx: int, nz: int, cloth: tuple, seconds: float
     ) -> tuple:
         """Return the reference simulation the automatic alignment compares the bag with."""
-        size, mass = cloth
+        size, mass, mesh = cloth
         preset = load_preset(options.align_engine, options.cloth, options.primitive)
+        grid = run_cloth((nx, nz) if nx and nz else None, size, mesh,
+                         task_starts(options.primitive, options.rate_hz, size))
         engine = make_engine(
             options.align_engine, options.rate_hz,
-            sized_params(options.align_engine, preset, size, mass),
-            cloth_grid((nx, nz) if nx and nz else None, size),
+            sized_params(options.align_engine, preset, size, mass, mesh_area(grid)), grid,
         )
         try:
             return reference_motion(

@@ -16,7 +16,8 @@ import time
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core import realtime_process
-from cloth_bench_ros.core.cloth_size import cloth_grid, grasp_width
+from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
+from cloth_bench_ros.core.cloth_size import grasp_width
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.engines import make_engine
@@ -25,6 +26,7 @@ from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     node_cloth,
+    node_cloth_mesh,
     node_grid,
     publish_serialises,
     run_node,
@@ -137,7 +139,9 @@ class Simulator(Node):
                 f'{self.get_name()}: parameters cloth_mass and engine_params mass both give the '
                 "cloth's mass; give one"
             )
-        grid = cloth_grid((nx, nz) if nx and nz else None, size)
+        targets = full_targets(primitive, rate_hz, grasp_width(size))
+        grid = run_cloth((nx, nz) if nx and nz else None, size, node_cloth_mesh(self),
+                         (targets.left[0], targets.right[0]))
         preset = load_preset(  # the model that runs first, then its entry of the set
             self.engine_name,
             cloth,
@@ -145,7 +149,8 @@ class Simulator(Node):
             Path(presets_dir) if presets_dir else None,
             overrides.get('model'),
         )
-        params = sized_params(self.engine_name, {**preset, **overrides}, size, mass)
+        params = sized_params(
+            self.engine_name, {**preset, **overrides}, size, mass, mesh_area(grid))
         if checked['device']:  # the engine refuses it if it has no such parameter or device
             params['device'] = checked['device']
         self.engine = make_engine(self.engine_name, rate_hz, params, grid)
@@ -158,7 +163,7 @@ class Simulator(Node):
         self.step = -1
         self.skipped = 0
         self.reported_divergence = False
-        self.targets = full_targets(primitive, rate_hz, grasp_width(size))
+        self.targets = targets
         self.stamps = np.array(
             [self.targets.stamp_ns(k) for k in range(len(self.targets))], dtype=np.int64
         )

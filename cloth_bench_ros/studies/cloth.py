@@ -1,10 +1,11 @@
-"""The cloth a command runs: `--cloth-size` and `--cloth-mass` checked, and the lines saying it."""
+"""The cloth a command runs: `--cloth-size`, `--cloth-mass`, `--cloth-mesh` checked; its lines."""
 
 from __future__ import annotations
 
 from typing import Mapping
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.cloth_mesh import ClothMesh, run_cloth, task_starts
 from cloth_bench_ros.core.cloth_size import (
     BENCHMARK_SIZE,
     cloth_grid,
@@ -37,24 +38,59 @@ def cloth_choice(
     return parsed, mass
 
 
+def mesh_choice(
+    path: str | None,
+    grid: tuple[int, int] | None,
+    size: Size | None,
+    primitive: str,
+    rate_hz: float,
+) -> ClothMesh | None:
+    """Return the `--cloth-mesh` read and checked (None without one); one line if refused."""
+    if not path:
+        return None
+    for given, flag in ((grid, '--grid'), (size, '--cloth-size')):
+        if given is not None:
+            raise InputError(f'--cloth-mesh and {flag}: a mesh has its own vertices and size; '
+                             'give one')
+    cloth = run_cloth(None, None, path, task_starts(primitive, rate_hz, None))
+    assert isinstance(cloth, ClothMesh)
+    return cloth
+
+
+def mesh_line(mesh: ClothMesh) -> str:
+    """Return the line that says a run's `--cloth-mesh`: size, spacing, grasp."""
+    return (
+        f'cloth: mesh {mesh.source}, {len(mesh.rest)} vertices, {len(mesh.triangles)} '
+        f'triangles, {mesh.area:.4g} m^2; material of a grid of spacing ratio '
+        f"{mesh.spacing_ratio():.4g} (the benchmark grid's 1); grasped vertices "
+        f'{mesh.left_corner} and {mesh.right_corner}'
+    )
+
+
 def cloth_lines(
     masses: Mapping[str, tuple[float, float]],
     size: Size | None,
     mass: float | None,
     grid: tuple[int, int] | None,
+    mesh: ClothMesh | None = None,
 ) -> list[str]:
     """
     Return what a run says of a cloth of another size or mass ([] for the benchmark's cloth).
 
     `masses`: per engine, (the total mass it runs with, its preset's mass).
     """
+    if mesh is not None:
+        return [mesh_line(mesh), 'mass ' + ', '.join(
+            f'{engine} {mass_text(total, None, mass, preset, mesh.area)}'
+            for engine, (total, preset) in masses.items()
+        )]
     if mass is None and is_benchmark(size):
         return []
-    mesh = cloth_grid(grid, size) or ClothGrid()
+    made = cloth_grid(grid, size) or ClothGrid()
     how = 'as --grid' if grid else "at the benchmark mesh's 5 cm spacing"
     lines = [
         f'cloth: {size_text(size)}{" (the benchmark)" if size is None else ""}, '
-        f'mesh {mesh.nx} x {mesh.nz} ({how}); mass '
+        f'mesh {made.nx} x {made.nz} ({how}); mass '
         + ', '.join(
             f'{engine} {mass_text(total, size, mass, preset)}'
             for engine, (total, preset) in masses.items()
@@ -73,7 +109,10 @@ def cloth_name(size: Size | None, mass: float | None) -> str:
 
 
 def engine_masses(
-    params_of: Mapping[str, Mapping], size: Size | None, mass: float | None
+    params_of: Mapping[str, Mapping],
+    size: Size | None,
+    mass: float | None,
+    area: float | None = None,
 ) -> dict[str, tuple[float, float]]:
     """Return per engine (the cloth's total mass it runs with, the mass of its `params`)."""
     from cloth_bench_ros.engines import engine_class
@@ -81,7 +120,7 @@ def engine_masses(
 
     out = {}
     for engine, params in params_of.items():
-        total = sized_params(engine, dict(params), size, mass).get('mass')
+        total = sized_params(engine, dict(params), size, mass, area).get('mass')
         own = engine_class(engine).validate_params(dict(params)).get('mass')
         if total is not None and own is not None:
             out[engine] = (float(total), float(own))

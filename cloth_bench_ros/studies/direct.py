@@ -17,13 +17,15 @@ import time
 from typing import Any
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.cloth_size import cloth_grid, cloth_record, grasp_width
+from cloth_bench_ros.core.cloth_mesh import (
+    Cloth, cloth_faces, mesh_area, mesh_record, run_cloth, task_starts,
+)
+from cloth_bench_ros.core.cloth_size import cloth_record, grasp_width
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.core.run_summary import run_summary
 from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
-from cloth_bench_ros.core.surface_distance import grid_faces
 from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, parse_primitive
 from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data import BagReader
@@ -39,6 +41,12 @@ from cloth_bench_ros.studies.run_config import RunConfig
 import yaml
 
 
+def _cloth(config: RunConfig) -> Cloth | None:
+    """Return the cloth of a run, as the nodes build it (None: the engine's default grid)."""
+    starts = task_starts(config.primitive, float(config.rate_hz), config.cloth_size)
+    return run_cloth(config.grid, config.cloth_size, config.cloth_mesh, starts)
+
+
 def _engine(config: RunConfig, name: str) -> ClothEngine:
     """Build an engine as the simulator node does: preset, then the overrides as YAML."""
     overrides = validation.parameter_mapping(
@@ -47,8 +55,9 @@ def _engine(config: RunConfig, name: str) -> ClothEngine:
     preset = load_preset(
         name, config.cloth, config.primitive, config.presets_dir, overrides.get('model')
     )
-    params = sized_params(name, {**preset, **overrides}, config.cloth_size, config.cloth_mass)
-    grid = cloth_grid(config.grid, config.cloth_size)
+    grid = _cloth(config)
+    params = sized_params(name, {**preset, **overrides}, config.cloth_size, config.cloth_mass,
+                          mesh_area(grid))
     return make_engine(name, float(config.rate_hz), params, grid)
 
 
@@ -106,7 +115,9 @@ def _replay(config: RunConfig, cut: int | None) -> tuple[Any, dict[str, Any]]:
         align_engine=config.engines[0],
     )
     size, mass = config.cloth_size, config.cloth_mass
-    key = (_bag_identity(Path(config.bag)), options, config.grid, size, mass)
+    cloth = _cloth(config)
+    key = (_bag_identity(Path(config.bag)), options, config.grid, size, mass,
+           str(mesh_record(cloth)))
     if key not in _PLANS:
 
         def motion(seconds: float) -> Any:
@@ -114,8 +125,8 @@ def _replay(config: RunConfig, cut: int | None) -> tuple[Any, dict[str, Any]]:
             engine = make_engine(
                 options.align_engine,
                 options.rate_hz,
-                sized_params(options.align_engine, preset, size, mass),
-                cloth_grid(config.grid, size),
+                sized_params(options.align_engine, preset, size, mass, mesh_area(cloth)),
+                cloth,
             )
             try:
                 return reference_motion(
@@ -147,8 +158,8 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
     plan, replay = _replay(config, cut)
     trial = TrialInfo.from_strings(plan.trial.to_strings())
     offset_ns = int(round(SETTLE_DURATION * 1e9))
-    grid = cloth_grid(config.grid, config.cloth_size) or ClothGrid()
-    faces = grid_faces(grid.nx, grid.nz)
+    grid = _cloth(config) or ClothGrid()
+    faces = cloth_faces(grid)
     core = OnlineEvaluator(list(config.engines), primitive, offset_ns, cut, REAL_FPS, faces=faces)
     if core.change_of_phase_frame is None:
         core.change_of_phase_frame = trial.change_of_phase_frame
@@ -172,6 +183,7 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
         'cloth': config.cloth,
         'seed': int(config.seed),
         **cloth_record(config.cloth_size, config.cloth_mass),
+        **mesh_record(grid),
         'devices': {name: engine.device for name, engine in engines.items()},
         'models': {name: str(engine.config.get('model', '')) for name, engine in engines.items()},
         'trial': trial.to_dict(),

@@ -72,7 +72,8 @@ def warmup(
             n += 1
             if end > deadline and n >= WARMUP_MIN_STEPS:
                 break
-        done = (engine.grid.nx, engine.grid.nz)
+        made = grid or ClothGrid()  # the engine's grid (hil runs grids only)
+        done = (made.nx, made.nz)
     finally:
         engine.close()
     taken = times[:n]

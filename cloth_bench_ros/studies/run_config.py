@@ -22,6 +22,7 @@ class RunConfig:
     grid: tuple[int, int] | None = None  # (nx, nz) vertices; None: the engine's default
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, the whole cloth; None: the preset's per area
+    cloth_mesh: str | None = None  # OBJ, PLY or STL file of the cloth; None: the grid
     presets_dir: Path | None = None  # directory of <engine>.yaml presets; None: config/presets
     replay: dict = field(
         default_factory=dict

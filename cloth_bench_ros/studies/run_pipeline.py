@@ -57,6 +57,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
     cloth = {  # the nodes' cloth_size and cloth_mass ('' and 0: the benchmark's, the preset's)
         'cloth_size': ','.join(f'{v:.17g}' for v in config.cloth_size or ()),
         'cloth_mass': float(config.cloth_mass or 0.0),
+        'cloth_mesh': str(config.cloth_mesh or ''),
     }
     nodes = {
         'trajectory_publisher': {
