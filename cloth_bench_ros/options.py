@@ -295,7 +295,23 @@ REPLAY_OPTIONS = (
     'align_step',
     'trial',
     'align',
+    'motion',
 )
+
+# The motion scored: a task file of the user's, or the task's motion on a recording that does not
+# match it (docs/own-recording.md).
+OPTIONS.update(_declare(
+    Option(
+        'task', str, '', "task file (YAML: the grippers' quintic segments, settle phase and "
+        'metric window; see docs/own-recording.md) instead of the shipped task of --primitive',
+        flag='--task', metavar='FILE',
+    ),
+    Option(
+        'motion', str, 'recorded', "recorded: a recording whose motion does not match the task is "
+        "refused; task: score the task's motion on it anyway", flag='--motion',
+        choices=('recorded', 'task'),
+    ),
+))
 
 # A cloth of another size than the benchmark's 0.5 x 0.7 m, and its mass (docs/identification.md).
 OPTIONS.update(_declare(

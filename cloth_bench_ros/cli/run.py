@@ -29,6 +29,7 @@ RUN_FLAGS: tuple[common.Flag, ...] = (
 )
 # scoring your own recording (docs/own-recording.md)
 SCORING_FLAGS: tuple[common.Flag, ...] = (
+    'task',
     *REPLAY_OPTIONS,
     Option(
         'transform', str, None, '4x4 matrix into world for every cloud, instead of tf',
@@ -63,8 +64,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.add_option(run, 'cloth_mass')
     run.set_defaults(func=cmd_run)
 
-    traj = sub.add_parser('trajectory', help='print the quintic part of a primitive as CSV')
-    common.add_options(traj, ('primitive', 'rate_hz'))
+    traj = sub.add_parser('trajectory', help="print a task's motion as CSV")
+    common.add_options(traj, ('primitive', 'task', 'rate_hz'))
     traj.set_defaults(func=cmd_trajectory)
 
     engines = sub.add_parser('engines', help='list known engines, their availability and version')
@@ -215,6 +216,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         }
         for name in engines
     }
+    from cloth_bench_ros.core.task_data import load_task
+
+    task = load_task(args.primitive, args.task)  # a bad task file: one line, before the run
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic)
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, overrides)
@@ -236,6 +240,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         rate_hz=args.rate,
         cloth=args.cloth,
         primitive=args.primitive,
+        task=args.task or '',
         seed=args.seed,
         pacing=args.pacing,
         output_dir=out,
@@ -279,6 +284,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
         f' bag {bag}{on}'
     )
+    if args.task:
+        print(f'task: {task.path} (sha256 {task.sha256[:12]}), {task.duration:.2f} s of motion')
     for name, device in devices.items():
         model = params[name].get('model')
         note = fitted_elsewhere(
@@ -305,10 +312,11 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_trajectory(args: argparse.Namespace) -> int:
-    """Print the quintic part of a primitive as CSV."""
+    """Print a task's motion (--task, else the shipped one of --primitive) as CSV."""
+    from cloth_bench_ros.core.task_data import load_task
     from cloth_bench_ros.core.trajectory import sample_quintic, to_csv
 
-    sys.stdout.write(to_csv(sample_quintic(args.primitive, args.rate)))
+    sys.stdout.write(to_csv(sample_quintic(load_task(args.primitive, args.task), args.rate)))
     return 0
 
 

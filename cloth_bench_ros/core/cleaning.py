@@ -12,10 +12,14 @@ a `CleaningStats`, so the summary can say so.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 from cloth_bench_ros.core import scene
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
+
+if TYPE_CHECKING:
+    from cloth_bench_ros.core.trajectory import TaskLike
 
 WORKSPACE_MARGIN = 0.10  # m around the reach of the cloth
 TABLE_PLANE_DISTANCE = 0.01  # m: points this close to the table's plane are removed with it
@@ -73,10 +77,10 @@ def workspace_box(
 
 
 def scene_cleaning(
-    primitives: tuple[str, ...] = ('dynamic', 'quasi_static'),
+    primitives: tuple[TaskLike, ...] = ('dynamic', 'quasi_static'),
     voxel: float = OPTIONS['voxel'].default,
 ) -> CleaningConfig:
-    """Return the cleaning for the benchmark scene: the box of the primitives' gripper paths."""
+    """Return the cleaning for the benchmark scene: the box of the tasks' gripper paths."""
     from cloth_bench_ros.core.trajectory import full_targets
 
     paths = [full_targets(p, 100.0) for p in primitives]

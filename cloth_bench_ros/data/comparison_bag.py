@@ -16,7 +16,6 @@ from typing import Any
 
 from cloth_bench_ros.core.scene import (
     ClothGrid,
-    SETTLE_DURATION,
     TABLE_THICKNESS,
     TABLE_TOP_Z,
     TABLE_X,
@@ -176,9 +175,9 @@ def write_comparison_bag(
 
     pairs: (FrameScore, real points, vertices, per-vertex errors or None) per scored frame.
     """
-    offset = int(round(SETTLE_DURATION * 1e9))
     pc2 = messages.POINTCLOUD2
     tg = full_targets(primitive, rate_hz)
+    offset = int(round(tg.quintic_start * 1e9))
     with BagWriter(path) as bag:
         bag.write_message('/tf_static', _tf_static(), 0)
         bag.write_message(SCENE_TOPIC, table_marker(0), 0)

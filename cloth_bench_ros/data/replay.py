@@ -16,6 +16,7 @@ from typing import Any
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.core.cleaning import clean, CleaningConfig, CleaningStats, scene_cleaning
 from cloth_bench_ros.core.phase import first_table_contact
+from cloth_bench_ros.core.task_data import load_task, Task
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.data import alignment, trials
 from cloth_bench_ros.data.bag_reader import BagReader, decode_cloud, IRREGULAR_TOLERANCE
@@ -38,6 +39,9 @@ class ReplayOptions:
 
     cloth: str = OPTIONS['cloth'].default
     primitive: str = OPTIONS['primitive'].default
+    task: str = ''  # a task file; '': the shipped task of `primitive`
+    # recorded: refuse a recording whose motion does not match the task; task: score it anyway
+    motion: str = OPTIONS['motion'].default
     change_of_phase_frame: int | None = None
     # "": the project's cloud topic, else the only PointCloud2 topic
     topic: str = OPTIONS['topic'].default
@@ -149,10 +153,11 @@ def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig
         )
     # Removing the plane also removes cloth lying flat on the table, which the quasi-static drag
     # scores.
+    task = replay_task(options)
     remove = options.table_plane == 'remove' or (
-        options.table_plane == 'auto' and options.primitive == 'dynamic'
+        options.table_plane == 'auto' and task.window == 'before_table_contact'
     )
-    return replace(scene_cleaning((options.primitive,), options.voxel), table_plane=remove)
+    return replace(scene_cleaning((task,), options.voxel), table_plane=remove)
 
 
 @dataclass
@@ -219,7 +224,7 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     start, chosen, region = _start(
         reader, options, project_bag, stamps, clouds, reference, split
     )
-    targets = full_targets(options.primitive, options.rate_hz)
+    targets = full_targets(replay_task(options), options.rate_hz)
     end_ns = targets.stamp_ns(len(targets) - 1) - int(round(targets.quintic_start * 1e9))
     plan = ReplayPlan(
         trial,
@@ -267,6 +272,11 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     return plan
 
 
+def replay_task(options: ReplayOptions) -> Task:
+    """Return the task the recording is replayed for: its file's, else the shipped one."""
+    return load_task(options.primitive, options.task)
+
+
 def recorded_grasp(reader: BagReader, topic: str) -> float | None:
     """Return the x distance between the first two poses of a recording's first gripper targets."""
     messages = reader.messages([topic])
@@ -293,11 +303,11 @@ def change_of_phase(
     table contact found in `frames` ((t_ns from the start, world points) in time order). The
     quasi-static task has none: it is scored over its whole length.
     """
-    if options.primitive != 'dynamic':
+    if replay_task(options).window != 'before_table_contact':
         return {
             'frame': None,
             'source': 'none',
-            'reason': 'the quasi-static task is scored over its whole length',
+            'reason': f'the {replay_task(options).name} task is scored over its whole length',
         }
     if options.change_of_phase_frame is not None:
         return {
@@ -329,11 +339,11 @@ def split_recording(
     """Return the repetitions of the task in a recording: from its targets topic, else clouds."""
     topic = options.targets_topic or TARGETS_TOPIC
     if reader.topics.get(topic) == POSE_ARRAY:
-        split = trials.split_targets(*_targets(reader, topic), topic, options.primitive)
+        split = trials.split_targets(*_targets(reader, topic), topic, replay_task(options))
     else:
-        split = trials.split_clouds(stamps, clouds, options.primitive)
+        split = trials.split_clouds(stamps, clouds, replay_task(options))
     split.origin_ns = min(stamps)
-    targets = full_targets(options.primitive, options.rate_hz)
+    targets = full_targets(replay_task(options), options.rate_hz)
     end_ns = targets.stamp_ns(len(targets) - 1) - int(round(targets.quintic_start * 1e9))
     at = np.asarray(stamps, dtype=np.int64)
     for found in split.trials:

@@ -14,7 +14,7 @@ from cloth_bench_ros.core.evaluation import accounting_line, OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.core.run_summary import run_summary
-from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
+from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS
 from cloth_bench_ros.core.surface_distance import grid_faces
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
 from cloth_bench_ros.core.worst_frames import write_worst_frames
@@ -23,6 +23,7 @@ from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     node_cloth,
     node_grid,
+    node_task,
     publishers_matched,
     replay_stamps,
     run_node,
@@ -56,9 +57,10 @@ class Evaluator(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('evaluator', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
         declare_fixed(self, 'engines', ['mujoco'])
-        self.primitive = parse_primitive(declare_option(self, 'primitive'))
+        self.task = node_task(self)
+        self.primitive = parse_primitive(self.get_parameter('primitive').value)
         rate_hz = declare_option(self, 'rate_hz')
-        declare_float(self, 'time_offset', SETTLE_DURATION)
+        declare_float(self, 'time_offset', self.task.settle_duration)
         cut = declare_option(self, 'change_of_phase_frame')
         self.output_dir = declare_fixed(self, 'output_dir', '')
         self.comparison_bag = declare_fixed(self, 'record_comparison', '')
@@ -85,6 +87,7 @@ class Evaluator(Node):
         self.comparison_figures = p['comparison_figures']
         self.run_info = {
             'primitive': self.primitive.value,
+            **self.task.record(),
             'rate_hz': rate_hz,
             'engines': self.engines,
             'cloth': cloth,
@@ -108,11 +111,11 @@ class Evaluator(Node):
                 check_output_dir(self.output_dir)
             except UnsafeInputError as exc:
                 raise validation.InputError(f'evaluator: parameter output_dir: {exc}') from None
-        targets = full_targets(self.primitive, rate_hz)
+        targets = full_targets(self.task, rate_hz)
         self.final_stamp = targets.stamp_ns(len(targets) - 1)
         self.core = OnlineEvaluator(
             self.engines,
-            self.primitive,
+            self.task,
             int(round(offset * 1e9)),
             cut,
             REAL_FPS,

@@ -23,10 +23,9 @@ import time
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.cloth_size import cloth_grid, grasp_width
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
-from cloth_bench_ros.core.scene import SETTLE_DURATION
 from cloth_bench_ros.data import BagReader, BagWriter
 from cloth_bench_ros.data.alignment import reference_motion, SearchSettings
-from cloth_bench_ros.data.replay import plan_replay, ReplayOptions
+from cloth_bench_ros.data.replay import plan_replay, replay_task, ReplayOptions
 from cloth_bench_ros.data.trial import TRIAL_STATUS_NAME
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset, sized_params
@@ -94,9 +93,10 @@ class Recorder(Node):
         path = declare_fixed(self, 'bag', '')
         if not path:
             raise InputError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
-        # Frames are stamped from the start of the quintic part; the run starts with the settle
+        options = self.replay_options()
+        # Frames are stamped from the start of the task's motion; the run starts with its settle
         # phase.
-        declare_float(self, 'time_offset', SETTLE_DURATION)
+        declare_float(self, 'time_offset', replay_task(options).settle_duration)
         clock = declare_fixed(self, 'clock', 'sim')
         declare_float(self, 'rate_factor', 1.0)
         declare_float(self, 'start_offset', 0.0)
@@ -117,7 +117,6 @@ class Recorder(Node):
         if clock not in ('sim', 'wall'):
             raise InputError(f'recorder: unknown clock {clock!r} (valid: sim, wall)')
         self.bag = BagReader(path)
-        options = self.replay_options()
         nx, nz = node_grid(self)  # 0, 0: the preset's grid
         cloth = node_cloth(self)  # the size and mass of the alignment's reference cloth
         try:
@@ -163,6 +162,8 @@ class Recorder(Node):
         return ReplayOptions(
             cloth=declare_option(self, 'cloth'),
             primitive=declare_option(self, 'primitive'),
+            task=declare_option(self, 'task'),
+            motion=p['motion'],
             change_of_phase_frame=p['change_of_phase_frame'],
             topic=p['topic'],
             start_time=p['start_time'],
@@ -192,7 +193,7 @@ class Recorder(Node):
         )
         try:
             return reference_motion(
-                engine, options.primitive, options.rate_hz, seconds, width=grasp_width(size)
+                engine, replay_task(options), options.rate_hz, seconds, width=grasp_width(size)
             )
         finally:
             engine.close()

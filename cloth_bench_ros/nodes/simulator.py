@@ -26,6 +26,7 @@ from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     node_cloth,
     node_grid,
+    node_task,
     publish_serialises,
     run_node,
 )
@@ -116,7 +117,8 @@ class Simulator(Node):
         self.engine_name = declare_fixed(self, 'engine', 'mujoco')
         rate_hz = declare_option(self, 'rate_hz')
         cloth = declare_option(self, 'cloth')
-        primitive = declare_option(self, 'primitive')
+        task = node_task(self)
+        primitive = self.get_parameter('primitive').value
         self.seed = declare_option(self, 'seed')
         declare_fixed(self, 'engine_params', '{}')
         nx, nz = node_grid(self)
@@ -158,7 +160,7 @@ class Simulator(Node):
         self.step = -1
         self.skipped = 0
         self.reported_divergence = False
-        self.targets = full_targets(primitive, rate_hz, grasp_width(size))
+        self.targets = full_targets(task, rate_hz, grasp_width(size))
         self.stamps = np.array(
             [self.targets.stamp_ns(k) for k in range(len(self.targets))], dtype=np.int64
         )

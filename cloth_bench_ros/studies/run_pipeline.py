@@ -50,6 +50,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
     out = config.output_dir if output_dir is None else output_dir
     common = {
         'primitive': config.primitive,
+        'task': config.task,
         'rate_hz': float(config.rate_hz),
         'use_sim_time': True,
     }
@@ -61,6 +62,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
     nodes = {
         'trajectory_publisher': {
             'primitive': config.primitive,
+            'task': config.task,
             'rate_hz': float(config.rate_hz),
             'cloth_size': cloth['cloth_size'],
             'engines': list(config.engines),
