@@ -10,7 +10,7 @@ import time
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.options import Option, OPTIONS, REPLAY_OPTIONS
+from cloth_bench_ros.options import MOTION_FLAGS, Option, OPTIONS, REPLAY_OPTIONS
 
 
 RUN_FLAGS: tuple[common.Flag, ...] = (
@@ -30,6 +30,7 @@ RUN_FLAGS: tuple[common.Flag, ...] = (
 # scoring your own recording (docs/own-recording.md)
 SCORING_FLAGS: tuple[common.Flag, ...] = (
     'task',
+    *MOTION_FLAGS,
     *REPLAY_OPTIONS,
     Option(
         'transform', str, None, '4x4 matrix into world for every cloud, instead of tf',
@@ -68,6 +69,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.add_options(traj, ('primitive', 'task', 'rate_hz'))
     traj.set_defaults(func=cmd_trajectory)
 
+    motion = sub.add_parser(
+        'motion', help="write a recording's gripper motion as a task file (for --task, task:=)"
+    )
+    common.add_options(motion, (
+        ('bag', {'help': 'rosbag2 recording', 'required': True}), 'topic', *MOTION_FLAGS,
+        'targets_topic', Option('output', str, None, 'the task file to write', flag='--output',
+                                metavar='FILE', required=True),
+    ))
+    motion.set_defaults(func=cmd_motion)
+
     engines = sub.add_parser('engines', help='list known engines, their availability and version')
     common.add_option(engines, Option(
         'warm', bool, False, "also compile what makes a first run slow (Newton: Warp's kernel "
@@ -86,6 +97,50 @@ def _replay_params(args: argparse.Namespace) -> dict:
     if args.transform:
         params['transform'] = [float(v) for v in common.read_transform(args.transform).ravel()]
     return params
+
+
+def _write_motion(args: argparse.Namespace, bag: Path, path: Path) -> tuple[Path, dict]:
+    """Write the recorded grippers (--gripper-frames, else --targets-topic) as a task file."""
+    from cloth_bench_ros.data.bag_reader import BagReader
+    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, recorded_task
+    from cloth_bench_ros.data.recorded_motion import write_task
+
+    with BagReader(bag) as reader:
+        doc = recorded_task(reader, args.topic or '', parse_gripper_frames(args.gripper_frames),
+                            args.targets_topic or '', args.table_z)
+    return write_task(path, doc), doc
+
+
+def recorded_motion(args: argparse.Namespace, bag: Path, out: Path) -> tuple[str, list[str]]:
+    """
+    Return the task file of the recorded grippers the run follows ('' : none) and its lines.
+
+    --gripper-frames or --targets-topic name them, unless --motion task; the task file is
+    written into the report directory.
+    """
+    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, table_line
+
+    follow = args.motion != 'task' and (
+        parse_gripper_frames(args.gripper_frames) or args.targets_topic
+    )
+    if not follow:
+        if args.table_z is not None:
+            raise UserError('--table-z: only with a recorded motion (--gripper-frames or '
+                            '--targets-topic)')
+        return '', (["motion: the task's, as --motion task asks (the recording's own is not "
+                     'followed)'] if args.motion == 'task' else [])
+    if args.task:
+        raise UserError('--task and a recorded motion (--gripper-frames or --targets-topic): '
+                        'give one')
+    path, doc = _write_motion(args, bag, out / 'motion.yaml')
+    rec = doc['recorded']
+    lines = [
+        f'motion: the recorded grippers ({rec["source"]}, {len(rec["t"])} samples over '
+        f'{rec["t"][-1]:.2f} s from the first cloud; in the clouds\' frame {rec["frame"]}, turned '
+        f'into the scene\'s), written to {path}',
+        table_line(doc),
+    ]
+    return str(path), lines
 
 
 def _print_real(summary: dict) -> None:
@@ -234,13 +289,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     _checked_output(
         out, '--output'
     )  # an unwritable or occupied --output is found before the run, not after it
+    task_file, motion_lines = recorded_motion(args, bag, out)
     config = RunConfig(
         bag=bag,
         engines=engines,
         rate_hz=args.rate,
         cloth=args.cloth,
         primitive=args.primitive,
-        task=args.task or '',
+        task=task_file or args.task or '',
         seed=args.seed,
         pacing=args.pacing,
         output_dir=out,
@@ -286,6 +342,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     if args.task:
         print(f'task: {task.path} (sha256 {task.sha256[:12]}), {task.duration:.2f} s of motion')
+    for line in motion_lines:
+        print(line)
     for name, device in devices.items():
         model = params[name].get('model')
         note = fitted_elsewhere(
@@ -317,6 +375,20 @@ def cmd_trajectory(args: argparse.Namespace) -> int:
     from cloth_bench_ros.core.trajectory import sample_quintic, to_csv
 
     sys.stdout.write(to_csv(sample_quintic(load_task(args.primitive, args.task), args.rate)))
+    return 0
+
+
+def cmd_motion(args: argparse.Namespace) -> int:
+    """Write a recording's gripper motion as a task file."""
+    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, table_line
+
+    if not parse_gripper_frames(args.gripper_frames) and not args.targets_topic:
+        raise UserError('motion: give the grippers with --gripper-frames LEFT,RIGHT or '
+                        '--targets-topic T')
+    common.check_bag(Path(args.bag), args.topic)
+    path, doc = _write_motion(args, Path(args.bag), Path(args.output))
+    print(f'task file: {path} ({doc["recorded"]["source"]}, {doc["recorded"]["t"][-1]:.2f} s)')
+    print(table_line(doc))
     return 0
 
 

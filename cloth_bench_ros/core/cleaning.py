@@ -106,6 +106,28 @@ def _remove_table(points: np.ndarray, distance: float) -> np.ndarray:
     return keep
 
 
+def find_table_z(points: np.ndarray, below_z: float) -> float | None:
+    """
+    Return the height of the table top among points (n, 3) below `below_z`, or None.
+
+    The plane the cleaning removes, searched without knowing its height: the near-horizontal
+    plane with the most inliers among the points below `below_z`, a table only if it holds at
+    least a fifth of them; its height is its inliers' median z.
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    points = points[np.isfinite(points).all(axis=1) & (points[:, 2] < below_z)]
+    if len(points) < 50:
+        return None
+    plane = _table_plane(points, TABLE_PLANE_DISTANCE)
+    if plane is None:
+        return None
+    normal, offset = plane
+    inliers = np.abs(points @ normal + offset) <= TABLE_PLANE_DISTANCE
+    if inliers.sum() < 0.2 * len(points):
+        return None
+    return float(np.median(points[inliers, 2]))
+
+
 def _table_plane(points: np.ndarray, distance: float) -> tuple[np.ndarray, float] | None:
     """
     Return the unit normal and offset of the near-horizontal plane with the most inliers.

@@ -2,9 +2,10 @@
 A task as data: the grippers' motion, its settle phase and the window its metrics average over.
 
 The paper's two tasks are the shipped files config/tasks/<primitive>.yaml; `--task FILE` names a
-user's own in the same format (docs/own-recording.md, "A task file"). `load_task` reads and
-checks a file once per process while it is unchanged; a bad file is one InputError naming the
-file and the field.
+user's own in the same format (docs/own-recording.md, "A task file"). A recorded motion
+(`--gripper-frames`, `--targets-topic`) is a task file too, of the grippers' samples instead of
+quintic segments (data/recorded_motion.py writes it). `load_task` reads and checks a file once
+per process while it is unchanged; a bad file is one InputError naming the file and the field.
 """
 
 from __future__ import annotations
@@ -20,16 +21,39 @@ from cloth_bench_ros.core.quintic import QuinticChain, QuinticSegment
 from cloth_bench_ros.errors import InputError, user_path
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.safe_io import load_yaml_bounded, read_text_bounded, UnsafeInputError
+import numpy as np
 
 SHIPPED = ('dynamic', 'quasi_static')  # config/tasks/<name>.yaml
 WINDOWS = ('before_table_contact', 'whole_motion')
-MAX_TASK_BYTES = 1_000_000
+MAX_TASK_BYTES = 50_000_000  # a recorded motion: ~50 bytes a sample
+MAX_SAMPLES = 500_000
 MAX_SEGMENTS = 1000  # per chain
 MAX_DURATION_S = 3600.0  # a segment, a settle phase
 ARMS = ('left', 'right')
 AXES = ('x', 'y', 'z')
 
 Axis = Union[QuinticChain, float]  # a chain, or a value held for the whole motion
+
+
+@dataclass(frozen=True, eq=False)
+class RecordedMotion:
+    """The grippers' recorded positions, in the scene's frame, from the motion's start."""
+
+    source: str  # e.g. 'tf frames left_gripper,right_gripper' or 'targets topic /targets'
+    frame: str  # the frame the clouds and grippers were resolved into ('' : the clouds' own)
+    start_ns: int  # bag stamp of t = 0
+    to_scene: tuple[float, ...]  # 16 numbers, row-major: that frame -> the scene's
+    table_z: float | None  # m, the table top in that frame; None: no table
+    table_source: str  # where table_z comes from
+    t: np.ndarray  # (n,) s from the start, increasing
+    left: np.ndarray  # (n, 3) m, in the scene's frame
+    right: np.ndarray
+
+    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return left and right (n, 3) at times t: linear between samples, held outside."""
+        def axes(p: np.ndarray) -> np.ndarray:
+            return np.stack([np.interp(t, self.t, p[:, i]) for i in range(3)], axis=1)
+        return axes(self.left), axes(self.right)
 
 
 @dataclass(frozen=True)
@@ -47,6 +71,7 @@ class Task:
     pitch: float  # radians
     yaw: float  # radians
     window: str  # one of WINDOWS
+    recorded: RecordedMotion | None = None  # followed instead of the chains (which are empty)
 
     @property
     def settle_duration(self) -> float:
@@ -55,7 +80,9 @@ class Task:
 
     @property
     def duration(self) -> float:
-        """Return the motion's length in seconds: its longest chain."""
+        """Return the motion's length in seconds: its longest chain, or the recording's."""
+        if self.recorded is not None:
+            return float(self.recorded.t[-1])
         chains = [a for a in (*self.left, *self.right, self.roll) if isinstance(a, QuinticChain)]
         return max((c.duration for c in chains), default=0.0)
 
@@ -64,9 +91,20 @@ class Task:
         """Return the metrics' suffix: d (scored before the table contact) or q (throughout)."""
         return 'd' if self.window == 'before_table_contact' else 'q'
 
-    def record(self) -> dict[str, str]:
+    def record(self) -> dict[str, Any]:
         """Return what summary.json and cache keys hold of the task."""
-        return {'task': self.name, 'task_file': self.path, 'task_sha256': self.sha256}
+        out: dict[str, Any] = {
+            'task': self.name, 'task_file': self.path, 'task_sha256': self.sha256
+        }
+        if self.recorded is not None:
+            out['motion'] = {
+                'source': self.recorded.source,
+                'frame': self.recorded.frame,
+                'table_z': self.recorded.table_z,
+                'table_source': self.recorded.table_source,
+                'to_scene': list(self.recorded.to_scene),
+            }
+        return out
 
 
 def task_file(name: str) -> Path:
@@ -101,10 +139,10 @@ def _mapping(value: Any, where: str, keys: tuple[str, ...]) -> dict:
     return value
 
 
-def _axis(value: Any, where: str, origin: float, scale: float = 1.0) -> Axis:
-    """Return a chain or a held value: position `origin + scale * p`, rates `scale * v`."""
+def _axis(value: Any, where: str, origin: float) -> Axis:
+    """Return a chain or a held value, its positions `origin + p`."""
     if not isinstance(value, list):
-        return origin + scale * _number(value, where)
+        return origin + _number(value, where)
     if not 1 <= len(value) <= MAX_SEGMENTS:
         raise InputError(f'{where}: expected 1 to {MAX_SEGMENTS} segments, got {len(value)}')
     segments = []
@@ -117,7 +155,7 @@ def _axis(value: Any, where: str, origin: float, scale: float = 1.0) -> Axis:
         ends = []
         for key in ('start', 'end'):
             p, v, a = _triple(seg[key], f'{at}.{key}')
-            ends.append((origin + scale * p, scale * v, scale * a))
+            ends.append((origin + p, v, a))
         segments.append(QuinticSegment(duration, ends[0], ends[1]))
     return QuinticChain(tuple(segments))
 
@@ -136,15 +174,73 @@ def _degrees(value: Any, where: str) -> Axis:
     ))
 
 
+def _samples(value: Any, where: str, width: int) -> np.ndarray:
+    """Return a list of numbers (width 1) or of `width`-lists as a finite float array."""
+    if not isinstance(value, list) or not 2 <= len(value) <= MAX_SAMPLES:
+        raise InputError(f'{where}: expected a list of 2 to {MAX_SAMPLES} samples')
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f'{where}: expected numbers only') from None
+    shape = (len(value),) if width == 1 else (len(value), width)
+    if array.shape != shape or not np.isfinite(array).all():
+        raise InputError(f'{where}: expected {"numbers" if width == 1 else "[x, y, z] lists"}, '
+                         'finite')
+    return array
+
+
+RECORDED_KEYS = ('source', 'frame', 'start_ns', 'to_scene', 'table_z', 'table_source', 't',
+                 'left', 'right')
+
+
+def _recorded(value: Any) -> RecordedMotion:
+    """Return the recorded motion of a task file's `recorded` mapping."""
+    rec = _mapping(value, 'recorded', RECORDED_KEYS)
+    t = _samples(rec['t'], 'recorded.t', 1)
+    if not (np.diff(t) > 0).all():
+        raise InputError('recorded.t: the times must increase')
+    if t[0] != 0.0:
+        raise InputError('recorded.t: the first time must be 0 (the motion\'s start)')
+    left, right = (_samples(rec[k], f'recorded.{k}', 3) for k in ('left', 'right'))
+    if len(left) != len(t) or len(right) != len(t):
+        raise InputError('recorded.left, recorded.right: one sample per time in recorded.t')
+    to_scene = _samples(rec['to_scene'], 'recorded.to_scene', 1)
+    if len(to_scene) != 16:
+        raise InputError('recorded.to_scene: expected 16 numbers (a row-major 4x4 matrix)')
+    start = rec['start_ns']
+    if isinstance(start, bool) or not isinstance(start, int) or start < 0:
+        raise InputError(f'recorded.start_ns: expected a bag stamp in ns, got {start!r}')
+    table = None if rec['table_z'] is None else _number(rec['table_z'], 'recorded.table_z')
+    return RecordedMotion(
+        str(rec['source']), str(rec['frame']), start, tuple(float(v) for v in to_scene), table,
+        str(rec['table_source']), t, left, right,
+    )
+
+
+def _settle(value: Any) -> tuple[float, float, float]:
+    settle = _mapping(value, 'settle', ('hold_start', 'move', 'hold_end'))
+    a, b, c = (
+        _number(settle[k], f'settle.{k}', 0.0, MAX_DURATION_S)
+        for k in ('hold_start', 'move', 'hold_end')
+    )
+    return a, b, c
+
+
 def parse_task(doc: Any, name: str, path: str, sha256: str) -> Task:
     """Return the Task of a parsed task file; InputError naming `path` and the field if bad."""
     try:
+        if isinstance(doc, dict) and 'recorded' in doc:
+            top = _mapping(doc, 'the file', ('settle', 'recorded', 'window'))
+            rec = _recorded(top['recorded'])
+            first_left, first_right = tuple(rec.left[0]), tuple(rec.right[0])
+            return Task(
+                name, path, sha256, _settle(top['settle']), (first_left, first_right),
+                (first_left[0], first_left[1], first_left[2]),
+                (first_right[0], first_right[1], first_right[2]), 0.0, 0.0, 0.0,
+                validation.choice(top['window'], 'window', WINDOWS), rec,
+            )
         top = _mapping(doc, 'the file', ('settle', 'grasp', 'motion', 'window'))
-        settle = _mapping(top['settle'], 'settle', ('hold_start', 'move', 'hold_end'))
-        phases = tuple(
-            _number(settle[k], f'settle.{k}', 0.0, MAX_DURATION_S)
-            for k in ('hold_start', 'move', 'hold_end')
-        )
+        phases = _settle(top['settle'])
         grasp = _mapping(top['grasp'], 'grasp', ARMS)
         left_at, right_at = (_triple(grasp[arm], f'grasp.{arm}') for arm in ARMS)
         motion = _mapping(top['motion'], 'motion', (*ARMS, 'roll', 'pitch', 'yaw'))

@@ -39,6 +39,7 @@ def parse_primitive(name: str) -> Primitive:
 
 
 TaskLike = Union[Task, Primitive, str]
+GRASP_SLACK = 0.01  # m a recorded motion's grippers may start further apart than the cloth is wide
 # the shipped task whose metric keys (CD_d or CD_q, ...) a task's window shares
 SUFFIX_TASK = {'d': Primitive.DYNAMIC.value, 'q': Primitive.QUASI_STATIC.value}
 
@@ -59,6 +60,9 @@ def _values(axis: Axis, t: np.ndarray) -> np.ndarray:
 
 def _motion(task: Task, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return left (n, 3), right (n, 3) and roll (n,) of the task's motion at times t."""
+    if task.recorded is not None:
+        left, right = task.recorded.at(t)
+        return left, right, np.zeros(len(t))
     left = np.stack([_values(a, t) for a in task.left], axis=1)
     right = np.stack([_values(a, t) for a in task.right], axis=1)
     return left, right, _values(task.roll, t)
@@ -114,6 +118,16 @@ def _settle(task: Task, t: np.ndarray, start: np.ndarray, grasp: np.ndarray) -> 
     return start + s * (grasp - start)
 
 
+def check_grasp(task: Task, width: float) -> None:
+    """InputError if a recorded motion's grippers start further apart than the cloth allows."""
+    apart = float(np.linalg.norm(np.subtract(task.grasp[1], task.grasp[0])))
+    if apart > width + GRASP_SLACK:
+        raise InputError(
+            f'task {task.path}: the grippers start {apart:.3f} m apart, further than the '
+            f"cloth's grasped edge ({width:.3f} m, --cloth-size W,L) allows"
+        )
+
+
 def full_targets(
     task: TaskLike, rate_hz: float, width: float | None = None
 ) -> GripperTargets:
@@ -130,10 +144,14 @@ def full_targets(
     left, right, roll = _motion(task, tq)
     n = len(t)
     grasp_left, grasp_right = np.array(task.grasp[0]), np.array(task.grasp[1])
-    left[settle] = _settle(task, t[settle], scene.GRIPPER_START_LEFT, grasp_left)
-    right[settle] = _settle(task, t[settle], scene.GRIPPER_START_RIGHT, grasp_right)
-    if width is not None and width != scene.CLOTH_WIDTH:
-        right[:, 0] += width - scene.CLOTH_WIDTH
+    if task.recorded is not None:  # the cloth starts hanging from the grippers' first positions
+        check_grasp(task, scene.CLOTH_WIDTH if width is None else width)
+        left[settle], right[settle] = grasp_left, grasp_right
+    else:
+        left[settle] = _settle(task, t[settle], scene.GRIPPER_START_LEFT, grasp_left)
+        right[settle] = _settle(task, t[settle], scene.GRIPPER_START_RIGHT, grasp_right)
+        if width is not None and width != scene.CLOTH_WIDTH:
+            right[:, 0] += width - scene.CLOTH_WIDTH
     return GripperTargets(
         t,
         left,

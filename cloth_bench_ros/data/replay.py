@@ -122,6 +122,9 @@ def _trial(reader: BagReader, options: ReplayOptions, topic: str) -> TrialInfo:
 
 def _to_world(reader: BagReader, options: ReplayOptions) -> tuple[Any, str]:
     """Return a function (frame_id, stamp_ns) -> 4x4 into world, and where it comes from."""
+    recorded = replay_task(options).recorded
+    if recorded is not None and options.transform is not None:
+        raise InputError('--transform and a recorded motion: the recorded motion sets the frame')
     if options.transform is not None:
         fixed = np.asarray(options.transform, dtype=float).reshape(4, 4)
         return (lambda frame, stamp: fixed), '--transform matrix applied to every cloud'
@@ -130,6 +133,11 @@ def _to_world(reader: BagReader, options: ReplayOptions) -> tuple[Any, str]:
     if tf_topics:
         buffer.add_messages((topic, msg) for topic, _, msg in reader.messages(tf_topics))
     source = f'tf from {", ".join(tf_topics)}' if tf_topics else 'clouds already in world'
+    if recorded is not None:  # into the grippers' frame, then turned into the scene's
+        to_scene = np.asarray(recorded.to_scene).reshape(4, 4)
+        return (
+            lambda frame, stamp: to_scene @ buffer.lookup(recorded.frame, frame, stamp)
+        ), f'{recorded.frame} turned into the scene (the recorded grippers\' start)'
     return (lambda frame, stamp: buffer.lookup(WORLD, frame, stamp)), source
 
 
@@ -218,7 +226,8 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     topic, trial, project_bag = rec.topic, rec.trial, rec.project_bag
     stamps, clouds, stats, config = rec.stamps, rec.clouds, rec.stats, rec.config
     frames_source, nan_dropped = rec.frames_source, rec.nan_dropped
-    split = None if project_bag or options.start_time else split_recording(
+    recorded = replay_task(options).recorded is not None
+    split = None if project_bag or options.start_time or recorded else split_recording(
         reader, options, stamps, clouds
     )
     start, chosen, region = _start(
@@ -387,8 +396,20 @@ def _start(
 ) -> tuple[alignment.StartTime, int, tuple[float, float]]:
     """Return the start, the trial scored (0: the recording as one) and that trial's region."""
     everything = (-np.inf, np.inf)
+    recorded = replay_task(options).recorded
+    if recorded is not None:
+        method = f"the recorded motion's start ({recorded.source}: the first cloud)"
+        return alignment.StartTime(recorded.start_ns, method, 0.0), 0, everything
     if options.start_time:
         return alignment.given_start(options.start_time, min(stamps)), 0, everything
+    if split is not None and split.trials and not split.usable and options.motion != 'task':
+        reasons = '; '.join(f'{t.number}: {t.reason}' for t in split.trials)
+        raise alignment.AlignmentError(
+            f'the recording\'s motion does not match the task {replay_task(options).name} '
+            f'({split.source}: {reasons}): give the motion it holds with --gripper-frames '
+            'LEFT,RIGHT or --targets-topic T (or --motion task to score the task\'s motion '
+            'anyway)'
+        )
     if options.align not in ('simulation', 'onset'):
         raise alignment.AlignmentError(f'align {options.align!r} is not simulation or onset')
     if split is not None and (options.trial or len(split.trials) > 1):
@@ -418,7 +439,7 @@ def _start(
         return alignment.StartTime(
             0, "bag stamps (the project's bags count from the start of the motion)", 0.0
         ), 0, everything
-    if options.align == 'onset':
+    if options.align == 'onset' and not (options.motion == 'task' and split and not split.usable):
         assert split is not None
         return choose_trial(split, 0).start or alignment.StartTime(0, '', 0.0), 0, everything
     if reference is None:

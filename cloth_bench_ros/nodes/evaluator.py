@@ -58,6 +58,9 @@ class Evaluator(Node):
         super().__init__('evaluator', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
         declare_fixed(self, 'engines', ['mujoco'])
         self.task = node_task(self)
+        # False while a composed graph is still being built: a node that fails to start then
+        # says why in one line, and this one has nothing to add
+        self.graph_started = True
         self.primitive = parse_primitive(self.get_parameter('primitive').value)
         rate_hz = declare_option(self, 'rate_hz')
         declare_float(self, 'time_offset', self.task.settle_duration)
@@ -328,7 +331,7 @@ class Evaluator(Node):
     def close(self) -> None:
         """Say what the run was waiting for when it is stopped before its end (signal or hang)."""
         self.error_topics.close()
-        if not self.done:
+        if not self.done and self.graph_started:
             waiting = '; '.join(self.waiting_for()) or 'nothing more'
             self.get_logger().warning(f'stopped before the run ended, waiting for {waiting}')
 

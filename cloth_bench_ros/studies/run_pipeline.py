@@ -143,6 +143,7 @@ def run_pipeline(config: RunConfig) -> dict | None:
         # delivers a message to its subscribers in subscription order, so the evaluator notes a
         # target's send time before a simulator steps on it (else latency would miss the step).
         evaluator = Evaluator(context=context, parameter_overrides=_params(params['evaluator']))
+        evaluator.graph_started = False
         nodes.append(evaluator)
         for engine in config.engines:
             name = f'simulator_{engine}'
@@ -152,6 +153,7 @@ def run_pipeline(config: RunConfig) -> dict | None:
                 )
             )
         nodes.append(Recorder(context=context, parameter_overrides=_params(params['recorder'])))
+        evaluator.graph_started = True
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)
