@@ -174,7 +174,7 @@ class Evaluator(Node):
         self.error_topics = ErrorTopics(
             self,
             self.engines,
-            self.primitive.value,
+            self.task,
             rate_hz,
             self.core.quintic_start_ns,
             self.realtime,
@@ -377,6 +377,7 @@ class Evaluator(Node):
                 self.summary,
                 Path(self.comparison_bag) if self.comparison_bag else None,
                 Path(self.output_dir) if self.comparison_figures and self.output_dir else None,
+                self.task,
             )
         if self.output_dir:
             write_run_report(Path(self.output_dir), self.summary, self.core.scores)
