@@ -44,7 +44,7 @@ def _smooth(s: np.ndarray | float) -> np.ndarray | float:
 
 
 def grippers(t: float) -> tuple[np.ndarray, np.ndarray]:
-    """The test's own motion (world frame): lift and swing, lower onto the table, slide."""
+    """Return the grippers of the test's own motion (world): lift, swing, lower, slide."""
     yaw = math.radians(LINE_YAW_DEG)
     along = np.array([math.cos(yaw), math.sin(yaw), 0.0])
     normal = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
@@ -124,7 +124,7 @@ def surface_points(vertices: np.ndarray, tris: np.ndarray, rng, per_triangle: in
 
 
 def table_points(rng, count: int = 1500) -> np.ndarray:
-    """The table top the camera sees around the cloth."""
+    """Return the table top the camera sees around the cloth."""
     xy = rng.uniform(-0.3, 0.9, (count, 2))
     return np.column_stack([xy, TABLE_Z + rng.normal(0.0, NOISE, count)])
 
@@ -205,18 +205,17 @@ def write_recording(
             ns = START_NS + int(round(t * 1e9))
             pts = np.concatenate([surface_points(vertices, tris, rng), table_points(rng)])
             floors.append((t, float(cKDTree(pts).query(vertices)[0].mean())))
-            messages.append((ns, points, ts.serialize_cdr(cloud(ns, move(pts)),
-                                                         'sensor_msgs/msg/PointCloud2')))
+            cdr = ts.serialize_cdr(cloud(ns, move(pts)), 'sensor_msgs/msg/PointCloud2')
+            messages.append((ns, points, cdr))
         for k in range(int(times[-1] * TF_HZ) + 1):
             t = k / TF_HZ
             ns = START_NS + int(round(t * 1e9))
             left, right = (move(p[None])[0] for p in grippers(t))
             if poses:
-                pose = T['geometry_msgs/msg/Pose']
+                pose, point = T['geometry_msgs/msg/Pose'], T['geometry_msgs/msg/Point']
+                still = T['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0, w=1.0)
                 msg = T['geometry_msgs/msg/PoseArray'](header=header(ns, frame), poses=[
-                    pose(position=T['geometry_msgs/msg/Point'](x=p[0], y=p[1], z=p[2]),
-                         orientation=T['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0,
-                                                                        w=1.0))
+                    pose(position=point(x=p[0], y=p[1], z=p[2]), orientation=still)
                     for p in (left, right)])
                 messages.append((ns, poses, ts.serialize_cdr(msg, 'geometry_msgs/msg/PoseArray')))
             if t < tf_from or (tf_gap and tf_gap[0] < t < tf_gap[1]):

@@ -33,7 +33,7 @@ pytest.importorskip('foxglove')
 
 TYPES = get_typestore(Stores.ROS2_HUMBLE)
 SUBPROTOCOLS = ['foxglove.sdk.v1', 'foxglove.websocket.v1']  # newest first, as the spec allows
-SETTLE_NS = int(round(load_task('dynamic').settle_duration * 1e9))  # run time of the quintic part's start
+SETTLE_NS = int(round(load_task('dynamic').settle_duration * 1e9))  # the motion's start, run time
 GRID = '6x8'
 
 

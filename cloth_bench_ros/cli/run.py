@@ -136,8 +136,8 @@ def recorded_motion(args: argparse.Namespace, bag: Path, out: Path) -> tuple[str
     rec = doc['recorded']
     lines = [
         f'motion: the recorded grippers ({rec["source"]}, {len(rec["t"])} samples over '
-        f'{rec["t"][-1]:.2f} s from the first cloud; in the clouds\' frame {rec["frame"]}, turned '
-        f'into the scene\'s), written to {path}',
+        f'{rec["t"][-1]:.2f} s from the first cloud; in the frame of the clouds, {rec["frame"]}, '
+        f'turned into the scene), written to {path}',
         table_line(doc),
     ]
     return str(path), lines

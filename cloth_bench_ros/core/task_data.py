@@ -200,7 +200,7 @@ def _recorded(value: Any) -> RecordedMotion:
     if not (np.diff(t) > 0).all():
         raise InputError('recorded.t: the times must increase')
     if t[0] != 0.0:
-        raise InputError('recorded.t: the first time must be 0 (the motion\'s start)')
+        raise InputError('recorded.t: the first time must be 0 (the start of the motion)')
     left, right = (_samples(rec[k], f'recorded.{k}', 3) for k in ('left', 'right'))
     if len(left) != len(t) or len(right) != len(t):
         raise InputError('recorded.left, recorded.right: one sample per time in recorded.t')

@@ -119,7 +119,7 @@ def _settle(task: Task, t: np.ndarray, start: np.ndarray, grasp: np.ndarray) -> 
 
 
 def check_grasp(task: Task, width: float) -> None:
-    """InputError if a recorded motion's grippers start further apart than the cloth allows."""
+    """Raise InputError if recorded grippers start further apart than the cloth allows."""
     apart = float(np.linalg.norm(np.subtract(task.grasp[1], task.grasp[0])))
     if apart > width + GRASP_SLACK:
         raise InputError(

@@ -20,10 +20,10 @@ from typing import Any
 
 from cloth_bench_ros.core import scene
 from cloth_bench_ros.core.cleaning import find_table_z
-from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.data.bag_reader import BagReader, decode_cloud
 from cloth_bench_ros.data.messages import POSE_ARRAY
 from cloth_bench_ros.data.tf_buffer import apply, TF_MESSAGE, TF_TOPICS, TfBuffer, TransformError
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.safe_io import atomic_write_text
 import numpy as np
 import yaml
@@ -79,7 +79,7 @@ def _from_tf(
     if len(kept) < 2:
         raise InputError(
             f'bag {reader.path}: the gripper frames {",".join(frames)} cannot be resolved into '
-            f'the clouds\' frame {target} at 2 common times'
+            f'the frame of the clouds, {target}, at 2 common times'
         )
     return np.asarray(kept, dtype=np.int64), np.asarray(left), np.asarray(right)
 
@@ -214,7 +214,7 @@ def recorded_task(
 def write_task(path: Path, doc: dict[str, Any]) -> Path:
     """Write a task file (YAML) and return its path."""
     head = (
-        '# The grippers\' recorded motion, in the scene\'s frame (cloth-bench; see '
+        "# The grippers' recorded motion, in the scene's frame (cloth-bench; see "
         'docs/own-recording.md).\n'
     )
     atomic_write_text(path, head + yaml.safe_dump(doc, sort_keys=False, width=100))
@@ -230,4 +230,5 @@ def table_line(doc: dict[str, Any]) -> str:
             'table: none (no --table-z, and no plane found below the grippers in the first '
             f"cloud): the engines' table lies {drop:.3f} m below the left gripper's start"
         )
-    return f'table: top at z = {rec["table_z"]:.3f} m in {rec["frame"]}, from {rec["table_source"]}'
+    where = f'in {rec["frame"]}, from {rec["table_source"]}'
+    return f'table: top at z = {rec["table_z"]:.3f} m {where}'

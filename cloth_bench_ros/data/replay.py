@@ -137,7 +137,7 @@ def _to_world(reader: BagReader, options: ReplayOptions) -> tuple[Any, str]:
         to_scene = np.asarray(recorded.to_scene).reshape(4, 4)
         return (
             lambda frame, stamp: to_scene @ buffer.lookup(recorded.frame, frame, stamp)
-        ), f'{recorded.frame} turned into the scene (the recorded grippers\' start)'
+        ), f"{recorded.frame} turned into the scene (the recorded grippers' start)"
     return (lambda frame, stamp: buffer.lookup(WORLD, frame, stamp)), source
 
 
@@ -405,9 +405,9 @@ def _start(
     if split is not None and split.trials and not split.usable and options.motion != 'task':
         reasons = '; '.join(f'{t.number}: {t.reason}' for t in split.trials)
         raise alignment.AlignmentError(
-            f'the recording\'s motion does not match the task {replay_task(options).name} '
+            f"the recording's motion does not match the task {replay_task(options).name} "
             f'({split.source}: {reasons}): give the motion it holds with --gripper-frames '
-            'LEFT,RIGHT or --targets-topic T (or --motion task to score the task\'s motion '
+            "LEFT,RIGHT or --targets-topic T (or --motion task to score the task's motion "
             'anyway)'
         )
     if options.align not in ('simulation', 'onset'):

@@ -92,7 +92,7 @@ class TfBuffer:
                 self.set_transform(transform, static=topic == '/tf_static')
 
     def stamps(self, frame: str) -> list[int]:
-        """Return the stamps (ns) of a frame's own /tf samples, in order ([] if static)."""
+        """Return, in ns and in order, when a frame's own /tf samples were taken ([]: static)."""
         return [s[0] for s in self._dynamic.get(_strip(frame), [])]
 
     @property

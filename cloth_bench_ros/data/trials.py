@@ -375,7 +375,12 @@ class _CornerFit:
 
 
 def _split(
-    split: Split, times: np.ndarray, fit: Any, moving: np.ndarray, base_ns: int, primitive: TaskLike
+    split: Split,
+    times: np.ndarray,
+    fit: Any,
+    moving: np.ndarray,
+    base_ns: int,
+    primitive: TaskLike,
 ) -> Split:
     """Turn moving samples into trials, each with its start from `fit(first, low, high)`."""
     t_ref, _ = task_displacement(primitive)
