@@ -101,3 +101,26 @@ def test_shipped_tasks_keep_the_papers_windows():
     assert load_task('dynamic').window == 'before_table_contact'
     assert load_task('quasi_static').window == 'whole_motion'
     assert np.isclose(load_task('quasi_static').duration, 14.0)
+
+
+def test_a_recorded_motion_file_is_checked_as_a_task_file(tmp_path):
+    doc = {
+        'settle': {'hold_start': 1.0, 'move': 1.0, 'hold_end': 1.0},
+        'recorded': {
+            'source': 'tf frames l,r', 'frame': 'base', 'start_ns': 10**18,
+            'to_scene': [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0],
+            'table_z': None, 'table_source': 'none', 't': [0.0, 0.5, 1.0],
+            'left': [[0, 0, 1], [0, 0.1, 1], [0, 0.2, 1]],
+            'right': [[0.5, 0, 1], [0.5, 0.1, 1], [0.5, 0.2, 1]],
+        },
+        'window': 'before_table_contact',
+    }
+    task = load_task('dynamic', _write(tmp_path, yaml.safe_dump(doc)))
+    tg = full_targets(task, 10.0)
+    assert task.duration == 1.0 and tg.quintic_index == 30
+    assert np.allclose(tg.left[:31], [0, 0, 1])  # settles where the grippers start
+    assert tg.left[35] == pytest.approx([0, 0.1, 1])
+    assert tg.right[-1] == pytest.approx([0.5, 0.2, 1])
+    doc['recorded']['t'] = [0.0, 1.0, 0.5]
+    with pytest.raises(InputError, match='recorded.t: the times must increase'):
+        load_task('dynamic', _write(tmp_path, yaml.safe_dump(doc), 'bad.yaml'))

@@ -40,7 +40,7 @@ class RecordedMotion:
     """The grippers' recorded positions, in the scene's frame, from the motion's start."""
 
     source: str  # e.g. 'tf frames left_gripper,right_gripper' or 'targets topic /targets'
-    frame: str  # the frame the clouds and grippers were resolved into ('' : the clouds' own)
+    frame: str  # the clouds' frame, which the grippers were resolved into
     start_ns: int  # bag stamp of t = 0
     to_scene: tuple[float, ...]  # 16 numbers, row-major: that frame -> the scene's
     table_z: float | None  # m, the table top in that frame; None: no table
@@ -71,7 +71,8 @@ class Task:
     pitch: float  # radians
     yaw: float  # radians
     window: str  # one of WINDOWS
-    recorded: RecordedMotion | None = None  # followed instead of the chains (which are empty)
+    # followed instead of the axes (which then hold its first positions)
+    recorded: RecordedMotion | None = None
 
     @property
     def settle_duration(self) -> float:
