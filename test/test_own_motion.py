@@ -129,3 +129,22 @@ def test_the_motion_command_writes_the_task_file_the_nodes_take(recordings, tmp_
         node.destroy_node()
     finally:
         context.shutdown()
+
+
+def test_the_turn_into_the_scene_puts_the_grippers_on_x_and_the_table_at_its_height():
+    import math
+
+    from cloth_bench_ros.core import scene
+    from cloth_bench_ros.data.recorded_motion import table_line, to_scene_matrix
+    from cloth_bench_ros.data.tf_buffer import apply
+    import numpy as np
+
+    left = np.array([1.0, 2.0, 1.4])
+    right = left + 0.45 * np.array([math.cos(2.5), math.sin(2.5), 0.0])  # along 143 degrees
+    for table_z, z_left in ((0.7, 1.4 - 0.7 + scene.TABLE_TOP_Z), (None, 1.0)):
+        m = to_scene_matrix(left, right, table_z)
+        moved = apply(m, np.array([left, right]))
+        assert moved == pytest.approx(np.array([[0, 0, z_left], [0.45, 0, z_left]]), abs=1e-12)
+        assert np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3))  # rigid: distances kept
+    line = table_line({'recorded': {'table_z': None, 'frame': 'base', 'table_source': 'none'}})
+    assert line.startswith('table: none') and '0.805 m below' in line
