@@ -68,6 +68,7 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/config/foxglove', glob('config/foxglove/*.json')),
         ('share/' + package_name + '/config/presets', glob('config/presets/*.yaml')),
+        ('share/' + package_name + '/config/tasks', glob('config/tasks/*.yaml')),
         *(
             ('share/' + package_name + '/' + d, glob(d + '/*.yaml'))
             for d in sorted(str(p) for p in Path('config/presets').iterdir() if p.is_dir())

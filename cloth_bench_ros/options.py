@@ -295,6 +295,36 @@ REPLAY_OPTIONS = (
     'align_step',
     'trial',
     'align',
+    'motion',
+)
+
+# The motion scored: a task file of the user's, or the task's motion on a recording that does not
+# match it (docs/own-recording.md).
+OPTIONS.update(_declare(
+    Option(
+        'task', str, '', "task file (YAML: the grippers' quintic segments, settle phase and "
+        'metric window; see docs/own-recording.md) instead of the shipped task of --primitive',
+        flag='--task', metavar='FILE',
+    ),
+    Option(
+        'motion', str, 'recorded', 'recorded: the engines follow the grippers that '
+        '--gripper-frames or --targets-topic name, and a recording whose motion does not match '
+        "the task is refused; task: the task's motion, whatever the recording holds",
+        flag='--motion', choices=('recorded', 'task'),
+    ),
+))
+# The recorded grippers the engines follow (cloth-bench run and motion; docs/own-recording.md):
+# the command line turns them into a task file (data/recorded_motion.py), which the nodes take.
+MOTION_FLAGS = (
+    Option(
+        'gripper_frames', str, '', 'the grippers as tf frames LEFT,RIGHT of /tf and /tf_static: '
+        'the engines follow them', flag='--gripper-frames', metavar='LEFT,RIGHT',
+    ),
+    Option(
+        'table_z', float, None, "the table top's height in the clouds' frame (default: the plane "
+        'found in the first cloud, else no table)', flag='--table-z', unit='m', low=-100.0,
+        high=100.0,
+    ),
 )
 
 # A cloth of another size than the benchmark's 0.5 x 0.7 m, and its mass (docs/identification.md).

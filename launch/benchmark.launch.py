@@ -3,7 +3,7 @@ Launch the benchmark's node graph.
 
 ros2 launch cloth_bench_ros benchmark.launch.py [engines:=mujoco,bullet] [rate_hz:=100.0]
 [bag:=PATH] [live:=true] [live_port:=8765] [live_wait:=30.0] [cloth_size:=W,L]
-[cloth_mass:=KG] [cloth_mesh:=FILE] [device:=cpu|cuda|cuda:N|auto] ...
+[cloth_mass:=KG] [cloth_mesh:=FILE] [device:=cpu|cuda|cuda:N|auto] [task:=FILE] ...
 
 The node graph (README, "The node graph"), one process per node, output on the screen; the launch
 ends when the evaluator has written its report. Launch arguments win over config/benchmark.yaml:
@@ -54,6 +54,7 @@ def _nodes(context):
     bag = arg('bag') or os.path.join(share, 'bags', f'{cloth}_{primitive}')
     common = {
         'primitive': primitive,
+        'task': arg('task'),  # a task file (docs/own-recording.md); '': the shipped one
         'rate_hz': float(arg('rate_hz')),
         'cloth': cloth,
         'engines': engines,
@@ -133,6 +134,7 @@ def generate_launch_description():
         'cloth_mass': '0.0',
         'cloth_mesh': '',
         'device': '',
+        'task': '',
     }
     return LaunchDescription(
         [DeclareLaunchArgument(name, default_value=value) for name, value in defaults.items()]

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cloth_bench_ros.core.scene import ClothGrid, SETTLE_DURATION
+from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.data import BagWriter, TrialInfo
 from cloth_bench_ros.engines import make_engine
@@ -12,6 +13,7 @@ from cloth_bench_ros.engines.presets import load_preset
 import numpy as np
 
 FPS = 30.0
+SETTLE_DURATION = load_task('dynamic').settle_duration
 
 
 def write_engine_target_bag(

@@ -314,7 +314,12 @@ def test_targets_topic_sets_the_start_of_a_plain_bag(tmp_path):
                 ],
             )
             bag.write_message('/arm/targets', msg, stamp)
-    plan = plan_replay(BagReader(path), ReplayOptions(targets_topic='/arm/targets', clean='off'))
+    # its 0.9 s motion is not the task's: refused, unless the task's motion is asked for
+    with pytest.raises(AlignmentError, match='does not match the task dynamic'):
+        plan_replay(BagReader(path), ReplayOptions(targets_topic='/arm/targets', clean='off'))
+    plan = plan_replay(
+        BagReader(path), ReplayOptions(targets_topic='/arm/targets', clean='off', motion='task')
+    )
     assert plan.start.bag_ns == 10**18 + 400_000_000
     assert plan.counts['before_start'] == 4 and plan.counts['to_send'] == 6
 

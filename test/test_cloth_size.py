@@ -143,8 +143,9 @@ def test_a_recordings_gripper_targets_are_checked_against_the_cloths_width(tmp_p
     bag = tmp_path / 'rec'
     make_repeated_recording(bundled_bag('towel', 'dynamic'), bag, repetitions=1, rest_s=1.0,
                             seed=5, targets_rate=30.0)
+    # --motion task: the targets topic sets the start, the engines follow the task's quintic
     base = ['run', '--bag', str(bag), '--topic', CAMERA_TOPIC, '--targets-topic', TARGETS_TOPIC,
-            '--grid', '5x7']
+            '--motion', 'task', '--grid', '5x7']
     assert cli.main([*base, '--output', str(tmp_path / 'a'), '--cloth-size', '0.4,0.6']) == 0
     printed = capsys.readouterr().out
     assert "grasp: the recording's gripper targets are 0.478 m apart, the simulated corners " \

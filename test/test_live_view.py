@@ -23,7 +23,7 @@ import subprocess
 import sys
 import time
 
-from cloth_bench_ros.core.scene import SETTLE_DURATION
+from cloth_bench_ros.core.task_data import load_task
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
@@ -33,7 +33,7 @@ pytest.importorskip('foxglove')
 
 TYPES = get_typestore(Stores.ROS2_HUMBLE)
 SUBPROTOCOLS = ['foxglove.sdk.v1', 'foxglove.websocket.v1']  # newest first, as the spec allows
-SETTLE_NS = int(round(SETTLE_DURATION * 1e9))  # run time of the quintic part's start
+SETTLE_NS = int(round(load_task('dynamic').settle_duration * 1e9))  # the motion's start, run time
 GRID = '6x8'
 
 

@@ -3,13 +3,13 @@
 import math
 
 from cloth_bench_ros.core import scene
+from cloth_bench_ros.core.quintic import QuinticSegment
+from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.core.trajectory import (
     CSV_HEADER,
     full_targets,
     Primitive,
     quaternion_xyz,
-    quintic_part,
-    QuinticSegment,
     sample_quintic,
     sample_times,
     to_csv,
@@ -62,10 +62,10 @@ QUASI_ENDS = {
     'primitive,ends', [(Primitive.DYNAMIC, DYNAMIC_ENDS), (Primitive.QUASI_STATIC, QUASI_ENDS)]
 )
 def test_segment_ends_meet_reference_at_sample_times(primitive, ends, rate):
-    traj = quintic_part(primitive)
-    t = sample_times(traj.duration, rate)
+    task = load_task(primitive.value)
+    t = sample_times(task.duration, rate)
     for axis, points in ends.items():
-        chain = getattr(traj, axis)
+        chain = {'y': task.left[1], 'z': task.left[2], 'roll': task.roll}[axis]
         pos, vel, acc = chain.evaluate(t)
         for t_end, (p, v, a) in points:
             k = int(round(t_end * rate))
@@ -77,8 +77,10 @@ def test_segment_ends_meet_reference_at_sample_times(primitive, ends, rate):
 
 @pytest.mark.parametrize('primitive', list(Primitive))
 def test_segments_join_continuously_in_position_and_velocity(primitive):
-    traj = quintic_part(primitive)
-    for chain in (traj.y, traj.z, traj.roll):
+    task = load_task(primitive.value)
+    for chain in (task.left[1], task.left[2], task.roll):
+        if not hasattr(chain, 'segments'):
+            continue
         for seg, nxt in zip(chain.segments, chain.segments[1:]):
             p1, v1, _ = seg.evaluate(seg.duration)
             p2, v2, _ = nxt.evaluate(0.0)
@@ -108,12 +110,13 @@ def test_grippers_share_y_z_and_keep_their_x():
 
 def test_full_targets_start_with_the_settle_phase():
     tg = full_targets('dynamic', 100.0)
-    assert tg.quintic_start == scene.SETTLE_DURATION and tg.quintic_index == 300
+    grasp_left = np.array(load_task('dynamic').grasp[0])
+    assert tg.quintic_start == 3.0 and tg.quintic_index == 300
     assert np.allclose(tg.left[0], scene.GRIPPER_START_LEFT) and np.allclose(
         tg.right[100], scene.GRIPPER_START_RIGHT
     )
-    assert np.allclose(tg.left[150], (scene.GRIPPER_START_LEFT + scene.PREGRASP_LEFT) / 2)
-    assert np.allclose(tg.left[200:301], scene.PREGRASP_LEFT)
+    assert np.allclose(tg.left[150], (scene.GRIPPER_START_LEFT + grasp_left) / 2)
+    assert np.allclose(tg.left[200:301], grasp_left)
     quintic = sample_quintic('dynamic', 100.0)
     assert np.allclose(tg.left[300:], quintic.left, atol=1e-12)
     assert tg.stamp_ns(300) == 3_000_000_000

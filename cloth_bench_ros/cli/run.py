@@ -10,7 +10,7 @@ import time
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.options import Option, OPTIONS, REPLAY_OPTIONS
+from cloth_bench_ros.options import MOTION_FLAGS, Option, OPTIONS, REPLAY_OPTIONS
 
 
 RUN_FLAGS: tuple[common.Flag, ...] = (
@@ -29,6 +29,8 @@ RUN_FLAGS: tuple[common.Flag, ...] = (
 )
 # scoring your own recording (docs/own-recording.md)
 SCORING_FLAGS: tuple[common.Flag, ...] = (
+    'task',
+    *MOTION_FLAGS,
     *REPLAY_OPTIONS,
     Option(
         'transform', str, None, '4x4 matrix into world for every cloud, instead of tf',
@@ -64,9 +66,19 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.add_option(run, 'cloth_mesh')
     run.set_defaults(func=cmd_run)
 
-    traj = sub.add_parser('trajectory', help='print the quintic part of a primitive as CSV')
-    common.add_options(traj, ('primitive', 'rate_hz'))
+    traj = sub.add_parser('trajectory', help="print a task's motion as CSV")
+    common.add_options(traj, ('primitive', 'task', 'rate_hz'))
     traj.set_defaults(func=cmd_trajectory)
+
+    motion = sub.add_parser(
+        'motion', help="write a recording's gripper motion as a task file (for --task, task:=)"
+    )
+    common.add_options(motion, (
+        ('bag', {'help': 'rosbag2 recording', 'required': True}), 'topic', *MOTION_FLAGS,
+        'targets_topic', Option('output', str, None, 'the task file to write', flag='--output',
+                                metavar='FILE', required=True),
+    ))
+    motion.set_defaults(func=cmd_motion)
 
     engines = sub.add_parser('engines', help='list known engines, their availability and version')
     common.add_option(engines, Option(
@@ -86,6 +98,50 @@ def _replay_params(args: argparse.Namespace) -> dict:
     if args.transform:
         params['transform'] = [float(v) for v in common.read_transform(args.transform).ravel()]
     return params
+
+
+def _write_motion(args: argparse.Namespace, bag: Path, path: Path) -> tuple[Path, dict]:
+    """Write the recorded grippers (--gripper-frames, else --targets-topic) as a task file."""
+    from cloth_bench_ros.data.bag_reader import BagReader
+    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, recorded_task
+    from cloth_bench_ros.data.recorded_motion import write_task
+
+    with BagReader(bag) as reader:
+        doc = recorded_task(reader, args.topic or '', parse_gripper_frames(args.gripper_frames),
+                            args.targets_topic or '', args.table_z)
+    return write_task(path, doc), doc
+
+
+def recorded_motion(args: argparse.Namespace, bag: Path, out: Path) -> tuple[str, list[str]]:
+    """
+    Return the task file of the recorded grippers the run follows ('' : none) and its lines.
+
+    --gripper-frames or --targets-topic name them, unless --motion task; the task file is
+    written into the report directory.
+    """
+    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, table_line
+
+    follow = args.motion != 'task' and (
+        parse_gripper_frames(args.gripper_frames) or args.targets_topic
+    )
+    if not follow:
+        if args.table_z is not None:
+            raise UserError('--table-z: only with a recorded motion (--gripper-frames or '
+                            '--targets-topic)')
+        return '', (["motion: the task's, as --motion task asks (the recording's own is not "
+                     'followed)'] if args.motion == 'task' else [])
+    if args.task:
+        raise UserError('--task and a recorded motion (--gripper-frames or --targets-topic): '
+                        'give one')
+    path, doc = _write_motion(args, bag, out / 'motion.yaml')
+    rec = doc['recorded']
+    lines = [
+        f'motion: the recorded grippers ({rec["source"]}, {len(rec["t"])} samples over '
+        f'{rec["t"][-1]:.2f} s from the first cloud; in the frame of the clouds, {rec["frame"]}, '
+        f'turned into the scene), written to {path}',
+        table_line(doc),
+    ]
+    return str(path), lines
 
 
 def _print_real(summary: dict) -> None:
@@ -218,6 +274,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         }
         for name in engines
     }
+    from cloth_bench_ros.core.task_data import load_task
+
+    task = load_task(args.primitive, args.task)  # a bad task file: one line, before the run
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic)
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, overrides)
@@ -235,12 +294,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     _checked_output(
         out, '--output'
     )  # an unwritable or occupied --output is found before the run, not after it
+    task_file, motion_lines = recorded_motion(args, bag, out)
     config = RunConfig(
         bag=bag,
         engines=engines,
         rate_hz=args.rate,
         cloth=args.cloth,
         primitive=args.primitive,
+        task=task_file or args.task or '',
         seed=args.seed,
         pacing=args.pacing,
         output_dir=out,
@@ -285,6 +346,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         f'cloth-bench run: {args.cloth} {args.primitive} at {args.rate:g} Hz, seed {args.seed},'
         f' bag {bag}{on}'
     )
+    if args.task:
+        print(f'task: {task.path} (sha256 {task.sha256[:12]}), {task.duration:.2f} s of motion')
+    for line in motion_lines:
+        print(line)
     for name, device in devices.items():
         model = params[name].get('model')
         note = fitted_elsewhere(
@@ -311,10 +376,25 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_trajectory(args: argparse.Namespace) -> int:
-    """Print the quintic part of a primitive as CSV."""
+    """Print a task's motion (--task, else the shipped one of --primitive) as CSV."""
+    from cloth_bench_ros.core.task_data import load_task
     from cloth_bench_ros.core.trajectory import sample_quintic, to_csv
 
-    sys.stdout.write(to_csv(sample_quintic(args.primitive, args.rate)))
+    sys.stdout.write(to_csv(sample_quintic(load_task(args.primitive, args.task), args.rate)))
+    return 0
+
+
+def cmd_motion(args: argparse.Namespace) -> int:
+    """Write a recording's gripper motion as a task file."""
+    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, table_line
+
+    if not parse_gripper_frames(args.gripper_frames) and not args.targets_topic:
+        raise UserError('motion: give the grippers with --gripper-frames LEFT,RIGHT or '
+                        '--targets-topic T')
+    common.check_bag(Path(args.bag), args.topic)
+    path, doc = _write_motion(args, Path(args.bag), Path(args.output))
+    print(f'task file: {path} ({doc["recorded"]["source"]}, {doc["recorded"]["t"][-1]:.2f} s)')
+    print(table_line(doc))
     return 0
 
 

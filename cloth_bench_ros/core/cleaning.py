@@ -12,10 +12,14 @@ a `CleaningStats`, so the summary can say so.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 from cloth_bench_ros.core import scene
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
+
+if TYPE_CHECKING:
+    from cloth_bench_ros.core.trajectory import TaskLike
 
 WORKSPACE_MARGIN = 0.10  # m around the reach of the cloth
 TABLE_PLANE_DISTANCE = 0.01  # m: points this close to the table's plane are removed with it
@@ -73,10 +77,10 @@ def workspace_box(
 
 
 def scene_cleaning(
-    primitives: tuple[str, ...] = ('dynamic', 'quasi_static'),
+    primitives: tuple[TaskLike, ...] = ('dynamic', 'quasi_static'),
     voxel: float = OPTIONS['voxel'].default,
 ) -> CleaningConfig:
-    """Return the cleaning for the benchmark scene: the box of the primitives' gripper paths."""
+    """Return the cleaning for the benchmark scene: the box of the tasks' gripper paths."""
     from cloth_bench_ros.core.trajectory import full_targets
 
     paths = [full_targets(p, 100.0) for p in primitives]
@@ -100,6 +104,28 @@ def _remove_table(points: np.ndarray, distance: float) -> np.ndarray:
         return keep
     keep[np.abs(points @ normal + offset) <= distance] = False
     return keep
+
+
+def find_table_z(points: np.ndarray, below_z: float) -> float | None:
+    """
+    Return the height of the table top among points (n, 3) below `below_z`, or None.
+
+    The plane the cleaning removes, searched without knowing its height: the near-horizontal
+    plane with the most inliers among the points below `below_z`, a table only if it holds at
+    least a fifth of them; its height is its inliers' median z.
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    points = points[np.isfinite(points).all(axis=1) & (points[:, 2] < below_z)]
+    if len(points) < 50:
+        return None
+    plane = _table_plane(points, TABLE_PLANE_DISTANCE)
+    if plane is None:
+        return None
+    normal, offset = plane
+    inliers = np.abs(points @ normal + offset) <= TABLE_PLANE_DISTANCE
+    if inliers.sum() < 0.2 * len(points):
+        return None
+    return float(np.median(points[inliers, 2]))
 
 
 def _table_plane(points: np.ndarray, distance: float) -> tuple[np.ndarray, float] | None:

@@ -274,11 +274,14 @@ def cloth_faces(cloth: Cloth) -> np.ndarray:
 
 
 def task_starts(
-    primitive: str, rate_hz: float, size: tuple[float, float] | None
+    task: Any, rate_hz: float, size: tuple[float, float] | None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Return the grippers' start positions (left, right): the task's first targets."""
+    """Return the grippers' start positions (left, right): the first targets of `task`.
+
+    `task`: a Task, or a shipped task's name (core/task_data.py).
+    """
     from cloth_bench_ros.core.cloth_size import grasp_width
     from cloth_bench_ros.core.trajectory import full_targets
 
-    targets = full_targets(primitive, rate_hz, grasp_width(size))
+    targets = full_targets(task, rate_hz, grasp_width(size))
     return targets.left[0], targets.right[0]

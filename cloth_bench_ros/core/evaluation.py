@@ -40,7 +40,7 @@ from cloth_bench_ros.core.surface_metrics import (
     surface_samples,
     surface_scores,
 )
-from cloth_bench_ros.core.trajectory import Primitive
+from cloth_bench_ros.core.trajectory import as_task, SUFFIX_TASK, TaskLike
 import numpy as np
 
 IRREGULAR_TOLERANCE = 0.25  # an interval off 1/fps by more than this fraction is reported
@@ -113,14 +113,15 @@ class OnlineEvaluator:
     def __init__(
         self,
         engines: list[str],
-        primitive: Primitive,
+        task: TaskLike,
         quintic_start_ns: int,
         change_of_phase_frame: int | None,
         fps: float = 30.0,
         keep_pairs: bool = False,
         faces: np.ndarray | None = None,
     ) -> None:
-        self.primitive = Primitive(primitive)
+        # the task's window: before the first table contact (its frames' CD_d) or every frame
+        self.suffix = as_task(task).suffix
         self.quintic_start_ns = int(quintic_start_ns)
         self.change_of_phase_frame = change_of_phase_frame
         self.fps = fps
@@ -145,7 +146,7 @@ class OnlineEvaluator:
         # the mesh's triangles: the surface metrics and contact onset are computed with them
         self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
         self.mesh_vertices = 0 if self.faces is None else int(self.faces.max()) + 1
-        self.contact_rule = self.faces is not None and self.primitive is Primitive.DYNAMIC
+        self.contact_rule = self.faces is not None and self.suffix == 'd'
         self.real_contact: list[tuple[float, bool]] = []
 
     # inputs
@@ -230,7 +231,7 @@ class OnlineEvaluator:
     def _score(self, stamp: int, cloud: RealCloud) -> None:
         t = (stamp - self.quintic_start_ns) / 1e9
         frame = int(round(t * self.fps))
-        if self.primitive is Primitive.DYNAMIC and self.change_of_phase_frame is not None:
+        if self.suffix == 'd' and self.change_of_phase_frame is not None:
             in_window = frame < self.change_of_phase_frame
         else:
             in_window = True
@@ -303,7 +304,7 @@ class OnlineEvaluator:
     ) -> dict[str, dict]:
         """Return per engine: CD/HD over the window, L_s, step time, latency, divergence."""
         out = {}
-        suffix = 'd' if self.primitive is Primitive.DYNAMIC else 'q'
+        suffix = self.suffix
         for name, e in self.engines.items():
             rows = [s for s in self.scores if s.engine == name]
             window = [s for s in rows if s.in_window]
@@ -331,7 +332,7 @@ class OnlineEvaluator:
             if self.faces is not None:
                 for f in SURFACE_FIELDS:
                     values = [getattr(s, f) for s in window]
-                    out[name][METRICS[f].summary_key(self.primitive.value)] = (
+                    out[name][METRICS[f].summary_key(SUFFIX_TASK[suffix])] = (
                         math.nan if diverged_in_window or not values else float(np.mean(values))
                     )
                 settings: dict[str, object] = dict(surface_settings())

@@ -11,16 +11,10 @@ CLOTH_WIDTH = 0.50  # m, the grasped edge (along x)
 CLOTH_LENGTH = 0.70  # m, the hanging length (along -z)
 GRAVITY = -9.81  # m/s^2 along z
 
+# Where the cloth hangs at rest; a task's settle phase moves the grippers on to its grasp pose
+# (config/tasks/*.yaml).
 GRIPPER_START_LEFT = np.array([0.00, 0.00, 1.00])
 GRIPPER_START_RIGHT = np.array([0.50, 0.00, 1.00])
-PREGRASP_LEFT = np.array([0.02, 0.00, 1.00])
-PREGRASP_RIGHT = np.array([0.498, 0.00, 1.00])
-
-# Settle phase before the quintic part: hold, move linearly to the pre-grasp pose, hold.
-SETTLE_HOLD_START = 1.0  # s
-SETTLE_MOVE = 1.0  # s
-SETTLE_HOLD_END = 1.0  # s
-SETTLE_DURATION = SETTLE_HOLD_START + SETTLE_MOVE + SETTLE_HOLD_END
 
 TABLE_TOP_Z = 0.195  # m
 TABLE_X = (-0.30, 0.80)  # m; the benchmark asks for at least [-0.1, 0.7]

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 
 from cloth_bench_ros.core.metrics import RealCloud
-from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.core.trajectory import full_targets, TaskLike
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
@@ -88,7 +88,7 @@ def targets_start(stamps_ns: list[int], positions: list[np.ndarray], topic: str)
 
 
 def reference_motion(
-    engine, primitive: str, rate_hz: float, seconds: float, seed: int = 0,
+    engine, primitive: TaskLike, rate_hz: float, seconds: float, seed: int = 0,
     width: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """

@@ -16,13 +16,12 @@ from typing import Any
 
 from cloth_bench_ros.core.scene import (
     ClothGrid,
-    SETTLE_DURATION,
     TABLE_THICKNESS,
     TABLE_TOP_Z,
     TABLE_X,
     TABLE_Y,
 )
-from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, quaternion_xyz
+from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, quaternion_xyz, TaskLike
 from cloth_bench_ros.data import error_view, messages
 from cloth_bench_ros.data.bag_writer import BagWriter
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POSE_ARRAY, TYPESTORE
@@ -169,16 +168,16 @@ def _metrics(stamp: int, score: Any) -> Any:
 
 
 def write_comparison_bag(
-    path: Path, pairs: list, primitive: str, rate_hz: float
+    path: Path, pairs: list, task: TaskLike, rate_hz: float
 ) -> dict[str, int]:
     """
     Write the comparison bag (see module doc); returns messages per topic.
 
     pairs: (FrameScore, real points, vertices, per-vertex errors or None) per scored frame.
     """
-    offset = int(round(SETTLE_DURATION * 1e9))
     pc2 = messages.POINTCLOUD2
-    tg = full_targets(primitive, rate_hz)
+    tg = full_targets(task, rate_hz)
+    offset = int(round(tg.quintic_start * 1e9))
     with BagWriter(path) as bag:
         bag.write_message('/tf_static', _tf_static(), 0)
         bag.write_message(SCENE_TOPIC, table_marker(0), 0)

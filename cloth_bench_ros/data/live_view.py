@@ -21,7 +21,7 @@ import threading
 import time
 from typing import Any, Callable, cast
 
-from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.core.trajectory import full_targets, TaskLike
 from cloth_bench_ros.data import error_view, messages
 from cloth_bench_ros.data.comparison_bag import table_marker, target_poses
 from cloth_bench_ros.errors import ClothBenchError
@@ -74,7 +74,7 @@ class LiveView:
     def __init__(
         self,
         engines: list[str],
-        primitive: str,
+        task: TaskLike,
         rate_hz: float,
         host: str = DEFAULT_HOST,
         port: int = DEFAULT_PORT,
@@ -88,7 +88,7 @@ class LiveView:
             raise LiveViewError(f'live view: foxglove-sdk is not installed ({exc})') from None
         logging.getLogger('foxglove').setLevel(logging.ERROR)  # its drops: our one line instead
         self.realtime, self.warn, self.rate_hz = realtime, warn, float(rate_hz)
-        self.targets = full_targets(primitive, rate_hz)
+        self.targets = full_targets(task, rate_hz)
         self.listener = _Listener()
         self.context = foxglove.Context()
         self.channels: dict[str, Any] = {}

@@ -16,6 +16,7 @@ from typing import Any
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.core.cleaning import clean, CleaningConfig, CleaningStats, scene_cleaning
 from cloth_bench_ros.core.phase import first_table_contact
+from cloth_bench_ros.core.task_data import load_task, Task
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.data import alignment, trials
 from cloth_bench_ros.data.bag_reader import BagReader, decode_cloud, IRREGULAR_TOLERANCE
@@ -38,6 +39,9 @@ class ReplayOptions:
 
     cloth: str = OPTIONS['cloth'].default
     primitive: str = OPTIONS['primitive'].default
+    task: str = ''  # a task file; '': the shipped task of `primitive`
+    # recorded: refuse a recording whose motion does not match the task; task: score it anyway
+    motion: str = OPTIONS['motion'].default
     change_of_phase_frame: int | None = None
     # "": the project's cloud topic, else the only PointCloud2 topic
     topic: str = OPTIONS['topic'].default
@@ -118,6 +122,9 @@ def _trial(reader: BagReader, options: ReplayOptions, topic: str) -> TrialInfo:
 
 def _to_world(reader: BagReader, options: ReplayOptions) -> tuple[Any, str]:
     """Return a function (frame_id, stamp_ns) -> 4x4 into world, and where it comes from."""
+    recorded = replay_task(options).recorded
+    if recorded is not None and options.transform is not None:
+        raise InputError('--transform and a recorded motion: the recorded motion sets the frame')
     if options.transform is not None:
         fixed = np.asarray(options.transform, dtype=float).reshape(4, 4)
         return (lambda frame, stamp: fixed), '--transform matrix applied to every cloud'
@@ -126,6 +133,11 @@ def _to_world(reader: BagReader, options: ReplayOptions) -> tuple[Any, str]:
     if tf_topics:
         buffer.add_messages((topic, msg) for topic, _, msg in reader.messages(tf_topics))
     source = f'tf from {", ".join(tf_topics)}' if tf_topics else 'clouds already in world'
+    if recorded is not None:  # into the grippers' frame, then turned into the scene's
+        to_scene = np.asarray(recorded.to_scene).reshape(4, 4)
+        return (
+            lambda frame, stamp: to_scene @ buffer.lookup(recorded.frame, frame, stamp)
+        ), f"{recorded.frame} turned into the scene (the recorded grippers' start)"
     return (lambda frame, stamp: buffer.lookup(WORLD, frame, stamp)), source
 
 
@@ -149,10 +161,11 @@ def cleaning_config(options: ReplayOptions, project_bag: bool) -> CleaningConfig
         )
     # Removing the plane also removes cloth lying flat on the table, which the quasi-static drag
     # scores.
+    task = replay_task(options)
     remove = options.table_plane == 'remove' or (
-        options.table_plane == 'auto' and options.primitive == 'dynamic'
+        options.table_plane == 'auto' and task.window == 'before_table_contact'
     )
-    return replace(scene_cleaning((options.primitive,), options.voxel), table_plane=remove)
+    return replace(scene_cleaning((task,), options.voxel), table_plane=remove)
 
 
 @dataclass
@@ -213,13 +226,14 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     topic, trial, project_bag = rec.topic, rec.trial, rec.project_bag
     stamps, clouds, stats, config = rec.stamps, rec.clouds, rec.stats, rec.config
     frames_source, nan_dropped = rec.frames_source, rec.nan_dropped
-    split = None if project_bag or options.start_time else split_recording(
+    recorded = replay_task(options).recorded is not None
+    split = None if project_bag or options.start_time or recorded else split_recording(
         reader, options, stamps, clouds
     )
     start, chosen, region = _start(
         reader, options, project_bag, stamps, clouds, reference, split
     )
-    targets = full_targets(options.primitive, options.rate_hz)
+    targets = full_targets(replay_task(options), options.rate_hz)
     end_ns = targets.stamp_ns(len(targets) - 1) - int(round(targets.quintic_start * 1e9))
     plan = ReplayPlan(
         trial,
@@ -267,6 +281,11 @@ def plan_replay(reader: BagReader, options: ReplayOptions, reference=None) -> Re
     return plan
 
 
+def replay_task(options: ReplayOptions) -> Task:
+    """Return the task the recording is replayed for: its file's, else the shipped one."""
+    return load_task(options.primitive, options.task)
+
+
 def recorded_grasp(reader: BagReader, topic: str) -> float | None:
     """Return the x distance between the first two poses of a recording's first gripper targets."""
     messages = reader.messages([topic])
@@ -293,11 +312,11 @@ def change_of_phase(
     table contact found in `frames` ((t_ns from the start, world points) in time order). The
     quasi-static task has none: it is scored over its whole length.
     """
-    if options.primitive != 'dynamic':
+    if replay_task(options).window != 'before_table_contact':
         return {
             'frame': None,
             'source': 'none',
-            'reason': 'the quasi-static task is scored over its whole length',
+            'reason': f'the {replay_task(options).name} task is scored over its whole length',
         }
     if options.change_of_phase_frame is not None:
         return {
@@ -329,11 +348,11 @@ def split_recording(
     """Return the repetitions of the task in a recording: from its targets topic, else clouds."""
     topic = options.targets_topic or TARGETS_TOPIC
     if reader.topics.get(topic) == POSE_ARRAY:
-        split = trials.split_targets(*_targets(reader, topic), topic, options.primitive)
+        split = trials.split_targets(*_targets(reader, topic), topic, replay_task(options))
     else:
-        split = trials.split_clouds(stamps, clouds, options.primitive)
+        split = trials.split_clouds(stamps, clouds, replay_task(options))
     split.origin_ns = min(stamps)
-    targets = full_targets(options.primitive, options.rate_hz)
+    targets = full_targets(replay_task(options), options.rate_hz)
     end_ns = targets.stamp_ns(len(targets) - 1) - int(round(targets.quintic_start * 1e9))
     at = np.asarray(stamps, dtype=np.int64)
     for found in split.trials:
@@ -377,8 +396,20 @@ def _start(
 ) -> tuple[alignment.StartTime, int, tuple[float, float]]:
     """Return the start, the trial scored (0: the recording as one) and that trial's region."""
     everything = (-np.inf, np.inf)
+    recorded = replay_task(options).recorded
+    if recorded is not None:
+        method = f"the recorded motion's start ({recorded.source}: the first cloud)"
+        return alignment.StartTime(recorded.start_ns, method, 0.0), 0, everything
     if options.start_time:
         return alignment.given_start(options.start_time, min(stamps)), 0, everything
+    if split is not None and split.trials and not split.usable and options.motion != 'task':
+        reasons = '; '.join(f'{t.number}: {t.reason}' for t in split.trials)
+        raise alignment.AlignmentError(
+            f"the recording's motion does not match the task {replay_task(options).name} "
+            f'({split.source}: {reasons}): give the motion it holds with --gripper-frames '
+            "LEFT,RIGHT or --targets-topic T (or --motion task to score the task's motion "
+            'anyway)'
+        )
     if options.align not in ('simulation', 'onset'):
         raise alignment.AlignmentError(f'align {options.align!r} is not simulation or onset')
     if split is not None and (options.trial or len(split.trials) > 1):
@@ -408,7 +439,7 @@ def _start(
         return alignment.StartTime(
             0, "bag stamps (the project's bags count from the start of the motion)", 0.0
         ), 0, everything
-    if options.align == 'onset':
+    if options.align == 'onset' and not (options.motion == 'task' and split and not split.usable):
         assert split is not None
         return choose_trial(split, 0).start or alignment.StartTime(0, '', 0.0), 0, everything
     if reference is None:

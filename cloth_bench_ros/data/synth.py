@@ -21,7 +21,7 @@ from typing import Any
 from cloth_bench_ros.core import scene
 from cloth_bench_ros.core.phase import first_table_contact
 from cloth_bench_ros.core.scene import ClothGrid
-from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quintic_part
+from cloth_bench_ros.core.trajectory import as_task, full_targets, parse_primitive
 from cloth_bench_ros.data import BagWriter, CLOUD_TOPIC, TrialInfo
 from cloth_bench_ros.data.virtual_camera import (
     background_triangles, mesh_triangles, observe, rasterize, Sensor
@@ -79,7 +79,7 @@ class SynthConfig:
     def frame_count(self) -> int:
         """Frames k = 0, 1, ... at t = k / fps while t <= duration - 1 / fps (132 and 420)."""
         duration = (
-            quintic_part(self.primitive).duration if self.duration is None else self.duration
+            as_task(self.primitive).duration if self.duration is None else self.duration
         )
         return int(math.floor(duration * self.fps + 1e-9))
 

@@ -91,6 +91,10 @@ class TfBuffer:
             for transform in msg.transforms:
                 self.set_transform(transform, static=topic == '/tf_static')
 
+    def stamps(self, frame: str) -> list[int]:
+        """Return, in ns and in order, when a frame's own /tf samples were taken ([]: static)."""
+        return [s[0] for s in self._dynamic.get(_strip(frame), [])]
+
     @property
     def frames(self) -> set[str]:
         return set(self._parent) | set(self._parent.values())

@@ -43,7 +43,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from cloth_bench_ros.core.trajectory import sample_quintic
+from cloth_bench_ros.core.trajectory import sample_quintic, TaskLike
 from cloth_bench_ros.data.alignment import StartTime
 import numpy as np
 from scipy.spatial import cKDTree
@@ -134,27 +134,27 @@ def settings() -> dict[str, Any]:
     return {name: value for name, value in globals().items() if name.isupper()}
 
 
-def task_displacement(primitive: str) -> tuple[np.ndarray, np.ndarray]:
+def task_displacement(primitive: TaskLike) -> tuple[np.ndarray, np.ndarray]:
     """(t, d): the grippers' mid-point displacement (n, 3) from its start over the task."""
     targets = sample_quintic(primitive, TEMPLATE_RATE)
     mid = (targets.left + targets.right) / 2
     return targets.t, mid - mid[0]
 
 
-def motion_lag(primitive: str) -> float:
+def motion_lag(primitive: TaskLike) -> float:
     """Return the time (s) the task's grippers take to move LAG_DISTANCE at their mean speed."""
     t, d = task_displacement(primitive)
     path = float(np.sum(np.linalg.norm(np.diff(d, axis=0), axis=1)))
     return float(np.clip(LAG_DISTANCE * t[-1] / path, *LAG_RANGE_S))
 
 
-def detection_lead(primitive: str) -> float:
+def detection_lead(primitive: TaskLike) -> float:
     """Return how long (s) the clouds' first moving frame may follow the task's start."""
     t, d = task_displacement(primitive)
     return float(t[np.argmax(np.linalg.norm(d, axis=1) >= LEAD_DISTANCE)])
 
 
-def longest_still(primitive: str) -> float:
+def longest_still(primitive: TaskLike) -> float:
     """Return the longest phase (s) in which the task's grippers do not move."""
     t, d = task_displacement(primitive)
     still = np.abs(np.diff(d, axis=0)).max(axis=1) < 1e-7
@@ -196,7 +196,7 @@ def _fit_cost(
 def fit_start(
     times: np.ndarray,
     position: np.ndarray,
-    primitive: str,
+    primitive: TaskLike,
     low: float,
     high: float,
 ) -> tuple[float, float, float, float]:
@@ -262,7 +262,7 @@ def _check(trial: FoundTrial, task_s: float, targets: bool) -> None:
 
 
 def split_targets(
-    stamps_ns: list[int], positions: list[np.ndarray], topic: str, primitive: str
+    stamps_ns: list[int], positions: list[np.ndarray], topic: str, primitive: TaskLike
 ) -> Split:
     """Find the repetitions of the task in recorded gripper targets (PoseArray positions)."""
     split = Split(f'targets topic {topic}')
@@ -286,7 +286,7 @@ def split_targets(
     return _split(split, times, fit, moving, stamps_ns[0], primitive)
 
 
-def split_clouds(stamps_ns: list[int], clouds: list[np.ndarray], primitive: str) -> Split:
+def split_clouds(stamps_ns: list[int], clouds: list[np.ndarray], primitive: TaskLike) -> Split:
     """Find the repetitions of the task in world clouds (cleaned: the cloth, little else)."""
     split = Split('clouds')
     keep = [i for i, c in enumerate(clouds) if len(c) >= 10]
@@ -320,7 +320,7 @@ def split_clouds(stamps_ns: list[int], clouds: list[np.ndarray], primitive: str)
 class _CornerFit:
     """The start fitted to where the cloud's grasped corners are: they move as the grippers do."""
 
-    def __init__(self, trees: list[cKDTree], times: np.ndarray, primitive: str) -> None:
+    def __init__(self, trees: list[cKDTree], times: np.ndarray, primitive: TaskLike) -> None:
         self.trees, self.times = trees, times
         self.t_ref, self.d_ref = task_displacement(primitive)
         task = sample_quintic(primitive, TEMPLATE_RATE)
@@ -375,7 +375,12 @@ class _CornerFit:
 
 
 def _split(
-    split: Split, times: np.ndarray, fit: Any, moving: np.ndarray, base_ns: int, primitive: str
+    split: Split,
+    times: np.ndarray,
+    fit: Any,
+    moving: np.ndarray,
+    base_ns: int,
+    primitive: TaskLike,
 ) -> Split:
     """Turn moving samples into trials, each with its start from `fit(first, low, high)`."""
     t_ref, _ = task_displacement(primitive)

@@ -8,6 +8,7 @@ import threading
 from typing import Callable, Iterable, Sequence
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.task_data import load_task, Task
 from cloth_bench_ros.errors import InputError, is_user_error, one_line
 from cloth_bench_ros.runtime import (
     declare_option,
@@ -92,6 +93,15 @@ def node_cloth_size(node) -> tuple[float, float] | None:
 def node_cloth_mesh(node) -> str | None:
     """Declare cloth_mesh and return it: a mesh file, or None: the grid (core/cloth_mesh.py)."""
     return declare_option(node, 'cloth_mesh') or None
+
+
+def node_task(node) -> Task:
+    """Declare primitive and task and return the task: the file's, else the shipped one."""
+    primitive = declare_option(node, 'primitive')
+    try:
+        return load_task(primitive, declare_option(node, 'task'))
+    except InputError as exc:
+        raise InputError(f'{node.get_name()}: {exc}') from None
 
 
 def node_cloth(node) -> tuple[tuple[float, float] | None, float | None]:

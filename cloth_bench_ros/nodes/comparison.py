@@ -15,6 +15,7 @@ from pathlib import Path
 import shutil
 from typing import Any
 
+from cloth_bench_ros.core.trajectory import TaskLike
 from cloth_bench_ros.data.comparison_bag import grid_for, write_comparison_bag
 import numpy as np
 
@@ -99,7 +100,7 @@ def animation(pairs: list, path: Path) -> tuple[Path, int]:
 
 
 def write_comparison(
-    pairs: list, summary: dict, bag_path: Path | None, figures_dir: Path | None
+    pairs: list, summary: dict, bag_path: Path | None, figures_dir: Path | None, task: TaskLike
 ) -> dict:
     """Every comparison output asked for; returns what was written, for the summary."""
     run = summary['run']
@@ -109,7 +110,7 @@ def write_comparison(
     if bag_path is not None:
         out['bag'] = str(bag_path)
         out['bag_topics'] = write_comparison_bag(
-            bag_path, pairs, run['primitive'], float(run['rate_hz'])
+            bag_path, pairs, task, float(run['rate_hz'])
         )
     if figures_dir is not None:
         figures_dir.mkdir(parents=True, exist_ok=True)

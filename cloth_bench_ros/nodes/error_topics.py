@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from cloth_bench_ros.core.trajectory import TaskLike
 from cloth_bench_ros.data import error_view
 from cloth_bench_ros.runtime import (
     declare_option,
@@ -41,7 +42,7 @@ class ErrorTopics:
         self,
         node: Any,
         engines: list[str],
-        primitive: str,
+        task: TaskLike,
         rate_hz: float,
         quintic_start_ns: int,
         realtime: bool,
@@ -72,7 +73,7 @@ class ErrorTopics:
 
             self.live = LiveView(
                 engines,
-                primitive,
+                task,
                 rate_hz,
                 live['live_host'],
                 live['live_port'],

@@ -15,7 +15,7 @@ from cloth_bench_ros.core.evaluation import accounting_line, OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.core.run_summary import run_summary
-from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
+from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
 from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data.trial import trial_from_message
@@ -24,6 +24,7 @@ from cloth_bench_ros.nodes.common import (
     node_cloth,
     node_cloth_mesh,
     node_grid,
+    node_task,
     publishers_matched,
     replay_stamps,
     run_node,
@@ -57,9 +58,13 @@ class Evaluator(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('evaluator', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
         declare_fixed(self, 'engines', ['mujoco'])
-        self.primitive = parse_primitive(declare_option(self, 'primitive'))
+        self.task = node_task(self)
+        # False while a composed graph is still being built: a node that fails to start then
+        # says why in one line, and this one has nothing to add
+        self.graph_started = True
+        self.primitive = parse_primitive(self.get_parameter('primitive').value)
         rate_hz = declare_option(self, 'rate_hz')
-        declare_float(self, 'time_offset', SETTLE_DURATION)
+        declare_float(self, 'time_offset', self.task.settle_duration)
         cut = declare_option(self, 'change_of_phase_frame')
         self.output_dir = declare_fixed(self, 'output_dir', '')
         self.comparison_bag = declare_fixed(self, 'record_comparison', '')
@@ -81,13 +86,14 @@ class Evaluator(Node):
                 'comparison_figures': validation.boolean,
             },
         )
-        targets = full_targets(self.primitive, rate_hz, grasp_width(size))
+        targets = full_targets(self.task, rate_hz, grasp_width(size))
         grid = run_cloth((nx, nz) if nx and nz else None, size, node_cloth_mesh(self),
                          (targets.left[0], targets.right[0])) or ClothGrid()
         self.engines, offset = p['engines'], p['time_offset']
         self.comparison_figures = p['comparison_figures']
         self.run_info = {
             'primitive': self.primitive.value,
+            **self.task.record(),
             'rate_hz': rate_hz,
             'engines': self.engines,
             'cloth': cloth,
@@ -115,7 +121,7 @@ class Evaluator(Node):
         self.final_stamp = targets.stamp_ns(len(targets) - 1)
         self.core = OnlineEvaluator(
             self.engines,
-            self.primitive,
+            self.task,
             int(round(offset * 1e9)),
             cut,
             REAL_FPS,
@@ -171,7 +177,7 @@ class Evaluator(Node):
         self.error_topics = ErrorTopics(
             self,
             self.engines,
-            self.primitive.value,
+            self.task,
             rate_hz,
             self.core.quintic_start_ns,
             self.realtime,
@@ -328,7 +334,7 @@ class Evaluator(Node):
     def close(self) -> None:
         """Say what the run was waiting for when it is stopped before its end (signal or hang)."""
         self.error_topics.close()
-        if not self.done:
+        if not self.done and self.graph_started:
             waiting = '; '.join(self.waiting_for()) or 'nothing more'
             self.get_logger().warning(f'stopped before the run ended, waiting for {waiting}')
 
@@ -374,6 +380,7 @@ class Evaluator(Node):
                 self.summary,
                 Path(self.comparison_bag) if self.comparison_bag else None,
                 Path(self.output_dir) if self.comparison_figures and self.output_dir else None,
+                self.task,
             )
         if self.output_dir:
             write_run_report(Path(self.output_dir), self.summary, self.core.scores)

@@ -24,10 +24,9 @@ from cloth_bench_ros import validation
 from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth, task_starts
 from cloth_bench_ros.core.cloth_size import grasp_width
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
-from cloth_bench_ros.core.scene import SETTLE_DURATION
 from cloth_bench_ros.data import BagReader, BagWriter
 from cloth_bench_ros.data.alignment import reference_motion, SearchSettings
-from cloth_bench_ros.data.replay import plan_replay, ReplayOptions
+from cloth_bench_ros.data.replay import plan_replay, replay_task, ReplayOptions
 from cloth_bench_ros.data.trial import TRIAL_STATUS_NAME
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset, sized_params
@@ -96,9 +95,10 @@ class Recorder(Node):
         path = declare_fixed(self, 'bag', '')
         if not path:
             raise InputError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
-        # Frames are stamped from the start of the quintic part; the run starts with the settle
+        options = self.replay_options()
+        # Frames are stamped from the start of the task's motion; the run starts with its settle
         # phase.
-        declare_float(self, 'time_offset', SETTLE_DURATION)
+        declare_float(self, 'time_offset', replay_task(options).settle_duration)
         clock = declare_fixed(self, 'clock', 'sim')
         declare_float(self, 'rate_factor', 1.0)
         declare_float(self, 'start_offset', 0.0)
@@ -119,7 +119,6 @@ class Recorder(Node):
         if clock not in ('sim', 'wall'):
             raise InputError(f'recorder: unknown clock {clock!r} (valid: sim, wall)')
         self.bag = BagReader(path)
-        options = self.replay_options()
         nx, nz = node_grid(self)  # 0, 0: the preset's grid
         # the size, mass and mesh of the alignment's reference cloth
         cloth = (*node_cloth(self), node_cloth_mesh(self))
@@ -166,6 +165,8 @@ class Recorder(Node):
         return ReplayOptions(
             cloth=declare_option(self, 'cloth'),
             primitive=declare_option(self, 'primitive'),
+            task=declare_option(self, 'task'),
+            motion=p['motion'],
             change_of_phase_frame=p['change_of_phase_frame'],
             topic=p['topic'],
             start_time=p['start_time'],
@@ -189,14 +190,14 @@ class Recorder(Node):
         size, mass, mesh = cloth
         preset = load_preset(options.align_engine, options.cloth, options.primitive)
         grid = run_cloth((nx, nz) if nx and nz else None, size, mesh,
-                         task_starts(options.primitive, options.rate_hz, size))
+                         task_starts(replay_task(options), options.rate_hz, size))
         engine = make_engine(
             options.align_engine, options.rate_hz,
             sized_params(options.align_engine, preset, size, mass, mesh_area(grid)), grid,
         )
         try:
             return reference_motion(
-                engine, options.primitive, options.rate_hz, seconds, width=grasp_width(size)
+                engine, replay_task(options), options.rate_hz, seconds, width=grasp_width(size)
             )
         finally:
             engine.close()

@@ -28,6 +28,7 @@ from cloth_bench_ros.nodes.common import (
     node_cloth,
     node_cloth_mesh,
     node_grid,
+    node_task,
     publish_serialises,
     run_node,
 )
@@ -118,7 +119,8 @@ class Simulator(Node):
         self.engine_name = declare_fixed(self, 'engine', 'mujoco')
         rate_hz = declare_option(self, 'rate_hz')
         cloth = declare_option(self, 'cloth')
-        primitive = declare_option(self, 'primitive')
+        task = node_task(self)
+        primitive = self.get_parameter('primitive').value
         self.seed = declare_option(self, 'seed')
         declare_fixed(self, 'engine_params', '{}')
         nx, nz = node_grid(self)
@@ -139,7 +141,7 @@ class Simulator(Node):
                 f'{self.get_name()}: parameters cloth_mass and engine_params mass both give the '
                 "cloth's mass; give one"
             )
-        targets = full_targets(primitive, rate_hz, grasp_width(size))
+        targets = full_targets(task, rate_hz, grasp_width(size))
         grid = run_cloth((nx, nz) if nx and nz else None, size, node_cloth_mesh(self),
                          (targets.left[0], targets.right[0]))
         preset = load_preset(  # the model that runs first, then its entry of the set

@@ -10,12 +10,13 @@ from typing import Any
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.cloth_size import grasp_width
 from cloth_bench_ros.core.hil_timing import TargetTimeline
-from cloth_bench_ros.core.trajectory import full_targets, parse_primitive, quaternion_xyz
+from cloth_bench_ros.core.trajectory import full_targets, quaternion_xyz
 from cloth_bench_ros.nodes.common import (
     all_subscriptions_matched,
     NAMESPACE,
     node_cloth_size,
     node_keys,
+    node_task,
     publish_serialises,
     publishers_matched,
     run_node,
@@ -52,7 +53,7 @@ class TrajectoryPublisher(Node):
         super().__init__(
             'trajectory_publisher', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs
         )
-        primitive = parse_primitive(declare_option(self, 'primitive'))
+        task = node_task(self)
         rate_hz = declare_option(self, 'rate_hz')
         self.pacing = declare_option(self, 'pacing')
         declare_fixed(self, 'engines', ['mujoco'])
@@ -74,7 +75,7 @@ class TrajectoryPublisher(Node):
         )
         self.timing_log = declare_fixed(self, 'timing_log', '')
         duration = declare_option(self, 'duration')
-        self.targets = full_targets(primitive, rate_hz, grasp_width(node_cloth_size(self)))
+        self.targets = full_targets(task, rate_hz, grasp_width(node_cloth_size(self)))
         # duration > 0: only the targets of the first `duration` seconds (short real-time checks).
         self.n_targets = (
             min(len(self.targets), int(duration * rate_hz) + 1)

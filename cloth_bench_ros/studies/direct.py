@@ -25,12 +25,13 @@ from cloth_bench_ros.core.evaluation import OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.core.run_summary import run_summary
-from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS, SETTLE_DURATION
+from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS
+from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, parse_primitive
 from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data import BagReader
 from cloth_bench_ros.data.alignment import reference_motion
-from cloth_bench_ros.data.replay import plan_replay, ReplayOptions
+from cloth_bench_ros.data.replay import plan_replay, replay_task, ReplayOptions
 from cloth_bench_ros.data.trial import TrialInfo
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.base import ClothEngine
@@ -43,7 +44,8 @@ import yaml
 
 def _cloth(config: RunConfig) -> Cloth | None:
     """Return the cloth of a run, as the nodes build it (None: the engine's default grid)."""
-    starts = task_starts(config.primitive, float(config.rate_hz), config.cloth_size)
+    task = load_task(config.primitive, config.task)
+    starts = task_starts(task, float(config.rate_hz), config.cloth_size)
     return run_cloth(config.grid, config.cloth_size, config.cloth_mesh, starts)
 
 
@@ -110,13 +112,15 @@ def _replay(config: RunConfig, cut: int | None) -> tuple[Any, dict[str, Any]]:
     options = ReplayOptions(
         cloth=config.cloth,
         primitive=config.primitive,
+        task=config.task,
         change_of_phase_frame=cut,
         rate_hz=float(config.rate_hz),
         align_engine=config.engines[0],
     )
     size, mass = config.cloth_size, config.cloth_mass
     cloth = _cloth(config)
-    key = (_bag_identity(Path(config.bag)), options, config.grid, size, mass,
+    task = replay_task(options).sha256  # a task file changed in place plans again
+    key = (_bag_identity(Path(config.bag)), options, task, config.grid, size, mass,
            str(mesh_record(cloth)))
     if key not in _PLANS:
 
@@ -130,7 +134,8 @@ def _replay(config: RunConfig, cut: int | None) -> tuple[Any, dict[str, Any]]:
             )
             try:
                 return reference_motion(
-                    engine, options.primitive, options.rate_hz, seconds, width=grasp_width(size)
+                    engine, replay_task(options), options.rate_hz, seconds,
+                    width=grasp_width(size),
                 )
             finally:
                 engine.close()
@@ -152,18 +157,19 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
             'realtime pacing, replay options and comparison outputs need the node graph'
         )
     primitive = parse_primitive(config.primitive)
+    task = load_task(primitive.value, config.task)
     rate_hz = validation.rate_hz(config.rate_hz)
     cut = config.change_of_phase_frame
     start = time.monotonic_ns()
     plan, replay = _replay(config, cut)
     trial = TrialInfo.from_strings(plan.trial.to_strings())
-    offset_ns = int(round(SETTLE_DURATION * 1e9))
+    offset_ns = int(round(task.settle_duration * 1e9))
     grid = _cloth(config) or ClothGrid()
     faces = cloth_faces(grid)
-    core = OnlineEvaluator(list(config.engines), primitive, offset_ns, cut, REAL_FPS, faces=faces)
+    core = OnlineEvaluator(list(config.engines), task, offset_ns, cut, REAL_FPS, faces=faces)
     if core.change_of_phase_frame is None:
         core.change_of_phase_frame = trial.change_of_phase_frame
-    targets = full_targets(primitive, rate_hz, grasp_width(config.cloth_size))
+    targets = full_targets(task, rate_hz, grasp_width(config.cloth_size))
     final_stamp = targets.stamp_ns(len(targets) - 1)
     for t, points in plan.frames:  # pending until the engines' states reach them
         if t + offset_ns <= final_stamp:
@@ -178,6 +184,7 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
     wall_s = (time.monotonic_ns() - start) / 1e9
     run = {
         'primitive': primitive.value,
+        **task.record(),
         'rate_hz': rate_hz,
         'engines': list(config.engines),
         'cloth': config.cloth,

@@ -147,14 +147,13 @@ def _evaluate(trial: Trial) -> dict:
     try:
         from cloth_bench_ros.core.pointcloud2 import as_carried
         from cloth_bench_ros.core.cloth_size import cloth_grid, grasp_width
-        from cloth_bench_ros.core.scene import SETTLE_DURATION
         from cloth_bench_ros.core.trajectory import full_targets
         from cloth_bench_ros.engines import make_engine
         from cloth_bench_ros.engines.presets import load_preset, sized_params
 
-        offset = int(round(SETTLE_DURATION * 1e9))
         size = trial.cloth_size
         targets = full_targets(trial.primitive, trial.rate_hz, grasp_width(size))
+        offset = int(round(targets.quintic_start * 1e9))
         preset = load_preset(trial.engine, trial.cloth, trial.primitive)  # for this cloth's size:
         preset = sized_params(trial.engine, preset, size, trial.cloth_mass)
         params = {**preset, **dict(trial.params)}

@@ -15,6 +15,7 @@ class RunConfig:
     rate_hz: float = OPTIONS['rate_hz'].default
     cloth: str = OPTIONS['cloth'].default
     primitive: str = OPTIONS['primitive'].default
+    task: str = ''  # a task file (--task); '': the shipped task of `primitive`
     seed: int = 0
     pacing: str = OPTIONS['pacing'].default
     output_dir: Path | None = None

@@ -50,6 +50,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
     out = config.output_dir if output_dir is None else output_dir
     common = {
         'primitive': config.primitive,
+        'task': config.task,
         'rate_hz': float(config.rate_hz),
         'use_sim_time': True,
     }
@@ -62,6 +63,7 @@ def node_parameters(config: RunConfig, output_dir: Path | None = None) -> dict[s
     nodes = {
         'trajectory_publisher': {
             'primitive': config.primitive,
+            'task': config.task,
             'rate_hz': float(config.rate_hz),
             'cloth_size': cloth['cloth_size'],
             'engines': list(config.engines),
@@ -142,6 +144,7 @@ def run_pipeline(config: RunConfig) -> dict | None:
         # delivers a message to its subscribers in subscription order, so the evaluator notes a
         # target's send time before a simulator steps on it (else latency would miss the step).
         evaluator = Evaluator(context=context, parameter_overrides=_params(params['evaluator']))
+        evaluator.graph_started = False
         nodes.append(evaluator)
         for engine in config.engines:
             name = f'simulator_{engine}'
@@ -151,6 +154,7 @@ def run_pipeline(config: RunConfig) -> dict | None:
                 )
             )
         nodes.append(Recorder(context=context, parameter_overrides=_params(params['recorder'])))
+        evaluator.graph_started = True
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)

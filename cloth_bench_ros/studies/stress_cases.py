@@ -223,7 +223,7 @@ def case_targets(case: StressCase):
     left, right = targets.left.copy(), targets.right.copy()
     q = targets.quintic_index
     if case.drag_height is not None:
-        z0 = float(scene.PREGRASP_LEFT[2])
+        z0 = float(left[q, 2])
         lowest = min(left[q:, 2].min(), right[q:, 2].min())
         scale = (z0 - (scene.TABLE_TOP_Z + case.drag_height)) / (z0 - lowest)
         for g in (left, right):
