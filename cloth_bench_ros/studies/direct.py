@@ -148,7 +148,7 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
     trial = TrialInfo.from_strings(plan.trial.to_strings())
     offset_ns = int(round(SETTLE_DURATION * 1e9))
     grid = cloth_grid(config.grid, config.cloth_size) or ClothGrid()
-    faces = grid_faces(grid.nx, grid.nz)
+    faces = grid_faces(grid.nx, grid.nz) if config.all_metrics else None  # None: CD/HD only
     core = OnlineEvaluator(list(config.engines), primitive, offset_ns, cut, REAL_FPS, faces=faces)
     if core.change_of_phase_frame is None:
         core.change_of_phase_frame = trial.change_of_phase_frame
