@@ -41,8 +41,9 @@ def overhead(rows: list[dict], label: str = '') -> dict[str, float]:
     """Print the cells' time against their engines' stepping, overall and per rate and engine."""
     rows = [r for r in rows if r.get('status') == 'ok']
     groups: dict[str, list[dict]] = {'all': rows}
-    for row in rows:
+    for row in sorted(rows, key=lambda r: -r['rate_hz']):
         groups.setdefault(f'{row["rate_hz"]:g} Hz', []).append(row)
+    for row in rows:
         groups.setdefault(row['engine'], []).append(row)
     ratios = {}
     for name, members in groups.items():

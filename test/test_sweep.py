@@ -188,6 +188,9 @@ def test_a_cell_scores_the_papers_metrics_unless_asked_and_a_row_lacking_one_run
     assert every['EMD'] > 0 and 0 <= every['F'] <= 1 and every['CD'] == paper['CD']
     assert main([*command, '--all-metrics']) == 0  # the same scoring: kept
     assert '(1 already done)' in capsys.readouterr().out and len(sw.load_rows(out)) == 1
+    assert main(command) == 0  # a row with every metric serves a cell that asks for CD/HD
+    assert '(1 already done)' in capsys.readouterr().out
+    assert [(r['all_metrics'], r['EMD']) for r in sw.load_rows(out)] == [(True, every['EMD'])]
 
 
 def test_a_cells_key_holds_its_engine_version_device_metrics_and_their_revision(

@@ -60,7 +60,7 @@ SWEEP_RUN_FLAGS: tuple[common.Flag, ...] = (
         action='store_true',
     ),
     Option(
-        'all_metrics', bool, False, "score every cell on every metric (docs/metrics.md), not only "
+        'all_metrics', bool, False, 'score every cell on every metric (docs/metrics.md), not only '
         "the paper's CD/HD and --metric's", flag='--all-metrics', action='store_true',
     ),
     Option(
@@ -217,6 +217,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if args.output
         else Path('results') / ('settings' if settings else 'sweep')
     )
+    cells = sw.with_kept_scoring(cells, sw.load_rows(out / sw.RESULTS_FILE))
     if args.dry_run:
         print(sw.estimate(cells, out, args.workers))
         return 0
@@ -376,6 +377,7 @@ def cmd_cross_reference(args: argparse.Namespace) -> int:
         common.check_bag(Path(bag))
     out = check_output_dir(args.output)
     results = out / sw.RESULTS_FILE
+    cells = sw.with_kept_scoring(cells, sw.load_rows(results))
     print(f'cloth-bench cross-reference: {len(cells)} cells -> {results}', flush=True)
     try:
         outcome = sw.run_sweep(

@@ -263,6 +263,16 @@ def cells_to_run(
     return sorted(todo.values(), key=lambda c: (c.seed, -estimated_cost(c)))
 
 
+def with_kept_scoring(cells: Sequence[Cell], existing: Sequence[dict]) -> list[Cell]:
+    """Return the cells, each CD/HD-only one whose cell is kept scored on every metric as that."""
+    keys = {row_key(r) for r in existing}
+    out = []
+    for cell in cells:
+        every = replace(cell, all_metrics=True)
+        out.append(every if not cell.all_metrics and every.key() in keys else cell)
+    return out
+
+
 def run_sweep(
     cells: Sequence[Cell],
     out_dir: Path,
