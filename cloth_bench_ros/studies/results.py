@@ -140,6 +140,25 @@ def superseded_rows(cells: Sequence[Any], existing: Sequence[dict]) -> list[dict
     return [r for r in existing if row_key(r) not in keys and identity(row_key(r)) in cells_of]
 
 
+def drop_superseded(path: Path, cells: Sequence[Any], existing: Sequence[dict]) -> None:
+    """Remove from a results file the rows of these cells computed otherwise (they run again)."""
+    gone = {id(r) for r in superseded_rows(cells, existing)}
+    if gone:
+        rewrite_rows(path, [r for r in existing if id(r) not in gone])
+
+
+def with_kept_scoring(cells: Sequence[Any], existing: Sequence[dict]) -> list[Any]:
+    """Return the cells, each CD/HD-only one whose cell is kept scored on every metric as that."""
+    from dataclasses import replace
+
+    keys = {row_key(r) for r in existing}
+    out = []
+    for cell in cells:
+        every = replace(cell, all_metrics=True)
+        out.append(every if not cell.all_metrics and every.key() in keys else cell)
+    return out
+
+
 def row_key(row: Mapping[str, Any]) -> tuple:
     """Return the key of a results row (the same as its Cell.key())."""
     return result_key(row)

@@ -56,16 +56,17 @@ from cloth_bench_ros.studies.results import (  # noqa: F401
     append_row,
     bag_fingerprint,
     cloth_fields,
+    drop_superseded,
     json_safe,
     load_rows,
     ResultRow,
     RESULTS_FILE,
     ResultsError,
     ResultsLock,
-    rewrite_rows,
     row_key,
+    SCORED_WITH,
     stale_cells,
-    superseded_rows,
+    with_kept_scoring,
 )
 from cloth_bench_ros.studies.run_config import RunConfig
 
@@ -131,9 +132,7 @@ def _cell_fields(cell: Cell) -> dict:
         'seed': int(cell.seed),
         'pacing': cell.pacing,
         'device': cell.device,
-        'engine_version': cell.engine_version,
-        'all_metrics': cell.all_metrics,
-        'surface_revision': cell.surface_revision,
+        **{name: getattr(cell, name) for name in SCORED_WITH},  # how it is computed
         'model': cell.model,
         'bag': cell.bag,
         'grid': f'{cell.grid[0]}x{cell.grid[1]}' if cell.grid else None,
@@ -263,16 +262,6 @@ def cells_to_run(
     return sorted(todo.values(), key=lambda c: (c.seed, -estimated_cost(c)))
 
 
-def with_kept_scoring(cells: Sequence[Cell], existing: Sequence[dict]) -> list[Cell]:
-    """Return the cells, each CD/HD-only one whose cell is kept scored on every metric as that."""
-    keys = {row_key(r) for r in existing}
-    out = []
-    for cell in cells:
-        every = replace(cell, all_metrics=True)
-        out.append(every if not cell.all_metrics and every.key() in keys else cell)
-    return out
-
-
 def run_sweep(
     cells: Sequence[Cell],
     out_dir: Path,
@@ -291,10 +280,7 @@ def run_sweep(
     with ResultsLock(out_dir, desc):
         existing = load_rows(results)
         todo = cells_to_run(cells, existing, retry_errors)
-        replaced = superseded_rows(todo, existing)
-        if replaced:  # computed otherwise (another engine version, other metrics): run again
-            gone = {id(r) for r in replaced}
-            rewrite_rows(results, [r for r in existing if id(r) not in gone])
+        drop_superseded(results, todo, existing)  # rows computed otherwise: run again
         outcome = SweepOutcome(results, len(cells), len(cells) - len(todo), 0, 0, 0, 0.0)
         start = time.perf_counter()
         bar = tqdm(
