@@ -30,6 +30,7 @@ import argparse
 from dataclasses import replace
 import os
 from pathlib import Path
+import sys
 import tempfile
 import time
 
@@ -59,11 +60,14 @@ def overhead(rows: list[dict], label: str = '') -> dict[str, float]:
 
 def cell_cost(cloths: list[str], seeds: int) -> None:
     """Print the cost ratio of the issue's sweep with every metric and with the paper's only."""
+    from cloth_bench_ros.core import metrics
     from cloth_bench_ros.core.surface_metrics import compile_kernels
+    from cloth_bench_ros.studies.dask_executor import WORKER_TREE_CACHE_POINTS
 
     plan = sw.SweepPlan(engines=['mujoco'], rates=[1000.0, 100.0], cloths=cloths, n_seeds=seeds)
     cells = sw.cells_to_run(plan.cells(), [])  # in the order the worker runs them
-    compile_kernels()  # a worker's start-up, not a cell's
+    compile_kernels()  # a worker's start-up (studies/dask_executor.py), not a cell's
+    metrics.keep_trees(WORKER_TREE_CACHE_POINTS)
     rows: dict[bool, list[dict]] = {True: [], False: []}
     with tempfile.TemporaryDirectory() as tmp:
         for k, cell in enumerate(cells):
@@ -71,6 +75,7 @@ def cell_cost(cloths: list[str], seeds: int) -> None:
                 row = sw.run_cell(replace(cell, all_metrics=every), tmp)
                 assert row['status'] == 'ok', row.get('error')
                 rows[every].append(row)
+            print(f'{k + 1}/{len(cells)} {cell.ident()}', file=sys.stderr, flush=True)
     print(f'{len(cells)} cells of `cloth-bench sweep --engine mujoco --rate 1000 --rate 100 '
           f'--seeds {seeds}` ({", ".join(cloths) or "every cloth"}), run in turn in one process; '
           f'load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores')
