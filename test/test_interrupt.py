@@ -162,3 +162,24 @@ def test_repair_journal_keeps_complete_lines_and_refuses_damage_in_the_middle(tm
     journal.write_text('{"op_code": 0}\ngarbage{\n{"op_code": 1}\n')
     with pytest.raises(ValueError, match='damaged at line 2'):
         repair_journal(journal)
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_rank_takes_its_one_cluster_down_and_keeps_the_trials(tmp_path):
+    """Interrupted in its first fold's identification: one line, exit 130, no worker left."""
+    from camera_recording import CAMERA_TOPIC, make_repeated_recording
+    from cloth_bench_ros.paths import bundled_bag
+
+    make_repeated_recording(bundled_bag('towel', 'dynamic'), tmp_path / 'rec' / 'two',
+                            repetitions=2, rest_s=1.0, seed=4)
+    out = tmp_path / 'rank'
+    args = ['rank', str(tmp_path / 'rec'), '--topic', CAMERA_TOPIC, '--engine', 'mujoco',
+            '--trials', '60', '--sampler', 'tpe', '--seeds', '1', '--grid', '6x8', '--rates',
+            '100', '--max-frames', '6', '--workers', '1', '--no-progress', '--output', str(out)]
+    trials = out / 'identify' / 'towel_dynamic' / 'mujoco' / 'fold1' / 'trials.jsonl'
+    code, err = interrupt_after_first_row(_cli(*args), trials)
+    assert code == 130, err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith('cloth-bench: rank interrupted: ') and 'to resume' in last
+    assert not any(word in err for word in NOISE), err
+    assert _lines(trials) >= 1

@@ -419,6 +419,31 @@ def test_rank_of_a_resized_cloth_names_it_and_never_reuses_another_sizes_cells(t
     assert json.loads((out / 'rank.json').read_text())['spec']['cloth_size'] == [0.45, 0.6]
 
 
+def test_a_rank_starts_one_cluster_for_every_folds_identification_and_its_cells(
+    tmp_path, monkeypatch, capsys
+):
+    """Two folds identified and their cells scored on one cluster; a kept rank starts none."""
+    from cloth_bench_ros.studies import dask_executor
+
+    started = []
+    start_cluster = dask_executor._cluster_client  # the session's cluster (conftest.py)
+
+    def counted(scheduler, workers, plugin):
+        started.append(scheduler)
+        return start_cluster(scheduler, workers, plugin)
+
+    monkeypatch.setattr(dask_executor, '_cluster_client', counted)
+    make_repeated_recording(bundled_bag('towel', 'dynamic'), tmp_path / 'rec' / 'two',
+                            repetitions=2, rest_s=1.0, seed=4)
+    command = ['rank', str(tmp_path / 'rec'), '--output', str(tmp_path / 'rank'), *TINY]
+    assert cli.main(command) == 0
+    printed = capsys.readouterr().out
+    assert 'identify mujoco on towel_dynamic fold 2' in printed and 'cells: 5 (0 kept' in printed
+    assert len(started) == 1  # not one per fold's identification and one more for the cells
+    assert cli.main(command) == 0
+    assert 'cells: 5 (5 kept' in capsys.readouterr().out and len(started) == 1
+
+
 @pytest.mark.parametrize(
     'rates, message',
     [('100,0.5', '0.5 Hz is outside [1, 10000]'), ('abc', "'abc' is not a number"),

@@ -10,6 +10,7 @@ import shutil
 
 from bag_fixtures import write_hanging_cloth_bag
 from cloth_bench_ros.cli import main
+from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
 from cloth_bench_ros.studies import sweep as sw
 import pytest
 
@@ -165,6 +166,66 @@ def test_sweep_appends_rows_and_resumes_without_recomputing(bag_dir, tmp_path):
     grown = sw.run_sweep(more, tmp_path, workers=2, progress=False)
     assert (grown.ran, grown.skipped) == (1, 2)
     assert sorted(r['seed'] for r in sw.load_rows(tmp_path)) == [0, 1, 2]
+
+
+def test_a_cell_scores_the_papers_metrics_unless_asked_and_a_row_lacking_one_runs_again(
+    tmp_path, capsys
+):
+    """CD/HD only by default; --metric emd or --all-metrics: every metric, replacing the row."""
+    bags, out = tmp_path / 'bags', tmp_path / 'out'
+    write_hanging_cloth_bag(bags / 'towel_dynamic', frames=40, change_of_phase_frame=30)
+    command = ['sweep', '--bag-dir', str(bags), '--engine', 'mujoco', '--rate', '100', '--cloth',
+               'towel', '--primitive', 'dynamic', '--seeds', '1', '--grid', '6x8', '--workers',
+               '1', '--no-progress', '--output', str(out)]
+    assert main(command) == 0
+    (paper,) = sw.load_rows(out)
+    assert paper['all_metrics'] is False and paper['surface_revision'] == 0
+    assert 0 < paper['CD'] <= paper['HD'] and 'EMD' not in paper and 'F' not in paper
+    assert main([*command, '--metric', 'emd']) == 0  # ranked on EMD: that row lacks it
+    assert '(0 already done)' in capsys.readouterr().out
+    (every,) = sw.load_rows(out)  # replaced, not beside the old one
+    assert every['all_metrics'] is True and every['surface_revision'] == SURFACE_REVISION
+    assert every['EMD'] > 0 and 0 <= every['F'] <= 1 and every['CD'] == paper['CD']
+    assert main([*command, '--all-metrics']) == 0  # the same scoring: kept
+    assert '(1 already done)' in capsys.readouterr().out and len(sw.load_rows(out)) == 1
+    assert main(command) == 0  # a row with every metric serves a cell that asks for CD/HD
+    assert '(1 already done)' in capsys.readouterr().out
+    assert [(r['all_metrics'], r['EMD']) for r in sw.load_rows(out)] == [(True, every['EMD'])]
+
+
+def test_a_cells_key_holds_its_engine_version_device_metrics_and_their_revision(
+    bag_dir, monkeypatch
+):
+    from dataclasses import replace
+
+    from cloth_bench_ros.core import surface_metrics
+    from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
+    from cloth_bench_ros.studies import cells as cells_module
+    from cloth_bench_ros.studies.results import KEY_FIELDS, superseded_rows
+
+    assert {'engine_version', 'device', 'all_metrics', 'surface_revision'} <= set(KEY_FIELDS)
+    (paper,) = sw.paper_cells(['mujoco'], [100], ['towel'], ['dynamic'], [0], bag_dir, GRID)
+    every = replace(paper, all_metrics=True)
+    keys = paper.key(), every.key()
+    assert keys[0] != keys[1]
+    row = sw.error_row(paper, 'x')
+    assert sw.row_key(row) == paper.key()
+    old = {k: v for k, v in row.items() if k not in ('engine_version', 'all_metrics')}
+    assert sw.row_key(old) not in keys  # a row from before these fields: computed again
+    assert superseded_rows([paper], [old, row]) == [old]
+    monkeypatch.setattr(surface_metrics, 'SURFACE_REVISION', surface_metrics.SURFACE_REVISION + 1)
+    assert paper.key() == keys[0] and every.key() != keys[1]  # CD/HD read no surface metric
+    monkeypatch.undo()
+    monkeypatch.setattr(MujocoCloth, 'version', classmethod(lambda cls: '99.0'))
+    cells_module._engine_version.cache_clear()
+    try:
+        assert paper.key() != keys[0] and paper.engine_version == '99.0'
+        assert superseded_rows([paper], [row]) == [row]
+    finally:
+        monkeypatch.undo()
+        cells_module._engine_version.cache_clear()
+    monkeypatch.setattr(sw.Cell, 'device', property(lambda cell: 'cuda:0'))
+    assert paper.key() != keys[0]
 
 
 def test_a_row_made_with_other_parameters_or_another_bag_is_never_resumed(tmp_path, capsys):

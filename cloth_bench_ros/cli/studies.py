@@ -60,6 +60,10 @@ SWEEP_RUN_FLAGS: tuple[common.Flag, ...] = (
         action='store_true',
     ),
     Option(
+        'all_metrics', bool, False, 'score every cell on every metric (docs/metrics.md), not only '
+        "the paper's CD/HD and --metric's", flag='--all-metrics', action='store_true',
+    ),
+    Option(
         'dry_run', bool, False, 'count the cells and estimate the time, run nothing',
         flag='--dry-run', action='store_true',
     ),
@@ -168,6 +172,13 @@ def say_fitted_elsewhere(cells: list, presets: Path | None) -> None:
             print(note)
 
 
+def scores_every_metric(args: argparse.Namespace) -> bool:
+    """Return whether a study's cells need every metric: asked for, or --metric is not CD/HD."""
+    from cloth_bench_ros.studies.objective import OBJECTIVES
+
+    return bool(getattr(args, 'all_metrics', False)) or args.metric not in OBJECTIVES
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run a sweep's cells on the executor, resuming what is done."""
     from cloth_bench_ros.studies import sweep as sw
@@ -193,6 +204,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         args.keep_frames,
         args.axis or [],
         common.preset_set(args),
+        all_metrics=scores_every_metric(args),
     )
     cells = plan.cells()
     if plan.left_out:
@@ -205,6 +217,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if args.output
         else Path('results') / ('settings' if settings else 'sweep')
     )
+    cells = sw.with_kept_scoring(cells, sw.load_rows(out / sw.RESULTS_FILE))
     if args.dry_run:
         print(sw.estimate(cells, out, args.workers))
         return 0
@@ -356,6 +369,7 @@ def cmd_cross_reference(args: argparse.Namespace) -> int:
         range(args.seed_start, args.seed_start + args.seeds),
         args.rate,
         entrants,
+        all_metrics=scores_every_metric(args),
     )
     for line in missing:
         print(f'cross-reference: {line}; that entrant runs with its preset only')
@@ -363,6 +377,7 @@ def cmd_cross_reference(args: argparse.Namespace) -> int:
         common.check_bag(Path(bag))
     out = check_output_dir(args.output)
     results = out / sw.RESULTS_FILE
+    cells = sw.with_kept_scoring(cells, sw.load_rows(results))
     print(f'cloth-bench cross-reference: {len(cells)} cells -> {results}', flush=True)
     try:
         outcome = sw.run_sweep(

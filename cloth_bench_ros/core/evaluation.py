@@ -163,7 +163,8 @@ class OnlineEvaluator:
         e.states.append((stamp_ns, vertices))
         if e.diverged_step is None and np.isfinite(vertices).all():
             e.stability.add(vertices)
-        self._score_ready()
+        if self._pending and self._pending[0][0] <= stamp_ns:  # else no frame is ready yet
+            self._score_ready()
 
     def add_step(
         self,

@@ -13,6 +13,7 @@ Two kinds of sweep build cells:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from itertools import product
 from pathlib import Path
 import re
@@ -64,6 +65,7 @@ class Cell:
     keep_frames: bool = False  # write summary.json + frames.csv of this run (per-frame plots)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
+    all_metrics: bool = False  # every metric (realtime cells: the node graph's always), or CD/HD
 
     def key(self) -> tuple:
         """Return what makes a cell unique in a results file (resume compares it with row_key)."""
@@ -95,6 +97,18 @@ class Cell:
             return str(self.params.get('device', 'cpu'))
 
     @property
+    def engine_version(self) -> str:
+        """Return the version of the cell's engine on this machine ('' where it is not here)."""
+        return _engine_version(self.engine)
+
+    @property
+    def surface_revision(self) -> int:
+        """Return the surface metrics' revision the cell is scored with (0: it is not)."""
+        from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
+
+        return SURFACE_REVISION if self.all_metrics else 0
+
+    @property
     def model(self) -> str:
         """Return the model the cell's engine runs (its overrides' on its shipped preset's)."""
         from cloth_bench_ros.engines import engine_model
@@ -121,6 +135,16 @@ class Cell:
             if part.startswith('presets='):
                 return part.removeprefix('presets=')
         return 'default'
+
+
+@lru_cache(maxsize=None)
+def _engine_version(engine: str) -> str:
+    from cloth_bench_ros.engines import engine_class
+
+    try:
+        return engine_class(engine).version()
+    except ClothBenchError:  # an engine not on this machine: its cells are error rows
+        return ''
 
 
 def _shown(value: object) -> str:
@@ -224,6 +248,7 @@ def paper_cells(
     step_per_target: bool = False,
     keep_frames_seeds: Iterable[int] | None = None,
     presets: PresetSet | None = None,
+    all_metrics: bool = False,
 ) -> list[Cell]:
     """
     Return the cells of the paper's layout.
@@ -231,6 +256,7 @@ def paper_cells(
     step_per_target: internal time step = 1 / rate, one engine step per target (the paper's
     frequency study), instead of the preset's time step. keep_frames_seeds: seeds whose per-frame
     scores are kept (default: the first seed). presets: a preset set instead of the shipped one.
+    all_metrics: score every metric, not only the paper's CD/HD.
     """
     overrides = overrides or {}
     _check_engines(engines, overrides)
@@ -264,6 +290,7 @@ def paper_cells(
                         tuple(sorted(params.items())),
                         pacing,
                         seed in keep,
+                        all_metrics=all_metrics or pacing == 'realtime',
                     )
                 )
     return cells
@@ -279,6 +306,7 @@ def settings_cells(
     axes: dict[str, list] | None = None,
     overrides: dict[str, dict] | None = None,
     presets: PresetSet | None = None,
+    all_metrics: bool = False,
 ) -> list[Cell]:
     """
     Factorial sweep over the settings that cost time, per engine, at one rate.
@@ -331,6 +359,7 @@ def settings_cells(
                             tuple(sorted({**base, **dict(params)}.items())),
                             'lockstep',
                             False,
+                            all_metrics=all_metrics,
                         )
                     )
     return cells

@@ -70,11 +70,13 @@ def cross_reference_cells(
     entrants: Sequence[tuple[str, dict]] = DEFAULT_ENTRANTS,
     references: Sequence[str] = REFERENCES,
     kinds: Sequence[str] = KINDS,
+    all_metrics: bool = False,
 ) -> tuple[list[Cell], list[str]]:
     """
     One sweep cell per entrant x kind x reference x task x seed (mode "cross_reference").
 
     Returns the cells and one line per identified entrant that has no identified parameters.
+    all_metrics: score every metric, for a --metric beside the paper's CD/HD.
     """
     cells, missing = [], []
     for reference in references:
@@ -106,6 +108,7 @@ def cross_reference_cells(
                             f'reference={reference},{label}',
                             None,
                             tuple(sorted(params.items())),
+                            all_metrics=all_metrics,
                         )
                     )
     return cells, missing

@@ -12,6 +12,8 @@ client keeps the study (which cells, the Optuna study, the results file); worker
   `on_crash` if it kills its workers again.
 - Every worker keeps the k-d trees of the real clouds it has scored (`WORKER_TREE_CACHE_POINTS`
   points at most), so a cell on a bag the worker has seen builds no tree again.
+- A command starts one cluster at most (`ClusterOnDemand`): rank's identifications and cells all
+  run on it, started when the first of them needs it (none when everything was kept).
 - The processes of a LocalCluster are children of the client; each watches its parent through a
   pipe and exits when the client dies, even by SIGKILL (distributed's AsyncProcess does this; the
   test suite checks it), so no worker outlives its study.
@@ -117,6 +119,36 @@ def open_client(
         quiet_shutdown(),
     ):  # quiet before closing
         yield client
+
+
+class ClusterOnDemand:
+    """
+    The one cluster of a command, started (by `open_client`) when `client()` is first called.
+
+    `with ClusterOnDemand(scheduler, workers, log) as cluster:` then `cluster.client()` wherever a
+    step of the command needs workers: every step runs on the same client, and a command whose
+    results were all kept starts none. Leaving the block closes it (an interrupt quietly).
+    """
+
+    def __init__(
+        self, scheduler: str | None = None, workers: int | None = None,
+        log_path: Path | None = None,
+    ) -> None:
+        self._open = (scheduler, workers, log_path)
+        self._stack = contextlib.ExitStack()
+        self._client: Any = None
+
+    def client(self) -> Any:
+        """Return the command's client, starting its cluster (or connecting) the first time."""
+        if self._client is None:
+            self._client = self._stack.enter_context(open_client(*self._open))
+        return self._client
+
+    def __enter__(self) -> 'ClusterOnDemand':
+        return self
+
+    def __exit__(self, *exc: Any) -> bool | None:
+        return self._stack.__exit__(*exc)
 
 
 @contextlib.contextmanager

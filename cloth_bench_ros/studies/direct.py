@@ -165,7 +165,7 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
     trial = TrialInfo.from_strings(plan.trial.to_strings())
     offset_ns = int(round(task.settle_duration * 1e9))
     grid = _cloth(config) or ClothGrid()
-    faces = cloth_faces(grid)
+    faces = cloth_faces(grid) if config.all_metrics else None  # None: CD/HD only
     core = OnlineEvaluator(list(config.engines), task, offset_ns, cut, REAL_FPS, faces=faces)
     if core.change_of_phase_frame is None:
         core.change_of_phase_frame = trial.change_of_phase_frame

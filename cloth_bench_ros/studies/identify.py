@@ -20,6 +20,7 @@ seeds (and the other trials' bags) against the engine's preset through the full 
 from __future__ import annotations
 
 from collections import deque
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from functools import partial
 import json
@@ -389,8 +390,14 @@ def identify(
     scheduler: str | None = None,
     workers: int | None = None,
     progress: bool = True,
+    client: Any = None,
 ) -> IdentifyOutcome:
-    """Run the identification of `spec` and its validation; write the preset and its JSON."""
+    """
+    Run the identification of `spec` and its validation; write the preset and its JSON.
+
+    On `client` where one is given (rank's one cluster for all its folds), else on a cluster of its
+    own (`scheduler`, or a local one of `workers` processes).
+    """
     from cloth_bench_ros.engines.presets import load_preset, sized_params
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.dask_executor import open_client
@@ -415,7 +422,8 @@ def identify(
     check_problem(spec, problem, spec.output / JOURNAL_FILE)
     with (
         ResultsLock(spec.output, 'identify'),
-        open_client(scheduler, workers, spec.output / 'workers.log') as client,
+        nullcontext(client) if client is not None
+        else open_client(scheduler, workers, spec.output / 'workers.log') as client,
     ):
         record_problem(spec, problem, spec.output / JOURNAL_FILE)
         shared = SharedSimulations(spec.shared, spec.pool) if spec.shared else None

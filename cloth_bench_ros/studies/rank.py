@@ -20,7 +20,7 @@ import json
 from pathlib import Path
 import shutil
 import sys
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Sequence, TYPE_CHECKING
 
 from cloth_bench_ros.core.cloth_size import cloth_record, grid_vertices
 from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
@@ -39,6 +39,9 @@ from cloth_bench_ros.studies.rank_trials import (
     recordings_of,
     reference_error,
 )
+
+if TYPE_CHECKING:
+    from cloth_bench_ros.studies.dask_executor import ClusterOnDemand
 
 DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
     ('mujoco', {}),
@@ -117,14 +120,15 @@ def _read_cells(path: Path) -> dict[str, dict]:
 
 
 def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTrial],
-              group: list[RankTrial], out: Path, scheduler: str | None, workers: int | None,
-              progress: bool, say: Callable[[str], None]) -> dict:
+              group: list[RankTrial], out: Path, cluster: ClusterOnDemand, progress: bool,
+              say: Callable[[str], None]) -> dict:
     """
     Return the identified parameters of one fold (resumed or reused when already done).
 
     The folds of an entrant share their simulations (studies.shared_simulations), kept beside
     the folds' folders: the same values, engine time spent once per parameter set. A fold whose
-    journal was fitted to another problem (studies.identify_problem) is identified afresh.
+    journal was fitted to another problem (studies.identify_problem) is identified afresh. Every
+    fold runs on the command's one cluster.
     """
     from cloth_bench_ros.studies.identify import identify, IdentifySpec, SUMMARY_FILE
     from cloth_bench_ros.studies.identify_problem import ProblemChanged
@@ -156,12 +160,12 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         pool=tuple(t.bag for t in group), shared=out.parent / SHARED_FILE,
     )
     try:
-        summary = identify(ident, scheduler, workers, progress).summary
+        summary = identify(ident, progress=progress, client=cluster.client()).summary
     except ProblemChanged as exc:  # its trials recorded again, another grid, rate, preset...
         say(f'{out.name}: its trials or settings changed since it was identified '
             f'({exc.changed}): identified again')
         shutil.rmtree(out)
-        summary = identify(ident, scheduler, workers, progress).summary
+        summary = identify(ident, progress=progress, client=cluster.client()).summary
     summary['rank_stamp'] = stamp
     done.write_text(json.dumps(summary, indent=1, default=str))
     return summary
@@ -245,13 +249,19 @@ def run_rank(
     progress: bool = True,
     say: Callable[[str], None] = print,
 ) -> dict[str, Any]:
-    """Run the protocol (resumable) and return every number it produced (see module doc)."""
+    """
+    Run the protocol (resumable) and return every number it produced (see module doc).
+
+    Every identification and cell runs on one cluster (`scheduler`, or `workers` local processes),
+    started when the first of them needs it.
+    """
     from cloth_bench_ros.safe_io import check_output_dir
-    from cloth_bench_ros.studies.dask_executor import open_client
+    from cloth_bench_ros.studies.dask_executor import ClusterOnDemand
     from cloth_bench_ros.studies.results import ResultsLock
 
     out = check_output_dir(spec.output)
-    with ResultsLock(out, 'rank'):
+    with ResultsLock(out, 'rank'), ClusterOnDemand(scheduler, workers,
+                                                   out / 'workers.log') as cluster:
         trials = prepare_trials(recordings_of(spec.recordings), spec.replay, out / 'trials', say)
         groups = groups_of(trials, say)
         if not groups:
@@ -274,7 +284,7 @@ def run_rank(
                     say(f'identify {name} on {group} fold {k + 1}: {len(train)} training trials')
                     summary = _identify(spec, engine, overrides, train, members,
                                         out / 'identify' / group / name / f'fold{k + 1}',
-                                        scheduler, workers, progress, say)
+                                        cluster, progress, say)
                     fitted = {**preset, **summary['params']}
                     identified[f'{group}|{name}|{k + 1}'] = {
                         'group': group, 'entrant': name, 'fold': k + 1,
@@ -309,8 +319,7 @@ def run_rank(
         left = [(k, c, m) for k, c, m in todo if k not in done]
         say(f'cells: {len(todo)} ({len(todo) - len(left)} kept from an earlier run)')
         if left:
-            with open_client(scheduler, workers, out / 'workers.log') as client:
-                _run_cells(client, left, out / CELLS_FILE, done, progress)
+            _run_cells(cluster.client(), left, out / CELLS_FILE, done, progress)
         vertices = grid_vertices(spec.grid, spec.cloth_size)
         return {
             'spec': {

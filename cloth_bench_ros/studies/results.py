@@ -40,7 +40,14 @@ KEY_FIELDS: dict[str, Any] = {
     'seed': None,
     'pacing': OPTIONS['pacing'].default,
     'device': 'cpu',  # the engine's compute device (rows written before it existed ran on the CPU)
+    # How the cell was computed (SCORED_WITH); rows older than a field never match a cell again.
+    'engine_version': '',
+    'all_metrics': True,  # every metric (core/metric_choice), or the paper's CD/HD only
+    'surface_revision': 0,  # core/surface_metrics.SURFACE_REVISION of an all-metrics row, else 0
 }
+# The key fields that say how a cell was computed, not which cell: a row that differs from a cell
+# in these only is superseded when the cell runs again (`superseded_rows`).
+SCORED_WITH = ('engine_version', 'all_metrics', 'surface_revision')
 NAME_FIELDS = ('mode', 'engine', 'cloth', 'primitive', 'pacing')
 NUMERIC_FIELDS = (
     'CD',
@@ -88,6 +95,8 @@ class ResultRow(TypedDict, total=False):
     seed: int
     pacing: str
     device: str  # the device the engine ran on (cpu, cuda:0, ...)
+    all_metrics: bool  # scored on every metric, or on the paper's CD/HD only
+    surface_revision: int  # the surface metrics' revision (all_metrics), else 0
     bag: str
     bag_fingerprint: str | None  # data.bag_layout.fingerprint: resumes only on the same bag
     grid: str | None
@@ -115,9 +124,39 @@ def result_key(fields: Mapping[str, Any]) -> tuple:
         values.append(
             float(value)
             if name == 'rate_hz'
-            else int(value) if name in ('trial', 'seed') else value
+            else int(value) if name in ('trial', 'seed', 'surface_revision')
+            else bool(value) if name == 'all_metrics' else value
         )
     return tuple(values)
+
+
+def superseded_rows(cells: Sequence[Any], existing: Sequence[dict]) -> list[dict]:
+    """Return the rows of these cells computed otherwise (another engine version or metrics)."""
+    def identity(key: tuple) -> tuple:
+        return tuple(v for name, v in zip(KEY_FIELDS, key) if name not in SCORED_WITH)
+
+    keys = {cell.key() for cell in cells}
+    cells_of = {identity(key) for key in keys}
+    return [r for r in existing if row_key(r) not in keys and identity(row_key(r)) in cells_of]
+
+
+def drop_superseded(path: Path, cells: Sequence[Any], existing: Sequence[dict]) -> None:
+    """Remove from a results file the rows of these cells computed otherwise (they run again)."""
+    gone = {id(r) for r in superseded_rows(cells, existing)}
+    if gone:
+        rewrite_rows(path, [r for r in existing if id(r) not in gone])
+
+
+def with_kept_scoring(cells: Sequence[Any], existing: Sequence[dict]) -> list[Any]:
+    """Return the cells, each CD/HD-only one whose cell is kept scored on every metric as that."""
+    from dataclasses import replace
+
+    keys = {row_key(r) for r in existing}
+    out = []
+    for cell in cells:
+        every = replace(cell, all_metrics=True)
+        out.append(every if not cell.all_metrics and every.key() in keys else cell)
+    return out
 
 
 def row_key(row: Mapping[str, Any]) -> tuple:
@@ -158,7 +197,10 @@ def check_row(row: Any, base: Path, where: str) -> dict[str, Any]:
             or not (math.isfinite(rate) and rate > 0)
         ):
             raise ResultsError(f'{where}: rate_hz {rate!r} is not a positive number')
-        for name in ('seed', 'trial'):
+        for name, kind in (('engine_version', str), ('all_metrics', bool)):
+            if name in row and not isinstance(row[name], kind):
+                raise ResultsError(f'{where}: {name} {row[name]!r} is not a {kind.__name__}')
+        for name in ('seed', 'trial', 'surface_revision'):
             if name in row and (
                 isinstance(row[name], bool) or not isinstance(row[name], int) or row[name] < 0
             ):

@@ -25,6 +25,7 @@ class RunConfig:
     cloth_mass: float | None = None  # kg, the whole cloth; None: the preset's per area
     cloth_mesh: str | None = None  # OBJ, PLY or STL file of the cloth; None: the grid
     presets_dir: Path | None = None  # directory of <engine>.yaml presets; None: config/presets
+    all_metrics: bool = True  # the direct path (studies/direct.py): False scores CD/HD only
     replay: dict = field(
         default_factory=dict
     )  # recorder parameters for plain bags (topic, start_time, ...)

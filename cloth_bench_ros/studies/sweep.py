@@ -56,6 +56,7 @@ from cloth_bench_ros.studies.results import (  # noqa: F401
     append_row,
     bag_fingerprint,
     cloth_fields,
+    drop_superseded,
     json_safe,
     load_rows,
     ResultRow,
@@ -63,7 +64,9 @@ from cloth_bench_ros.studies.results import (  # noqa: F401
     ResultsError,
     ResultsLock,
     row_key,
+    SCORED_WITH,
     stale_cells,
+    with_kept_scoring,
 )
 from cloth_bench_ros.studies.run_config import RunConfig
 
@@ -129,6 +132,7 @@ def _cell_fields(cell: Cell) -> dict:
         'seed': int(cell.seed),
         'pacing': cell.pacing,
         'device': cell.device,
+        **{name: getattr(cell, name) for name in SCORED_WITH},  # how it is computed
         'model': cell.model,
         'bag': cell.bag,
         'grid': f'{cell.grid[0]}x{cell.grid[1]}' if cell.grid else None,
@@ -183,7 +187,7 @@ def cell_config(cell: Cell, output_dir: Path | None) -> RunConfig:
         bag=Path(cell.bag), engines=[cell.engine], rate_hz=cell.rate_hz, cloth=cell.cloth,
         primitive=cell.primitive, seed=cell.seed, pacing=cell.pacing, output_dir=output_dir,
         engine_params={cell.engine: cell.params}, grid=cell.grid, cloth_size=cell.cloth_size,
-        cloth_mass=cell.cloth_mass,
+        cloth_mass=cell.cloth_mass, all_metrics=cell.all_metrics,
     )
 
 
@@ -192,7 +196,6 @@ def run_cell(cell: Cell, out_dir: str) -> dict:
     start = time.perf_counter()
     frames_dir = Path(out_dir) / 'frames' / cell.ident() if cell.keep_frames else None
     try:
-        from cloth_bench_ros.engines import engine_class
         from cloth_bench_ros.studies.direct import run_direct
         from cloth_bench_ros.studies.run_pipeline import run_pipeline
 
@@ -205,7 +208,6 @@ def run_cell(cell: Cell, out_dir: str) -> dict:
         row = {**_cell_fields(cell), **summary_row(cell, summary)}
         row['status'] = 'diverged' if row['diverged'] else 'ok'
         row['error'] = ''
-        row['engine_version'] = engine_class(cell.engine).version()
     except ClothBenchError as exc:  # input this cell cannot run on is a row; a bug ends the sweep
         last = traceback.extract_tb(exc.__traceback__)[-1:] if exc.__traceback__ else []
         where = f' ({Path(last[0].filename).name}:{last[0].lineno})' if last else ''
@@ -276,7 +278,9 @@ def run_sweep(
     out_dir = check_output_dir(out_dir)
     results = out_dir / RESULTS_FILE
     with ResultsLock(out_dir, desc):
-        todo = cells_to_run(cells, load_rows(results), retry_errors)
+        existing = load_rows(results)
+        todo = cells_to_run(cells, existing, retry_errors)
+        drop_superseded(results, todo, existing)  # rows computed otherwise: run again
         outcome = SweepOutcome(results, len(cells), len(cells) - len(todo), 0, 0, 0, 0.0)
         start = time.perf_counter()
         bar = tqdm(
@@ -336,6 +340,7 @@ class SweepPlan:
     keep_frames: str = 'first'  # first | all | none
     axes: Sequence[str] = ()  # settings mode: "name=v1,v2" strings
     presets: PresetSet | None = None  # a preset set instead of the shipped presets
+    all_metrics: bool = False  # every metric in every cell, not only the paper's CD/HD
     left_out: list[str] = field(default_factory=list)  # 'engine cloth task' the set lacks
 
     def seeds(self) -> list[int]:
@@ -398,6 +403,7 @@ class SweepPlan:
                 axes,
                 self.overrides,
                 self.presets,
+                self.all_metrics,
             )
         if self.axes:
             raise InputError('--axis is for --mode settings')
@@ -415,6 +421,7 @@ class SweepPlan:
             self.step_per_target,
             keep,
             self.presets,
+            self.all_metrics,
         )
 
     def _preset_gaps(self, cloths: list[str], primitives: list[str]) -> set[tuple[str, str, str]]:
