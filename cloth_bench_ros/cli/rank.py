@@ -58,6 +58,7 @@ RANK_FLAGS: tuple[common.Flag, ...] = (
     'grid',
     'metric',  # cd/hd: also the identification objective (else cd)
     'max_frames',
+    ('settle', {'default': 'fast'}),  # every trial and cell settles: the cheaper one by default
     ('topic', {'help': 'PointCloud2 topic of plain recordings'}),
     ('targets_topic', {'help': 'recorded PoseArray gripper targets'}),
     'clean',
@@ -102,6 +103,7 @@ def cmd_rank(args: argparse.Namespace) -> int:
     spec = RankSpec(
         args.recordings, out, entrants, replay, args.trials, args.sampler, args.seeds, args.rate,
         args.rates, args.grid, args.metric, args.max_frames, fixed, args.fidelity, size, mass,
+        args.settle,
     )
     print(f'cloth-bench rank: {", ".join(args.recordings)}; engines '
           f'{", ".join(e + (":" + o["model"] if o else "") for e, o in entrants)}; output {out}',

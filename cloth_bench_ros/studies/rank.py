@@ -75,6 +75,7 @@ class RankSpec:
     fidelity: str = 'full'  # identification's: full, or prune (studies/identify_fidelity.py)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, the cloth's (not fitted); None: the preset's per area
+    settle: str = 'full'  # the settle phase (engines/settle.py): full (the paper's) or fast
 
 
 def entrant_key(engine: str, overrides: dict) -> str:
@@ -135,7 +136,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         'sampler': spec.sampler, 'grid': spec.grid, 'metric': objective(spec),
         'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
         'fixed': {**spec.fixed.get(engine, {}), **overrides}, 'fidelity': spec.fidelity,
-        **cloth_record(spec.cloth_size, spec.cloth_mass),
+        'settle': spec.settle, **cloth_record(spec.cloth_size, spec.cloth_mass),
         'model': simulated_model(engine, train[0].cloth, train[0].primitive, spec.cloth_size,
                                  spec.cloth_mass, {**spec.fixed.get(engine, {}), **overrides}),
     }))
@@ -152,7 +153,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         spec.trials, objective(spec), (), 0, spec.rate_hz, spec.grid,
         {**spec.fixed.get(engine, {}), **overrides}, validate_seeds=0,
         max_frames=spec.max_frames, also=tuple(bags[1:]), fidelity=spec.fidelity,
-        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, settle=spec.settle,
         pool=tuple(t.bag for t in group), shared=out.parent / SHARED_FILE,
     )
     try:
@@ -181,12 +182,13 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
         + (f'|all{SURFACE_REVISION}' if every else '')  # surface metrics of that revision
         + ('' if spec.cloth_size is None and spec.cloth_mass is None  # another cloth: other cells
            else f'|{spec.cloth_size}|{spec.cloth_mass}')
+        + ('' if spec.settle == 'full' else f'|settle {spec.settle}')  # full: keyed as before
         + '|' + hashlib.sha256(json.dumps(model, sort_keys=True).encode()).hexdigest()[:16]
     )
     return key, Trial(
         engine, trial.cloth, trial.primitive, trial.bag, tuple(sorted(params.items())),
         objective(spec), seed, rate, spec.grid, frames, -1, label, all_metrics=every,
-        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, settle=spec.settle,
     )
 
 
@@ -322,7 +324,7 @@ def run_rank(
                 'rate_hz': spec.rate_hz, 'rates': list(spec.rates), 'grid': spec.grid,
                 'metric': spec.metric, 'objective': objective(spec),
                 'max_frames': spec.max_frames, 'fidelity': spec.fidelity,
-                **cloth_record(spec.cloth_size, spec.cloth_mass),
+                'settle': spec.settle, **cloth_record(spec.cloth_size, spec.cloth_mass),
             },
             'trials': [t.as_dict() for t in trials],
             'groups': {

@@ -40,6 +40,7 @@ KEY_FIELDS: dict[str, Any] = {
     'seed': None,
     'pacing': OPTIONS['pacing'].default,
     'device': 'cpu',  # the engine's compute device (rows written before it existed ran on the CPU)
+    'settle': 'full',  # the settle phase (rows written before it existed settled in full)
 }
 NAME_FIELDS = ('mode', 'engine', 'cloth', 'primitive', 'pacing')
 NUMERIC_FIELDS = (

@@ -129,6 +129,7 @@ def _cell_fields(cell: Cell) -> dict:
         'seed': int(cell.seed),
         'pacing': cell.pacing,
         'device': cell.device,
+        'settle': cell.settle,
         'model': cell.model,
         'bag': cell.bag,
         'grid': f'{cell.grid[0]}x{cell.grid[1]}' if cell.grid else None,
@@ -183,7 +184,7 @@ def cell_config(cell: Cell, output_dir: Path | None) -> RunConfig:
         bag=Path(cell.bag), engines=[cell.engine], rate_hz=cell.rate_hz, cloth=cell.cloth,
         primitive=cell.primitive, seed=cell.seed, pacing=cell.pacing, output_dir=output_dir,
         engine_params={cell.engine: cell.params}, grid=cell.grid, cloth_size=cell.cloth_size,
-        cloth_mass=cell.cloth_mass,
+        cloth_mass=cell.cloth_mass, settle=cell.settle,
     )
 
 
@@ -337,6 +338,7 @@ class SweepPlan:
     axes: Sequence[str] = ()  # settings mode: "name=v1,v2" strings
     presets: PresetSet | None = None  # a preset set instead of the shipped presets
     left_out: list[str] = field(default_factory=list)  # 'engine cloth task' the set lacks
+    settle: str = 'full'  # the settle phase of every cell (engines/settle.py)
 
     def seeds(self) -> list[int]:
         settings = self.mode == 'settings'
@@ -353,6 +355,12 @@ class SweepPlan:
 
     def cells(self) -> list[Cell]:
         """Return the sweep's cells; ValueError (one line) on a combination that makes no sense."""
+        if self.settle != 'full' and self.pacing != 'lockstep':
+            raise InputError('--settle fast runs lockstep cells only: the node graph of '
+                             '--pacing realtime settles in full')
+        return [replace(cell, settle=self.settle) for cell in self._cells()]
+
+    def _cells(self) -> list[Cell]:
         from cloth_bench_ros.engines.presets import CLOTHS
 
         settings = self.mode == 'settings'
