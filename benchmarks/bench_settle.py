@@ -11,10 +11,12 @@ simulation per settle and seed on the default 11 x 15 grid at 100 Hz. Printed pe
   quintic part (mm; the acceptance asks for at most 1), and `seed d`, the same distance between
   seeds 0 and 1 of the full settle (the protocol's own spread of that state);
 - `CD full`, `CD fast`, `dCD`: the mean held-out CD (seeds 1..N, as `identify` validates) of
-  each settle on the set's bag, and its change (%; the acceptance asks for at most 0.5); `se`:
-  the standard error of the full settle's mean over those seeds (%), the seeds' own noise;
+  each settle on the set's bag (the identified sets), and its change (%; the acceptance asks for
+  at most 0.5); `se`: the standard error of the full settle's mean over those seeds (%), the
+  seeds' own noise;
 - engine-seconds (the sum of the step times) of the settle and of a whole simulation (every
-  target of the run), full -> fast, and the fraction of the settle's steps the fast one took.
+  target of the run), full -> fast, and `steps`, the engine steps of the fast settle (the full
+  one takes 299).
 
     .venv/bin/python benchmarks/bench_settle.py [--engines mujoco bullet newton]
         [--seeds 3] [--sets preset identified identified-newton-vbd] [--no-cd]
@@ -115,7 +117,7 @@ def main() -> None:
         start_d = np.linalg.norm(fast['start'] - full['start'], axis=1).max() * 1e3
         seed_d = np.linalg.norm(other['start'] - full['start'], axis=1).max() * 1e3
         cds = [[np.nan], [np.nan]]
-        if not args.no_cd and bag.exists():
+        if not args.no_cd and bag.exists() and 'identified' in label:
             cds = [held_out_cd(engine, params, primitive, bag, s, args.seeds) for s in SETTLES]
         cd = [float(np.mean(c)) for c in cds]
         change = 100 * (cd[1] - cd[0]) / cd[0]

@@ -19,6 +19,7 @@ from cloth_bench_ros.core.surface_distance import grid_faces
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
 from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data.trial import trial_from_message
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     node_cloth,
@@ -89,6 +90,7 @@ class Evaluator(Node):
             'engines': self.engines,
             'cloth': cloth,
             'seed': seed,
+            'settle': FULL,  # the simulator nodes step every target (engines/settle.py)
             **cloth_record(size, mass),
         }
         for key, text in (('devices', devices), ('models', models)):

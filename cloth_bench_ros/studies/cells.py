@@ -19,6 +19,7 @@ import re
 from typing import Iterable, Sequence
 
 from cloth_bench_ros.engines.presets import PresetSet
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
@@ -64,7 +65,7 @@ class Cell:
     keep_frames: bool = False  # write summary.json + frames.csv of this run (per-frame plots)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
-    settle: str = 'full'  # the settle phase (engines/settle.py): full (the paper's) or fast
+    settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
 
     def key(self) -> tuple:
         """Return what makes a cell unique in a results file (resume compares it with row_key)."""
@@ -76,7 +77,7 @@ class Cell:
             f'{self.mode}_{self.config}_{self.engine}_{self.rate_hz:g}hz_{self.cloth}'
             f'_{self.primitive}'
             f'_t{self.trial}_s{self.seed}_{self.pacing}'
-            + ('' if self.settle == 'full' else f'_settle-{self.settle}')
+            + ('' if self.settle == FULL else f'_settle-{self.settle}')
         )
         return re.sub(r'[^A-Za-z0-9_.=-]+', '-', text)
 

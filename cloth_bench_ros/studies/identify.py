@@ -30,6 +30,7 @@ import time
 from typing import Any, Sequence
 import warnings
 
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-exported)
@@ -96,7 +97,7 @@ class IdentifySpec:
     fidelity: str = 'full'  # or prune, coarse: multi-fidelity (studies/identify_fidelity.py)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, given: not fitted unless named in `params`
-    settle: str = 'full'  # the settle phase (engines/settle.py): full (the paper's) or fast
+    settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
     pool: tuple[str, ...] = ()  # rank's: every trial of the group, scored by each simulation
     shared: Path | None = None  # rank's: the folds' simulations (studies.shared_simulations)
 

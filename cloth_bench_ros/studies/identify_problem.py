@@ -24,6 +24,7 @@ import json
 from pathlib import Path
 from typing import Any, Mapping
 
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
 
 PROBLEM_FILE = 'problem.json'
@@ -178,7 +179,7 @@ def check_problem(spec: Any, problem: dict, journal: Path) -> None:
         return
     old = _read_problems(spec.output / PROBLEM_FILE).get(study_key(spec))
     if old is not None:  # a problem kept before the settle was recorded settled in full
-        old = {'settle': 'full', **old}
+        old = {'settle': FULL, **old}
     changed = ', '.join(changed_keys(old, problem)) if old is not None else ''
     if changed:
         raise ProblemChanged(

@@ -27,6 +27,7 @@ import time
 from typing import Any
 
 from cloth_bench_ros.data.errors import BagError
+from cloth_bench_ros.engines.settle import FULL, Settler
 from cloth_bench_ros.errors import ClothBenchError, one_line
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
@@ -60,7 +61,7 @@ class Trial:
     all_metrics: bool = False  # also every metric the evaluator reports (given the mesh's faces)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
-    settle: str = 'full'  # the settle phase (engines.settle): full (the paper's) or fast
+    settle: str = FULL  # the settle phase (engines.settle): full (the paper's) or fast
 
 
 def bag_clouds(
@@ -152,7 +153,6 @@ def _evaluate(trial: Trial) -> dict:
         from cloth_bench_ros.core.trajectory import full_targets
         from cloth_bench_ros.engines import make_engine
         from cloth_bench_ros.engines.presets import load_preset, sized_params
-        from cloth_bench_ros.engines.settle import Settler
 
         offset = int(round(SETTLE_DURATION * 1e9))
         size = trial.cloth_size

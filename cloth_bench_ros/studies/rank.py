@@ -27,6 +27,7 @@ from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
 from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.data.replay import ReplayOptions
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cloth import cloth_name
@@ -75,7 +76,7 @@ class RankSpec:
     fidelity: str = 'full'  # identification's: full, or prune (studies/identify_fidelity.py)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, the cloth's (not fitted); None: the preset's per area
-    settle: str = 'full'  # the settle phase (engines/settle.py): full (the paper's) or fast
+    settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
 
 
 def entrant_key(engine: str, overrides: dict) -> str:
@@ -182,7 +183,7 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
         + (f'|all{SURFACE_REVISION}' if every else '')  # surface metrics of that revision
         + ('' if spec.cloth_size is None and spec.cloth_mass is None  # another cloth: other cells
            else f'|{spec.cloth_size}|{spec.cloth_mass}')
-        + ('' if spec.settle == 'full' else f'|settle {spec.settle}')  # full: keyed as before
+        + ('' if spec.settle == FULL else f'|settle {spec.settle}')  # full: keyed as before
         + '|' + hashlib.sha256(json.dumps(model, sort_keys=True).encode()).hexdigest()[:16]
     )
     return key, Trial(

@@ -20,6 +20,7 @@ from pathlib import Path
 import socket
 from typing import Any, Mapping, Sequence, TypedDict
 
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.safe_io import confined_path, read_text_bounded, safe_name, UnsafeInputError
@@ -40,7 +41,7 @@ KEY_FIELDS: dict[str, Any] = {
     'seed': None,
     'pacing': OPTIONS['pacing'].default,
     'device': 'cpu',  # the engine's compute device (rows written before it existed ran on the CPU)
-    'settle': 'full',  # the settle phase (rows written before it existed settled in full)
+    'settle': FULL,  # the settle phase (rows written before it existed settled in full)
 }
 NAME_FIELDS = ('mode', 'engine', 'cloth', 'primitive', 'pacing')
 NUMERIC_FIELDS = (

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.options import OPTIONS
 
 
@@ -23,7 +24,7 @@ class RunConfig:
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, the whole cloth; None: the preset's per area
     presets_dir: Path | None = None  # directory of <engine>.yaml presets; None: config/presets
-    settle: str = 'full'  # the settle phase (engines.settle): full (the paper's) or fast
+    settle: str = FULL  # the settle phase (engines.settle): full (the paper's) or fast
     replay: dict = field(
         default_factory=dict
     )  # recorder parameters for plain bags (topic, start_time, ...)

@@ -9,6 +9,7 @@ import random
 
 from cloth_bench_ros.engines import engine_device, engine_model
 from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import close_nodes
 from cloth_bench_ros.nodes.evaluator import Evaluator
@@ -120,7 +121,7 @@ def isolated_domain() -> int:
 
 def run_pipeline(config: RunConfig) -> dict | None:
     """Run trajectory publisher, one simulator per engine, recorder and evaluator to the end."""
-    if config.settle != 'full':
+    if config.settle != FULL:
         raise InputError('the node graph settles in full: the fast settle runs on the direct '
                          'study path (lockstep cells)')
     context = rclpy.Context()

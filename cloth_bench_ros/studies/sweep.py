@@ -27,6 +27,7 @@ from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.engines.presets import PresetSet
 
 # re-exported: the studies' one vocabulary
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cells import (  # noqa: F401
@@ -338,7 +339,7 @@ class SweepPlan:
     axes: Sequence[str] = ()  # settings mode: "name=v1,v2" strings
     presets: PresetSet | None = None  # a preset set instead of the shipped presets
     left_out: list[str] = field(default_factory=list)  # 'engine cloth task' the set lacks
-    settle: str = 'full'  # the settle phase of every cell (engines/settle.py)
+    settle: str = FULL  # the settle phase of every cell (engines/settle.py)
 
     def seeds(self) -> list[int]:
         settings = self.mode == 'settings'
@@ -355,7 +356,7 @@ class SweepPlan:
 
     def cells(self) -> list[Cell]:
         """Return the sweep's cells; ValueError (one line) on a combination that makes no sense."""
-        if self.settle != 'full' and self.pacing != 'lockstep':
+        if self.settle != FULL and self.pacing != 'lockstep':
             raise InputError('--settle fast runs lockstep cells only: the node graph of '
                              '--pacing realtime settles in full')
         return [replace(cell, settle=self.settle) for cell in self._cells()]
