@@ -54,7 +54,7 @@ def test_the_fast_settle_starts_the_quintic_part_near_the_full_one_for_less(engi
     q = targets.quintic_index
     assert full_div is None and fast_div is None
     assert full_steps == q
-    assert fast_steps <= final_hold(targets) + round(HOLD_LIMIT_S * RATE_HZ)  # the hold cut short
+    assert fast_steps == final_hold(targets) + round(HOLD_LIMIT_S * RATE_HZ)  # the hold cut short
     difference = np.linalg.norm(fast - full, axis=1).max()
     spread = np.linalg.norm(other - full, axis=1).max()
     assert difference <= max(3 * spread, 0.02)

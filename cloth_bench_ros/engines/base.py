@@ -275,21 +275,6 @@ class ClothEngine(abc.ABC):
         self._vertices = vertices
         return vertices
 
-    def stop_cloth(self) -> bool:
-        """
-        Set every cloth vertex's velocity to zero, positions kept (the fast settle's damping).
-
-        False where the engine cannot (PyBullet: no soft-body velocity setter); the fast settle
-        then only ends the final hold early, the cloth moving as it was.
-        """
-        if self._vertices is None or self.divergence is not None:
-            return False
-        return self._stop_cloth()
-
-    def _stop_cloth(self) -> bool:
-        """Zero the cloth's velocities; an engine without a way to leaves the default False."""
-        return False
-
     def _check(self, vertices: np.ndarray, left: np.ndarray, right: np.ndarray) -> str | None:
         """
         Return check_divergence's reason, cheaply (None when the state is sound).

@@ -356,10 +356,6 @@ class MujocoCloth(ClothEngine):
         self._target[:] = self._goal
         return self._vertices_now()
 
-    def _stop_cloth(self) -> bool:
-        self.data.qvel[:] = 0.0  # the grasped corners' velocities are set again each substep
-        return True
-
     def close(self) -> None:
         self.data = None  # type: ignore[assignment]
         self.model = None  # type: ignore[assignment]

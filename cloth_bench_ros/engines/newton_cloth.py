@@ -472,11 +472,6 @@ class NewtonCloth(ClothEngine):
         self._target[:] = goal
         return self._vertices_now()
 
-    def _stop_cloth(self) -> bool:
-        for state in self._states:
-            state.particle_qd.zero_()  # in place: a captured graph reads the same arrays
-        return True
-
     def close(self) -> None:
         self._graph = None
         self.solver = None
