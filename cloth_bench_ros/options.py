@@ -275,8 +275,8 @@ FLAGS = _declare(
     Option('quiet', bool, False, 'no progress bar', flag='--quiet', action='store_true'),
     Option(
         'settle', str, 'full', "the settle phase before the quintic part: full (the paper's, "
-        'every target simulated) or fast (kinetic damping in its holds, a cloth at rest not '
-        'simulated to the end of a hold; docs/benchmark.md)', flag='--settle', choices=SETTLES,
+        'every target simulated) or fast (its final hold simulated for 0.3 s of 1 s; '
+        'docs/benchmark.md)', flag='--settle', choices=SETTLES,
     ),
     Option('overwrite', bool, False, 'replace what exists', flag='--overwrite',
            action='store_true'),

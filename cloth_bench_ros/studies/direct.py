@@ -77,7 +77,7 @@ def _step_engines(
             start = clock()
             vertices = settlers[name].step(k, left, right) if k else first[name]
             step_time = clock() - start
-            if settlers[name].stepped:  # a settle target answered at rest is no step
+            if settlers[name].stepped:  # a settle target answered without a step
                 core.add_latency(name, step_time)
             core.add_state(name, stamp, as_carried(vertices))
             divergence = engine.divergence

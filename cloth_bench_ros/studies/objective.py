@@ -178,7 +178,7 @@ def _evaluate(trial: Trial) -> dict:
             step_s = time.perf_counter() - t0
             carried = as_carried(vertices)  # as a run carries it
             for core, _ in cores:
-                if settler.stepped:  # a settle target answered at rest is no step
+                if settler.stepped:  # a settle target answered without a step
                     core.add_step(
                         trial.engine, stamp, k, step_s, d is not None, d.reason if d else ''
                     )
