@@ -23,6 +23,7 @@ from cloth_bench_ros.errors import InputError
 
 CLOTHS = ('towel', 'chequered', 'linen')  # the cloths the presets describe
 PACINGS = ('lockstep', 'realtime')
+SETTLES = ('full', 'fast')  # the settle phase (engines/settle.py)
 
 
 @dataclass(frozen=True)
@@ -272,6 +273,11 @@ FLAGS = _declare(
         flag='--tolerance-abs', low=0.0, unit='m',
     ),
     Option('quiet', bool, False, 'no progress bar', flag='--quiet', action='store_true'),
+    Option(
+        'settle', str, 'full', "the settle phase before the quintic part: full (the paper's, "
+        'every target simulated) or fast (its final hold simulated for 0.3 s of 1 s; '
+        'docs/benchmark.md)', flag='--settle', choices=SETTLES,
+    ),
     Option('overwrite', bool, False, 'replace what exists', flag='--overwrite',
            action='store_true'),
 )

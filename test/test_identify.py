@@ -356,6 +356,7 @@ def test_the_changes_of_a_problem_are_named(target, tmp_path, monkeypatch):
     assert changed_keys(old, problem(also=(str(target),), objective='hd')) == ['bags', 'objective']
     assert changed_keys(old, problem(fixed={**FIXED, 'friction': 0.5})) == ['fixed values']
     assert changed_keys(old, problem(fidelity='prune')) == ['fidelity']
+    assert changed_keys(old, problem(settle='fast')) == ['settle']
     preset['poisson'] = 0.3  # a preset shipped with other values: trials of other values
     assert changed_keys(old, problem()) == ['preset values']
     preset['poisson'] = old['preset']['poisson']

@@ -76,6 +76,7 @@ FIT_FLAGS: tuple[common.Flag, ...] = (
         'bag_dir', str, None, "other trials' bags of the cloth and task for validation",
         flag='--bag-dir',
     ),
+    'settle',
     ('output', {'help': 'directory (default results/identify/<engine>_<cloth>_<primitive>)'}),
     # a plain recording is split as rank splits it: its first usable trial is fitted
     ('topic', {'help': 'PointCloud2 topic of a plain recording'}),
@@ -176,11 +177,12 @@ def cmd_identify(args: argparse.Namespace) -> int:
         fidelity=args.fidelity,
         cloth_size=size,
         cloth_mass=mass,
+        settle=args.settle,
     )
     print(
         f'cloth-bench identify: {args.engine}, {args.cloth} {args.primitive},'
         f' {args.objective.upper()}, sampler {args.sampler},'
-        f' {args.trials or "auto (doubling)"} trials each; bag {bag};'
+        f' {args.trials or "auto (doubling)"} trials each, {args.settle} settle; bag {bag};'
         f' output {out}',
         flush=True,
     )

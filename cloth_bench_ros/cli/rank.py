@@ -58,6 +58,7 @@ RANK_FLAGS: tuple[common.Flag, ...] = (
     'grid',
     'metric',  # cd/hd: also the identification objective (else cd)
     'max_frames',
+    'settle',
     ('topic', {'help': 'PointCloud2 topic of plain recordings'}),
     ('targets_topic', {'help': 'recorded PoseArray gripper targets'}),
     'clean',
@@ -102,9 +103,11 @@ def cmd_rank(args: argparse.Namespace) -> int:
     spec = RankSpec(
         args.recordings, out, entrants, replay, args.trials, args.sampler, args.seeds, args.rate,
         args.rates, args.grid, args.metric, args.max_frames, fixed, args.fidelity, size, mass,
+        args.settle,
     )
     print(f'cloth-bench rank: {", ".join(args.recordings)}; engines '
-          f'{", ".join(e + (":" + o["model"] if o else "") for e, o in entrants)}; output {out}',
+          f'{", ".join(e + (":" + o["model"] if o else "") for e, o in entrants)}; '
+          f'{args.settle} settle; output {out}',
           flush=True)
     try:
         raw = run_rank(spec, args.scheduler, args.workers, progress=not args.no_progress)

@@ -42,6 +42,7 @@ SWEEP_FLAGS: tuple[common.Flag, ...] = (
 )
 SWEEP_RUN_FLAGS: tuple[common.Flag, ...] = (
     'pacing',
+    'settle',
     Option(
         'step_per_target', bool, False, "internal time step = 1 / rate (the paper's frequency "
         "study) instead of the preset's", flag='--step-per-target', action='store_true',
@@ -205,6 +206,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         args.axis or [],
         common.preset_set(args),
         all_metrics=scores_every_metric(args),
+        settle=args.settle,
     )
     cells = plan.cells()
     if plan.left_out:

@@ -19,6 +19,7 @@ from cloth_bench_ros.core.scene import ClothGrid, REAL_FPS
 from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
 from cloth_bench_ros.core.worst_frames import write_worst_frames
 from cloth_bench_ros.data.trial import trial_from_message
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.nodes.common import (
     NAMESPACE,
     node_cloth,
@@ -98,6 +99,7 @@ class Evaluator(Node):
             'engines': self.engines,
             'cloth': cloth,
             'seed': seed,
+            'settle': FULL,  # the simulator nodes step every target (engines/settle.py)
             **cloth_record(size, mass),
             **mesh_record(grid),
         }

@@ -20,6 +20,7 @@ import re
 from typing import Iterable, Sequence
 
 from cloth_bench_ros.engines.presets import PresetSet
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
@@ -66,6 +67,7 @@ class Cell:
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
     all_metrics: bool = False  # every metric (realtime cells: the node graph's always), or CD/HD
+    settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
 
     def key(self) -> tuple:
         """Return what makes a cell unique in a results file (resume compares it with row_key)."""
@@ -77,6 +79,7 @@ class Cell:
             f'{self.mode}_{self.config}_{self.engine}_{self.rate_hz:g}hz_{self.cloth}'
             f'_{self.primitive}'
             f'_t{self.trial}_s{self.seed}_{self.pacing}'
+            + ('' if self.settle == FULL else f'_settle-{self.settle}')
         )
         return re.sub(r'[^A-Za-z0-9_.=-]+', '-', text)
 

@@ -36,6 +36,7 @@ from cloth_bench_ros.data.trial import TrialInfo
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.base import ClothEngine
 from cloth_bench_ros.engines.presets import load_preset, sized_params
+from cloth_bench_ros.engines.settle import FULL, Settler
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.errors import user_path
 from cloth_bench_ros.studies.run_config import RunConfig
@@ -64,7 +65,11 @@ def _engine(config: RunConfig, name: str) -> ClothEngine:
 
 
 def _step_engines(
-    core: OnlineEvaluator, engines: dict[str, ClothEngine], targets: GripperTargets, seed: int
+    core: OnlineEvaluator,
+    engines: dict[str, ClothEngine],
+    targets: GripperTargets,
+    seed: int,
+    settle: str = FULL,
 ) -> None:
     """
     Step every engine through the targets in lockstep, as the simulator nodes do.
@@ -74,21 +79,24 @@ def _step_engines(
     """
     left, right = targets.left[0], targets.right[0]
     first = {name: engine.start(seed, left, right) for name, engine in engines.items()}
+    settlers = {name: Settler(engine, targets, settle) for name, engine in engines.items()}
     clock = time.perf_counter
     moves = zip(range(len(targets)), targets.left, targets.right)
     for k, left, right in moves:
         stamp = targets.stamp_ns(k)
         for name, engine in engines.items():
             start = clock()
-            vertices = engine.step(left, right) if k else first[name]
+            vertices = settlers[name].step(k, left, right) if k else first[name]
             step_time = clock() - start
-            core.add_latency(name, step_time)
+            if settlers[name].stepped:  # a settle target answered without a step
+                core.add_latency(name, step_time)
             core.add_state(name, stamp, as_carried(vertices))
             divergence = engine.divergence
             reason = 'ok' if divergence is None else (
                 f'diverged at step {divergence.step}: {divergence.reason}'
             )
-            core.add_step(name, stamp, k, step_time, divergence is not None, reason)
+            if settlers[name].stepped:
+                core.add_step(name, stamp, k, step_time, divergence is not None, reason)
 
 
 _PLANS: dict[tuple, tuple[Any, str]] = {}  # a worker's replay plans, by bag and options
@@ -177,7 +185,7 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
             core.add_real(t + offset_ns, kept, dropped)
     engines = {name: _engine(config, name) for name in config.engines}
     try:
-        _step_engines(core, engines, targets, int(config.seed))
+        _step_engines(core, engines, targets, int(config.seed), config.settle)
     finally:
         for engine in engines.values():
             engine.close()
@@ -189,6 +197,7 @@ def run_direct(config: RunConfig) -> dict[str, Any]:
         'engines': list(config.engines),
         'cloth': config.cloth,
         'seed': int(config.seed),
+        'settle': config.settle,
         **cloth_record(config.cloth_size, config.cloth_mass),
         **mesh_record(grid),
         'devices': {name: engine.device for name, engine in engines.items()},

@@ -31,6 +31,7 @@ import time
 from typing import Any, Sequence
 import warnings
 
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-exported)
@@ -97,6 +98,7 @@ class IdentifySpec:
     fidelity: str = 'full'  # or prune, coarse: multi-fidelity (studies/identify_fidelity.py)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, given: not fitted unless named in `params`
+    settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
     pool: tuple[str, ...] = ()  # rank's: every trial of the group, scored by each simulation
     shared: Path | None = None  # rank's: the folds' simulations (studies.shared_simulations)
 
@@ -268,7 +270,8 @@ def trial_of(
         spec.engine, spec.cloth, spec.primitive, str(spec.bag),
         tuple(sorted({**spec.fixed, **params}.items())), spec.objective, spec.seed, spec.rate_hz,
         spec.grid, spec.max_frames, number, sampler, tuple(spec.also),
-        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, **(rung or {}),
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, settle=spec.settle,
+        **(rung or {}),
     )
 
 

@@ -58,6 +58,7 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
                         tuple(sorted(params.items())),
                         cloth_size=spec.cloth_size,
                         cloth_mass=spec.cloth_mass,
+                        settle=spec.settle,
                     )
                 )
     return cells
@@ -158,6 +159,7 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
         f'(the preset: {summary["preset_value"]:.6g} m) with {summary["best_sampler"]} '
         f'(trials: {trials}; seed {spec.seed}, '
         f'{spec.rate_hz:g} Hz, grid {"x".join(map(str, spec.grid)) if spec.grid else "default"}'
+        f', {spec.settle} settle'
         f'{", first " + str(spec.max_frames) + " frames" if spec.max_frames else ""}); fitted'
         f' {params}; '
         f'{fixed}'
@@ -229,6 +231,7 @@ def summarise(
         'fixed': spec.fixed,
         'max_frames': spec.max_frames,
         'fidelity': spec.fidelity,
+        'settle': spec.settle,
         'space': {n: [d.low, d.high, d.log] for n, d in space.items()},
         'samplers': list(studies),
         'best_sampler': best,

@@ -5,10 +5,11 @@ Everything a trial's value depends on except the budget and the sampler (another
 `--sampler` resumes the journal) and the cloth's size and mass (their study has its own name in
 the journal): the bags and their data (`data.bag_layout.fingerprint`), the metric, seed, rate,
 grid, frames, the engine's version, the device it runs on (`auto` resolved on this machine), the
-preset's values, fixed values, search space and fidelity. Kept in `<output>/problem.json`, one
-entry per study of the journal; `identify` refuses, in one line, to resume a journal of another
-problem (ProblemChanged; `rank` identifies such a fold afresh). A key that a recorded problem
-lacks (kept before that key was) is not a change.
+preset's values, fixed values, search space, fidelity and settle. Kept in
+`<output>/problem.json`, one entry per study of the journal; `identify` refuses, in one line, to
+resume a journal of another problem (ProblemChanged; `rank` identifies such a fold afresh). A key
+that a recorded problem lacks (kept before that key was) is not a change, but the settle: such a
+problem was settled in full.
 
 `simulated_model` is the part of it that every stored simulation depends on beyond its own
 parameters (the engine's version, the preset they are set on and the device): rank's kept
@@ -23,6 +24,7 @@ import json
 from pathlib import Path
 from typing import Any, Mapping
 
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
 
 PROBLEM_FILE = 'problem.json'
@@ -118,6 +120,7 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
         'fixed': dict(spec.fixed),
         'space': {name: json.loads(distribution_to_json(d)) for name, d in space.items()},
         'fidelity': spec.fidelity,
+        'settle': spec.settle,
     })
 
 
@@ -175,6 +178,8 @@ def check_problem(spec: Any, problem: dict, journal: Path) -> None:
     if not journal.exists():
         return
     old = _read_problems(spec.output / PROBLEM_FILE).get(study_key(spec))
+    if old is not None:  # a problem kept before the settle was recorded settled in full
+        old = {'settle': FULL, **old}
     changed = ', '.join(changed_keys(old, problem)) if old is not None else ''
     if changed:
         raise ProblemChanged(

@@ -27,6 +27,7 @@ from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
 from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.data.replay import ReplayOptions
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cloth import cloth_name
@@ -78,6 +79,7 @@ class RankSpec:
     fidelity: str = 'full'  # identification's: full, or prune (studies/identify_fidelity.py)
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, the cloth's (not fitted); None: the preset's per area
+    settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
 
 
 def entrant_key(engine: str, overrides: dict) -> str:
@@ -139,7 +141,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         'sampler': spec.sampler, 'grid': spec.grid, 'metric': objective(spec),
         'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
         'fixed': {**spec.fixed.get(engine, {}), **overrides}, 'fidelity': spec.fidelity,
-        **cloth_record(spec.cloth_size, spec.cloth_mass),
+        'settle': spec.settle, **cloth_record(spec.cloth_size, spec.cloth_mass),
         'model': simulated_model(engine, train[0].cloth, train[0].primitive, spec.cloth_size,
                                  spec.cloth_mass, {**spec.fixed.get(engine, {}), **overrides}),
     }))
@@ -156,7 +158,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         spec.trials, objective(spec), (), 0, spec.rate_hz, spec.grid,
         {**spec.fixed.get(engine, {}), **overrides}, validate_seeds=0,
         max_frames=spec.max_frames, also=tuple(bags[1:]), fidelity=spec.fidelity,
-        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, settle=spec.settle,
         pool=tuple(t.bag for t in group), shared=out.parent / SHARED_FILE,
     )
     try:
@@ -185,12 +187,13 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
         + (f'|all{SURFACE_REVISION}' if every else '')  # surface metrics of that revision
         + ('' if spec.cloth_size is None and spec.cloth_mass is None  # another cloth: other cells
            else f'|{spec.cloth_size}|{spec.cloth_mass}')
+        + ('' if spec.settle == FULL else f'|settle {spec.settle}')  # full: keyed as before
         + '|' + hashlib.sha256(json.dumps(model, sort_keys=True).encode()).hexdigest()[:16]
     )
     return key, Trial(
         engine, trial.cloth, trial.primitive, trial.bag, tuple(sorted(params.items())),
         objective(spec), seed, rate, spec.grid, frames, -1, label, all_metrics=every,
-        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass,
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, settle=spec.settle,
     )
 
 
@@ -331,7 +334,7 @@ def run_rank(
                 'rate_hz': spec.rate_hz, 'rates': list(spec.rates), 'grid': spec.grid,
                 'metric': spec.metric, 'objective': objective(spec),
                 'max_frames': spec.max_frames, 'fidelity': spec.fidelity,
-                **cloth_record(spec.cloth_size, spec.cloth_mass),
+                'settle': spec.settle, **cloth_record(spec.cloth_size, spec.cloth_mass),
             },
             'trials': [t.as_dict() for t in trials],
             'groups': {

@@ -20,6 +20,7 @@ from pathlib import Path
 import socket
 from typing import Any, Mapping, Sequence, TypedDict
 
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.safe_io import confined_path, read_text_bounded, safe_name, UnsafeInputError
@@ -44,10 +45,11 @@ KEY_FIELDS: dict[str, Any] = {
     'engine_version': '',
     'all_metrics': True,  # every metric (core/metric_choice), or the paper's CD/HD only
     'surface_revision': 0,  # core/surface_metrics.SURFACE_REVISION of an all-metrics row, else 0
+    'settle': FULL,  # the settle phase (rows written before it existed settled in full)
 }
 # The key fields that say how a cell was computed, not which cell: a row that differs from a cell
 # in these only is superseded when the cell runs again (`superseded_rows`).
-SCORED_WITH = ('engine_version', 'all_metrics', 'surface_revision')
+SCORED_WITH = ('engine_version', 'all_metrics', 'surface_revision', 'settle')
 NAME_FIELDS = ('mode', 'engine', 'cloth', 'primitive', 'pacing')
 NUMERIC_FIELDS = (
     'CD',

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.options import OPTIONS
 
 
@@ -26,6 +27,7 @@ class RunConfig:
     cloth_mesh: str | None = None  # OBJ, PLY or STL file of the cloth; None: the grid
     presets_dir: Path | None = None  # directory of <engine>.yaml presets; None: config/presets
     all_metrics: bool = True  # the direct path (studies/direct.py): False scores CD/HD only
+    settle: str = FULL  # the settle phase (engines.settle): full (the paper's) or fast
     replay: dict = field(
         default_factory=dict
     )  # recorder parameters for plain bags (topic, start_time, ...)

@@ -9,6 +9,8 @@ import random
 
 from cloth_bench_ros.engines import engine_device, engine_model
 from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.engines.settle import FULL
+from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.nodes.common import close_nodes
 from cloth_bench_ros.nodes.evaluator import Evaluator
 from cloth_bench_ros.nodes.recorder import Recorder
@@ -122,6 +124,9 @@ def isolated_domain() -> int:
 
 def run_pipeline(config: RunConfig) -> dict | None:
     """Run trajectory publisher, one simulator per engine, recorder and evaluator to the end."""
+    if config.settle != FULL:
+        raise InputError('the node graph settles in full: the fast settle runs on the direct '
+                         'study path (lockstep cells)')
     context = rclpy.Context()
     # Composed in one process on the intra-process transport, whatever CLOTH_BENCH_TRANSPORT says
     # (that switch is for the node console scripts): deterministic, and parallel sweeps stay apart.

@@ -23,6 +23,7 @@ import math
 from pathlib import Path
 from typing import Any, Sequence
 
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.studies.objective import Trial
 import numpy as np
 
@@ -185,6 +186,8 @@ def _key(trial: Trial) -> str:
     from cloth_bench_ros.studies.identify_problem import simulated_model
 
     fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='', objective='cd'))
+    if fields['settle'] == FULL:  # as rows were keyed before the fast settle existed
+        del fields['settle']
     fields['model'] = simulated_model(trial.engine, trial.cloth, trial.primitive,
                                       trial.cloth_size, trial.cloth_mass, dict(trial.params))
     return json.dumps(fields, sort_keys=True, default=str)

@@ -27,6 +27,7 @@ from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.engines.presets import PresetSet
 
 # re-exported: the studies' one vocabulary
+from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cells import (  # noqa: F401
@@ -187,7 +188,7 @@ def cell_config(cell: Cell, output_dir: Path | None) -> RunConfig:
         bag=Path(cell.bag), engines=[cell.engine], rate_hz=cell.rate_hz, cloth=cell.cloth,
         primitive=cell.primitive, seed=cell.seed, pacing=cell.pacing, output_dir=output_dir,
         engine_params={cell.engine: cell.params}, grid=cell.grid, cloth_size=cell.cloth_size,
-        cloth_mass=cell.cloth_mass, all_metrics=cell.all_metrics,
+        cloth_mass=cell.cloth_mass, all_metrics=cell.all_metrics, settle=cell.settle,
     )
 
 
@@ -342,6 +343,7 @@ class SweepPlan:
     presets: PresetSet | None = None  # a preset set instead of the shipped presets
     all_metrics: bool = False  # every metric in every cell, not only the paper's CD/HD
     left_out: list[str] = field(default_factory=list)  # 'engine cloth task' the set lacks
+    settle: str = FULL  # the settle phase of every cell (engines/settle.py)
 
     def seeds(self) -> list[int]:
         settings = self.mode == 'settings'
@@ -358,6 +360,12 @@ class SweepPlan:
 
     def cells(self) -> list[Cell]:
         """Return the sweep's cells; ValueError (one line) on a combination that makes no sense."""
+        if self.settle != FULL and self.pacing != 'lockstep':
+            raise InputError('--settle fast runs lockstep cells only: the node graph of '
+                             '--pacing realtime settles in full')
+        return [replace(cell, settle=self.settle) for cell in self._cells()]
+
+    def _cells(self) -> list[Cell]:
         from cloth_bench_ros.engines.presets import CLOTHS
 
         settings = self.mode == 'settings'
