@@ -6,9 +6,9 @@ from collections.abc import Callable, Iterator
 import contextlib
 import os
 from pathlib import Path
-import random
 
 from bag_fixtures import write_hanging_cloth_bag
+from dds_domains import random_domain
 import pytest
 
 
@@ -27,7 +27,7 @@ def dds_on_loopback():
     from cloth_bench_ros.runtime.dds import loopback_environment
 
     entries = {
-        **loopback_environment(random.randint(1, 200)),
+        **loopback_environment(random_domain()),
         'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
     }
     saved = {key: os.environ.get(key) for key in [*entries, 'ROS_STATIC_PEERS']}
