@@ -86,3 +86,8 @@ def studies_on_one_dask_cluster(request, monkeypatch):
         return start_cluster(scheduler or address(), workers, plugin)
 
     monkeypatch.setattr(dask_executor, '_cluster_client', on_the_session_cluster)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Run test_install.py (minutes of pip) first, while the other xdist process runs the rest."""
+    items.sort(key=lambda item: item.path.name != 'test_install.py')  # stable: else as collected
