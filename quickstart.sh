@@ -72,7 +72,8 @@ install_system
 install_python
 case "$job" in
   run) exec "$VENV/bin/cloth-bench" run "$@" ;;
-  test) install_ros_tier; exec "$VENV/bin/python" -m pytest "$@" ;;
+  # two pytest-xdist processes, each test file in one of them (its module fixtures made once)
+  test) install_ros_tier; exec "$VENV/bin/python" -m pytest -n 2 --dist loadfile "$@" ;;
   install) ;;
   *) echo "usage: ./quickstart.sh run|test|install [args...]" >&2; exit 2 ;;
 esac

@@ -31,6 +31,7 @@ EXTRAS_REQUIRE = {
     'newton': ['warp-lang>=1.17', 'newton>=1.8'],  # the third engine (Warp on the CPU)
     'test': [
         'pytest>=7.0',
+        'pytest-xdist>=3.5',
         'mcap-ros2-support>=0.5',
         'colcon-common-extensions>=0.3',
         'websockets>=12',

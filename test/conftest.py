@@ -6,9 +6,9 @@ from collections.abc import Callable, Iterator
 import contextlib
 import os
 from pathlib import Path
-import random
 
 from bag_fixtures import write_hanging_cloth_bag
+from dds_domains import random_domain
 import pytest
 
 
@@ -27,7 +27,7 @@ def dds_on_loopback():
     from cloth_bench_ros.runtime.dds import loopback_environment
 
     entries = {
-        **loopback_environment(random.randint(1, 200)),
+        **loopback_environment(random_domain()),
         'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
     }
     saved = {key: os.environ.get(key) for key in [*entries, 'ROS_STATIC_PEERS']}
@@ -86,3 +86,8 @@ def studies_on_one_dask_cluster(request, monkeypatch):
         return start_cluster(scheduler or address(), workers, plugin)
 
     monkeypatch.setattr(dask_executor, '_cluster_client', on_the_session_cluster)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Run test_install.py (minutes of pip) first, while the other xdist process runs the rest."""
+    items.sort(key=lambda item: item.path.name != 'test_install.py')  # stable: else as collected

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import json
 import os
-import random
 import subprocess
 import sys
 
 from cloth_bench_ros.runtime.dds import loopback_environment
 from conformance_cases import ISOLATED
+from dds_domains import random_domain
 import pytest
 from real_ros import in_namespace, require_real_ros, ROOT, ros_env
 
@@ -51,7 +51,7 @@ def _embedded_cases(transport: str, names: list[str]) -> dict:
         'PYTHONPATH': str(ROOT),
     }
     if transport == 'dds':
-        env.update(loopback_environment(random.randint(1, 200)))
+        env.update(loopback_environment(random_domain()))
     out = subprocess.run(
         [sys.executable, CASES, *names], capture_output=True, text=True, env=env, timeout=300
     )

@@ -7,7 +7,6 @@ Interface lo, no multicast, peer 127.0.0.1, so parallel runs do not hear each ot
 from __future__ import annotations
 
 import os
-import random
 import subprocess
 import sys
 import time
@@ -18,6 +17,7 @@ from cloth_bench_ros.runtime import messages as M
 from cloth_bench_ros.runtime.dds import loopback_environment
 from cloth_bench_ros.runtime.dds.domain import domain_config
 from cloth_bench_ros.runtime.dds.transport import dds_topic_name
+from dds_domains import random_domain
 import numpy as np
 import pytest
 
@@ -25,7 +25,7 @@ import pytest
 @pytest.fixture
 def dds_env(monkeypatch) -> dict[str, str]:
     """Loopback-only Cyclone on a random ROS domain; the environment for child processes too."""
-    entries = loopback_environment(random.randint(1, 200))
+    entries = loopback_environment(random_domain())
     for key, value in entries.items():
         monkeypatch.setenv(key, value)
     monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)

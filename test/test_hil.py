@@ -13,7 +13,6 @@ from dataclasses import replace
 import gc
 import math
 import os
-import random
 import subprocess
 import sys
 import threading
@@ -40,6 +39,7 @@ from cloth_bench_ros.runtime import (
 from cloth_bench_ros.runtime.dds import loopback_environment
 from cloth_bench_ros.studies import hil
 from cloth_bench_ros.studies.recommend import load_recommendations, recommend_for_rate
+from dds_domains import random_domain
 import numpy as np
 import pytest
 
@@ -49,7 +49,7 @@ MS = 1_000_000
 @pytest.fixture
 def dds_loopback(monkeypatch) -> None:
     """Confine Cyclone to lo, no multicast, peer 127.0.0.1, a random domain; children inherit."""
-    for key, value in loopback_environment(random.randint(1, 200)).items():
+    for key, value in loopback_environment(random_domain()).items():
         monkeypatch.setenv(key, value)
     monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
     monkeypatch.delenv('ROS_STATIC_PEERS', raising=False)

@@ -97,7 +97,9 @@ def test_a_kept_cell_of_the_other_settle_is_run_again():
     assert full.key() != fast.key() and full.ident() != fast.ident()
     old_row = {'mode': 'paper', 'config': 'preset', 'engine': 'mujoco', 'rate_hz': 100.0,
                'cloth': 'towel', 'primitive': 'dynamic', 'trial': 0, 'seed': 0,
-               'pacing': 'lockstep', 'device': 'cpu', 'params': {}}  # before the settle was kept
+               'pacing': 'lockstep', 'device': 'cpu', 'params': {},
+               'engine_version': full.engine_version, 'all_metrics': full.all_metrics,
+               'surface_revision': full.surface_revision}  # before the settle was kept
     assert row_key(old_row) == full.key()
     assert cells_to_run([full, fast], [old_row]) == [fast]
     assert cells_to_run([fast], [{**old_row, 'settle': 'fast'}]) == []
