@@ -88,6 +88,25 @@ def studies_on_one_dask_cluster(request, monkeypatch):
     monkeypatch.setattr(dask_executor, '_cluster_client', on_the_session_cluster)
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Run test_install.py (minutes of pip) first, while the other xdist process runs the rest."""
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        '--timing-tests', choices=('with', 'apart', 'only'), default='with',
+        help='tests marked timing: run with the others (default), leave them out, or run only them',
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """
+    Select the timing tests as --timing-tests says; run test_install.py (minutes of pip) first.
+
+    A timing test measures wall-clock behaviour, which a second xdist process beside it disturbs:
+    ./quickstart.sh test runs the rest in two processes, then these alone (`apart`, then `only`).
+    """
+    mode = config.getoption('--timing-tests')
+    if mode != 'with':
+        wanted = mode == 'only'
+        keep = [item for item in items if (item.get_closest_marker('timing') is not None) == wanted]
+        left = [item for item in items if (item.get_closest_marker('timing') is not None) != wanted]
+        config.hook.pytest_deselected(items=left)
+        items[:] = keep
     items.sort(key=lambda item: item.path.name != 'test_install.py')  # stable: else as collected

@@ -57,6 +57,7 @@ def dds_loopback(monkeypatch) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize('layout', ['sleeping', 'pinned_polling'])
+@pytest.mark.timing
 def test_short_realtime_run_in_three_processes_accounts_for_every_target(
     dds_loopback, hanging_bag, tmp_path, layout
 ):
@@ -389,6 +390,7 @@ def test_recommended_falls_back_to_the_shipped_file_with_its_provenance(tmp_path
         load_recommendations(bad)
 
 
+@pytest.mark.timing
 def test_cli_hil_in_process_with_the_recommended_configuration(hanging_bag, tmp_path, capsys):
     from cloth_bench_ros.studies.sweep import append_row
 

@@ -26,6 +26,8 @@ from cloth_bench_ros.studies.hil_warmup import coarser_grids, warmup
 from cloth_bench_ros.studies.recommend import meets_deadline
 import pytest
 
+pytestmark = pytest.mark.timing  # wall-clock behaviour: run alone (conftest.py)
+
 SLOW = ['--set', 'mujoco.substeps=50']  # 50 internal steps per step: milliseconds on 4 x 5
 
 

@@ -17,6 +17,8 @@ import time
 
 import pytest
 
+pytestmark = pytest.mark.timing  # wall-clock behaviour: run alone (conftest.py)
+
 NOISE = ('Traceback', 'CancelledError', 'never awaited', 'Exception ignored')
 
 

@@ -70,6 +70,7 @@ def test_runs_at_10_and_1000_hz(hanging_bag, tmp_path, rate):
     assert m['diverged'] or np.isfinite(m['CD_d'])
 
 
+@pytest.mark.timing
 def test_realtime_pacing_reports_latency_deadline_misses_and_real_time_factor(
     hanging_bag, tmp_path
 ):
