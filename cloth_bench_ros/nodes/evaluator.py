@@ -88,7 +88,7 @@ class Evaluator(Node):
         )
         targets = full_targets(self.task, rate_hz, grasp_width(size))
         grid = run_cloth((nx, nz) if nx and nz else None, size, node_cloth_mesh(self),
-                         (targets.left[0], targets.right[0])) or ClothGrid()
+                         self.task, rate_hz) or ClothGrid()
         self.engines, offset = p['engines'], p['time_offset']
         self.comparison_figures = p['comparison_figures']
         self.run_info = {
