@@ -129,6 +129,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.add_options(sweep, SWEEP_FLAGS)
     common.engine_override_option(sweep, 'engine parameter override for every cell (repeatable)')
     common.add_options(sweep, SWEEP_RUN_FLAGS)
+    common.add_option(sweep, 'task')
+    common.add_option(sweep, 'cloth_mesh')
     sweep.set_defaults(func=cmd_sweep)
 
     report = sub.add_parser(
@@ -206,7 +208,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         common.preset_set(args),
         all_metrics=scores_every_metric(args),
     )
-    cells = plan.cells()
+    cells = sw.with_inputs(plan.cells(), args.task, args.cloth_mesh)  # read and checked once
     if plan.left_out:
         print(
             f'cloth-bench sweep: --presets {plan.presets.name if plan.presets else ""} has no'

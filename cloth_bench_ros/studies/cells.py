@@ -12,7 +12,7 @@ Two kinds of sweep build cells:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import product
 from pathlib import Path
@@ -66,6 +66,10 @@ class Cell:
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
     all_metrics: bool = False  # every metric (realtime cells: the node graph's always), or CD/HD
+    task_file: str = ''  # --task: a task file instead of the shipped task of `primitive`
+    task_sha256: str = ''  # of the task file's content ('': the shipped task)
+    cloth_mesh: str = ''  # --cloth-mesh: the cloth as a mesh file instead of the grid
+    mesh_sha256: str = ''  # of the mesh file's content
 
     def key(self) -> tuple:
         """Return what makes a cell unique in a results file (resume compares it with row_key)."""
@@ -77,6 +81,8 @@ class Cell:
             f'{self.mode}_{self.config}_{self.engine}_{self.rate_hz:g}hz_{self.cloth}'
             f'_{self.primitive}'
             f'_t{self.trial}_s{self.seed}_{self.pacing}'
+            + (f'_task{self.task_sha256[:8]}' if self.task_sha256 else '')
+            + (f'_mesh{self.mesh_sha256[:8]}' if self.mesh_sha256 else '')
         )
         return re.sub(r'[^A-Za-z0-9_.=-]+', '-', text)
 
@@ -224,6 +230,37 @@ def _bag_trial(path: Path) -> int:
     except ClothBenchError:  # an unreadable bag is reported by the cell that runs it
         return 0
     return int(trial.trial) if trial is not None else 0
+
+
+def with_inputs(cells: Sequence[Cell], task_file: str, cloth_mesh: str) -> list[Cell]:
+    """
+    Return the cells running a task file and a cloth mesh, each with its file's content hash.
+
+    Both are read and checked here (one line, before any cell runs): the mesh is grasped at
+    each cell's task's start.
+    """
+    from cloth_bench_ros.core.cloth_mesh import ClothMesh, run_cloth
+    from cloth_bench_ros.core.task_data import load_task
+
+    if not task_file and not cloth_mesh:
+        return list(cells)
+    out = []
+    meshes: dict[tuple, str] = {}
+    for cell in cells:
+        task = load_task(cell.primitive, task_file or None)
+        mesh_sha = ''
+        if cloth_mesh:
+            at = (cell.primitive, cell.grid, cell.rate_hz)
+            if at not in meshes:
+                mesh = run_cloth(cell.grid, cell.cloth_size, cloth_mesh, task, cell.rate_hz)
+                assert isinstance(mesh, ClothMesh)
+                meshes[at] = mesh.sha256
+            mesh_sha = meshes[at]
+        out.append(replace(
+            cell, task_file=task_file, task_sha256=task.sha256 if task_file else '',
+            cloth_mesh=cloth_mesh, mesh_sha256=mesh_sha,
+        ))
+    return out
 
 
 def _check_engines(engines: Iterable[str], overrides: dict[str, dict]) -> None:

@@ -1,0 +1,91 @@
+"""
+A task file and a cloth mesh in the studies: sweep, stress and hil run them and key on them.
+
+Real engines on coarse meshes; the bags are written by the test's bag fixture, the mesh file by
+the test itself.
+"""
+
+from __future__ import annotations
+
+import shutil
+
+from bag_fixtures import write_hanging_cloth_bag
+from cloth_bench_ros.cli import main
+from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.task_data import task_file
+from cloth_bench_ros.studies import sweep as sw
+import pytest
+
+
+def write_grid_obj(path, nx=6, nz=8):
+    """Write the benchmark's cloth as an nx x nz grid mesh (OBJ, exact floats); return its path."""
+    grid = ClothGrid(nx, nz)
+    lines = [f'v {x!r} {y!r} {z!r}' for x, y, z in grid.vertices().tolist()]
+    lines += [f'f {a + 1} {b + 1} {c + 1}' for a, b, c in grid.faces().tolist()]
+    path.write_text('\n'.join(lines) + '\n')
+    return path
+
+
+@pytest.fixture(scope='module')
+def bags(tmp_path_factory):
+    d = tmp_path_factory.mktemp('study_inputs')
+    write_hanging_cloth_bag(d / 'bags' / 'towel_dynamic', frames=40, change_of_phase_frame=30)
+    write_grid_obj(d / 'grid.obj')
+    shutil.copy(task_file('dynamic'), d / 'my_task.yaml')
+    return d
+
+
+def _sweep(root, out, *extra):
+    command = ['sweep', '--bag-dir', str(root / 'bags'), '--engine', 'mujoco', '--rate', '100',
+               '--cloth', 'towel', '--primitive', 'dynamic', '--seeds', '1', '--workers', '1',
+               '--no-progress', '--output', str(out), *extra]
+    assert main(command) == 0
+    return sw.load_rows(out)
+
+
+def test_a_sweep_runs_a_task_file_and_a_mesh_and_records_them(bags, tmp_path):
+    (grid,) = _sweep(bags, tmp_path / 'grid', '--grid', '6x8')
+    task = str(bags / 'my_task.yaml')
+    (both,) = _sweep(bags, tmp_path / 'both', '--cloth-mesh', str(bags / 'grid.obj'),
+                     '--task', task)
+    assert grid['task_file'] == '' and grid['cloth_mesh'] == '' and grid['task_sha256'] == ''
+    assert both['task_file'] == task and len(both['task_sha256']) == 64
+    assert both['cloth_mesh'] == str(bags / 'grid.obj') and len(both['mesh_sha256']) == 64
+    # the shipped task as a file and the 6 x 8 grid as a mesh are that task and grid exactly
+    assert both['CD'] == grid['CD'] and both['HD'] == grid['HD'] and grid['CD'] > 0
+
+
+def test_a_changed_task_file_or_mesh_recomputes_a_kept_cell(bags, tmp_path, capsys):
+    task, mesh = tmp_path / 'task.yaml', tmp_path / 'cloth.obj'
+    shutil.copy(bags / 'my_task.yaml', task)
+    shutil.copy(bags / 'grid.obj', mesh)
+    out = tmp_path / 'out'
+    args = ('--task', str(task), '--cloth-mesh', str(mesh))
+    (first,) = _sweep(bags, out, *args)
+    assert _sweep(bags, out, *args) == [first]
+    assert '(1 already done)' in capsys.readouterr().out
+    task.write_text(task.read_text() + '# kept as it was\n')  # another file, the same task
+    (again,) = _sweep(bags, out, *args)  # replaced, not beside the old row
+    assert '(0 already done)' in capsys.readouterr().out
+    assert again['task_sha256'] != first['task_sha256'] and again['CD'] == first['CD']
+    mesh.write_text(mesh.read_text().replace('v ', 'v  ', 1))  # one more space: another file
+    (moved,) = _sweep(bags, out, *args)
+    assert '(0 already done)' in capsys.readouterr().out
+    assert moved['mesh_sha256'] != again['mesh_sha256'] and moved['CD'] == first['CD']
+
+
+@pytest.mark.parametrize('extra,words', [
+    (('--cloth-mesh', 'missing.obj'), ['missing.obj']),
+    (('--cloth-mesh', 'GRID', '--grid', '6x8'), ['grid.obj', 'own vertices']),
+    (('--task', 'missing.yaml'), ['missing.yaml']),
+])
+def test_a_bad_task_file_or_mesh_is_one_line_before_any_cell(bags, tmp_path, extra, words):
+    from test_cli import assert_one_line_error
+    from test_cli import cli as cli_process
+
+    extra = [str(bags / 'grid.obj') if e == 'GRID' else e for e in extra]
+    result = cli_process('sweep', '--bag-dir', str(bags / 'bags'), '--engine', 'mujoco', '--rate',
+                         '100', '--cloth', 'towel', '--primitive', 'dynamic', '--seeds', '1',
+                         '--output', str(tmp_path / 'out'), *extra)
+    assert_one_line_error(result, *words)
+    assert not (tmp_path / 'out' / 'results.jsonl').exists()
