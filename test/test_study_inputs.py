@@ -89,3 +89,24 @@ def test_a_bad_task_file_or_mesh_is_one_line_before_any_cell(bags, tmp_path, ext
                          '--output', str(tmp_path / 'out'), *extra)
     assert_one_line_error(result, *words)
     assert not (tmp_path / 'out' / 'results.jsonl').exists()
+
+
+def test_stress_runs_a_task_file_and_a_mesh_and_records_them(bags, tmp_path, capsys):
+    import json
+
+    mesh, task = str(bags / 'grid.obj'), str(bags / 'my_task.yaml')
+    command = ['stress', '--engine', 'mujoco', '--case', 'fling_10hz', '--workers', '1',
+               '--no-progress']
+    assert main([*command, '--output', str(tmp_path / 'grid')]) == 0
+    assert main([*command, '--case', 'fine_mesh_one_step', '--output', str(tmp_path / 'mesh'),
+                 '--cloth-mesh', mesh, '--task', task]) == 0
+    assert 'cases of their own grid are left out' in capsys.readouterr().out
+    grid, meshed = ([json.loads(line) for line in (tmp_path / d / 'stress.jsonl').open()]
+                    for d in ('grid', 'mesh'))
+    assert grid[0]['cloth_mesh'] == '' and grid[0]['task_file'] == ''
+    (row,) = meshed  # the fine mesh case is left out
+    assert row['case'] == 'fling_10hz' and row['status'] == 'ok', row
+    assert row['cloth_mesh'] == mesh and len(row['mesh_sha256']) == 64
+    assert row['task_file'] == task and len(row['task_sha256']) == 64
+    # the 6 x 8 mesh is a coarser cloth than the default 11 x 15 grid: its own steps
+    assert row['steps'] == grid[0]['steps'] and row['L_s'] != grid[0]['L_s']

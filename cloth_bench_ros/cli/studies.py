@@ -148,6 +148,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     common.add_options(stress, STRESS_FLAGS)
     common.device_option(stress, with_set=False)
+    common.add_option(stress, 'task')
+    common.add_option(stress, 'cloth_mesh')
     stress.set_defaults(func=cmd_stress)
 
     xref = sub.add_parser(
@@ -326,7 +328,12 @@ def cmd_stress(args: argparse.Namespace) -> int:
         args.engine or [e for e in ('mujoco', 'bullet', 'newton') if e in available], '--engine'
     )
     presets = common.preset_set(args)
-    cases = select_cases(engines, args.case, args.max_wall_s, presets)
+    cases = select_cases(
+        engines, args.case, args.max_wall_s, presets, args.task or '', args.cloth_mesh or ''
+    )
+    if args.cloth_mesh and any(c.grid for c in select_cases(engines, args.case)):
+        print(f'stress: the cases of their own grid are left out: --cloth-mesh {args.cloth_mesh} '
+              'is the cloth of every case')
     if args.device is not None:  # Newton's cases on the device asked for
         if 'newton' not in engines:
             raise common.UserError('--device applies to engine newton, not part of this run')
