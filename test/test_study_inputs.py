@@ -110,3 +110,20 @@ def test_stress_runs_a_task_file_and_a_mesh_and_records_them(bags, tmp_path, cap
     assert row['task_file'] == task and len(row['task_sha256']) == 64
     # the 6 x 8 mesh is a coarser cloth than the default 11 x 15 grid: its own steps
     assert row['steps'] == grid[0]['steps'] and row['L_s'] != grid[0]['L_s']
+
+
+def test_hil_runs_a_task_file_and_a_mesh_and_records_them(bags, tmp_path, capsys):
+    import json
+
+    mesh, task = str(bags / 'grid.obj'), str(bags / 'my_task.yaml')
+    command = ['hil', '--rate', '100', '--bag', str(bags / 'bags' / 'towel_dynamic'),
+               '--in-process', '--duration', '0.3', '--no-lockstep', '--cloth-mesh', mesh,
+               '--task', task, '--output', str(tmp_path / 'o')]
+    assert main(command) == 0
+    assert 'steps of the mesh ' + mesh in capsys.readouterr().out  # the engine ran the mesh
+    (row,) = [json.loads(line) for line in (tmp_path / 'o' / 'hil.jsonl').open()]
+    assert row['cloth_mesh'] == mesh and len(row['mesh_sha256']) == 64
+    assert row['task_file'] == task and len(row['task_sha256']) == 64
+    assert row['run_dir'].endswith('_task-my_task_mesh-grid')
+    assert main([*command, '--grid', '6x8']) == 2  # a mesh has its own vertices
+    assert 'own vertices' in capsys.readouterr().err

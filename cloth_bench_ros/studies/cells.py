@@ -239,27 +239,18 @@ def with_inputs(cells: Sequence[Cell], task_file: str, cloth_mesh: str) -> list[
     Both are read and checked here (one line, before any cell runs): the mesh is grasped at
     each cell's task's start.
     """
-    from cloth_bench_ros.core.cloth_mesh import ClothMesh, run_cloth
-    from cloth_bench_ros.core.task_data import load_task
+    from cloth_bench_ros.studies.cloth import study_inputs
 
     if not task_file and not cloth_mesh:
         return list(cells)
+    inputs: dict[tuple, dict[str, str]] = {}
     out = []
-    meshes: dict[tuple, str] = {}
     for cell in cells:
-        task = load_task(cell.primitive, task_file or None)
-        mesh_sha = ''
-        if cloth_mesh:
-            at = (cell.primitive, cell.grid, cell.rate_hz)
-            if at not in meshes:
-                mesh = run_cloth(cell.grid, cell.cloth_size, cloth_mesh, task, cell.rate_hz)
-                assert isinstance(mesh, ClothMesh)
-                meshes[at] = mesh.sha256
-            mesh_sha = meshes[at]
-        out.append(replace(
-            cell, task_file=task_file, task_sha256=task.sha256 if task_file else '',
-            cloth_mesh=cloth_mesh, mesh_sha256=mesh_sha,
-        ))
+        at = (cell.primitive, cell.grid, cell.cloth_size, cell.rate_hz)
+        if at not in inputs:
+            inputs[at] = study_inputs(cell.primitive, task_file, cloth_mesh, cell.grid,
+                                      cell.cloth_size, cell.rate_hz)
+        out.append(replace(cell, **inputs[at]))
     return out
 
 

@@ -60,6 +60,31 @@ def mesh_choice(
     return cloth if isinstance(cloth, ClothMesh) else None
 
 
+def study_inputs(
+    primitive: str,
+    task_file: str,
+    cloth_mesh: str,
+    grid: tuple[int, int] | None,
+    size: Size | None,
+    rate_hz: float,
+) -> dict[str, str]:
+    """
+    Return what a study's row records of its `--task` and `--cloth-mesh`: files and SHA-256s.
+
+    Both are read and checked (one line if bad); '' for what is not given.
+    """
+    from cloth_bench_ros.core.task_data import load_task
+
+    task = load_task(primitive, task_file or None)
+    cloth = run_cloth(grid, size, cloth_mesh or None, task, rate_hz)
+    return {
+        'task_file': task_file,
+        'task_sha256': task.sha256 if task_file else '',
+        'cloth_mesh': cloth_mesh,
+        'mesh_sha256': cloth.sha256 if isinstance(cloth, ClothMesh) else '',
+    }
+
+
 def mesh_line(mesh: ClothMesh) -> str:
     """Return the line that says a run's `--cloth-mesh`: size, spacing, grasp."""
     return (

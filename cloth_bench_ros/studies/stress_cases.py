@@ -242,16 +242,10 @@ def case_cloth(case: StressCase):
 
 def case_inputs(case: StressCase) -> dict:
     """Return what a row records of a case's task file and mesh (file and SHA-256; '': none)."""
-    from cloth_bench_ros.core.cloth_mesh import ClothMesh
+    from cloth_bench_ros.studies.cloth import study_inputs
 
-    task = case_task(case) if case.task_file else None
-    cloth = case_cloth(case) if case.cloth_mesh else None
-    return {
-        'task_file': case.task_file,
-        'task_sha256': task.sha256 if task else '',
-        'cloth_mesh': case.cloth_mesh,
-        'mesh_sha256': cloth.sha256 if isinstance(cloth, ClothMesh) else '',
-    }
+    return study_inputs(case.primitive, case.task_file, case.cloth_mesh, case.grid, None,
+                        case.rate_hz)
 
 
 def case_targets(case: StressCase):
