@@ -129,3 +129,33 @@ def test_a_recorded_motions_turn_moves_the_mesh_as_it_moves_the_grippers(tmp_pat
     mesh = read_cloth_mesh(path, moved[0], moved[2], turn)
     assert mesh.rest == pytest.approx(moved, abs=1e-9)
     assert mesh.area == pytest.approx(0.5 * 0.3, abs=1e-9)  # rigid: the area is kept
+
+
+def test_the_comparison_bag_draws_the_meshs_own_triangles(tmp_path, capsys):
+    from cloth_bench_ros.core.scene import ClothGrid
+    from rosbags.highlevel import AnyReader
+
+    grid = ClothGrid(6, 8)
+    faces = grid.faces()[::-1, ::-1]  # its own order and winding: not the grid's triangles
+    mesh = write_obj(tmp_path / 'sheet.obj', grid.vertices(), faces)
+    bag = tmp_path / 'comparison'
+    assert cli.main(['run', '--cloth-mesh', str(mesh), '--output', str(tmp_path / 'out'),
+                     '--record-comparison', str(bag)]) == 0
+    assert f'run of: cloth mesh {mesh} (48 vertices, 70 triangles' in capsys.readouterr().out
+    markers = 0
+    with AnyReader([bag]) as reader:
+        by_stamp: dict = {}
+        wanted = [c for c in reader.connections
+                  if c.topic in ('/cloth_bench/mujoco/mesh', '/cloth_bench/mujoco/error_cloud')]
+        for conn, stamp, raw in reader.messages(connections=wanted):
+            by_stamp.setdefault(stamp, {})[conn.topic] = reader.deserialize(raw, conn.msgtype)
+    for pair in by_stamp.values():
+        marker, cloud = pair['/cloth_bench/mujoco/mesh'], pair['/cloth_bench/mujoco/error_cloud']
+        n, step = cloud.width * cloud.height, cloud.point_step
+        raw = np.frombuffer(bytes(cloud.data), dtype=np.uint8).reshape(n, step)
+        xyz = np.column_stack([raw[:, 4 * i:4 * i + 4].copy().view('<f4').ravel()
+                               for i in range(3)])
+        points = np.array([[p.x, p.y, p.z] for p in marker.points])
+        assert points == pytest.approx(xyz[faces.ravel()], abs=1e-6)
+        markers += 1
+    assert markers > 10

@@ -28,14 +28,46 @@ def _fmt(value: float | None, digits: int = 4) -> str:
     return f'{value:.{digits}f}'
 
 
+def inputs_line(summary: dict) -> str:
+    """
+    Return which task file, recorded motion and cloth mesh a run used, in one line.
+
+    '' for the shipped task on the grid (summary.json's `task_file`, `motion`, `cloth_mesh`).
+    """
+    run = summary['run']
+    parts = []
+    task_file = str(run.get('task_file') or '')
+    if task_file and not task_file.startswith('config/tasks/'):
+        parts.append(f'task {task_file} (sha256 {str(run.get("task_sha256", ""))[:12]})')
+    motion = run.get('motion')
+    if motion:
+        table = motion.get('table_z')
+        parts.append(
+            f'motion recorded ({motion.get("source")}, in {motion.get("frame")}; table '
+            + (f'{table:.3f} m' if isinstance(table, (int, float)) else 'none') + ')'
+        )
+    mesh = run.get('cloth_mesh')
+    if mesh:
+        parts.append(
+            f'cloth mesh {mesh.get("file")} ({mesh.get("vertices")} vertices, '
+            f'{mesh.get("triangles")} triangles, sha256 {str(mesh.get("sha256", ""))[:12]})'
+        )
+    return 'run of: ' + '; '.join(parts) if parts else ''
+
+
 def result_table(summary: dict, realtime: bool = False) -> str:
-    """One row per engine: CD, HD, L_s and step time (ms); realtime: latency, misses, skips."""
+    """
+    One row per engine: CD, HD, L_s and step time (ms); realtime: latency, misses, skips.
+
+    Headed by `inputs_line` when the run had a task file, a recorded motion or a mesh.
+    """
     suffix = 'd' if summary['run']['primitive'] == 'dynamic' else 'q'
     header = (
         f'{"engine":<10} {"CD_" + suffix:>8} {"HD_" + suffix:>8} {"L_s":>10} '
         f'{"step mean":>10} {"p50":>8} {"p99":>8} {"max":>8}  status'
     )
-    lines = [header, '-' * len(header)]
+    inputs = inputs_line(summary)
+    lines = ([inputs] if inputs else []) + [header, '-' * len(header)]
     for engine, m in summary['engines'].items():
         st = m['step_time']
         ms = {k: st[k] * 1e3 if st[k] is not None else None for k in ('mean', 'p50', 'p99', 'max')}
