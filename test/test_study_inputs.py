@@ -127,3 +127,19 @@ def test_hil_runs_a_task_file_and_a_mesh_and_records_them(bags, tmp_path, capsys
     assert row['run_dir'].endswith('_task-my_task_mesh-grid')
     assert main([*command, '--grid', '6x8']) == 2  # a mesh has its own vertices
     assert 'own vertices' in capsys.readouterr().err
+
+
+def test_the_sweep_report_names_the_task_files_and_meshes_its_cells_ran(bags, tmp_path):
+    from cloth_bench_ros.report.document import overview_section
+
+    out = tmp_path / 'out'
+    _sweep(bags, out, '--grid', '6x8')
+    (plain,) = [r for r in _sweep(bags, out, '--cloth-mesh', str(bags / 'grid.obj'))
+                if r['cloth_mesh']]
+    rows = sw.load_rows(out)
+    assert len(rows) == 2  # a mesh is another cell than the grid
+    text = overview_section(rows)[0][1]
+    assert f'1 cells ran the cloth mesh `{bags / "grid.obj"}` (sha256 ' in text
+    assert plain['mesh_sha256'][:12] in text and 'task file' not in text
+    grid_only = [r for r in rows if not r['cloth_mesh']]
+    assert 'ran the' not in overview_section(grid_only)[0][1]
