@@ -43,7 +43,7 @@ def hanging_mesh(left, right, nx=6, nz=8, length=LENGTH):
 
 @pytest.fixture(scope='module')
 def recordings(tmp_path_factory):
-    """The world and base-frame recordings and the reference's mesh written in each frame."""
+    """Write the world and base-frame recordings and the reference's mesh in each frame."""
     root = tmp_path_factory.mktemp('own_motion_mesh')
     world = write_recording(root / 'world')
     write_recording(root / 'base', frame='base_link')
@@ -84,7 +84,7 @@ def test_a_mesh_in_the_scenes_frame_is_not_grasped_by_a_turned_recording(recordi
 
 
 def _recorded_task(tmp_path, apart):
-    """A recorded task (task file) whose grippers start `apart` metres apart along x, still."""
+    """Return a recorded task (a task file) of still grippers `apart` metres apart along x."""
     from cloth_bench_ros.core.task_data import load_task
     import yaml
 

@@ -329,7 +329,8 @@ def cloth_faces(cloth: Cloth) -> np.ndarray:
 def task_starts(
     task: Any, rate_hz: float, size: tuple[float, float] | None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Return the grippers' start positions (left, right): the first targets of `task`.
+    """
+    Return the grippers' start positions (left, right): the first targets of `task`.
 
     `task`: a Task, or a shipped task's name (core/task_data.py).
     """

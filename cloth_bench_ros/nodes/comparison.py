@@ -115,7 +115,7 @@ def write_comparison(
 
     faces: the cloth's triangles (a `--cloth-mesh`'s; None: the grid's).
     """
-    from cloth_bench_ros.report.run_report import inputs_line
+    from cloth_bench_ros.core.run_summary import inputs_line
 
     run = summary['run']
     out: dict[str, Any] = {}

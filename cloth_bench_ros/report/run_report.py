@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 from cloth_bench_ros.core.metric_choice import METRICS
+from cloth_bench_ros.core.run_summary import inputs_line
 
 # the metrics beside the paper's, in the order of docs/metrics.md: (name, column title, digits)
 SURFACE_COLUMNS = (
@@ -26,33 +27,6 @@ def _fmt(value: float | None, digits: int = 4) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return '-'
     return f'{value:.{digits}f}'
-
-
-def inputs_line(summary: dict) -> str:
-    """
-    Return which task file, recorded motion and cloth mesh a run used, in one line.
-
-    '' for the shipped task on the grid (summary.json's `task_file`, `motion`, `cloth_mesh`).
-    """
-    run = summary['run']
-    parts = []
-    task_file = str(run.get('task_file') or '')
-    if task_file and not task_file.startswith('config/tasks/'):
-        parts.append(f'task {task_file} (sha256 {str(run.get("task_sha256", ""))[:12]})')
-    motion = run.get('motion')
-    if motion:
-        table = motion.get('table_z')
-        parts.append(
-            f'motion recorded ({motion.get("source")}, in {motion.get("frame")}; table '
-            + (f'{table:.3f} m' if isinstance(table, (int, float)) else 'none') + ')'
-        )
-    mesh = run.get('cloth_mesh')
-    if mesh:
-        parts.append(
-            f'cloth mesh {mesh.get("file")} ({mesh.get("vertices")} vertices, '
-            f'{mesh.get("triangles")} triangles, sha256 {str(mesh.get("sha256", ""))[:12]})'
-        )
-    return 'run of: ' + '; '.join(parts) if parts else ''
 
 
 def result_table(summary: dict, realtime: bool = False) -> str:

@@ -45,7 +45,9 @@ import yaml
 def _cloth(config: RunConfig) -> Cloth | None:
     """Return the cloth of a run, as the nodes build it (None: the engine's default grid)."""
     task = load_task(config.primitive, config.task)
-    return run_cloth(config.grid, config.cloth_size, config.cloth_mesh, task, float(config.rate_hz))
+    return run_cloth(
+        config.grid, config.cloth_size, config.cloth_mesh, task, float(config.rate_hz)
+    )
 
 
 def _engine(config: RunConfig, name: str) -> ClothEngine:

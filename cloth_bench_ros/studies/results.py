@@ -45,7 +45,7 @@ KEY_FIELDS: dict[str, Any] = {
     'all_metrics': True,  # every metric (core/metric_choice), or the paper's CD/HD only
     'surface_revision': 0,  # core/surface_metrics.SURFACE_REVISION of an all-metrics row, else 0
     # --task and --cloth-mesh: the file (which cell) and its content's SHA-256 (how it ran)
-    **{name: '' for name in ('task_file', 'task_sha256', 'cloth_mesh', 'mesh_sha256')},
+    **dict.fromkeys(('task_file', 'task_sha256', 'cloth_mesh', 'mesh_sha256'), ''),
 }
 # The key fields that say how a cell was computed, not which cell: a row that differs from a cell
 # in these only is superseded when the cell runs again (`superseded_rows`).

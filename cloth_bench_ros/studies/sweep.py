@@ -45,8 +45,8 @@ from cloth_bench_ros.studies.cells import (  # noqa: F401
     PRESET,
     settings_cells,
     SETTINGS_RATE,
-    with_inputs,
     SETTINGS_SEEDS,
+    with_inputs,
 )
 from cloth_bench_ros.studies.dask_executor import default_workers, open_client, run_tasks
 from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
