@@ -256,6 +256,7 @@ def run_cloth(
     from cloth_bench_ros.core.trajectory import as_task
 
     task = as_task(task)
+    cloth: Cloth | None
     if not mesh:
         cloth = cloth_grid(grid, size)
     elif grid or size is not None:

@@ -250,7 +250,9 @@ def with_inputs(cells: Sequence[Cell], task_file: str, cloth_mesh: str) -> list[
         if at not in inputs:
             inputs[at] = study_inputs(cell.primitive, task_file, cloth_mesh, cell.grid,
                                       cell.cloth_size, cell.rate_hz)
-        out.append(replace(cell, **inputs[at]))
+        given = inputs[at]
+        out.append(replace(cell, task_file=given['task_file'], task_sha256=given['task_sha256'],
+                           cloth_mesh=given['cloth_mesh'], mesh_sha256=given['mesh_sha256']))
     return out
 
 
