@@ -91,7 +91,7 @@ def studies_on_one_dask_cluster(request, monkeypatch):
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption(
         '--timing-tests', choices=('with', 'apart', 'only'), default='with',
-        help='tests marked timing: run with the others (default), leave them out, or run only them',
+        help='tests marked timing: run with the others (default), leave them out, or only them',
     )
 
 
@@ -105,8 +105,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     mode = config.getoption('--timing-tests')
     if mode != 'with':
         wanted = mode == 'only'
-        keep = [item for item in items if (item.get_closest_marker('timing') is not None) == wanted]
-        left = [item for item in items if (item.get_closest_marker('timing') is not None) != wanted]
-        config.hook.pytest_deselected(items=left)
-        items[:] = keep
+        timed = [item.get_closest_marker('timing') is not None for item in items]
+        config.hook.pytest_deselected(items=[i for i, t in zip(items, timed) if t != wanted])
+        items[:] = [i for i, t in zip(items, timed) if t == wanted]
     items.sort(key=lambda item: item.path.name != 'test_install.py')  # stable: else as collected

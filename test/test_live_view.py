@@ -48,9 +48,9 @@ def _cli(*args: str) -> list[str]:
 
 
 def _start_run(out: Path, port: int, *extra: str) -> subprocess.Popen:
+    cloth = () if '--cloth-mesh' in extra else ('--grid', GRID)
     return subprocess.Popen(
-        _cli('run', '--grid', GRID, '--output', str(out), '--live', '--live-port', str(port),
-             *extra),
+        _cli('run', *cloth, '--output', str(out), '--live', '--live-port', str(port), *extra),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -153,6 +153,7 @@ def test_the_client_sees_every_channel_and_the_run_said_it_waited(watched):
         '/cloth_bench/targets',
         '/cloth_bench/scene',
         '/cloth_bench/mujoco/error_cloud',
+        '/cloth_bench/mujoco/mesh',
         '/cloth_bench/mujoco/frame_metrics',
         '/cloth_bench/mujoco/step_metrics',
     }
@@ -162,6 +163,49 @@ def test_the_client_sees_every_channel_and_the_run_said_it_waited(watched):
     assert set(seen['messages']) == set(topics)  # every channel carried something
     waits = [line for line in stderr.splitlines() if 'waiting up to 60 s for a viewer' in line]
     assert len(waits) == 1
+
+
+def _triangles_match_the_vertices(seen: dict, faces: np.ndarray) -> int:
+    """Assert each mesh Marker is its frame's error-cloud vertices, triangle by triangle."""
+    clouds = seen['messages']['/cloth_bench/mujoco/error_cloud']
+    meshes = seen['messages']['/cloth_bench/mujoco/mesh']
+    assert len(meshes) == len(clouds) > 0
+    for (_, cloud), (_, mesh) in zip(clouds, meshes):
+        msg = TYPES.deserialize_cdr(mesh, 'visualization_msgs/msg/Marker')
+        assert msg.type == 11  # TRIANGLE_LIST
+        points = np.array([[p.x, p.y, p.z] for p in msg.points])
+        fields = _cloud(cloud)
+        vertices = np.column_stack([fields['x'], fields['y'], fields['z']])
+        assert points == pytest.approx(vertices[faces.ravel()], abs=1e-6)
+    return len(meshes)
+
+
+@pytest.mark.slow
+def test_the_cloths_triangles_are_streamed_with_each_frame(watched):
+    from cloth_bench_ros.core.scene import ClothGrid
+
+    assert _triangles_match_the_vertices(watched[1], ClothGrid(6, 8).faces()) > 0
+
+
+@pytest.mark.slow
+def test_a_meshs_own_triangles_are_streamed_and_its_run_is_named(tmp_path):
+    from cloth_bench_ros.core.scene import ClothGrid
+
+    grid = ClothGrid(6, 8)
+    faces = grid.faces()[::-1, ::-1]  # its own order and winding: not the grid's triangles
+    mesh = tmp_path / 'sheet.obj'
+    mesh.write_text(''.join(f'v {x!r} {y!r} {z!r}\n' for x, y, z in grid.vertices().tolist())
+                    + ''.join(f'f {a + 1} {b + 1} {c + 1}\n' for a, b, c in faces.tolist()))
+    port = _free_port()
+    proc = _start_run(tmp_path / 'run', port, '--live-wait', '60', '--cloth-mesh', str(mesh))
+    try:
+        seen = asyncio.run(_watch(port))
+        stdout, stderr = proc.communicate(timeout=300)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, stderr
+    assert _triangles_match_the_vertices(seen, faces) > 0
+    assert f'run of: cloth mesh {mesh} (48 vertices, 70 triangles, sha256 ' in stdout
 
 
 def test_clouds_and_their_error_field_match_frames_csv(watched):

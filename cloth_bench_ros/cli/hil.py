@@ -95,6 +95,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.engine_override_option(hil, 'engine parameter override')
     common.add_options(hil, LAYOUT_FLAGS)
     hil_rate.add_options(hil)
+    common.add_option(hil, 'task')
+    common.add_option(hil, 'cloth_mesh')
     hil.set_defaults(func=cmd_hil)
 
 
@@ -107,6 +109,7 @@ def cmd_hil(args: argparse.Namespace) -> int:
     from cloth_bench_ros.studies import hil
     from cloth_bench_ros.studies.hil_layout import resolve_layout
     from cloth_bench_ros.studies.cells import set_label, set_values
+    from cloth_bench_ros.studies.cloth import study_inputs
     from cloth_bench_ros.studies.sweep import config_label
 
     if args.budget is None:
@@ -126,6 +129,12 @@ def cmd_hil(args: argparse.Namespace) -> int:
             ' with the rate: give --grid/--set instead'
         )
     grids = [tuple(g) for g in args.grid] if args.grid else [None]
+    if args.cloth_mesh and args.config == 'recommended':
+        raise UserError('--cloth-mesh and --config recommended: the recommendation is a grid; '
+                        'give one')
+    for grid in grids:  # a bad task file or mesh (or a mesh with --grid): one line, first
+        study_inputs(args.primitive, args.task or '', args.cloth_mesh or '', grid, None,
+                     OPTIONS['rate_hz'].default)
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag)
     overrides = common.engine_overrides(args.set, engines)
@@ -177,6 +186,8 @@ def cmd_hil(args: argparse.Namespace) -> int:
                 layout.busy_wait,
                 args.duration,
                 live=tuple(sorted(common.live_parameters(args).items())),
+                task_file=args.task or '',
+                cloth_mesh=args.cloth_mesh or '',
             )
             if args.config == 'recommended':
                 rec, source = hil.recommended(

@@ -114,7 +114,7 @@ def remedy_line(
                     f'`--config recommended` ({rec.config}, CD {rec.cd:.4f} m; warm-up step p99'
                     f' {1e3 * tried.p99_s:.3g} ms)'
                 )
-    if not check.meets:
+    if not check.meets and not timing.mesh:
         for grid in coarser_grids(timing.grid):
             coarse = warmup(replace(config, grid=grid))
             if deadline_check(coarse.p99_s, rate, args.budget).meets:
@@ -128,7 +128,8 @@ def remedy_line(
             'a quieter machine: the step p99 meets the rule, so the misses are the round trip'
             f' and the load (CPU busy {100 * result.load.get("cpu_busy", float("nan")):.0f} %)'
         )
-    mesh = f' --grid {timing.grid[0]}x{timing.grid[1]}'
+    mesh = (f' --cloth-mesh {timing.mesh}' if timing.mesh
+            else f' --grid {timing.grid[0]}x{timing.grid[1]}')
     ways.append(
         f'a lower rate: this configuration meets the rule up to {check.rate_met_hz:.3g} Hz'
         f' (`cloth-bench hil --find-rate --engine {config.engine}{mesh}` finds the highest rate'

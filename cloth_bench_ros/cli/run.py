@@ -280,9 +280,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic)
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, overrides)
-    mesh = mesh_choice(args.cloth_mesh, args.grid, size, args.primitive, args.rate)
-    # an engine without a mass fails here, one line
-    masses = engine_masses(params, size, mass, mesh.area if mesh else None)
     replay = _replay_params(args)
     out = (
         Path(args.output)
@@ -295,6 +292,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         out, '--output'
     )  # an unwritable or occupied --output is found before the run, not after it
     task_file, motion_lines = recorded_motion(args, bag, out)
+    if task_file:
+        task = load_task(args.primitive, task_file)
+    # the mesh in the task's frame, grasped at its grippers' start; the start checked
+    mesh = mesh_choice(args.cloth_mesh, args.grid, size, task, args.rate)
+    # an engine without a mass fails here, one line
+    masses = engine_masses(params, size, mass, mesh.area if mesh else None)
     config = RunConfig(
         bag=bag,
         engines=engines,

@@ -130,6 +130,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.add_options(sweep, SWEEP_FLAGS)
     common.engine_override_option(sweep, 'engine parameter override for every cell (repeatable)')
     common.add_options(sweep, SWEEP_RUN_FLAGS)
+    common.add_option(sweep, 'task')
+    common.add_option(sweep, 'cloth_mesh')
     sweep.set_defaults(func=cmd_sweep)
 
     report = sub.add_parser(
@@ -147,6 +149,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     common.add_options(stress, STRESS_FLAGS)
     common.device_option(stress, with_set=False)
+    common.add_option(stress, 'task')
+    common.add_option(stress, 'cloth_mesh')
     stress.set_defaults(func=cmd_stress)
 
     xref = sub.add_parser(
@@ -208,7 +212,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         all_metrics=scores_every_metric(args),
         settle=args.settle,
     )
-    cells = plan.cells()
+    cells = sw.with_inputs(plan.cells(), args.task, args.cloth_mesh)  # read and checked once
     if plan.left_out:
         print(
             f'cloth-bench sweep: --presets {plan.presets.name if plan.presets else ""} has no'
@@ -326,7 +330,12 @@ def cmd_stress(args: argparse.Namespace) -> int:
         args.engine or [e for e in ('mujoco', 'bullet', 'newton') if e in available], '--engine'
     )
     presets = common.preset_set(args)
-    cases = select_cases(engines, args.case, args.max_wall_s, presets)
+    cases = select_cases(
+        engines, args.case, args.max_wall_s, presets, args.task or '', args.cloth_mesh or ''
+    )
+    if args.cloth_mesh and any(c.grid for c in select_cases(engines, args.case)):
+        print(f'stress: the cases of their own grid are left out: --cloth-mesh {args.cloth_mesh} '
+              'is the cloth of every case')
     if args.device is not None:  # Newton's cases on the device asked for
         if 'newton' not in engines:
             raise common.UserError('--device applies to engine newton, not part of this run')

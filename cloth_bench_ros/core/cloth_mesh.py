@@ -3,11 +3,15 @@ A cloth from a triangle mesh file (`--cloth-mesh`): its shape, grasp, area and s
 
 - File: OBJ, PLY or STL, read by trimesh (no processing of its own: vertices at one position are
   merged, first occurrence first, so an STL's triangle soup is one surface and an OBJ or PLY keeps
-  its vertex order). The mesh is the cloth in its start placement, in the scene's frame (metres).
+  its vertex order). The mesh is the cloth in its start placement, in the scene's frame (metres),
+  or, with a recorded motion, in the recording's frame: it is then moved into the scene's by the
+  motion's own turn and translation (`to_scene`), as the grippers are.
 - Checked, one line each: readable, finite, triangles only; no degenerate triangle (a repeated
   vertex or an area under DEGENERATE_AREA of the mean), no triangle twice, no edge shared by more
   than two triangles, one connected part, at most `validation.MAX_GRID_VERTICES` vertices.
-- Grasp: the vertices nearest the grippers' start positions, each within GRASP_REACH.
+- Grasp: the vertices nearest the grippers' start positions, each within GRASP_REACH; recorded
+  grippers that start further apart than the grasped vertices (or a grid's grasped edge) allow are
+  refused (`check_start`).
 - Spacing: sqrt(2 area / triangles), the cell of a grid with the same triangle area; over the
   benchmark grid's it scales that grid's (dx, dz), and the material follows by the rule of
   `--grid` (engines/base.py `params_for_grid`): a finer mesh of one garment is the same cloth.
@@ -28,6 +32,7 @@ import numpy as np
 
 FORMATS = ('.obj', '.ply', '.stl')
 GRASP_REACH = 0.01  # m: a grasped vertex lies this close to its gripper's start position
+GRASP_SLACK = 0.01  # m: recorded grippers may start this much further apart than the cloth allows
 DEGENERATE_AREA = 1e-6  # a triangle under this fraction of the mean triangle area is degenerate
 # The mesh's area and its spacing ratio are rounded to these, so that a mesh of the benchmark's
 # grid is that grid's cloth exactly (a sum of triangle areas differs in the last bits).
@@ -125,11 +130,15 @@ def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
 
 
-def read_cloth_mesh(path: str | Path, left: np.ndarray, right: np.ndarray) -> ClothMesh:
+def read_cloth_mesh(
+    path: str | Path, left: np.ndarray, right: np.ndarray, to_scene: np.ndarray | None = None
+) -> ClothMesh:
     """
     Read and check a cloth mesh; grasped at the vertices nearest `left` and `right`.
 
-    InputError, one line naming the file, for anything the benchmark cannot run as a cloth.
+    `to_scene`: a 4x4 rigid transform from the file's frame to the scene's (a recorded motion's),
+    applied to the vertices first. InputError, one line naming the file, for anything the
+    benchmark cannot run as a cloth.
     """
     name = f'cloth mesh {path}'
     suffix = Path(path).suffix.lower()
@@ -140,6 +149,8 @@ def read_cloth_mesh(path: str | Path, left: np.ndarray, right: np.ndarray) -> Cl
     vertices, faces = _load(data, suffix, name)
     vertices, faces = _merged(vertices, faces)
     check_mesh(vertices, faces, name)
+    if to_scene is not None:
+        vertices = vertices @ to_scene[:3, :3].T + to_scene[:3, 3]
     corners = [_grasped(vertices, np.asarray(p, float), side, name)
                for p, side in ((left, 'left'), (right, 'right'))]
     if corners[0] == corners[1]:
@@ -231,23 +242,66 @@ def run_cloth(
     grid: tuple[int, int] | None,
     size: tuple[float, float] | None,
     mesh: str | None,
-    starts: tuple[np.ndarray, np.ndarray],
+    task: Any,
+    rate_hz: float,
 ) -> Cloth | None:
     """
-    Return the cloth a run simulates: `mesh` grasped nearest the grippers' `starts`, else the grid.
+    Return the cloth a run of `task` simulates: `mesh`, else the grid; its start checked.
 
-    None: the engine's default grid. A mesh with a grid or a size is refused (it has its own).
+    The mesh is grasped nearest the grippers' start positions (in the recording's frame for a
+    recorded motion, moved into the scene's as the grippers are). None: the engine's default
+    grid. A mesh with a grid or a size is refused (it has its own).
     """
     from cloth_bench_ros.core.cloth_size import cloth_grid
+    from cloth_bench_ros.core.trajectory import as_task
 
+    task = as_task(task)
+    cloth: Cloth | None
     if not mesh:
-        return cloth_grid(grid, size)
-    if grid or size is not None:
+        cloth = cloth_grid(grid, size)
+    elif grid or size is not None:
         raise InputError(
             f'cloth mesh {mesh}: a mesh has its own vertices and size; give no grid or cloth '
             'size with it'
         )
-    return read_cloth_mesh(mesh, *starts)
+    else:
+        cloth = read_cloth_mesh(mesh, *task_starts(task, rate_hz, size), task_placement(task))
+    check_start(task, cloth, size)
+    return cloth
+
+
+def task_placement(task: Any) -> np.ndarray | None:
+    """Return a recorded motion's 4x4 turn and translation into the scene (None: a task's own)."""
+    if task.recorded is None:
+        return None
+    return np.asarray(task.recorded.to_scene, dtype=np.float64).reshape(4, 4)
+
+
+def check_start(task: Any, cloth: Cloth | None, size: tuple[float, float] | None) -> None:
+    """
+    InputError, one line, if recorded grippers start further apart than the cloth allows.
+
+    The cloth's allowance: a mesh's grasped vertices' distance, else the grid's grasped edge.
+    """
+    from cloth_bench_ros.core.cloth_size import grasp_width
+    from cloth_bench_ros.core.scene import CLOTH_WIDTH
+
+    if task.recorded is None:
+        return
+    apart = float(np.linalg.norm(np.subtract(task.grasp[1], task.grasp[0])))
+    if isinstance(cloth, ClothMesh):
+        width = float(
+            np.linalg.norm(cloth.rest[cloth.right_corner] - cloth.rest[cloth.left_corner])
+        )
+        allowed = f'its grasped vertices, {width:.3f} m apart in {cloth.source}'
+    else:
+        width = grasp_width(size) or CLOTH_WIDTH
+        allowed = f'its grasped edge, {width:.3f} m, --cloth-size W,L'
+    if apart > width + GRASP_SLACK:
+        raise InputError(
+            f'task {task.path}: the grippers start {apart:.3f} m apart, further than the '
+            f'cloth ({allowed}) allows'
+        )
 
 
 def mesh_area(cloth: Cloth | None) -> float | None:
@@ -276,7 +330,8 @@ def cloth_faces(cloth: Cloth) -> np.ndarray:
 def task_starts(
     task: Any, rate_hz: float, size: tuple[float, float] | None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Return the grippers' start positions (left, right): the first targets of `task`.
+    """
+    Return the grippers' start positions (left, right): the first targets of `task`.
 
     `task`: a Task, or a shipped task's name (core/task_data.py).
     """

@@ -58,3 +58,30 @@ def run_summary(
         },
         'engines': engines,
     }
+
+
+def inputs_line(summary: dict) -> str:
+    """
+    Return which task file, recorded motion and cloth mesh a run used, in one line.
+
+    '' for the shipped task on the grid (summary.json's `task_file`, `motion`, `cloth_mesh`).
+    """
+    run = summary['run']
+    parts = []
+    task_file = str(run.get('task_file') or '')
+    if task_file and not task_file.startswith('config/tasks/'):
+        parts.append(f'task {task_file} (sha256 {str(run.get("task_sha256", ""))[:12]})')
+    motion = run.get('motion')
+    if motion:
+        table = motion.get('table_z')
+        parts.append(
+            f'motion recorded ({motion.get("source")}, in {motion.get("frame")}; table '
+            + (f'{table:.3f} m' if isinstance(table, (int, float)) else 'none') + ')'
+        )
+    mesh = run.get('cloth_mesh')
+    if mesh:
+        parts.append(
+            f'cloth mesh {mesh.get("file")} ({mesh.get("vertices")} vertices, '
+            f'{mesh.get("triangles")} triangles, sha256 {str(mesh.get("sha256", ""))[:12]})'
+        )
+    return 'run of: ' + '; '.join(parts) if parts else ''

@@ -39,7 +39,6 @@ def parse_primitive(name: str) -> Primitive:
 
 
 TaskLike = Union[Task, Primitive, str]
-GRASP_SLACK = 0.01  # m a recorded motion's grippers may start further apart than the cloth is wide
 # the shipped task whose metric keys (CD_d or CD_q, ...) a task's window shares
 SUFFIX_TASK = {'d': Primitive.DYNAMIC.value, 'q': Primitive.QUASI_STATIC.value}
 
@@ -118,16 +117,6 @@ def _settle(task: Task, t: np.ndarray, start: np.ndarray, grasp: np.ndarray) -> 
     return start + s * (grasp - start)
 
 
-def check_grasp(task: Task, width: float) -> None:
-    """Raise InputError if recorded grippers start further apart than the cloth allows."""
-    apart = float(np.linalg.norm(np.subtract(task.grasp[1], task.grasp[0])))
-    if apart > width + GRASP_SLACK:
-        raise InputError(
-            f'task {task.path}: the grippers start {apart:.3f} m apart, further than the '
-            f"cloth's grasped edge ({width:.3f} m, --cloth-size W,L) allows"
-        )
-
-
 def full_targets(
     task: TaskLike, rate_hz: float, width: float | None = None
 ) -> GripperTargets:
@@ -145,7 +134,7 @@ def full_targets(
     n = len(t)
     grasp_left, grasp_right = np.array(task.grasp[0]), np.array(task.grasp[1])
     if task.recorded is not None:  # the cloth starts hanging from the grippers' first positions
-        check_grasp(task, scene.CLOTH_WIDTH if width is None else width)
+        # (core/cloth_mesh.py check_start refuses grippers further apart than the cloth allows)
         left[settle], right[settle] = grasp_left, grasp_right
     else:
         left[settle] = _settle(task, t[settle], scene.GRIPPER_START_LEFT, grasp_left)

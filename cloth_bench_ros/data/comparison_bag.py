@@ -74,7 +74,13 @@ def grid_for(vertex_count: int) -> ClothGrid:
     return ClothGrid(nx, nz)
 
 
-def _marker(stamp: int, engine: str, vertices: np.ndarray, faces: np.ndarray) -> Any:
+def cloth_triangles(vertices: np.ndarray, faces: np.ndarray | None) -> np.ndarray:
+    """Return the cloth's triangles: `faces` if given, else the grid's of the vertex count."""
+    return grid_for(len(vertices)).faces() if faces is None else faces
+
+
+def mesh_marker(stamp: int, engine: str, vertices: np.ndarray, faces: np.ndarray) -> Any:
+    """Return the simulated cloth as a red TRIANGLE_LIST Marker of its triangles."""
     point = messages.msg_class('geometry_msgs/msg/Point')
     tris = vertices[faces.ravel()]
     return default_message(
@@ -168,12 +174,13 @@ def _metrics(stamp: int, score: Any) -> Any:
 
 
 def write_comparison_bag(
-    path: Path, pairs: list, task: TaskLike, rate_hz: float
+    path: Path, pairs: list, task: TaskLike, rate_hz: float, faces: np.ndarray | None = None
 ) -> dict[str, int]:
     """
     Write the comparison bag (see module doc); returns messages per topic.
 
-    pairs: (FrameScore, real points, vertices, per-vertex errors or None) per scored frame.
+    pairs: (FrameScore, real points, vertices, per-vertex errors or None) per scored frame;
+    faces: the cloth's triangles (a `--cloth-mesh`'s; None: the grid's of the vertex count).
     """
     pc2 = messages.POINTCLOUD2
     tg = full_targets(task, rate_hz)
@@ -198,7 +205,7 @@ def write_comparison_bag(
             )
             bag.write_message(
                 error_view.topic(error_view.MESH, engine),
-                _marker(stamp, engine, vertices, grid_for(len(vertices)).faces()),
+                mesh_marker(stamp, engine, vertices, cloth_triangles(vertices, faces)),
                 stamp,
             )
             bag.write(

@@ -4,7 +4,8 @@ The Foxglove layout shipped with the package (config/foxglove/cloth_bench_live.j
 Made with foxglove-sdk's layout types from the topic names of data/error_view.py, so the one file
 opens a live run (`--live`), a comparison bag (`--record-comparison`) and a graph seen through
 foxglove_bridge: a 3D view of the real cloud (grey) against each engine's scored vertices coloured
-by their error (turbo colour map, 0 to 5 cm), the grippers' targets and the table; CD and HD per
+by their error (turbo colour map, 0 to 5 cm) and its cloth's triangles (red, a `--cloth-mesh`'s
+or the grid's), the grippers' targets and the table; CD and HD per
 engine over time; step time and latency per engine over time.
 `python -m cloth_bench_ros.data.live_layout FILE` writes it again.
 """
@@ -51,6 +52,9 @@ def live_layout() -> Any:
                 min_value=ERROR_RANGE_M[0],
                 max_value=ERROR_RANGE_M[1],
             )
+        )
+        topics[error_view.topic(error_view.MESH, engine)] = (
+            fl.BaseRendererRosMarkerTopicSettings(visible=True)
         )
     view = fl.ThreeDeePanel(
         title='real (grey) and simulated cloth, coloured by each vertex error (m)',

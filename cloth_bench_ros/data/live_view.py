@@ -23,7 +23,9 @@ from typing import Any, Callable, cast
 
 from cloth_bench_ros.core.trajectory import full_targets, TaskLike
 from cloth_bench_ros.data import error_view, messages
-from cloth_bench_ros.data.comparison_bag import table_marker, target_poses
+from cloth_bench_ros.data.comparison_bag import (
+    cloth_triangles, MARKER, mesh_marker, table_marker, target_poses,
+)
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
@@ -80,6 +82,7 @@ class LiveView:
         port: int = DEFAULT_PORT,
         realtime: bool = False,
         warn: Callable[[str], None] = print,
+        faces: np.ndarray | None = None,
     ) -> None:
         try:
             import foxglove
@@ -89,16 +92,18 @@ class LiveView:
         logging.getLogger('foxglove').setLevel(logging.ERROR)  # its drops: our one line instead
         self.realtime, self.warn, self.rate_hz = realtime, warn, float(rate_hz)
         self.targets = full_targets(task, rate_hz)
+        self.faces = faces  # the cloth's triangles (a --cloth-mesh's; None: the grid's)
         self.listener = _Listener()
         self.context = foxglove.Context()
         self.channels: dict[str, Any] = {}
         self._add(foxglove, error_view.topic(error_view.REAL_CLOUD), messages.POINTCLOUD2)
         self._add(foxglove, error_view.topic(error_view.TARGETS), messages.POSE_ARRAY)
-        self._add(foxglove, error_view.topic(error_view.SCENE), 'visualization_msgs/msg/Marker')
+        self._add(foxglove, error_view.topic(error_view.SCENE), MARKER)
         for engine in engines:
             self._add(
                 foxglove, error_view.topic(error_view.ERROR_CLOUD, engine), messages.POINTCLOUD2
             )
+            self._add(foxglove, error_view.topic(error_view.MESH, engine), MARKER)
             for name in (error_view.FRAME_METRICS_TOPIC, error_view.STEP_METRICS_TOPIC):
                 self._add(
                     foxglove, error_view.topic(name, engine), error_view.FLOAT64_MULTI_ARRAY
@@ -201,6 +206,13 @@ class LiveView:
         self._log(
             error_view.topic(error_view.ERROR_CLOUD, engine),
             lambda: error_view.cdr_error_cloud(scored),
+            stamp,
+        )
+        vertices = np.asarray(scored.vertices)
+        self._log(
+            error_view.topic(error_view.MESH, engine),
+            lambda: messages.serialize(mesh_marker(
+                stamp, engine, vertices, cloth_triangles(vertices, self.faces))),
             stamp,
         )
         self._log(

@@ -16,7 +16,7 @@ import shutil
 from typing import Any
 
 from cloth_bench_ros.core.trajectory import TaskLike
-from cloth_bench_ros.data.comparison_bag import grid_for, write_comparison_bag
+from cloth_bench_ros.data.comparison_bag import cloth_triangles, write_comparison_bag
 import numpy as np
 
 # The paper's Fig. 4: time steps (s from the start of the motion) of each primitive.
@@ -31,17 +31,19 @@ def _by_engine(pairs: list) -> dict[str, list]:
     return dict(out)
 
 
-def _draw(ax: Any, real: np.ndarray, vertices: np.ndarray) -> None:
+def _draw(ax: Any, real: np.ndarray, vertices: np.ndarray, faces: np.ndarray | None) -> None:
     """Side view (y right, z up), where the fling shows: cloud black, mesh red."""
     ax.scatter(real[:, 1], real[:, 2], s=0.5, c='black', linewidths=0)
-    faces = grid_for(len(vertices)).faces()
+    faces = cloth_triangles(vertices, faces)
     ax.triplot(vertices[:, 1], vertices[:, 2], faces, color='red', linewidth=0.4)
     ax.set_aspect('equal')
     ax.set_xticks([])
     ax.set_yticks([])
 
 
-def qualitative_figure(pairs: list, primitive: str, path: Path) -> tuple[int, int]:
+def qualitative_figure(
+    pairs: list, primitive: str, path: Path, faces: np.ndarray | None = None, title: str = ''
+) -> tuple[int, int]:
     """Return the paper's Fig. 4 for this run: (rows, columns) drawn = (engines, time steps)."""
     import matplotlib
 
@@ -57,18 +59,19 @@ def qualitative_figure(pairs: list, primitive: str, path: Path) -> tuple[int, in
         for col, t in enumerate(times):
             ax = axes[row][col]
             score, real, vertices = min(rows, key=lambda p: abs(p[0].t - t))[:3]
-            _draw(ax, real, vertices)
+            _draw(ax, real, vertices, faces)
             ax.set_xlabel(f't={score.t:.1f} s\nCD {score.cd:.3f}  HD {score.hd:.3f}', fontsize=7)
             if col == 0:
                 ax.set_ylabel(engine)
-    fig.suptitle('simulated mesh (red) over the real cloud (black), side view (y-z)', fontsize=8)
+    fig.suptitle('simulated mesh (red) over the real cloud (black), side view (y-z)'
+                 + (f'\n{title}' if title else ''), fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return len(engines), len(times)
 
 
-def animation(pairs: list, path: Path) -> tuple[Path, int]:
+def animation(pairs: list, path: Path, faces: np.ndarray | None = None) -> tuple[Path, int]:
     """Animate sim against real over the trial, a panel per engine: MP4 with ffmpeg, else GIF."""
     import matplotlib
 
@@ -85,7 +88,7 @@ def animation(pairs: list, path: Path) -> tuple[Path, int]:
         for ax, (engine, rows) in zip(axes[0], engines.items()):
             ax.clear()
             score, real, vertices = rows[picks[i]][:3]
-            _draw(ax, real, vertices)
+            _draw(ax, real, vertices, faces)
             ax.set_title(f'{engine} t={score.t:.2f} s CD {score.cd:.3f}', fontsize=7)
 
     anim = FuncAnimation(fig, update, frames=len(picks))
@@ -100,9 +103,20 @@ def animation(pairs: list, path: Path) -> tuple[Path, int]:
 
 
 def write_comparison(
-    pairs: list, summary: dict, bag_path: Path | None, figures_dir: Path | None, task: TaskLike
+    pairs: list,
+    summary: dict,
+    bag_path: Path | None,
+    figures_dir: Path | None,
+    task: TaskLike,
+    faces: np.ndarray | None = None,
 ) -> dict:
-    """Every comparison output asked for; returns what was written, for the summary."""
+    """
+    Every comparison output asked for; returns what was written, for the summary.
+
+    faces: the cloth's triangles (a `--cloth-mesh`'s; None: the grid's).
+    """
+    from cloth_bench_ros.core.run_summary import inputs_line
+
     run = summary['run']
     out: dict[str, Any] = {}
     if not pairs:
@@ -110,15 +124,15 @@ def write_comparison(
     if bag_path is not None:
         out['bag'] = str(bag_path)
         out['bag_topics'] = write_comparison_bag(
-            bag_path, pairs, task, float(run['rate_hz'])
+            bag_path, pairs, task, float(run['rate_hz']), faces
         )
     if figures_dir is not None:
         figures_dir.mkdir(parents=True, exist_ok=True)
         fig_path = figures_dir / 'qualitative.png'
         out['figure'], out['figure_panels'] = (
             str(fig_path),
-            qualitative_figure(pairs, run['primitive'], fig_path),
+            qualitative_figure(pairs, run['primitive'], fig_path, faces, inputs_line(summary)),
         )
-        anim_path, frames = animation(pairs, figures_dir / 'animation')
+        anim_path, frames = animation(pairs, figures_dir / 'animation', faces)
         out['animation'], out['animation_frames'] = str(anim_path), frames
     return out

@@ -47,6 +47,7 @@ class ErrorTopics:
         quintic_start_ns: int,
         realtime: bool,
         live: dict[str, Any],
+        faces: Any = None,
     ) -> None:
         self.node, self.quintic_start_ns = node, quintic_start_ns
         qos = make_qos(100)
@@ -79,6 +80,7 @@ class ErrorTopics:
                 live['live_port'],
                 realtime,
                 warn=node.get_logger().warning,
+                faces=faces,
             )
             if realtime:  # no wait: the schedule starts when the controller says
                 node.get_logger().warning(f'live view at {self.live.url} (Foxglove WebSocket)')

@@ -9,7 +9,7 @@ import time
 from typing import Any
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.cloth_mesh import cloth_faces, mesh_record, run_cloth
+from cloth_bench_ros.core.cloth_mesh import cloth_faces, ClothMesh, mesh_record, run_cloth
 from cloth_bench_ros.core.cloth_size import cloth_record, grasp_width
 from cloth_bench_ros.core.evaluation import accounting_line, OnlineEvaluator
 from cloth_bench_ros.core.pointcloud2 import drop_nan, read_xyz
@@ -89,7 +89,7 @@ class Evaluator(Node):
         )
         targets = full_targets(self.task, rate_hz, grasp_width(size))
         grid = run_cloth((nx, nz) if nx and nz else None, size, node_cloth_mesh(self),
-                         (targets.left[0], targets.right[0])) or ClothGrid()
+                         self.task, rate_hz) or ClothGrid()
         self.engines, offset = p['engines'], p['time_offset']
         self.comparison_figures = p['comparison_figures']
         self.run_info = {
@@ -130,6 +130,8 @@ class Evaluator(Node):
             keep_pairs=bool(self.comparison_bag or self.comparison_figures),
             faces=cloth_faces(grid),
         )
+        # the cloth's triangles for the comparison outputs and the live view (None: the grid's)
+        self.faces = cloth_faces(grid) if isinstance(grid, ClothMesh) else None
         self.replay: dict = {}  # the recorder's frame accounting, from the trial message
         self.expected_real_frames: int | None = None  # as announced by the recorder
         # Inputs keep every sample until taken: a slow evaluator delays, never loses, a frame.
@@ -184,6 +186,7 @@ class Evaluator(Node):
             self.core.quintic_start_ns,
             self.realtime,
             declare_live_parameters(self),
+            self.faces,
         )
         self.core.listeners.append(self.error_topics.scored)
 
@@ -383,6 +386,7 @@ class Evaluator(Node):
                 Path(self.comparison_bag) if self.comparison_bag else None,
                 Path(self.output_dir) if self.comparison_figures and self.output_dir else None,
                 self.task,
+                self.faces,
             )
         if self.output_dir:
             write_run_report(Path(self.output_dir), self.summary, self.core.scores)

@@ -21,7 +21,7 @@ import shutil
 import time
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth, task_starts
+from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
 from cloth_bench_ros.core.cloth_size import grasp_width
 from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz32
 from cloth_bench_ros.data import BagReader, BagWriter
@@ -189,8 +189,8 @@ class Recorder(Node):
         """Return the reference simulation the automatic alignment compares the bag with."""
         size, mass, mesh = cloth
         preset = load_preset(options.align_engine, options.cloth, options.primitive)
-        grid = run_cloth((nx, nz) if nx and nz else None, size, mesh,
-                         task_starts(replay_task(options), options.rate_hz, size))
+        grid = run_cloth((nx, nz) if nx and nz else None, size, mesh, replay_task(options),
+                         options.rate_hz)
         engine = make_engine(
             options.align_engine, options.rate_hz,
             sized_params(options.align_engine, preset, size, mass, mesh_area(grid)), grid,

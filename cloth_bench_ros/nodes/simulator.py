@@ -142,8 +142,8 @@ class Simulator(Node):
                 "cloth's mass; give one"
             )
         targets = full_targets(task, rate_hz, grasp_width(size))
-        grid = run_cloth((nx, nz) if nx and nz else None, size, node_cloth_mesh(self),
-                         (targets.left[0], targets.right[0]))
+        grid = run_cloth((nx, nz) if nx and nz else None, size, node_cloth_mesh(self), task,
+                         rate_hz)
         preset = load_preset(  # the model that runs first, then its entry of the set
             self.engine_name,
             cloth,

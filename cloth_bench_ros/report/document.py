@@ -110,9 +110,22 @@ def overview_section(rows: Sequence[dict]) -> list[Block]:
             ' distances in metres (docs/benchmark.md, section 3); mean ± std over seeds and trial'
             ' bags (population std); a diverged run is counted, not averaged. All results here'
             ' are ours unless a column or paragraph is marked **paper**.'
-            + load_text
+            + load_text + inputs_text(rows)
         )
     ]
+
+
+def inputs_text(rows: Sequence[dict]) -> str:
+    """Return the sentence naming the task files and cloth meshes the cells ran ('' : none)."""
+    parts = []
+    for field, sha, what in (('task_file', 'task_sha256', 'task file'),
+                             ('cloth_mesh', 'mesh_sha256', 'cloth mesh')):
+        files = sorted({(r[field], str(r.get(sha, ''))[:12]) for r in rows if r.get(field)})
+        if files:
+            named = ', '.join(f'`{name}` (sha256 {digest})' for name, digest in files)
+            cells = sum(1 for r in rows if r.get(field))
+            parts.append(f'{cells} cells ran the {what} {named}')
+    return (' ' + '; '.join(parts) + '; the others the shipped task on the grid.') if parts else ''
 
 
 def paper_configs(rows: Sequence[dict]) -> list[str]:

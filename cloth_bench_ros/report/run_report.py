@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 from cloth_bench_ros.core.metric_choice import METRICS
+from cloth_bench_ros.core.run_summary import inputs_line
 
 # the metrics beside the paper's, in the order of docs/metrics.md: (name, column title, digits)
 SURFACE_COLUMNS = (
@@ -29,13 +30,18 @@ def _fmt(value: float | None, digits: int = 4) -> str:
 
 
 def result_table(summary: dict, realtime: bool = False) -> str:
-    """One row per engine: CD, HD, L_s and step time (ms); realtime: latency, misses, skips."""
+    """
+    One row per engine: CD, HD, L_s and step time (ms); realtime: latency, misses, skips.
+
+    Headed by `inputs_line` when the run had a task file, a recorded motion or a mesh.
+    """
     suffix = 'd' if summary['run']['primitive'] == 'dynamic' else 'q'
     header = (
         f'{"engine":<10} {"CD_" + suffix:>8} {"HD_" + suffix:>8} {"L_s":>10} '
         f'{"step mean":>10} {"p50":>8} {"p99":>8} {"max":>8}  status'
     )
-    lines = [header, '-' * len(header)]
+    inputs = inputs_line(summary)
+    lines = ([inputs] if inputs else []) + [header, '-' * len(header)]
     for engine, m in summary['engines'].items():
         st = m['step_time']
         ms = {k: st[k] * 1e3 if st[k] is not None else None for k in ('mean', 'p50', 'p99', 'max')}

@@ -12,7 +12,7 @@ Two kinds of sweep build cells:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import product
 from pathlib import Path
@@ -68,6 +68,10 @@ class Cell:
     cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
     all_metrics: bool = False  # every metric (realtime cells: the node graph's always), or CD/HD
     settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
+    task_file: str = ''  # --task: a task file instead of the shipped task of `primitive`
+    task_sha256: str = ''  # of the task file's content ('': the shipped task)
+    cloth_mesh: str = ''  # --cloth-mesh: the cloth as a mesh file instead of the grid
+    mesh_sha256: str = ''  # of the mesh file's content
 
     def key(self) -> tuple:
         """Return what makes a cell unique in a results file (resume compares it with row_key)."""
@@ -80,6 +84,8 @@ class Cell:
             f'_{self.primitive}'
             f'_t{self.trial}_s{self.seed}_{self.pacing}'
             + ('' if self.settle == FULL else f'_settle-{self.settle}')
+            + (f'_task{self.task_sha256[:8]}' if self.task_sha256 else '')
+            + (f'_mesh{self.mesh_sha256[:8]}' if self.mesh_sha256 else '')
         )
         return re.sub(r'[^A-Za-z0-9_.=-]+', '-', text)
 
@@ -227,6 +233,30 @@ def _bag_trial(path: Path) -> int:
     except ClothBenchError:  # an unreadable bag is reported by the cell that runs it
         return 0
     return int(trial.trial) if trial is not None else 0
+
+
+def with_inputs(cells: Sequence[Cell], task_file: str, cloth_mesh: str) -> list[Cell]:
+    """
+    Return the cells running a task file and a cloth mesh, each with its file's content hash.
+
+    Both are read and checked here (one line, before any cell runs): the mesh is grasped at
+    each cell's task's start.
+    """
+    from cloth_bench_ros.studies.cloth import study_inputs
+
+    if not task_file and not cloth_mesh:
+        return list(cells)
+    inputs: dict[tuple, dict[str, str]] = {}
+    out = []
+    for cell in cells:
+        at = (cell.primitive, cell.grid, cell.cloth_size, cell.rate_hz)
+        if at not in inputs:
+            inputs[at] = study_inputs(cell.primitive, task_file, cloth_mesh, cell.grid,
+                                      cell.cloth_size, cell.rate_hz)
+        given = inputs[at]
+        out.append(replace(cell, task_file=given['task_file'], task_sha256=given['task_sha256'],
+                           cloth_mesh=given['cloth_mesh'], mesh_sha256=given['mesh_sha256']))
+    return out
 
 
 def _check_engines(engines: Iterable[str], overrides: dict[str, dict]) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Mapping
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.cloth_mesh import ClothMesh, run_cloth, task_starts
+from cloth_bench_ros.core.cloth_mesh import ClothMesh, run_cloth
 from cloth_bench_ros.core.cloth_size import (
     BENCHMARK_SIZE,
     cloth_grid,
@@ -16,6 +16,7 @@ from cloth_bench_ros.core.cloth_size import (
     size_text,
 )
 from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.task_data import Task
 from cloth_bench_ros.errors import InputError
 
 
@@ -42,19 +43,46 @@ def mesh_choice(
     path: str | None,
     grid: tuple[int, int] | None,
     size: Size | None,
-    primitive: str,
+    task: Task | str,
     rate_hz: float,
 ) -> ClothMesh | None:
-    """Return the `--cloth-mesh` read and checked (None without one); one line if refused."""
-    if not path:
-        return None
-    for given, flag in ((grid, '--grid'), (size, '--cloth-size')):
-        if given is not None:
-            raise InputError(f'--cloth-mesh and {flag}: a mesh has its own vertices and size; '
-                             'give one')
-    cloth = run_cloth(None, None, path, task_starts(primitive, rate_hz, None))
-    assert isinstance(cloth, ClothMesh)
-    return cloth
+    """
+    Return the `--cloth-mesh` read and checked for `task` (None without one); one line if refused.
+
+    Without a mesh the grid's start is checked against the task's (a recorded motion's grippers).
+    """
+    if path:
+        for given, flag in ((grid, '--grid'), (size, '--cloth-size')):
+            if given is not None:
+                raise InputError(f'--cloth-mesh and {flag}: a mesh has its own vertices and '
+                                 'size; give one')
+    cloth = run_cloth(grid, size, path or None, task, rate_hz)
+    return cloth if isinstance(cloth, ClothMesh) else None
+
+
+def study_inputs(
+    primitive: str,
+    task_file: str,
+    cloth_mesh: str,
+    grid: tuple[int, int] | None,
+    size: Size | None,
+    rate_hz: float,
+) -> dict[str, str]:
+    """
+    Return what a study's row records of its `--task` and `--cloth-mesh`: files and SHA-256s.
+
+    Both are read and checked (one line if bad); '' for what is not given.
+    """
+    from cloth_bench_ros.core.task_data import load_task
+
+    task = load_task(primitive, task_file or None)
+    cloth = run_cloth(grid, size, cloth_mesh or None, task, rate_hz)
+    return {
+        'task_file': task_file,
+        'task_sha256': task.sha256 if task_file else '',
+        'cloth_mesh': cloth_mesh,
+        'mesh_sha256': cloth.sha256 if isinstance(cloth, ClothMesh) else '',
+    }
 
 
 def mesh_line(mesh: ClothMesh) -> str:

@@ -18,7 +18,7 @@ from typing import Any
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.core.cloth_mesh import (
-    Cloth, cloth_faces, mesh_area, mesh_record, run_cloth, task_starts,
+    Cloth, cloth_faces, mesh_area, mesh_record, run_cloth,
 )
 from cloth_bench_ros.core.cloth_size import cloth_record, grasp_width
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
@@ -46,8 +46,9 @@ import yaml
 def _cloth(config: RunConfig) -> Cloth | None:
     """Return the cloth of a run, as the nodes build it (None: the engine's default grid)."""
     task = load_task(config.primitive, config.task)
-    starts = task_starts(task, float(config.rate_hz), config.cloth_size)
-    return run_cloth(config.grid, config.cloth_size, config.cloth_mesh, starts)
+    return run_cloth(
+        config.grid, config.cloth_size, config.cloth_mesh, task, float(config.rate_hz)
+    )
 
 
 def _engine(config: RunConfig, name: str) -> ClothEngine:

@@ -23,6 +23,7 @@ from cloth_bench_ros.core.hil_timing import (
     TargetTimeline,
 )
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.studies.cloth import study_inputs
 from cloth_bench_ros.studies.hil_config import HilConfig, SIMULATOR_FILE, SUMMARY_FILE, TIMELINE
 from cloth_bench_ros.studies.hil_groups import run_groups
 
@@ -60,6 +61,7 @@ class HilResult:
             'grid': f'{c.grid[0]}x{c.grid[1]}' if c.grid else None,
             'params': dict(c.params),
             'processes': c.processes,
+            **study_inputs(c.primitive, c.task_file, c.cloth_mesh, c.grid, None, c.rate_hz),
             **self.figures.as_dict(),
             'stepped': self.stepped,
             'problems': self.problems,
@@ -156,7 +158,7 @@ def collect(config: HilConfig, run_dir: Path, load: dict) -> HilResult:
     )
     if (run_dir / SUMMARY_FILE).is_file():
         m = json.loads((run_dir / SUMMARY_FILE).read_text())['engines'][config.engine]
-        result.cd_realtime = _cd(m, config.primitive)
+        result.cd_realtime = _cd(m, config)
         result.diverged = bool(m['diverged'])
         heard, stepped = m['step_time']['count'], sim['stepped'] - 1  # step 0 is the reset
         result.observer_states = heard
@@ -167,8 +169,8 @@ def collect(config: HilConfig, run_dir: Path, load: dict) -> HilResult:
     return result
 
 
-def _cd(metrics: dict, primitive: str) -> float:
-    value = metrics.get('CD_d' if primitive == 'dynamic' else 'CD_q')
+def _cd(metrics: dict, config: HilConfig) -> float:
+    value = metrics.get(f'CD_{config.task().suffix}')  # the task's window
     return math.nan if value is None else float(value)
 
 
@@ -186,11 +188,13 @@ def lockstep_cd(config: HilConfig) -> float:
             seed=config.seed,
             engine_params={config.engine: dict(config.params)},
             grid=config.grid,
+            task=config.task_file,
+            cloth_mesh=config.cloth_mesh or None,
         )
     )
     if summary is None:
         raise RuntimeError('the node graph ended before the evaluator finished')
-    return _cd(summary['engines'][config.engine], config.primitive)
+    return _cd(summary['engines'][config.engine], config)
 
 
 def write_results(results: list[HilResult], out_dir: Path) -> Path:

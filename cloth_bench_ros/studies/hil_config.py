@@ -37,11 +37,21 @@ class HilConfig:
     )
     duration: float = 0.0  # s of the trajectory to run (0: all of it, scored by the observer)
     live: tuple[tuple[str, object], ...] = ()  # the evaluator's live-view parameters (--live)
+    task_file: str = ''  # --task: a task file instead of the shipped task of `primitive`
+    cloth_mesh: str = ''  # --cloth-mesh: the cloth as a mesh file instead of the grid
 
     def ident(self) -> str:
         """Return the run's directory name (engine, rate, task, seed, configuration), file-safe."""
         text = (
             f'{self.engine}_{self.rate_hz:g}hz_{self.cloth}_{self.primitive}'
             f'_s{self.seed}_{self.config}'
+            + (f'_task-{Path(self.task_file).stem}' if self.task_file else '')
+            + (f'_mesh-{Path(self.cloth_mesh).stem}' if self.cloth_mesh else '')
         )
         return re.sub(r'[^A-Za-z0-9_.+-]+', '-', text)
+
+    def task(self):
+        """Return the Task the run follows: its task file's, else the shipped one."""
+        from cloth_bench_ros.core.task_data import load_task
+
+        return load_task(self.primitive, self.task_file or None)

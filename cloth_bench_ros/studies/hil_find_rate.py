@@ -173,7 +173,7 @@ def find_rate(
     if math.isfinite(low):
         at = replace(base, rate_hz=low)
         timing = warmup(at)
-        found.grid = f'{timing.grid[0]}x{timing.grid[1]}'
+        found.grid = timing.mesh or f'{timing.grid[0]}x{timing.grid[1]}'
         found.warmup_p99_s = timing.p99_s
         if lockstep:
             found.cd = lockstep_cd(replace(at, duration=0.0))

@@ -47,7 +47,9 @@ SINGLE_THREADED_MATH = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THRE
 
 def _parameters(config: HilConfig, group: str, run_dir: Path) -> list[tuple[str, dict]]:
     """(node kind, parameter values) of each node of a group."""
-    common = {'primitive': config.primitive, 'rate_hz': float(config.rate_hz)}
+    common = {'primitive': config.primitive, 'task': config.task_file,
+              'rate_hz': float(config.rate_hz)}
+    mesh = {'cloth_mesh': config.cloth_mesh}  # the nodes that build or score the cloth
     if group == 'controller':
         return [
             (
@@ -75,6 +77,7 @@ def _parameters(config: HilConfig, group: str, run_dir: Path) -> list[tuple[str,
                     'seed': int(config.seed),
                     'grid_nx': nx,
                     'grid_nz': nz,
+                    **mesh,
                     'engine_params': yaml.safe_dump(dict(config.params)),
                     'use_sim_time': False,
                     'cpu': int(config.cpu),
@@ -94,12 +97,13 @@ def _parameters(config: HilConfig, group: str, run_dir: Path) -> list[tuple[str,
                 'seed': int(config.seed),
                 'pacing': 'realtime',
                 'use_sim_time': True,
+                **mesh,
                 **dict(config.live),
             },
         ),
         # The run's rate: the recording's frames after the last target are not sent (at a rate
         # whose last target falls before the motion's end they would never come due).
-        ('recorder', {**common, 'bag': str(config.bag), 'use_sim_time': True}),
+        ('recorder', {**common, **mesh, 'bag': str(config.bag), 'use_sim_time': True}),
     ]
 
 
@@ -193,7 +197,7 @@ def _waited(config: HilConfig) -> list[str]:
 def _time_budget(config: HilConfig) -> float:
     from cloth_bench_ros.core.trajectory import full_targets
 
-    run_s = config.duration or len(full_targets(config.primitive, config.rate_hz)) / config.rate_hz
+    run_s = config.duration or len(full_targets(config.task(), config.rate_hz)) / config.rate_hz
     return 3 * run_s + 90.0  # start-up, DDS discovery and a simulator far slower than real time
 
 

@@ -15,7 +15,7 @@ import math
 import time
 
 from cloth_bench_ros.core.scene import ClothGrid
-from cloth_bench_ros.core.trajectory import full_targets, parse_primitive
+from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.studies.hil_config import HilConfig
 import numpy as np
 
@@ -32,12 +32,14 @@ class Warmup:
     p50_s: float
     p99_s: float
     max_s: float
-    grid: tuple[int, int]  # the mesh that ran (the engine's default when none was given)
+    grid: tuple[int, int]  # the grid that ran (the engine's default when none was given)
+    mesh: str = ''  # the --cloth-mesh file that ran instead of a grid (grid then (0, 0))
 
     def describe(self) -> str:
         """Return how the warm-up went, in a few words."""
+        cloth = f'mesh {self.mesh}' if self.mesh else f'{self.grid[0]}x{self.grid[1]} mesh'
         return (
-            f'{self.steps} steps of the {self.grid[0]}x{self.grid[1]} mesh: step p50'
+            f'{self.steps} steps of the {cloth}: step p50'
             f' {1e3 * self.p50_s:.3g} ms, p99 {1e3 * self.p99_s:.3g} ms'
         )
 
@@ -46,16 +48,18 @@ def warmup(
     config: HilConfig, seconds: float = WARMUP_SECONDS, wall_s: float = WARMUP_WALL_S
 ) -> Warmup:
     """Step the configuration's engine through the first `seconds` of its targets; time steps."""
+    from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
     from cloth_bench_ros.engines import make_engine
-    from cloth_bench_ros.engines.presets import load_preset
+    from cloth_bench_ros.engines.presets import load_preset, sized_params
 
-    params = {
+    task = config.task()
+    grid = run_cloth(config.grid, None, config.cloth_mesh or None, task, config.rate_hz)
+    params = sized_params(config.engine, {
         **load_preset(config.engine, config.cloth, config.primitive),
         **dict(config.params),
-    }
-    grid = ClothGrid(*config.grid) if config.grid else None
+    }, None, None, mesh_area(grid))
     engine = make_engine(config.engine, config.rate_hz, params, grid)
-    targets = full_targets(parse_primitive(config.primitive), config.rate_hz)
+    targets = full_targets(task, config.rate_hz)
     span = seconds if not config.duration else min(seconds, config.duration)
     count = min(len(targets), max(WARMUP_MIN_STEPS, int(round(span * config.rate_hz)) + 1))
     times = np.empty(count - 1)
@@ -72,19 +76,20 @@ def warmup(
             n += 1
             if end > deadline and n >= WARMUP_MIN_STEPS:
                 break
-        made = grid or ClothGrid()  # the engine's grid (hil runs grids only)
-        done = (made.nx, made.nz)
+        made = grid if isinstance(grid, ClothGrid) else ClothGrid()  # the engine's grid
+        done = (0, 0) if config.cloth_mesh else (made.nx, made.nz)
     finally:
         engine.close()
     taken = times[:n]
     if not n:
-        return Warmup(0, math.nan, math.nan, math.nan, done)
+        return Warmup(0, math.nan, math.nan, math.nan, done, config.cloth_mesh)
     return Warmup(
         n,
         float(np.percentile(taken, 50)),
         float(np.percentile(taken, 99)),
         float(taken.max()),
         done,
+        config.cloth_mesh,
     )
 
 

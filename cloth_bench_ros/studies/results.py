@@ -46,10 +46,14 @@ KEY_FIELDS: dict[str, Any] = {
     'all_metrics': True,  # every metric (core/metric_choice), or the paper's CD/HD only
     'surface_revision': 0,  # core/surface_metrics.SURFACE_REVISION of an all-metrics row, else 0
     'settle': FULL,  # the settle phase (rows written before it existed settled in full)
+    # --task and --cloth-mesh: the file (which cell) and its content's SHA-256 (how it ran)
+    **dict.fromkeys(('task_file', 'task_sha256', 'cloth_mesh', 'mesh_sha256'), ''),
 }
 # The key fields that say how a cell was computed, not which cell: a row that differs from a cell
 # in these only is superseded when the cell runs again (`superseded_rows`).
-SCORED_WITH = ('engine_version', 'all_metrics', 'surface_revision', 'settle')
+SCORED_WITH = (
+    'engine_version', 'all_metrics', 'surface_revision', 'settle', 'task_sha256', 'mesh_sha256'
+)
 NAME_FIELDS = ('mode', 'engine', 'cloth', 'primitive', 'pacing')
 NUMERIC_FIELDS = (
     'CD',
@@ -199,7 +203,8 @@ def check_row(row: Any, base: Path, where: str) -> dict[str, Any]:
             or not (math.isfinite(rate) and rate > 0)
         ):
             raise ResultsError(f'{where}: rate_hz {rate!r} is not a positive number')
-        for name, kind in (('engine_version', str), ('all_metrics', bool)):
+        text_fields = ('engine_version', 'task_file', 'task_sha256', 'cloth_mesh', 'mesh_sha256')
+        for name, kind in (*((n, str) for n in text_fields), ('all_metrics', bool)):
             if name in row and not isinstance(row[name], kind):
                 raise ResultsError(f'{where}: {name} {row[name]!r} is not a {kind.__name__}')
         for name in ('seed', 'trial', 'surface_revision'):

@@ -29,7 +29,7 @@ from typing import Sequence
 
 from cloth_bench_ros.core.table import Table
 from cloth_bench_ros.errors import ClothBenchError, InputError, one_line
-from cloth_bench_ros.studies.stress_cases import case_targets, StressCase
+from cloth_bench_ros.studies.stress_cases import case_cloth, case_inputs, case_targets, StressCase
 import numpy as np
 
 STRESS_FILE = 'stress.jsonl'
@@ -37,10 +37,10 @@ STRESS_FILE = 'stress.jsonl'
 
 def run_case(case: StressCase) -> dict:
     """Run one case to its end, its divergence or its wall-time budget; raises only on a bug."""
+    from cloth_bench_ros.core.cloth_mesh import mesh_area
     from cloth_bench_ros.core.metrics import StabilityAccumulator
-    from cloth_bench_ros.core.scene import ClothGrid
     from cloth_bench_ros.engines import make_engine
-    from cloth_bench_ros.engines.presets import load_preset
+    from cloth_bench_ros.engines.presets import load_preset, sized_params
 
     row = {
         'case': case.name,
@@ -63,15 +63,18 @@ def run_case(case: StressCase) -> dict:
         'step_time_max': math.nan,
         'wall_s': math.nan,
         'error': '',
+        **{k: getattr(case, k) for k in ('task_file', 'cloth_mesh')},
     }
     start = time.perf_counter()
     engine = None
     try:
+        row.update(case_inputs(case))
         left, right, q, dt = case_targets(case)
-        params = {**load_preset(case.engine, 'towel', case.primitive), **case.params}
-        engine = make_engine(
-            case.engine, case.rate_hz, params, ClothGrid(*case.grid) if case.grid else None
-        )
+        cloth = case_cloth(case)
+        params = sized_params(case.engine, {
+            **load_preset(case.engine, 'towel', case.primitive), **case.params
+        }, None, None, mesh_area(cloth))
+        engine = make_engine(case.engine, case.rate_hz, params, cloth)
         previous = engine.reset(0, left[0], right[0]).copy()
         stability = StabilityAccumulator()
         times = []
@@ -145,6 +148,7 @@ def crashed_row(case: StressCase, message: str) -> dict:
         'max_vertex_speed': math.nan,
         'step_time_mean': math.nan,
         'steps': 0,
+        **{k: getattr(case, k) for k in ('task_file', 'cloth_mesh')},
     }
 
 

@@ -34,6 +34,8 @@ class StressCase:
     )
     jump: float = 0.0  # m: the right gripper jumps this far outwards (x) 1 s into the quintic part
     max_wall_s: float = MAX_CASE_WALL_S
+    task_file: str = ''  # --task: a task file's motion instead of the shipped task of `primitive`
+    cloth_mesh: str = ''  # --cloth-mesh: the cloth as a mesh file instead of the grid
 
 
 def _one_step(rate: float) -> dict:
@@ -182,8 +184,15 @@ def select_cases(
     names: Sequence[str] | None = None,
     max_wall_s: float | None = None,
     presets: PresetSet | None = None,
+    task_file: str = '',
+    cloth_mesh: str = '',
 ) -> list[StressCase]:
-    """Return the suite for `engines`; optionally only `names`, a time budget, a preset set."""
+    """
+    Return the suite for `engines`; optionally only `names`, a time budget, a preset set.
+
+    `task_file`, `cloth_mesh`: every case runs that task's motion and that cloth (checked here,
+    one line); a case of its own grid is left out with a mesh.
+    """
     from dataclasses import replace
 
     from cloth_bench_ros.engines import engine_class
@@ -204,12 +213,39 @@ def select_cases(
         if not (math.isfinite(max_wall_s) and max_wall_s > 0):
             raise InputError(f'--max-wall-s must be a number of seconds > 0, got {max_wall_s}')
         cases = [replace(c, max_wall_s=max_wall_s) for c in cases]
+    if task_file or cloth_mesh:
+        cases = [replace(c, task_file=task_file, cloth_mesh=cloth_mesh)
+                 for c in cases if not (cloth_mesh and c.grid)]
+        for case in cases:
+            case_cloth(case)  # a bad task file or mesh: one line, before any case runs
     # A preset set's values (its entry of the preset's model) go in as overrides of the towel
     # preset, under each case's own (a case may switch the model: that is what it stresses).
     return [
         replace(c, params={**set_values(presets, c.engine, 'towel', c.primitive), **c.params})
         for c in cases
     ]
+
+
+def case_task(case: StressCase):
+    """Return the Task a case runs: its task file's, else the shipped one of its primitive."""
+    from cloth_bench_ros.core.task_data import load_task
+
+    return load_task(case.primitive, case.task_file or None)
+
+
+def case_cloth(case: StressCase):
+    """Return the cloth a case runs (core/cloth_mesh.py run_cloth; None: the engine's grid)."""
+    from cloth_bench_ros.core.cloth_mesh import run_cloth
+
+    return run_cloth(case.grid, None, case.cloth_mesh or None, case_task(case), case.rate_hz)
+
+
+def case_inputs(case: StressCase) -> dict:
+    """Return what a row records of a case's task file and mesh (file and SHA-256; '': none)."""
+    from cloth_bench_ros.studies.cloth import study_inputs
+
+    return study_inputs(case.primitive, case.task_file, case.cloth_mesh, case.grid, None,
+                        case.rate_hz)
 
 
 def case_targets(case: StressCase):
@@ -219,7 +255,7 @@ def case_targets(case: StressCase):
 
     # Sampled every time_compression / rate s of trajectory time, played one sample per 1 / rate.
     samples_per_s = case.rate_hz / case.time_compression
-    targets = full_targets(case.primitive, samples_per_s)
+    targets = full_targets(case_task(case), samples_per_s)
     left, right = targets.left.copy(), targets.right.copy()
     q = targets.quintic_index
     if case.drag_height is not None:

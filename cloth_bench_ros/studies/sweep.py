@@ -24,6 +24,8 @@ import traceback
 from typing import Sequence
 
 from cloth_bench_ros.core.metric_choice import METRICS
+from cloth_bench_ros.core.task_data import load_task
+from cloth_bench_ros.core.trajectory import SUFFIX_TASK
 from cloth_bench_ros.engines.presets import PresetSet
 
 # re-exported: the studies' one vocabulary
@@ -45,6 +47,7 @@ from cloth_bench_ros.studies.cells import (  # noqa: F401
     settings_cells,
     SETTINGS_RATE,
     SETTINGS_SEEDS,
+    with_inputs,
 )
 from cloth_bench_ros.studies.dask_executor import default_workers, open_client, run_tasks
 from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
@@ -81,13 +84,14 @@ def _nan(value):
 def summary_row(cell: Cell, summary: dict) -> dict:
     """Return the flat results row of one finished run."""
     m = summary['engines'][cell.engine]
-    suffix = 'd' if cell.primitive == 'dynamic' else 'q'
+    suffix = load_task(cell.primitive, cell.task_file or None).suffix  # the task's window
+    keyed = SUFFIX_TASK[suffix]  # the shipped task whose metric keys that window has
     trial = summary['run'].get('trial') or {}
     st, lat = m['step_time'], m['latency']
     beside = {  # the metrics beside the paper's, under their task-free keys (core/metric_choice)
-        x.key: _nan(m.get(x.summary_key(cell.primitive)))
+        x.key: _nan(m.get(x.summary_key(keyed)))
         for x in METRICS.values()
-        if x.summary_key(cell.primitive) in m
+        if x.summary_key(keyed) in m
     }
     return {
         **beside,
@@ -139,6 +143,8 @@ def _cell_fields(cell: Cell) -> dict:
         'grid': f'{cell.grid[0]}x{cell.grid[1]}' if cell.grid else None,
         'params': cell.params,
         'bag_fingerprint': bag_fingerprint(cell.bag),
+        'task_file': cell.task_file,
+        'cloth_mesh': cell.cloth_mesh,
     }
     if cell.reference:  # a cross-reference cell names the synthetic reference it is scored against
         fields['reference'] = cell.reference
@@ -189,6 +195,7 @@ def cell_config(cell: Cell, output_dir: Path | None) -> RunConfig:
         primitive=cell.primitive, seed=cell.seed, pacing=cell.pacing, output_dir=output_dir,
         engine_params={cell.engine: cell.params}, grid=cell.grid, cloth_size=cell.cloth_size,
         cloth_mass=cell.cloth_mass, all_metrics=cell.all_metrics, settle=cell.settle,
+        task=cell.task_file, cloth_mesh=cell.cloth_mesh or None,
     )
 
 
