@@ -99,6 +99,10 @@ class IdentifySpec:
     cloth_mass: float | None = None  # kg, given: not fitted unless named in `params`
     pool: tuple[str, ...] = ()  # rank's: every trial of the group, scored by each simulation
     shared: Path | None = None  # rank's: the folds' simulations (studies.shared_simulations)
+    task: str = ''  # a task file for bags without their own (objective.TASK_IN_BAG)
+    cloth_mesh: str = ''  # --cloth-mesh; '': the grid
+    gripper_frames: str = ''  # recorded only (the task file holds the motion they gave)
+    table_z: float | None = None
 
 
 def default_params(engine: str, model: str | None = None) -> list[str]:
@@ -268,7 +272,8 @@ def trial_of(
         spec.engine, spec.cloth, spec.primitive, str(spec.bag),
         tuple(sorted({**spec.fixed, **params}.items())), spec.objective, spec.seed, spec.rate_hz,
         spec.grid, spec.max_frames, number, sampler, tuple(spec.also),
-        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, **(rung or {}),
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, task=spec.task,
+        cloth_mesh=spec.cloth_mesh, **(rung or {}),
     )
 
 

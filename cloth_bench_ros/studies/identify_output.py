@@ -206,6 +206,16 @@ def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
     return preset
 
 
+def _inputs(spec: Any) -> dict:
+    """Return the task of each bag, the mesh, the gripper frames and the table height."""
+    from cloth_bench_ros.studies.objective import bag_task
+    from cloth_bench_ros.studies.recording import inputs_record
+
+    tasks = [bag_task(str(b), spec.task) for b in (spec.bag, *spec.also)]
+    return inputs_record(spec.primitive, tasks, spec.cloth_mesh, spec.gripper_frames,
+                         spec.table_z)
+
+
 def summarise(
     spec: Any,
     space: dict,
@@ -229,6 +239,7 @@ def summarise(
         'fixed': spec.fixed,
         'max_frames': spec.max_frames,
         'fidelity': spec.fidelity,
+        **_inputs(spec),
         'space': {n: [d.low, d.high, d.log] for n, d in space.items()},
         'samplers': list(studies),
         'best_sampler': best,

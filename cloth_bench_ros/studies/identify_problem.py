@@ -5,7 +5,8 @@ Everything a trial's value depends on except the budget and the sampler (another
 `--sampler` resumes the journal) and the cloth's size and mass (their study has its own name in
 the journal): the bags and their data (`data.bag_layout.fingerprint`), the metric, seed, rate,
 grid, frames, the engine's version, the device it runs on (`auto` resolved on this machine), the
-preset's values, fixed values, search space and fidelity. Kept in `<output>/problem.json`, one
+preset's values, fixed values, search space, fidelity, each bag's task file and the cloth mesh
+(their content hashes: studies.recording). Kept in `<output>/problem.json`, one
 entry per study of the journal; `identify` refuses, in one line, to resume a journal of another
 problem (ProblemChanged; `rank` identifies such a fold afresh). A key that a recorded problem
 lacks (kept before that key was) is not a change.
@@ -27,7 +28,8 @@ from cloth_bench_ros.errors import InputError
 
 PROBLEM_FILE = 'problem.json'
 # How a changed key is named to the user (others: the key itself).
-LABELS = {'engine_version': 'engine version', 'fixed': 'fixed values', 'preset': 'preset values'}
+LABELS = {'engine_version': 'engine version', 'fixed': 'fixed values', 'preset': 'preset values',
+          'tasks': 'task file', 'cloth_mesh': 'cloth mesh'}
 
 
 class ProblemChanged(InputError):
@@ -99,6 +101,8 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
     """
     from cloth_bench_ros.data.bag_layout import fingerprint
     from cloth_bench_ros.engines import engine_class
+    from cloth_bench_ros.studies.objective import bag_task
+    from cloth_bench_ros.studies.recording import file_sha256, task_record
     from optuna.distributions import distribution_to_json
 
     bags = [Path(b) for b in (spec.bag, *spec.also)]
@@ -118,6 +122,10 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
         'fixed': dict(spec.fixed),
         'space': {name: json.loads(distribution_to_json(d)) for name, d in space.items()},
         'fidelity': spec.fidelity,
+        # each bag's task (its own recorded motion, else --task, else the shipped one) and mesh
+        'tasks': [task_record(spec.primitive, bag_task(str(b), spec.task))['sha256']
+                  for b in bags],
+        'cloth_mesh': file_sha256(spec.cloth_mesh),
     })
 
 
