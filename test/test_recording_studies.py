@@ -95,3 +95,35 @@ def test_rank_pools_two_recorded_motions_checks_across_them_and_recomputes_a_cha
     printed = capsys.readouterr().out
     assert 'cells: 5 (0 kept from an earlier run)' in printed
     assert 'identified again' in printed
+
+
+@pytest.fixture(scope='module')
+def garment(tmp_path_factory):
+    """A T-shirt mesh and its MuJoCo-direct reference along the fling (test_cloth_mesh_reference)."""
+    from test_cloth_mesh import t_shirt, write_mesh
+    from test_cloth_mesh_reference import reference_states, write_reference_bag
+
+    folder = tmp_path_factory.mktemp('garment')
+    vertices, faces = t_shirt()
+    mesh = write_mesh(folder / 'shirt.obj', vertices, faces)
+    reference, other = (reference_states(vertices, faces, seed) for seed in (1, 2))
+    bag, _ = write_reference_bag(folder / 'bag', reference, faces, other)
+    return mesh, bag
+
+
+@pytest.mark.slow
+def test_identify_on_a_mesh_records_it_and_never_resumes_another_mesh(garment, tmp_path, capsys):
+    mesh, bag = garment
+    out = tmp_path / 'identify'
+    argv = ['identify', '--bag', str(bag), '--topic', '/points', '--start-time', '0', '--clean',
+            'off', '--engine', 'mujoco', '--trials', '2', '--sampler', 'tpe', '--workers', '1',
+            '--no-progress', '--output', str(out)]
+    assert cli.main([*argv, '--cloth-mesh', str(mesh)]) == 0
+    assert f'cloth: mesh {mesh}, ' in capsys.readouterr().out
+    summary = json.loads((out / 'identification.json').read_text())
+    assert summary['cloth_mesh']['file'] == str(mesh)
+    assert 0.0 < summary['preset_value'] < 0.02  # the garment's own (the rectangle: far above)
+    other = tmp_path / 'shirt.obj'  # the same garment, other bytes: another file
+    other.write_text(mesh.read_text() + '# edited\n')
+    again = cli_process(*argv, '--cloth-mesh', str(other))
+    assert_one_line_error(again, 'another problem', 'cloth mesh')

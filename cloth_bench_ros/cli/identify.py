@@ -135,7 +135,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, validate on held-out seeds, write the preset and print the outcome."""
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.paths import bundled_bag
-    from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses
+    from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses, mesh_choice
     from cloth_bench_ros.studies.identify import identify, IdentifySpec, JOURNAL_FILE, TRIALS_FILE
 
     from cloth_bench_ros.cli.run import recordings_motions
@@ -147,7 +147,12 @@ def cmd_identify(args: argparse.Namespace) -> int:
     fixed = common.engine_overrides(args.set, [args.engine]).get(args.engine, {})
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, {args.engine: fixed})
     preset = {**load_preset(args.engine, args.cloth, args.primitive), **fixed}
-    masses = engine_masses({args.engine: preset}, size, mass)
+    # a mesh read as `run` reads it (the task's grippers' start); a recorded motion's own start
+    # is the objective's, per trial
+    follows = args.motion != 'task' and (args.gripper_frames or args.targets_topic)
+    mesh = None if follows else mesh_choice(args.cloth_mesh, args.grid, size, args.primitive,
+                                            args.rate)
+    masses = engine_masses({args.engine: preset}, size, mass, mesh.area if mesh else None)
     out = (
         Path(args.output)
         if args.output
@@ -195,7 +200,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if own_task and args.validate_seeds:
         print('held-out seeds: not validated (the validation runs the shipped tasks on the grid; '
               'a task file, recorded motion or mesh is scored by the fit alone)')
-    for line in cloth_lines(masses, size, mass, args.grid):
+    for line in cloth_lines(masses, size, mass, args.grid, mesh):
         print(line)
     if mass is not None and 'mass' not in spec.params:
         print(f"mass: {mass:g} kg, the cloth's own (--cloth-mass): not fitted")

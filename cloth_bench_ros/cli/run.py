@@ -133,7 +133,8 @@ def recordings_motions(
 
     identify and rank: written under `out`/motions/<n>_<recording>/motion.yaml.
     """
-    tasks, lines = [], []
+    tasks: list[str] = []
+    lines: list[str] = []
     for i, bag in enumerate(bags):
         task, said = recorded_motion(args, bag, out / 'motions' / f'{i + 1}_{bag.name}')
         tasks.append(task)

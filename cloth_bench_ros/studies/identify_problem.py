@@ -122,9 +122,9 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
         'fixed': dict(spec.fixed),
         'space': {name: json.loads(distribution_to_json(d)) for name, d in space.items()},
         'fidelity': spec.fidelity,
-        # each bag's task (its own recorded motion, else --task, else the shipped one) and mesh
-        'tasks': [task_record(spec.primitive, bag_task(str(b), spec.task))['sha256']
-                  for b in bags],
+        # the bags' tasks (each one's recorded motion, else --task, else the shipped one) and mesh
+        'tasks': sorted({task_record(spec.primitive, bag_task(str(b), spec.task))['sha256']
+                         for b in bags}),
         'cloth_mesh': file_sha256(spec.cloth_mesh),
     })
 
