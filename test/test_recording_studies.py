@@ -99,7 +99,7 @@ def test_rank_pools_two_recorded_motions_checks_across_them_and_recomputes_a_cha
 
 @pytest.fixture(scope='module')
 def garment(tmp_path_factory):
-    """A T-shirt mesh and its MuJoCo-direct reference along the fling (test_cloth_mesh_reference)."""
+    """Return a T-shirt mesh and its MuJoCo-direct reference along the fling (helpers beside)."""
     from test_cloth_mesh import t_shirt, write_mesh
     from test_cloth_mesh_reference import reference_states, write_reference_bag
 
