@@ -33,10 +33,14 @@ def test_identify_follows_the_recorded_grippers_and_a_changed_task_is_never_resu
 ):
     out = tmp_path / 'identify'
     assert cli.main(['identify', '--bag', str(motions / 'swing'), *GRIPPERS, *TINY,
-                     '--output', str(out)]) == 0
+                     '--validate-seeds', '1', '--output', str(out)]) == 0
     printed = capsys.readouterr().out
     assert 'one trial along its recorded motion (tf frames left_gripper,right_gripper' in printed
     summary = json.loads((out / 'identification.json').read_text())
+    # held-out seed 1 along the same recorded motion (not the shipped task's: that is ~0.2 m)
+    (held,) = summary['validation']
+    assert held['preset']['ok'] == held['identified']['ok'] == 1
+    assert 0.0 < held['preset']['mean'] < 0.03 and 0.0 < held['identified']['mean'] < 0.03
     task = summary['tasks'][0]
     assert task['file'].endswith('task.yaml') and len(task['sha256']) == 64
     assert summary['gripper_frames'] == 'left_gripper,right_gripper'

@@ -160,7 +160,6 @@ def cmd_identify(args: argparse.Namespace) -> int:
     )
     (motion,), motion_lines = recordings_motions(args, [bag], out)
     bag = _trial_bag(bag, args, out, motion)
-    own_task = bool(motion or args.task or args.cloth_mesh)
     spec = IdentifySpec(
         args.engine,
         args.cloth,
@@ -178,7 +177,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         args.span,
         args.max_frames,
         args.batch,
-        0 if own_task else args.validate_seeds,
+        args.validate_seeds,
         Path(args.bag_dir) if args.bag_dir else None,
         fidelity=args.fidelity,
         cloth_size=size,
@@ -197,9 +196,6 @@ def cmd_identify(args: argparse.Namespace) -> int:
     )
     for line in motion_lines:
         print(line)
-    if own_task and args.validate_seeds:
-        print('held-out seeds: not validated (the validation runs the shipped tasks on the grid; '
-              'a task file, recorded motion or mesh is scored by the fit alone)')
     for line in cloth_lines(masses, size, mass, args.grid, mesh):
         print(line)
     if mass is not None and 'mass' not in spec.params:
