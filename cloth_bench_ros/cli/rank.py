@@ -90,6 +90,9 @@ def cmd_rank(args: argparse.Namespace) -> int:
     fixed = common.engine_overrides(args.set, sorted({e for e, _ in entrants}))
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, fixed)
     load_task(args.primitive, args.task)  # a bad task file: one line, before the work
+    if args.trial:
+        raise UserError('--trial: rank scores every usable trial of each recording; --trial '
+                        'picks the one that run scores or identify fits')
     out = Path(args.output) if args.output else Path('results') / 'rank'
     bags = recordings_of(args.recordings)
     tasks, motion_lines = recordings_motions(args, bags, out)
