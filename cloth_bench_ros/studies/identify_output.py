@@ -122,8 +122,7 @@ def validate_along(client: Any, spec: Any, fitted: dict) -> list[dict]:
 
     A task file, a recorded motion or a mesh: the sweep's cells run the shipped tasks on grids.
     """
-    from cloth_bench_ros.studies.identify import trial_of
-    from cloth_bench_ros.studies.objective import evaluate
+    from cloth_bench_ros.studies.objective import evaluate, trial_of
 
     seeds = range(spec.seed + 1, spec.seed + 1 + spec.validate_seeds)
     if not seeds:

@@ -67,6 +67,19 @@ class Trial:
     cloth_mesh: str = ''  # a cloth mesh file (--cloth-mesh); '': the grid
 
 
+def trial_of(
+    spec: Any, params: dict, number: int, sampler: str, rung: dict | None = None
+) -> Trial:
+    """Return an IdentifySpec's trial of `params`; `rung`: the Pruner's rung fields, if any."""
+    return Trial(
+        spec.engine, spec.cloth, spec.primitive, str(spec.bag),
+        tuple(sorted({**spec.fixed, **params}.items())), spec.objective, spec.seed, spec.rate_hz,
+        spec.grid, spec.max_frames, number, sampler, tuple(spec.also),
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, task=spec.task,
+        cloth_mesh=spec.cloth_mesh, **(rung or {}),
+    )
+
+
 def bag_task(bag: str, task: str = '') -> str:
     """Return the task file a bag is scored along: its own (TASK_IN_BAG), else `task`."""
     own = Path(bag) / TASK_IN_BAG
