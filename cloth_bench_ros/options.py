@@ -356,3 +356,15 @@ OPTIONS.update(_declare(
         flag='--cloth-mesh', metavar='FILE',
     ),
 ))
+
+# The recording options: what every command that reads a user's recording takes (run, identify,
+# rank; cli/common.recording_options), declared once, in `run --help` order.
+RECORDING_FLAGS: tuple = (
+    'task',
+    *MOTION_FLAGS,
+    *REPLAY_OPTIONS,
+    Option(
+        'transform', str, None, '4x4 matrix into world for every cloud, instead of tf',
+        flag='--transform', metavar='FILE',
+    ),
+)

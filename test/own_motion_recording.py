@@ -36,6 +36,7 @@ START_NS = 1_750_000_000_000_000_000
 LINE_YAW_DEG = 20.0  # the gripper line's direction in the world
 BASE_YAW_DEG = 35.0
 BASE_ORIGIN = np.array([0.4, -0.3, 0.1])  # the robot base in the world
+SWING = 0.15  # m, the forward-and-back swing (another value: another motion of the same cloth)
 
 
 def _smooth(s: np.ndarray | float) -> np.ndarray | float:
@@ -43,14 +44,14 @@ def _smooth(s: np.ndarray | float) -> np.ndarray | float:
     return s * s * s * (10 - 15 * s + 6 * s * s)
 
 
-def grippers(t: float) -> tuple[np.ndarray, np.ndarray]:
+def grippers(t: float, swing: float = SWING) -> tuple[np.ndarray, np.ndarray]:
     """Return the grippers of the test's own motion (world): lift, swing, lower, slide."""
     yaw = math.radians(LINE_YAW_DEG)
     along = np.array([math.cos(yaw), math.sin(yaw), 0.0])
     normal = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
     s = float(_smooth((t - REST_S) / MOTION_S))
     offset = (
-        normal * 0.15 * math.sin(2 * math.pi * s)
+        normal * swing * math.sin(2 * math.pi * s)
         + np.array([0.0, 0.0, 0.08 * math.sin(math.pi * s) - 0.55 * s])
         + along * 0.1 * s
     )
@@ -71,7 +72,7 @@ def _mesh() -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(rows), np.asarray(tris)
 
 
-def simulate() -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+def simulate(swing: float = SWING) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
     """Return the frame times (s), the cloth's vertices (world) per frame, and its triangles."""
     rest, tris = _mesh()
     points = ' '.join(f'{v:.9g}' for v in rest.ravel())
@@ -100,8 +101,8 @@ def simulate() -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
     total = int(round((SETTLE_S + REST_S + MOTION_S + 0.3) / STEP_S))
     for k in range(total + 1):
         t = k * STEP_S - SETTLE_S  # recording time
-        targets = grippers(max(t, 0.0))
-        ahead = grippers(max(t + STEP_S, 0.0))
+        targets = grippers(max(t, 0.0), swing)
+        ahead = grippers(max(t + STEP_S, 0.0), swing)
         for c, qa, da in zip(range(2), qpos, dofs):
             d.qpos[qa:qa + 3] = targets[c] - rest[corners[c]]
             d.qvel[da:da + 3] = (ahead[c] - targets[c]) / STEP_S
@@ -138,7 +139,7 @@ def base_matrix() -> np.ndarray:
     return m
 
 
-_REFERENCE: list = []  # the simulation, once per process
+_REFERENCE: dict = {}  # the simulation of each swing, once per process
 
 
 def write_recording(
@@ -148,17 +149,19 @@ def write_recording(
     tf_gap: tuple[float, float] | None = None,
     tf_from: float = 0.0,
     targets_topic: str = '',
+    swing: float = SWING,
 ) -> dict:
     """
     Write the bag; `frame` world or base_link; returns the reference and its noise floor.
 
     `tf_gap` (s, s): no gripper sample on /tf between these times; `tf_from`: none before it;
-    `targets_topic`: the grippers also as a PoseArray topic of that name. `floor`: the CD of the
+    `targets_topic`: the grippers also as a PoseArray topic of that name; `swing`: another
+    motion (the forward-and-back swing's amplitude, m). `floor`: the CD of the
     reference's own vertices against the clouds written, over the frames before `t_contact`.
     """
-    if not _REFERENCE:
-        _REFERENCE.append(simulate())
-    times, frames, tris = _REFERENCE[0]
+    if swing not in _REFERENCE:
+        _REFERENCE[swing] = simulate(swing)
+    times, frames, tris = _REFERENCE[swing]
     floors = []
     rng = np.random.default_rng(seed)
     to_frame = np.eye(4) if frame == 'world' else np.linalg.inv(base_matrix())
@@ -210,7 +213,7 @@ def write_recording(
         for k in range(int(times[-1] * TF_HZ) + 1):
             t = k / TF_HZ
             ns = START_NS + int(round(t * 1e9))
-            left, right = (move(p[None])[0] for p in grippers(t))
+            left, right = (move(p[None])[0] for p in grippers(t, swing))
             if poses:
                 pose, point = T['geometry_msgs/msg/Pose'], T['geometry_msgs/msg/Point']
                 still = T['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0, w=1.0)

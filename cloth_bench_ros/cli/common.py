@@ -148,6 +148,41 @@ def live_parameters(args: argparse.Namespace) -> dict:
     }
 
 
+def recording_options(parser: argparse.ArgumentParser) -> Any:
+    """Add the recording options (options.RECORDING_FLAGS) as one group; return the group."""
+    group = parser.add_argument_group('scoring your own recording (see docs/own-recording.md)')
+    add_options(group, options.RECORDING_FLAGS)
+    return group
+
+
+def replay_params(args: argparse.Namespace) -> dict:
+    """Return the recorder parameters of the recording options (a plain recording's)."""
+    params = {}
+    for name in options.REPLAY_OPTIONS:
+        value = getattr(args, name)
+        params[name] = options.OPTIONS[name].default if value is None else value
+    if args.transform:
+        params['transform'] = [float(v) for v in read_transform(args.transform).ravel()]
+    return params
+
+
+def replay_options(args: argparse.Namespace, task: str = '') -> Any:
+    """Return the ReplayOptions of the recording options, as the recorder node builds them."""
+    from cloth_bench_ros.data.alignment import SearchSettings
+    from cloth_bench_ros.data.replay import ReplayOptions
+
+    p = replay_params(args)
+    return ReplayOptions(
+        cloth=args.cloth, primitive=args.primitive, task=task or args.task or '',
+        motion=p['motion'], change_of_phase_frame=args.change_of_phase_frame, topic=p['topic'],
+        start_time=p['start_time'], targets_topic=p['targets_topic'],
+        transform=tuple(p['transform']) if 'transform' in p else None, clean=p['clean'],
+        voxel=p['voxel'], table_plane=p['table_plane'], rate_hz=float(args.rate),
+        search=SearchSettings(window=p['align_window'], coarse_step=p['align_step']),
+        trial=p['trial'], align=p['align'],
+    )
+
+
 def executor_options() -> argparse.ArgumentParser:
     """Parent parser: where a study's cells run (local workers or Dask) and its progress bar."""
     parent = argparse.ArgumentParser(add_help=False)

@@ -8,7 +8,7 @@ from pathlib import Path
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.options import Option, OPTIONS
+from cloth_bench_ros.options import Option
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 
@@ -78,10 +78,6 @@ FIT_FLAGS: tuple[common.Flag, ...] = (
     ),
     'settle',
     ('output', {'help': 'directory (default results/identify/<engine>_<cloth>_<primitive>)'}),
-    # a plain recording is split as rank splits it: its first usable trial is fitted
-    ('topic', {'help': 'PointCloud2 topic of a plain recording'}),
-    ('targets_topic', {'help': 'its recorded PoseArray gripper targets'}),
-    'clean',
 )
 
 
@@ -95,9 +91,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.add_options(ident, IDENTIFY_FLAGS)
     common.engine_override_option(ident, 'fixed override, not fitted')
     common.add_options(ident, FIT_FLAGS)
+    # a plain recording is split as rank splits it: its first usable trial (--trial N) is fitted
+    common.recording_options(ident)
     common.add_option(ident, 'cloth_size')
     common.add_option(ident, 'cloth_mass', help='total mass of the cloth, not fitted unless '
                       "--params names mass (unset: the preset's mass per area times the area)")
+    common.add_option(ident, 'cloth_mesh')
     ident.set_defaults(func=cmd_identify)
 
 
@@ -110,51 +109,58 @@ def _budget_text(budget: dict) -> str:
     return f' (budget: the doubling {before} -> {after} improved {gain:.1%}{verdict})'
 
 
-def _trial_bag(bag: Path, args: argparse.Namespace, out: Path) -> Path:
+def _trial_bag(bag: Path, args: argparse.Namespace, out: Path, task: str) -> Path:
     """
-    Return the bag to fit: a project bag as it is, else the recording's first usable trial.
+    Return the bag to fit: a project bag as it is, else a trial of the recording (--trial N).
 
-    A plain recording is split as `rank` splits it, without an engine; the trial is written
-    under `out`.
+    A plain recording is split as `rank` splits it, without an engine (a recorded motion, `task`,
+    or a --start-time: the recording is one trial); the trial is written under `out`.
     """
     from cloth_bench_ros.data import BagReader
-    from cloth_bench_ros.data.replay import ReplayOptions
     from cloth_bench_ros.studies.rank_trials import prepare_trials
 
     with BagReader(bag) as reader:
         if reader.trial is not None:
             return bag
-    replay = ReplayOptions(
-        cloth=args.cloth, primitive=args.primitive, topic=args.topic or OPTIONS['topic'].default,
-        targets_topic=args.targets_topic or OPTIONS['targets_topic'].default,
-        clean=args.clean or OPTIONS['clean'].default, rate_hz=args.rate,
-    )
-    found = prepare_trials([bag], replay, out / 'trials')
-    if not found:
-        raise UserError(f'identify: bag {bag} holds no usable trial of the task (above)')
-    print(f'identify: fitting trial {found[0].number} of {bag} ({found[0].bag})')
-    return Path(found[0].bag)
+    found = prepare_trials([bag], common.replay_options(args), out / 'trials', tasks=[task])
+    chosen = [t for t in found if t.number == args.trial] if args.trial else found
+    if not chosen:
+        raise UserError(f'identify: bag {bag} holds no usable trial of the task'
+                        + (f' numbered {args.trial} (--trial)' if args.trial else '')
+                        + ' (above)')
+    print(f'identify: fitting trial {chosen[0].number} of {bag} ({chosen[0].bag})')
+    return Path(chosen[0].bag)
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, validate on held-out seeds, write the preset and print the outcome."""
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.paths import bundled_bag
-    from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses
+    from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses, mesh_choice
     from cloth_bench_ros.studies.identify import identify, IdentifySpec, JOURNAL_FILE, TRIALS_FILE
 
+    from cloth_bench_ros.cli.run import recordings_motions
+    from cloth_bench_ros.core.task_data import load_task
+
+    load_task(args.primitive, args.task)  # a bad task file: one line, before the work
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic or None)
     fixed = common.engine_overrides(args.set, [args.engine]).get(args.engine, {})
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, {args.engine: fixed})
     preset = {**load_preset(args.engine, args.cloth, args.primitive), **fixed}
-    masses = engine_masses({args.engine: preset}, size, mass)
+    # a mesh read as `run` reads it (the task's grippers' start); a recorded motion's own start
+    # is the objective's, per trial
+    follows = args.motion != 'task' and (args.gripper_frames or args.targets_topic)
+    mesh = None if follows else mesh_choice(
+        args.cloth_mesh, args.grid, size, load_task(args.primitive, args.task), args.rate)
+    masses = engine_masses({args.engine: preset}, size, mass, mesh.area if mesh else None)
     out = (
         Path(args.output)
         if args.output
         else (Path('results') / 'identify' / f'{args.engine}_{args.cloth}_{args.primitive}')
     )
-    bag = _trial_bag(bag, args, out)
+    (motion,), motion_lines = recordings_motions(args, [bag], out)
+    bag = _trial_bag(bag, args, out, motion)
     spec = IdentifySpec(
         args.engine,
         args.cloth,
@@ -178,6 +184,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         cloth_size=size,
         cloth_mass=mass,
         settle=args.settle,
+        task=args.task or '',
+        cloth_mesh=args.cloth_mesh or '',
+        gripper_frames=args.gripper_frames or '',
+        table_z=args.table_z,
     )
     print(
         f'cloth-bench identify: {args.engine}, {args.cloth} {args.primitive},'
@@ -186,7 +196,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
         f' output {out}',
         flush=True,
     )
-    for line in cloth_lines(masses, size, mass, args.grid):
+    for line in motion_lines:
+        print(line)
+    for line in cloth_lines(masses, size, mass, args.grid, mesh):
         print(line)
     if mass is not None and 'mass' not in spec.params:
         print(f"mass: {mass:g} kg, the cloth's own (--cloth-mass): not fitted")

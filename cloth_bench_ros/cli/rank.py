@@ -9,9 +9,8 @@ from pathlib import Path
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.cli.identify import FIDELITY, SAMPLER, TRIALS
-from cloth_bench_ros.cli.run import _replay_params
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.options import Option, OPTIONS, REPLAY_OPTIONS
+from cloth_bench_ros.options import Option, OPTIONS
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 RESULT_FILE = 'rank.json'
@@ -59,9 +58,6 @@ RANK_FLAGS: tuple[common.Flag, ...] = (
     'metric',  # cd/hd: also the identification objective (else cd)
     'max_frames',
     'settle',
-    ('topic', {'help': 'PointCloud2 topic of plain recordings'}),
-    ('targets_topic', {'help': 'recorded PoseArray gripper targets'}),
-    'clean',
     ('output', {'help': 'directory (default results/rank)'}),
 )
 
@@ -74,41 +70,48 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help='rank the engines on your own recordings: identified, scored on held-out trials',
     )
     common.add_options(rank, RANK_FLAGS)
+    common.recording_options(rank)
     common.engine_override_option(rank, 'fixed on every entrant of that engine, not fitted')
     common.add_option(rank, 'cloth_size')
     common.add_option(rank, 'cloth_mass', help='total mass of the cloth, not fitted')
+    common.add_option(rank, 'cloth_mesh')
     rank.set_defaults(func=cmd_rank)
 
 
 def cmd_rank(args: argparse.Namespace) -> int:
     """Run the protocol, print the table and its sentences, write rank.json."""
-    from cloth_bench_ros.data.replay import ReplayOptions
+    from cloth_bench_ros.cli.run import recordings_motions
+    from cloth_bench_ros.core.task_data import load_task
     from cloth_bench_ros.report.rank import rank_answer, rank_lines, rank_table
     from cloth_bench_ros.studies.cloth import cloth_choice
     from cloth_bench_ros.studies.rank import CELLS_FILE, DEFAULT_ENTRANTS, run_rank, RankSpec
+    from cloth_bench_ros.studies.rank_trials import recordings_of
 
     entrants = args.engine or list(DEFAULT_ENTRANTS)
     fixed = common.engine_overrides(args.set, sorted({e for e, _ in entrants}))
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, fixed)
+    load_task(args.primitive, args.task)  # a bad task file: one line, before the work
+    if args.trial:
+        raise UserError('--trial: rank scores every usable trial of each recording; --trial '
+                        'picks the one that run scores or identify fits')
     out = Path(args.output) if args.output else Path('results') / 'rank'
-    declared = {name: OPTIONS[name].default for name in REPLAY_OPTIONS}  # the replay's defaults
-    params = _replay_params(argparse.Namespace(**{
-        **declared, 'topic': args.topic, 'start_time': None, 'targets_topic': args.targets_topic,
-        'clean': args.clean, 'transform': None, 'trial': None,
-    }))
-    replay = ReplayOptions(
-        cloth=args.cloth, primitive=args.primitive, topic=params['topic'],
-        targets_topic=params['targets_topic'], clean=params['clean'], rate_hz=args.rate,
-    )  # the split never simulates: its starts are fitted in the recordings (--align onset)
+    bags = recordings_of(args.recordings)
+    tasks, motion_lines = recordings_motions(args, bags, out)
+    # the split never simulates: its starts are fitted in the recordings (--align onset) or are
+    # the recorded motions' first clouds
+    replay = common.replay_options(args)
     spec = RankSpec(
-        args.recordings, out, entrants, replay, args.trials, args.sampler, args.seeds, args.rate,
-        args.rates, args.grid, args.metric, args.max_frames, fixed, args.fidelity, size, mass,
-        args.settle,
+        [str(b) for b in bags], out, entrants, replay, args.trials, args.sampler, args.seeds,
+        args.rate, args.rates, args.grid, args.metric, args.max_frames, fixed, args.fidelity,
+        size, mass, tasks=tasks, cloth_mesh=args.cloth_mesh or '',
+        gripper_frames=args.gripper_frames or '', table_z=args.table_z, settle=args.settle,
     )
     print(f'cloth-bench rank: {", ".join(args.recordings)}; engines '
           f'{", ".join(e + (":" + o["model"] if o else "") for e, o in entrants)}; '
           f'{args.settle} settle; output {out}',
           flush=True)
+    for line in motion_lines:
+        print(line)
     try:
         raw = run_rank(spec, args.scheduler, args.workers, progress=not args.no_progress)
     except KeyboardInterrupt:

@@ -10,7 +10,7 @@ import time
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.options import MOTION_FLAGS, Option, OPTIONS, REPLAY_OPTIONS
+from cloth_bench_ros.options import MOTION_FLAGS, Option
 
 
 RUN_FLAGS: tuple[common.Flag, ...] = (
@@ -27,15 +27,8 @@ RUN_FLAGS: tuple[common.Flag, ...] = (
         'help': 'report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)'
     }),
 )
-# scoring your own recording (docs/own-recording.md)
+# the run's own outputs of a recording (the recording options: common.recording_options)
 SCORING_FLAGS: tuple[common.Flag, ...] = (
-    'task',
-    *MOTION_FLAGS,
-    *REPLAY_OPTIONS,
-    Option(
-        'transform', str, None, '4x4 matrix into world for every cloud, instead of tf',
-        flag='--transform', metavar='FILE',
-    ),
     Option(
         'record_comparison', str, None, 'write a comparison bag (Foxglove/RViz)',
         flag='--record-comparison', metavar='DIR',
@@ -55,8 +48,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help='run the node graph on a bag and print the result table',
     )
     common.add_options(run, RUN_FLAGS)
-    scoring = run.add_argument_group('scoring your own recording (see docs/own-recording.md)')
-    common.add_options(scoring, SCORING_FLAGS)
+    common.add_options(common.recording_options(run), SCORING_FLAGS)
     common.add_option(run, 'grid')
     common.engine_override_option(
         run, 'override an engine parameter on top of the preset (repeatable)'
@@ -88,18 +80,6 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     engines.set_defaults(func=cmd_engines)
 
 
-def _replay_params(args: argparse.Namespace) -> dict:
-    """Return the recorder parameters for bags that do not say everything (plain recordings)."""
-    params = {}
-    for name in REPLAY_OPTIONS:
-        value = getattr(args, name)
-        params[name] = OPTIONS[name].default if value is None else value
-    params.pop('change_of_phase_frame')  # passed to every node by the pipeline
-    if args.transform:
-        params['transform'] = [float(v) for v in common.read_transform(args.transform).ravel()]
-    return params
-
-
 def _write_motion(args: argparse.Namespace, bag: Path, path: Path) -> tuple[Path, dict]:
     """Write the recorded grippers (--gripper-frames, else --targets-topic) as a task file."""
     from cloth_bench_ros.data.bag_reader import BagReader
@@ -109,6 +89,7 @@ def _write_motion(args: argparse.Namespace, bag: Path, path: Path) -> tuple[Path
     with BagReader(bag) as reader:
         doc = recorded_task(reader, args.topic or '', parse_gripper_frames(args.gripper_frames),
                             args.targets_topic or '', args.table_z)
+    path.parent.mkdir(parents=True, exist_ok=True)
     return write_task(path, doc), doc
 
 
@@ -142,6 +123,23 @@ def recorded_motion(args: argparse.Namespace, bag: Path, out: Path) -> tuple[str
         table_line(doc),
     ]
     return str(path), lines
+
+
+def recordings_motions(
+    args: argparse.Namespace, bags: list[Path], out: Path
+) -> tuple[list[str], list[str]]:
+    """
+    Return each recording's recorded-motion task file ('': none), as `run` makes it, and lines.
+
+    identify and rank: written under `out`/motions/<n>_<recording>/motion.yaml.
+    """
+    tasks: list[str] = []
+    lines: list[str] = []
+    for i, bag in enumerate(bags):
+        task, said = recorded_motion(args, bag, out / 'motions' / f'{i + 1}_{bag.name}')
+        tasks.append(task)
+        lines.extend(f'{bag}: {line}' for line in said)
+    return tasks, lines[:1] if not any(tasks) else lines
 
 
 def _print_real(summary: dict) -> None:
@@ -280,7 +278,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic)
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, overrides)
-    replay = _replay_params(args)
+    replay = common.replay_params(args)
+    replay.pop('change_of_phase_frame')  # passed to every node by the pipeline
     out = (
         Path(args.output)
         if args.output

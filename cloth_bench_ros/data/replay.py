@@ -362,6 +362,17 @@ def split_recording(
     return split
 
 
+def mismatch_error(split: trials.Split, options: ReplayOptions) -> str:
+    """Return the one line that refuses a recording whose motion does not match the task."""
+    reasons = '; '.join(f'{t.number}: {t.reason}' for t in split.trials)
+    return (
+        f"the recording's motion does not match the task {replay_task(options).name} "
+        f'({split.source}: {reasons}): give the motion it holds with --gripper-frames '
+        "LEFT,RIGHT or --targets-topic T (or --motion task to score the task's motion "
+        'anyway)'
+    )
+
+
 def choose_trial(split: trials.Split, number: int) -> trials.FoundTrial:
     """Return trial `number` (1-based) of a split, or the first usable; AlignmentError if none."""
     found = ', '.join(str(t.number) for t in split.usable) or 'none'
@@ -403,13 +414,7 @@ def _start(
     if options.start_time:
         return alignment.given_start(options.start_time, min(stamps)), 0, everything
     if split is not None and split.trials and not split.usable and options.motion != 'task':
-        reasons = '; '.join(f'{t.number}: {t.reason}' for t in split.trials)
-        raise alignment.AlignmentError(
-            f"the recording's motion does not match the task {replay_task(options).name} "
-            f'({split.source}: {reasons}): give the motion it holds with --gripper-frames '
-            "LEFT,RIGHT or --targets-topic T (or --motion task to score the task's motion "
-            'anyway)'
-        )
+        raise alignment.AlignmentError(mismatch_error(split, options))
     if options.align not in ('simulation', 'onset'):
         raise alignment.AlignmentError(f'align {options.align!r} is not simulation or onset')
     if split is not None and (options.trial or len(split.trials) > 1):

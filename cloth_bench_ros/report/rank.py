@@ -144,6 +144,11 @@ def rank_answer(raw: dict[str, Any]) -> dict[str, Any]:
              'value': cell_value(c, m)}
             for c in cells if c.get('kind') == 'cross_task' and c['group'] == group
         ]
+        other_motion = {  # held out along a motion its fold was not fitted on
+            n: [cell_value(c, m) for c in _held_out(cells, group, n, 'identified')
+                if c.get('other_motion')]
+            for n in entries
+        }
         answer[group] = {
             **ranking_record(ranking),
             'within_reference_error': within_reference_error(
@@ -155,6 +160,9 @@ def rank_answer(raw: dict[str, Any]) -> dict[str, Any]:
             'deadline_rule': f'step p99 < {DEADLINE_BUDGET:g} x the period',
             'pareto': {f'{r:g}': _pareto(entries, f'{r:g}', m) for r in raw['spec']['rates']},
             'cross_task': cross,
+            'cross_motion': {n: {'values': v, 'mean': float(finite(v).mean())
+                                 if len(finite(v)) else None}
+                             for n, v in other_motion.items() if v},
         }
     return {**raw, 'answer': answer}
 
@@ -247,9 +255,12 @@ def rank_lines(result: dict[str, Any]) -> list[str]:
                 r['name'] for r in a['ranking']
                 if r['low'] is not None and r['low'] > floor['max']
             ]
+            motions = info.get('motions', 1)
             lines.append(
                 f'{group}: floor (repeated real trials, {floor["vertices"]} points) '
-                f'{floor["mean"]:.4f} m (pairs {floor["min"]:.4f}-{floor["max"]:.4f}); '
+                f'{floor["mean"]:.4f} m (pairs {floor["min"]:.4f}-{floor["max"]:.4f}'
+                + (f"; between {motions} motions: an upper bound of the trials' own spread"
+                   if motions > 1 else '') + '); '
                 + (f'further from a trial than the trials are from each other: {", ".join(above)}'
                    if above else "no engine is clearly further than the trials' own spread")
             )
@@ -270,5 +281,12 @@ def rank_lines(result: dict[str, Any]) -> list[str]:
             lines.append(
                 f'{group}: {entrant} fitted on {fitted_on}: {_f(mean)}{unit} '
                 f'(fitted on this task: {_f(own)}{unit})'
+            )
+        for entrant, c in sorted(a.get('cross_motion', {}).items()):
+            own = a['entrants'].get(entrant, {}).get('identified', {}).get('mean')
+            lines.append(
+                f'{group}: {entrant} fitted on other motions, scored on {len(c["values"])} '
+                f'held-out runs of a motion it was not fitted on: {_f(c["mean"])}{unit} '
+                f'(every held-out run: {_f(own)}{unit})'
             )
     return lines

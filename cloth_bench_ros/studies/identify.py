@@ -51,7 +51,7 @@ from cloth_bench_ros.studies.identify_problem import (
     record_problem,
     study_key,
 )
-from cloth_bench_ros.studies.objective import evaluate, Trial
+from cloth_bench_ros.studies.objective import evaluate, Trial, trial_of
 from cloth_bench_ros.studies.shared_simulations import SharedSimulations
 
 SAMPLERS = ('cmaes', 'tpe', 'gp', 'both')
@@ -101,6 +101,10 @@ class IdentifySpec:
     settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
     pool: tuple[str, ...] = ()  # rank's: every trial of the group, scored by each simulation
     shared: Path | None = None  # rank's: the folds' simulations (studies.shared_simulations)
+    task: str = ''  # a task file for bags without their own (objective.TASK_IN_BAG)
+    cloth_mesh: str = ''  # --cloth-mesh; '': the grid
+    gripper_frames: str = ''  # recorded only (the task file holds the motion they gave)
+    table_z: float | None = None
 
 
 def default_params(engine: str, model: str | None = None) -> list[str]:
@@ -260,19 +264,6 @@ def open_study(spec: IdentifySpec, sampler: str) -> Any:
     for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
         study.tell(t.number, state=TrialState.FAIL)
     return study
-
-
-def trial_of(
-    spec: IdentifySpec, params: dict, number: int, sampler: str, rung: dict | None = None
-) -> Trial:
-    """Return the objective's trial of `params`; `rung`: the Pruner's rung fields, if any."""
-    return Trial(
-        spec.engine, spec.cloth, spec.primitive, str(spec.bag),
-        tuple(sorted({**spec.fixed, **params}.items())), spec.objective, spec.seed, spec.rate_hz,
-        spec.grid, spec.max_frames, number, sampler, tuple(spec.also),
-        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, settle=spec.settle,
-        **(rung or {}),
-    )
 
 
 def submit(client: Any, task: Trial, shared: SharedSimulations | None = None) -> Any:

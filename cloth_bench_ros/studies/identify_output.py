@@ -1,12 +1,14 @@
 """
 What an identification leaves behind: validation, preset file and identification.json.
 
-The validation runs through the node graph; identification.json holds everything the report needs,
+The validation runs through the node graph (along a task file, a recorded motion or a mesh: as
+the objective's trials); identification.json holds everything the report needs,
 so the report needs no Optuna.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from datetime import datetime, timezone
 import json
 import math
@@ -67,9 +69,12 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
 def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]:
     """Run the validation cells (resumable): per bag, preset against identified parameters."""
     from cloth_bench_ros.studies.dask_executor import run_tasks
+    from cloth_bench_ros.studies.objective import bag_task
     from cloth_bench_ros.studies.results import rewrite_rows, stale_cells
     from cloth_bench_ros.studies.sweep import cells_to_run, error_row, run_cell
 
+    if spec.cloth_mesh or bag_task(str(spec.bag), spec.task):
+        return validate_along(client, spec, fitted)
     results = spec.output / RESULTS_FILE
     cells = validation_cells(spec, fitted)
     rows = load_rows(results)
@@ -110,6 +115,33 @@ def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]
             }
         out.append(entry)
     return out
+
+
+def validate_along(client: Any, spec: Any, fitted: dict) -> list[dict]:
+    """
+    Validate on the fitted bag's held-out seeds along its own task and cloth, as objective trials.
+
+    A task file, a recorded motion or a mesh: the sweep's cells run the shipped tasks on grids.
+    """
+    from cloth_bench_ros.studies.objective import evaluate, trial_of
+
+    seeds = range(spec.seed + 1, spec.seed + 1 + spec.validate_seeds)
+    if not seeds:
+        return []
+    entry: dict = {'bag': str(spec.bag)}
+    for config, params in (('preset', {}), ('identified', fitted)):
+        trials = [replace(trial_of(spec, params, -1, config), seed=seed, also=())
+                  for seed in seeds]
+        results = client.gather([client.submit(evaluate, t, pure=False) for t in trials])
+        values = np.array([r['value'] for r in results if r['status'] == 'ok'])
+        entry[config] = {
+            'mean': float(values.mean()) if len(values) else math.nan,
+            'std': float(values.std()) if len(values) else math.nan,
+            'n': len(results),
+            'ok': int(len(values)),
+            'diverged': sum(r['status'] == 'diverged' for r in results),
+        }
+    return [entry]
 
 
 def _key(row: dict) -> tuple:
@@ -208,6 +240,16 @@ def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
     return preset
 
 
+def _inputs(spec: Any) -> dict:
+    """Return the task of each bag, the mesh, the gripper frames and the table height."""
+    from cloth_bench_ros.studies.objective import bag_task
+    from cloth_bench_ros.studies.recording import inputs_record
+
+    tasks = [bag_task(str(b), spec.task) for b in (spec.bag, *spec.also)]
+    return inputs_record(spec.primitive, tasks, spec.cloth_mesh, spec.gripper_frames,
+                         spec.table_z)
+
+
 def summarise(
     spec: Any,
     space: dict,
@@ -232,6 +274,7 @@ def summarise(
         'max_frames': spec.max_frames,
         'fidelity': spec.fidelity,
         'settle': spec.settle,
+        **_inputs(spec),
         'space': {n: [d.low, d.high, d.log] for n, d in space.items()},
         'samplers': list(studies),
         'best_sampler': best,

@@ -5,11 +5,11 @@ Everything a trial's value depends on except the budget and the sampler (another
 `--sampler` resumes the journal) and the cloth's size and mass (their study has its own name in
 the journal): the bags and their data (`data.bag_layout.fingerprint`), the metric, seed, rate,
 grid, frames, the engine's version, the device it runs on (`auto` resolved on this machine), the
-preset's values, fixed values, search space, fidelity and settle. Kept in
-`<output>/problem.json`, one entry per study of the journal; `identify` refuses, in one line, to
-resume a journal of another problem (ProblemChanged; `rank` identifies such a fold afresh). A key
-that a recorded problem lacks (kept before that key was) is not a change, but the settle: such a
-problem was settled in full.
+preset's values, fixed values, search space, fidelity, settle, each bag's task file and the cloth
+mesh (their content hashes: studies.recording). Kept in `<output>/problem.json`, one entry per
+study of the journal; `identify` refuses, in one line, to resume a journal of another problem
+(ProblemChanged; `rank` identifies such a fold afresh). A key that a recorded problem lacks (kept
+before that key was) is not a change, but the settle: such a problem was settled in full.
 
 `simulated_model` is the part of it that every stored simulation depends on beyond its own
 parameters (the engine's version, the preset they are set on and the device): rank's kept
@@ -29,7 +29,8 @@ from cloth_bench_ros.errors import InputError
 
 PROBLEM_FILE = 'problem.json'
 # How a changed key is named to the user (others: the key itself).
-LABELS = {'engine_version': 'engine version', 'fixed': 'fixed values', 'preset': 'preset values'}
+LABELS = {'engine_version': 'engine version', 'fixed': 'fixed values', 'preset': 'preset values',
+          'tasks': 'task file', 'cloth_mesh': 'cloth mesh'}
 
 
 class ProblemChanged(InputError):
@@ -101,6 +102,8 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
     """
     from cloth_bench_ros.data.bag_layout import fingerprint
     from cloth_bench_ros.engines import engine_class
+    from cloth_bench_ros.studies.objective import bag_task
+    from cloth_bench_ros.studies.recording import file_sha256, task_record
     from optuna.distributions import distribution_to_json
 
     bags = [Path(b) for b in (spec.bag, *spec.also)]
@@ -121,6 +124,10 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
         'space': {name: json.loads(distribution_to_json(d)) for name, d in space.items()},
         'fidelity': spec.fidelity,
         'settle': spec.settle,
+        # the bags' tasks (each one's recorded motion, else --task, else the shipped one) and mesh
+        'tasks': sorted({task_record(spec.primitive, bag_task(str(b), spec.task))['sha256']
+                         for b in bags}),
+        'cloth_mesh': file_sha256(spec.cloth_mesh),
     })
 
 

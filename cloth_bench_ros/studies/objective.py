@@ -34,6 +34,9 @@ import numpy as np
 
 OBJECTIVES = ('cd', 'hd')
 FPS = 30.0
+# A trial bag of a recorded motion carries its task file (studies.rank_trials writes it): the
+# engines follow it on that bag, and the bag's fingerprint changes with it.
+TASK_IN_BAG = 'task.yaml'
 _BAG_CACHE: dict[tuple, tuple] = {}
 _BAG_CACHE_SIZE = 4
 
@@ -62,6 +65,27 @@ class Trial:
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg; None: the preset's mass per area times the area
     settle: str = FULL  # the settle phase (engines.settle): full (the paper's) or fast
+    task: str = ''  # a task file for bags without their own (TASK_IN_BAG); '': the shipped one
+    cloth_mesh: str = ''  # a cloth mesh file (--cloth-mesh); '': the grid
+
+
+def trial_of(
+    spec: Any, params: dict, number: int, sampler: str, rung: dict | None = None
+) -> Trial:
+    """Return an IdentifySpec's trial of `params`; `rung`: the Pruner's rung fields, if any."""
+    return Trial(
+        spec.engine, spec.cloth, spec.primitive, str(spec.bag),
+        tuple(sorted({**spec.fixed, **params}.items())), spec.objective, spec.seed, spec.rate_hz,
+        spec.grid, spec.max_frames, number, sampler, tuple(spec.also),
+        cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, settle=spec.settle,
+        task=spec.task, cloth_mesh=spec.cloth_mesh, **(rung or {}),
+    )
+
+
+def bag_task(bag: str, task: str = '') -> str:
+    """Return the task file a bag is scored along: its own (TASK_IN_BAG), else `task`."""
+    own = Path(bag) / TASK_IN_BAG
+    return str(own) if own.is_file() else task
 
 
 def bag_clouds(
@@ -105,8 +129,15 @@ def evaluate(trial: Trial) -> dict:
     Run one trial: status ok (value finite), diverged (reason, step) or error (refused input).
 
     Only the engine's own instability signals make it diverged, and only the project's
-    user-facing errors make it an error; any other exception is a bug and is raised.
+    user-facing errors make it an error; any other exception is a bug and is raised. Bags of
+    different motions (their own task files) are one simulation per motion, scored together.
     """
+    bags = (trial.bag, *trial.also)
+    motions: dict[str, list[int]] = {}
+    for i, bag in enumerate(bags):
+        motions.setdefault(bag_task(bag, trial.task), []).append(i)
+    if len(motions) > 1:
+        return _motions(trial, list(motions.values()))
     if not trial.ladder:
         return _evaluate(trial)
     partials: list[float] = []
@@ -131,6 +162,39 @@ def evaluate(trial: Trial) -> dict:
     return out
 
 
+def _motions(trial: Trial, groups: list[list[int]]) -> dict:
+    """Return the result over bags of several motions: one evaluation per motion, per bag."""
+    bags = (trial.bag, *trial.also)
+    parts = [evaluate(replace(trial, bag=bags[g[0]], also=tuple(bags[i] for i in g[1:])))
+             for g in groups]
+    n = len(bags)
+    cd, hd, frames = [math.nan] * n, [math.nan] * n, [0] * n
+    for g, r in zip(groups, parts):
+        one = len(g) == 1
+        for j, i in enumerate(g):
+            cd[i] = r['CD'] if one else r['per_bag'][j]
+            hd[i] = r['HD'] if one else r['per_bag_hd'][j]
+            frames[i] = r['frames'] if one else r['per_bag_frames'][j]
+    first = parts[0]
+    out = {**first, 'CD': float(np.mean(cd)), 'HD': float(np.mean(hd)), 'frames': sum(frames),
+           'per_bag': cd, 'per_bag_hd': hd, 'per_bag_frames': frames,
+           'cpu_s': sum(r['cpu_s'] for r in parts), 'wall_s': sum(r['wall_s'] for r in parts),
+           'diverged': next((r.get('diverged') for r in parts if r.get('diverged')), None)}
+    out['value'] = out['CD'] if trial.objective == 'cd' else out['HD']
+    if all('partial' in r for r in parts):
+        out['partial'] = float(np.mean([r['partial'] for r in parts]))
+    if trial.all_metrics and all('metrics' in r for r in parts):
+        weights = [len(g) for g in groups]
+        out['metrics'] = {k: float(np.average([r['metrics'][k] for r in parts], weights=weights))
+                          for k in first['metrics']}
+    failed = next((r for r in parts if r['status'] != 'ok'), None)
+    if failed is not None:
+        out.update(status=failed['status'], reason=failed['reason'], step=failed['step'])
+    if failed is not None and failed['status'] == 'pruned':
+        out.update(value=math.nan, CD=math.nan, HD=math.nan)
+    return out
+
+
 def _evaluate(trial: Trial) -> dict:
     start, cpu_start = time.perf_counter(), time.process_time()
     out: dict[str, Any] = {
@@ -147,21 +211,26 @@ def _evaluate(trial: Trial) -> dict:
     }
     engine = None
     try:
+        from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
+        from cloth_bench_ros.core.cloth_size import grasp_width
         from cloth_bench_ros.core.pointcloud2 import as_carried
-        from cloth_bench_ros.core.cloth_size import cloth_grid, grasp_width
+        from cloth_bench_ros.core.task_data import load_task
         from cloth_bench_ros.core.trajectory import full_targets
         from cloth_bench_ros.engines import make_engine
         from cloth_bench_ros.engines.presets import load_preset, sized_params
 
         size = trial.cloth_size
-        targets = full_targets(trial.primitive, trial.rate_hz, grasp_width(size))
+        task = load_task(trial.primitive, bag_task(trial.bag, trial.task) or None)
+        targets = full_targets(task, trial.rate_hz, grasp_width(size))
         offset = int(round(targets.quintic_start * 1e9))
+        cloth = run_cloth(trial.grid, size, trial.cloth_mesh or None, task, trial.rate_hz)
         preset = load_preset(trial.engine, trial.cloth, trial.primitive)  # for this cloth's size:
-        preset = sized_params(trial.engine, preset, size, trial.cloth_mass)
+        preset = sized_params(trial.engine, preset, size, trial.cloth_mass, mesh_area(cloth))
         params = {**preset, **dict(trial.params)}
-        engine = make_engine(trial.engine, trial.rate_hz, params, cloth_grid(trial.grid, size))
+        engine = make_engine(trial.engine, trial.rate_hz, params, cloth)
         faces = engine.faces if trial.all_metrics else None
-        scored = [_scored_bag(trial, bag, offset, faces) for bag in (trial.bag, *trial.also)]
+        scored = [_scored_bag(trial, bag, offset, faces, task)
+                  for bag in (trial.bag, *trial.also)]
         cores = [(core, stamps[-1]) for core, stamps in scored]
         last = max(end for _, end in cores)
         rung = _rung(trial, scored)
@@ -190,7 +259,7 @@ def _evaluate(trial: Trial) -> dict:
                 if trial.prune_above is not None and not out['partial'] <= trial.prune_above:
                     out.update(status='pruned', reason='partial value above the threshold')
                     return out
-        suffix = 'd' if trial.primitive == 'dynamic' else 'q'
+        suffix = task.suffix
         per_bag = []
         for core, _ in cores:
             core.finish()
@@ -255,20 +324,17 @@ def _partial(trial: Trial, scored: list[tuple[Any, list[int]]], counts: list[int
 
 
 def _scored_bag(
-    trial: Trial, bag: str, offset: int, faces: np.ndarray | None = None
+    trial: Trial, bag: str, offset: int, faces: np.ndarray | None, task: Any
 ) -> tuple[Any, list[int]]:
     """Return an evaluator core fed with a bag's frames of the window, and their stamps."""
     from cloth_bench_ros.core.evaluation import OnlineEvaluator
-    from cloth_bench_ros.core.trajectory import Primitive
 
     cut, frames = bag_clouds(bag, max(_BAG_CACHE_SIZE, 1 + len(trial.also)))
-    core = OnlineEvaluator(
-        [trial.engine], Primitive(trial.primitive), offset, cut, FPS, faces=faces
-    )
+    core = OnlineEvaluator([trial.engine], task, offset, cut, FPS, faces=faces)
     used = [
         f
         for f in frames
-        if trial.primitive != 'dynamic' or cut is None or int(round(f[0] / 1e9 * FPS)) < cut
+        if task.suffix != 'd' or cut is None or int(round(f[0] / 1e9 * FPS)) < cut
     ]
     used = used[: trial.max_frames] if trial.max_frames else used
     if not used:

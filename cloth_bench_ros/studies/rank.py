@@ -7,8 +7,11 @@ fold, identification (studies.identify, the same sampler and budget for every en
 training trials, the objective being the mean over them; then the held-out trial scored with the
 identified parameters and with the preset on `seeds` seeds (the evaluator's core, as `run`
 scores); step times at each rate; the cross-task check where a cloth's two tasks were recorded;
-the floor (the distance between the group's real trials). Every finished identification and
-cell is kept (the identifications' journals, `cells.jsonl`): the same command resumes.
+the floor (the distance between the group's real trials). Trials of recorded motions (each
+recording's own, its trial bag carrying its task file) pool in their cloth's group, and a held-out
+trial of a motion its fold was not fitted on is the cross-motion check. Every finished
+identification and cell is kept (the identifications' journals, `cells.jsonl`): the same
+command resumes.
 The ranking itself is the report's (report.rank): this module computes, it does not judge.
 """
 
@@ -40,6 +43,7 @@ from cloth_bench_ros.studies.rank_trials import (
     recordings_of,
     reference_error,
 )
+from cloth_bench_ros.studies.recording import inputs_record
 
 if TYPE_CHECKING:
     from cloth_bench_ros.studies.dask_executor import ClusterOnDemand
@@ -80,6 +84,10 @@ class RankSpec:
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, the cloth's (not fitted); None: the preset's per area
     settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
+    tasks: Sequence[str] = ()  # per recording: its recorded motion's task file ('' : replay.task)
+    cloth_mesh: str = ''  # --cloth-mesh; '': the grid
+    gripper_frames: str = ''
+    table_z: float | None = None
 
 
 def entrant_key(engine: str, overrides: dict) -> str:
@@ -142,6 +150,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         'rate_hz': spec.rate_hz, 'max_frames': spec.max_frames,
         'fixed': {**spec.fixed.get(engine, {}), **overrides}, 'fidelity': spec.fidelity,
         'settle': spec.settle, **cloth_record(spec.cloth_size, spec.cloth_mass),
+        'inputs': [_inputs_key(spec, t) for t in train],
         'model': simulated_model(engine, train[0].cloth, train[0].primitive, spec.cloth_size,
                                  spec.cloth_mass, {**spec.fixed.get(engine, {}), **overrides}),
     }))
@@ -160,6 +169,7 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
         max_frames=spec.max_frames, also=tuple(bags[1:]), fidelity=spec.fidelity,
         cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, settle=spec.settle,
         pool=tuple(t.bag for t in group), shared=out.parent / SHARED_FILE,
+        task=spec.replay.task, cloth_mesh=spec.cloth_mesh,
     )
     try:
         summary = identify(ident, progress=progress, client=cluster.client()).summary
@@ -171,6 +181,13 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
     summary['rank_stamp'] = stamp
     done.write_text(json.dumps(summary, indent=1, default=str))
     return summary
+
+
+def _inputs_key(spec: RankSpec, trial: RankTrial) -> str:
+    """Return the trial's task and the mesh as a key part (their content hashes)."""
+    from cloth_bench_ros.studies.recording import inputs_key
+
+    return inputs_key(trial.primitive, trial.task or spec.replay.task, spec.cloth_mesh)
 
 
 def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int, rate: float,
@@ -189,12 +206,19 @@ def _cell(spec: RankSpec, engine: str, params: dict, trial: RankTrial, seed: int
            else f'|{spec.cloth_size}|{spec.cloth_mass}')
         + ('' if spec.settle == FULL else f'|settle {spec.settle}')  # full: keyed as before
         + '|' + hashlib.sha256(json.dumps(model, sort_keys=True).encode()).hexdigest()[:16]
+        + '|' + _inputs_key(spec, trial)
     )
     return key, Trial(
         engine, trial.cloth, trial.primitive, trial.bag, tuple(sorted(params.items())),
         objective(spec), seed, rate, spec.grid, frames, -1, label, all_metrics=every,
         cloth_size=spec.cloth_size, cloth_mass=spec.cloth_mass, settle=spec.settle,
+        task=spec.replay.task, cloth_mesh=spec.cloth_mesh,
     )
+
+
+def motion_of(trial: RankTrial) -> str:
+    """Return the motion a trial was recorded along: its task file's hash ('' : the task's)."""
+    return trial.task_sha256
 
 
 def _run_cells(client: Any, left: list[tuple[str, Trial, dict]], path: Path, done: dict,
@@ -265,7 +289,8 @@ def run_rank(
     out = check_output_dir(spec.output)
     with ResultsLock(out, 'rank'), ClusterOnDemand(scheduler, workers,
                                                    out / 'workers.log') as cluster:
-        trials = prepare_trials(recordings_of(spec.recordings), spec.replay, out / 'trials', say)
+        trials = prepare_trials(recordings_of(spec.recordings), spec.replay, out / 'trials', say,
+                                spec.tasks)
         groups = groups_of(trials, say)
         if not groups:
             raise RankError(
@@ -297,13 +322,16 @@ def run_rank(
                     }
                     meta = {'group': group, 'entrant': name, 'fold': k + 1,
                             'device': resolved_device(engine, preset)}
-                    for i in held:
+                    fitted_motions = {motion_of(t) for t in train}
+                    for i in held:  # a motion the fold was not fitted on: the cross-motion check
+                        other = motion_of(members[i]) not in fitted_motions
                         for seed in range(1, spec.seeds + 1):
                             for label, params in (('identified', fitted), ('preset', preset)):
                                 key, cell = _cell(spec, engine, params, members[i], seed,
                                                   spec.rate_hz, label)
                                 todo.append((key, cell, {**meta, 'trial': members[i].name,
-                                                         'kind': 'held_out'}))
+                                                         'kind': 'held_out',
+                                                         'other_motion': other}))
                     if k == 0:
                         for rate in spec.rates:
                             key, cell = _cell(spec, engine, fitted, members[0], 1, rate, 'timing')
@@ -335,6 +363,9 @@ def run_rank(
                 'metric': spec.metric, 'objective': objective(spec),
                 'max_frames': spec.max_frames, 'fidelity': spec.fidelity,
                 'settle': spec.settle, **cloth_record(spec.cloth_size, spec.cloth_mass),
+                **inputs_record(spec.replay.primitive,
+                                [t or spec.replay.task for t in spec.tasks or ['']],
+                                spec.cloth_mesh, spec.gripper_frames, spec.table_z),
             },
             'trials': [t.as_dict() for t in trials],
             'groups': {
@@ -344,6 +375,7 @@ def run_rank(
                     'folds': [[m[i].name for i in held] for held in folds(len(m))],
                     'floor': floor(m, vertices),
                     'reference_error': reference_error(m),
+                    'motions': len({motion_of(t) for t in m}),
                 }
                 for (c, p), m in groups.items()
             },

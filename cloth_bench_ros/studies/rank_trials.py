@@ -6,15 +6,19 @@ one trial as it is. Any other recording is read as `run` reads it (its cloud top
 world and cleaned) and split into the repetitions of the task (data.trials: from its gripper
 targets when it has them, else from the clouds); each usable repetition is written as a bag of
 the project's layout (stamps from the start of the motion, the change of phase found in its
-clouds), which identification and scoring then read as they read any trial. The floor is the
-distance between two real trials of one cloth and task, as an engine's is measured.
+clouds), which identification and scoring then read as they read any trial. A recording with a
+recorded motion (its task file, `cli.run.recorded_motion`) is one trial from its first cloud, as
+`run` scores it; its bag carries that task file (objective.TASK_IN_BAG), which the engines follow
+on it. The floor is the distance between two real trials of one cloth and task, as an engine's
+is measured.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 import json
 from pathlib import Path
+import shutil
 from typing import Any, Sequence
 
 from cloth_bench_ros.core.metrics import RealCloud
@@ -22,9 +26,12 @@ from cloth_bench_ros.core.phase import first_table_contact
 from cloth_bench_ros.core.scene import REAL_FPS
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.data import BagReader, BagWriter
+from cloth_bench_ros.data.alignment import AlignmentError
 from cloth_bench_ros.data.bag_layout import locate
 from cloth_bench_ros.data.errors import BagError
-from cloth_bench_ros.data.replay import read_frames, ReplayOptions, split_recording
+from cloth_bench_ros.data.replay import (
+    mismatch_error, plan_replay, read_frames, replay_task, ReplayOptions, split_recording,
+)
 from cloth_bench_ros.data.trial import CLOUD_TOPIC, TrialInfo
 from cloth_bench_ros.data.trials import settings as split_settings
 from cloth_bench_ros.errors import ClothBenchError
@@ -57,6 +64,8 @@ class RankTrial:
     start_precision_s: float
     frames: int
     change_of_phase: int | None
+    task: str = ''  # the task file the engines follow on this trial; '': the shipped one
+    task_sha256: str = ''
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -94,24 +103,27 @@ def _identity(path: Path) -> list:
 
 
 def prepare_trials(
-    recordings: Sequence[Path], options: ReplayOptions, out: Path, say: Any = print
+    recordings: Sequence[Path], options: ReplayOptions, out: Path, say: Any = print,
+    tasks: Sequence[str] = (),
 ) -> list[RankTrial]:
     """
     Return every usable trial of the recordings; say one line per trial found or left out.
 
-    Split recordings are written under `out` once (kept while the recording, the options and the
-    split's thresholds are the same: a rerun reads them back).
+    `tasks`: each recording's task file ('' or none: the options'), e.g. its recorded motion.
+    Split recordings are written under `out` once (kept while the recording, the options, the
+    task file and the split's thresholds are the same: a rerun reads them back).
     """
     trials: list[RankTrial] = []
     names: set[str] = set()
-    for path in recordings:
+    for i, path in enumerate(recordings):
         base = path.name
         while base in names:
             base += '_'
         names.add(base)
+        own = replace(options, task=tasks[i]) if i < len(tasks) and tasks[i] else options
         with BagReader(path) as reader:
             if reader.trial is None:
-                trials.extend(_split_one(reader, path, base, options, out / base, say))
+                trials.extend(_split_one(reader, path, base, own, out / base, say))
                 continue
             t = reader.trial
             frames = reader.message_counts.get(reader.cloud_topic(), 0)
@@ -152,7 +164,9 @@ def _split_one(
     reader: BagReader, path: Path, base: str, options: ReplayOptions, out: Path, say: Any
 ) -> list[RankTrial]:
     """Split one plain recording into trials written as bags under `out`."""
-    stamp = {'recording': _identity(path), 'options': repr(options), 'split': split_settings()}
+    task = replay_task(options)
+    stamp = {'recording': _identity(path), 'options': repr(options), 'split': split_settings(),
+             'task_sha256': task.sha256}
     done = out / 'trials.json'
     if done.exists():
         try:
@@ -163,8 +177,18 @@ def _split_one(
                 return [RankTrial(**t) for t in kept['trials']]
         except (ValueError, TypeError, KeyError):
             pass  # damaged: split again
+    if task.recorded is not None or options.start_time:
+        lines, found = _one_trial(reader, path, base, options, out)
+        for line in lines:
+            say(line)
+        done.write_text(json.dumps(
+            {'stamp': stamp, 'lines': lines, 'trials': [f.as_dict() for f in found]}, indent=1
+        ))
+        return found
     rec = read_frames(reader, options)
     split = split_recording(reader, options, rec.stamps, rec.clouds)
+    if split.trials and not split.usable and options.motion != 'task':
+        raise AlignmentError(mismatch_error(split, options))  # as `run` refuses it
     targets = full_targets(options.primitive, options.rate_hz)
     end_ns = targets.stamp_ns(len(targets) - 1) - int(round(targets.quintic_start * 1e9))
     lines, found = [], []
@@ -216,6 +240,41 @@ def _split_one(
         {'stamp': stamp, 'lines': lines, 'trials': [f.as_dict() for f in found]}, indent=1
     ))
     return found
+
+
+def _one_trial(
+    reader: BagReader, path: Path, base: str, options: ReplayOptions, out: Path
+) -> tuple[list[str], list[RankTrial]]:
+    """
+    Write a recording of a recorded motion, or one given --start-time, as one trial bag.
+
+    The bag carries the task file it was recorded along (a recorded motion, a --task).
+    """
+    from cloth_bench_ros.studies.objective import TASK_IN_BAG
+
+    plan = plan_replay(reader, options)  # the start is the recorded motion's or given: no engine
+    cop = plan.change_of_phase['frame']
+    info = TrialInfo(cloth=options.cloth, trial=0, primitive=options.primitive,
+                     change_of_phase_frame=cop, fps=REAL_FPS,
+                     source=f'recorded motion of {path.name} ({plan.start.method})')
+    bag = out / 'trial0'
+    with BagWriter(bag, info, overwrite=True) as writer:
+        for t_ns, points in plan.frames:
+            writer.write_cloud(CLOUD_TOPIC, t_ns, points)
+    task = replay_task(options)
+    if options.task:
+        shutil.copyfile(options.task, bag / TASK_IN_BAG)
+    cop_text = ('no change of phase' if cop is None
+                else f'change of phase at frame {cop}, {plan.change_of_phase["source"]}')
+    along = (f'its recorded motion ({task.recorded.source}' if task.recorded
+             else f'the task {task.name} ({plan.start.method}')
+    line = (f'{path}: one trial along {along}, {task.duration:.2f} s), {len(plan.frames)} '
+            f'frames, {cop_text}')
+    trial = RankTrial(base, options.cloth, options.primitive, str(bag), str(path), 0,
+                      plan.start.method, plan.start.precision_s, len(plan.frames), cop,
+                      str(bag / TASK_IN_BAG) if options.task else '',
+                      task.sha256 if options.task else '')
+    return [line], [trial]
 
 
 def _window(bag: str, primitive: str) -> list[tuple[int, np.ndarray]]:

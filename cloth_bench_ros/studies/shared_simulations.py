@@ -184,10 +184,12 @@ def _key(trial: Trial) -> str:
     (another project or engine version, or another device, simulates again).
     """
     from cloth_bench_ros.studies.identify_problem import simulated_model
+    from cloth_bench_ros.studies.recording import inputs_key
 
     fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='', objective='cd'))
     if fields['settle'] == FULL:  # as rows were keyed before the fast settle existed
         del fields['settle']
+    fields['inputs'] = inputs_key(trial.primitive, trial.task, trial.cloth_mesh)
     fields['model'] = simulated_model(trial.engine, trial.cloth, trial.primitive,
                                       trial.cloth_size, trial.cloth_mass, dict(trial.params))
     return json.dumps(fields, sort_keys=True, default=str)
