@@ -131,7 +131,7 @@ def test_identified_provenance_names_the_device_and_the_preset_does_not(tmp_path
 
     spec = SimpleNamespace(
         engine='newton', bag=tmp_path / 'no_bag', cloth='towel', primitive='dynamic',
-        objective='cd', seed=0, rate_hz=100.0, grid=None, max_frames=None,
+        objective='cd', seed=0, rate_hz=100.0, grid=None, max_frames=None, settle='full',
         fixed={'model': 'xpbd', 'device': 'cpu'},
     )
     summary = {
