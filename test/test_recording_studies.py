@@ -131,3 +131,12 @@ def test_identify_on_a_mesh_records_it_and_never_resumes_another_mesh(garment, t
     other.write_text(mesh.read_text() + '# edited\n')
     again = cli_process(*argv, '--cloth-mesh', str(other))
     assert_one_line_error(again, 'another problem', 'cloth mesh')
+
+
+@pytest.mark.parametrize('command', ['identify', 'rank'])
+def test_identify_and_rank_refuse_a_start_searched_with_an_engine(command, tmp_path, capsys):
+    bag = str(tmp_path / 'no_bag')  # refused before any bag is read
+    argv = ([command, '--bag', bag] if command == 'identify' else [command, bag])
+    assert cli.main([*argv, '--align', 'simulation', '--output', str(tmp_path / 'o')]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and '--align simulation' in err and 'without an' in err

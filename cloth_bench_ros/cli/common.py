@@ -155,6 +155,15 @@ def recording_options(parser: argparse.ArgumentParser) -> Any:
     return group
 
 
+def check_split_without_engine(args: argparse.Namespace, command: str) -> None:
+    """Refuse --align simulation: identify and rank find a recording's trials without an engine."""
+    if args.align == 'simulation':
+        raise UserError(
+            f'{command}: --align simulation: {command} finds the trials of a recording without an '
+            'engine (--align onset, or --start-time S for a recording of one trial)'
+        )
+
+
 def replay_params(args: argparse.Namespace) -> dict:
     """Return the recorder parameters of the recording options (a plain recording's)."""
     params = {}

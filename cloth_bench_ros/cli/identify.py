@@ -143,6 +143,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from cloth_bench_ros.core.task_data import load_task
 
     load_task(args.primitive, args.task)  # a bad task file: one line, before the work
+    common.check_split_without_engine(args, 'identify')
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
     common.check_bag(bag, args.topic or None)
     fixed = common.engine_overrides(args.set, [args.engine]).get(args.engine, {})

@@ -91,6 +91,7 @@ def cmd_rank(args: argparse.Namespace) -> int:
     fixed = common.engine_overrides(args.set, sorted({e for e, _ in entrants}))
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, fixed)
     load_task(args.primitive, args.task)  # a bad task file: one line, before the work
+    common.check_split_without_engine(args, 'rank')
     if args.trial:
         raise UserError('--trial: rank scores every usable trial of each recording; --trial '
                         'picks the one that run scores or identify fits')
