@@ -16,7 +16,11 @@ import cloth_bench_ros
 import pytest
 
 PACKAGE = Path(cloth_bench_ros.__file__).parent
-LAYERS = ('core', 'engines', 'data', 'runtime', 'nodes', 'studies', 'report', 'cli')
+# A feature package sits where its parts are used: hil/ (hardware-in-the-loop) above the studies
+# it reuses.
+LAYERS = (
+    'core', 'engines', 'data', 'runtime', 'nodes', 'studies', 'hil', 'report', 'cli',
+)
 
 
 def module_name(path: Path) -> str:
@@ -102,6 +106,18 @@ def test_the_report_runs_nothing(graph):
                         f' {node.module}'
                     )
     assert not running, '\n'.join(running)
+
+
+def test_the_feature_packages_have_their_place():
+    """studies/ may not import the hil package, which may import studies/."""
+    graph = {
+        'cloth_bench_ros.studies.sweep': {'cloth_bench_ros.hil.study': 5},
+        'cloth_bench_ros.hil.study': {'cloth_bench_ros.studies.cloth': 1},
+    }
+    with pytest.raises(AssertionError) as caught:
+        test_imports_only_go_downwards(graph)
+    assert 'studies may not import hil' in str(caught.value)
+    assert 'cloth_bench_ros.hil.study (line' not in str(caught.value)  # hil may import studies
 
 
 def circles(graph: dict[str, dict[str, int]]) -> list[list[str]]:

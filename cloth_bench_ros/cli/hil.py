@@ -106,8 +106,8 @@ def cmd_hil(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines import engine_class
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.hil import hil_table, text_table, write_hil_report
-    from cloth_bench_ros.studies import hil
-    from cloth_bench_ros.studies.hil_layout import resolve_layout
+    from cloth_bench_ros.hil import study as hil
+    from cloth_bench_ros.hil.layout import resolve_layout
     from cloth_bench_ros.studies.cells import set_label, set_values
     from cloth_bench_ros.studies.cloth import study_inputs
     from cloth_bench_ros.studies.sweep import config_label

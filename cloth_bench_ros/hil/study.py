@@ -23,9 +23,9 @@ from cloth_bench_ros.core.hil_timing import (
     TargetTimeline,
 )
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.hil.config import HilConfig, SIMULATOR_FILE, SUMMARY_FILE, TIMELINE
+from cloth_bench_ros.hil.groups import run_groups
 from cloth_bench_ros.studies.cloth import study_inputs
-from cloth_bench_ros.studies.hil_config import HilConfig, SIMULATOR_FILE, SUMMARY_FILE, TIMELINE
-from cloth_bench_ros.studies.hil_groups import run_groups
 
 
 @dataclass
