@@ -16,10 +16,10 @@ import cloth_bench_ros
 import pytest
 
 PACKAGE = Path(cloth_bench_ros.__file__).parent
-# A feature package sits where its parts are used: hil/ (hardware-in-the-loop) above the studies
-# it reuses.
+# A feature package sits where its parts are used: live/ (the live view) below the nodes that
+# stream and write it, hil/ (hardware-in-the-loop) above the studies it reuses.
 LAYERS = (
-    'core', 'engines', 'data', 'runtime', 'nodes', 'studies', 'hil', 'report', 'cli',
+    'core', 'engines', 'data', 'live', 'runtime', 'nodes', 'studies', 'hil', 'report', 'cli',
 )
 
 
@@ -109,15 +109,17 @@ def test_the_report_runs_nothing(graph):
 
 
 def test_the_feature_packages_have_their_place():
-    """studies/ may not import the hil package, which may import studies/."""
+    """data/ (bag input and output) may not import the live view, nor studies/ the hil package."""
     graph = {
+        'cloth_bench_ros.data.bag_writer': {'cloth_bench_ros.live.view': 3},
         'cloth_bench_ros.studies.sweep': {'cloth_bench_ros.hil.study': 5},
-        'cloth_bench_ros.hil.study': {'cloth_bench_ros.studies.cloth': 1},
+        'cloth_bench_ros.live.view': {'cloth_bench_ros.data.messages': 1},
     }
     with pytest.raises(AssertionError) as caught:
         test_imports_only_go_downwards(graph)
+    assert 'data may not import live' in str(caught.value)
     assert 'studies may not import hil' in str(caught.value)
-    assert 'cloth_bench_ros.hil.study (line' not in str(caught.value)  # hil may import studies
+    assert 'cloth_bench_ros.live.view (line' not in str(caught.value)  # live may import data
 
 
 def circles(graph: dict[str, dict[str, int]]) -> list[list[str]]:

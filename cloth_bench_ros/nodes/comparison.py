@@ -16,7 +16,7 @@ import shutil
 from typing import Any
 
 from cloth_bench_ros.core.trajectory import TaskLike
-from cloth_bench_ros.data.comparison_bag import cloth_triangles, write_comparison_bag
+from cloth_bench_ros.live.comparison_bag import cloth_triangles, write_comparison_bag
 import numpy as np
 
 # The paper's Fig. 4: time steps (s from the start of the motion) of each primitive.

@@ -14,7 +14,7 @@ import time
 from typing import Any
 
 from cloth_bench_ros.core.trajectory import TaskLike
-from cloth_bench_ros.data import error_view
+from cloth_bench_ros.live import error_view
 from cloth_bench_ros.runtime import (
     declare_option,
     Float64MultiArray,
@@ -70,7 +70,7 @@ class ErrorTopics:
         self.waiting_until: float | None = None
         self.decided = realtime  # a realtime run starts on its schedule: no wait for a viewer
         if live.get('live'):
-            from cloth_bench_ros.data.live_view import LiveView
+            from cloth_bench_ros.live.view import LiveView
 
             self.live = LiveView(
                 engines,

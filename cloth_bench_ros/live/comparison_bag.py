@@ -22,9 +22,10 @@ from cloth_bench_ros.core.scene import (
     TABLE_Y,
 )
 from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, quaternion_xyz, TaskLike
-from cloth_bench_ros.data import error_view, messages
+from cloth_bench_ros.data import messages
 from cloth_bench_ros.data.bag_writer import BagWriter
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POSE_ARRAY, TYPESTORE
+from cloth_bench_ros.live import error_view
 import numpy as np
 
 MARKER = 'visualization_msgs/msg/Marker'

@@ -22,11 +22,12 @@ import time
 from typing import Any, Callable, cast
 
 from cloth_bench_ros.core.trajectory import full_targets, TaskLike
-from cloth_bench_ros.data import error_view, messages
-from cloth_bench_ros.data.comparison_bag import (
+from cloth_bench_ros.data import messages
+from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.live import error_view
+from cloth_bench_ros.live.comparison_bag import (
     cloth_triangles, MARKER, mesh_marker, table_marker, target_poses,
 )
-from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
