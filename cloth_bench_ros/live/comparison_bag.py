@@ -3,7 +3,7 @@ The comparison bag of a run, for Foxglove/RViz, stamped in run time.
 
 Input is what the evaluator kept of each scored real frame: its `FrameScore`, the real points, the
 engine's vertices at that time and each vertex's error. The topics are the node graph's and the
-live view's (data/error_view.py): the real cloud, each engine's error cloud (PointCloud2 with the
+live view's (live/error_view.py): the real cloud, each engine's error cloud (PointCloud2 with the
 per-vertex `error` field), mesh (visualization_msgs/Marker TRIANGLE_LIST, red) and frame metrics
 (Float64MultiArray), the gripper targets, the per-frame DiagnosticArray, the table, and
 /tf_static for `world`.

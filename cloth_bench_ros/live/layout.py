@@ -1,7 +1,7 @@
 """
 The Foxglove layout shipped with the package (config/foxglove/cloth_bench_live.json).
 
-Made with foxglove-sdk's layout types from the topic names of data/error_view.py, so the one file
+Made with foxglove-sdk's layout types from the topic names of live/error_view.py, so the one file
 opens a live run (`--live`), a comparison bag (`--record-comparison`) and a graph seen through
 foxglove_bridge: a 3D view of the real cloud (grey) against each engine's scored vertices coloured
 by their error (turbo colour map, 0 to 5 cm) and its cloth's triangles (red, a `--cloth-mesh`'s
