@@ -248,7 +248,11 @@ def cmd_hil(args: argparse.Namespace) -> int:
 
 def _export_recommended(args: argparse.Namespace) -> int:
     """Export the settings sweep's recommendation per engine, task and rate."""
-    from cloth_bench_ros.report.hil import all_recommendations, provenance, recommendation_yaml
+    from cloth_bench_ros.hil.recommendation import (
+        all_recommendations,
+        provenance,
+        recommendation_yaml,
+    )
     from cloth_bench_ros.safe_io import atomic_write_text
     from cloth_bench_ros.studies.sweep import load_rows
 
