@@ -34,10 +34,10 @@ import os
 from pathlib import Path
 import random
 
+from cloth_bench_ros.hil import study as hil
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.report.hil import hil_table, text_table, write_hil_report
 from cloth_bench_ros.runtime.dds import loopback_environment
-from cloth_bench_ros.studies import hil
 
 
 def main() -> None:

@@ -25,6 +25,7 @@ from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.engines.base import check_divergence
 from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
+from cloth_bench_ros.hil import study as hil
 from cloth_bench_ros.nodes.simulator import Simulator, StateMessages
 from cloth_bench_ros.report.hil import write_hil_report
 from cloth_bench_ros.runtime import (
@@ -37,7 +38,6 @@ from cloth_bench_ros.runtime import (
     Time,
 )
 from cloth_bench_ros.runtime.dds import loopback_environment
-from cloth_bench_ros.studies import hil
 from cloth_bench_ros.studies.recommend import load_recommendations, recommend_for_rate
 from dds_domains import random_domain
 import numpy as np

@@ -21,8 +21,8 @@ from cloth_bench_ros.core.deadline import (
     within_tolerance,
 )
 from cloth_bench_ros.core.trajectory import full_targets
-from cloth_bench_ros.studies.hil_config import HilConfig
-from cloth_bench_ros.studies.hil_warmup import coarser_grids, warmup
+from cloth_bench_ros.hil.config import HilConfig
+from cloth_bench_ros.hil.warmup import coarser_grids, warmup
 from cloth_bench_ros.studies.recommend import meets_deadline
 import pytest
 
@@ -206,7 +206,7 @@ def test_a_whole_run_ends_when_its_last_target_falls_before_the_motions_end(
 
 def test_a_run_that_does_not_finish_in_time_is_one_line_not_a_bug(tmp_path, capsys, monkeypatch):
     """A starved process (a loaded machine) is said as such, never as an internal error."""
-    from cloth_bench_ros.studies import hil_groups
+    from cloth_bench_ros.hil import groups as hil_groups
 
     monkeypatch.setattr(hil_groups, '_time_budget', lambda config: 0.0)
     code = main(['hil', '--engine', 'mujoco', '--rate', '100', '--grid', '4x5', '--no-lockstep',

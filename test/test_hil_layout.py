@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 from cloth_bench_ros.cli import main
-from cloth_bench_ros.studies.hil_layout import (
+from cloth_bench_ros.hil.layout import (
     choose_layout,
     fifo_permitted,
     FIFO_PRIORITY,

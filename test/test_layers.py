@@ -16,7 +16,11 @@ import cloth_bench_ros
 import pytest
 
 PACKAGE = Path(cloth_bench_ros.__file__).parent
-LAYERS = ('core', 'engines', 'data', 'runtime', 'nodes', 'studies', 'report', 'cli')
+# A feature package sits where its parts are used: live/ (the live view) below the nodes that
+# stream and write it, hil/ (hardware-in-the-loop) above the studies it reuses.
+LAYERS = (
+    'core', 'engines', 'data', 'live', 'runtime', 'nodes', 'studies', 'hil', 'report', 'cli',
+)
 
 
 def module_name(path: Path) -> str:
@@ -102,6 +106,20 @@ def test_the_report_runs_nothing(graph):
                         f' {node.module}'
                     )
     assert not running, '\n'.join(running)
+
+
+def test_the_feature_packages_have_their_place():
+    """data/ (bag input and output) may not import the live view, nor studies/ the hil package."""
+    graph = {
+        'cloth_bench_ros.data.bag_writer': {'cloth_bench_ros.live.view': 3},
+        'cloth_bench_ros.studies.sweep': {'cloth_bench_ros.hil.study': 5},
+        'cloth_bench_ros.live.view': {'cloth_bench_ros.data.messages': 1},
+    }
+    with pytest.raises(AssertionError) as caught:
+        test_imports_only_go_downwards(graph)
+    assert 'data may not import live' in str(caught.value)
+    assert 'studies may not import hil' in str(caught.value)
+    assert 'cloth_bench_ros.live.view (line' not in str(caught.value)  # live may import data
 
 
 def circles(graph: dict[str, dict[str, int]]) -> list[list[str]]:

@@ -324,12 +324,12 @@ def test_a_viewer_that_leaves_or_stops_reading_never_stalls_the_run(tmp_path):
 
 
 def test_the_shipped_layout_is_made_from_the_topic_names_the_stream_uses(watched):
-    from cloth_bench_ros.data.live_layout import layout_json
-    from cloth_bench_ros.data.live_view import LAYOUT_FILE
+    from cloth_bench_ros.live.layout import layout_json
+    from cloth_bench_ros.live.view import LAYOUT_FILE
     from cloth_bench_ros.paths import share_dir
 
     shipped = share_dir('config') / 'foxglove' / LAYOUT_FILE
-    assert shipped.read_text() == layout_json()  # `python -m cloth_bench_ros.data.live_layout`
+    assert shipped.read_text() == layout_json()  # `python -m cloth_bench_ros.live.layout`
     layout = json.loads(shipped.read_text())
     text = json.dumps(layout)
     paths = re.findall(r'/cloth_bench/[\w/]+(?:\.data\[\d\])?', text)
@@ -349,8 +349,8 @@ def test_the_streams_shortcut_encodings_are_rosbags_cdr_byte_for_byte():
     from cloth_bench_ros.core.evaluation import FrameScore, ScoredFrame
     from cloth_bench_ros.core.pointcloud2 import create_cloud_xyz_fields
     from cloth_bench_ros.core.trajectory import full_targets
-    from cloth_bench_ros.data import error_view
-    from cloth_bench_ros.data.comparison_bag import target_poses, targets_message
+    from cloth_bench_ros.live import error_view
+    from cloth_bench_ros.live.comparison_bag import target_poses, targets_message
 
     rng = np.random.default_rng(5)
     tg = full_targets('dynamic', 100.0)

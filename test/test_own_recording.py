@@ -133,7 +133,7 @@ def _check_comparison_bag(path: Path, frames: int) -> None:
     errors: list = []
     metrics: list = []
 
-    topics = {  # the node graph's and the live view's names (data/error_view.py)
+    topics = {  # the node graph's and the live view's names (live/error_view.py)
         '/tf_static',
         '/cloth_bench/scene',
         '/cloth_bench/real/cloud',

@@ -106,8 +106,8 @@ def cmd_hil(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines import engine_class
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.report.hil import hil_table, text_table, write_hil_report
-    from cloth_bench_ros.studies import hil
-    from cloth_bench_ros.studies.hil_layout import resolve_layout
+    from cloth_bench_ros.hil import study as hil
+    from cloth_bench_ros.hil.layout import resolve_layout
     from cloth_bench_ros.studies.cells import set_label, set_values
     from cloth_bench_ros.studies.cloth import study_inputs
     from cloth_bench_ros.studies.sweep import config_label
@@ -248,7 +248,11 @@ def cmd_hil(args: argparse.Namespace) -> int:
 
 def _export_recommended(args: argparse.Namespace) -> int:
     """Export the settings sweep's recommendation per engine, task and rate."""
-    from cloth_bench_ros.report.hil import all_recommendations, provenance, recommendation_yaml
+    from cloth_bench_ros.hil.recommendation import (
+        all_recommendations,
+        provenance,
+        recommendation_yaml,
+    )
     from cloth_bench_ros.safe_io import atomic_write_text
     from cloth_bench_ros.studies.sweep import load_rows
 

@@ -5,7 +5,7 @@ Input is what the evaluator kept of each scored real frame: its `FrameScore`, th
 the engine's vertices at that time. The figure puts the mesh (red) over the real cloud (black) at
 the time steps of the paper's Fig. 4, CD/HD under each panel, one row per engine; the animation
 shows the same over the whole trial (GIF; MP4 when ffmpeg exists). The bag is
-data/comparison_bag.py's.
+live/comparison_bag.py's.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import shutil
 from typing import Any
 
 from cloth_bench_ros.core.trajectory import TaskLike
-from cloth_bench_ros.data.comparison_bag import cloth_triangles, write_comparison_bag
+from cloth_bench_ros.live.comparison_bag import cloth_triangles, write_comparison_bag
 import numpy as np
 
 # The paper's Fig. 4: time steps (s from the start of the motion) of each primitive.

@@ -4,8 +4,8 @@ The evaluator's error outputs: `<engine>/error_cloud`, frame and step metrics, t
 One computation feeds them all: each frame the evaluator's core scores (core.evaluation's
 ScoredFrame: the vertices at the real frame's stamp and each vertex's L1 distance to the nearest
 real point) is published on the graph's topics and, with `live`, sent to the Foxglove viewer
-(data/live_view.py); the comparison bag is written from the same arrays. Topic names and field
-orders are data/error_view.py's.
+(live/view.py); the comparison bag is written from the same arrays. Topic names and field
+orders are live/error_view.py's.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import time
 from typing import Any
 
 from cloth_bench_ros.core.trajectory import TaskLike
-from cloth_bench_ros.data import error_view
+from cloth_bench_ros.live import error_view
 from cloth_bench_ros.runtime import (
     declare_option,
     Float64MultiArray,
@@ -70,7 +70,7 @@ class ErrorTopics:
         self.waiting_until: float | None = None
         self.decided = realtime  # a realtime run starts on its schedule: no wait for a viewer
         if live.get('live'):
-            from cloth_bench_ros.data.live_view import LiveView
+            from cloth_bench_ros.live.view import LiveView
 
             self.live = LiveView(
                 engines,

@@ -3,8 +3,6 @@ Hardware in the loop: the configuration chosen per rate and the report of real-t
 
 - `deadline_tables`: the deadline rule (core/deadline.py) for every configuration of a settings
   sweep.
-- the recommendation file (config/hil_recommended.yaml): what `cloth-bench hil --config
-  recommended` falls back to without settings-sweep results, with its provenance.
 - `write_hil_report`: per engine, rate and configuration the latency p50 / p99 / p99.9 / max,
   deadline misses, skipped targets, real-time factor, CPU load and the CD in lockstep; a plot of
   latency over the run and a histogram per run.
@@ -28,12 +26,10 @@ from cloth_bench_ros.report.blocks import (
 )
 from cloth_bench_ros.report.selections import engine_label, metric_name
 from cloth_bench_ros.report.selections import fmt_fixed as _fmt
-from cloth_bench_ros.studies.aggregate import finite
 from cloth_bench_ros.studies.recommend import (
     DEADLINE_BUDGET,
     meets_deadline,
     recommend_for_rate,
-    Recommendation,
     settings_results,
     step_ms_by_config,
 )
@@ -119,70 +115,6 @@ def deadline_tables(
                 f' within tolerance is `{rec.config}` (step p99 {rec.step_p99_ms:.3f} ms).'
             )
     return tables, notes
-
-
-# ------------------------------------------------------------------- recommendation file
-
-
-def recommendation_yaml(recs: Sequence[Recommendation], provenance: dict) -> str:
-    """Return the recommendation file: provenance, then one entry per engine, task and rate."""
-    import yaml
-
-    return yaml.safe_dump(
-        {'provenance': provenance, 'recommendations': [r.as_dict() for r in recs]},
-        sort_keys=False,
-        width=110,
-    )
-
-
-def all_recommendations(
-    rows: Sequence[dict],
-    tol_rel: float = 0.05,
-    tol_abs: float = 0.002,
-    budget: float = DEADLINE_BUDGET,
-) -> list[Recommendation]:
-    """`recommend_for_rate` for every engine, task and rate of a settings sweep's rows."""
-    keys = sorted(
-        {
-            (r['engine'], r['cloth'], r['primitive'], float(r['rate_hz']))
-            for r in rows
-            if r.get('mode') == 'settings'
-        }
-    )
-    recs = [recommend_for_rate(rows, *key, tol_rel, tol_abs, budget) for key in keys]
-    return [r for r in recs if r is not None]
-
-
-def provenance(
-    rows: Sequence[dict], tol_rel: float, tol_abs: float, budget: float, note: str = ''
-) -> dict:
-    """Return where a recommendation file's numbers come from: sweep size, engines, load, rule."""
-    from datetime import datetime, timezone
-
-    settings = [r for r in rows if r.get('mode') == 'settings']
-    loads = finite(r.get('load_avg_1min') for r in settings)
-    return {
-        'generated': datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
-        'from': (
-            f'{len(settings)} settings-sweep cells (`cloth-bench sweep --mode settings`), lockstep'
-        ),
-        'engines': sorted(
-            {f'{r["engine"]} {r["engine_version"]}' for r in settings if r.get('engine_version')}
-        ),
-        'rule': (
-            f'cheapest (median step time) with CD <= best + max({tol_rel:g} x best, {tol_abs:g} m)'
-            f' and step p99 < {budget:g} x period; if none meets the deadline, the cheapest within'
-            ' tolerance (meets_deadline false)'
-        ),
-        'machine': (
-            f'{settings[0].get("cpu_count") if settings else "?"} cores; 1-minute load average'
-            f' during the sweep {np.median(loads):.1f} (median,'
-            f' {loads.min():.1f}-{loads.max():.1f})'
-            if len(loads)
-            else 'unknown'
-        ),
-        'note': note,
-    }
 
 
 # ---------------------------------------------------------------------------- the report

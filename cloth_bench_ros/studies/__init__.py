@@ -1,1 +1,1 @@
-"""Layer 6: the studies run over the node graph (run, sweep, settings sweep, stress, hil)."""
+"""Layer 6: the studies run over the node graph (run, sweep, stress, identify, rank)."""

@@ -1,13 +1,13 @@
 """
 The Foxglove layout shipped with the package (config/foxglove/cloth_bench_live.json).
 
-Made with foxglove-sdk's layout types from the topic names of data/error_view.py, so the one file
+Made with foxglove-sdk's layout types from the topic names of live/error_view.py, so the one file
 opens a live run (`--live`), a comparison bag (`--record-comparison`) and a graph seen through
 foxglove_bridge: a 3D view of the real cloud (grey) against each engine's scored vertices coloured
 by their error (turbo colour map, 0 to 5 cm) and its cloth's triangles (red, a `--cloth-mesh`'s
 or the grid's), the grippers' targets and the table; CD and HD per
 engine over time; step time and latency per engine over time.
-`python -m cloth_bench_ros.data.live_layout FILE` writes it again.
+`python -m cloth_bench_ros.live.layout FILE` writes it again.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from pathlib import Path
 import sys
 from typing import Any
 
-from cloth_bench_ros.data import error_view
+from cloth_bench_ros.live import error_view
 
 LAYOUT_ENGINES = ('mujoco', 'bullet', 'newton')  # an engine not in the run: its series stay empty
 ERROR_RANGE_M = (0.0, 0.05)  # the colour map's span: the paper's CDs are a few centimetres
@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     """Write the layout to the file named (the shipped one is made so)."""
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 1:
-        print('usage: python -m cloth_bench_ros.data.live_layout FILE', file=sys.stderr)
+        print('usage: python -m cloth_bench_ros.live.layout FILE', file=sys.stderr)
         return 2
     Path(args[0]).write_text(layout_json())
     return 0

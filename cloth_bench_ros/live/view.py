@@ -3,7 +3,7 @@ The live viewer stream of a run: a Foxglove WebSocket server (foxglove-sdk) fed 
 
 An output sink like the comparison bag's writer: it takes the evaluator's scored frames
 (core.evaluation.ScoredFrame) and steps and sends them, as ROS 2 messages in CDR with `ros2msg`
-schemas, on the topics of data/error_view.py (the node graph's and the comparison bag's names), so
+schemas, on the topics of live/error_view.py (the node graph's and the comparison bag's names), so
 one Foxglove layout opens a live run, a recorded comparison and a graph seen through
 foxglove_bridge. Messages are logged at simulation time under lockstep, wall time under realtime.
 
@@ -22,11 +22,12 @@ import time
 from typing import Any, Callable, cast
 
 from cloth_bench_ros.core.trajectory import full_targets, TaskLike
-from cloth_bench_ros.data import error_view, messages
-from cloth_bench_ros.data.comparison_bag import (
+from cloth_bench_ros.data import messages
+from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.live import error_view
+from cloth_bench_ros.live.comparison_bag import (
     cloth_triangles, MARKER, mesh_marker, table_marker, target_poses,
 )
-from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
 

@@ -3,7 +3,7 @@ The comparison bag of a run, for Foxglove/RViz, stamped in run time.
 
 Input is what the evaluator kept of each scored real frame: its `FrameScore`, the real points, the
 engine's vertices at that time and each vertex's error. The topics are the node graph's and the
-live view's (data/error_view.py): the real cloud, each engine's error cloud (PointCloud2 with the
+live view's (live/error_view.py): the real cloud, each engine's error cloud (PointCloud2 with the
 per-vertex `error` field), mesh (visualization_msgs/Marker TRIANGLE_LIST, red) and frame metrics
 (Float64MultiArray), the gripper targets, the per-frame DiagnosticArray, the table, and
 /tf_static for `world`.
@@ -22,9 +22,10 @@ from cloth_bench_ros.core.scene import (
     TABLE_Y,
 )
 from cloth_bench_ros.core.trajectory import full_targets, GripperTargets, quaternion_xyz, TaskLike
-from cloth_bench_ros.data import error_view, messages
+from cloth_bench_ros.data import messages
 from cloth_bench_ros.data.bag_writer import BagWriter
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POSE_ARRAY, TYPESTORE
+from cloth_bench_ros.live import error_view
 import numpy as np
 
 MARKER = 'visualization_msgs/msg/Marker'

@@ -1,7 +1,7 @@
 """
 Hardware in the loop: the node graph with targets on the wall clock, laid out as a robot sees it.
 
-`run_hil` runs the three groups of `hil_groups` (controller, simulator, observer) and collects
+`run_hil` runs the three groups of `hil.groups` (controller, simulator, observer) and collects
 what they measured: latency per target, deadline misses, skipped targets, the engine's step time,
 the machine's load, and the CD of the states the run produced. `recommended` picks a rate's
 configuration from the settings sweep.
@@ -23,9 +23,9 @@ from cloth_bench_ros.core.hil_timing import (
     TargetTimeline,
 )
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.hil.config import HilConfig, SIMULATOR_FILE, SUMMARY_FILE, TIMELINE
+from cloth_bench_ros.hil.groups import run_groups
 from cloth_bench_ros.studies.cloth import study_inputs
-from cloth_bench_ros.studies.hil_config import HilConfig, SIMULATOR_FILE, SUMMARY_FILE, TIMELINE
-from cloth_bench_ros.studies.hil_groups import run_groups
 
 
 @dataclass

@@ -22,10 +22,10 @@ from cloth_bench_ros.core.deadline import (
     holds_rate,
     MISS_THRESHOLD,
 )
+from cloth_bench_ros.hil.config import HilConfig
+from cloth_bench_ros.hil.study import HilResult, lockstep_cd, run_hil
+from cloth_bench_ros.hil.warmup import warmup
 from cloth_bench_ros.studies.errors import RunTimeout
-from cloth_bench_ros.studies.hil import HilResult, lockstep_cd, run_hil
-from cloth_bench_ros.studies.hil_config import HilConfig
-from cloth_bench_ros.studies.hil_warmup import warmup
 
 RATE_MIN = 10.0  # Hz
 RATE_MAX = 10_000.0  # Hz

@@ -16,7 +16,7 @@ import time
 
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets
-from cloth_bench_ros.studies.hil_config import HilConfig
+from cloth_bench_ros.hil.config import HilConfig
 import numpy as np
 
 WARMUP_SECONDS = 2.0  # of the trajectory stepped (its start: the grasp, the lift, the swing)

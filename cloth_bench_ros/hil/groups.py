@@ -30,7 +30,7 @@ import sys
 import time
 from typing import Sequence
 
-from cloth_bench_ros.studies.hil_config import HilConfig, SIMULATOR_FILE
+from cloth_bench_ros.hil.config import HilConfig, SIMULATOR_FILE
 import numpy as np
 import yaml
 
@@ -331,7 +331,7 @@ def _run_processes(config: HilConfig, run_dir: Path) -> None:
                     [
                         sys.executable,
                         '-m',
-                        'cloth_bench_ros.studies.hil_groups',
+                        'cloth_bench_ros.hil.groups',
                         group,
                         str(run_dir),
                         _config_json(config),
@@ -378,5 +378,5 @@ def run_groups(config: HilConfig, run_dir: Path) -> None:
     (_run_processes if config.processes else _run_in_process)(config, run_dir)
 
 
-if __name__ == '__main__':  # python -m cloth_bench_ros.studies.hil_groups GROUP RUN_DIR CONFIG
+if __name__ == '__main__':  # python -m cloth_bench_ros.hil.groups GROUP RUN_DIR CONFIG
     serve_group(_config_from_json(sys.argv[3]), sys.argv[1], Path(sys.argv[2]))
