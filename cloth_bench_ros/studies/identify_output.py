@@ -173,7 +173,7 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
     fixed = ', '.join(f'{k} = {v}' for k, v in spec.fixed.items() if k != 'device')
     fixed = f'fixed {fixed}; ' if fixed else ''
     trials = ', '.join(f'{s} {r["trials"]}' for s, r in summary['per_sampler'].items())
-    fidelity = getattr(spec, 'fidelity', 'full')
+    fidelity = spec.fidelity
     if fidelity != 'full':  # the budget counts trials stopped at a rung: say how many
         pruned = sum(r.get('pruned', 0) for r in summary['per_sampler'].values())
         trials += f'; multi-fidelity {fidelity}, {pruned} stopped at a rung'
