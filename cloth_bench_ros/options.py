@@ -405,3 +405,14 @@ RECORDING_FLAGS: tuple = (
         flag='--transform', metavar='FILE',
     ),
 )
+
+# The nodes' engines: the simulator's, the one the recorder aligns with, and what the evaluator
+# writes beside the scores.
+OPTIONS.update(_declare(
+    Option('engine', str, 'mujoco', 'engine name (`cloth-bench engines` lists them)'),
+    Option('align_engine', str, 'mujoco', "the automatic alignment's reference simulation"),
+    Option(
+        'record_comparison', str, '', 'write a comparison bag (Foxglove/RViz)',
+        flag='--record-comparison', metavar='DIR',
+    ),
+))

@@ -116,7 +116,7 @@ class Simulator(Node):
             namespace=kwargs.pop('namespace', NAMESPACE),
             **kwargs,
         )
-        self.engine_name = declare_fixed(self, 'engine', 'mujoco')
+        self.engine_name = declare_option(self, 'engine')
         rate_hz = declare_option(self, 'rate_hz')
         cloth = declare_option(self, 'cloth')
         task = node_task(self)
