@@ -17,10 +17,10 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, METRICS
-from cloth_bench_ros.core.trajectory import PRIMITIVES
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC, METRICS
 
+PRIMITIVES = ('dynamic', 'quasi_static')  # the tasks (core.trajectory.Primitive's values)
 CLOTHS = ('towel', 'chequered', 'linen')  # the cloths the presets describe
 PACINGS = ('lockstep', 'realtime')
 SETTLES = ('full', 'fast')  # the settle phase (engines/settle.py)

@@ -505,3 +505,11 @@ def test_every_node_parameter_is_declared_in_options_py():
              if _is_literal(default)}
     assert [text for key, text in found.items() if key not in PARAMETERS_NOT_YET] == []
     assert PARAMETERS_NOT_YET - set(found) == set()  # moved: drop it here
+
+
+def test_the_declared_tasks_are_the_trajectory_primitives():
+    """options.PRIMITIVES (the config layer's) names every core.trajectory.Primitive."""
+    from cloth_bench_ros.core.trajectory import Primitive
+    from cloth_bench_ros.options import PRIMITIVES
+
+    assert tuple(p.value for p in Primitive) == PRIMITIVES

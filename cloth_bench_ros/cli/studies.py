@@ -8,7 +8,7 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import FLAGS, Option, OPTIONS
 from cloth_bench_ros.studies.errors import StudyInterrupted
 

@@ -18,8 +18,8 @@ from pathlib import Path
 import re
 from typing import Sequence
 
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.report import figures, time_figures
 from cloth_bench_ros.report.blocks import (

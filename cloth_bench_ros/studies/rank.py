@@ -26,12 +26,12 @@ import sys
 from typing import Any, Callable, Sequence, TYPE_CHECKING
 
 from cloth_bench_ros.core.cloth_size import cloth_record, grid_vertices
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
 from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import FLAGS, OPTIONS
 from cloth_bench_ros.studies.cloth import cloth_name
 from cloth_bench_ros.studies.identify_problem import resolved_device, simulated_model

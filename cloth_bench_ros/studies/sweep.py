@@ -23,7 +23,6 @@ import time
 import traceback
 from typing import Sequence
 
-from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.core.trajectory import SUFFIX_TASK
 from cloth_bench_ros.engines.presets import PresetSet
@@ -31,6 +30,7 @@ from cloth_bench_ros.engines.presets import PresetSet
 # re-exported: the studies' one vocabulary
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
+from cloth_bench_ros.metric_choice import METRICS
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
@@ -88,7 +88,7 @@ def summary_row(cell: Cell, summary: dict) -> dict:
     keyed = SUFFIX_TASK[suffix]  # the shipped task whose metric keys that window has
     trial = summary['run'].get('trial') or {}
     st, lat = m['step_time'], m['latency']
-    beside = {  # the metrics beside the paper's, under their task-free keys (core/metric_choice)
+    beside = {  # the metrics beside the paper's, under their task-free keys (metric_choice)
         x.key: _nan(m.get(x.summary_key(keyed)))
         for x in METRICS.values()
         if x.summary_key(keyed) in m
