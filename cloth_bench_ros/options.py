@@ -412,6 +412,10 @@ OPTIONS.update(_declare(
     Option('engine', str, 'mujoco', 'engine name (`cloth-bench engines` lists them)'),
     Option('align_engine', str, 'mujoco', "the automatic alignment's reference simulation"),
     Option(
+        'device', str, '', "Newton's compute device: cpu, cuda, cuda:N or auto; empty: "
+        "engine_params' device, else the engine's (auto)",
+    ),
+    Option(
         'record_comparison', str, '', 'write a comparison bag (Foxglove/RViz)',
         flag='--record-comparison', metavar='DIR',
     ),

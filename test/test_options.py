@@ -435,7 +435,6 @@ PARAMETERS_NOT_YET = {
     ('cloth_bench_ros/nodes/recorder.py', 'record_topics'),
     ('cloth_bench_ros/nodes/simulator.py', 'engine_params'),
     ('cloth_bench_ros/nodes/simulator.py', 'presets_dir'),
-    ('cloth_bench_ros/nodes/simulator.py', 'device'),
     ('cloth_bench_ros/nodes/simulator.py', 'cpu'),
     ('cloth_bench_ros/nodes/simulator.py', 'realtime_priority'),
     ('cloth_bench_ros/nodes/simulator.py', 'freeze_gc'),
