@@ -312,6 +312,14 @@ FLAGS.update(_declare(
         'rank_trials', int, 0, 'identification trials per sampler, or auto (default auto)',
         flag='--trials', low=1,
     ),
+    Option(
+        'sweep_mode', str, 'paper', "paper: the paper's layout (default); settings: sweep the "
+        'settings that cost time', flag='--mode', choices=('paper', 'settings'),
+    ),
+    Option(
+        'keep_frames', str, 'first', 'seeds whose per-frame CD/HD are kept for the plots '
+        '(default: the first)', flag='--keep-frames', choices=('first', 'all', 'none'),
+    ),
     Option('rank_seeds', int, 3, 'held-out seeds per held-out trial', flag='--seeds', low=1),
     Option(
         'rates', float, (10.0, 100.0, 1000.0), 'rates whose step times decide the '

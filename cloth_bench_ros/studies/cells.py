@@ -58,7 +58,7 @@ class Cell:
     seed: int
     bag: str
     trial: int = 0
-    mode: str = 'paper'
+    mode: str = FLAGS['sweep_mode'].default
     config: str = PRESET  # name of the engine configuration (grid + overrides)
     grid: tuple[int, int] | None = None
     overrides: tuple[tuple[str, object], ...] = ()  # sorted (parameter, value) pairs

@@ -31,7 +31,7 @@ from cloth_bench_ros.engines.presets import PresetSet
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
 from cloth_bench_ros.metric_choice import METRICS
-from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.options import FLAGS, OPTIONS
 from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
     config_label,
@@ -333,7 +333,7 @@ def run_sweep(
 class SweepPlan:
     """What `cloth-bench sweep` was asked for, checked; `cells()` builds the cells."""
 
-    mode: str = 'paper'
+    mode: str = FLAGS['sweep_mode'].default
     engines: Sequence[str] = DEFAULT_ENGINES
     rates: Sequence[float] = ()
     cloths: Sequence[str] = ()
@@ -345,7 +345,7 @@ class SweepPlan:
     overrides: dict = field(default_factory=dict)
     pacing: str = OPTIONS['pacing'].default
     step_per_target: bool = False
-    keep_frames: str = 'first'  # first | all | none
+    keep_frames: str = FLAGS['keep_frames'].default  # first | all | none
     axes: Sequence[str] = ()  # settings mode: "name=v1,v2" strings
     presets: PresetSet | None = None  # a preset set instead of the shipped presets
     all_metrics: bool = False  # every metric in every cell, not only the paper's CD/HD
