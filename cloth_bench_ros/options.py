@@ -17,10 +17,10 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, METRICS
-from cloth_bench_ros.core.trajectory import PRIMITIVES
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC, METRICS
 
+PRIMITIVES = ('dynamic', 'quasi_static')  # the tasks (core.trajectory.Primitive's values)
 CLOTHS = ('towel', 'chequered', 'linen')  # the cloths the presets describe
 PACINGS = ('lockstep', 'realtime')
 SETTLES = ('full', 'fast')  # the settle phase (engines/settle.py)
@@ -282,6 +282,51 @@ FLAGS = _declare(
            action='store_true'),
 )
 
+# The studies' own flags (identify, rank, sweep), declared here so that each default is written
+# once: the command's flag, its spec's field and the study read it. A command may add its own check
+# (`variant(validate=...)`) or help; the default stays this one.
+SAMPLERS = ('cmaes', 'tpe', 'gp', 'both')
+FLAGS.update(_declare(
+    Option(
+        'sampler', str, 'both', 'cmaes, tpe (Bayesian optimisation), gp (Gaussian-process BO, '
+        'needs PyTorch) or both (CMA-ES and TPE, keep the best; default)', flag='--sampler',
+        choices=SAMPLERS,
+    ),
+    Option(
+        'trials', int, 500, 'trials per sampler (default 500, as the paper), or auto: 32, then '
+        'doubling while a doubling improves the best by 2 % or more (at most 512)',
+        flag='--trials', low=1,
+    ),
+    Option(
+        'fidelity', str, 'full', 'full (default): every trial over the whole motion; '
+        'multi-fidelity: prune: a trial whose CD over the first quarter of the frames is above '
+        'the best 30 % stops there; coarse: a trial is scored first on a mesh of half the '
+        'vertices per side, and run on its own mesh only where that CD is in the best 20 % of '
+        'the last 16', flag='--fidelity', choices=('full', 'prune', 'coarse'),
+    ),
+    Option(
+        'rank_sampler', str, 'tpe', "tpe (default), cmaes, gp, or both: the paper's pair, about "
+        'twice the time', flag='--sampler', choices=SAMPLERS,
+    ),
+    Option(
+        'rank_trials', int, 0, 'identification trials per sampler, or auto (default auto)',
+        flag='--trials', low=1,
+    ),
+    Option(
+        'sweep_mode', str, 'paper', "paper: the paper's layout (default); settings: sweep the "
+        'settings that cost time', flag='--mode', choices=('paper', 'settings'),
+    ),
+    Option(
+        'keep_frames', str, 'first', 'seeds whose per-frame CD/HD are kept for the plots '
+        '(default: the first)', flag='--keep-frames', choices=('first', 'all', 'none'),
+    ),
+    Option('rank_seeds', int, 3, 'held-out seeds per held-out trial', flag='--seeds', low=1),
+    Option(
+        'rates', float, (10.0, 100.0, 1000.0), 'rates whose step times decide the '
+        'recommendation (default 10,100,1000)', flag='--rates', unit='Hz',
+    ),
+))
+
 
 def declared(name: str) -> Option:
     """Return the declaration of `name`: a node parameter's, else a shared flag's."""
@@ -368,3 +413,18 @@ RECORDING_FLAGS: tuple = (
         flag='--transform', metavar='FILE',
     ),
 )
+
+# The nodes' engines: the simulator's, the one the recorder aligns with, and what the evaluator
+# writes beside the scores.
+OPTIONS.update(_declare(
+    Option('engine', str, 'mujoco', 'engine name (`cloth-bench engines` lists them)'),
+    Option('align_engine', str, 'mujoco', "the automatic alignment's reference simulation"),
+    Option(
+        'device', str, '', "Newton's compute device: cpu, cuda, cuda:N or auto; empty: "
+        "engine_params' device, else the engine's (auto)",
+    ),
+    Option(
+        'record_comparison', str, '', 'write a comparison bag (Foxglove/RViz)',
+        flag='--record-comparison', metavar='DIR',
+    ),
+))

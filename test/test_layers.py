@@ -1,10 +1,11 @@
 """
 The package's layers import only downwards, without circles, and the report runs nothing.
 
-Layers, top to bottom: core -> engines -> data -> runtime -> nodes -> studies -> report -> cli; a
-module imports only from its own layer or those above it. The modules at the package's top level
-(paths, safe_io, validation, errors) belong to core. Every import counts, also those inside
-functions and under TYPE_CHECKING.
+Layers, top to bottom: config -> core -> engines -> data -> live -> runtime -> nodes -> studies ->
+hil -> report -> cli; a module imports only from its own layer or those above it. config is the
+modules at the package's top level (errors, paths, safe_io, validation, metric_choice, options):
+each is declared in TOP_LEVEL, and a new one without a layer fails. Every import counts, also
+those inside functions and under TYPE_CHECKING.
 """
 
 from __future__ import annotations
@@ -16,10 +17,12 @@ import cloth_bench_ros
 import pytest
 
 PACKAGE = Path(cloth_bench_ros.__file__).parent
-# A feature package sits where its parts are used: live/ (the live view) below the nodes that
-# stream and write it, hil/ (hardware-in-the-loop) above the studies it reuses.
+# config: the top-level modules (TOP_LEVEL). A feature package sits where its parts are used:
+# live/ (the live view) below the nodes that stream and write it, hil/ (hardware-in-the-loop)
+# above the studies it reuses.
 LAYERS = (
-    'core', 'engines', 'data', 'live', 'runtime', 'nodes', 'studies', 'hil', 'report', 'cli',
+    'config', 'core', 'engines', 'data', 'live', 'runtime', 'nodes', 'studies', 'hil', 'report',
+    'cli',
 )
 
 
@@ -32,12 +35,28 @@ def all_modules() -> dict[str, Path]:
     return {module_name(p): p for p in sorted(PACKAGE.rglob('*.py'))}
 
 
+# The package's top-level modules and their layers (the package itself: its docstring only).
+TOP_LEVEL = {
+    'cloth_bench_ros': 'config',
+    'cloth_bench_ros.errors': 'config',
+    'cloth_bench_ros.paths': 'config',
+    'cloth_bench_ros.safe_io': 'config',
+    'cloth_bench_ros.validation': 'config',
+    'cloth_bench_ros.metric_choice': 'config',
+    'cloth_bench_ros.options': 'config',
+}
+
+
 def layer(module: str) -> str:
-    """Return a module's layer: its subpackage, cli, or core for the top-level modules."""
+    """Return a module's layer: its subpackage's, or a top-level module's declared one."""
     parts = module.split('.')
     if len(parts) > 1 and parts[1] in LAYERS:
         return parts[1]
-    return 'core'
+    return TOP_LEVEL.get(module, 'undeclared')
+
+
+def test_every_top_level_module_has_a_declared_layer(graph):
+    assert [m for m in graph if layer(m) == 'undeclared'] == []
 
 
 def imports_of(module: str, path: Path, modules: dict[str, Path]) -> dict[str, int]:
@@ -86,7 +105,7 @@ def test_imports_only_go_downwards(graph):
         f'{m} (line {line}) imports {target}: {layer(m)} may not import {layer(target)}'
         for m, targets in sorted(graph.items())
         for target, line in sorted(targets.items())
-        if LAYERS.index(layer(target)) > LAYERS.index(layer(m))
+        if layer(target) in LAYERS and LAYERS.index(layer(target)) > LAYERS.index(layer(m))
     ]
     assert not upward, '\n'.join(upward)
 
@@ -170,7 +189,11 @@ def test_the_checks_find_what_they_look_for():
         'cloth_bench_ros.cli': {},
     }
     assert circles(graph) == [['cloth_bench_ros.core.a', 'cloth_bench_ros.report.b']]
-    assert layer('cloth_bench_ros.safe_io') == 'core' and layer('cloth_bench_ros.cli') == 'cli'
+    assert layer('cloth_bench_ros.safe_io') == 'config' and layer('cloth_bench_ros.cli') == 'cli'
+    assert layer('cloth_bench_ros.new_module') == 'undeclared'
+    with pytest.raises(AssertionError, match='config may not import core'):
+        test_imports_only_go_downwards({'cloth_bench_ros.options': {'cloth_bench_ros.core.a': 1},
+                                        'cloth_bench_ros.core.a': {}})
     with pytest.raises(AssertionError, match='core may not import report'):
         test_imports_only_go_downwards(graph)
     with pytest.raises(AssertionError, match='<->'):

@@ -16,8 +16,8 @@ from camera_recording import (
     make_repeated_recording,
 )
 from cloth_bench_ros import cli
-from cloth_bench_ros.core.metric_choice import metric
 from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
+from cloth_bench_ros.metric_choice import metric
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.report.rank import (
     deadline_ms,

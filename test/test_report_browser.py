@@ -22,7 +22,7 @@ import time
 
 from bag_fixtures import write_hanging_cloth_bag
 from cloth_bench_ros.cli import main
-from cloth_bench_ros.core.metric_choice import METRICS
+from cloth_bench_ros.metric_choice import METRICS
 from cloth_bench_ros.studies import sweep as sw
 import pytest
 

@@ -10,7 +10,6 @@ import subprocess
 import sys
 
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
-from cloth_bench_ros.core.metric_choice import metric, METRICS
 from cloth_bench_ros.core.metrics import RealCloud
 from cloth_bench_ros.core.run_files import write_run_report
 from cloth_bench_ros.core.scene import ClothGrid, TABLE_TOP_Z
@@ -32,6 +31,7 @@ from cloth_bench_ros.core.surface_metrics import (
 )
 from cloth_bench_ros.core.trajectory import Primitive
 from cloth_bench_ros.data.bag_reader import BagReader
+from cloth_bench_ros.metric_choice import metric, METRICS
 from cloth_bench_ros.validation import InputError
 import numpy as np
 import ot

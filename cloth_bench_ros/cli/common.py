@@ -316,5 +316,5 @@ def read_transform(path: str):
 
 
 def add_metric_option(parser: argparse.ArgumentParser) -> None:
-    """Add `--metric`: what rankings and comparisons are made on (core/metric_choice.py)."""
+    """Add `--metric`: what rankings and comparisons are made on (metric_choice.py)."""
     add_option(parser, 'metric')

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cloth_bench_ros import validation
+from cloth_bench_ros import options, validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.options import Option
@@ -24,23 +24,9 @@ def trials_value(text: str, label: str = '--trials') -> int:
         raise validation.InputError(f'{exc} (or auto)') from None
 
 
-SAMPLER = Option(
-    'sampler', str, 'both', 'cmaes, tpe (Bayesian optimisation), gp (Gaussian-process BO, needs '
-    'PyTorch) or both (CMA-ES and TPE, keep the best; default)', flag='--sampler',
-    choices=('cmaes', 'tpe', 'gp', 'both'),
-)
-TRIALS = Option(
-    'trials', int, 500, 'trials per sampler (default 500, as the paper), or auto: 32, then '
-    'doubling while a doubling improves the best by 2 % or more (at most 512)',
-    flag='--trials', low=1, validate=trials_value,
-)
-FIDELITY = Option(
-    'fidelity', str, 'full', 'full (default): every trial over the whole motion; multi-fidelity: '
-    'prune: a trial whose CD over the first quarter of the frames is above the best 30 % stops '
-    'there; coarse: a trial is scored first on a mesh of half the vertices per side, and run on '
-    'its own mesh only where that CD is in the best 20 % of the last 16', flag='--fidelity',
-    choices=('full', 'prune', 'coarse'),
-)
+SAMPLER = options.declared('sampler')
+TRIALS = options.declared('trials').variant(validate=trials_value)
+FIDELITY = options.declared('fidelity')
 IDENTIFY_FLAGS: tuple[common.Flag, ...] = (
     Option('engine', str, 'mujoco', 'the engine to fit', flag='--engine'),
     ('bag', {'help': 'rosbag2 bag to fit (default: the bundled one)'}),

@@ -6,9 +6,10 @@ import argparse
 import json
 from pathlib import Path
 
+from cloth_bench_ros import options
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.cli.identify import FIDELITY, SAMPLER, TRIALS
+from cloth_bench_ros.cli.identify import FIDELITY, TRIALS
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import Option, OPTIONS
 from cloth_bench_ros.studies.errors import StudyInterrupted
@@ -40,20 +41,14 @@ RANK_FLAGS: tuple[common.Flag, ...] = (
     ),
     ('engines', {'validate': _entrant,
                  'help': 'engine[:model] (repeat; default mujoco, bullet, newton:xpbd)'}),
-    TRIALS.variant(
-        default=0, help='identification trials per sampler, or auto (default auto)'
-    ),
-    SAMPLER.variant(default='tpe', help="tpe (default), cmaes, gp, or both: the paper's pair, "
-                    'about twice the time'),
+    options.declared('rank_trials').variant(validate=TRIALS.validate),
+    options.declared('rank_sampler'),
     FIDELITY.variant(
         help='identification: full (default), or prune, coarse: multi-fidelity, as identify'
     ),
-    ('seeds', {'default': 3, 'help': 'held-out seeds per held-out trial'}),
+    'rank_seeds',
     ('rate_hz', {'help': 'simulator rate of identification and scoring'}),
-    Option(
-        'rates', float, [10.0, 100.0, 1000.0], 'rates whose step times decide the recommendation '
-        '(default 10,100,1000)', flag='--rates', unit='Hz', validate=_rates,
-    ),
+    options.declared('rates').variant(validate=_rates),
     'grid',
     'metric',  # cd/hd: also the identification objective (else cd)
     'max_frames',

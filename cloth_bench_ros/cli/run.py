@@ -10,7 +10,7 @@ import time
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.options import MOTION_FLAGS, Option
+from cloth_bench_ros.options import MOTION_FLAGS, Option, OPTIONS
 
 
 RUN_FLAGS: tuple[common.Flag, ...] = (
@@ -29,10 +29,7 @@ RUN_FLAGS: tuple[common.Flag, ...] = (
 )
 # the run's own outputs of a recording (the recording options: common.recording_options)
 SCORING_FLAGS: tuple[common.Flag, ...] = (
-    Option(
-        'record_comparison', str, None, 'write a comparison bag (Foxglove/RViz)',
-        flag='--record-comparison', metavar='DIR',
-    ),
+    'record_comparison',
     Option(
         'figures', bool, False, 'qualitative figure (paper Fig. 4) and animation in the report '
         'directory', flag='--figures', action='store_true',
@@ -256,7 +253,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 
-    engines = validation.unique(args.engine or ['mujoco'], '--engine')
+    engines = validation.unique(args.engine or [OPTIONS['engine'].default], '--engine')
     for name in engines:
         engine_class(name)
     presets = common.preset_set(args).directory

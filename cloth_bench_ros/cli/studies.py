@@ -8,7 +8,7 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import FLAGS, Option, OPTIONS
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
@@ -16,10 +16,7 @@ TOLERANCE_REL = FLAGS['tolerance_rel'].default  # settings recommendation: CD wi
 TOLERANCE_ABS = FLAGS['tolerance_abs'].default  # ... fraction of the best, or these metres
 
 SWEEP_FLAGS: tuple[common.Flag, ...] = (
-    Option(
-        'mode', str, 'paper', "paper: the paper's layout (default); settings: sweep the settings "
-        'that cost time', flag='--mode', choices=('paper', 'settings'),
-    ),
+    'sweep_mode',
     ('engines', {'help': 'repeat for several (default: mujoco, bullet, newton)'}),
     OPTIONS['rate_hz'].variant(
         action='append', default=None,
@@ -47,10 +44,7 @@ SWEEP_RUN_FLAGS: tuple[common.Flag, ...] = (
         'step_per_target', bool, False, "internal time step = 1 / rate (the paper's frequency "
         "study) instead of the preset's", flag='--step-per-target', action='store_true',
     ),
-    Option(
-        'keep_frames', str, 'first', 'seeds whose per-frame CD/HD are kept for the plots (default:'
-        ' the first)', flag='--keep-frames', choices=('first', 'all', 'none'),
-    ),
+    'keep_frames',
     Option(
         'axis', str, None, 'settings mode: an axis of the factorial sweep, e.g. grid=6x8,11x15 or '
         'timestep=preset,0.005 (replaces the default axes)', flag='--axis', action='append',

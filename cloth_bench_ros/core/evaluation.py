@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 import math
 from typing import Callable
 
-from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.core.metrics import latency_stats, RealCloud, StabilityAccumulator
 from cloth_bench_ros.core.phase import (
     CONTACT_FLOOR,
@@ -41,6 +40,7 @@ from cloth_bench_ros.core.surface_metrics import (
     surface_scores,
 )
 from cloth_bench_ros.core.trajectory import as_task, SUFFIX_TASK, TaskLike
+from cloth_bench_ros.metric_choice import METRICS
 import numpy as np
 
 IRREGULAR_TOLERANCE = 0.25  # an interval off 1/fps by more than this fraction is reported

@@ -19,15 +19,13 @@ from cloth_bench_ros.core import scene
 from cloth_bench_ros.core.quintic import QuinticChain
 from cloth_bench_ros.core.task_data import Axis, load_task, Task
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.options import PRIMITIVES
 import numpy as np
 
 
 class Primitive(str, Enum):
     DYNAMIC = 'dynamic'
     QUASI_STATIC = 'quasi_static'
-
-
-PRIMITIVES = tuple(p.value for p in Primitive)
 
 
 def parse_primitive(name: str) -> Primitive:

@@ -54,7 +54,7 @@ class ReplayOptions:
     # remove, keep, or auto: remove for dynamic (scored before contact), keep for quasi_static
     table_plane: str = OPTIONS['table_plane'].default
     rate_hz: float = OPTIONS['rate_hz'].default
-    align_engine: str = 'mujoco'
+    align_engine: str = OPTIONS['align_engine'].default
     search: alignment.SearchSettings = alignment.SearchSettings()
     # the repetition to score (1-based); 0: the only one, else the first usable
     trial: int = OPTIONS['trial'].default

@@ -26,9 +26,9 @@ import re
 from typing import Iterable
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.trajectory import PRIMITIVES
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.options import CLOTHS  # noqa: F401  (re-exported)
+from cloth_bench_ros.options import PRIMITIVES
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.safe_io import load_yaml_file, UnsafeInputError
 

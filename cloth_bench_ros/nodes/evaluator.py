@@ -32,6 +32,7 @@ from cloth_bench_ros.nodes.common import (
 )
 from cloth_bench_ros.nodes.comparison import write_comparison
 from cloth_bench_ros.nodes.error_topics import declare_live_parameters, ErrorTopics
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.runtime import (
     declare_fixed,
     declare_float,
@@ -58,7 +59,7 @@ class Evaluator(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('evaluator', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
-        declare_fixed(self, 'engines', ['mujoco'])
+        declare_fixed(self, 'engines', [OPTIONS['engine'].default])
         self.task = node_task(self)
         # False while a composed graph is still being built: a node that fails to start then
         # says why in one line, and this one has nothing to add
@@ -68,7 +69,7 @@ class Evaluator(Node):
         declare_float(self, 'time_offset', self.task.settle_duration)
         cut = declare_option(self, 'change_of_phase_frame')
         self.output_dir = declare_fixed(self, 'output_dir', '')
-        self.comparison_bag = declare_fixed(self, 'record_comparison', '')
+        self.comparison_bag = declare_option(self, 'record_comparison')
         declare_fixed(self, 'comparison_figures', False)
         cloth = declare_option(self, 'cloth')
         seed = declare_option(self, 'seed')

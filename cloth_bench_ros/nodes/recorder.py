@@ -176,7 +176,7 @@ class Recorder(Node):
             voxel=p['voxel'],
             table_plane=p['table_plane'],
             rate_hz=p['rate_hz'],
-            align_engine=declare_fixed(self, 'align_engine', 'mujoco'),
+            align_engine=declare_option(self, 'align_engine'),
             search=search,
             trial=p['trial'],
             align=p['align'],

@@ -116,7 +116,7 @@ class Simulator(Node):
             namespace=kwargs.pop('namespace', NAMESPACE),
             **kwargs,
         )
-        self.engine_name = declare_fixed(self, 'engine', 'mujoco')
+        self.engine_name = declare_option(self, 'engine')
         rate_hz = declare_option(self, 'rate_hz')
         cloth = declare_option(self, 'cloth')
         task = node_task(self)
@@ -126,7 +126,7 @@ class Simulator(Node):
         nx, nz = node_grid(self)
         size, mass = node_cloth(self)
         presets_dir = declare_fixed(self, 'presets_dir', '')
-        declare_fixed(self, 'device', '')  # '' : engine_params' device, else the engine's
+        declare_option(self, 'device')  # '' : engine_params' device, else the engine's
         # Every value through the one validation layer; an error names the node and parameter.
         checked = validation.node_parameters(
             self,

@@ -22,6 +22,7 @@ from cloth_bench_ros.nodes.common import (
     run_node,
 )
 from cloth_bench_ros.nodes.message_pool import MessagePool
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.runtime import (
     Clock,
     declare_fixed,
@@ -56,7 +57,7 @@ class TrajectoryPublisher(Node):
         task = node_task(self)
         rate_hz = declare_option(self, 'rate_hz')
         self.pacing = declare_option(self, 'pacing')
-        declare_fixed(self, 'engines', ['mujoco'])
+        declare_fixed(self, 'engines', [OPTIONS['engine'].default])
         declare_fixed(self, 'wait_for_recorder', True)
         declare_fixed(self, 'wait_for_evaluator', True)
         # Every value through the one validation layer; an error names the node and parameter.

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, metric as metric_choice
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC, metric as metric_choice
 from cloth_bench_ros.options import FLAGS
 from cloth_bench_ros.report.blocks import Table
 from cloth_bench_ros.report.ranking import ranking_table

@@ -18,8 +18,8 @@ from pathlib import Path
 import re
 from typing import Sequence
 
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.report import figures, time_figures
 from cloth_bench_ros.report.blocks import (
@@ -34,6 +34,7 @@ from cloth_bench_ros.report.blocks import (
 )
 from cloth_bench_ros.report.selections import (
     cloths_of,
+    DEFAULT_MODE,
     engine_label,
     fmt_fixed,
     fmt_sig,
@@ -133,7 +134,7 @@ def paper_configs(rows: Sequence[dict]) -> list[str]:
     counts = Counter(
         r.get('config', 'preset')
         for r in rows
-        if r.get('mode', 'paper') == 'paper'
+        if r.get('mode', DEFAULT_MODE) == 'paper'
         and r.get('pacing', OPTIONS['pacing'].default) == 'lockstep'
     )
     if not counts:
@@ -211,7 +212,7 @@ def speed_error_section(
     lockstep = [
         r
         for r in rows
-        if r.get('mode', 'paper') == 'paper'
+        if r.get('mode', DEFAULT_MODE) == 'paper'
         and r.get('pacing', OPTIONS['pacing'].default) == 'lockstep'
     ]
     cloth = (

@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 from typing import Sequence
 
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, metric as metric_choice, METRICS
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC, metric as metric_choice, METRICS
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.report.blocks import Block, heading, paragraph, Table, table_block
 from cloth_bench_ros.report.selections import engine_label

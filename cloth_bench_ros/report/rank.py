@@ -16,8 +16,8 @@ import math
 from typing import Any
 
 from cloth_bench_ros.core.cloth_size import BENCHMARK_SIZE, is_benchmark, size_text
-from cloth_bench_ros.core.metric_choice import Metric, metric as metric_of
 from cloth_bench_ros.core.table import Table
+from cloth_bench_ros.metric_choice import Metric, metric as metric_of
 from cloth_bench_ros.studies.ranking_stats import HeldOutRun, rank_runs, Ranked, ranking_record
 from cloth_bench_ros.studies.recommend import DEADLINE_BUDGET
 import numpy as np

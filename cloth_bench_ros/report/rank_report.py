@@ -16,8 +16,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from cloth_bench_ros.core.metric_choice import metric as metric_of
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.metric_choice import metric as metric_of
 from cloth_bench_ros.report.blocks import (
     Document, figure_block, heading, paragraph, table_block, write_document,
 )

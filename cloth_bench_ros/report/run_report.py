@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 
-from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.core.run_summary import inputs_line
+from cloth_bench_ros.metric_choice import METRICS
 
 # the metrics beside the paper's, in the order of docs/metrics.md: (name, column title, digits)
 SURFACE_COLUMNS = (

@@ -10,7 +10,7 @@ from collections import Counter
 import math
 from typing import Iterable, Sequence
 
-from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.options import FLAGS, OPTIONS
 
 ENGINE_LABEL = {
     'mujoco': 'MuJoCo',
@@ -29,6 +29,7 @@ ENGINE_COLOR = {
 METRICS = ('CD_d', 'HD_d', 'CD_q', 'HD_q')
 PAPER_ENGINES = ('mujoco', 'bullet', 'flex', 'sofa')
 FPS = 30.0
+DEFAULT_MODE = FLAGS['sweep_mode'].default  # a row without a mode: the sweep's default
 
 
 def metric_name(primitive: str, kind: str) -> str:
@@ -73,7 +74,7 @@ def paper_rows(
     return [
         r
         for r in rows
-        if r.get('mode', 'paper') == 'paper'
+        if r.get('mode', DEFAULT_MODE) == 'paper'
         and r.get('config', 'preset') == config
         and r.get('pacing', OPTIONS['pacing'].default) == pacing
     ]

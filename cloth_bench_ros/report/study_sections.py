@@ -6,7 +6,7 @@ from functools import partial
 from pathlib import Path
 from typing import Sequence
 
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC, metric as metric_choice
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC, metric as metric_choice
 from cloth_bench_ros.report import figures
 from cloth_bench_ros.report.blocks import Block, figure_block, heading, paragraph, table_block
 from cloth_bench_ros.report.selections import engine_label, engines_of

@@ -22,13 +22,13 @@ from typing import Iterable, Sequence
 from cloth_bench_ros.engines.presets import PresetSet
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
-from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.options import FLAGS, OPTIONS, PRIMITIVES
 from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
 
-DEFAULT_RATES = (10.0, 100.0, 1000.0)
+DEFAULT_RATES = FLAGS['rates'].default
 DEFAULT_ENGINES = ('mujoco', 'bullet', 'newton')
 DEFAULT_CLOTHS = ('towel', 'chequered', 'linen')
-DEFAULT_PRIMITIVES = ('dynamic', 'quasi_static')
+DEFAULT_PRIMITIVES = PRIMITIVES
 DEFAULT_SEEDS = 20
 PRESET = 'preset'
 
@@ -58,7 +58,7 @@ class Cell:
     seed: int
     bag: str
     trial: int = 0
-    mode: str = 'paper'
+    mode: str = FLAGS['sweep_mode'].default
     config: str = PRESET  # name of the engine configuration (grid + overrides)
     grid: tuple[int, int] | None = None
     overrides: tuple[tuple[str, object], ...] = ()  # sorted (parameter, value) pairs

@@ -33,7 +33,7 @@ import warnings
 
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.options import FLAGS, OPTIONS, SAMPLERS
 from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-exported)
     AUTO,
     AUTO_FIRST,
@@ -54,8 +54,7 @@ from cloth_bench_ros.studies.identify_problem import (
 from cloth_bench_ros.studies.objective import evaluate, Trial, trial_of
 from cloth_bench_ros.studies.shared_simulations import SharedSimulations
 
-SAMPLERS = ('cmaes', 'tpe', 'gp', 'both')
-DEFAULT_TRIALS = 500
+DEFAULT_TRIALS = FLAGS['trials'].default
 DEFAULT_SPAN = 10.0
 JOURNAL_FILE = 'study.journal'
 TRIALS_FILE = 'trials.jsonl'
@@ -81,7 +80,7 @@ class IdentifySpec:
     primitive: str
     bag: Path
     output: Path
-    sampler: str = 'both'
+    sampler: str = FLAGS['sampler'].default
     trials: int = DEFAULT_TRIALS  # per sampler; AUTO: chosen by doubling (see budget_reached)
     objective: str = 'cd'
     params: Sequence[str] = ()
@@ -95,7 +94,8 @@ class IdentifySpec:
     validate_seeds: int = 5
     bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
     also: tuple[str, ...] = ()  # more training bags: the objective is the mean over all of them
-    fidelity: str = 'full'  # or prune, coarse: multi-fidelity (studies/identify_fidelity.py)
+    # or prune, coarse: multi-fidelity (studies/identify_fidelity.py)
+    fidelity: str = FLAGS['fidelity'].default
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, given: not fitted unless named in `params`
     settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast

@@ -17,6 +17,7 @@ import platform
 from typing import Any
 
 from cloth_bench_ros.core.cloth_size import BENCHMARK_AREA, cloth_record, is_benchmark, size_text
+from cloth_bench_ros.options import FLAGS
 from cloth_bench_ros.studies.cells import Cell, find_bags
 from cloth_bench_ros.studies.identify_curve import best_value, convergence, importance
 from cloth_bench_ros.studies.results import append_row, json_safe, load_rows, RESULTS_FILE
@@ -173,7 +174,7 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
     fixed = ', '.join(f'{k} = {v}' for k, v in spec.fixed.items() if k != 'device')
     fixed = f'fixed {fixed}; ' if fixed else ''
     trials = ', '.join(f'{s} {r["trials"]}' for s, r in summary['per_sampler'].items())
-    fidelity = getattr(spec, 'fidelity', 'full')
+    fidelity = getattr(spec, 'fidelity', FLAGS['fidelity'].default)
     if fidelity != 'full':  # the budget counts trials stopped at a rung: say how many
         pruned = sum(r.get('pruned', 0) for r in summary['per_sampler'].values())
         trials += f'; multi-fidelity {fidelity}, {pruned} stopped at a rung'

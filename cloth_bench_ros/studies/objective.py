@@ -14,7 +14,7 @@ on its own mesh.
 The evaluator core is given no mesh faces here, so a trial computes the paper's CD/HD (its
 objective) and none of the metrics beside them (docs/metrics.md), which would cost it tens of
 milliseconds per frame; `all_metrics` gives it the mesh's faces, and the trial returns every
-metric of core.metric_choice (`metrics`: rank's held-out cells).
+metric of metric_choice (`metrics`: rank's held-out cells).
 """
 
 from __future__ import annotations
@@ -273,7 +273,7 @@ def _evaluate(trial: Trial) -> dict:
             step_p99_ms=_num(m['step_time']['p99']) * 1e3,
         )
         if trial.all_metrics:
-            from cloth_bench_ros.core.metric_choice import METRICS
+            from cloth_bench_ros.metric_choice import METRICS
 
             out['metrics'] = {
                 name: float(np.mean([metric.value(b, trial.primitive) for b in per_bag]))

@@ -26,13 +26,13 @@ import sys
 from typing import Any, Callable, Sequence, TYPE_CHECKING
 
 from cloth_bench_ros.core.cloth_size import cloth_record, grid_vertices
-from cloth_bench_ros.core.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
 from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError
-from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.metric_choice import DEFAULT_METRIC
+from cloth_bench_ros.options import FLAGS, OPTIONS
 from cloth_bench_ros.studies.cloth import cloth_name
 from cloth_bench_ros.studies.identify_problem import resolved_device, simulated_model
 from cloth_bench_ros.studies.objective import evaluate, OBJECTIVES, Trial
@@ -53,7 +53,7 @@ DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
     ('bullet', {}),
     ('newton', {'model': 'xpbd'}),
 )
-RATES = (10.0, 100.0, 1000.0)
+RATES = FLAGS['rates'].default
 MAX_FOLDS = 5
 CELLS_FILE = 'cells.jsonl'
 SHARED_FILE = 'simulations.jsonl'
@@ -71,16 +71,19 @@ class RankSpec:
     output: Path
     entrants: Sequence[tuple[str, dict]] = DEFAULT_ENTRANTS
     replay: ReplayOptions = field(default_factory=ReplayOptions)  # cloth, task, topic, ...
-    trials: int = 0  # identification budget per sampler (AUTO: from the convergence curve)
-    sampler: str = 'tpe'  # both (CMA-ES too) doubles the cost (docs/identification.md)
-    seeds: int = 3  # held-out seeds 1..seeds
+    # identification budget per sampler (AUTO: from the convergence curve)
+    trials: int = FLAGS['rank_trials'].default
+    # both (CMA-ES too) doubles the cost (docs/identification.md)
+    sampler: str = FLAGS['rank_sampler'].default
+    seeds: int = FLAGS['rank_seeds'].default  # held-out seeds 1..seeds
     rate_hz: float = OPTIONS['rate_hz'].default
     rates: Sequence[float] = RATES
     grid: tuple[int, int] | None = None
     metric: str = DEFAULT_METRIC  # the ranking metric; cd/hd: the objective too
     max_frames: int | None = None
     fixed: dict = field(default_factory=dict)  # per engine: overrides on every entrant of it
-    fidelity: str = 'full'  # identification's: full, or prune (studies/identify_fidelity.py)
+    # identification's: full, or prune (studies/identify_fidelity.py)
+    fidelity: str = FLAGS['fidelity'].default
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, the cloth's (not fitted); None: the preset's per area
     settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast

@@ -43,7 +43,7 @@ KEY_FIELDS: dict[str, Any] = {
     'device': 'cpu',  # the engine's compute device (rows written before it existed ran on the CPU)
     # How the cell was computed (SCORED_WITH); rows older than a field never match a cell again.
     'engine_version': '',
-    'all_metrics': True,  # every metric (core/metric_choice), or the paper's CD/HD only
+    'all_metrics': True,  # every metric (metric_choice), or the paper's CD/HD only
     'surface_revision': 0,  # core/surface_metrics.SURFACE_REVISION of an all-metrics row, else 0
     'settle': FULL,  # the settle phase (rows written before it existed settled in full)
     # --task and --cloth-mesh: the file (which cell) and its content's SHA-256 (how it ran)
@@ -58,7 +58,7 @@ NAME_FIELDS = ('mode', 'engine', 'cloth', 'primitive', 'pacing')
 NUMERIC_FIELDS = (
     'CD',
     'HD',
-    # the metrics beside the paper's (core/metric_choice.py keys)
+    # the metrics beside the paper's (metric_choice.py keys)
     'CD_reverse',
     'HD_reverse',
     'CD_surface',

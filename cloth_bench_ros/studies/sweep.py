@@ -23,7 +23,6 @@ import time
 import traceback
 from typing import Sequence
 
-from cloth_bench_ros.core.metric_choice import METRICS
 from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.core.trajectory import SUFFIX_TASK
 from cloth_bench_ros.engines.presets import PresetSet
@@ -31,7 +30,8 @@ from cloth_bench_ros.engines.presets import PresetSet
 # re-exported: the studies' one vocabulary
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
-from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.metric_choice import METRICS
+from cloth_bench_ros.options import FLAGS, OPTIONS
 from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
     config_label,
@@ -88,7 +88,7 @@ def summary_row(cell: Cell, summary: dict) -> dict:
     keyed = SUFFIX_TASK[suffix]  # the shipped task whose metric keys that window has
     trial = summary['run'].get('trial') or {}
     st, lat = m['step_time'], m['latency']
-    beside = {  # the metrics beside the paper's, under their task-free keys (core/metric_choice)
+    beside = {  # the metrics beside the paper's, under their task-free keys (metric_choice)
         x.key: _nan(m.get(x.summary_key(keyed)))
         for x in METRICS.values()
         if x.summary_key(keyed) in m
@@ -333,7 +333,7 @@ def run_sweep(
 class SweepPlan:
     """What `cloth-bench sweep` was asked for, checked; `cells()` builds the cells."""
 
-    mode: str = 'paper'
+    mode: str = FLAGS['sweep_mode'].default
     engines: Sequence[str] = DEFAULT_ENGINES
     rates: Sequence[float] = ()
     cloths: Sequence[str] = ()
@@ -345,7 +345,7 @@ class SweepPlan:
     overrides: dict = field(default_factory=dict)
     pacing: str = OPTIONS['pacing'].default
     step_per_target: bool = False
-    keep_frames: str = 'first'  # first | all | none
+    keep_frames: str = FLAGS['keep_frames'].default  # first | all | none
     axes: Sequence[str] = ()  # settings mode: "name=v1,v2" strings
     presets: PresetSet | None = None  # a preset set instead of the shipped presets
     all_metrics: bool = False  # every metric in every cell, not only the paper's CD/HD
