@@ -31,6 +31,7 @@ import time
 
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.engines import make_engine
+from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.engines.settle import Settler, SETTLES
 from cloth_bench_ros.studies.objective import evaluate, Trial
@@ -91,7 +92,7 @@ def parameter_sets(engines: list[str], sets: list[str]) -> list[tuple[str, str, 
                     directory = None if name == 'preset' else ROOT / 'config' / 'presets' / name
                     try:
                         params = load_preset(engine, 'towel', primitive, directory, model)
-                    except Exception:  # a set without this model's entry
+                    except EngineError:  # a set without this model's entry
                         continue
                     if model:
                         params['model'] = model
