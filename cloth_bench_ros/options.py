@@ -320,7 +320,7 @@ FLAGS.update(_declare(
         'rates', float, (10.0, 100.0, 1000.0), 'a rate whose step times decide the '
         'recommendation (repeat for several; default 10, 100, 1000)', flag='--recommend-rate',
         action='append', low=validation.MIN_RATE_HZ, high=validation.MAX_RATE_HZ, unit='Hz',
-        metavar='HZ',
+        metavar='HZ', dest='rates',
     ),
 ))
 

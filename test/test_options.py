@@ -23,6 +23,8 @@ NOT_YET = {
     'cloth_bench_ros/options.py',  # the declarations themselves
     'cloth_bench_ros/command_options.py',
 }
+
+
 @pytest.fixture
 def context():
     ctx = rclpy.Context()
@@ -418,3 +420,77 @@ def test_the_declared_tasks_are_the_trajectory_primitives():
     from cloth_bench_ros.options import PRIMITIVES
 
     assert tuple(p.value for p in Primitive) == PRIMITIVES
+
+
+@pytest.mark.parametrize('old, new, dest, value', [
+    (['import', 'data', '--out', 'bags'], '--output', 'output', 'bags'),
+    (['import', 'data', '--output', 'bags', '--quiet'], '--no-progress', 'no_progress', True),
+    (['synth', '--out', 'b'], '--output', 'output', 'b'),
+    (['synth', '--quiet'], '--no-progress', 'no_progress', True),
+    (['rank', 'bags', '--rates', '10,1000'], '--recommend-rate', 'rates', [10.0, 1000.0]),
+    (['identify', '--params', 'mass,damping'], '--param', 'params', ['mass', 'damping']),
+])
+def test_an_old_flag_name_works_with_a_one_line_note(old, new, dest, value, capsys):
+    """A renamed flag's old name gives the new flag's value, and says so once on stderr."""
+    args = build_parser().parse_args(old)
+    assert getattr(args, dest) == value
+    flag = next(word for word in old if word.startswith('--') and word != '--output')
+    assert capsys.readouterr().err.splitlines() == [
+        f'cloth-bench: {flag} is deprecated, use {new}'
+        + (' (repeated)' if flag in ('--rates', '--params') else '')
+    ]
+    assert '--out ' not in build_parser()._subparsers._group_actions[0].choices[
+        old[0]].format_help()  # the old name is not in --help
+
+
+def test_a_repeated_flag_replaces_its_declared_default():
+    """A repeated flag (rank --recommend-rate) gives the values given, not the default's too."""
+    parser = build_parser()
+    assert parser.parse_args(['rank', 'b']).rates == FLAGS_DECLARED['rates'].default
+    assert parser.parse_args(['rank', 'b', '--recommend-rate', '50',
+                              '--recommend-rate', '500']).rates == [50.0, 500.0]
+
+
+@pytest.mark.parametrize('argv, engines, sets', [
+    (['run', '--engine', 'newton:vbd', '--engine', 'mujoco'], ['newton', 'mujoco'],
+     ['newton.model=vbd']),
+    (['run', '--engine', 'newton:vbd', '--set', 'newton.iterations=4'], ['newton'],
+     ['newton.model=vbd', 'newton.iterations=4']),
+    (['identify', '--engine', 'newton:xpbd'], 'newton', ['newton.model=xpbd']),
+    (['sweep', '--engine', 'newton:vbd'], ['newton'], ['newton.model=vbd']),
+])
+def test_engine_model_is_one_syntax_on_every_command(argv, engines, sets):
+    """--engine NAME:MODEL is --engine NAME with --set NAME.model=MODEL (rank's entrants, too)."""
+    from cloth_bench_ros.cli.common import engine_models
+
+    args = build_parser().parse_args(argv)
+    engine_models(args)
+    assert (args.engine, args.set) == (engines, sets)
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['run', '--engine', 'newton:vbd', '--engine', 'newton:xpbd'], 'one model per engine'),
+    (['stress', '--engine', 'newton:vbd'], 'stress takes engine names only'),
+    (['run', '--engine', 'newton:'], 'no model after the colon'),
+])
+def test_engine_model_refused_in_one_line(argv, message, capsys):
+    """Two models of one engine, a model where no --set is, or none after the colon: exit 2."""
+    from cloth_bench_ros.cli import main
+
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_the_docs_options_table_is_the_parsers():
+    """docs/cli.md's table of every flag (default, list form, commands) is made from the parser."""
+    from cloth_bench_ros.cli import options_table
+
+    text = (ROOT / 'docs' / 'cli.md').read_text()
+    start = text.index(options_table.BEGIN)
+    shown = text[start:text.index(options_table.END) + len(options_table.END)]
+    assert shown == options_table.markdown(), (
+        'docs/cli.md: run python -m cloth_bench_ros.cli.options_table docs/cli.md')
+    rows = options_table.rows()
+    assert len(rows) > 100
+    assert ('--trials', 'auto', 'value', 'identify, rank') in rows
+    assert ('--recommend-rate', '10, 100, 1000', 'repeated', 'rank') in rows

@@ -133,6 +133,8 @@ class _Renamed(argparse.Action):
             self.target(parser, namespace, [], new)
             return
         words = [w.strip() for w in values.split(',') if w.strip()] if self.split else [values]
+        if not words:
+            raise argparse.ArgumentError(self, f'no value in {values!r} (comma-separated)')
         for word in words:
             self.target(parser, namespace, parser._get_values(self.target, [word])
                         if self.target.nargs is None else word, new)

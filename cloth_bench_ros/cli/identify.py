@@ -62,7 +62,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common.recording_options(ident)
     common.add_option(ident, 'cloth_size')
     common.add_option(ident, 'cloth_mass', help='total mass of the cloth, not fitted unless '
-                      "--params names mass (unset: the preset's mass per area times the area)")
+                      "--param names mass (unset: the preset's mass per area times the area)")
     common.add_option(ident, 'cloth_mesh')
     ident.set_defaults(func=cmd_identify)
 

@@ -26,10 +26,10 @@ from pathlib import Path
 import time
 from typing import Any
 
+from cloth_bench_ros.command_options import COMMAND_FLAGS
 from cloth_bench_ros.data.errors import BagError
 from cloth_bench_ros.engines.settle import FULL, Settler
 from cloth_bench_ros.errors import ClothBenchError, one_line
-from cloth_bench_ros.command_options import COMMAND_FLAGS
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
