@@ -320,7 +320,8 @@ def engine_models(args: argparse.Namespace) -> None:
     if not given or getattr(args, 'command', '') == 'rank':
         return
     texts = [given] if isinstance(given, str) else list(given)
-    names, models = [], {}
+    names: list[str] = []
+    models: dict[str, str] = {}
     for text in texts:
         name, colon, model = text.strip().partition(':')
         names.append(name)
