@@ -283,6 +283,11 @@ FLAGS = _declare(
     ),
     Option('overwrite', bool, False, 'replace what exists', flag='--overwrite',
            action='store_true'),
+    # checked on this machine by the command line (cli/common.device: Warp's devices)
+    Option(
+        'newton_device', str, None, "Newton's device: cpu, cuda, cuda:N or auto (default auto: "
+        'the first CUDA device Warp finds, else cpu)', flag='--device', metavar='DEVICE',
+    ),
 )
 
 # The studies' own flags (identify, rank, sweep), declared here so that each default is written

@@ -250,9 +250,8 @@ def test_every_parameter_of_every_node_is_read_only_and_a_change_is_refused(cont
             node.destroy_node()
 
 
-# Flags not made from a declaration: argparse's own --help, the global --verbose, and --device,
-# whose check asks Warp which devices this machine has (cli/common.device_option).
-UNDECLARED = {'--help', '--verbose', '--device'}
+# Flags not made from a declaration: argparse's own --help and the global --verbose.
+UNDECLARED = {'--help', '--verbose'}
 
 
 def test_every_flag_of_every_command_is_made_from_a_declaration():

@@ -290,16 +290,8 @@ def device_option(parser: argparse.ArgumentParser, with_set: bool = True) -> Non
     With `with_set`, the choice is also an engine override (`--set newton.device=...`), which is
     how it reaches the engines of every command that takes --set.
     """
-    parser.add_argument(
-        '--device',
-        type=device,
-        action=_DeviceAction if with_set else 'store',
-        metavar='DEVICE',
-        help=(
-            "Newton's device: cpu, cuda, cuda:N or auto (default auto: the first CUDA device "
-            'Warp finds, else cpu)'
-        ),
-    )
+    add_option(parser, 'newton_device', type=device,
+               action=_DeviceAction if with_set else 'store')
 
 
 def engine_override_option(
