@@ -363,7 +363,9 @@ def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) 
         try:
             engine_class(engine).validate_params(params)
         except ClothBenchError as exc:
-            raise UserError(f'--set {engine}: {exc}') from None
+            model = f' (or --engine {engine}:MODEL)' if 'model' in params else ''
+            given = f'--set {engine}{model}'
+            raise UserError(f'{given}: {exc}') from None
     return overrides
 
 

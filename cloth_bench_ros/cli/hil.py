@@ -12,7 +12,7 @@ from cloth_bench_ros.options import OPTIONS
 
 
 HIL_FLAGS: tuple[common.Flag, ...] = (
-    ('engines', {'help': 'repeat for several (default mujoco)'}),
+    ('engines', {'help': 'engine[:model] (repeat for several; default mujoco)'}),
     ('rate_list', {'help': 'simulator rate (repeat for several; default 100)'}),
     'hil_config',
     'settings',

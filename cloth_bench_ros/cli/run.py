@@ -14,7 +14,7 @@ from cloth_bench_ros.options import MOTION_FLAGS, OPTIONS
 
 
 RUN_FLAGS: tuple[common.Flag, ...] = (
-    ('engines', {'help': 'engine to run (repeat for several; default mujoco)'}),
+    ('engines', {'help': 'engine[:model] to run (repeat for several; default mujoco)'}),
     'rate_hz',
     ('bag', {'help': 'rosbag2 bag to score against (default: the bundled one)'}),
     'seed',
