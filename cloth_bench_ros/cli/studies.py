@@ -48,7 +48,8 @@ REPORT_FLAGS: tuple[common.Flag, ...] = (
     OPTIONS['cloth'].variant(flag='--fig5-cloth', help='cloth of the Fig. 5 layout'),
     'metric',
 )
-ENGINES = ('engines', {'help': 'repeat for several (default: mujoco, bullet, newton)'})
+ENGINES = ('engines', {'help': 'repeat for several (default: mujoco, bullet, newton)',
+                       'metavar': 'ENGINE'})  # names only: stress has no --set for a model
 STRESS_FLAGS: tuple[common.Flag, ...] = (
     ENGINES,
     'case',
