@@ -10,19 +10,16 @@ import time
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.options import MOTION_FLAGS, Option, OPTIONS
+from cloth_bench_ros.options import MOTION_FLAGS, OPTIONS
 
 
 RUN_FLAGS: tuple[common.Flag, ...] = (
-    ('engines', {'help': 'engine to run (repeat for several; default mujoco)'}),
+    ('engines', {'help': 'engine[:model] to run (repeat for several; default mujoco)'}),
     'rate_hz',
     ('bag', {'help': 'rosbag2 bag to score against (default: the bundled one)'}),
     'seed',
     'pacing',
-    Option(
-        'processes', bool, False, 'one OS process per node over DDS on loopback (default: all '
-        'nodes in this process)', flag='--processes', action='store_true',
-    ),
+    'processes',
     ('output', {
         'help': 'report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)'
     }),
@@ -30,10 +27,7 @@ RUN_FLAGS: tuple[common.Flag, ...] = (
 # the run's own outputs of a recording (the recording options: common.recording_options)
 SCORING_FLAGS: tuple[common.Flag, ...] = (
     'record_comparison',
-    Option(
-        'figures', bool, False, 'qualitative figure (paper Fig. 4) and animation in the report '
-        'directory', flag='--figures', action='store_true',
-    ),
+    'figures',
 )
 
 
@@ -64,16 +58,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     common.add_options(motion, (
         ('bag', {'help': 'rosbag2 recording', 'required': True}), 'topic', *MOTION_FLAGS,
-        'targets_topic', Option('output', str, None, 'the task file to write', flag='--output',
-                                metavar='FILE', required=True),
+        'targets_topic', ('output', {'help': 'the task file to write', 'metavar': 'FILE',
+                                     'required': True}),
     ))
     motion.set_defaults(func=cmd_motion)
 
     engines = sub.add_parser('engines', help='list known engines, their availability and version')
-    common.add_option(engines, Option(
-        'warm', bool, False, "also compile what makes a first run slow (Newton: Warp's kernel "
-        "cache; the metrics' numba kernels)", flag='--warm', action='store_true',
-    ))
+    common.add_option(engines, 'warm')
     engines.set_defaults(func=cmd_engines)
 
 

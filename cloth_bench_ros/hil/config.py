@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 import re
 
-from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.options import NODE_PARAMETERS, OPTIONS
 
 TIMELINE = 'timeline_{engine}.csv'
 SIMULATOR_FILE = 'simulator.json'
@@ -27,7 +27,7 @@ class HilConfig:
     params: tuple[tuple[str, object], ...] = ()  # sorted engine parameter overrides
     config: str = 'preset'  # the configuration's name (settings-sweep label)
     processes: bool = True
-    cpu: int = -1  # core to pin the simulator to (-1: not pinned)
+    cpu: int = NODE_PARAMETERS['cpu'].default  # core to pin the simulator to (-1: not pinned)
     realtime_priority: int = (
         0  # SCHED_FIFO priority of the simulator and the controller (0: not asked)
     )

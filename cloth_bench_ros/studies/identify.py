@@ -31,6 +31,7 @@ import time
 from typing import Any, Sequence
 import warnings
 
+from cloth_bench_ros.command_options import COMMAND_FLAGS
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import FLAGS, OPTIONS, SAMPLERS
@@ -82,7 +83,7 @@ class IdentifySpec:
     output: Path
     sampler: str = FLAGS['sampler'].default
     trials: int = DEFAULT_TRIALS  # per sampler; AUTO: chosen by doubling (see budget_reached)
-    objective: str = 'cd'
+    objective: str = COMMAND_FLAGS['objective'].default
     params: Sequence[str] = ()
     seed: int = 0
     rate_hz: float = OPTIONS['rate_hz'].default
@@ -91,7 +92,7 @@ class IdentifySpec:
     span: float = DEFAULT_SPAN
     max_frames: int | None = None
     batch: int | None = None  # trials in flight (default: the cluster's worker threads)
-    validate_seeds: int = 5
+    validate_seeds: int = COMMAND_FLAGS['validate_seeds'].default
     bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
     also: tuple[str, ...] = ()  # more training bags: the objective is the mean over all of them
     # or prune, coarse: multi-fidelity (studies/identify_fidelity.py)
@@ -143,10 +144,10 @@ def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> 
         p = schema.get(name)
         if p is None:
             raise InputError(
-                f'--params: unknown {engine} parameter {name} (known: {", ".join(schema)})'
+                f'--param: unknown {engine} parameter {name} (known: {", ".join(schema)})'
             )
         if p.choices or isinstance(p.default, bool) or p.low is None or p.high is None:
-            raise InputError(f'--params: {engine} parameter {name} is not a number with a range')
+            raise InputError(f'--param: {engine} parameter {name} is not a number with a range')
         value = float(base.get(name, p.default))
         low, high = float(p.low), float(p.high)
         decades = high >= 100 * low if low > 0 else value > 0 and high >= 100 * value

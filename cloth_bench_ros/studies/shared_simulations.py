@@ -27,6 +27,9 @@ from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.studies.objective import Trial
 import numpy as np
 
+# what every key names as the objective: a simulation does not depend on it (rows keep it)
+KEY_OBJECTIVE = 'cd'
+
 
 @dataclass
 class KnownResult:
@@ -186,7 +189,8 @@ def _key(trial: Trial) -> str:
     from cloth_bench_ros.studies.identify_problem import simulated_model
     from cloth_bench_ros.studies.recording import inputs_key
 
-    fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='', objective='cd'))
+    fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='',
+                            objective=KEY_OBJECTIVE))
     if fields['settle'] == FULL:  # as rows were keyed before the fast settle existed
         del fields['settle']
     fields['inputs'] = inputs_key(trial.primitive, trial.task, trial.cloth_mesh)
