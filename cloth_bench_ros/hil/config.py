@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 import re
 
+from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.options import NODE_PARAMETERS, OPTIONS
 
 TIMELINE = 'timeline_{engine}.csv'
@@ -52,6 +53,4 @@ class HilConfig:
 
     def task(self):
         """Return the Task the run follows: its task file's, else the shipped one."""
-        from cloth_bench_ros.core.task_data import load_task
-
         return load_task(self.primitive, self.task_file or None)

@@ -36,6 +36,7 @@ from cloth_bench_ros.runtime import (
     steady_clock,
     Time,
 )
+from cloth_bench_ros.safe_io import atomic_write_text
 import numpy as np
 
 PREROLL_RESEND_S = (
@@ -269,8 +270,6 @@ class TrajectoryPublisher(Node):
             self.destroy_timer(self.pace_timer)
             self.pace_timer = None
         if self.timing_log:
-            from cloth_bench_ros.safe_io import atomic_write_text
-
             Path(self.timing_log).mkdir(parents=True, exist_ok=True)
             for engine, timeline in self.timelines.items():
                 atomic_write_text(
