@@ -17,6 +17,7 @@ GUIDE_LINES = 450
 
 # Module (relative to the package) -> the one job that makes it long.
 LONG_MODULES = {
+    'options.py': 'the declarations of the options every command and node shares: one table',
     'core/surface_distance.py': 'one algorithm: exact point-to-triangle distances and their grid',
     'data/replay.py': "the recorder's replay plan: every frame of a bag's topic in one account",
     'engines/newton_cloth.py': "one engine's adapter: Newton's two cloth models, grasp and device",
