@@ -1,0 +1,303 @@
+"""
+Compare two records of benchmarks/compare_commands.py, command by command, after normalising.
+
+Normalised, and nothing else: the record's own folder, the repository, the interpreter and
+temporary folders (as <RECORD>, <REPO>, <PYTHON>, <TMP>); dates; wall-clock and step timings (JSON
+keys, CSV and table columns matching TIMING_NAME, a real-time run's counters, lines of timing);
+progress bars. A line with "is deprecated, use" is set apart as a deprecation note.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+import difflib
+import io
+import json
+import math
+from pathlib import Path
+import re
+from typing import Any, Iterator
+
+import numpy as np
+
+DEPRECATION = 'is deprecated, use'
+MASK = '<t>'
+# JSON keys, CSV and table columns whose values are wall-clock or step timings (whole subtree);
+# a name is lower-cased, spaces and dashes as _, before matching
+TIMING_NAME = re.compile(
+    r'^(step_time|step_times|step_(mean|max|min|p\d+)|latency|send_lag|loadavg|load_avg|cpu_busy'
+    r'|cpu_steal|cpu_s|real_time_factor|deadline_misses|p50|p99|p999|compute_s/s|date'
+    r'|(due|sent|received)_ns)(_\w*)?$')
+WALL_NAME = re.compile(r'(^|_)(wall|elapsed)(_|$)')
+# a real-time run's record (a dict with one of these keys): its counters follow the wall clock
+REALTIME_RECORD = frozenset({'realtime', 'latency_p99'})
+REALTIME_COUNTS = frozenset({'skipped', 'lost', 'stepped', 'states', 'sent', 'realtime'})
+# a text table's header over timing columns (masked in the rows under it), and those columns
+TIMING_HEADER = re.compile(r'\bstep mean\b|\bp50\b.*\bp99\b')
+TIMING_COLUMN = frozenset({'step', 'lat', 'p50', 'p99', 'wall', 'elapsed'})
+RESULT_COLUMN = frozenset({'status', 'cd', 'hd', 'cd_d', 'hd_d', 'l_s', '(m)', 'lockstep'})
+DATE = re.compile(r'\d{4}-\d{2}-\d{2}([T _]\d{2}[:\-]\d{2}([:\-]\d{2}(\.\d+)?)?)?')
+TMP = re.compile(r'/tmp/[^\s\'",:;)\]}]+')
+# "12.3 s", "4.5 ms", "1.2 min", "2 core-min" on a line that speaks of time taken
+DURATION = re.compile(r'\d+(\.\d+)?(e[-+]?\d+)?\s*(s|ms|min|h|core-min|core-s)\b')
+TIMING_LINE = re.compile(r'\b(took|wall|elapsed|in \d+(\.\d+)? ?s\b|per second|step time|p50|p99)',
+                         re.IGNORECASE)
+# phrases whose numbers follow the machine and its load, not the physics
+VARYING = re.compile(r'\d+ start-up objects frozen|[\d.]+ h of cell compute'
+                     r'|load average at the end of the cells was [\d.]+ \(median; [\d.]+-[\d.]+\)')
+UNCOMPARED = frozenset({'.png', '.jpg', '.jpeg', '.gif', '.svg', '.pdf', '.mp4', '.webm'})
+SHOWN = 3  # differences shown per file
+
+
+@dataclass
+class Paths:
+    """The absolute paths a record names, each replaced by its placeholder (longest first)."""
+
+    replacements: list[tuple[str, str]]
+
+    @classmethod
+    def of(cls, record: Path) -> Paths:
+        about = json.loads((record / 'record.json').read_text())
+        pairs = [(about['record'], '<RECORD>'), (about['repo'], '<REPO>'),
+                 (str(Path(about['python']).parent.parent), '<PYTHON>')]
+        return cls(sorted(pairs, key=lambda p: -len(p[0])))
+
+    def text(self, value: str) -> str:
+        for path, name in self.replacements:
+            value = value.replace(path, name)
+        return DATE.sub('<DATE>', TMP.sub('<TMP>', value))
+
+
+@dataclass
+class Outcome:
+    """What comparing one command found."""
+
+    differences: list[str] = field(default_factory=list)
+    deprecations: list[str] = field(default_factory=list)
+    uncompared: int = 0
+
+
+def normalise_lines(text: str, paths: Paths, deprecations: list[str]) -> list[str]:
+    """The lines of a text output with paths, dates, timings and progress bars masked."""
+    lines = []
+    spans: tuple[int, list[tuple[int, int]]] | None = None  # a fixed-width table's columns
+    cells: set[int] = set()  # a Markdown table's timing columns
+    for raw in text.replace('\r\n', '\n').split('\n'):
+        line = paths.text(raw.rsplit('\r', 1)[-1])  # a progress bar redraws with \r
+        if DEPRECATION in line:
+            deprecations.append(line.strip())
+            continue
+        if line.startswith('|'):
+            row = line.split('|')
+            if not re.search(r'\d\.\d', line) and any(map(is_timing, row)):
+                cells = {i for i, cell in enumerate(row) if is_timing(cell)}
+            elif cells and not set(line) <= set('|-: '):
+                line = '|'.join(MASK if i in cells else c for i, c in enumerate(row))
+        elif not line.strip():
+            spans, cells = None, set()
+        elif TIMING_HEADER.search(line) and not re.search(r'(^|\s)[-+]?\.?\d', line):
+            spans = _header_spans(line)
+        elif spans is not None and re.search(r'[:;]', line):
+            spans = None  # the table's legend
+        elif spans is not None and not set(line.strip()) <= set('-=+| '):
+            line = _mask_columns(line, spans)
+        if TIMING_LINE.search(line):
+            line = DURATION.sub(MASK, line)
+        line = VARYING.sub(lambda m: re.sub(r'\d+(\.\d+)?', MASK, m.group()), line)
+        lines.append(line.rstrip())
+    return lines
+
+
+def _header_spans(header: str) -> tuple[int, list[tuple[int, int]]]:
+    """Where the header's timing columns start, and the spans of result columns after it."""
+    words = [(m.start(), m.end(), m.group()) for m in re.finditer(r'\S+', header)]
+    start = next((s for s, _, w in words if w.lower() in TIMING_COLUMN), len(header))
+    return start, [(s, e) for s, e, w in words if s >= start and w.lower() in RESULT_COLUMN]
+
+
+def _mask_columns(line: str, spans: tuple[int, list[tuple[int, int]]]) -> str:
+    """Mask the row's words from the timing columns on, except those under a result column."""
+    start, kept = spans
+    out = line
+    for match in reversed(list(re.finditer(r'\S+', line))):
+        if match.end() > start and not any(
+                match.start() < end and begin < match.end() for begin, end in kept):
+            out = out[:match.start()] + MASK.ljust(match.end() - match.start()) + out[match.end():]
+    return out
+
+
+def is_timing(name: str) -> bool:
+    """Whether a key or column names a wall-clock or step timing."""
+    name = re.sub(r'\s*\((ms|s|m)\)\s*$', '', name.strip().lower())
+    name = re.sub(r'[\s-]+', '_', name.removesuffix(' ms'))
+    return bool(TIMING_NAME.match(name) or WALL_NAME.search(name))
+
+
+def mask_json(value: Any, paths: Paths) -> Any:
+    """The value with timing keys masked and paths normalised, recursively."""
+    if isinstance(value, dict):
+        realtime = not REALTIME_RECORD.isdisjoint(value)
+        return {k: MASK if is_timing(k) or (realtime and k in REALTIME_COUNTS)
+                else mask_json(v, paths) for k, v in value.items()}
+    if isinstance(value, list):
+        return [mask_json(v, paths) for v in value]
+    if isinstance(value, str):
+        return paths.text(value)
+    return value
+
+
+def flatten(value: Any, prefix: str = '') -> Iterator[tuple[str, Any]]:
+    """(JSON path, leaf value) pairs in document order."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            yield from flatten(item, f'{prefix}.{key}')
+        if not value:
+            yield prefix, {}
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            yield from flatten(item, f'{prefix}[{i}]')
+        if not value:
+            yield prefix, []
+    else:
+        yield prefix, value
+
+
+def _same_leaf(a: Any, b: Any) -> bool:
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return type(a) is type(b) and a == b
+
+
+def diff_json(old: Any, new: Any) -> list[str]:
+    """The JSON paths whose values differ (or exist on one side only)."""
+    left, right = dict(flatten(old)), dict(flatten(new))
+    found = []
+    for key in list(left) + [k for k in right if k not in left]:
+        if key not in right or key not in left or not _same_leaf(left[key], right[key]):
+            found.append(f'{key or "."}: {left.get(key, "<absent>")!r} -> '
+                         f'{right.get(key, "<absent>")!r}')
+    return found
+
+
+def diff_lines(old: list[str], new: list[str]) -> list[str]:
+    """The first differing lines, as '-old' / '+new'."""
+    if old == new:
+        return []
+    changed = [d for d in difflib.unified_diff(old, new, lineterm='', n=0)
+               if d[:1] in '+-' and not d.startswith(('+++', '---'))]
+    return changed or ['(line endings)']
+
+
+def load_json(path: Path, paths: Paths) -> Any:
+    if path.suffix == '.jsonl':
+        return [mask_json(json.loads(line), paths)
+                for line in path.read_text().splitlines() if line.strip()]
+    return mask_json(json.loads(path.read_text()), paths)
+
+
+def load_csv(path: Path, paths: Paths) -> list[list[str]]:
+    """CSV rows with timing columns masked and paths normalised."""
+    rows = list(csv.reader(io.StringIO(path.read_text())))
+    if not rows:
+        return rows
+    timing = {i for i, name in enumerate(rows[0]) if is_timing(name)}
+    return [rows[0]] + [[MASK if i in timing else paths.text(cell) for i, cell in enumerate(row)]
+                        for row in rows[1:]]
+
+
+def diff_npz(old: Path, new: Path) -> list[str]:
+    """Arrays that differ, bit for bit (NaN equal to NaN)."""
+    with np.load(old, allow_pickle=False) as a, np.load(new, allow_pickle=False) as b:
+        found = [f'{k}: only in one' for k in sorted(set(a.files) ^ set(b.files))]
+        for key in sorted(set(a.files) & set(b.files)):
+            x, y = a[key], b[key]
+            if x.shape != y.shape or x.dtype != y.dtype:
+                found.append(f'{key}: {x.dtype}{x.shape} -> {y.dtype}{y.shape}')
+            elif not np.array_equal(x, y, equal_nan=x.dtype.kind in 'fc'):
+                found.append(f'{key}: values differ')
+    return found
+
+
+def diff_file(old: Path, new: Path, paths: tuple[Paths, Paths], outcome: Outcome) -> list[str]:
+    """One output file's differences, by its kind."""
+    suffix = old.suffix.lower()
+    if suffix in UNCOMPARED:
+        outcome.uncompared += 1
+        return []
+    if suffix in ('.json', '.jsonl'):
+        return diff_json(load_json(old, paths[0]), load_json(new, paths[1]))
+    if suffix == '.csv':
+        left, right = load_csv(old, paths[0]), load_csv(new, paths[1])
+        return diff_lines([','.join(r) for r in left], [','.join(r) for r in right])
+    if suffix == '.npz':
+        return diff_npz(old, new)
+    try:
+        texts = old.read_text(), new.read_text()
+    except UnicodeDecodeError:
+        return [] if old.read_bytes() == new.read_bytes() else ['bytes differ']
+    return diff_lines(normalise_lines(texts[0], paths[0], outcome.deprecations),
+                      normalise_lines(texts[1], paths[1], outcome.deprecations))
+
+
+def files_of(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob('*') if p.is_file()}
+
+
+def compare_command(old: Path, new: Path, paths: tuple[Paths, Paths]) -> Outcome:
+    """Exit code, argv, stdout, stderr and every written file of one command, old against new."""
+    outcome = Outcome()
+    meta = [json.loads((side / 'command.json').read_text()) for side in (old, new)]
+    if meta[0]['exit_code'] != meta[1]['exit_code']:
+        outcome.differences.append(f'exit code {meta[0]["exit_code"]} -> {meta[1]["exit_code"]}')
+    argv = [[p.text(a) for a in m['argv']] for p, m in zip(paths, meta)]
+    if argv[0] != argv[1]:
+        outcome.differences.append(f'argv {argv[0]} -> {argv[1]}')
+    for stream in ('stdout.txt', 'stderr.txt'):
+        lines = [normalise_lines((side / stream).read_text(), p, outcome.deprecations)
+                 for side, p in zip((old, new), paths)]
+        outcome.differences += [f'{stream[:-4]}: {d}' for d in diff_lines(*lines)[:SHOWN * 2]]
+    written = [files_of(side / 'work') for side in (old, new)]
+    for name in sorted(written[0] ^ written[1]):
+        outcome.differences.append(f'{name}: only in {"old" if name in written[0] else "new"}')
+    for name in sorted(written[0] & written[1]):
+        found = diff_file(old / 'work' / name, new / 'work' / name, paths, outcome)
+        outcome.differences += [f'{name}: {d}' for d in found[:SHOWN]]
+        if len(found) > SHOWN:
+            outcome.differences.append(f'{name}: ... {len(found) - SHOWN} more')
+    return outcome
+
+
+def command_names(record: Path) -> list[str]:
+    """The commands a record holds, in the order they ran."""
+    listed = json.loads((record / 'record.json').read_text()).get('commands', [])
+    present = {p.parent.name for p in record.glob('*/command.json')}
+    return [n for n in listed if n in present] + sorted(present - set(listed))
+
+
+def compare_records(old: Path, new: Path) -> int:
+    """Print one line per command; return 1 if any command differs (help texts apart), else 0."""
+    paths = (Paths.of(old), Paths.of(new))
+    names = command_names(old) + [n for n in command_names(new) if n not in command_names(old)]
+    differing, deprecations = 0, []
+    for name in names:
+        if not (old / name / 'command.json').exists() or not (new / name / 'command.json').exists():
+            print(f'{name:28s} DIFFERENT: recorded only in {"new" if (new / name).exists() else "old"}')
+            differing += 1
+            continue
+        outcome = compare_command(old / name, new / name, paths)
+        deprecations += [f'{name}: {line}' for line in dict.fromkeys(outcome.deprecations)]
+        note = f' ({outcome.uncompared} figures not compared)' if outcome.uncompared else ''
+        if not outcome.differences:
+            print(f'{name:28s} same{note}')
+        elif name.startswith('help_'):
+            print(f'{name:28s} help text changed (not counted): {outcome.differences[0]}')
+        else:
+            differing += 1
+            print(f'{name:28s} DIFFERENT: ' + '\n' + '\n'.join(
+                f'{"":30s}{d}' for d in outcome.differences[:SHOWN * 3]))
+    for line in deprecations:
+        print(f'deprecated (expected after a rename): {line}')
+    print(f'{len(names) - differing} of {len(names)} commands the same'
+          + (f', {differing} DIFFERENT' if differing else ''))
+    return 1 if differing else 0
