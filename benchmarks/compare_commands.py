@@ -1,14 +1,17 @@
 """
-Every cloth-bench command's output before and after a change: record each, then compare two records.
+Every cloth-bench command's output before and after a change: record each, compare two records.
 
-`record DIR` runs a fixed list of commands (every subcommand at least once, on the bundled bags with
-small settings: a 6x8 grid, one rate, few trials and seeds, one worker, lockstep on the CPU) and
-keeps per command its argv, exit code, stdout, stderr and every file it wrote. `compare OLD NEW`
-prints one line per command, `same` or `DIFFERENT:` with the first differing lines or JSON paths,
-and exits 1 if any differ. Only what legitimately varies run to run is normalised (the record's
-own paths and temporary folders, dates, wall-clock and step timings, progress bars); every number
-of the physics and metrics must match exactly. Lines saying "is deprecated, use" (a renamed flag's
-old spelling) are listed apart, not as a difference; a changed `--help` text is listed, not failed.
+`record DIR` runs a fixed list of commands (every subcommand at least once, on the bundled bags
+and two small recordings written by the tests' helpers, with small settings: a 6x8 grid, one rate,
+few trials and seeds, one worker, lockstep on the CPU) and keeps per command its argv, exit code,
+stdout, stderr and every file it wrote. `compare OLD NEW` prints one line per command, `same` or
+`DIFFERENT:` with the first differing lines or JSON paths, and exits 1 if any differ. Only what
+legitimately varies run to run is normalised (compare_outputs.py: the record's own paths and
+temporary folders, dates, wall-clock and step timings, progress bars); every number of the physics
+and metrics must match exactly. Lines saying "is deprecated, use" (a renamed flag's old spelling)
+are listed apart, not as a difference; a changed `--help` text is listed, not counted. `synth`
+and `converge` take minutes at their smallest: only their errors are in the list, the runs
+themselves with --long.
 
     .venv/bin/python benchmarks/compare_commands.py record /tmp/before     # ~6 min on two cores
     git checkout my-branch
@@ -32,6 +35,7 @@ from typing import Sequence
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # its normaliser, next to it
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))  # the tests' recorder
 
+import cloth_bench_ros  # noqa: E402
 from compare_outputs import compare_records  # noqa: E402
 from own_motion_recording import write_recording  # noqa: E402
 
@@ -44,7 +48,7 @@ ONE_WORKER = ['--workers', '1', '--no-progress']
 
 
 def bag(name: str) -> str:
-    """A bundled bag's directory."""
+    """Return a bundled bag's directory."""
     return str(BAGS / name)
 
 
@@ -65,9 +69,9 @@ COMMANDS: dict[str, list[str]] = {
                           '--record-comparison', '{out}/comparison', '--output', '{out}/report'],
     'run_task_file': [
         'run', '--task', '{record}/motion/work/out/task.yaml', *OWN[:4], '--motion', 'task',
-        '--engine', 'mujoco', *SMALL, '--clean', 'on', '--voxel', '0.01', '--change-of-phase-frame', '80',
-        '--set', 'mujoco.damping=0.02', '--cloth-size', '0.5,0.65', '--cloth-mass', '0.1',
-        '--output', '{out}'],
+        '--engine', 'mujoco', *SMALL, '--clean', 'on', '--voxel', '0.01',
+        '--change-of-phase-frame', '80', '--set', 'mujoco.damping=0.02',
+        '--cloth-size', '0.5,0.65', '--cloth-mass', '0.1', '--output', '{out}'],
     'sweep': ['sweep', '--engine', 'mujoco', '--engine', 'bullet', '--rate', '100',
               '--cloth', 'towel', '--primitive', 'dynamic', '--seeds', '2', *SMALL,
               *ONE_WORKER, '--output', '{out}'],
@@ -95,7 +99,7 @@ COMMANDS: dict[str, list[str]] = {
     'error_missing_bag': ['run', '--bag', '{record}/_inputs/no_such_bag', '--output', '{out}'],
     'error_bad_rates_list': ['rank', bag('towel_dynamic'), '--rates', '10,abc'],
 }
-# minutes each, recorded with --long only: both simulate the 31x43 reference, with no smaller setting
+# minutes each, recorded with --long only: both simulate the 31x43 reference (no smaller setting)
 LONG: dict[str, list[str]] = {
     'synth': ['synth', '--out', '{out}/towel_dynamic', '--seed', '1', '--quiet'],
     'converge': ['converge', '--axis', 'iterations', '--levels', '1', '--duration', '0.5',
@@ -107,13 +111,13 @@ for _sub in ('run', 'trajectory', 'motion', 'engines', 'sweep', 'report', 'stres
 
 
 def write_inputs(inputs: Path) -> None:
-    """The recordings the commands read besides the bundled bags, written afresh each record."""
+    """Write the recordings the commands read besides the bundled bags (afresh each record)."""
     write_dataset(inputs / 'dataset')
     write_recording(inputs / 'own_motion', frame='base_link')
 
 
 def write_dataset(root: Path) -> None:
-    """A tiny published-dataset tree for `import`: one trial of five ASCII PLY frames."""
+    """Write a tiny published-dataset tree for `import`: one trial of five ASCII PLY frames."""
     cloud = root / 'cotton_rag_0' / 'dynamic' / 'cloud'
     cloud.mkdir(parents=True, exist_ok=True)
     for frame in range(5):
@@ -157,15 +161,18 @@ def record(record_dir: Path, names: Sequence[str], timeout_s: float) -> int:
     record_dir.mkdir(parents=True, exist_ok=True)
     shutil.rmtree(record_dir / '_inputs', ignore_errors=True)
     write_inputs(record_dir / '_inputs')
-    about = {'record': str(record_dir), 'repo': str(REPO), 'python': sys.executable,
-             'tmp': os.environ.get('TMPDIR', '/tmp'), 'date': time.strftime('%Y-%m-%d %H:%M:%S'),
-             'commands': list(names)}
+    commit = subprocess.run(['git', '-C', str(REPO), 'describe', '--always', '--dirty'],
+                            capture_output=True, text=True).stdout.strip()
+    about = {'record': str(record_dir), 'repo': str(REPO), 'commit': commit,
+             'package': str(Path(cloth_bench_ros.__file__).parent), 'python': sys.executable,
+             'date': time.strftime('%Y-%m-%d %H:%M:%S'), 'commands': list(names)}
     (record_dir / 'record.json').write_text(json.dumps(about, indent=1) + '\n')
     start = time.monotonic()
     for name in names:
         meta = run_one(name, {**COMMANDS, **LONG}[name], record_dir, timeout_s)
         print(f'{name:28s} exit {meta["exit_code"]:3d}  {meta["wall_s"]:7.1f} s', flush=True)
-    print(f'recorded {len(names)} commands into {record_dir} in {time.monotonic() - start:.0f} s')
+    print(f'recorded {len(names)} commands of {about["package"]} ({commit}) into {record_dir} in '
+          f'{time.monotonic() - start:.0f} s')
     return 0
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass, field
+import datetime
 import difflib
 import io
 import json
@@ -20,6 +21,7 @@ import re
 from typing import Any, Iterator
 
 import numpy as np
+import yaml
 
 DEPRECATION = 'is deprecated, use'
 MASK = '<t>'
@@ -40,12 +42,12 @@ RESULT_COLUMN = frozenset({'status', 'cd', 'hd', 'cd_d', 'hd_d', 'l_s', '(m)', '
 DATE = re.compile(r'\d{4}-\d{2}-\d{2}([T _]\d{2}[:\-]\d{2}([:\-]\d{2}(\.\d+)?)?)?')
 TMP = re.compile(r'/tmp/[^\s\'",:;)\]}]+')
 # "12.3 s", "4.5 ms", "1.2 min", "2 core-min" on a line that speaks of time taken
-DURATION = re.compile(r'\d+(\.\d+)?(e[-+]?\d+)?\s*(s|ms|min|h|core-min|core-s)\b')
+DURATION = re.compile(r'(?<![\w.])\d+(\.\d+)?(e[-+]?\d+)?\s*(s|ms|min|h|core-min|core-s)\b')
 TIMING_LINE = re.compile(r'\b(took|wall|elapsed|in \d+(\.\d+)? ?s\b|per second|step time|p50|p99)',
                          re.IGNORECASE)
 # phrases whose numbers follow the machine and its load, not the physics
 VARYING = re.compile(r'\d+ start-up objects frozen|[\d.]+ h of cell compute'
-                     r'|load average at the end of the cells was [\d.]+ \(median; [\d.]+-[\d.]+\)')
+                     r'|load average[a-z -]{0,40} [\d.]+ \(median[;,] [\d.]+-[\d.]+\)')
 UNCOMPARED = frozenset({'.png', '.jpg', '.jpeg', '.gif', '.svg', '.pdf', '.mp4', '.webm'})
 SHOWN = 3  # differences shown per file
 
@@ -79,7 +81,7 @@ class Outcome:
 
 
 def normalise_lines(text: str, paths: Paths, deprecations: list[str]) -> list[str]:
-    """The lines of a text output with paths, dates, timings and progress bars masked."""
+    """Return the lines of a text output with paths, dates, timings and progress bars masked."""
     lines = []
     spans: tuple[int, list[tuple[int, int]]] | None = None  # a fixed-width table's columns
     cells: set[int] = set()  # a Markdown table's timing columns
@@ -93,7 +95,7 @@ def normalise_lines(text: str, paths: Paths, deprecations: list[str]) -> list[st
             if not re.search(r'\d\.\d', line) and any(map(is_timing, row)):
                 cells = {i for i, cell in enumerate(row) if is_timing(cell)}
             elif cells and not set(line) <= set('|-: '):
-                line = '|'.join(MASK if i in cells else c for i, c in enumerate(row))
+                line = '|'.join(f' {MASK} ' if i in cells else c for i, c in enumerate(row))
         elif not line.strip():
             spans, cells = None, set()
         elif TIMING_HEADER.search(line) and not re.search(r'(^|\s)[-+]?\.?\d', line):
@@ -102,11 +104,24 @@ def normalise_lines(text: str, paths: Paths, deprecations: list[str]) -> list[st
             spans = None  # the table's legend
         elif spans is not None and not set(line.strip()) <= set('-=+| '):
             line = _mask_columns(line, spans)
-        if TIMING_LINE.search(line):
-            line = DURATION.sub(MASK, line)
-        line = VARYING.sub(lambda m: re.sub(r'\d+(\.\d+)?', MASK, m.group()), line)
-        lines.append(line.rstrip())
+        line = mask_timing_phrases(line).rstrip()
+        lines.append(re.sub(r'\s+', ' ', line) if MASK in line else line)  # widths vary
     return lines
+
+
+def html_rows(text: str) -> str:
+    """Write each HTML table row as a Markdown one, so its timing columns are found alike."""
+    def row(line: str) -> str:
+        cells = re.findall(r'<t[hd](?:\s[^>]*)?>(.*?)</t[hd]>', line)
+        return '| ' + ' | '.join(cells) + ' |' if cells else line
+    return '\n'.join(row(line) for line in text.split('\n'))
+
+
+def mask_timing_phrases(line: str) -> str:
+    """Mask the durations on a line that speaks of time taken, and the load-dependent phrases."""
+    if TIMING_LINE.search(line):
+        line = DURATION.sub(MASK, line)
+    return VARYING.sub(lambda m: re.sub(r'\d+(\.\d+)?', MASK, m.group()), line)
 
 
 def _header_spans(header: str) -> tuple[int, list[tuple[int, int]]]:
@@ -135,7 +150,7 @@ def is_timing(name: str) -> bool:
 
 
 def mask_json(value: Any, paths: Paths) -> Any:
-    """The value with timing keys masked and paths normalised, recursively."""
+    """Return the value with timing keys masked and paths normalised, recursively."""
     if isinstance(value, dict):
         realtime = not REALTIME_RECORD.isdisjoint(value)
         return {k: MASK if is_timing(k) or (realtime and k in REALTIME_COUNTS)
@@ -143,7 +158,9 @@ def mask_json(value: Any, paths: Paths) -> Any:
     if isinstance(value, list):
         return [mask_json(v, paths) for v in value]
     if isinstance(value, str):
-        return paths.text(value)
+        return '\n'.join(mask_timing_phrases(paths.text(line)) for line in value.split('\n'))
+    if isinstance(value, (datetime.date, datetime.time)):
+        return MASK  # YAML reads an unquoted date as one
     return value
 
 
@@ -170,7 +187,7 @@ def _same_leaf(a: Any, b: Any) -> bool:
 
 
 def diff_json(old: Any, new: Any) -> list[str]:
-    """The JSON paths whose values differ (or exist on one side only)."""
+    """Return the JSON paths whose values differ (or exist on one side only)."""
     left, right = dict(flatten(old)), dict(flatten(new))
     found = []
     for key in list(left) + [k for k in right if k not in left]:
@@ -181,7 +198,7 @@ def diff_json(old: Any, new: Any) -> list[str]:
 
 
 def diff_lines(old: list[str], new: list[str]) -> list[str]:
-    """The first differing lines, as '-old' / '+new'."""
+    """Return the differing lines, as '-old' / '+new'."""
     if old == new:
         return []
     changed = [d for d in difflib.unified_diff(old, new, lineterm='', n=0)
@@ -190,6 +207,9 @@ def diff_lines(old: list[str], new: list[str]) -> list[str]:
 
 
 def load_json(path: Path, paths: Paths) -> Any:
+    """Read a JSON, JSON Lines or YAML file, masked."""
+    if path.suffix in ('.yaml', '.yml'):
+        return mask_json(yaml.safe_load(path.read_text()), paths)
     if path.suffix == '.jsonl':
         return [mask_json(json.loads(line), paths)
                 for line in path.read_text().splitlines() if line.strip()]
@@ -225,7 +245,7 @@ def diff_file(old: Path, new: Path, paths: tuple[Paths, Paths], outcome: Outcome
     if suffix in UNCOMPARED:
         outcome.uncompared += 1
         return []
-    if suffix in ('.json', '.jsonl'):
+    if suffix in ('.json', '.jsonl', '.yaml', '.yml'):
         return diff_json(load_json(old, paths[0]), load_json(new, paths[1]))
     if suffix == '.csv':
         left, right = load_csv(old, paths[0]), load_csv(new, paths[1])
@@ -236,6 +256,8 @@ def diff_file(old: Path, new: Path, paths: tuple[Paths, Paths], outcome: Outcome
         texts = old.read_text(), new.read_text()
     except UnicodeDecodeError:
         return [] if old.read_bytes() == new.read_bytes() else ['bytes differ']
+    if suffix in ('.html', '.htm'):
+        texts = html_rows(texts[0]), html_rows(texts[1])
     return diff_lines(normalise_lines(texts[0], paths[0], outcome.deprecations),
                       normalise_lines(texts[1], paths[1], outcome.deprecations))
 
@@ -269,7 +291,7 @@ def compare_command(old: Path, new: Path, paths: tuple[Paths, Paths]) -> Outcome
 
 
 def command_names(record: Path) -> list[str]:
-    """The commands a record holds, in the order they ran."""
+    """Return the commands a record holds, in the order they ran."""
     listed = json.loads((record / 'record.json').read_text()).get('commands', [])
     present = {p.parent.name for p in record.glob('*/command.json')}
     return [n for n in listed if n in present] + sorted(present - set(listed))
@@ -281,8 +303,9 @@ def compare_records(old: Path, new: Path) -> int:
     names = command_names(old) + [n for n in command_names(new) if n not in command_names(old)]
     differing, deprecations = 0, []
     for name in names:
-        if not (old / name / 'command.json').exists() or not (new / name / 'command.json').exists():
-            print(f'{name:28s} DIFFERENT: recorded only in {"new" if (new / name).exists() else "old"}')
+        missing = [side for side in (old, new) if not (side / name / 'command.json').exists()]
+        if missing:
+            print(f'{name:28s} DIFFERENT: not recorded in {missing[0]}')
             differing += 1
             continue
         outcome = compare_command(old / name, new / name, paths)

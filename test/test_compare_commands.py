@@ -1,4 +1,4 @@
-"""benchmarks/compare_outputs.py on tiny hand-made records: timings pass, a changed number fails."""
+"""benchmarks/compare_outputs.py on tiny hand-made records: a timing passes, a number fails."""
 
 from __future__ import annotations
 
@@ -6,11 +6,10 @@ import json
 from pathlib import Path
 import sys
 
-import pytest
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'benchmarks'))
 
 from compare_outputs import compare_records  # noqa: E402
+import pytest  # noqa: E402
 
 STDOUT = """cloth-bench run: towel dynamic at 100 Hz, bag {root}/repo/bags/towel_dynamic
 engine         CD_d     HD_d        L_s  step mean      p50      p99      max  status
@@ -26,7 +25,7 @@ report: {root}/rec/run/work/out/summary.json
 
 def write_record(root: Path, cd: float = 0.0446, step: str = '0.623', wall: str = '3.9',
                  stderr: str = '') -> Path:
-    """A record of one command `run` as compare_commands.py writes it, under root/rec."""
+    """Write a record of one command `run` as compare_commands.py does, under root/rec."""
     record = root / 'rec'
     command = record / 'run'
     (command / 'work' / 'out').mkdir(parents=True)
@@ -43,6 +42,9 @@ def write_record(root: Path, cd: float = 0.0446, step: str = '0.623', wall: str 
     (command / 'work' / 'out' / 'summary.json').write_text(json.dumps(summary))
     (command / 'work' / 'out' / 'frames.csv').write_text(
         f'engine,frame,cd,wall_s\nmujoco,0,{cd},{wall}\n')
+    (command / 'work' / 'out' / 'report.html').write_text(
+        '<table><thead><tr><th>engine</th><th>step p99 ms</th><th>CD_d (m)</th></tr></thead>\n'
+        f'<tr><td>MuJoCo</td><td class="num">{step}</td><td class="num">{cd}</td></tr></table>\n')
     return record
 
 
@@ -55,7 +57,7 @@ def test_the_same_outputs_are_the_same(tmp_path, capsys):
 
 def test_only_timings_and_dates_changed_is_the_same(tmp_path, capsys):
     old = write_record(tmp_path / 'a')
-    new = write_record(tmp_path / 'b', step='0.871', wall='5.2')
+    new = write_record(tmp_path / 'b', step='12.871', wall='5.2')  # another column width
     assert compare_records(old, new) == 0
     assert 'run                          same' in capsys.readouterr().out
 
@@ -67,7 +69,8 @@ def test_a_changed_number_differs_and_is_named(tmp_path, capsys):
     out = capsys.readouterr().out
     assert 'run                          DIFFERENT' in out
     assert '.engines.mujoco.CD_d: 0.0446 -> 0.0446000001' in out
-    assert 'mujoco,0,0.0446' in out  # the CSV row, both sides
+    assert '-mujoco,0,0.0446,<t>' in out and '+mujoco,0,0.0446000001,<t>' in out  # the CSV
+    assert 'report.html: -| MuJoCo | <t> | 0.0446 |' in out
 
 
 @pytest.mark.parametrize('where', ['stdout', 'exit'])
