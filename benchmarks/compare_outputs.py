@@ -80,9 +80,13 @@ class Outcome:
     uncompared: int = 0
 
 
-def normalise_lines(text: str, paths: Paths, deprecations: list[str]) -> list[str]:
+def normalise_lines(text: str, paths: Paths, deprecations: list[str],
+                    timings: bool = True) -> list[str]:
     """Return the lines of a text output with paths, dates, timings and progress bars masked."""
+    if not timings:  # a help text: its defaults and ranges are all to compare
+        return [paths.text(line) for line in text.split('\n') if DEPRECATION not in line]
     lines = []
+    previous = ''
     spans: tuple[int, list[tuple[int, int]]] | None = None  # a fixed-width table's columns
     cells: set[int] = set()  # a Markdown table's timing columns
     for raw in text.replace('\r\n', '\n').split('\n'):
@@ -92,7 +96,7 @@ def normalise_lines(text: str, paths: Paths, deprecations: list[str]) -> list[st
             continue
         if line.startswith('|'):
             row = line.split('|')
-            if not re.search(r'\d\.\d', line) and any(map(is_timing, row)):
+            if not previous.startswith('|'):  # a table's header
                 cells = {i for i, cell in enumerate(row) if is_timing(cell)}
             elif cells and not set(line) <= set('|-: '):
                 line = '|'.join(f' {MASK} ' if i in cells else c for i, c in enumerate(row))
@@ -104,6 +108,7 @@ def normalise_lines(text: str, paths: Paths, deprecations: list[str]) -> list[st
             spans = None  # the table's legend
         elif spans is not None and not set(line.strip()) <= set('-=+| '):
             line = _mask_columns(line, spans)
+        previous = line
         line = mask_timing_phrases(line).rstrip()
         lines.append(re.sub(r'\s+', ' ', line) if MASK in line else line)  # widths vary
     return lines
@@ -113,7 +118,8 @@ def html_rows(text: str) -> str:
     """Write each HTML table row as a Markdown one, so its timing columns are found alike."""
     def row(line: str) -> str:
         cells = re.findall(r'<t[hd](?:\s[^>]*)?>(.*?)</t[hd]>', line)
-        return '| ' + ' | '.join(cells) + ' |' if cells else line
+        header = '\n' if '<th' in line else ''  # a new table starts
+        return f'{header}| ' + ' | '.join(cells) + ' |' if cells else line
     return '\n'.join(row(line) for line in text.split('\n'))
 
 
@@ -276,7 +282,8 @@ def compare_command(old: Path, new: Path, paths: tuple[Paths, Paths]) -> Outcome
     if argv[0] != argv[1]:
         outcome.differences.append(f'argv {argv[0]} -> {argv[1]}')
     for stream in ('stdout.txt', 'stderr.txt'):
-        lines = [normalise_lines((side / stream).read_text(), p, outcome.deprecations)
+        lines = [normalise_lines((side / stream).read_text(), p, outcome.deprecations,
+                                 timings=not old.name.startswith('help_'))
                  for side, p in zip((old, new), paths)]
         outcome.differences += [f'{stream[:-4]}: {d}' for d in diff_lines(*lines)[:SHOWN * 2]]
     written = [files_of(side / 'work') for side in (old, new)]
