@@ -25,12 +25,14 @@ import yaml
 
 DEPRECATION = 'is deprecated, use'
 MASK = '<t>'
-# JSON keys, CSV and table columns whose values are wall-clock or step timings (whole subtree);
+# JSON keys, CSV and table columns whose values are wall-clock or step timings (whole subtree),
+# verdicts on them (meets_deadline, rank's recommendation), Optuna's dates and random worker ids;
 # a name is lower-cased, spaces and dashes as _, before matching
 TIMING_NAME = re.compile(
     r'^(step_time|step_times|step_(mean|max|min|p\d+)|latency|send_lag|loadavg|load_avg|cpu_busy'
-    r'|cpu_steal|cpu_s|real_time_factor|deadline_misses|p50|p99|p999|compute_s/s|date'
-    r'|(due|sent|received)_ns)(_\w*)?$')
+    r'|cpu_steal|cpu_s|real_time_factor|rtf|deadline_misses|p50|p99|p999|compute_s/s|date'
+    r'|(due|sent|received)_ns|lat_p[\d.]+|lat_max|load_/_cores|skipped_targets|cd_realtime'
+    r'|meets_deadline|recommendation|datetime|worker_id)(_\w*)?$')
 WALL_NAME = re.compile(r'(^|_)(wall|elapsed)(_|$)')
 # a real-time run's record (a dict with one of these keys): its counters follow the wall clock
 REALTIME_RECORD = frozenset({'realtime', 'latency_p99'})
@@ -45,9 +47,11 @@ TMP = re.compile(r'/tmp/[^\s\'",:;)\]}]+')
 DURATION = re.compile(r'(?<![\w.])\d+(\.\d+)?(e[-+]?\d+)?\s*(s|ms|min|h|core-min|core-s)\b')
 TIMING_LINE = re.compile(r'\b(took|wall|elapsed|in \d+(\.\d+)? ?s\b|per second|step time|p50|p99)',
                          re.IGNORECASE)
-# phrases whose numbers follow the machine and its load, not the physics
+# phrases whose numbers or words follow the machine and its load, not the physics
 VARYING = re.compile(r'\d+ start-up objects frozen|[\d.]+ h of cell compute'
-                     r'|load average[a-z -]{0,40} [\d.]+ \(median[;,] [\d.]+-[\d.]+\)')
+                     r'|load average[a-z -]{0,40} [\d.]+ \(median[;,] [\d.]+-[\d.]+\)'
+                     r'|; [\d.]+ (s|min|h);')
+VERDICT = re.compile(r'(deadline )(met|not met)|( at [\d.]+ Hz \(p99 < [^)]*\): ).*$')
 UNCOMPARED = frozenset({'.png', '.jpg', '.jpeg', '.gif', '.svg', '.pdf', '.mp4', '.webm'})
 SHOWN = 3  # differences shown per file
 
@@ -116,17 +120,22 @@ def normalise_lines(text: str, paths: Paths, deprecations: list[str],
 
 def html_rows(text: str) -> str:
     """Write each HTML table row as a Markdown one, so its timing columns are found alike."""
-    def row(line: str) -> str:
+    lines = []
+    for line in text.split('\n'):
         cells = re.findall(r'<t[hd](?:\s[^>]*)?>(.*?)</t[hd]>', line)
-        header = '\n' if '<th' in line else ''  # a new table starts
-        return f'{header}| ' + ' | '.join(cells) + ' |' if cells else line
-    return '\n'.join(row(line) for line in text.split('\n'))
+        if cells:
+            lines += [''] if '<th' in line else []  # a new table starts
+            lines.append('| ' + ' | '.join(cells) + ' |')
+        elif not re.fullmatch(r'\s*(</?(table|thead|tbody|tfoot)(\s[^>]*)?>\s*)+', line):
+            lines.append(line)  # a line between a table's rows is only its structure
+    return '\n'.join(lines)
 
 
 def mask_timing_phrases(line: str) -> str:
-    """Mask the durations on a line that speaks of time taken, and the load-dependent phrases."""
+    """Mask a timing line's durations, the load-dependent phrases, the verdicts on step times."""
     if TIMING_LINE.search(line):
         line = DURATION.sub(MASK, line)
+    line = VERDICT.sub(lambda m: (m.group(1) or m.group(3)) + MASK, line)
     return VARYING.sub(lambda m: re.sub(r'\d+(\.\d+)?', MASK, m.group()), line)
 
 
@@ -216,7 +225,7 @@ def load_json(path: Path, paths: Paths) -> Any:
     """Read a JSON, JSON Lines or YAML file, masked."""
     if path.suffix in ('.yaml', '.yml'):
         return mask_json(yaml.safe_load(path.read_text()), paths)
-    if path.suffix == '.jsonl':
+    if path.suffix in ('.jsonl', '.journal'):  # a journal: Optuna's, one JSON per line
         return [mask_json(json.loads(line), paths)
                 for line in path.read_text().splitlines() if line.strip()]
     return mask_json(json.loads(path.read_text()), paths)
@@ -251,7 +260,7 @@ def diff_file(old: Path, new: Path, paths: tuple[Paths, Paths], outcome: Outcome
     if suffix in UNCOMPARED:
         outcome.uncompared += 1
         return []
-    if suffix in ('.json', '.jsonl', '.yaml', '.yml'):
+    if suffix in ('.json', '.jsonl', '.journal', '.yaml', '.yml'):
         return diff_json(load_json(old, paths[0]), load_json(new, paths[1]))
     if suffix == '.csv':
         left, right = load_csv(old, paths[0]), load_csv(new, paths[1])
