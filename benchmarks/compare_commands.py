@@ -13,11 +13,14 @@ are listed apart, not as a difference; a changed `--help` text is listed, not co
 and `converge` take minutes at their smallest: only their errors are in the list, the runs
 themselves with --long.
 
-    .venv/bin/python benchmarks/compare_commands.py record /tmp/before     # ~6 min on two cores
+The commands run the cloth_bench_ros that this Python imports: set PYTHONPATH to the checkout
+under test (record.json and the last line of `record` name the package and its commit).
+
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/compare_commands.py record /tmp/before  # 3-6 min
     git checkout my-branch
-    .venv/bin/python benchmarks/compare_commands.py record /tmp/after
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/compare_commands.py record /tmp/after
     .venv/bin/python benchmarks/compare_commands.py compare /tmp/before /tmp/after
-    .venv/bin/python benchmarks/compare_commands.py list                   # the commands
+    .venv/bin/python benchmarks/compare_commands.py list                 # the commands
 """
 
 from __future__ import annotations

@@ -2,9 +2,12 @@
 Compare two records of benchmarks/compare_commands.py, command by command, after normalising.
 
 Normalised, and nothing else: the record's own folder, the repository, the interpreter and
-temporary folders (as <RECORD>, <REPO>, <PYTHON>, <TMP>); dates; wall-clock and step timings (JSON
-keys, CSV and table columns matching TIMING_NAME, a real-time run's counters, lines of timing);
-progress bars. A line with "is deprecated, use" is set apart as a deprecation note.
+temporary folders (as <RECORD>, <REPO>, <PYTHON>, <TMP>); dates; wall-clock and step timings (JSON,
+YAML and Optuna-journal keys, CSV, Markdown, HTML and fixed-width table columns matching
+TIMING_NAME or under a timing header, a real-time run's counters, durations on lines of timing,
+the load average) and the verdicts drawn from them (a deadline met, rank's recommendation);
+Optuna's random worker ids; progress bars. Figures are not compared (their numbers are in the
+files beside them). A line with "is deprecated, use" is set apart as a deprecation note.
 """
 
 from __future__ import annotations
