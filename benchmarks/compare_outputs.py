@@ -35,13 +35,14 @@ TIMING_NAME = re.compile(
     r'^(step_time|step_times|step_(mean|max|min|p\d+)|latency|send_lag|loadavg|load_avg|cpu_busy'
     r'|cpu_steal|cpu_s|real_time_factor|rtf|deadline_misses|p50|p99|p999|compute_s/s|date'
     r'|(due|sent|received)_ns|lat_p[\d.]+|lat_max|load_/_cores|skipped_targets|cd_realtime'
-    r'|meets_deadline|recommendation|datetime|worker_id)(_\w*)?$')
+    r'|meets_deadline|recommendation|datetime|worker_id|seconds)(_\w*)?$')
 WALL_NAME = re.compile(r'(^|_)(wall|elapsed)(_|$)')
 # a real-time run's record (a dict with one of these keys): its counters follow the wall clock
 REALTIME_RECORD = frozenset({'realtime', 'latency_p99'})
 REALTIME_COUNTS = frozenset({'skipped', 'lost', 'stepped', 'states', 'sent', 'realtime'})
 # a text table's header over timing columns (masked in the rows under it), and those columns
 TIMING_HEADER = re.compile(r'\bstep mean\b|\bp50\b.*\bp99\b')
+SECONDS_HEADER = re.compile(r'^run +settings +s +hang mm')
 TIMING_COLUMN = frozenset({'step', 'lat', 'p50', 'p99', 'wall', 'elapsed'})
 RESULT_COLUMN = frozenset({'status', 'cd', 'hd', 'cd_d', 'hd_d', 'l_s', '(m)', 'lockstep'})
 DATE = re.compile(r'\d{4}-\d{2}-\d{2}([T _]\d{2}[:\-]\d{2}([:\-]\d{2}(\.\d+)?)?)?')
@@ -94,7 +95,7 @@ def normalise_lines(text: str, paths: Paths, deprecations: list[str],
         return [paths.text(line) for line in text.split('\n') if DEPRECATION not in line]
     lines = []
     previous = ''
-    spans: tuple[int, list[tuple[int, int]]] | None = None  # a fixed-width table's columns
+    spans: Spans | None = None  # a fixed-width table's columns
     cells: set[int] = set()  # a Markdown table's timing columns
     for raw in text.replace('\r\n', '\n').split('\n'):
         line = paths.text(raw.rsplit('\r', 1)[-1])  # a progress bar redraws with \r
@@ -109,7 +110,8 @@ def normalise_lines(text: str, paths: Paths, deprecations: list[str],
                 line = '|'.join(f' {MASK} ' if i in cells else c for i, c in enumerate(row))
         elif not line.strip():
             spans, cells = None, set()
-        elif TIMING_HEADER.search(line) and not re.search(r'(^|\s)[-+]?\.?\d', line):
+        elif (TIMING_HEADER.search(line) or SECONDS_HEADER.search(line)) and not re.search(
+                r'(^|\s)[-+]?\.?\d', line):
             spans = _header_spans(line)
         elif spans is not None and re.search(r'[:;]', line):
             spans = None  # the table's legend
@@ -142,20 +144,25 @@ def mask_timing_phrases(line: str) -> str:
     return VARYING.sub(lambda m: re.sub(r'\d+(\.\d+)?', MASK, m.group()), line)
 
 
-def _header_spans(header: str) -> tuple[int, list[tuple[int, int]]]:
-    """Where the header's timing columns start, and the spans of result columns after it."""
+Spans = tuple[int, list[tuple[int, int]], set[int]]
+
+
+def _header_spans(header: str) -> Spans:
+    """Where the timing columns start, result columns after that, and lone timing columns' ends."""
     words = [(m.start(), m.end(), m.group()) for m in re.finditer(r'\S+', header)]
+    if SECONDS_HEADER.search(header):  # converge's: one right-aligned column of wall seconds
+        return len(header) + 1000, [], {e for _, e, w in words if w == 's'}
     start = next((s for s, _, w in words if w.lower() in TIMING_COLUMN), len(header))
-    return start, [(s, e) for s, e, w in words if s >= start and w.lower() in RESULT_COLUMN]
+    return start, [(s, e) for s, e, w in words if s >= start and w.lower() in RESULT_COLUMN], set()
 
 
-def _mask_columns(line: str, spans: tuple[int, list[tuple[int, int]]]) -> str:
-    """Mask the row's words from the timing columns on, except those under a result column."""
-    start, kept = spans
+def _mask_columns(line: str, spans: Spans) -> str:
+    """Mask the row's words from the timing columns on (but results) and in lone ones."""
+    start, kept, lone_ends = spans
     out = line
     for match in reversed(list(re.finditer(r'\S+', line))):
-        if match.end() > start and not any(
-                match.start() < end and begin < match.end() for begin, end in kept):
+        under_result = any(match.start() < end and begin < match.end() for begin, end in kept)
+        if (match.end() > start and not under_result) or match.end() in lone_ends:
             out = out[:match.start()] + MASK.ljust(match.end() - match.start()) + out[match.end():]
     return out
 
@@ -248,7 +255,7 @@ def diff_npz(old: Path, new: Path) -> list[str]:
     """Arrays that differ, bit for bit (NaN equal to NaN)."""
     with np.load(old, allow_pickle=False) as a, np.load(new, allow_pickle=False) as b:
         found = [f'{k}: only in one' for k in sorted(set(a.files) ^ set(b.files))]
-        for key in sorted(set(a.files) & set(b.files)):
+        for key in sorted(k for k in set(a.files) & set(b.files) if not is_timing(k)):
             x, y = a[key], b[key]
             if x.shape != y.shape or x.dtype != y.dtype:
                 found.append(f'{key}: {x.dtype}{x.shape} -> {y.dtype}{y.shape}')
