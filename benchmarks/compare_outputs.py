@@ -57,6 +57,8 @@ VARYING = re.compile(r'\d+ start-up objects frozen|[\d.]+ h of cell compute'
                      r'|; [\d.]+ (s|min|h);')
 VERDICT = re.compile(r'(deadline )(met|not met)|( at [\d.]+ Hz \(p99 < [^)]*\): ).*$')
 UNCOMPARED = frozenset({'.png', '.jpg', '.jpeg', '.gif', '.svg', '.pdf', '.mp4', '.webm'})
+# Logs of other programs' own chatter (Dask's workers: heartbeats, shutdown races): not an output.
+UNCOMPARED_NAMES = frozenset({'workers.log'})
 SHOWN = 3  # differences shown per file
 
 
@@ -178,7 +180,8 @@ def mask_json(value: Any, paths: Paths) -> Any:
     """Return the value with timing keys masked and paths normalised, recursively."""
     if isinstance(value, dict):
         realtime = not REALTIME_RECORD.isdisjoint(value)
-        return {k: MASK if is_timing(k) or (realtime and k in REALTIME_COUNTS)
+        return {paths.text(k) if isinstance(k, str) else k:  # keys can hold paths too
+                MASK if is_timing(k) or (realtime and k in REALTIME_COUNTS)
                 else mask_json(v, paths) for k, v in value.items()}
     if isinstance(value, list):
         return [mask_json(v, paths) for v in value]
@@ -267,7 +270,7 @@ def diff_npz(old: Path, new: Path) -> list[str]:
 def diff_file(old: Path, new: Path, paths: tuple[Paths, Paths], outcome: Outcome) -> list[str]:
     """One output file's differences, by its kind."""
     suffix = old.suffix.lower()
-    if suffix in UNCOMPARED:
+    if suffix in UNCOMPARED or old.name in UNCOMPARED_NAMES:
         outcome.uncompared += 1
         return []
     if suffix in ('.json', '.jsonl', '.journal', '.yaml', '.yml'):
