@@ -110,7 +110,7 @@ def cmd_hil(args: argparse.Namespace) -> int:
     from cloth_bench_ros.hil.layout import resolve_layout
     from cloth_bench_ros.studies.cells import set_label, set_values
     from cloth_bench_ros.studies.cloth import study_inputs
-    from cloth_bench_ros.studies.sweep import config_label
+    from cloth_bench_ros.sweep.study import config_label
 
     if args.budget is None:
         args.budget = hil.HIL_DEADLINE_BUDGET
@@ -254,7 +254,7 @@ def _export_recommended(args: argparse.Namespace) -> int:
         recommendation_yaml,
     )
     from cloth_bench_ros.safe_io import atomic_write_text
-    from cloth_bench_ros.studies.sweep import load_rows
+    from cloth_bench_ros.sweep.study import load_rows
 
     if not args.settings:
         raise UserError(

@@ -14,7 +14,7 @@ from cloth_bench_ros.studies.errors import StudyInterrupted
 
 def trials_value(text: str, label: str = '--trials') -> int:
     """--trials: a count >= 1, or auto (the study's AUTO)."""
-    from cloth_bench_ros.studies.identify import AUTO
+    from cloth_bench_ros.identify.study import AUTO
 
     if text.strip().lower() == 'auto':
         return AUTO
@@ -103,7 +103,7 @@ def _trial_bag(bag: Path, args: argparse.Namespace, out: Path, task: str) -> Pat
     or a --start-time: the recording is one trial); the trial is written under `out`.
     """
     from cloth_bench_ros.data import BagReader
-    from cloth_bench_ros.studies.rank_trials import prepare_trials
+    from cloth_bench_ros.rank.trials import prepare_trials
 
     with BagReader(bag) as reader:
         if reader.trial is not None:
@@ -123,7 +123,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from cloth_bench_ros.engines.presets import load_preset
     from cloth_bench_ros.paths import bundled_bag
     from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses, mesh_choice
-    from cloth_bench_ros.studies.identify import identify, IdentifySpec, JOURNAL_FILE, TRIALS_FILE
+    from cloth_bench_ros.identify.study import identify, IdentifySpec, JOURNAL_FILE, TRIALS_FILE
 
     from cloth_bench_ros.cli.run import recordings_motions
     from cloth_bench_ros.core.task_data import load_task

@@ -77,10 +77,11 @@ def cmd_rank(args: argparse.Namespace) -> int:
     """Run the protocol, print the table and its sentences, write rank.json."""
     from cloth_bench_ros.cli.run import recordings_motions
     from cloth_bench_ros.core.task_data import load_task
-    from cloth_bench_ros.report.rank import rank_answer, rank_lines, rank_table
+    from cloth_bench_ros.rank.answer import rank_answer
+    from cloth_bench_ros.report.rank import rank_lines, rank_table
     from cloth_bench_ros.studies.cloth import cloth_choice
-    from cloth_bench_ros.studies.rank import CELLS_FILE, DEFAULT_ENTRANTS, run_rank, RankSpec
-    from cloth_bench_ros.studies.rank_trials import recordings_of
+    from cloth_bench_ros.rank.study import CELLS_FILE, DEFAULT_ENTRANTS, run_rank, RankSpec
+    from cloth_bench_ros.rank.trials import recordings_of
 
     entrants = args.engine or list(DEFAULT_ENTRANTS)
     fixed = common.engine_overrides(args.set, sorted({e for e, _ in entrants}))

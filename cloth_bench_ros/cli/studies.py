@@ -173,14 +173,14 @@ def say_fitted_elsewhere(cells: list, presets: Path | None) -> None:
 
 def scores_every_metric(args: argparse.Namespace) -> bool:
     """Return whether a study's cells need every metric: asked for, or --metric is not CD/HD."""
-    from cloth_bench_ros.studies.objective import OBJECTIVES
+    from cloth_bench_ros.identify.objective import OBJECTIVES
 
     return bool(getattr(args, 'all_metrics', False)) or args.metric not in OBJECTIVES
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run a sweep's cells on the executor, resuming what is done."""
-    from cloth_bench_ros.studies import sweep as sw
+    from cloth_bench_ros.sweep import study as sw
 
     settings = args.mode == 'settings'
     engines = validation.unique(
@@ -361,7 +361,7 @@ def cmd_cross_reference(args: argparse.Namespace) -> int:
     """Score every engine against both synthetic references on the executor; print the table."""
     from cloth_bench_ros.report.cross_reference import cross_reference_markdown
     from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
-    from cloth_bench_ros.studies import sweep as sw
+    from cloth_bench_ros.sweep import study as sw
     from cloth_bench_ros.studies.cross_reference import cross_reference_cells, DEFAULT_ENTRANTS
 
     available = common.available_engines()

@@ -55,7 +55,7 @@ from cloth_bench_ros.report.tables import (
     table3,
     timing_table,
 )
-from cloth_bench_ros.studies.aggregate import finite
+from cloth_bench_ros.sweep.aggregate import finite
 import numpy as np
 
 

@@ -15,13 +15,13 @@ from cloth_bench_ros.report.selections import (
     engine_label,
     engines_of,
     metric_name,
-    pareto_front,
     rates_of,
 )
-from cloth_bench_ros.studies.aggregate import (
+from cloth_bench_ros.sweep.aggregate import (
     compute_per_sim_second,
     finite,
     group,
+    pareto_front,
     stat,
 )
 from cloth_bench_ros.validation import parse_grid

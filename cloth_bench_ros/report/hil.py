@@ -26,7 +26,7 @@ from cloth_bench_ros.report.blocks import (
 )
 from cloth_bench_ros.report.selections import engine_label, metric_name
 from cloth_bench_ros.report.selections import fmt_fixed as _fmt
-from cloth_bench_ros.studies.recommend import (
+from cloth_bench_ros.sweep.recommend import (
     DEADLINE_BUDGET,
     meets_deadline,
     recommend_for_rate,

@@ -18,10 +18,11 @@ from typing import Any
 
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.metric_choice import metric as metric_of
+from cloth_bench_ros.rank.answer import deadline_ms
 from cloth_bench_ros.report.blocks import (
     Document, figure_block, heading, paragraph, table_block, write_document,
 )
-from cloth_bench_ros.report.rank import deadline_ms, rank_lines, rank_table
+from cloth_bench_ros.report.rank import rank_lines, rank_table
 
 RANK_FILE = 'rank.json'
 

@@ -84,7 +84,7 @@ def cross_reference_blocks(rows: Sequence[dict], metric: str = DEFAULT_METRIC) -
         ranking_statements,
     )
     from cloth_bench_ros.report.ranking import ranking_table
-    from cloth_bench_ros.studies.ranking_stats import REPLICATES
+    from cloth_bench_ros.rank.ranking import REPLICATES
 
     xref = cross_reference_section(rows, metric)
     if xref is None:

@@ -12,7 +12,7 @@ from typing import Sequence
 
 from cloth_bench_ros.report.figures import plain_log, plt, save_figure
 from cloth_bench_ros.report.selections import ENGINE_COLOR, engine_label, engines_of, FPS
-from cloth_bench_ros.studies.aggregate import finite, group
+from cloth_bench_ros.sweep.aggregate import finite, group
 import numpy as np
 
 

@@ -26,19 +26,12 @@ from typing import Any, Mapping
 
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.identify.errors import ProblemChanged
 
 PROBLEM_FILE = 'problem.json'
 # How a changed key is named to the user (others: the key itself).
 LABELS = {'engine_version': 'engine version', 'fixed': 'fixed values', 'preset': 'preset values',
           'tasks': 'task file', 'cloth_mesh': 'cloth mesh'}
-
-
-class ProblemChanged(InputError):
-    """An output's journal was fitted to another problem; `changed` names what changed."""
-
-    def __init__(self, message: str, changed: str) -> None:
-        super().__init__(message)
-        self.changed = changed
 
 
 def study_key(spec: Any) -> str:
@@ -102,7 +95,7 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
     """
     from cloth_bench_ros.data.bag_layout import fingerprint
     from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.studies.objective import bag_task
+    from cloth_bench_ros.identify.objective import bag_task
     from cloth_bench_ros.studies.recording import file_sha256, task_record
     from optuna.distributions import distribution_to_json
 

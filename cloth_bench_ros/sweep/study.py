@@ -26,7 +26,6 @@ from typing import Sequence
 from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.core.trajectory import SUFFIX_TASK
 from cloth_bench_ros.engines.presets import PresetSet
-
 # re-exported: the studies' one vocabulary
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
@@ -50,12 +49,6 @@ from cloth_bench_ros.studies.cells import (  # noqa: F401
     with_inputs,
 )
 from cloth_bench_ros.studies.dask_executor import default_workers, open_client, run_tasks
-from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
-    parse_grid,
-    parse_overrides,
-    parse_settings_axes,
-    parse_value,
-)
 from cloth_bench_ros.studies.results import (  # noqa: F401
     append_row,
     bag_fingerprint,
@@ -73,6 +66,12 @@ from cloth_bench_ros.studies.results import (  # noqa: F401
     with_kept_scoring,
 )
 from cloth_bench_ros.studies.run_config import RunConfig
+from cloth_bench_ros.sweep.parsing import (  # noqa: F401  (re-exported)
+    parse_grid,
+    parse_overrides,
+    parse_settings_axes,
+    parse_value,
+)
 
 # -------------------------------------------------------------------------------------- rows
 

@@ -1,5 +1,5 @@
 """
-Simulations that the folds of one ranking share (studies.rank's identifications).
+Simulations that the folds of one ranking share (rank.study's identifications).
 
 A trial's simulation depends on the engine, its parameters, the seed, the rate, the mesh and the
 cloth, never on the recording it is scored against: every trial of a cloth and task is driven
@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from cloth_bench_ros.engines.settle import FULL
-from cloth_bench_ros.studies.objective import Trial
+from cloth_bench_ros.identify.objective import Trial
 import numpy as np
 
 
@@ -183,7 +183,7 @@ def _key(trial: Trial) -> str:
     Every field but the bags and the trial's labels, and the engine's version, preset and device
     (another project or engine version, or another device, simulates again).
     """
-    from cloth_bench_ros.studies.identify_problem import simulated_model
+    from cloth_bench_ros.identify.problem import simulated_model
     from cloth_bench_ros.studies.recording import inputs_key
 
     fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='', objective='cd'))

@@ -17,9 +17,9 @@ import platform
 from typing import Any
 
 from cloth_bench_ros.core.cloth_size import BENCHMARK_AREA, cloth_record, is_benchmark, size_text
+from cloth_bench_ros.identify.curve import best_value, convergence, importance
 from cloth_bench_ros.options import FLAGS
 from cloth_bench_ros.studies.cells import Cell, find_bags
-from cloth_bench_ros.studies.identify_curve import best_value, convergence, importance
 from cloth_bench_ros.studies.results import append_row, json_safe, load_rows, RESULTS_FILE
 import numpy as np
 
@@ -70,9 +70,9 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
 def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]:
     """Run the validation cells (resumable): per bag, preset against identified parameters."""
     from cloth_bench_ros.studies.dask_executor import run_tasks
-    from cloth_bench_ros.studies.objective import bag_task
+    from cloth_bench_ros.identify.objective import bag_task
     from cloth_bench_ros.studies.results import rewrite_rows, stale_cells
-    from cloth_bench_ros.studies.sweep import cells_to_run, error_row, run_cell
+    from cloth_bench_ros.sweep.study import cells_to_run, error_row, run_cell
 
     if spec.cloth_mesh or bag_task(str(spec.bag), spec.task):
         return validate_along(client, spec, fitted)
@@ -124,7 +124,7 @@ def validate_along(client: Any, spec: Any, fitted: dict) -> list[dict]:
 
     A task file, a recorded motion or a mesh: the sweep's cells run the shipped tasks on grids.
     """
-    from cloth_bench_ros.studies.objective import evaluate, trial_of
+    from cloth_bench_ros.identify.objective import evaluate, trial_of
 
     seeds = range(spec.seed + 1, spec.seed + 1 + spec.validate_seeds)
     if not seeds:
@@ -243,7 +243,7 @@ def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
 
 def _inputs(spec: Any) -> dict:
     """Return the task of each bag, the mesh, the gripper frames and the table height."""
-    from cloth_bench_ros.studies.objective import bag_task
+    from cloth_bench_ros.identify.objective import bag_task
     from cloth_bench_ros.studies.recording import inputs_record
 
     tasks = [bag_task(str(b), spec.task) for b in (spec.bag, *spec.also)]

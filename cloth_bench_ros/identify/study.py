@@ -33,8 +33,7 @@ import warnings
 
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.options import FLAGS, OPTIONS, SAMPLERS
-from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-exported)
+from cloth_bench_ros.identify.curve import (  # noqa: F401  (AUTO: re-exported)
     AUTO,
     AUTO_FIRST,
     AUTO_MAX_TRIALS,
@@ -45,14 +44,15 @@ from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-ex
     finite_or_inf,
     importance,
 )
-from cloth_bench_ros.studies.identify_problem import (
+from cloth_bench_ros.identify.objective import evaluate, Trial, trial_of
+from cloth_bench_ros.identify.problem import (
     check_problem,
     identify_problem,
     record_problem,
     study_key,
 )
-from cloth_bench_ros.studies.objective import evaluate, Trial, trial_of
-from cloth_bench_ros.studies.shared_simulations import SharedSimulations
+from cloth_bench_ros.identify.shared_simulations import SharedSimulations
+from cloth_bench_ros.options import FLAGS, OPTIONS, SAMPLERS
 
 DEFAULT_TRIALS = FLAGS['trials'].default
 DEFAULT_SPAN = 10.0
@@ -94,13 +94,13 @@ class IdentifySpec:
     validate_seeds: int = 5
     bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
     also: tuple[str, ...] = ()  # more training bags: the objective is the mean over all of them
-    # or prune, coarse: multi-fidelity (studies/identify_fidelity.py)
+    # or prune, coarse: multi-fidelity (identify/fidelity.py)
     fidelity: str = FLAGS['fidelity'].default
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, given: not fitted unless named in `params`
     settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
     pool: tuple[str, ...] = ()  # rank's: every trial of the group, scored by each simulation
-    shared: Path | None = None  # rank's: the folds' simulations (studies.shared_simulations)
+    shared: Path | None = None  # rank's: the folds' simulations (identify.shared_simulations)
     task: str = ''  # a task file for bags without their own (objective.TASK_IN_BAG)
     cloth_mesh: str = ''  # --cloth-mesh; '': the grid
     gripper_frames: str = ''  # recorded only (the task file holds the motion they gave)
@@ -284,7 +284,7 @@ def run_sampler(
     `shared` (a SharedSimulations): a simulation another fold ran already is not run again.
     """
     from cloth_bench_ros.studies.dask_executor import worker_slots
-    from cloth_bench_ros.studies.identify_fidelity import Pruner
+    from cloth_bench_ros.identify.fidelity import Pruner
     from distributed import KilledWorker
     from optuna.trial import TrialState
     from tqdm import tqdm
@@ -395,8 +395,8 @@ def identify(
     from cloth_bench_ros.engines.presets import load_preset, sized_params
     from cloth_bench_ros.safe_io import check_output_dir
     from cloth_bench_ros.studies.dask_executor import open_client
-    from cloth_bench_ros.studies.identify_fidelity import check_fidelity
-    from cloth_bench_ros.studies.identify_output import summarise, validate, write_outputs
+    from cloth_bench_ros.identify.fidelity import check_fidelity
+    from cloth_bench_ros.identify.output import summarise, validate, write_outputs
     from cloth_bench_ros.studies.results import ResultsLock
 
     start = time.perf_counter()

@@ -34,7 +34,7 @@ import numpy as np
 
 OBJECTIVES = ('cd', 'hd')
 FPS = 30.0
-# A trial bag of a recorded motion carries its task file (studies.rank_trials writes it): the
+# A trial bag of a recorded motion carries its task file (rank.trials writes it): the
 # engines follow it on that bag, and the bag's fingerprint changes with it.
 TASK_IN_BAG = 'task.yaml'
 _BAG_CACHE: dict[tuple, tuple] = {}
@@ -279,7 +279,7 @@ def _evaluate(trial: Trial) -> dict:
                 name: float(np.mean([metric.value(b, trial.primitive) for b in per_bag]))
                 for name, metric in METRICS.items()
             }
-        if trial.also:  # per bag too (studies.shared_simulations keeps them for other folds)
+        if trial.also:  # per bag too (identify.shared_simulations keeps them for other folds)
             out['per_bag'] = [_num(b[f'CD_{suffix}']) for b in per_bag]
             out['per_bag_hd'] = [_num(b[f'HD_{suffix}']) for b in per_bag]
             out['per_bag_frames'] = [int(b['frames_in_window']) for b in per_bag]

@@ -24,7 +24,7 @@ from cloth_bench_ros.core.deadline import (
     within_tolerance,
 )
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.studies.aggregate import compute_per_sim_second, finite, group, Stat, stat
+from cloth_bench_ros.sweep.aggregate import compute_per_sim_second, finite, group, Stat, stat
 from cloth_bench_ros.validation import parse_grid
 import numpy as np
 
