@@ -10,7 +10,7 @@ and `errors`. report/rank.py renders the answer.
 
 from cloth_bench_ros.rank.answer import deadline_ms, rank_answer
 from cloth_bench_ros.rank.errors import RankError, RankInputError
-from cloth_bench_ros.rank.statistics import (
+from cloth_bench_ros.rank.ranking import (
     HeldOutRun, order_agreement, rank_runs, Ranked, Ranking, ranking_record, REPLICATES,
 )
 from cloth_bench_ros.rank.study import CELLS_FILE, DEFAULT_ENTRANTS, RankSpec, run_rank
