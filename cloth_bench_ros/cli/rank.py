@@ -10,8 +10,14 @@ from cloth_bench_ros import options
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.cli.identify import FIDELITY, TRIALS
+from cloth_bench_ros.cli.run import recordings_motions
+from cloth_bench_ros.core.task_data import load_task
+from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import Option, OPTIONS
+from cloth_bench_ros.rank.answer import rank_answer
+from cloth_bench_ros.report.rank import rank_lines, rank_table
+from cloth_bench_ros.studies.cloth import cloth_choice
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 RESULT_FILE = 'rank.json'
@@ -19,8 +25,6 @@ RESULT_FILE = 'rank.json'
 
 def _entrant(text: str, label: str = '--engine') -> tuple[str, dict]:
     """--engine NAME or NAME:MODEL (newton:xpbd, newton:vbd)."""
-    from cloth_bench_ros.engines import engine_class
-
     name, _, model = text.strip().partition(':')
     engine_class(name)  # EngineError, one line, for an unknown engine
     return name, ({'model': model} if model else {})
@@ -75,13 +79,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def cmd_rank(args: argparse.Namespace) -> int:
     """Run the protocol, print the table and its sentences, write rank.json."""
-    from cloth_bench_ros.cli.run import recordings_motions
-    from cloth_bench_ros.core.task_data import load_task
-    from cloth_bench_ros.rank.answer import rank_answer
-    from cloth_bench_ros.report.rank import rank_lines, rank_table
-    from cloth_bench_ros.studies.cloth import cloth_choice
-    from cloth_bench_ros.rank.study import CELLS_FILE, DEFAULT_ENTRANTS, run_rank, RankSpec
-    from cloth_bench_ros.rank.trials import recordings_of
+    from cloth_bench_ros.rank.study import (  # lazy: Optuna, Dask, engines, +1.6 s on --help
+        CELLS_FILE, DEFAULT_ENTRANTS, RankSpec, run_rank,
+    )
+    from cloth_bench_ros.rank.trials import recordings_of  # lazy: bags, scipy, +0.9 s
 
     entrants = args.engine or list(DEFAULT_ENTRANTS)
     fixed = common.engine_overrides(args.set, sorted({e for e, _ in entrants}))

@@ -10,7 +10,16 @@ import time
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
+from cloth_bench_ros.core.cloth_size import targets_grasp_text
+from cloth_bench_ros.core.task_data import load_task
+from cloth_bench_ros.core.trajectory import sample_quintic, to_csv
+from cloth_bench_ros.engines import engine_class, known_engines
+from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere, load_preset
 from cloth_bench_ros.options import MOTION_FLAGS, Option, OPTIONS
+from cloth_bench_ros.paths import bundled_bag
+from cloth_bench_ros.safe_io import check_output_dir
+from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses, mesh_choice
+from cloth_bench_ros.studies.errors import ProcessRunError
 
 
 RUN_FLAGS: tuple[common.Flag, ...] = (
@@ -79,9 +88,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def _write_motion(args: argparse.Namespace, bag: Path, path: Path) -> tuple[Path, dict]:
     """Write the recorded grippers (--gripper-frames, else --targets-topic) as a task file."""
-    from cloth_bench_ros.data.bag_reader import BagReader
-    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, recorded_task
-    from cloth_bench_ros.data.recorded_motion import write_task
+    from cloth_bench_ros.data.bag_reader import BagReader  # lazy: the bag readers, +0.2 s
+    from cloth_bench_ros.data.recorded_motion import (  # lazy: the bag readers, +0.15 s
+        parse_gripper_frames, recorded_task, write_task,
+    )
 
     with BagReader(bag) as reader:
         doc = recorded_task(reader, args.topic or '', parse_gripper_frames(args.gripper_frames),
@@ -97,7 +107,9 @@ def recorded_motion(args: argparse.Namespace, bag: Path, out: Path) -> tuple[str
     --gripper-frames or --targets-topic name them, unless --motion task; the task file is
     written into the report directory.
     """
-    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, table_line
+    from cloth_bench_ros.data.recorded_motion import (  # lazy: the bag readers, +0.15 s
+        parse_gripper_frames, table_line,
+    )
 
     follow = args.motion != 'task' and (
         parse_gripper_frames(args.gripper_frames) or args.targets_topic
@@ -140,7 +152,7 @@ def recordings_motions(
 
 
 def _print_real(summary: dict) -> None:
-    from cloth_bench_ros.core.evaluation import accounting_line
+    from cloth_bench_ros.core.evaluation import accounting_line  # lazy: numba, +0.2 s on --help
 
     real = summary['real']
     acc = real['accounting']
@@ -153,7 +165,6 @@ def _print_real(summary: dict) -> None:
             f'start of the motion: bag time {start["bag_ns"] / 1e9:.3f} s, {start["method"]}, '
             f'precision +/- {start["precision_s"] * 1e3:.1f} ms'
         )
-    from cloth_bench_ros.core.cloth_size import targets_grasp_text
 
     size = tuple(summary['run'].get('cloth_size') or ()) or None
     grasp = targets_grasp_text(real.get('targets_grasp_m'), size)  # type: ignore[arg-type]
@@ -234,8 +245,6 @@ def window_line(summary: dict) -> str:
 
 def _checked_output(path: Path, option: str) -> Path:
     """Return an output directory that can be written, checked before the work starts."""
-    from cloth_bench_ros.safe_io import check_output_dir
-
     try:
         return check_output_dir(path)
     except common.ClothBenchError as exc:
@@ -244,14 +253,10 @@ def _checked_output(path: Path, option: str) -> Path:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Run the node graph on a bag and print the result table."""
-    from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere, load_preset
-    from cloth_bench_ros.paths import bundled_bag
-    from cloth_bench_ros.report.run_report import result_table
-    from cloth_bench_ros.studies.cloth import (
-        cloth_choice, cloth_lines, engine_masses, mesh_choice,
+    from cloth_bench_ros.report.run_report import result_table  # lazy: numba, +0.2 s on --help
+    from cloth_bench_ros.studies.run_pipeline import (  # lazy: the node graph, +0.7 s on --help
+        run_pipeline, RunConfig,
     )
-    from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 
     engines = validation.unique(args.engine or [OPTIONS['engine'].default], '--engine')
     for name in engines:
@@ -269,7 +274,6 @@ def cmd_run(args: argparse.Namespace) -> int:
         }
         for name in engines
     }
-    from cloth_bench_ros.core.task_data import load_task
 
     task = load_task(args.primitive, args.task)  # a bad task file: one line, before the run
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
@@ -324,8 +328,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         _checked_output(config.record_comparison, '--record-comparison')
     summary: dict | None
     if args.processes:
-        from cloth_bench_ros.studies.errors import ProcessRunError
-        from cloth_bench_ros.studies.processes import run_processes
+        from cloth_bench_ros.studies.processes import run_processes  # lazy: the node graph, +0.7 s
 
         try:
             summary = run_processes(config)
@@ -376,16 +379,15 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_trajectory(args: argparse.Namespace) -> int:
     """Print a task's motion (--task, else the shipped one of --primitive) as CSV."""
-    from cloth_bench_ros.core.task_data import load_task
-    from cloth_bench_ros.core.trajectory import sample_quintic, to_csv
-
     sys.stdout.write(to_csv(sample_quintic(load_task(args.primitive, args.task), args.rate)))
     return 0
 
 
 def cmd_motion(args: argparse.Namespace) -> int:
     """Write a recording's gripper motion as a task file."""
-    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, table_line
+    from cloth_bench_ros.data.recorded_motion import (  # lazy: the bag readers, +0.15 s
+        parse_gripper_frames, table_line,
+    )
 
     if not parse_gripper_frames(args.gripper_frames) and not args.targets_topic:
         raise UserError('motion: give the grippers with --gripper-frames LEFT,RIGHT or '
@@ -399,8 +401,7 @@ def cmd_motion(args: argparse.Namespace) -> int:
 
 def cmd_engines(args: argparse.Namespace) -> int:
     """List the engines; with --warm, compile what makes their first run slow."""
-    from cloth_bench_ros.core.surface_metrics import compile_kernels
-    from cloth_bench_ros.engines import engine_class, known_engines
+    from cloth_bench_ros.core.surface_metrics import compile_kernels  # lazy: numba, +0.2 s
 
     print(f'{"engine":<10} {"available":<10} {"version":<10} reason')
     for info in known_engines():

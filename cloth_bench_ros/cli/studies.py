@@ -8,8 +8,10 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
+from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import FLAGS, Option, OPTIONS
+from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 TOLERANCE_REL = FLAGS['tolerance_rel'].default  # settings recommendation: CD within this ...
@@ -159,8 +161,6 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def say_fitted_elsewhere(cells: list, presets: Path | None) -> None:
     """Print, per engine and device, one line where the cells' presets were fitted elsewhere."""
-    from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere
-
     fitted: dict[tuple[str, str], set] = {}
     for cell in cells:
         fitted.setdefault((cell.engine, cell.device), set()).add(
@@ -173,14 +173,14 @@ def say_fitted_elsewhere(cells: list, presets: Path | None) -> None:
 
 def scores_every_metric(args: argparse.Namespace) -> bool:
     """Return whether a study's cells need every metric: asked for, or --metric is not CD/HD."""
-    from cloth_bench_ros.identify.objective import OBJECTIVES
+    from cloth_bench_ros.identify.objective import OBJECTIVES  # lazy: the engines, +0.3 s
 
     return bool(getattr(args, 'all_metrics', False)) or args.metric not in OBJECTIVES
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run a sweep's cells on the executor, resuming what is done."""
-    from cloth_bench_ros.sweep import study as sw
+    from cloth_bench_ros.sweep import study as sw  # lazy: Dask, the node graph, +1.6 s
 
     settings = args.mode == 'settings'
     engines = validation.unique(
@@ -275,7 +275,7 @@ def render(
     metric: str = DEFAULT_METRIC,
 ) -> int:
     """Render the report of `results` into `out` and print its headline tables."""
-    from cloth_bench_ros.report.document import report_directory
+    from cloth_bench_ros.report.document import report_directory  # lazy: matplotlib, +2.3 s
 
     outcome = report_directory(
         Path(results), out, stress, rate, cloth, tol_rel, tol_abs, metric=metric
@@ -316,8 +316,10 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_stress(args: argparse.Namespace) -> int:
     """Run the stress suite and print which cases diverged."""
-    from cloth_bench_ros.studies.stress import run_suite, stress_table, verdict
-    from cloth_bench_ros.studies.stress_cases import select_cases
+    from cloth_bench_ros.studies.stress import (  # lazy: Dask, +0.9 s on --help
+        run_suite, stress_table, verdict,
+    )
+    from cloth_bench_ros.studies.stress_cases import select_cases  # lazy: engines, +0.7 s
 
     available = common.available_engines()
     engines = validation.unique(
@@ -359,10 +361,13 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
 def cmd_cross_reference(args: argparse.Namespace) -> int:
     """Score every engine against both synthetic references on the executor; print the table."""
-    from cloth_bench_ros.report.cross_reference import cross_reference_markdown
-    from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
-    from cloth_bench_ros.sweep import study as sw
-    from cloth_bench_ros.studies.cross_reference import cross_reference_cells, DEFAULT_ENTRANTS
+    from cloth_bench_ros.report.cross_reference import (  # lazy: +0.8 s on --help
+        cross_reference_markdown,
+    )
+    from cloth_bench_ros.studies.cross_reference import (  # lazy: engines, +0.8 s on --help
+        cross_reference_cells, DEFAULT_ENTRANTS,
+    )
+    from cloth_bench_ros.sweep import study as sw  # lazy: Dask, the node graph, +1.6 s
 
     available = common.available_engines()
     entrants = [(e, o) for e, o in DEFAULT_ENTRANTS if e in available]

@@ -26,9 +26,21 @@ from pathlib import Path
 import time
 from typing import Any
 
+from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
+from cloth_bench_ros.core.cloth_size import grasp_width
+from cloth_bench_ros.core.evaluation import OnlineEvaluator
+from cloth_bench_ros.core.phase import first_table_contact
+from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
+from cloth_bench_ros.core.task_data import load_task
+from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.data import BagReader
+from cloth_bench_ros.data.bag_reader import decode_cloud
 from cloth_bench_ros.data.errors import BagError
+from cloth_bench_ros.engines import make_engine
+from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.engines.settle import FULL, Settler
 from cloth_bench_ros.errors import ClothBenchError, one_line
+from cloth_bench_ros.metric_choice import METRICS
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
@@ -97,11 +109,6 @@ def bag_clouds(
     The worker keeps the `keep` bags used last: a trial scored on more bags than the cache held
     would decode every one of them again each trial.
     """
-    from cloth_bench_ros.core.phase import first_table_contact
-    from cloth_bench_ros.core.pointcloud2 import drop_nan
-    from cloth_bench_ros.data import BagReader
-    from cloth_bench_ros.data.bag_reader import decode_cloud
-
     st = os.stat(bag) if os.path.isfile(bag) else os.stat(Path(bag) / 'metadata.yaml')
     key = (str(Path(bag).resolve()), st.st_mtime_ns, st.st_size)
     if key not in _BAG_CACHE:
@@ -211,14 +218,6 @@ def _evaluate(trial: Trial) -> dict:
     }
     engine = None
     try:
-        from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
-        from cloth_bench_ros.core.cloth_size import grasp_width
-        from cloth_bench_ros.core.pointcloud2 import as_carried
-        from cloth_bench_ros.core.task_data import load_task
-        from cloth_bench_ros.core.trajectory import full_targets
-        from cloth_bench_ros.engines import make_engine
-        from cloth_bench_ros.engines.presets import load_preset, sized_params
-
         size = trial.cloth_size
         task = load_task(trial.primitive, bag_task(trial.bag, trial.task) or None)
         targets = full_targets(task, trial.rate_hz, grasp_width(size))
@@ -273,8 +272,6 @@ def _evaluate(trial: Trial) -> dict:
             step_p99_ms=_num(m['step_time']['p99']) * 1e3,
         )
         if trial.all_metrics:
-            from cloth_bench_ros.metric_choice import METRICS
-
             out['metrics'] = {
                 name: float(np.mean([metric.value(b, trial.primitive) for b in per_bag]))
                 for name, metric in METRICS.items()
@@ -327,8 +324,6 @@ def _scored_bag(
     trial: Trial, bag: str, offset: int, faces: np.ndarray | None, task: Any
 ) -> tuple[Any, list[int]]:
     """Return an evaluator core fed with a bag's frames of the window, and their stamps."""
-    from cloth_bench_ros.core.evaluation import OnlineEvaluator
-
     cut, frames = bag_clouds(bag, max(_BAG_CACHE_SIZE, 1 + len(trial.also)))
     core = OnlineEvaluator([trial.engine], task, offset, cut, FPS, faces=faces)
     used = [

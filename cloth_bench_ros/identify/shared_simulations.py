@@ -23,8 +23,12 @@ import math
 from pathlib import Path
 from typing import Any, Sequence
 
+from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.identify.objective import Trial
+from cloth_bench_ros.identify.problem import simulated_model
+from cloth_bench_ros.studies.recording import inputs_key
+from cloth_bench_ros.studies.results import append_row
 import numpy as np
 
 
@@ -101,7 +105,6 @@ class SharedSimulations:
                                           'wall_s')},
         }
         self.rows[key] = row
-        from cloth_bench_ros.studies.results import append_row
 
         append_row(self.path, row)
         return fold_result(trial, row, reused=False, names=self.names)
@@ -144,8 +147,6 @@ def split_pooled(pooled: Trial, result: dict, trials: Sequence[Trial]) -> list[d
 
 def bag_identity(bag: str) -> str:
     """Return a bag's path with its fingerprint (data.bag_layout: its files' names and data)."""
-    from cloth_bench_ros.data.bag_layout import fingerprint
-
     return f'{bag}|{fingerprint(Path(bag))}'
 
 
@@ -183,9 +184,6 @@ def _key(trial: Trial) -> str:
     Every field but the bags and the trial's labels, and the engine's version, preset and device
     (another project or engine version, or another device, simulates again).
     """
-    from cloth_bench_ros.identify.problem import simulated_model
-    from cloth_bench_ros.studies.recording import inputs_key
-
     fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='', objective='cd'))
     if fields['settle'] == FULL:  # as rows were keyed before the fast settle existed
         del fields['settle']

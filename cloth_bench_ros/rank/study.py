@@ -23,15 +23,18 @@ import json
 from pathlib import Path
 import shutil
 import sys
-from typing import Any, Callable, Sequence, TYPE_CHECKING
+from typing import Any, Callable, Sequence
 
 from cloth_bench_ros.core.cloth_size import cloth_record, grid_vertices
 from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
 from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.engines.settle import FULL
+from cloth_bench_ros.identify.errors import ProblemChanged
 from cloth_bench_ros.identify.objective import evaluate, OBJECTIVES, Trial
 from cloth_bench_ros.identify.problem import resolved_device, simulated_model
+from cloth_bench_ros.identify.shared_simulations import pool_cells, split_pooled
+from cloth_bench_ros.identify.study import identify, IdentifySpec, SUMMARY_FILE
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import FLAGS, OPTIONS
 from cloth_bench_ros.rank.errors import RankError
@@ -42,11 +45,13 @@ from cloth_bench_ros.rank.trials import (
     recordings_of,
     reference_error,
 )
+from cloth_bench_ros.safe_io import check_output_dir
 from cloth_bench_ros.studies.cloth import cloth_name
-from cloth_bench_ros.studies.recording import inputs_record
-
-if TYPE_CHECKING:
-    from cloth_bench_ros.studies.dask_executor import ClusterOnDemand
+from cloth_bench_ros.studies.dask_executor import ClusterOnDemand
+from cloth_bench_ros.studies.recording import inputs_key, inputs_record
+from cloth_bench_ros.studies.results import append_row, ResultsLock
+from distributed import as_completed
+from tqdm import tqdm
 
 DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
     ('mujoco', {}),
@@ -139,9 +144,6 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
     journal was fitted to another problem (identify.problem) is identified afresh. Every
     fold runs on the command's one cluster.
     """
-    from cloth_bench_ros.identify.study import identify, IdentifySpec, SUMMARY_FILE
-    from cloth_bench_ros.identify.errors import ProblemChanged
-
     bags = [t.bag for t in train]
     stamp = json.loads(json.dumps({
         'bags': bags, 'data': [fingerprint(Path(b)) for b in bags], 'trials': spec.trials,
@@ -184,8 +186,6 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
 
 def _inputs_key(spec: RankSpec, trial: RankTrial) -> str:
     """Return the trial's task and the mesh as a key part (their content hashes)."""
-    from cloth_bench_ros.studies.recording import inputs_key
-
     return inputs_key(trial.primitive, trial.task or spec.replay.task, spec.cloth_mesh)
 
 
@@ -230,11 +230,6 @@ def _run_cells(client: Any, left: list[tuple[str, Trial, dict]], path: Path, don
     that cannot run (status error) ends the command: exit 2 for input it refuses, and a bug in a
     worker is raised as it is (exit 1); either way it is never counted as a divergence.
     """
-    from cloth_bench_ros.studies.results import append_row
-    from cloth_bench_ros.identify.shared_simulations import pool_cells, split_pooled
-    from distributed import as_completed
-    from tqdm import tqdm
-
     bar = tqdm(total=len(left), desc='rank cells', unit='cell', disable=not progress,
                file=sys.stderr, dynamic_ncols=True)
 
@@ -281,10 +276,6 @@ def run_rank(
     Every identification and cell runs on one cluster (`scheduler`, or `workers` local processes),
     started when the first of them needs it.
     """
-    from cloth_bench_ros.safe_io import check_output_dir
-    from cloth_bench_ros.studies.dask_executor import ClusterOnDemand
-    from cloth_bench_ros.studies.results import ResultsLock
-
     out = check_output_dir(spec.output)
     with ResultsLock(out, 'rank'), ClusterOnDemand(scheduler, workers,
                                                    out / 'workers.log') as cluster:
