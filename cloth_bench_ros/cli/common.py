@@ -180,17 +180,16 @@ def replay_params(args: argparse.Namespace) -> dict:
 
 def replay_options(args: argparse.Namespace, task: str = '') -> Any:
     """Return the ReplayOptions of the recording options, as the recorder node builds them."""
-    from cloth_bench_ros.data.alignment import SearchSettings  # lazy: scipy, +0.6 s on --help
-    from cloth_bench_ros.data.replay import ReplayOptions  # lazy: +1.1 s on --help
+    from cloth_bench_ros.data import alignment, replay  # lazy: scipy, numba, +1.1 s on --help
 
     p = replay_params(args)
-    return ReplayOptions(
+    return replay.ReplayOptions(
         cloth=args.cloth, primitive=args.primitive, task=task or args.task or '',
         motion=p['motion'], change_of_phase_frame=args.change_of_phase_frame, topic=p['topic'],
         start_time=p['start_time'], targets_topic=p['targets_topic'],
         transform=tuple(p['transform']) if 'transform' in p else None, clean=p['clean'],
         voxel=p['voxel'], table_plane=p['table_plane'], rate_hz=float(args.rate),
-        search=SearchSettings(window=p['align_window'], coarse_step=p['align_step']),
+        search=alignment.SearchSettings(window=p['align_window'], coarse_step=p['align_step']),
         trial=p['trial'], align=p['align'],
     )
 

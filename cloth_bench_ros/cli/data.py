@@ -10,7 +10,6 @@ from cloth_bench_ros.cli import common
 from cloth_bench_ros.core.cleaning import scene_cleaning
 from cloth_bench_ros.options import Option
 from cloth_bench_ros.safe_io import check_output_dir
-from cloth_bench_ros.studies import reference_convergence as rc
 
 
 def _frame_or_detected(text: str, label: str) -> int | str:
@@ -171,7 +170,9 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 def cmd_converge(args: argparse.Namespace) -> int:
     """Run a reference's convergence study on the executor; print and save its table."""
-    from cloth_bench_ros.studies.dask_executor import open_client, run_tasks  # lazy: Dask, +0.6 s
+    from cloth_bench_ros.studies import (  # lazy: Dask, the engines, +1.0 s on --help
+        dask_executor, reference_convergence as rc,
+    )
 
     available = common.available_engines()
     for engine in args.score or []:
@@ -193,8 +194,8 @@ def cmd_converge(args: argparse.Namespace) -> int:
     out = check_output_dir(args.output or f'results/convergence/{name}')
     runs = study.variants()
     print(f'cloth-bench converge: {len(runs)} runs of the {args.reference} reference -> {out}')
-    with open_client(args.scheduler, args.workers) as client:
-        study.run(out, lambda *a: run_tasks(client, *a))
+    with dask_executor.open_client(args.scheduler, args.workers) as client:
+        study.run(out, lambda *a: dask_executor.run_tasks(client, *a))
     rows = study.rows()
     rc.save(rows, study, out / 'convergence.json')
     print(rc.format_rows(rows))
@@ -211,13 +212,12 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 def cmd_bag_rewrite(args: argparse.Namespace) -> int:
     """Copy a bag into the current writer's layout, checking the messages are unchanged."""
-    from cloth_bench_ros.data import BagReader  # lazy: the bag readers, +0.2 s on --help
-    from cloth_bench_ros.data.bag_rewrite import rewrite_bag  # lazy: +0.3 s on --help
+    from cloth_bench_ros.data import bag_reader, bag_rewrite  # lazy: the bag readers, +0.3 s
 
-    counts = rewrite_bag(Path(args.src), Path(args.dst), args.change_of_phase_frame)
+    counts = bag_rewrite.rewrite_bag(Path(args.src), Path(args.dst), args.change_of_phase_frame)
     changed = ''
     if args.change_of_phase_frame is not None:
-        with BagReader(Path(args.dst)) as rewritten:
+        with bag_reader.BagReader(Path(args.dst)) as rewritten:
             trial = rewritten.trial
         frame = trial.change_of_phase_frame if trial is not None else None
         changed = f'; change of phase set to frame {frame}'

@@ -79,12 +79,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def cmd_rank(args: argparse.Namespace) -> int:
     """Run the protocol, print the table and its sentences, write rank.json."""
-    from cloth_bench_ros.rank.study import (  # lazy: Optuna, Dask, engines, +1.6 s on --help
-        CELLS_FILE, DEFAULT_ENTRANTS, RankSpec, run_rank,
-    )
-    from cloth_bench_ros.rank.trials import recordings_of  # lazy: bags, scipy, +0.9 s
+    from cloth_bench_ros.rank import study, trials  # lazy: Optuna, Dask, engines, +1.6 s
 
-    entrants = args.engine or list(DEFAULT_ENTRANTS)
+    entrants = args.engine or list(study.DEFAULT_ENTRANTS)
     fixed = common.engine_overrides(args.set, sorted({e for e, _ in entrants}))
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, fixed)
     load_task(args.primitive, args.task)  # a bad task file: one line, before the work
@@ -93,12 +90,12 @@ def cmd_rank(args: argparse.Namespace) -> int:
         raise UserError('--trial: rank scores every usable trial of each recording; --trial '
                         'picks the one that run scores or identify fits')
     out = Path(args.output) if args.output else Path('results') / 'rank'
-    bags = recordings_of(args.recordings)
+    bags = trials.recordings_of(args.recordings)
     tasks, motion_lines = recordings_motions(args, bags, out)
     # the split never simulates: its starts are fitted in the recordings (--align onset) or are
     # the recorded motions' first clouds
     replay = common.replay_options(args)
-    spec = RankSpec(
+    spec = study.RankSpec(
         [str(b) for b in bags], out, entrants, replay, args.trials, args.sampler, args.seeds,
         args.rate, args.rates, args.grid, args.metric, args.max_frames, fixed, args.fidelity,
         size, mass, tasks=tasks, cloth_mesh=args.cloth_mesh or '',
@@ -111,11 +108,11 @@ def cmd_rank(args: argparse.Namespace) -> int:
     for line in motion_lines:
         print(line)
     try:
-        raw = run_rank(spec, args.scheduler, args.workers, progress=not args.no_progress)
+        raw = study.run_rank(spec, args.scheduler, args.workers, progress=not args.no_progress)
     except KeyboardInterrupt:
         raise StudyInterrupted(
             f'rank interrupted: every finished identification (journals under {out}/identify) '
-            f'and cell ({out / CELLS_FILE}) is kept; run the same command again to resume'
+            f'and cell ({out / study.CELLS_FILE}) is kept; run the same command again to resume'
         ) from None
     result = rank_answer(raw)
     print(rank_table(result).markdown())

@@ -316,20 +316,17 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_stress(args: argparse.Namespace) -> int:
     """Run the stress suite and print which cases diverged."""
-    from cloth_bench_ros.studies.stress import (  # lazy: Dask, +0.9 s on --help
-        run_suite, stress_table, verdict,
-    )
-    from cloth_bench_ros.studies.stress_cases import select_cases  # lazy: engines, +0.7 s
+    from cloth_bench_ros.studies import stress, stress_cases  # lazy: Dask, engines, +0.9 s
 
     available = common.available_engines()
     engines = validation.unique(
         args.engine or [e for e in ('mujoco', 'bullet', 'newton') if e in available], '--engine'
     )
     presets = common.preset_set(args)
-    cases = select_cases(
+    cases = stress_cases.select_cases(
         engines, args.case, args.max_wall_s, presets, args.task or '', args.cloth_mesh or ''
     )
-    if args.cloth_mesh and any(c.grid for c in select_cases(engines, args.case)):
+    if args.cloth_mesh and any(c.grid for c in stress_cases.select_cases(engines, args.case)):
         print(f'stress: the cases of their own grid are left out: --cloth-mesh {args.cloth_mesh} '
               'is the cloth of every case')
     if args.device is not None:  # Newton's cases on the device asked for
@@ -345,11 +342,11 @@ def cmd_stress(args: argparse.Namespace) -> int:
         return 0
     default_out = 'stress' if presets.is_default else f'stress_{Path(presets.name).name}'
     out = Path(args.output) if args.output else Path('results') / default_out
-    rows = run_suite(
+    rows = stress.run_suite(
         cases, out, args.workers, progress=not args.no_progress, scheduler=args.scheduler
     )
-    print(stress_table(rows).markdown())
-    for engine, diverged in verdict(rows).items():
+    print(stress.stress_table(rows).markdown())
+    for engine, diverged in stress.verdict(rows).items():
         n = sum(r['engine'] == engine for r in rows)
         print(
             f'{engine}: {len(diverged)} of {n} cases diverged'
