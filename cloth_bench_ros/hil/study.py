@@ -199,7 +199,7 @@ def lockstep_cd(config: HilConfig) -> float:
 
 def write_results(results: list[HilResult], out_dir: Path) -> Path:
     """Append each run's row to <out_dir>/hil.jsonl; its path."""
-    from cloth_bench_ros.sweep.study import append_row
+    from cloth_bench_ros.studies.results import append_row
 
     path = Path(out_dir) / 'hil.jsonl'
     for result in results:
@@ -239,7 +239,7 @@ def recommended(
     """
     from cloth_bench_ros.paths import share_dir
     from cloth_bench_ros.sweep.recommend import load_recommendations, recommend_for_rate
-    from cloth_bench_ros.sweep.study import load_rows
+    from cloth_bench_ros.studies.results import load_rows
 
     if settings is not None and Path(settings).exists():
         rec = recommend_for_rate(
