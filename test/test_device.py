@@ -18,7 +18,7 @@ from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.engines.newton_cloth import available_devices, NewtonCloth, resolve_device
 from cloth_bench_ros.engines.presets import fitted_device, load_preset, preset_set
 from cloth_bench_ros.identify.output import write_outputs
-from cloth_bench_ros.identify.study import IdentifySpec
+from cloth_bench_ros.identify.spec import IdentifySpec
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.studies.cells import Cell, paper_cells
 from cloth_bench_ros.studies.direct import run_direct

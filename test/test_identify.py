@@ -18,10 +18,10 @@ from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.identify.objective import evaluate, Trial
 from cloth_bench_ros.identify.problem import changed_keys, identify_problem, PROBLEM_FILE
+from cloth_bench_ros.identify.spec import IdentifySpec
 from cloth_bench_ros.identify.study import (
     budget_reached,
     identify,
-    IdentifySpec,
     JOURNAL_FILE,
     search_space,
 )

@@ -11,6 +11,7 @@ from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.cli.run import recordings_motions
 from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.identify.spec import IdentifySpec
 from cloth_bench_ros.options import Option
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses, mesh_choice
@@ -126,7 +127,7 @@ def _trial_bag(bag: Path, args: argparse.Namespace, out: Path, task: str) -> Pat
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, validate on held-out seeds, write the preset and print the outcome."""
     from cloth_bench_ros.identify.study import (  # lazy: Optuna, Dask, engines, +1.5 s on --help
-        identify, IdentifySpec, JOURNAL_FILE, TRIALS_FILE,
+        identify, JOURNAL_FILE, TRIALS_FILE,
     )
 
     load_task(args.primitive, args.task)  # a bad task file: one line, before the work

@@ -40,6 +40,7 @@ from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.engines.settle import FULL, Settler
 from cloth_bench_ros.errors import ClothBenchError, one_line
+from cloth_bench_ros.identify.spec import IdentifySpec
 from cloth_bench_ros.metric_choice import METRICS
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
@@ -82,7 +83,7 @@ class Trial:
 
 
 def trial_of(
-    spec: Any, params: dict, number: int, sampler: str, rung: dict | None = None
+    spec: IdentifySpec, params: dict, number: int, sampler: str, rung: dict | None = None
 ) -> Trial:
     """Return an IdentifySpec's trial of `params`; `rung`: the Pruner's rung fields, if any."""
     return Trial(

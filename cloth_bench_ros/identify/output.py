@@ -22,6 +22,7 @@ from cloth_bench_ros.engines import engine_class, engine_device
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.identify.curve import best_value, convergence, importance
 from cloth_bench_ros.identify.objective import bag_task, evaluate, trial_of
+from cloth_bench_ros.identify.spec import IdentifySpec
 from cloth_bench_ros.options import FLAGS
 from cloth_bench_ros.safe_io import atomic_write_text
 from cloth_bench_ros.studies.cells import Cell, find_bags
@@ -43,7 +44,7 @@ import yaml
 PRESETS_DIR = 'presets'
 
 
-def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
+def validation_cells(spec: IdentifySpec, fitted: dict) -> list[Cell]:
     """
     Return the validation cells: seeds other than the identification's, preset and identified.
 
@@ -84,7 +85,7 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
     return cells
 
 
-def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]:
+def validate(client: Any, spec: IdentifySpec, fitted: dict, progress: bool) -> list[dict]:
     """Run the validation cells (resumable): per bag, preset against identified parameters."""
     if spec.cloth_mesh or bag_task(str(spec.bag), spec.task):
         return validate_along(client, spec, fitted)
@@ -130,7 +131,7 @@ def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]
     return out
 
 
-def validate_along(client: Any, spec: Any, fitted: dict) -> list[dict]:
+def validate_along(client: Any, spec: IdentifySpec, fitted: dict) -> list[dict]:
     """
     Validate on the fitted bag's held-out seeds along its own task and cloth, as objective trials.
 
@@ -171,7 +172,7 @@ def bag_source(bag: Any, limit: int = 120) -> str:
     return head if len(head) <= limit else head[: limit - 3] + '...'
 
 
-def provenance_text(spec: Any, summary: dict, version: str) -> str:
+def provenance_text(spec: IdentifySpec, summary: dict, version: str) -> str:
     """Return the preset file's provenance: what was fitted against what, how, when and where."""
     params = ', '.join(f'{k} = {v:.6g}' for k, v in summary['params'].items())
     fixed = ', '.join(f'{k} = {v}' for k, v in spec.fixed.items() if k != 'device')
@@ -206,7 +207,7 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
     )
 
 
-def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
+def write_outputs(spec: IdentifySpec, base: dict, summary: dict) -> Path:
     """<output>/presets/<engine>.yaml (config/presets format) and <output>/identification.json."""
     version = engine_class(spec.engine).version() or 'unknown'
     values = {**base, **{k: float(v) for k, v in summary['params'].items()}}
@@ -240,7 +241,7 @@ def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
     return preset
 
 
-def _inputs(spec: Any) -> dict:
+def _inputs(spec: IdentifySpec) -> dict:
     """Return the task of each bag, the mesh, the gripper frames and the table height."""
     tasks = [bag_task(str(b), spec.task) for b in (spec.bag, *spec.also)]
     return inputs_record(spec.primitive, tasks, spec.cloth_mesh, spec.gripper_frames,
@@ -248,7 +249,7 @@ def _inputs(spec: Any) -> dict:
 
 
 def summarise(
-    spec: Any,
+    spec: IdentifySpec,
     space: dict,
     base: dict,
     before: dict,

@@ -31,6 +31,7 @@ from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.identify.errors import ProblemChanged
 from cloth_bench_ros.identify.objective import bag_task
+from cloth_bench_ros.identify.spec import IdentifySpec
 from cloth_bench_ros.safe_io import atomic_write_text, read_text_bounded
 from cloth_bench_ros.studies.cloth import cloth_name
 from cloth_bench_ros.studies.recording import file_sha256, task_record
@@ -42,7 +43,7 @@ LABELS = {'engine_version': 'engine version', 'fixed': 'fixed values', 'preset':
           'tasks': 'task file', 'cloth_mesh': 'cloth mesh'}
 
 
-def study_key(spec: Any) -> str:
+def study_key(spec: IdentifySpec) -> str:
     """Return the name of an IdentifySpec's studies in the journal, less the sampler."""
     other = spec.cloth_size is not None or spec.cloth_mass is not None  # its own study
     cloth = f'-{cloth_name(spec.cloth_size, spec.cloth_mass)}' if other else ''
@@ -85,7 +86,7 @@ def simulated_model(engine: str, cloth: str, primitive: str, cloth_size: Any = N
     return model
 
 
-def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
+def identify_problem(spec: IdentifySpec, space: dict, preset: dict) -> dict:
     """
     Return the problem an IdentifySpec identifies over `space` (name -> distribution), as JSON.
 
@@ -94,7 +95,7 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
     Not in it: the budget, the samplers, the cloth's size and mass, and rank's `pool` and
     `shared` (they change no value).
     """
-    bags = [Path(b) for b in (spec.bag, *spec.also)]
+    bags = [Path(spec.bag), *(Path(b) for b in spec.also)]
     return _json({
         'engine': spec.engine,
         'cloth': spec.cloth,
@@ -161,7 +162,7 @@ def _read_problems(path: Path) -> dict:
     return problems
 
 
-def check_problem(spec: Any, problem: dict, journal: Path) -> None:
+def check_problem(spec: IdentifySpec, problem: dict, journal: Path) -> None:
     """
     Refuse, in one line, to resume `journal` where it was fitted to another problem.
 
@@ -180,7 +181,7 @@ def check_problem(spec: Any, problem: dict, journal: Path) -> None:
             'changed); give another --output, or delete that folder to start afresh', changed)
 
 
-def record_problem(spec: Any, problem: dict, journal: Path) -> None:
+def record_problem(spec: IdentifySpec, problem: dict, journal: Path) -> None:
     """Write `problem` as the study's in `<output>/problem.json` (alone, where no journal is)."""
     path = spec.output / PROBLEM_FILE
     problems = _read_problems(path) if journal.exists() else {}

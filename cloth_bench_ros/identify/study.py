@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections import deque
 from contextlib import nullcontext
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import partial
 import json
 import math
@@ -33,7 +33,6 @@ import warnings
 
 from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.engines.presets import load_preset, sized_params
-from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.identify.curve import (  # noqa: F401  (AUTO: re-exported)
     AUTO,
@@ -56,7 +55,8 @@ from cloth_bench_ros.identify.problem import (
     study_key,
 )
 from cloth_bench_ros.identify.shared_simulations import SharedSimulations
-from cloth_bench_ros.options import FLAGS, OPTIONS, SAMPLERS
+from cloth_bench_ros.identify.spec import IdentifySpec
+from cloth_bench_ros.options import SAMPLERS
 from cloth_bench_ros.safe_io import check_output_dir
 from cloth_bench_ros.studies.dask_executor import open_client, worker_slots
 from cloth_bench_ros.studies.results import append_row, ResultsLock
@@ -72,8 +72,6 @@ try:
 except ImportError:  # optuna < 4
     from optuna.storages import JournalFileStorage as JournalBackend
 
-DEFAULT_TRIALS = FLAGS['trials'].default
-DEFAULT_SPAN = 10.0
 JOURNAL_FILE = 'study.journal'
 TRIALS_FILE = 'trials.jsonl'
 SUMMARY_FILE = 'identification.json'
@@ -87,42 +85,6 @@ DEFAULT_PARAMS = {
     'newton:vbd': ('mass', 'tri_stiffness', 'tri_damping', 'bending', 'friction'),
 }
 NOT_FITTED = ('timestep', 'substeps', 'solver_iterations')
-
-
-@dataclass
-class IdentifySpec:
-    """What to identify, against what, how; checked by `check()`."""
-
-    engine: str
-    cloth: str
-    primitive: str
-    bag: Path
-    output: Path
-    sampler: str = FLAGS['sampler'].default
-    trials: int = DEFAULT_TRIALS  # per sampler; AUTO: chosen by doubling (see budget_reached)
-    objective: str = 'cd'
-    params: Sequence[str] = ()
-    seed: int = 0
-    rate_hz: float = OPTIONS['rate_hz'].default
-    grid: tuple[int, int] | None = None
-    fixed: dict = field(default_factory=dict)  # overrides on top of the preset, not fitted
-    span: float = DEFAULT_SPAN
-    max_frames: int | None = None
-    batch: int | None = None  # trials in flight (default: the cluster's worker threads)
-    validate_seeds: int = 5
-    bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
-    also: tuple[str, ...] = ()  # more training bags: the objective is the mean over all of them
-    # or prune, coarse: multi-fidelity (identify/fidelity.py)
-    fidelity: str = FLAGS['fidelity'].default
-    cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
-    cloth_mass: float | None = None  # kg, given: not fitted unless named in `params`
-    settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
-    pool: tuple[str, ...] = ()  # rank's: every trial of the group, scored by each simulation
-    shared: Path | None = None  # rank's: the folds' simulations (identify.shared_simulations)
-    task: str = ''  # a task file for bags without their own (objective.TASK_IN_BAG)
-    cloth_mesh: str = ''  # --cloth-mesh; '': the grid
-    gripper_frames: str = ''  # recorded only (the task file holds the motion they gave)
-    table_z: float | None = None
 
 
 def default_params(engine: str, model: str | None = None) -> list[str]:
