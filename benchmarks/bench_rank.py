@@ -32,8 +32,8 @@ from cloth_bench_ros import cli  # noqa: E402
 from cloth_bench_ros.paths import bundled_bag  # noqa: E402
 
 GOAL_S = 30 * 60
-QUICK = ['--trials', '2', '--sampler', 'tpe', '--seeds', '1', '--grid', '6x8', '--rates', '100',
-         '--max-frames', '6']
+QUICK = ['--trials', '2', '--sampler', 'tpe', '--seeds', '1', '--grid', '6x8',
+         '--recommend-rate', '100', '--max-frames', '6']
 
 
 def recordings(root: Path) -> Path:

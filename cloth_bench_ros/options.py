@@ -7,7 +7,7 @@ from the one `Option` here. A flag's help shows the unit, the range and the defa
 
 OPTIONS are node parameters (most with a flag too); FLAGS are the command line's own, shared by
 several commands (--engine, --grid, --workers, --output, ...). A flag of one command only is
-declared beside its command, in cli/, as an `Option` too.
+declared in command_options.py, as an `Option` too; no default is written anywhere else.
 """
 
 from __future__ import annotations
@@ -159,7 +159,8 @@ OPTIONS = _declare(
     ),
     Option(
         'change_of_phase_frame', int, -1,
-        "last frame of the dynamic window (default: the bag's metadata, else none)",
+        "first frame left out of the dynamic window (default: the bag's metadata, else the "
+        'first table contact detected in the clouds)',
         flag='--change-of-phase-frame', low=0, high=validation.MAX_FRAME, unset=-1, metavar='N',
     ),
     Option(
@@ -225,7 +226,10 @@ OPTIONS = _declare(
 
 # The command line's own options, shared by several commands (cli/common.add_option).
 FLAGS = _declare(
-    Option('engines', str, None, 'engine (repeat for several)', flag='--engine', action='append'),
+    Option(
+        'engines', str, None, 'engine, or engine:model, e.g. newton:vbd (repeat for several)',
+        flag='--engine', action='append', metavar='ENGINE[:MODEL]',
+    ),
     Option(
         'grid', str, None, "cloth mesh NXxNZ vertices, e.g. 6x8 (default: the engine's)",
         flag='--grid', validate=validation.parse_grid,
@@ -272,7 +276,6 @@ FLAGS = _declare(
         'tolerance_abs', float, 0.002, '... or this many metres, whichever is larger',
         flag='--tolerance-abs', low=0.0, unit='m',
     ),
-    Option('quiet', bool, False, 'no progress bar', flag='--quiet', action='store_true'),
     Option(
         'settle', str, 'full', "the settle phase before the quintic part: full (the paper's, "
         'every target simulated) or fast (its final hold simulated for 0.3 s of 1 s; '
@@ -280,6 +283,11 @@ FLAGS = _declare(
     ),
     Option('overwrite', bool, False, 'replace what exists', flag='--overwrite',
            action='store_true'),
+    # checked on this machine by the command line (cli/common.device: Warp's devices)
+    Option(
+        'newton_device', str, None, "Newton's device: cpu, cuda, cuda:N or auto (default auto: "
+        'the first CUDA device Warp finds, else cpu)', flag='--device', metavar='DEVICE',
+    ),
 )
 
 # The studies' own flags (identify, rank, sweep), declared here so that each default is written
@@ -288,14 +296,14 @@ FLAGS = _declare(
 SAMPLERS = ('cmaes', 'tpe', 'gp', 'both')
 FLAGS.update(_declare(
     Option(
-        'sampler', str, 'both', 'cmaes, tpe (Bayesian optimisation), gp (Gaussian-process BO, '
-        'needs PyTorch) or both (CMA-ES and TPE, keep the best; default)', flag='--sampler',
-        choices=SAMPLERS,
+        'sampler', str, 'tpe', 'the identification sampler: tpe (Bayesian optimisation; '
+        'default), cmaes, gp (Gaussian-process BO, needs PyTorch) or both (CMA-ES and TPE, keep '
+        "the best: the paper's pair, about twice the time)", flag='--sampler', choices=SAMPLERS,
     ),
     Option(
-        'trials', int, 500, 'trials per sampler (default 500, as the paper), or auto: 32, then '
-        'doubling while a doubling improves the best by 2 % or more (at most 512)',
-        flag='--trials', low=1,
+        'trials', int, 0, 'identification trials per sampler, or auto (default): 32, then '
+        'doubling while a doubling improves the best by 2 % or more (at most 512; the paper ran '
+        '500)', flag='--trials', low=1,
     ),
     Option(
         'fidelity', str, 'full', 'full (default): every trial over the whole motion; '
@@ -303,14 +311,6 @@ FLAGS.update(_declare(
         'the best 30 % stops there; coarse: a trial is scored first on a mesh of half the '
         'vertices per side, and run on its own mesh only where that CD is in the best 20 % of '
         'the last 16', flag='--fidelity', choices=('full', 'prune', 'coarse'),
-    ),
-    Option(
-        'rank_sampler', str, 'tpe', "tpe (default), cmaes, gp, or both: the paper's pair, about "
-        'twice the time', flag='--sampler', choices=SAMPLERS,
-    ),
-    Option(
-        'rank_trials', int, 0, 'identification trials per sampler, or auto (default auto)',
-        flag='--trials', low=1,
     ),
     Option(
         'sweep_mode', str, 'paper', "paper: the paper's layout (default); settings: sweep the "
@@ -322,8 +322,10 @@ FLAGS.update(_declare(
     ),
     Option('rank_seeds', int, 3, 'held-out seeds per held-out trial', flag='--seeds', low=1),
     Option(
-        'rates', float, (10.0, 100.0, 1000.0), 'rates whose step times decide the '
-        'recommendation (default 10,100,1000)', flag='--rates', unit='Hz',
+        'rates', float, (10.0, 100.0, 1000.0), 'a rate whose step times decide the '
+        'recommendation (repeat for several; default 10, 100, 1000)', flag='--recommend-rate',
+        action='append', low=validation.MIN_RATE_HZ, high=validation.MAX_RATE_HZ, unit='Hz',
+        metavar='HZ', dest='rates',
     ),
 ))
 
@@ -366,7 +368,7 @@ OPTIONS.update(_declare(
 ))
 # The recorded grippers the engines follow (cloth-bench run and motion; docs/own-recording.md):
 # the command line turns them into a task file (data/recorded_motion.py), which the nodes take.
-MOTION_FLAGS = (
+FLAGS.update(_declare(
     Option(
         'gripper_frames', str, '', 'the grippers as tf frames LEFT,RIGHT of /tf and /tf_static: '
         'the engines follow them', flag='--gripper-frames', metavar='LEFT,RIGHT',
@@ -376,7 +378,12 @@ MOTION_FLAGS = (
         'found in the first cloud, else no table)', flag='--table-z', unit='m', low=-100.0,
         high=100.0,
     ),
-)
+    Option(
+        'transform', str, None, '4x4 matrix into world for every cloud, instead of tf',
+        flag='--transform', metavar='FILE',
+    ),
+))
+MOTION_FLAGS = ('gripper_frames', 'table_z')
 
 # A cloth of another size than the benchmark's 0.5 x 0.7 m, and its mass (docs/identification.md).
 OPTIONS.update(_declare(
@@ -390,7 +397,7 @@ OPTIONS.update(_declare(
     ),
     Option(
         'cloth_mass', float, 0.0,
-        "total mass of the cloth (0 or unset: the preset's mass per area times the cloth's area)",
+        "total mass of the cloth (unset: the preset's mass per area times the cloth's area)",
         flag='--cloth-mass', low=validation.CLOTH_MASS_RANGE[0],
         high=validation.CLOTH_MASS_RANGE[1], unit='kg', unset=0.0, metavar='KG',
     ),
@@ -404,20 +411,13 @@ OPTIONS.update(_declare(
 
 # The recording options: what every command that reads a user's recording takes (run, identify,
 # rank; cli/common.recording_options), declared once, in `run --help` order.
-RECORDING_FLAGS: tuple = (
-    'task',
-    *MOTION_FLAGS,
-    *REPLAY_OPTIONS,
-    Option(
-        'transform', str, None, '4x4 matrix into world for every cloud, instead of tf',
-        flag='--transform', metavar='FILE',
-    ),
-)
+RECORDING_FLAGS = ('task', *MOTION_FLAGS, *REPLAY_OPTIONS, 'transform')
 
 # The nodes' engines: the simulator's, the one the recorder aligns with, and what the evaluator
 # writes beside the scores.
 OPTIONS.update(_declare(
-    Option('engine', str, 'mujoco', 'engine name (`cloth-bench engines` lists them)'),
+    Option('engine', str, 'mujoco', 'engine name (`cloth-bench engines` lists them)',
+           flag='--engine'),
     Option('align_engine', str, 'mujoco', "the automatic alignment's reference simulation"),
     Option(
         'device', str, '', "Newton's compute device: cpu, cuda, cuda:N or auto; empty: "
@@ -428,3 +428,36 @@ OPTIONS.update(_declare(
         flag='--record-comparison', metavar='DIR',
     ),
 ))
+
+# The nodes' own parameters, without a flag (the command line sets them from its own options):
+# runtime.declare_fixed(node, name) reads the default here. A list's type is its items'.
+NODE_PARAMETERS = _declare(
+    # trajectory publisher
+    Option('engines', str, [OPTIONS['engine'].default],
+           'the simulators whose states lockstep waits for (the evaluator: what to score)'),
+    Option('wait_for_recorder', bool, True, 'start only once the recorder is in the graph'),
+    Option('wait_for_evaluator', bool, True, 'start only once the evaluator is in the graph'),
+    Option('timing_log', str, '', 'realtime: directory for timeline_<engine>.csv'),
+    # simulator
+    Option('engine_params', str, '{}', 'YAML mapping of parameter overrides on the preset'),
+    Option('presets_dir', str, '', 'directory of <engine>.yaml presets (empty: config/presets)'),
+    Option('cpu', int, -1, 'pin the process to this core (-1: not)'),
+    Option('realtime_priority', int, 0, 'SCHED_FIFO priority (0: not)'),
+    Option('freeze_gc', bool, False, 'freeze the start-up heap, collect only after each state'),
+    # recorder
+    Option('mode', str, 'replay', 'replay or record', choices=('replay', 'record')),
+    Option('bag', str, '', 'rosbag2 bag to replay'),
+    Option('clock', str, 'sim', 'sim: frames follow /clock; wall: replay on the wall clock',
+           choices=('sim', 'wall')),
+    Option('rate_factor', float, 1.0, 'wall mode: replay speed'),
+    Option('start_offset', float, 0.0, 'wall mode: seconds skipped at the start', unit='s'),
+    Option('loop', bool, False, 'wall mode: loop at the end'),
+    Option('transform', float, [0.0], '16 numbers (row-major 4x4) into world for every cloud'),
+    Option('output', str, '', 'record mode: bag directory'),
+    Option('record_topics', str, [''], 'record mode: "topic:package/msg/Type" entries'),
+    # evaluator
+    Option('output_dir', str, '', 'where summary.json and frames.csv go (empty: not written)'),
+    Option('comparison_figures', bool, False, 'qualitative figure and animation into output_dir'),
+    Option('devices', str, '', "the engines' devices, comma-separated, for summary.json"),
+    Option('models', str, '', "the engines' models, comma-separated, for summary.json"),
+)

@@ -125,7 +125,7 @@ def test_identify_with_a_bug_exits_1_and_records_no_diverged_trial(tmp_path):
     out = tmp_path / 'identify'
     bag = str(bundled_bag('towel', 'dynamic'))
     result = planted('identify', '--engine', 'mujoco', '--bag', bag,
-                     '--sampler', 'tpe', '--trials', '2', '--params', 'damping', '--grid', '5x6',
+                     '--sampler', 'tpe', '--trials', '2', '--param', 'damping', '--grid', '5x6',
                      '--max-frames', '5', '--validate-seeds', '0', '--workers', '1',
                      '--no-progress', '--output', str(out))
     assert_a_bug(result)
@@ -149,7 +149,7 @@ def test_rank_with_a_bug_exits_1(tmp_path):
         make_camera_recording(source, tmp_path / name, seed=seed, pre_roll=30, noise=0.002)
     result = planted('rank', str(tmp_path / 'first'), str(tmp_path / 'second'),
                      '--topic', CAMERA_TOPIC, '--engine', 'mujoco', '--trials', '2',
-                     '--sampler', 'tpe', '--seeds', '1', *SMALL, '--rates', '100',
+                     '--sampler', 'tpe', '--seeds', '1', *SMALL, '--recommend-rate', '100',
                      '--max-frames', '6', '--workers', '1', '--no-progress',
                      '--output', str(tmp_path / 'rank'))
     assert_a_bug(result)

@@ -93,11 +93,11 @@ def test_import_command_with_a_transform_file(tmp_path):
     result = cli(
         'import',
         str(tmp_path / 'data'),
-        '--out',
+        '--output',
         str(tmp_path / 'bags'),
         '--transform',
         str(shift),
-        '--quiet',
+        '--no-progress',
     )
     assert result.returncode == 0, result.stderr
     assert 'imported 3 trial(s)' in result.stdout
@@ -109,7 +109,7 @@ def test_import_command_refuses_a_bad_transform(tmp_path):
     bad = tmp_path / 'bad.txt'
     bad.write_text('1 2 3')
     assert_one_line_error(
-        cli('import', str(tmp_path), '--out', str(tmp_path / 'o'), '--transform', str(bad)),
+        cli('import', str(tmp_path), '--output', str(tmp_path / 'o'), '--transform', str(bad)),
         'bad.txt',
     )
 

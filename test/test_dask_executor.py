@@ -181,7 +181,7 @@ def test_sweep_and_identify_on_an_external_scheduler_survive_a_killed_worker(bag
                 '5x6',
                 '--set',
                 'mujoco.timestep=0.01',
-                '--params',
+                '--param',
                 'damping',
                 '--sampler',
                 'tpe',

@@ -348,7 +348,7 @@ def test_import_refuses_malformed_cloud_headers(capsys, tmp_path, name, edit, wo
         cloud / name, pts
     )
     (cloud / name).write_bytes(edit((cloud / name).read_bytes()))
-    argv = ['import', str(tmp_path / 'data'), '--out', str(tmp_path / 'out'), '--quiet']
+    argv = ['import', str(tmp_path / 'data'), '--output', str(tmp_path / 'out'), '--no-progress']
     code, _, err = run_main(capsys, cli.main, argv)
     assert_one_line(code, err, name, *words)
     assert not any((tmp_path / 'out').iterdir()) if (tmp_path / 'out').exists() else True
@@ -361,7 +361,7 @@ def test_import_refuses_two_folders_mapping_to_one_trial(capsys, tmp_path):
     out.mkdir()
     (out / 'keep.txt').write_text('kept')
     code, _, err = run_main(
-        capsys, cli.main, ['import', str(tmp_path / 'data'), '--out', str(out), '--quiet']
+        capsys, cli.main, ['import', str(tmp_path / 'data'), '--output', str(out), '--no-progress']
     )
     assert_one_line(code, err, 'cotton_rag_1', 'cotton_rag_01', 'towel_1_quasi_static')
     assert sorted(p.name for p in out.iterdir()) == ['keep.txt']
@@ -408,7 +408,7 @@ def test_synth_into_an_existing_bag_is_refused_before_simulating(capsys, tmp_pat
     out = tmp_path / 'bag'
     out.mkdir()
     (out / 'metadata.yaml').write_text('old\n')
-    code, _, err = run_main(capsys, cli.main, ['synth', '--out', str(out), '--quiet'])
+    code, _, err = run_main(capsys, cli.main, ['synth', '--output', str(out), '--no-progress'])
     assert_one_line(code, err, str(out), 'already exists')
     assert (out / 'metadata.yaml').read_text() == 'old\n'
 
@@ -545,7 +545,7 @@ def test_recorder_on_a_full_tmpfs_stops_with_a_complete_bag(tmp_path):
 
 def test_synth_rate_must_put_frames_on_steps(capsys, tmp_path, monkeypatch):
     out = tmp_path / 'bag'
-    code, _, err = run_main(capsys, cli.main, ['synth', '--out', str(out), '--rate', '1000'])
+    code, _, err = run_main(capsys, cli.main, ['synth', '--output', str(out), '--rate', '1000'])
     assert_one_line(code, err, '1000 Hz', 'not a multiple of 30 fps')
     assert not out.exists()
     made = []  # the configuration the bag would be made from (minutes to simulate at 31 x 43)
@@ -555,5 +555,5 @@ def test_synth_rate_must_put_frames_on_steps(capsys, tmp_path, monkeypatch):
         return out
 
     monkeypatch.setattr(synth, 'write_synthetic_bag', keep_config)
-    assert cli.main(['synth', '--out', str(out), '--rate', '1800', '--quiet']) == 0
+    assert cli.main(['synth', '--output', str(out), '--rate', '1800', '--no-progress']) == 0
     assert made[0].rate_hz == 1800.0 and made[0].steps_per_frame == 60

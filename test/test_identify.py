@@ -191,7 +191,7 @@ def test_search_space_is_the_schema_range_log_scaled_around_the_preset_where_it_
 @pytest.mark.parametrize(
     'argv, message',
     [
-        (['--params', 'nope'], 'unknown mujoco parameter nope'),
+        (['--param', 'nope'], 'unknown mujoco parameter nope'),
         (['--trials', '0'], '--trials: 0 is outside [1, inf]'),
         (['--trials', 'many'], "--trials: 'many' is not an integer (or auto)"),
         (['--span', '1'], '--span: 1.0 is outside (1, inf]'),
@@ -373,7 +373,7 @@ def test_the_changes_of_a_problem_are_named(target, tmp_path, monkeypatch):
 @pytest.mark.slow
 def test_cli_identify_refuses_a_journal_of_another_problem_in_one_line(target, tmp_path, capsys):
     argv = ['identify', '--bag', str(target), '--output', str(tmp_path), '--no-progress',
-            '--sampler', 'tpe', '--trials', '1', '--params', 'damping', '--grid', '5x6',
+            '--sampler', 'tpe', '--trials', '1', '--param', 'damping', '--grid', '5x6',
             '--max-frames', '5', '--validate-seeds', '0', '--workers', '1']
     assert main(argv) == 0
     capsys.readouterr()
@@ -395,7 +395,7 @@ def test_cli_identify_fits_a_plain_recording_on_its_trial_found_without_an_engin
     make_camera_recording(bundled_bag('towel', 'dynamic'), camera, pre_roll=10, noise=0.002)
     out = tmp_path / 'out'
     argv = ['identify', '--bag', str(camera), '--topic', CAMERA_TOPIC, '--output', str(out),
-            '--no-progress', '--sampler', 'tpe', '--trials', '1', '--params', 'damping',
+            '--no-progress', '--sampler', 'tpe', '--trials', '1', '--param', 'damping',
             '--grid', '5x6', '--max-frames', '5', '--validate-seeds', '0', '--workers', '1']
     assert main(argv) == 0
     printed = capsys.readouterr().out

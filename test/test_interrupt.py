@@ -176,8 +176,9 @@ def test_ctrl_c_during_rank_takes_its_one_cluster_down_and_keeps_the_trials(tmp_
                             repetitions=2, rest_s=1.0, seed=4)
     out = tmp_path / 'rank'
     args = ['rank', str(tmp_path / 'rec'), '--topic', CAMERA_TOPIC, '--engine', 'mujoco',
-            '--trials', '60', '--sampler', 'tpe', '--seeds', '1', '--grid', '6x8', '--rates',
-            '100', '--max-frames', '6', '--workers', '1', '--no-progress', '--output', str(out)]
+            '--trials', '60', '--sampler', 'tpe', '--seeds', '1', '--grid', '6x8',
+            '--recommend-rate', '100', '--max-frames', '6', '--workers', '1', '--no-progress',
+            '--output', str(out)]
     trials = out / 'identify' / 'towel_dynamic' / 'mujoco' / 'fold1' / 'trials.jsonl'
     code, err = interrupt_after_first_row(_cli(*args), trials)
     assert code == 130, err

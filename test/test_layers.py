@@ -4,8 +4,8 @@ The package's layers import only downwards, without circles, and the report runs
 Layers, top to bottom: config -> core -> engines -> data -> live -> runtime -> nodes -> studies ->
 sweep -> identify -> rank -> hil -> report -> cli; a module imports only from its own layer or
 those above it. config is the modules at the package's top level (errors, paths, safe_io,
-validation, metric_choice, options): each is declared in TOP_LEVEL, and a new one without a layer
-fails. Every import counts, also those inside functions and under TYPE_CHECKING.
+validation, metric_choice, options, command_options): each is declared in TOP_LEVEL, and a new one
+without a layer fails. Every import counts, also those inside functions and under TYPE_CHECKING.
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ TOP_LEVEL = {
     'cloth_bench_ros.validation': 'config',
     'cloth_bench_ros.metric_choice': 'config',
     'cloth_bench_ros.options': 'config',
+    'cloth_bench_ros.command_options': 'config',
 }
 
 

@@ -7,8 +7,9 @@ from pathlib import Path
 import re
 
 from cloth_bench_ros.cli import build_parser
+from cloth_bench_ros.command_options import COMMAND_FLAGS
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.options import FLAGS as FLAGS_DECLARED, Option, OPTIONS
+from cloth_bench_ros.options import FLAGS as FLAGS_DECLARED, NODE_PARAMETERS, Option, OPTIONS
 from cloth_bench_ros.runtime import declare_option
 from cloth_bench_ros.runtime import embedded as rclpy
 import pytest
@@ -20,16 +21,7 @@ FLAGS = {o.flag: o for o in OPTIONS.values() if o.flag}
 # Files whose literals are the declarations themselves.
 NOT_YET = {
     'cloth_bench_ros/options.py',  # the declarations themselves
-}
-# The same spelling for another value, and rank's replay flags (its own defaults for a recording)
-OTHER_VALUES = {
-    ('cloth-bench synth', '--rate'),  # the reference's step rate (default: its file's)
-    ('cloth-bench import', '--clean'),  # a switch: clean before writing
-    ('cloth-bench converge', '--duration'),  # of the reference's quintic part, not of a run
-    ('cloth-bench bag rewrite', '--change-of-phase-frame'),  # N or "detected"
-    ('cloth-bench rank', '--topic'),
-    ('cloth-bench rank', '--targets-topic'),
-    ('cloth-bench rank', '--clean'),
+    'cloth_bench_ros/command_options.py',
 }
 
 
@@ -51,11 +43,12 @@ def _actions(parser: argparse.ArgumentParser, path: str = 'cloth-bench'):
 
 
 def _declared_flags():
+    """Return (command, action, option) of every flag made from a node parameter's declaration."""
     return [
-        (path, action, FLAGS[flag])
+        (path, action, OPTIONS[action.declared.name])
         for path, action in _actions(build_parser())
-        for flag in action.option_strings
-        if flag in FLAGS
+        if getattr(action, 'declared', None) is not None and action.declared.name in OPTIONS
+        and action.option_strings and action.help != argparse.SUPPRESS
     ]
 
 
@@ -75,12 +68,11 @@ def test_every_flag_of_a_declared_option_is_made_from_its_declaration():
     for path, action, option in _declared_flags():
         if action.nargs is not None or isinstance(action, argparse._AppendAction):
             continue  # a repeatable flag (sweep --rate) is a list of values, not this option
-        if (path, option.flag) in OTHER_VALUES:
-            continue
         seen.add(option.name)
-        assert getattr(action, 'declared', None) is option, (path, option.flag)
+        # the declaration itself, or a variant with another flag or help only
+        assert action.declared.variant(flag=option.flag, help=option.help) == option, path
         assert action.default == option.check(option.default), (path, action.dest)
-        tail = option.help_text().split('; ')[1:]
+        tail = action.declared.help_text().split('; ')[1:]
         assert action.help.endswith('; '.join(['', *tail])), path
         if option.type in (float, int) and not option.choices:
             with pytest.raises(argparse.ArgumentTypeError):
@@ -157,7 +149,8 @@ def test_no_literal_default_of_a_declared_option_outside_its_declaration():
     names = '|'.join(OPTIONS)
     declared = rf"declare_(?:parameter|float|fixed)\(\s*(?:\w+,\s*)?'({names})'"
     patterns = [re.compile(declared)]
-    for option in [*OPTIONS.values(), *FLAGS_DECLARED.values()]:
+    for option in [*OPTIONS.values(), *FLAGS_DECLARED.values(), *COMMAND_FLAGS.values(),
+                   *NODE_PARAMETERS.values()]:
         literal = _literal(option.default)
         if literal:
             patterns.append(re.compile(
@@ -195,7 +188,7 @@ def _docs_table() -> dict[str, list[str]]:
 
 
 def _same(option: Option, text: str) -> bool:
-    if option.type is float:
+    if option.type is float and not isinstance(option.default, list):
         return float(Fraction(text)) == pytest.approx(option.default)
     value = yaml.safe_load(text)
     return (value if value is not None else '') == option.default
@@ -203,11 +196,11 @@ def _same(option: Option, text: str) -> bool:
 
 def test_the_docs_parameter_table_agrees_with_the_declarations():
     table = _docs_table()
-    checked = [name for name in OPTIONS if name in table]
-    assert set(checked) == set(OPTIONS)  # every node parameter of options.py is in the table
-    for name in checked:
+    declared = {**OPTIONS, **NODE_PARAMETERS}
+    assert set(declared) - set(table) == set()  # every node parameter is in the table
+    for name, option in declared.items():
         for text in table[name]:
-            assert _same(OPTIONS[name], text), f'docs/ros2.md: {name} default {text}'
+            assert _same(option, text), f'docs/ros2.md: {name} default {text}'
 
 
 def test_the_launch_file_and_the_config_agree_with_the_declarations():
@@ -218,17 +211,21 @@ def test_the_launch_file_and_the_config_agree_with_the_declarations():
         if isinstance(node, ast.Assign)
         and getattr(node.targets[0], 'id', '') == 'defaults'
     )
-    launch = [name for name in defaults if name in OPTIONS]
+    declared = {**OPTIONS, **NODE_PARAMETERS}
+    # a launch argument is a string: a list parameter ('engines') is spelled otherwise there; and
+    # the launch writes its results into cloth_bench_results where a bare evaluator writes none
+    launch = [name for name in defaults if name in declared and name != 'output_dir'
+              and not isinstance(declared[name].default, list)]
     assert {'rate_hz', 'seed', 'cloth', 'primitive', 'pacing', 'live_port'} <= set(launch)
     for name in launch:
-        assert _same(OPTIONS[name], defaults[name]), f'launch: {name}'
+        assert _same(declared[name], defaults[name]), f'launch: {name}'
     checked = set()
     for path in sorted((ROOT / 'config').glob('*.yaml')):  # every parameter file, every section
         for section, body in (yaml.safe_load(path.read_text()) or {}).items():
             params = body.get('ros__parameters', {}) if isinstance(body, dict) else {}
-            for name in (n for n in params if n in OPTIONS):
+            for name in (n for n in params if n in declared):
                 checked.add(name)
-                assert params[name] == OPTIONS[name].default, f'{path.name} {section}: {name}'
+                assert params[name] == declared[name].default, f'{path.name} {section}: {name}'
     assert {'rate_hz', 'seed', 'topic', 'change_of_phase_frame', 'pacing'} <= checked
 
 
@@ -257,9 +254,8 @@ def test_every_parameter_of_every_node_is_read_only_and_a_change_is_refused(cont
             node.destroy_node()
 
 
-# Flags not made from a declaration: argparse's own --help, the global --verbose, and --device,
-# whose check asks Warp which devices this machine has (cli/common.device_option).
-UNDECLARED = {'--help', '--verbose', '--device'}
+# Flags not made from a declaration: argparse's own --help and the global --verbose.
+UNDECLARED = {'--help', '--verbose'}
 
 
 def test_every_flag_of_every_command_is_made_from_a_declaration():
@@ -277,8 +273,8 @@ def test_help_shows_every_declared_unit_and_range():
     count = 0
     for path, action in _actions(build_parser()):
         option = getattr(action, 'declared', None)
-        if option is None or action.help is None:
-            continue
+        if option is None or action.help in (None, argparse.SUPPRESS):
+            continue  # an old name (a note on stderr) has no help of its own
         help_text = action.help.replace('%%', '%')
         if option.range_text():
             count += 1
@@ -334,8 +330,8 @@ def test_every_flag_that_is_a_node_parameter_has_its_default_range_and_help(cont
                 assert ranges[0].to_value == option.high, (node, name)
                 assert ranges[0].from_value in (option.low, option.unset), (node, name)
         for path, action in flags:
-            if action.declared is not option or (path, option.flag) in OTHER_VALUES:
-                continue  # a variant (sweep's repeatable --rate) is another value
+            if action.declared is not option:
+                continue  # a variant (another command's help or flag)
             assert action.default == option.check(option.default), (path, name)
             tail = option.help_text().removeprefix(option.help)
             assert action.help.replace('%%', '%').endswith(tail), (path, name)
@@ -343,108 +339,10 @@ def test_every_flag_that_is_a_node_parameter_has_its_default_range_and_help(cont
                 assert f'range {option.range_text()}' in action.help, (path, name)
 
 
-# Flags and node parameters whose default is still written beside its command or node, not in
-# options.py (issue 49), to move there. A new one fails, and so does one moved but still listed.
-FLAG_DEFAULTS_NOT_YET = {
-    ('cloth-bench run', '--processes'),
-    ('cloth-bench run', '--gripper-frames'),
-    ('cloth-bench run', '--table-z'),
-    ('cloth-bench run', '--transform'),
-    ('cloth-bench run', '--figures'),
-    ('cloth-bench motion', '--gripper-frames'),
-    ('cloth-bench motion', '--table-z'),
-    ('cloth-bench engines', '--warm'),
-    ('cloth-bench sweep', '--rate'),
-    ('cloth-bench sweep', '--cloth'),
-    ('cloth-bench sweep', '--primitive'),
-    ('cloth-bench sweep', '--bag-dir'),
-    ('cloth-bench sweep', '--step-per-target'),
-    ('cloth-bench sweep', '--axis'),
-    ('cloth-bench sweep', '--retry-errors'),
-    ('cloth-bench sweep', '--all-metrics'),
-    ('cloth-bench sweep', '--dry-run'),
-    ('cloth-bench sweep', '--report'),
-    ('cloth-bench report', 'results'),
-    ('cloth-bench report', '--stress'),
-    ('cloth-bench stress', '--case'),
-    ('cloth-bench stress', '--list'),
-    ('cloth-bench stress', '--max-wall-s'),
-    ('cloth-bench cross-reference', '--primitive'),
-    ('cloth-bench cross-reference', '--seeds'),
-    ('cloth-bench cross-reference', '--seed-start'),
-    ('cloth-bench cross-reference', '--output'),
-    ('cloth-bench identify', '--objective'),
-    ('cloth-bench identify', '--params'),
-    ('cloth-bench identify', '--span'),
-    ('cloth-bench identify', '--batch'),
-    ('cloth-bench identify', '--validate-seeds'),
-    ('cloth-bench identify', '--bag-dir'),
-    ('cloth-bench identify', '--gripper-frames'),
-    ('cloth-bench identify', '--table-z'),
-    ('cloth-bench identify', '--transform'),
-    ('cloth-bench rank', 'recordings'),
-    ('cloth-bench rank', '--gripper-frames'),
-    ('cloth-bench rank', '--table-z'),
-    ('cloth-bench rank', '--transform'),
-    ('cloth-bench hil', '--rate'),
-    ('cloth-bench hil', '--config'),
-    ('cloth-bench hil', '--settings'),
-    ('cloth-bench hil', '--deadline-budget'),
-    ('cloth-bench hil', '--layout'),
-    ('cloth-bench hil', '--cpu'),
-    ('cloth-bench hil', '--fifo'),
-    ('cloth-bench hil', '--no-freeze-gc'),
-    ('cloth-bench hil', '--busy-wait/--no-busy-wait'),
-    ('cloth-bench hil', '--in-process'),
-    ('cloth-bench hil', '--no-lockstep'),
-    ('cloth-bench hil', '--export-recommended'),
-    ('cloth-bench hil', '--note'),
-    ('cloth-bench hil', '--find-rate'),
-    ('cloth-bench hil', '--miss-threshold'),
-    ('cloth-bench hil', '--rate-min'),
-    ('cloth-bench hil', '--rate-max'),
-    ('cloth-bench hil', '--rate-tolerance'),
-    ('cloth-bench hil', '--repeats'),
-    ('cloth-bench import', 'root'),
-    ('cloth-bench import', '--transform'),
-    ('cloth-bench synth', '--reference'),
-    ('cloth-bench synth', '--rate'),
-    ('cloth-bench converge', '--reference'),
-    ('cloth-bench converge', '--axis'),
-    ('cloth-bench converge', '--levels'),
-    ('cloth-bench converge', '--score'),
-    ('cloth-bench bag info', 'path'),
-    ('cloth-bench bag rewrite', 'src'),
-    ('cloth-bench bag rewrite', 'dst'),
-}
-PARAMETERS_NOT_YET = {
-    ('cloth_bench_ros/nodes/evaluator.py', 'output_dir'),
-    ('cloth_bench_ros/nodes/evaluator.py', 'comparison_figures'),
-    ('cloth_bench_ros/nodes/evaluator.py', 'devices'),
-    ('cloth_bench_ros/nodes/evaluator.py', 'models'),
-    ('cloth_bench_ros/nodes/recorder.py', 'mode'),
-    ('cloth_bench_ros/nodes/recorder.py', 'bag'),
-    ('cloth_bench_ros/nodes/recorder.py', 'clock'),
-    ('cloth_bench_ros/nodes/recorder.py', 'rate_factor'),
-    ('cloth_bench_ros/nodes/recorder.py', 'start_offset'),
-    ('cloth_bench_ros/nodes/recorder.py', 'loop'),
-    ('cloth_bench_ros/nodes/recorder.py', 'output'),
-    ('cloth_bench_ros/nodes/recorder.py', 'transform'),
-    ('cloth_bench_ros/nodes/recorder.py', 'record_topics'),
-    ('cloth_bench_ros/nodes/simulator.py', 'engine_params'),
-    ('cloth_bench_ros/nodes/simulator.py', 'presets_dir'),
-    ('cloth_bench_ros/nodes/simulator.py', 'cpu'),
-    ('cloth_bench_ros/nodes/simulator.py', 'realtime_priority'),
-    ('cloth_bench_ros/nodes/simulator.py', 'freeze_gc'),
-    ('cloth_bench_ros/nodes/trajectory_publisher.py', 'wait_for_recorder'),
-    ('cloth_bench_ros/nodes/trajectory_publisher.py', 'wait_for_evaluator'),
-    ('cloth_bench_ros/nodes/trajectory_publisher.py', 'timing_log'),
-}
-
-
 def _registered(option: Option) -> Option | None:
-    """Return the declaration in options.py an action's Option was made from, if any."""
-    return OPTIONS.get(option.name) or FLAGS_DECLARED.get(option.name)
+    """Return the declaration an action's Option was made from (options.py, command_options.py)."""
+    return OPTIONS.get(option.name) or FLAGS_DECLARED.get(option.name) or COMMAND_FLAGS.get(
+        option.name)
 
 
 def test_every_flag_default_is_the_one_in_options_py():
@@ -465,24 +363,23 @@ def test_every_flag_default_is_the_one_in_options_py():
         registered = option and _registered(option)
         if registered is None:
             found.append((key, f'{where}: default {action.default!r} not declared in options.py'))
-        elif (path, registered.flag) not in OTHER_VALUES and option.default != registered.default:
+        elif option.default != registered.default:
             found.append((key, f'{where}: default {option.default!r}, declared'
                           f' {registered.default!r}'))
-    assert checked > 100
-    assert [text for key, text in found if key not in FLAG_DEFAULTS_NOT_YET] == []
-    assert FLAG_DEFAULTS_NOT_YET - {key for key, _ in found} == set()  # moved: drop it here
+    assert checked > 250
+    assert found == []
 
 
-def _fixed_declarations() -> list[tuple[str, str, str]]:
-    """Return (file, name, default source) of each declare_fixed and declare_float call."""
+def _fixed_declarations() -> list[tuple[str, str, str | None]]:
+    """Return (file, name, default source or None) of each declare_fixed and declare_float call."""
     calls = []
     for path in sorted(PACKAGE.rglob('*.py')):
         for node in ast.walk(ast.parse(path.read_text())):
             if (isinstance(node, ast.Call) and getattr(node.func, 'id', '') in (
-                    'declare_fixed', 'declare_float') and len(node.args) == 3
+                    'declare_fixed', 'declare_float') and len(node.args) >= 2
                     and isinstance(node.args[1], ast.Constant)):
-                calls.append((path.relative_to(ROOT).as_posix(), node.args[1].value,
-                              ast.unparse(node.args[2])))
+                default = ast.unparse(node.args[2]) if len(node.args) == 3 else None
+                calls.append((path.relative_to(ROOT).as_posix(), node.args[1].value, default))
     return calls
 
 
@@ -490,18 +387,34 @@ def _is_literal(source: str) -> bool:
     try:
         ast.literal_eval(source)
     except ValueError:
-        return False  # read from a declaration (OPTIONS['engine'].default) or computed
+        return False  # computed at start-up (the task's settle duration)
     return True
 
 
 def test_every_node_parameter_is_declared_in_options_py():
-    """A node's declare_fixed(node, name, default) writes no literal default: options.py has it."""
+    """
+    A node's declare_fixed(node, name) takes the default of options.NODE_PARAMETERS[name].
+
+    Only a default computed at start-up is written beside the node; no node writes a literal one,
+    and every declared parameter is declared by a node.
+    """
     calls = _fixed_declarations()
     assert len(calls) > 20
-    found = {(rel, name): f'{rel}: {name} = {default}' for rel, name, default in calls
-             if _is_literal(default)}
-    assert [text for key, text in found.items() if key not in PARAMETERS_NOT_YET] == []
-    assert PARAMETERS_NOT_YET - set(found) == set()  # moved: drop it here
+    literal = [f'{rel}: {name} = {default}' for rel, name, default in calls
+               if default is not None and _is_literal(default)]
+    assert literal == []
+    undeclared = [f'{rel}: {name}' for rel, name, default in calls
+                  if default is None and name not in NODE_PARAMETERS]
+    assert undeclared == []
+    assert set(NODE_PARAMETERS) == {name for _, name, default in calls if default is None}
+
+
+def test_every_declaration_has_one_name():
+    """A name is declared once, across the node parameters, the flags and the commands' flags."""
+    names = [*OPTIONS, *FLAGS_DECLARED, *COMMAND_FLAGS]
+    assert sorted({n for n in names if names.count(n) > 1}) == []
+    # a node-only parameter may share a flag's name ('bag', 'output'): both are the one concept
+    assert not set(NODE_PARAMETERS) & set(OPTIONS)
 
 
 def test_the_declared_tasks_are_the_trajectory_primitives():
@@ -510,3 +423,77 @@ def test_the_declared_tasks_are_the_trajectory_primitives():
     from cloth_bench_ros.options import PRIMITIVES
 
     assert tuple(p.value for p in Primitive) == PRIMITIVES
+
+
+@pytest.mark.parametrize('old, new, dest, value', [
+    (['import', 'data', '--out', 'bags'], '--output', 'output', 'bags'),
+    (['import', 'data', '--output', 'bags', '--quiet'], '--no-progress', 'no_progress', True),
+    (['synth', '--out', 'b'], '--output', 'output', 'b'),
+    (['synth', '--quiet'], '--no-progress', 'no_progress', True),
+    (['rank', 'bags', '--rates', '10,1000'], '--recommend-rate', 'rates', [10.0, 1000.0]),
+    (['identify', '--params', 'mass,damping'], '--param', 'params', ['mass', 'damping']),
+])
+def test_an_old_flag_name_works_with_a_one_line_note(old, new, dest, value, capsys):
+    """A renamed flag's old name gives the new flag's value, and says so once on stderr."""
+    args = build_parser().parse_args(old)
+    assert getattr(args, dest) == value
+    flag = next(word for word in old if word.startswith('--') and word != '--output')
+    assert capsys.readouterr().err.splitlines() == [
+        f'cloth-bench: {flag} is deprecated, use {new}'
+        + (' (repeated)' if flag in ('--rates', '--params') else '')
+    ]
+    assert '--out ' not in build_parser()._subparsers._group_actions[0].choices[
+        old[0]].format_help()  # the old name is not in --help
+
+
+def test_a_repeated_flag_replaces_its_declared_default():
+    """A repeated flag (rank --recommend-rate) gives the values given, not the default's too."""
+    parser = build_parser()
+    assert parser.parse_args(['rank', 'b']).rates == FLAGS_DECLARED['rates'].default
+    assert parser.parse_args(['rank', 'b', '--recommend-rate', '50',
+                              '--recommend-rate', '500']).rates == [50.0, 500.0]
+
+
+@pytest.mark.parametrize('argv, engines, sets', [
+    (['run', '--engine', 'newton:vbd', '--engine', 'mujoco'], ['newton', 'mujoco'],
+     ['newton.model=vbd']),
+    (['run', '--engine', 'newton:vbd', '--set', 'newton.iterations=4'], ['newton'],
+     ['newton.model=vbd', 'newton.iterations=4']),
+    (['identify', '--engine', 'newton:xpbd'], 'newton', ['newton.model=xpbd']),
+    (['sweep', '--engine', 'newton:vbd'], ['newton'], ['newton.model=vbd']),
+])
+def test_engine_model_is_one_syntax_on_every_command(argv, engines, sets):
+    """--engine NAME:MODEL is --engine NAME with --set NAME.model=MODEL (rank's entrants, too)."""
+    from cloth_bench_ros.cli.common import engine_models
+
+    args = build_parser().parse_args(argv)
+    engine_models(args)
+    assert (args.engine, args.set) == (engines, sets)
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['run', '--engine', 'newton:vbd', '--engine', 'newton:xpbd'], 'one model per engine'),
+    (['stress', '--engine', 'newton:vbd'], 'stress takes engine names only'),
+    (['run', '--engine', 'newton:'], 'no model after the colon'),
+])
+def test_engine_model_refused_in_one_line(argv, message, capsys):
+    """Two models of one engine, a model where no --set is, or none after the colon: exit 2."""
+    from cloth_bench_ros.cli import main
+
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_the_docs_options_table_is_the_parsers():
+    """docs/cli.md's table of every flag (default, list form, commands) is made from the parser."""
+    from cloth_bench_ros.cli import options_table
+
+    text = (ROOT / 'docs' / 'cli.md').read_text()
+    start = text.index(options_table.BEGIN)
+    shown = text[start:text.index(options_table.END) + len(options_table.END)]
+    assert shown == options_table.markdown(), (
+        'docs/cli.md: run python -m cloth_bench_ros.cli.options_table docs/cli.md')
+    rows = options_table.rows()
+    assert len(rows) > 100
+    assert ('--trials', 'auto', 'value', 'identify, rank') in rows
+    assert ('--recommend-rate', '10, 100, 1000', 'repeated', 'rank') in rows

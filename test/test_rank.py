@@ -31,8 +31,8 @@ from cloth_bench_ros.report.rank_report import plot_ranking
 import pytest
 
 TINY = ['--topic', CAMERA_TOPIC, '--engine', 'mujoco', '--trials', '2', '--sampler', 'tpe',
-        '--seeds', '1', '--grid', '6x8', '--rates', '100', '--max-frames', '6', '--workers', '2',
-        '--no-progress']
+        '--seeds', '1', '--grid', '6x8', '--recommend-rate', '100', '--max-frames', '6',
+        '--workers', '2', '--no-progress']
 
 
 @pytest.fixture
@@ -440,11 +440,12 @@ def test_a_rank_starts_one_cluster_for_every_folds_identification_and_its_cells(
 
 
 @pytest.mark.parametrize(
-    'rates, message',
-    [('100,0.5', '0.5 Hz is outside [1, 10000]'), ('abc', "'abc' is not a number"),
-     (',', 'no rate in')],
+    'flag, rates, message',
+    [('--recommend-rate', '0.5', '0.5 Hz is outside [1, 10000]'),
+     ('--recommend-rate', 'abc', "'abc' is not a number"),
+     ('--rates', '100,0.5', '0.5 Hz is outside [1, 10000]'), ('--rates', ',', 'no value in')],
 )
-def test_rates_are_checked_as_the_rate_option_is(rates, message, capsys):
+def test_rates_are_checked_as_the_rate_option_is(flag, rates, message, capsys):
     with pytest.raises(SystemExit) as exit_:
-        cli.main(['rank', 'bags', '--rates', rates])
+        cli.main(['rank', 'bags', flag, rates])
     assert exit_.value.code == 2 and message in capsys.readouterr().err

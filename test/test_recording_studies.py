@@ -75,7 +75,7 @@ def test_rank_pools_two_recorded_motions_checks_across_them_and_recomputes_a_cha
 ):
     out = tmp_path / 'rank'
     argv = ['rank', str(motions / 'swing'), str(motions / 'small_swing'), *GRIPPERS, *TINY,
-            '--seeds', '1', '--rates', '100', '--output', str(out)]
+            '--seeds', '1', '--recommend-rate', '100', '--output', str(out)]
     assert cli.main(argv) == 0
     printed = capsys.readouterr().out
     assert 'cells: 5 (0 kept from an earlier run)' in printed

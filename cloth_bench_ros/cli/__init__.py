@@ -9,7 +9,7 @@ import sys
 import warnings
 
 from cloth_bench_ros.cli import data, hil, identify, rank, run, studies
-from cloth_bench_ros.cli.common import Parser, UserError
+from cloth_bench_ros.cli.common import engine_models, Parser, UserError
 from cloth_bench_ros.errors import is_user_error, one_line
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
@@ -35,6 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     warnings.formatwarning = lambda message, *_: f'cloth-bench: warning: {message}\n'
     try:
+        engine_models(args)
         return args.func(args)
     except BrokenPipeError:  # `cloth-bench ... | head`: the reader left, nothing to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -6,9 +6,11 @@ import argparse
 from collections.abc import Callable, Iterable
 from contextlib import closing
 from pathlib import Path
+import sys
 from typing import Any, Union
 
 from cloth_bench_ros import options, validation
+from cloth_bench_ros.command_options import COMMAND_FLAGS
 from cloth_bench_ros.engines import engine_class, engine_device, known_engines
 from cloth_bench_ros.engines.presets import preset_set as resolve
 from cloth_bench_ros.errors import ClothBenchError
@@ -43,15 +45,20 @@ def option(check: Callable[[str, str], Any], name: str) -> Callable[[str], Any]:
 Flag = Union[str, Option, tuple[str, dict[str, Any]]]
 
 
+def declaration(name: str) -> Option:
+    """Return the declaration of `name`: a node parameter's, a shared flag's or a command's."""
+    return COMMAND_FLAGS[name] if name in COMMAND_FLAGS else options.declared(name)
+
+
 def add_option(parser: Any, name: str | Option, flag: str | None = None, **overrides: Any) -> None:
     """
-    Add the flag of a declaration (options.declared(name), or an Option of one command).
+    Add the flag of a declaration (a declared name, or an Option).
 
     Its type, check, default, choices, action and help (with unit, range and default) come from
     the declaration; `overrides` are argparse's keywords. A `help` override is another meaning:
     the declared unit, range and default stay.
     """
-    declared = name if isinstance(name, Option) else options.declared(name)
+    declared = name if isinstance(name, Option) else declaration(name)
     flag = flag or declared.flag
     assert flag, f'{declared.name} has no flag'
     kwargs: dict[str, Any] = {'help': declared.help_text().replace('%', '%%')}
@@ -60,10 +67,14 @@ def add_option(parser: Any, name: str | Option, flag: str | None = None, **overr
     else:
         if declared.action == 'optional_bool':
             kwargs['action'] = argparse.BooleanOptionalAction
+        elif declared.action == 'append' and declared.default is not None:
+            kwargs['action'] = _Repeated
         elif declared.action:
             kwargs['action'] = declared.action
         default = declared.default
-        if default is not None and declared.action != 'optional_bool' and not declared.validate:
+        if declared.action == 'append':
+            pass  # a list, each of its values checked as the flag's
+        elif default is not None and declared.action != 'optional_bool' and not declared.validate:
             default = declared.check(default)  # a validated default is a value already
         kwargs['default'] = default
         if declared.choices:
@@ -93,9 +104,54 @@ def add_options(parser: Any, flags: Iterable[Flag]) -> None:
         if isinstance(item, tuple) and set(item[1]) == {'help'}:
             add_option(parser, item[0], help=item[1]['help'])  # the declaration, another meaning
         elif isinstance(item, tuple):
-            add_option(parser, options.declared(item[0]).variant(**item[1]))
+            add_option(parser, declaration(item[0]).variant(**item[1]))
         else:
             add_option(parser, item)
+
+
+class _Repeated(argparse._AppendAction):
+    """A repeated flag with a declared list as its default: the values given replace it."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:  # noqa: D102
+        if getattr(namespace, self.dest, None) is self.default:
+            setattr(namespace, self.dest, [])
+        super().__call__(parser, namespace, values, option_string)
+
+
+class _Renamed(argparse.Action):
+    """An old name of a flag: a one-line note on stderr, then the new flag's action."""
+
+    def __init__(self, option_strings, dest, target, split=False, **kwargs) -> None:
+        nargs = 0 if target.nargs == 0 else None
+        super().__init__(option_strings, argparse.SUPPRESS, nargs=nargs,
+                         default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+        self.target = target
+        self.split = split  # an old comma-separated list: one value of the new flag each
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:  # noqa: D102
+        new = self.target.option_strings[0]
+        print(f'cloth-bench: {option_string} is deprecated, use {new}'
+              + (' (repeated)' if self.split else ''), file=sys.stderr)
+        if self.target.nargs == 0:
+            self.target(parser, namespace, [], new)
+            return
+        words = [w.strip() for w in values.split(',') if w.strip()] if self.split else [values]
+        if not words:
+            raise argparse.ArgumentError(self, f'no value in {values!r} (comma-separated)')
+        for word in words:
+            self.target(parser, namespace, parser._get_values(self.target, [word])
+                        if self.target.nargs is None else word, new)
+
+
+def add_renamed(parser: Any, old: str, new: str, split: bool = False) -> None:
+    """
+    Accept `old`, a flag's former name, for `new`: the same value, and a note on stderr.
+
+    With `split`, the old flag took a comma-separated list and the new one is repeated.
+    """
+    target = next(a for a in parser._actions if new in a.option_strings)
+    action = parser.add_argument(old, action=_Renamed, target=target, split=split)
+    action.declared = target.declared  # type: ignore[attr-defined]
 
 
 def scheduler(text: str) -> str:
@@ -235,16 +291,8 @@ def device_option(parser: argparse.ArgumentParser, with_set: bool = True) -> Non
     With `with_set`, the choice is also an engine override (`--set newton.device=...`), which is
     how it reaches the engines of every command that takes --set.
     """
-    parser.add_argument(
-        '--device',
-        type=device,
-        action=_DeviceAction if with_set else 'store',
-        metavar='DEVICE',
-        help=(
-            "Newton's device: cpu, cuda or cuda:N (default: the first CUDA device Warp finds,"
-            ' else cpu)'
-        ),
-    )
+    add_option(parser, 'newton_device', type=device,
+               action=_DeviceAction if with_set else 'store')
 
 
 def engine_override_option(
@@ -253,6 +301,35 @@ def engine_override_option(
     """--set ENGINE.PARAM=VALUE (repeatable), and --device for Newton."""
     add_option(parser, options.declared('set').variant(help=help))
     device_option(parser)
+
+
+def engine_models(args: argparse.Namespace) -> None:
+    """
+    --engine NAME:MODEL: the engine NAME with `--set NAME.model=MODEL` (one syntax, every command).
+
+    rank parses its own entrants (several models of one engine); elsewhere an engine has one model.
+    """
+    given = getattr(args, 'engine', None)
+    if not given or getattr(args, 'command', '') == 'rank':
+        return
+    texts = [given] if isinstance(given, str) else list(given)
+    names: list[str] = []
+    models: dict[str, str] = {}
+    for text in texts:
+        name, colon, model = text.strip().partition(':')
+        names.append(name)
+        if not colon:
+            continue
+        if not model:
+            raise UserError(f'--engine {text}: no model after the colon (e.g. newton:vbd)')
+        if not hasattr(args, 'set'):
+            raise UserError(f'--engine {text}: {args.command} takes engine names only')
+        if models.setdefault(name, model) != model:
+            raise UserError(f'--engine {name}: one model per engine here ({models[name]} and '
+                            f'{model}); rank compares several')
+    args.engine = names[0] if isinstance(given, str) else names
+    if models:
+        args.set = [*(f'{n}.model={m}' for n, m in models.items()), *(args.set or [])]
 
 
 def check_bag(bag: Path, topic: str | None = None) -> None:
@@ -284,7 +361,9 @@ def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) 
         try:
             engine_class(engine).validate_params(params)
         except ClothBenchError as exc:
-            raise UserError(f'--set {engine}: {exc}') from None
+            model = f' (or --engine {engine}:MODEL)' if 'model' in params else ''
+            given = f'--set {engine}{model}'
+            raise UserError(f'{given}: {exc}') from None
     return overrides
 
 

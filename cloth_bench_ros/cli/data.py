@@ -7,83 +7,37 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
-from cloth_bench_ros.core.cleaning import scene_cleaning
-from cloth_bench_ros.options import Option
 from cloth_bench_ros.safe_io import check_output_dir
 
 
-def _frame_or_detected(text: str, label: str) -> int | str:
-    if text == 'detected':
-        return 'detected'
-    frame = validation.parse_integer(text, label)
-    return validation.integer(frame, label, 0, validation.MAX_FRAME)
-
-
-REFERENCES = ('mujoco', 'newton-vbd')
 IMPORT_FLAGS: tuple[common.Flag, ...] = (
-    Option(
-        'root', str, None, 'dataset root: <root>/<cloth>_rag_<trial>/<primitive>/cloud/'
-        '<NNNNN>.ply|.pcd', flag='root',
-    ),
-    ('output', {'flag': '--out', 'required': True, 'help': 'directory for the bags'}),
-    Option(
-        'transform', str, None, '4x4 matrix into the simulation frame (text file of 16 numbers, or'
-        ' .npy)', flag='--transform',
-    ),
+    'root',
+    ('output', {'help': 'directory for the bags (required)'}),
+    ('transform', {'help': '4x4 matrix into the simulation frame (text file of 16 numbers, or '
+                   '.npy)'}),
     ('overwrite', {'help': 'replace bags that exist'}),
-    Option(
-        'clean', bool, False, 'crop to the workspace, remove the table plane and outliers '
-        '(core.cleaning) before writing', flag='--clean', action='store_true',
-    ),
+    'import_clean',
     ('voxel', {'help': 'with --clean: voxel size (0: off)'}),
-    'quiet',
+    'no_progress',
 )
 SYNTH_FLAGS: tuple[common.Flag, ...] = (
-    ('output', {'flag': '--out', 'help': 'bag directory (default <cloth>_<primitive>)'}),
+    ('output', {'help': 'bag directory (default <cloth>_<primitive>[_newton_vbd])'}),
     ('seed', {'help': 'sensor noise and reference seed'}),
-    Option(
-        'reference', str, 'mujoco', 'reference model: mujoco (config/synth.yaml, default) or '
-        'newton-vbd (config/synth_newton_vbd.yaml); default bag name '
-        '<cloth>_<primitive>[_newton_vbd]', flag='--reference', choices=REFERENCES,
-    ),
-    Option(
-        'rate', float, None, "the reference's step rate, a multiple of 30 (default: the "
-        "reference file's)", flag='--rate', low=0.0, low_open=True, unit='Hz', metavar='HZ',
-    ),
+    'reference',
+    'synth_rate',
     ('overwrite', {'help': 'replace the bag if it exists'}),
-    'quiet',
+    'no_progress',
 )
 CONVERGE_FLAGS: tuple[common.Flag, ...] = (
-    Option('reference', str, 'mujoco', 'the reference model', flag='--reference',
-           choices=REFERENCES),
-    Option(
-        'axis', str, None, 'setting to refine (repeatable; default all three)', flag='--axis',
-        action='append', choices=('iterations', 'rate', 'grid'),
-    ),
-    Option(
-        'levels', int, 1, 'refinements per axis: iterations and rate x2 each, grid spacing /1.5',
-        flag='--levels', low=1,
-    ),
-    Option(
-        'duration', float, None, 'seconds of the quintic part (default: the whole trial)',
-        flag='--duration', low=0.0, low_open=True, unit='s', metavar='S',
-    ),
-    Option(
-        'score', str, None, "score this engine's preset (tested grid) against every run "
-        '(repeatable)', flag='--score', action='append', metavar='ENGINE',
-    ),
+    ('reference', {'help': 'the reference model'}),
+    'converge_axis',
+    'levels',
+    'converge_duration',
+    'score',
     ('output', {'help': 'directory: one .npz per run (reused) and convergence.json (default '
                 'results/convergence/<reference>_<cloth>_<primitive>)'}),
 )
-REWRITE_FLAGS: tuple[common.Flag, ...] = (
-    Option('src', str, None, 'bag to read', flag='src'),
-    Option('dst', str, None, 'new bag directory (must not exist or be empty)', flag='dst'),
-    Option(
-        'change_of_phase_frame', int, None, 'store this change-of-phase frame in the trial '
-        '(dynamic task), or the first table contact found in the clouds',
-        flag='--change-of-phase-frame', metavar='N|detected', validate=_frame_or_detected,
-    ),
-)
+REWRITE_FLAGS: tuple[common.Flag, ...] = ('src', 'dst', 'rewrite_change_of_phase_frame')
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -92,6 +46,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         'import', help='turn the published dataset (PLY/PCD per frame) into one bag per trial'
     )
     common.add_options(imp, IMPORT_FLAGS)
+    common.add_renamed(imp, '--out', '--output')
+    common.add_renamed(imp, '--quiet', '--no-progress')
     imp.set_defaults(func=cmd_import)
 
     synth = sub.add_parser(
@@ -100,6 +56,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help='make a synthetic reference bag (reference simulation seen by a virtual Kinect)',
     )
     common.add_options(synth, SYNTH_FLAGS)
+    common.add_renamed(synth, '--out', '--output')
+    common.add_renamed(synth, '--quiet', '--no-progress')
     common.device_option(synth, with_set=False)
     synth.set_defaults(func=cmd_synth)
 
@@ -115,7 +73,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     bag = sub.add_parser('bag', help='bag tools')
     bag_sub = bag.add_subparsers(dest='bag_command', required=True, parser_class=common.Parser)
     info = bag_sub.add_parser('info', help='describe a bag: topics, frames, trial metadata')
-    common.add_option(info, Option('path', str, None, 'the bag', flag='path'))
+    common.add_option(info, 'path')
     info.set_defaults(func=cmd_bag_info)
     rewrite = bag_sub.add_parser(
         'rewrite',
@@ -130,36 +88,39 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def cmd_import(args: argparse.Namespace) -> int:
     """Import the published dataset's per-frame clouds into one bag per trial."""
-    from cloth_bench_ros.data.importer import import_dataset  # lazy: +0.2 s on --help
+    from cloth_bench_ros.core.cleaning import scene_cleaning  # lazy: scipy's k-d tree, +0.3 s
+    from cloth_bench_ros.data.importer import import_dataset  # lazy: the cleaning, +0.3 s
 
+    if not args.output:  # not argparse's required: the old --out gives it too
+        raise common.UserError('import: --output DIR is required (the directory for the bags)')
     transform = common.read_transform(args.transform) if args.transform else None
     bags = import_dataset(
         Path(args.root),
-        Path(args.out),
+        Path(args.output),
         transform=transform,
-        progress=not args.quiet,
+        progress=not args.no_progress,
         overwrite=args.overwrite,
         cleaning=scene_cleaning(voxel=args.voxel) if args.clean else None,
     )
     for bag in bags:
         print(bag)
-    print(f'imported {len(bags)} trial(s) into {args.out}')
+    print(f'imported {len(bags)} trial(s) into {args.output}')
     return 0
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
     """Write a synthetic reference bag."""
-    from cloth_bench_ros.data.synth import synth_command  # lazy: +0.2 s on --help
+    from cloth_bench_ros.data.synth import synth_command  # lazy: the cleaning, +0.2 s
 
     suffix = '' if args.reference == 'mujoco' else '_' + args.reference.replace('-', '_')
-    out = Path(args.out) if args.out else Path(f'{args.cloth}_{args.primitive}{suffix}')
+    out = Path(args.output) if args.output else Path(f'{args.cloth}_{args.primitive}{suffix}')
     bag = synth_command(
         args.cloth,
         args.primitive,
         out,
         seed=args.seed,
         overwrite=args.overwrite,
-        progress=not args.quiet,
+        progress=not args.no_progress,
         reference=args.reference,
         rate_hz=args.rate,
         device=args.device,

@@ -13,77 +13,36 @@ from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.hil import study as hil
 from cloth_bench_ros.hil.layout import resolve_layout
 from cloth_bench_ros.hil.recommendation import all_recommendations, provenance, recommendation_yaml
-from cloth_bench_ros.options import Option, OPTIONS
+from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.safe_io import atomic_write_text
 from cloth_bench_ros.studies.cloth import study_inputs
+from cloth_bench_ros.studies.results import load_rows
 
 
 HIL_FLAGS: tuple[common.Flag, ...] = (
-    ('engines', {'help': 'repeat for several (default mujoco)'}),
-    OPTIONS['rate_hz'].variant(
-        action='append', default=None, help='repeat for several (default 100)'
-    ),
-    Option(
-        'config', str, 'preset', "preset (with --grid/--set) or the settings sweep's "
-        'recommendation for the rate', flag='--config', choices=('preset', 'recommended'),
-    ),
-    Option(
-        'settings', str, None, 'settings-sweep results for --config recommended (default '
-        'results/settings; without a result there: config/hil_recommended.yaml)',
-        flag='--settings',
-    ),
-    Option(
-        'budget', float, None, 'recommendation: step p99 under this fraction of the period '
-        '(default 0.5: the rest is the round trip)', flag='--deadline-budget', dest='budget',
-        low=0.0, low_open=True,
-    ),
+    ('engines', {'help': 'engine[:model] (repeat for several; default mujoco)'}),
+    ('rate_list', {'help': 'simulator rate (repeat for several; default 100)'}),
+    'hil_config',
+    'settings',
+    'budget',
     'bag',
     'seed',
     ('grid', {'action': 'append', 'help': "cloth mesh NXxNZ (default: the engine's; several "
               'with --find-rate)'}),
 )
 LAYOUT_FLAGS: tuple[common.Flag, ...] = (
-    Option(
-        'layout', str, 'auto', 'real-time layout: auto (default: the measured best this machine '
-        'allows: the step loop polling on a core of its own, the controller on SCHED_FIFO) or '
-        'none', flag='--layout', choices=('auto', 'none'),
-    ),
-    Option(
-        'cpu', int, None, "pin the simulator's step loop to this core (-1: not; default: from "
-        '--layout)', flag='--cpu', low=-1,
-    ),
-    Option(
-        'fifo', int, None, 'SCHED_FIFO priority for the simulator and the controller (1-99, 0: '
-        'not; default: from --layout)', flag='--fifo', low=0, high=99, metavar='PRIORITY',
-    ),
-    Option(
-        'no_freeze_gc', bool, False, 'keep automatic garbage collection in the simulator',
-        flag='--no-freeze-gc', action='store_true',
-    ),
-    Option(
-        'busy_wait', bool, None, 'the simulator polls for targets instead of sleeping (needs a '
-        'core of its own: --cpu; default: from --layout)', flag='--busy-wait',
-        action='optional_bool',
-    ),
-    Option(
-        'in_process', bool, False, 'all nodes in one process (intra-process transport)',
-        flag='--in-process', action='store_true',
-    ),
+    'layout',
+    'cpu',
+    'fifo',
+    'no_freeze_gc',
+    'busy_wait',
+    'in_process',
     'duration',
-    Option(
-        'no_lockstep', bool, False, 'skip the lockstep run that gives the CD',
-        flag='--no-lockstep', action='store_true',
-    ),
+    'no_lockstep',
     ('output', {'help': 'results directory (default results/hil)'}),
-    Option(
-        'export_recommended', str, None, 'write the recommendation of every engine, task and rate '
-        'in --settings to FILE and exit', flag='--export-recommended', metavar='FILE',
-    ),
-    Option(
-        'note', str, None, "--export-recommended: a provenance note (e.g. the sweep's command)",
-        flag='--note',
-    ),
+    'export_recommended',
+    'note',
 )
 
 
@@ -253,8 +212,6 @@ def cmd_hil(args: argparse.Namespace) -> int:
 
 def _export_recommended(args: argparse.Namespace) -> int:
     """Export the settings sweep's recommendation per engine, task and rate."""
-    from cloth_bench_ros.studies.results import load_rows  # lazy: the bag readers, +0.14 s
-
     if not args.settings:
         raise UserError(
             "--export-recommended needs --settings RESULTS (a settings sweep's results)"

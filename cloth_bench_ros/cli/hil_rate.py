@@ -15,58 +15,20 @@ from pathlib import Path
 
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.core.deadline import (
-    deadline_check,
-    deadline_rule,
-    DeadlineCheck,
-    holds_rate,
-    MISS_THRESHOLD,
-)
+from cloth_bench_ros.core.deadline import deadline_check, deadline_rule, DeadlineCheck, holds_rate
 from cloth_bench_ros.core.table import Table
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.hil import study as hil
 from cloth_bench_ros.hil.config import HilConfig
-from cloth_bench_ros.hil.find_rate import (
-    find_rate,
-    miss_fraction,
-    missed,
-    RATE_MAX,
-    RATE_MIN,
-    RATE_TOLERANCE,
-    REPEATS,
-)
+from cloth_bench_ros.hil.find_rate import find_rate, miss_fraction, missed
 from cloth_bench_ros.hil.warmup import coarser_grids, warmup
-from cloth_bench_ros.options import Option, OPTIONS
 from cloth_bench_ros.safe_io import atomic_write_text
 
 FIND_RATE_FILE = 'find_rate.json'
 
 
 FIND_RATE_FLAGS: tuple[common.Flag, ...] = (
-    Option(
-        'find_rate', bool, False, 'find the highest rate each engine and --grid holds (misses '
-        'under --miss-threshold), by bisection on a log scale', flag='--find-rate',
-        action='store_true',
-    ),
-    Option(
-        'miss_threshold', float, MISS_THRESHOLD, 'a rate is held when under this share of '
-        'deadlines is missed; over it, a run ends with what would meet its rate',
-        flag='--miss-threshold', low=0.0, high=1.0, low_open=True,
-    ),
-    OPTIONS['rate_hz'].variant(
-        flag='--rate-min', default=RATE_MIN, help='--find-rate: the lowest rate tried'
-    ),
-    OPTIONS['rate_hz'].variant(
-        flag='--rate-max', default=RATE_MAX, help='--find-rate: the highest rate tried'
-    ),
-    Option(
-        'rate_tolerance', float, RATE_TOLERANCE, '--find-rate: stop when the bracket is within '
-        'this fraction', flag='--rate-tolerance', low=0.0, low_open=True,
-    ),
-    Option(
-        'repeats', int, REPEATS, '--find-rate: runs per rate, judged on their median',
-        flag='--repeats', low=1, high=99,
-    ),
+    'find_rate', 'miss_threshold', 'rate_min', 'rate_max', 'rate_tolerance', 'repeats',
 )
 
 

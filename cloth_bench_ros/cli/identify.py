@@ -12,7 +12,6 @@ from cloth_bench_ros.cli.run import recordings_motions
 from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.identify.spec import IdentifySpec
-from cloth_bench_ros.options import Option
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses, mesh_choice
 from cloth_bench_ros.studies.errors import StudyInterrupted
@@ -30,44 +29,25 @@ def trials_value(text: str, label: str = '--trials') -> int:
         raise validation.InputError(f'{exc} (or auto)') from None
 
 
-SAMPLER = options.declared('sampler')
 TRIALS = options.declared('trials').variant(validate=trials_value)
-FIDELITY = options.declared('fidelity')
 IDENTIFY_FLAGS: tuple[common.Flag, ...] = (
-    Option('engine', str, 'mujoco', 'the engine to fit', flag='--engine'),
+    ('engine', {'help': 'the engine to fit, or engine:model (e.g. newton:vbd)'}),
     ('bag', {'help': 'rosbag2 bag to fit (default: the bundled one)'}),
-    SAMPLER,
+    'sampler',
     TRIALS,
-    FIDELITY,
-    Option(
-        'objective', str, 'cd', 'metric of the task window', flag='--objective',
-        choices=('cd', 'hd'),
-    ),
-    Option(
-        'params', str, None, "comma-separated parameters to fit (default: the engine's identified "
-        'set)', flag='--params',
-    ),
+    'fidelity',
+    'objective',
+    'params',
     ('seed', {'help': 'seed of every trial'}),
     'rate_hz',
     'grid',
 )
 FIT_FLAGS: tuple[common.Flag, ...] = (
-    Option(
-        'span', float, 10.0, 'log-scale ranges reach this factor either side of the preset',
-        flag='--span', low=1.0, low_open=True,
-    ),
+    'span',
     ('max_frames', {'help': 'score only the first N frames of the window (faster)'}),
-    Option(
-        'batch', int, None, "trials in flight (default: the cluster's worker threads)",
-        flag='--batch', low=1,
-    ),
-    Option(
-        'validate_seeds', int, 5, 'held-out seeds to validate on', flag='--validate-seeds', low=0
-    ),
-    Option(
-        'bag_dir', str, None, "other trials' bags of the cloth and task for validation",
-        flag='--bag-dir',
-    ),
+    'batch',
+    'validate_seeds',
+    'validation_bag_dir',
     'settle',
     ('output', {'help': 'directory (default results/identify/<engine>_<cloth>_<primitive>)'}),
 )
@@ -81,13 +61,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help="fit an engine's cloth parameters to a bag (CMA-ES and Bayesian optimisation)",
     )
     common.add_options(ident, IDENTIFY_FLAGS)
+    common.add_renamed(ident, '--params', '--param', split=True)
     common.engine_override_option(ident, 'fixed override, not fitted')
     common.add_options(ident, FIT_FLAGS)
     # a plain recording is split as rank splits it: its first usable trial (--trial N) is fitted
     common.recording_options(ident)
     common.add_option(ident, 'cloth_size')
     common.add_option(ident, 'cloth_mass', help='total mass of the cloth, not fitted unless '
-                      "--params names mass (unset: the preset's mass per area times the area)")
+                      "--param names mass (unset: the preset's mass per area times the area)")
     common.add_option(ident, 'cloth_mesh')
     ident.set_defaults(func=cmd_identify)
 
@@ -109,6 +90,7 @@ def _trial_bag(bag: Path, args: argparse.Namespace, out: Path, task: str) -> Pat
     or a --start-time: the recording is one trial); the trial is written under `out`.
     """
     from cloth_bench_ros.data import BagReader  # lazy: the bag readers, +0.2 s on --help
+
     from cloth_bench_ros.rank.trials import prepare_trials  # lazy: bags, scipy, +0.9 s
 
     with BagReader(bag) as reader:
@@ -159,7 +141,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         args.sampler,
         args.trials,
         args.objective,
-        [p.strip() for p in args.params.split(',') if p.strip()] if args.params else [],
+        list(args.params or []),
         args.seed,
         args.rate,
         args.grid,

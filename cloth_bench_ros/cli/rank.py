@@ -6,15 +6,12 @@ import argparse
 import json
 from pathlib import Path
 
-from cloth_bench_ros import options
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.cli.identify import FIDELITY, TRIALS
+from cloth_bench_ros.cli.identify import TRIALS
 from cloth_bench_ros.cli.run import recordings_motions
 from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.engines import engine_class
-from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.options import Option, OPTIONS
 from cloth_bench_ros.rank.answer import rank_answer
 from cloth_bench_ros.report.rank import rank_lines, rank_table
 from cloth_bench_ros.studies.cloth import cloth_choice
@@ -30,29 +27,17 @@ def _entrant(text: str, label: str = '--engine') -> tuple[str, dict]:
     return name, ({'model': model} if model else {})
 
 
-def _rates(text: str, label: str = '--rates') -> list[float]:
-    """Comma-separated rates, each checked as --rate is (the one declaration of a rate)."""
-    values = [OPTIONS['rate_hz'].parse(v.strip(), label) for v in text.split(',') if v.strip()]
-    if not values:
-        raise InputError(f'no rate in {text!r} (comma-separated Hz)')
-    return values
-
-
 RANK_FLAGS: tuple[common.Flag, ...] = (
-    Option(
-        'recordings', str, None, "rosbag2 bags, or folders of bags (the importer's output)",
-        flag='recordings', nargs='+', metavar='RECORDING',
-    ),
+    'recordings',
     ('engines', {'validate': _entrant,
                  'help': 'engine[:model] (repeat; default mujoco, bullet, newton:xpbd)'}),
-    options.declared('rank_trials').variant(validate=TRIALS.validate),
-    options.declared('rank_sampler'),
-    FIDELITY.variant(
-        help='identification: full (default), or prune, coarse: multi-fidelity, as identify'
-    ),
+    TRIALS,
+    'sampler',
+    ('fidelity', {'help': 'identification: full (default), or prune, coarse: multi-fidelity, '
+                  'as identify'}),
     'rank_seeds',
     ('rate_hz', {'help': 'simulator rate of identification and scoring'}),
-    options.declared('rates').variant(validate=_rates),
+    'rates',
     'grid',
     'metric',  # cd/hd: also the identification objective (else cd)
     'max_frames',
@@ -69,6 +54,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help='rank the engines on your own recordings: identified, scored on held-out trials',
     )
     common.add_options(rank, RANK_FLAGS)
+    common.add_renamed(rank, '--rates', '--recommend-rate', split=True)
     common.recording_options(rank)
     common.engine_override_option(rank, 'fixed on every entrant of that engine, not fitted')
     common.add_option(rank, 'cloth_size')

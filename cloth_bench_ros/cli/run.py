@@ -15,7 +15,7 @@ from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.core.trajectory import sample_quintic, to_csv
 from cloth_bench_ros.engines import engine_class, known_engines
 from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere, load_preset
-from cloth_bench_ros.options import MOTION_FLAGS, Option, OPTIONS
+from cloth_bench_ros.options import MOTION_FLAGS, OPTIONS
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.safe_io import check_output_dir
 from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses, mesh_choice
@@ -23,15 +23,12 @@ from cloth_bench_ros.studies.errors import ProcessRunError
 
 
 RUN_FLAGS: tuple[common.Flag, ...] = (
-    ('engines', {'help': 'engine to run (repeat for several; default mujoco)'}),
+    ('engines', {'help': 'engine[:model] to run (repeat for several; default mujoco)'}),
     'rate_hz',
     ('bag', {'help': 'rosbag2 bag to score against (default: the bundled one)'}),
     'seed',
     'pacing',
-    Option(
-        'processes', bool, False, 'one OS process per node over DDS on loopback (default: all '
-        'nodes in this process)', flag='--processes', action='store_true',
-    ),
+    'processes',
     ('output', {
         'help': 'report directory (default results/<cloth>_<primitive>_<rate>hz_seed<seed>)'
     }),
@@ -39,10 +36,7 @@ RUN_FLAGS: tuple[common.Flag, ...] = (
 # the run's own outputs of a recording (the recording options: common.recording_options)
 SCORING_FLAGS: tuple[common.Flag, ...] = (
     'record_comparison',
-    Option(
-        'figures', bool, False, 'qualitative figure (paper Fig. 4) and animation in the report '
-        'directory', flag='--figures', action='store_true',
-    ),
+    'figures',
 )
 
 
@@ -73,31 +67,26 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     common.add_options(motion, (
         ('bag', {'help': 'rosbag2 recording', 'required': True}), 'topic', *MOTION_FLAGS,
-        'targets_topic', Option('output', str, None, 'the task file to write', flag='--output',
-                                metavar='FILE', required=True),
+        'targets_topic', ('output', {'help': 'the task file to write', 'metavar': 'FILE',
+                                     'required': True}),
     ))
     motion.set_defaults(func=cmd_motion)
 
     engines = sub.add_parser('engines', help='list known engines, their availability and version')
-    common.add_option(engines, Option(
-        'warm', bool, False, "also compile what makes a first run slow (Newton: Warp's kernel "
-        "cache; the metrics' numba kernels)", flag='--warm', action='store_true',
-    ))
+    common.add_option(engines, 'warm')
     engines.set_defaults(func=cmd_engines)
 
 
 def _write_motion(args: argparse.Namespace, bag: Path, path: Path) -> tuple[Path, dict]:
     """Write the recorded grippers (--gripper-frames, else --targets-topic) as a task file."""
-    from cloth_bench_ros.data.bag_reader import BagReader  # lazy: the bag readers, +0.2 s
-    from cloth_bench_ros.data.recorded_motion import (  # lazy: the bag readers, +0.15 s
-        parse_gripper_frames, recorded_task, write_task,
-    )
+    from cloth_bench_ros.data import bag_reader, recorded_motion as motion  # lazy: +0.2 s
 
-    with BagReader(bag) as reader:
-        doc = recorded_task(reader, args.topic or '', parse_gripper_frames(args.gripper_frames),
-                            args.targets_topic or '', args.table_z)
+    with bag_reader.BagReader(bag) as reader:
+        doc = motion.recorded_task(reader, args.topic or '',
+                                   motion.parse_gripper_frames(args.gripper_frames),
+                                   args.targets_topic or '', args.table_z)
     path.parent.mkdir(parents=True, exist_ok=True)
-    return write_task(path, doc), doc
+    return motion.write_task(path, doc), doc
 
 
 def recorded_motion(args: argparse.Namespace, bag: Path, out: Path) -> tuple[str, list[str]]:
@@ -107,7 +96,7 @@ def recorded_motion(args: argparse.Namespace, bag: Path, out: Path) -> tuple[str
     --gripper-frames or --targets-topic name them, unless --motion task; the task file is
     written into the report directory.
     """
-    from cloth_bench_ros.data.recorded_motion import (  # lazy: the bag readers, +0.15 s
+    from cloth_bench_ros.data.recorded_motion import (  # lazy: +0.2 s on --help
         parse_gripper_frames, table_line,
     )
 
@@ -385,7 +374,7 @@ def cmd_trajectory(args: argparse.Namespace) -> int:
 
 def cmd_motion(args: argparse.Namespace) -> int:
     """Write a recording's gripper motion as a task file."""
-    from cloth_bench_ros.data.recorded_motion import (  # lazy: the bag readers, +0.15 s
+    from cloth_bench_ros.data.recorded_motion import (  # lazy: +0.2 s on --help
         parse_gripper_frames, table_line,
     )
 

@@ -10,7 +10,7 @@ from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC
-from cloth_bench_ros.options import FLAGS, Option, OPTIONS
+from cloth_bench_ros.options import FLAGS, OPTIONS
 from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
@@ -19,91 +19,53 @@ TOLERANCE_ABS = FLAGS['tolerance_abs'].default  # ... fraction of the best, or t
 
 SWEEP_FLAGS: tuple[common.Flag, ...] = (
     'sweep_mode',
-    ('engines', {'help': 'repeat for several (default: mujoco, bullet, newton)'}),
-    OPTIONS['rate_hz'].variant(
-        action='append', default=None,
-        help='repeat for several (default 10, 100, 1000; settings mode: one rate, default 100)',
-    ),
-    OPTIONS['cloth'].variant(
-        action='append', default=None, help='repeat (default all three; settings mode: towel)'
-    ),
-    OPTIONS['primitive'].variant(
-        action='append', default=None, help='task, repeat (default both)'
-    ),
+    ('engines', {'help': 'engine[:model] (repeat for several; default: mujoco, bullet, newton)'}),
+    ('rate_list', {'help': 'simulator rate (repeat for several; default 10, 100, 1000; settings '
+                   'mode: one rate, default 100)'}),
+    ('cloth_list', {'help': 'the cloth (repeat; default all three; settings mode: towel)'}),
+    ('primitive_list', {'help': 'the task (repeat; default both)'}),
     ('seeds', {'help': 'number of seeds (default 20; settings mode 2)'}),
     'seed_start',
     ('output', {'help': 'results directory (default results/sweep or results/settings)'}),
-    Option(
-        'bag_dir', str, None, 'directory of <cloth>_<task> or <cloth>_<trial>_<task> bags '
-        '(default: the bundled bags)', flag='--bag-dir',
-    ),
+    'sweep_bag_dir',
     ('grid', {'help': 'cloth mesh NXxNZ for every cell (paper mode)'}),
 )
 SWEEP_RUN_FLAGS: tuple[common.Flag, ...] = (
     'pacing',
     'settle',
-    Option(
-        'step_per_target', bool, False, "internal time step = 1 / rate (the paper's frequency "
-        "study) instead of the preset's", flag='--step-per-target', action='store_true',
-    ),
+    'step_per_target',
     'keep_frames',
-    Option(
-        'axis', str, None, 'settings mode: an axis of the factorial sweep, e.g. grid=6x8,11x15 or '
-        'timestep=preset,0.005 (replaces the default axes)', flag='--axis', action='append',
-        metavar='PARAM=V1,V2',
-    ),
-    Option(
-        'retry_errors', bool, False, 'run cells recorded as errors again', flag='--retry-errors',
-        action='store_true',
-    ),
-    Option(
-        'all_metrics', bool, False, 'score every cell on every metric (docs/metrics.md), not only '
-        "the paper's CD/HD and --metric's", flag='--all-metrics', action='store_true',
-    ),
-    Option(
-        'dry_run', bool, False, 'count the cells and estimate the time, run nothing',
-        flag='--dry-run', action='store_true',
-    ),
-    Option(
-        'report', bool, False, 'render the report into <output>/report afterwards',
-        flag='--report', action='store_true',
-    ),
+    'sweep_axis',
+    'retry_errors',
+    'all_metrics',
+    'dry_run',
+    'report',
     'metric',
 )
 REPORT_FLAGS: tuple[common.Flag, ...] = (
-    Option('results', str, None, 'results.jsonl of a sweep, or its directory', flag='results'),
+    'results',
     ('output', {'help': 'report directory (default <results dir>/report)'}),
-    Option(
-        'stress', str, None, 'stress.jsonl (or its directory) to include (default: stress.jsonl '
-        'next to the results, if any)', flag='--stress',
-    ),
+    'stress',
     ('rate_hz', {'help': 'rate of the Table III layout'}),
     OPTIONS['cloth'].variant(flag='--fig5-cloth', help='cloth of the Fig. 5 layout'),
     'metric',
 )
-ENGINES = ('engines', {'help': 'repeat for several (default: mujoco, bullet, newton)'})
+ENGINES = ('engines', {'help': 'repeat for several (default: mujoco, bullet, newton)',
+                       'metavar': 'ENGINE'})  # names only: stress has no --set for a model
 STRESS_FLAGS: tuple[common.Flag, ...] = (
     ENGINES,
-    Option('case', str, None, 'only these cases (repeat; see --list)', flag='--case',
-           action='append'),
-    Option('list', bool, False, 'list the cases and exit', flag='--list', action='store_true'),
-    Option(
-        'max_wall_s', float, None, 'wall-time budget per case (default 120 s)',
-        flag='--max-wall-s', low=0.0, low_open=True, unit='s',
-    ),
+    'case',
+    'list',
+    'max_wall_s',
     ('output', {'help': 'results directory (default results/stress)'}),
 )
 XREF_FLAGS: tuple[common.Flag, ...] = (
     ('cloth', {'help': 'the cloth; needs its <cloth>_<task>_newton_vbd bags'}),
-    OPTIONS['primitive'].variant(
-        action='append', default=None, help='task (repeatable; default both)'
-    ),
-    ('seeds', {'default': 5, 'help': 'seeds per engine'}),
-    ('seed_start', {'default': 1, 'help': 'first seed (1: identifications run on seed 0, so '
-                    'every seed is held out)'}),
+    ('primitive_list', {'help': 'the task (repeat; default both)'}),
+    'xref_seeds',
+    'xref_seed_start',
     'rate_hz',
-    ('output', {'default': 'results/cross_reference',
-                'help': 'results directory: results.jsonl (resumed) and cross_reference.md'}),
+    'xref_output',
     'metric',
 )
 

@@ -12,17 +12,14 @@ a `CleaningStats`, so the summary can say so.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING
 
 from cloth_bench_ros.core import scene
+from cloth_bench_ros.core.trajectory import full_targets, TaskLike
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
-
-if TYPE_CHECKING:
-    from cloth_bench_ros.core.trajectory import TaskLike
+from scipy.spatial import cKDTree
 
 WORKSPACE_MARGIN = 0.10  # m around the reach of the cloth
-TABLE_PLANE_DISTANCE = 0.01  # m: points this close to the table's plane are removed with it
 TABLE_SEARCH = 0.1  # m: the plane is searched among the points this close to the table height
 TABLE_MIN_NORMAL_Z = 0.95  # |n_z| of a table's unit normal: at most 18 degrees from horizontal
 RANSAC_ITERATIONS = 200
@@ -35,7 +32,7 @@ class CleaningConfig:
     box_min: tuple[float, float, float] | None = None
     box_max: tuple[float, float, float] | None = None
     table_plane: bool = True  # remove the table's plane (RANSAC, near-horizontal, near the table)
-    table_distance: float = TABLE_PLANE_DISTANCE  # m: points this close to the plane belong to it
+    table_distance: float = scene.TABLE_PLANE_DISTANCE  # m: points this close belong to the plane
     sor_neighbors: int = 20
     sor_std_ratio: float = 3.0  # gentle: a cloud cleaned once already keeps its edges
     voxel: float = OPTIONS['voxel'].default  # m; 0: no down-sampling
@@ -81,8 +78,6 @@ def scene_cleaning(
     voxel: float = OPTIONS['voxel'].default,
 ) -> CleaningConfig:
     """Return the cleaning for the benchmark scene: the box of the tasks' gripper paths."""
-    from cloth_bench_ros.core.trajectory import full_targets
-
     paths = [full_targets(p, 100.0) for p in primitives]
     lo, hi = workspace_box(np.concatenate([np.concatenate([t.left, t.right]) for t in paths]))
     return CleaningConfig(lo, hi, voxel=voxel)
@@ -118,11 +113,11 @@ def find_table_z(points: np.ndarray, below_z: float) -> float | None:
     points = points[np.isfinite(points).all(axis=1) & (points[:, 2] < below_z)]
     if len(points) < 50:
         return None
-    plane = _table_plane(points, TABLE_PLANE_DISTANCE)
+    plane = _table_plane(points, scene.TABLE_PLANE_DISTANCE)
     if plane is None:
         return None
     normal, offset = plane
-    inliers = np.abs(points @ normal + offset) <= TABLE_PLANE_DISTANCE
+    inliers = np.abs(points @ normal + offset) <= scene.TABLE_PLANE_DISTANCE
     if inliers.sum() < 0.2 * len(points):
         return None
     return float(np.median(points[inliers, 2]))
@@ -168,8 +163,6 @@ def remove_outliers(points: np.ndarray, neighbors: int, std_ratio: float) -> np.
     them) must be positive and below the mean of those distances plus `std_ratio` standard
     deviations (Bessel-corrected).
     """
-    from scipy.spatial import cKDTree
-
     pts = np.asarray(points, dtype=np.float64)
     if neighbors <= 0 or len(pts) <= neighbors:
         return pts

@@ -21,12 +21,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import hashlib
+import io
 import math
 from pathlib import Path
 from typing import Any
 
 from cloth_bench_ros import validation
-from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.core.cloth_size import cloth_grid, grasp_width
+from cloth_bench_ros.core.scene import CLOTH_WIDTH, ClothGrid
+from cloth_bench_ros.core.trajectory import as_task, full_targets
 from cloth_bench_ros.errors import InputError, user_path
 import numpy as np
 
@@ -160,9 +163,7 @@ def read_cloth_mesh(
 
 def _load(data: bytes, suffix: str, name: str) -> tuple[np.ndarray, np.ndarray]:
     """Return the file's vertices and triangles as trimesh reads them, unprocessed."""
-    import io
-
-    import trimesh
+    import trimesh  # lazy: +0.6 s at an engine's start, not in .venv-ros; mesh files only
 
     try:
         loaded: Any = trimesh.load(
@@ -192,8 +193,7 @@ def _merged(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.nda
 
 def check_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
     """InputError, one line, unless the mesh is one manifold surface of sound triangles."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from scipy.sparse import coo_matrix, csgraph  # lazy: +0.34 s at an engine's start
 
     n, limit = len(vertices), validation.MAX_GRID_VERTICES
     if n > limit:
@@ -219,7 +219,7 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
         raise InputError(f'{name}: {int((per_edge > 2).sum())} non-manifold edges (an edge of '
                          f'more than two triangles), the first between vertices {a} and {b}')
     graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    parts, _ = connected_components(graph, directed=False)
+    parts, _ = csgraph.connected_components(graph, directed=False)
     if parts > 1:
         raise InputError(f'{name}: {parts} separate parts (or vertices of no triangle); a cloth '
                          'is one connected surface')
@@ -252,9 +252,6 @@ def run_cloth(
     recorded motion, moved into the scene's as the grippers are). None: the engine's default
     grid. A mesh with a grid or a size is refused (it has its own).
     """
-    from cloth_bench_ros.core.cloth_size import cloth_grid
-    from cloth_bench_ros.core.trajectory import as_task
-
     task = as_task(task)
     cloth: Cloth | None
     if not mesh:
@@ -283,9 +280,6 @@ def check_start(task: Any, cloth: Cloth | None, size: tuple[float, float] | None
 
     The cloth's allowance: a mesh's grasped vertices' distance, else the grid's grasped edge.
     """
-    from cloth_bench_ros.core.cloth_size import grasp_width
-    from cloth_bench_ros.core.scene import CLOTH_WIDTH
-
     if task.recorded is None:
         return
     apart = float(np.linalg.norm(np.subtract(task.grasp[1], task.grasp[0])))
@@ -317,14 +311,10 @@ def mesh_record(cloth: Cloth | None) -> dict[str, Any]:
 
 
 def cloth_faces(cloth: Cloth) -> np.ndarray:
-    """Return the triangles the surface metrics are on (a grid's read-only `grid_faces`)."""
-    from cloth_bench_ros.core.surface_distance import grid_faces
-
-    if isinstance(cloth, ClothMesh):
-        faces = cloth.faces()
-        faces.setflags(write=False)
-        return faces
-    return grid_faces(cloth.nx, cloth.nz)
+    """Return the triangles the surface metrics are on, read-only (a mesh's or a grid's)."""
+    faces = cloth.faces()
+    faces.setflags(write=False)
+    return faces
 
 
 def task_starts(
@@ -335,8 +325,5 @@ def task_starts(
 
     `task`: a Task, or a shipped task's name (core/task_data.py).
     """
-    from cloth_bench_ros.core.cloth_size import grasp_width
-    from cloth_bench_ros.core.trajectory import full_targets
-
     targets = full_targets(task, rate_hz, grasp_width(size))
     return targets.left[0], targets.right[0]

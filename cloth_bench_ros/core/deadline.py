@@ -19,8 +19,11 @@ from dataclasses import dataclass
 import math
 from typing import Iterable
 
+from cloth_bench_ros.command_options import COMMAND_FLAGS
+
 DEADLINE_BUDGET = 0.5  # the step's share of the period; the rest is the round trip
-MISS_THRESHOLD = 0.01  # a rate is held when under this share of the deadlines is missed
+# a rate is held when under this share of the deadlines is missed (hil --miss-threshold)
+MISS_THRESHOLD = COMMAND_FLAGS['miss_threshold'].default
 
 
 def deadline_rule(budget: float = DEADLINE_BUDGET) -> str:

@@ -17,8 +17,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from cloth_bench_ros.core.cleaning import TABLE_PLANE_DISTANCE
-from cloth_bench_ros.core.scene import TABLE_TOP_Z
+from cloth_bench_ros.core.scene import TABLE_PLANE_DISTANCE, TABLE_TOP_Z
 import numpy as np
 
 CONTACT_MARGIN = 0.02  # m above the table top: the band's top ...

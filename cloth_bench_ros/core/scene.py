@@ -20,6 +20,8 @@ TABLE_TOP_Z = 0.195  # m
 TABLE_X = (-0.30, 0.80)  # m; the benchmark asks for at least [-0.1, 0.7]
 TABLE_Y = (-0.90, 0.90)  # m; the benchmark asks for at least [-0.8, 0.8]
 TABLE_THICKNESS = 0.05  # m
+# m: a cloud's points this close to the table's plane are the table's (the cleaning removes them)
+TABLE_PLANE_DISTANCE = 0.01
 
 REAL_FPS = 30.0  # real point clouds per second
 

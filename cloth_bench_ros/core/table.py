@@ -9,6 +9,8 @@ import io
 from pathlib import Path
 import re
 
+from cloth_bench_ros.safe_io import atomic_write_text
+
 
 @dataclass
 class Table:
@@ -45,8 +47,6 @@ class Table:
         return f'<table>\n<thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody>\n</table>'
 
     def write_csv(self, path: Path) -> None:
-        from cloth_bench_ros.safe_io import atomic_write_text
-
         buffer = io.StringIO()
         w = csv.writer(buffer)
         w.writerow([_plain(h) for h in self.headers])

@@ -10,6 +10,7 @@ project's own MCAP path; sqlite3 and compressed bags to rosbags (data/bag_storag
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import hashlib
 from pathlib import Path
 import stat
 
@@ -142,8 +143,6 @@ def fingerprint(path: Path) -> str:
     Cheap on bags of any size; a bag rewritten or made again (another reference, another change
     of phase) has another one. Resumed studies compare it to know that a row is of this bag.
     """
-    import hashlib
-
     path = Path(path)
     files = sorted(p for p in path.iterdir() if p.is_file()) if path.is_dir() else [path]
     digest = hashlib.blake2b(digest_size=12)

@@ -15,6 +15,7 @@ import warnings
 
 from cloth_bench_ros.core import pointcloud2
 from cloth_bench_ros.data import messages
+from cloth_bench_ros.data.bag_reader import BagReader
 from cloth_bench_ros.data.errors import BagError, BagWarning
 from cloth_bench_ros.data.messages import DIAGNOSTIC_ARRAY, POINTCLOUD2
 from cloth_bench_ros.data.trial import (
@@ -239,10 +240,6 @@ class BagWriter:
         The .mcap then ends at the damage without a summary (BagReader reads it up to there, with a
         warning); `written` and `counts` become what is readable in it, never what was lost.
         """
-        from cloth_bench_ros.data.bag_reader import (
-            BagReader,
-        )  # the reader imports the trial layer too
-
         with self._lock:
             if (self.path / 'metadata.yaml').exists():
                 return dict(self.counts)  # finalised before the failure

@@ -31,6 +31,7 @@ from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.safe_io import staged_directory
 import numpy as np
+from tqdm import tqdm
 import yaml
 
 
@@ -257,8 +258,6 @@ def write_synthetic_bag(
     with staged_directory(out_dir, overwrite) as staged:  # output checks fail before simulating
         frames = synthetic_frames(config)
         if progress:
-            from tqdm import tqdm
-
             frames = tqdm(frames, total=config.frame_count, unit='frame', desc=out_dir.name)
         rendered = list(
             frames

@@ -57,7 +57,7 @@ def slab_tetrahedra(grid: Cloth, thickness: float) -> tuple[np.ndarray, np.ndarr
     rest = grid.vertices()
     n = len(rest)
     if isinstance(grid, ClothMesh):
-        import trimesh
+        import trimesh  # lazy: +0.6 s at an engine's start, not in .venv-ros; meshes only
 
         normals = trimesh.Trimesh(rest, grid.faces(), process=False).vertex_normals
         nodes = np.concatenate([rest - normals * thickness / 2, rest + normals * thickness / 2])

@@ -26,11 +26,14 @@ import re
 from typing import Iterable
 
 from cloth_bench_ros import validation
+from cloth_bench_ros.core.cloth_size import is_benchmark_cloth, with_cloth_mass
+from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.options import CLOTHS  # noqa: F401  (re-exported)
 from cloth_bench_ros.options import PRIMITIVES
 from cloth_bench_ros.paths import share_dir
-from cloth_bench_ros.safe_io import load_yaml_file, UnsafeInputError
+from cloth_bench_ros.safe_io import atomic_write_text, load_yaml_file, UnsafeInputError
+import yaml
 
 REQUIRED_KEYS = ('engine', 'engine_version', 'provenance', 'presets')
 MAX_PRESET_BYTES = 1024 * 1024
@@ -236,8 +239,6 @@ def fitted_elsewhere(engine: str, device: str, fitted: Iterable[str | None]) -> 
 
 def default_model(engine: str, cloth: str, primitive: str) -> str | None:
     """Return the model an engine runs without an override: its shipped preset's, or default."""
-    from cloth_bench_ros.engines import engine_class  # late: the registry imports engines
-
     model = load_preset(engine, cloth, primitive).get('model')
     if model is not None:
         return str(model)
@@ -250,8 +251,6 @@ def default_model(engine: str, cloth: str, primitive: str) -> str | None:
 
 def _check_against_engine(engine: str, values: dict, path: Path, where: str) -> None:
     """Raise EngineError naming the file if the engine's schema rejects a value."""
-    from cloth_bench_ros.engines import engine_class  # late: the registry imports engines
-
     try:
         cls = engine_class(engine)
     except EngineError:
@@ -334,9 +333,6 @@ def merge_identified(preset_files: list[Path], out_dir: Path) -> list[Path]:
 
 def write_merged_set(doc: dict, out_dir: Path) -> Path:
     """Write a merged set's file (provenance as {entry: paragraph}); return its path."""
-    from cloth_bench_ros.safe_io import atomic_write_text
-    import yaml
-
     out_dir.mkdir(parents=True, exist_ok=True)
     entries = [f'{cloth} {task} ({model})' for cloth, tasks in doc['presets'].items()
                for task, models in tasks.items() for model in models]
@@ -395,9 +391,6 @@ def sized_params(
     A given `mass`, else the preset's mass per area times the cloth's area (a mesh's `area` if
     given); the benchmark's cloth without a mass: `params` unchanged.
     """
-    from cloth_bench_ros.core.cloth_size import is_benchmark_cloth, with_cloth_mass
-    from cloth_bench_ros.engines import engine_class
-
     if mass is None and is_benchmark_cloth(size, area):
         return dict(params)
     schema = {p.name: p for p in engine_class(engine).params}

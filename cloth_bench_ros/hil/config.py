@@ -6,7 +6,8 @@ from dataclasses import dataclass
 from pathlib import Path
 import re
 
-from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.core.task_data import load_task
+from cloth_bench_ros.options import NODE_PARAMETERS, OPTIONS
 
 TIMELINE = 'timeline_{engine}.csv'
 SIMULATOR_FILE = 'simulator.json'
@@ -27,7 +28,7 @@ class HilConfig:
     params: tuple[tuple[str, object], ...] = ()  # sorted engine parameter overrides
     config: str = 'preset'  # the configuration's name (settings-sweep label)
     processes: bool = True
-    cpu: int = -1  # core to pin the simulator to (-1: not pinned)
+    cpu: int = NODE_PARAMETERS['cpu'].default  # core to pin the simulator to (-1: not pinned)
     realtime_priority: int = (
         0  # SCHED_FIFO priority of the simulator and the controller (0: not asked)
     )
@@ -52,6 +53,4 @@ class HilConfig:
 
     def task(self):
         """Return the Task the run follows: its task file's, else the shipped one."""
-        from cloth_bench_ros.core.task_data import load_task
-
         return load_task(self.primitive, self.task_file or None)

@@ -16,6 +16,7 @@ import math
 from pathlib import Path
 from typing import Callable
 
+from cloth_bench_ros.command_options import COMMAND_FLAGS
 from cloth_bench_ros.core.deadline import (
     DEADLINE_BUDGET,
     deadline_check,
@@ -27,10 +28,10 @@ from cloth_bench_ros.hil.study import HilResult, lockstep_cd, run_hil
 from cloth_bench_ros.hil.warmup import warmup
 from cloth_bench_ros.studies.errors import RunTimeout
 
-RATE_MIN = 10.0  # Hz
-RATE_MAX = 10_000.0  # Hz
-RATE_TOLERANCE = 0.1  # the bracket's ends within 10 % of each other
-REPEATS = 3  # runs per rate, judged on their median
+RATE_MIN = COMMAND_FLAGS['rate_min'].default  # Hz
+RATE_MAX = COMMAND_FLAGS['rate_max'].default  # Hz
+RATE_TOLERANCE = COMMAND_FLAGS['rate_tolerance'].default  # the bracket's ends within this fraction
+REPEATS = COMMAND_FLAGS['repeats'].default  # runs per rate, judged on their median
 
 
 @dataclass

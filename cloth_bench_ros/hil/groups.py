@@ -30,7 +30,27 @@ import sys
 import time
 from typing import Sequence
 
+from cloth_bench_ros.core import realtime_process
+from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.hil.config import HilConfig, SIMULATOR_FILE
+from cloth_bench_ros.nodes.common import close_nodes
+from cloth_bench_ros.nodes.evaluator import Evaluator
+from cloth_bench_ros.nodes.recorder import Recorder
+from cloth_bench_ros.nodes.simulator import Simulator
+from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
+from cloth_bench_ros.runtime import (
+    deserialize_message,
+    Parameter,
+    PointCloud2,
+    PoseArray,
+    rclpy,
+    serialize_message,
+    SingleThreadedExecutor,
+)
+from cloth_bench_ros.runtime.dds import loopback_environment
+from cloth_bench_ros.safe_io import atomic_write_text
+from cloth_bench_ros.studies.errors import RunTimeout
+from cloth_bench_ros.studies.processes import node_failed
 import numpy as np
 import yaml
 
@@ -108,12 +128,6 @@ def _parameters(config: HilConfig, group: str, run_dir: Path) -> list[tuple[str,
 
 
 def _make_nodes(config: HilConfig, group: str, run_dir: Path, context) -> list:
-    from cloth_bench_ros.nodes.evaluator import Evaluator
-    from cloth_bench_ros.nodes.recorder import Recorder
-    from cloth_bench_ros.nodes.simulator import Simulator
-    from cloth_bench_ros.nodes.trajectory_publisher import TrajectoryPublisher
-    from cloth_bench_ros.runtime import Parameter
-
     kinds = {
         'trajectory_publisher': TrajectoryPublisher,
         'simulator': Simulator,
@@ -140,8 +154,6 @@ def _finished(group: str, nodes: list) -> bool:
     The observer ends once the evaluator reported (it has every frame due by the last target,
     whatever the recorder has left); the simulator runs until it is told to stop.
     """
-    from cloth_bench_ros.nodes.evaluator import Evaluator
-
     if group == 'simulator':
         return False
     if group == 'observer':
@@ -161,9 +173,6 @@ def _waiting(nodes: list) -> str:
 
 
 def _write_simulator_file(run_dir: Path, nodes: list, notes: Sequence[str] = ()) -> None:
-    from cloth_bench_ros.nodes.simulator import Simulator
-    from cloth_bench_ros.safe_io import atomic_write_text
-
     for node in nodes:
         if isinstance(node, Simulator):
             times = node.step_times[1:node.step + 1]  # step 0 is the reset
@@ -195,18 +204,12 @@ def _waited(config: HilConfig) -> list[str]:
 
 
 def _time_budget(config: HilConfig) -> float:
-    from cloth_bench_ros.core.trajectory import full_targets
-
     run_s = config.duration or len(full_targets(config.task(), config.rate_hz)) / config.rate_hz
     return 3 * run_s + 90.0  # start-up, DDS discovery and a simulator far slower than real time
 
 
 def _run_in_process(config: HilConfig, run_dir: Path) -> None:
     """All three groups in one process, one executor, the embedded intra-process transport."""
-    from cloth_bench_ros.nodes.common import close_nodes
-    from cloth_bench_ros.runtime import rclpy, SingleThreadedExecutor
-    from cloth_bench_ros.studies.errors import RunTimeout
-
     context = rclpy.Context()
     rclpy.init(args=[], context=context, transport='intra')
     groups: list[tuple[str, list]] = []
@@ -233,10 +236,6 @@ def _run_in_process(config: HilConfig, run_dir: Path) -> None:
 
 def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
     """Run one group in this process over DDS until it finishes or gets SIGTERM."""
-    from cloth_bench_ros.nodes.common import close_nodes
-    from cloth_bench_ros.core import realtime_process
-    from cloth_bench_ros.runtime import rclpy, SingleThreadedExecutor
-
     stopped: list[bool] = []
     signal.signal(signal.SIGTERM, lambda *_: stopped.append(True))
     context = rclpy.Context()
@@ -276,13 +275,6 @@ def serve_group(config: HilConfig, group: str, run_dir: Path) -> None:
 
 def _warm_up_messages() -> None:
     """Make the controller's serialisers (targets out, states in) before any deadline."""
-    from cloth_bench_ros.runtime import (
-        deserialize_message,
-        PointCloud2,
-        PoseArray,
-        serialize_message,
-    )
-
     for msg_type in (PoseArray, PointCloud2):
         deserialize_message(serialize_message(msg_type()), msg_type)
 
@@ -308,10 +300,6 @@ def _config_from_json(text: str) -> HilConfig:
 
 def _run_processes(config: HilConfig, run_dir: Path) -> None:
     """Run the three groups as OS processes; the simulator is stopped once the others are done."""
-    from cloth_bench_ros.runtime.dds import loopback_environment
-    from cloth_bench_ros.studies.errors import RunTimeout
-    from cloth_bench_ros.studies.processes import node_failed
-
     # As `cloth-bench run --processes`: DDS on loopback only, on ROS_DOMAIN_ID or a random domain.
     domain = (
         int(os.environ['ROS_DOMAIN_ID'])

@@ -7,17 +7,17 @@ recommended configuration per engine, task and rate, with its provenance.
 
 from __future__ import annotations
 
+from datetime import datetime, timezone
 from typing import Sequence
 
 from cloth_bench_ros.sweep.aggregate import finite
 from cloth_bench_ros.sweep.recommend import DEADLINE_BUDGET, recommend_for_rate, Recommendation
 import numpy as np
+import yaml
 
 
 def recommendation_yaml(recs: Sequence[Recommendation], provenance: dict) -> str:
     """Return the recommendation file: provenance, then one entry per engine, task and rate."""
-    import yaml
-
     return yaml.safe_dump(
         {'provenance': provenance, 'recommendations': [r.as_dict() for r in recs]},
         sort_keys=False,
@@ -47,8 +47,6 @@ def provenance(
     rows: Sequence[dict], tol_rel: float, tol_abs: float, budget: float, note: str = ''
 ) -> dict:
     """Return where a recommendation file's numbers come from: sweep size, engines, load, rule."""
-    from datetime import datetime, timezone
-
     settings = [r for r in rows if r.get('mode') == 'settings']
     loads = finite(r.get('load_avg_1min') for r in settings)
     return {

@@ -24,8 +24,11 @@ from cloth_bench_ros.core.hil_timing import (
 )
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.hil.config import HilConfig, SIMULATOR_FILE, SUMMARY_FILE, TIMELINE
-from cloth_bench_ros.hil.groups import run_groups
+from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.studies.cloth import study_inputs
+from cloth_bench_ros.studies.results import append_row, load_rows
+from cloth_bench_ros.studies.run_config import RunConfig
+from cloth_bench_ros.sweep.recommend import load_recommendations, recommend_for_rate
 
 
 @dataclass
@@ -126,6 +129,8 @@ class LoadMeter:
 
 def run_hil(config: HilConfig, out_dir: Path, lockstep: bool = True) -> HilResult:
     """One real-time run (and, if asked, the same configuration in lockstep for its CD)."""
+    from cloth_bench_ros.hil.groups import run_groups  # lazy: the nodes, +0.9 s on --help
+
     run_dir = Path(out_dir) / config.ident()
     run_dir.mkdir(parents=True, exist_ok=True)
     for stale in (SIMULATOR_FILE, SUMMARY_FILE, TIMELINE.format(engine=config.engine)):
@@ -176,7 +181,7 @@ def _cd(metrics: dict, config: HilConfig) -> float:
 
 def lockstep_cd(config: HilConfig) -> float:
     """CD of the same configuration run in lockstep (in one process: deterministic)."""
-    from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
+    from cloth_bench_ros.studies.run_pipeline import run_pipeline  # lazy: +0.6 s on --help
 
     summary = run_pipeline(
         RunConfig(
@@ -199,8 +204,6 @@ def lockstep_cd(config: HilConfig) -> float:
 
 def write_results(results: list[HilResult], out_dir: Path) -> Path:
     """Append each run's row to <out_dir>/hil.jsonl; its path."""
-    from cloth_bench_ros.studies.results import append_row
-
     path = Path(out_dir) / 'hil.jsonl'
     for result in results:
         append_row(path, result.row())
@@ -237,10 +240,6 @@ def recommended(
     The settings sweep's results if they hold this engine, task and rate, else the shipped
     config/hil_recommended.yaml.
     """
-    from cloth_bench_ros.paths import share_dir
-    from cloth_bench_ros.sweep.recommend import load_recommendations, recommend_for_rate
-    from cloth_bench_ros.studies.results import load_rows
-
     if settings is not None and Path(settings).exists():
         rec = recommend_for_rate(
             load_rows(Path(settings)), engine, cloth, primitive, rate_hz, tol_rel, tol_abs, budget

@@ -14,8 +14,11 @@ from dataclasses import dataclass
 import math
 import time
 
+from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.engines import make_engine
+from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.hil.config import HilConfig
 import numpy as np
 
@@ -48,10 +51,6 @@ def warmup(
     config: HilConfig, seconds: float = WARMUP_SECONDS, wall_s: float = WARMUP_WALL_S
 ) -> Warmup:
     """Step the configuration's engine through the first `seconds` of its targets; time steps."""
-    from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
-    from cloth_bench_ros.engines import make_engine
-    from cloth_bench_ros.engines.presets import load_preset, sized_params
-
     task = config.task()
     grid = run_cloth(config.grid, None, config.cloth_mesh or None, task, config.rate_hz)
     params = sized_params(config.engine, {

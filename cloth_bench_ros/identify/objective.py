@@ -26,6 +26,7 @@ from pathlib import Path
 import time
 from typing import Any
 
+from cloth_bench_ros.command_options import COMMAND_FLAGS
 from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
 from cloth_bench_ros.core.cloth_size import grasp_width
 from cloth_bench_ros.core.evaluation import OnlineEvaluator
@@ -63,7 +64,7 @@ class Trial:
     primitive: str
     bag: str
     params: tuple[tuple[str, object], ...]  # sorted (name, value) on top of the preset
-    objective: str = 'cd'
+    objective: str = COMMAND_FLAGS['objective'].default
     seed: int = 0
     rate_hz: float = OPTIONS['rate_hz'].default
     grid: tuple[int, int] | None = None

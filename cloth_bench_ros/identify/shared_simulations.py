@@ -31,6 +31,9 @@ from cloth_bench_ros.studies.recording import inputs_key
 from cloth_bench_ros.studies.results import append_row
 import numpy as np
 
+# what every key names as the objective: a simulation does not depend on it (rows keep it)
+KEY_OBJECTIVE = 'cd'
+
 
 @dataclass
 class KnownResult:
@@ -184,7 +187,8 @@ def _key(trial: Trial) -> str:
     Every field but the bags and the trial's labels, and the engine's version, preset and device
     (another project or engine version, or another device, simulates again).
     """
-    fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='', objective='cd'))
+    fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='',
+                            objective=KEY_OBJECTIVE))
     if fields['settle'] == FULL:  # as rows were keyed before the fast settle existed
         del fields['settle']
     fields['inputs'] = inputs_key(trial.primitive, trial.task, trial.cloth_mesh)

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.command_options import COMMAND_FLAGS
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.options import FLAGS, OPTIONS
 
@@ -24,7 +25,7 @@ class IdentifySpec:
     output: Path
     sampler: str = FLAGS['sampler'].default
     trials: int = DEFAULT_TRIALS  # per sampler; AUTO: chosen by doubling (see budget_reached)
-    objective: str = 'cd'
+    objective: str = COMMAND_FLAGS['objective'].default
     params: Sequence[str] = ()
     seed: int = 0
     rate_hz: float = OPTIONS['rate_hz'].default
@@ -33,7 +34,7 @@ class IdentifySpec:
     span: float = DEFAULT_SPAN
     max_frames: int | None = None
     batch: int | None = None  # trials in flight (default: the cluster's worker threads)
-    validate_seeds: int = 5
+    validate_seeds: int = COMMAND_FLAGS['validate_seeds'].default
     bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
     also: tuple[str, ...] = ()  # more training bags: the objective is the mean over all of them
     # or prune, coarse: multi-fidelity (identify/fidelity.py)

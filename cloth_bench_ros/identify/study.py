@@ -118,10 +118,10 @@ def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> 
         p = schema.get(name)
         if p is None:
             raise InputError(
-                f'--params: unknown {engine} parameter {name} (known: {", ".join(schema)})'
+                f'--param: unknown {engine} parameter {name} (known: {", ".join(schema)})'
             )
         if p.choices or isinstance(p.default, bool) or p.low is None or p.high is None:
-            raise InputError(f'--params: {engine} parameter {name} is not a number with a range')
+            raise InputError(f'--param: {engine} parameter {name} is not a number with a range')
         value = float(base.get(name, p.default))
         low, high = float(p.low), float(p.high)
         decades = high >= 100 * low if low > 0 else value > 0 and high >= 100 * value

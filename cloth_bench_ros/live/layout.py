@@ -12,17 +12,19 @@ engine over time; step time and latency per engine over time.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 import sys
 from typing import Any
 
 from cloth_bench_ros.live import error_view
+import foxglove.layouts as fl
 
 LAYOUT_ENGINES = ('mujoco', 'bullet', 'newton')  # an engine not in the run: its series stay empty
 ERROR_RANGE_M = (0.0, 0.05)  # the colour map's span: the paper's CDs are a few centimetres
 
 
-def _series(fl: Any, engine: str, topic: str, fields: tuple[str, ...], name: str) -> Any:
+def _series(engine: str, topic: str, fields: tuple[str, ...], name: str) -> Any:
     return fl.PlotSeries(
         value=f'{error_view.topic(topic, engine)}.data[{fields.index(name)}]',
         label=f'{engine} {name}',
@@ -32,8 +34,6 @@ def _series(fl: Any, engine: str, topic: str, fields: tuple[str, ...], name: str
 
 def live_layout() -> Any:
     """Return the layout (a foxglove.layouts.Layout)."""
-    import foxglove.layouts as fl
-
     topics: dict[str, Any] = {
         error_view.topic(error_view.REAL_CLOUD): fl.BaseRendererPointCloudTopicSettings(
             visible=True, point_size=2, color_mode='flat', flat_color='#9e9e9eff'
@@ -65,7 +65,7 @@ def live_layout() -> Any:
         title='CD and HD per scored real frame (m)',
         config=fl.PlotConfig(
             paths=[
-                _series(fl, e, error_view.FRAME_METRICS_TOPIC, frame, name)
+                _series(e, error_view.FRAME_METRICS_TOPIC, frame, name)
                 for e in LAYOUT_ENGINES
                 for name in ('cd', 'hd')
             ],
@@ -76,7 +76,7 @@ def live_layout() -> Any:
         title='step time and latency per step (s)',
         config=fl.PlotConfig(
             paths=[
-                _series(fl, e, error_view.STEP_METRICS_TOPIC, step, name)
+                _series(e, error_view.STEP_METRICS_TOPIC, step, name)
                 for e in LAYOUT_ENGINES
                 for name in ('step_time', 'latency')
             ],
@@ -97,8 +97,6 @@ def live_layout() -> Any:
 
 def layout_json() -> str:
     """Return the layout as the shipped file holds it (indented JSON, one newline at the end)."""
-    import json
-
     return json.dumps(json.loads(live_layout().to_json()), indent=2) + '\n'
 
 

@@ -86,8 +86,7 @@ class LiveView:
         faces: np.ndarray | None = None,
     ) -> None:
         try:
-            import foxglove
-            from foxglove.websocket import Capability  # noqa: F401 (the server module is there)
+            import foxglove.websocket  # lazy: --live only; foxglove-sdk is not in .venv-ros
         except ImportError as exc:
             raise LiveViewError(f'live view: foxglove-sdk is not installed ({exc})') from None
         logging.getLogger('foxglove').setLevel(logging.ERROR)  # its drops: our one line instead

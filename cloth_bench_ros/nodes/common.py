@@ -212,7 +212,7 @@ def run_nodes(
 
 def _no_rclpy_signal_handlers():
     """Rclpy's SignalHandlerOptions.NO (real rclpy only)."""
-    from rclpy.signals import SignalHandlerOptions
+    from rclpy.signals import SignalHandlerOptions  # lazy: real rclpy only (optional)
 
     return SignalHandlerOptions.NO
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import shutil
 from typing import Any
 
+from cloth_bench_ros.core.run_summary import inputs_line
 from cloth_bench_ros.core.trajectory import TaskLike
 from cloth_bench_ros.live.comparison_bag import cloth_triangles, write_comparison_bag
 import numpy as np
@@ -41,15 +42,21 @@ def _draw(ax: Any, real: np.ndarray, vertices: np.ndarray, faces: np.ndarray | N
     ax.set_yticks([])
 
 
+def _pyplot() -> Any:
+    """Return matplotlib's pyplot on the Agg backend (no display: figures are files)."""
+    import matplotlib  # lazy: +0.5 s at the evaluator's start, not in .venv-ros
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt  # lazy: as matplotlib, --figures only
+
+    return plt
+
+
 def qualitative_figure(
     pairs: list, primitive: str, path: Path, faces: np.ndarray | None = None, title: str = ''
 ) -> tuple[int, int]:
     """Return the paper's Fig. 4 for this run: (rows, columns) drawn = (engines, time steps)."""
-    import matplotlib
-
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     engines = _by_engine(pairs)
     times = FIG4_TIMES[primitive]
     fig, axes = plt.subplots(
@@ -73,11 +80,8 @@ def qualitative_figure(
 
 def animation(pairs: list, path: Path, faces: np.ndarray | None = None) -> tuple[Path, int]:
     """Animate sim against real over the trial, a panel per engine: MP4 with ffmpeg, else GIF."""
-    import matplotlib
-
-    matplotlib.use('Agg')
-    from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
+    from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter  # lazy: matplotlib
 
     engines = _by_engine(pairs)
     count = min(len(rows) for rows in engines.values())
@@ -115,8 +119,6 @@ def write_comparison(
 
     faces: the cloth's triangles (a `--cloth-mesh`'s; None: the grid's).
     """
-    from cloth_bench_ros.core.run_summary import inputs_line
-
     run = summary['run']
     out: dict[str, Any] = {}
     if not pairs:

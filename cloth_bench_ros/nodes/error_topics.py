@@ -15,6 +15,7 @@ from typing import Any
 
 from cloth_bench_ros.core.trajectory import TaskLike
 from cloth_bench_ros.live import error_view
+from cloth_bench_ros.live.view import LiveView
 from cloth_bench_ros.runtime import (
     declare_option,
     Float64MultiArray,
@@ -70,8 +71,6 @@ class ErrorTopics:
         self.waiting_until: float | None = None
         self.decided = realtime  # a realtime run starts on its schedule: no wait for a viewer
         if live.get('live'):
-            from cloth_bench_ros.live.view import LiveView
-
             self.live = LiveView(
                 engines,
                 task,

@@ -32,7 +32,6 @@ from cloth_bench_ros.nodes.common import (
 )
 from cloth_bench_ros.nodes.comparison import write_comparison
 from cloth_bench_ros.nodes.error_topics import declare_live_parameters, ErrorTopics
-from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.runtime import (
     declare_fixed,
     declare_float,
@@ -59,7 +58,7 @@ class Evaluator(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('evaluator', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
-        declare_fixed(self, 'engines', [OPTIONS['engine'].default])
+        declare_fixed(self, 'engines')
         self.task = node_task(self)
         # False while a composed graph is still being built: a node that fails to start then
         # says why in one line, and this one has nothing to add
@@ -68,17 +67,17 @@ class Evaluator(Node):
         rate_hz = declare_option(self, 'rate_hz')
         declare_float(self, 'time_offset', self.task.settle_duration)
         cut = declare_option(self, 'change_of_phase_frame')
-        self.output_dir = declare_fixed(self, 'output_dir', '')
+        self.output_dir = declare_fixed(self, 'output_dir')
         self.comparison_bag = declare_option(self, 'record_comparison')
-        declare_fixed(self, 'comparison_figures', False)
+        declare_fixed(self, 'comparison_figures')
         cloth = declare_option(self, 'cloth')
         seed = declare_option(self, 'seed')
         # the simulators' grid (0: the default), whose triangles the surface metrics are on
         nx, nz = node_grid(self)
         size, mass = node_cloth(self)  # recorded in the summary; the mesh's extent
         # The engines' devices, comma-separated in the order of `engines` ('' : not recorded).
-        devices = str(declare_fixed(self, 'devices', ''))
-        models = str(declare_fixed(self, 'models', ''))  # the engines' models, likewise
+        devices = str(declare_fixed(self, 'devices'))
+        models = str(declare_fixed(self, 'models'))  # the engines' models, likewise
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,

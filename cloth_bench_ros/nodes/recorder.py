@@ -78,7 +78,7 @@ class RecordingStopped(ClothBenchError, ValueError):
 class Recorder(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('recorder', namespace=kwargs.pop('namespace', NAMESPACE), **kwargs)
-        self.mode = declare_fixed(self, 'mode', 'replay')
+        self.mode = declare_fixed(self, 'mode')
         self.done = False
         self.writer: BagWriter | None = None
         self.bag: BagReader | None = None  # replay: closed by close()
@@ -92,17 +92,17 @@ class Recorder(Node):
     # --- replay ------------------------------------------------------------------------------
 
     def start_replay(self) -> None:
-        path = declare_fixed(self, 'bag', '')
+        path = declare_fixed(self, 'bag')
         if not path:
             raise InputError("recorder: parameter 'bag' is empty (path to a rosbag2 MCAP bag)")
         options = self.replay_options()
         # Frames are stamped from the start of the task's motion; the run starts with its settle
         # phase.
         declare_float(self, 'time_offset', replay_task(options).settle_duration)
-        clock = declare_fixed(self, 'clock', 'sim')
-        declare_float(self, 'rate_factor', 1.0)
-        declare_float(self, 'start_offset', 0.0)
-        declare_fixed(self, 'loop', False)
+        clock = declare_fixed(self, 'clock')
+        declare_float(self, 'rate_factor')
+        declare_float(self, 'start_offset')
+        declare_fixed(self, 'loop')
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,
@@ -155,7 +155,7 @@ class Recorder(Node):
 
     def replay_options(self) -> ReplayOptions:
         """Return what the bag does not say, from the node's parameters."""
-        transform = list(declare_fixed(self, 'transform', [0.0]))
+        transform = list(declare_fixed(self, 'transform'))
         if transform != [0.0] and len(transform) != 16:
             raise InputError(
                 f'recorder: transform needs 16 numbers (a 4x4 matrix), got {len(transform)}'
@@ -274,8 +274,8 @@ class Recorder(Node):
     # --- record ------------------------------------------------------------------------------
 
     def start_recording(self) -> None:
-        output = declare_fixed(self, 'output', '')
-        entries = list(declare_fixed(self, 'record_topics', ['']))
+        output = declare_fixed(self, 'output')
+        entries = list(declare_fixed(self, 'record_topics'))
         if not output:
             raise InputError(
                 "recorder: parameter 'output' is empty (bag directory to record into)"

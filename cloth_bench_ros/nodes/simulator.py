@@ -122,10 +122,10 @@ class Simulator(Node):
         task = node_task(self)
         primitive = self.get_parameter('primitive').value
         self.seed = declare_option(self, 'seed')
-        declare_fixed(self, 'engine_params', '{}')
+        declare_fixed(self, 'engine_params')
         nx, nz = node_grid(self)
         size, mass = node_cloth(self)
-        presets_dir = declare_fixed(self, 'presets_dir', '')
+        presets_dir = declare_fixed(self, 'presets_dir')
         declare_option(self, 'device')  # '' : engine_params' device, else the engine's
         # Every value through the one validation layer; an error names the node and parameter.
         checked = validation.node_parameters(
@@ -182,9 +182,9 @@ class Simulator(Node):
         )
         self.prepared: np.ndarray | None = self.warm_up()
         self.realtime = realtime_process.apply(
-            int(declare_fixed(self, 'cpu', -1)),
-            int(declare_fixed(self, 'realtime_priority', 0)),
-            bool(declare_fixed(self, 'freeze_gc', False)),
+            int(declare_fixed(self, 'cpu')),
+            int(declare_fixed(self, 'realtime_priority')),
+            bool(declare_fixed(self, 'freeze_gc')),
         )
         # Subscribed last, once start-up is done, so the first target finds the engine ready.
         # Keep-last 1, as a controller's command topic: a simulator that falls behind steps to the

@@ -22,7 +22,6 @@ from cloth_bench_ros.nodes.common import (
     run_node,
 )
 from cloth_bench_ros.nodes.message_pool import MessagePool
-from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.runtime import (
     Clock,
     declare_fixed,
@@ -37,6 +36,7 @@ from cloth_bench_ros.runtime import (
     steady_clock,
     Time,
 )
+from cloth_bench_ros.safe_io import atomic_write_text
 import numpy as np
 
 PREROLL_RESEND_S = (
@@ -57,9 +57,9 @@ class TrajectoryPublisher(Node):
         task = node_task(self)
         rate_hz = declare_option(self, 'rate_hz')
         self.pacing = declare_option(self, 'pacing')
-        declare_fixed(self, 'engines', [OPTIONS['engine'].default])
-        declare_fixed(self, 'wait_for_recorder', True)
-        declare_fixed(self, 'wait_for_evaluator', True)
+        declare_fixed(self, 'engines')
+        declare_fixed(self, 'wait_for_recorder')
+        declare_fixed(self, 'wait_for_evaluator')
         # Every value through the one validation layer; an error names the node and parameter.
         p = validation.node_parameters(
             self,
@@ -74,7 +74,7 @@ class TrajectoryPublisher(Node):
             p['wait_for_recorder'],
             p['wait_for_evaluator'],
         )
-        self.timing_log = declare_fixed(self, 'timing_log', '')
+        self.timing_log = declare_fixed(self, 'timing_log')
         duration = declare_option(self, 'duration')
         self.targets = full_targets(task, rate_hz, grasp_width(node_cloth_size(self)))
         # duration > 0: only the targets of the first `duration` seconds (short real-time checks).
@@ -270,8 +270,6 @@ class TrajectoryPublisher(Node):
             self.destroy_timer(self.pace_timer)
             self.pace_timer = None
         if self.timing_log:
-            from cloth_bench_ros.safe_io import atomic_write_text
-
             Path(self.timing_log).mkdir(parents=True, exist_ok=True)
             for engine, timeline in self.timelines.items():
                 atomic_write_text(

@@ -74,9 +74,9 @@ class RankSpec:
     entrants: Sequence[tuple[str, dict]] = DEFAULT_ENTRANTS
     replay: ReplayOptions = field(default_factory=ReplayOptions)  # cloth, task, topic, ...
     # identification budget per sampler (AUTO: from the convergence curve)
-    trials: int = FLAGS['rank_trials'].default
+    trials: int = FLAGS['trials'].default
     # both (CMA-ES too) doubles the cost (docs/identification.md)
-    sampler: str = FLAGS['rank_sampler'].default
+    sampler: str = FLAGS['sampler'].default
     seeds: int = FLAGS['rank_seeds'].default  # held-out seeds 1..seeds
     rate_hz: float = OPTIONS['rate_hz'].default
     rates: Sequence[float] = RATES

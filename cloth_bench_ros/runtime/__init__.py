@@ -12,7 +12,7 @@ import os
 from typing import Any, TYPE_CHECKING
 
 from cloth_bench_ros.errors import InputError, is_rclpy_user_error, RCLPY_USER_ERRORS
-from cloth_bench_ros.options import Option, OPTIONS
+from cloth_bench_ros.options import NODE_PARAMETERS, Option, OPTIONS
 
 EMBEDDED = bool(os.environ.get('CLOTH_BENCH_EMBEDDED'))
 if not EMBEDDED and not TYPE_CHECKING:
@@ -237,17 +237,25 @@ def declare_option(node, name: str) -> Any:
     return option.check(value, label)
 
 
-def declare_fixed(node, name: str, default: Any) -> Any:
+_DECLARED: Any = object()  # the default of options.NODE_PARAMETERS[name]
+
+
+def declare_fixed(node, name: str, default: Any = _DECLARED) -> Any:
     """
     Declare a parameter that a running node cannot change (read-only) and return its value.
+
+    Its default is the declaration's (options.NODE_PARAMETERS), else one computed at start-up.
 
     Every node reads its parameters once, at start-up: `ros2 param set` on one is refused, by
     rclpy and the embedded runtime alike ('Trying to set a read-only parameter').
     """
+    if default is _DECLARED:
+        declared = NODE_PARAMETERS[name].default
+        default = list(declared) if isinstance(declared, list) else declared  # not shared
     return node.declare_parameter(name, default, ParameterDescriptor(read_only=True)).value
 
 
-def declare_float(node, name: str, default: float) -> float:
+def declare_float(node, name: str, default: float = _DECLARED) -> float:
     """
     Return a double parameter that also takes an integer (`-p rate_hz:=1000`).
 
@@ -256,6 +264,8 @@ def declare_float(node, name: str, default: float) -> float:
     rclpy refuses an INTEGER override for a parameter declared DOUBLE; declared with dynamic
     typing, any type is accepted and this is the one place that keeps numbers and refuses the rest.
     """
+    if default is _DECLARED:
+        default = NODE_PARAMETERS[name].default
     value = node.declare_parameter(
         name, float(default), ParameterDescriptor(dynamic_typing=True, read_only=True)
     ).value

@@ -35,6 +35,7 @@ from pathlib import Path
 import time
 from typing import Any, Callable
 
+from cloth_bench_ros.command_options import COMMAND_FLAGS
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.surface_distance import grid_faces, point_to_surface, TriangleMesh
 from cloth_bench_ros.data.synth import reference_config, simulate_reference, SynthConfig
@@ -210,7 +211,7 @@ class ConvergenceStudy:
     cloth: str
     primitive: str
     axes: tuple[str, ...] = AXES
-    levels: int = 1
+    levels: int = COMMAND_FLAGS['levels'].default
     duration: float | None = None  # s of the quintic part (None: the whole trial)
     overrides: dict[str, Any] = field(default_factory=dict)  # of the base (tests: a coarse grid)
     scored: tuple[str, ...] = ()  # engines whose presets are scored against every run

@@ -21,7 +21,6 @@ from pathlib import Path
 import socket
 from typing import Any, Mapping, Sequence, TypedDict
 
-from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
@@ -359,6 +358,8 @@ def cloth_fields(cell: Any, every: bool = False) -> dict[str, Any]:
 
 def bag_fingerprint(bag: str) -> str | None:
     """Return a bag's fingerprint, or None where it cannot be read (the run reports why)."""
+    from cloth_bench_ros.data.bag_layout import fingerprint  # lazy: the bag readers, +0.1 s
+
     try:
         return fingerprint(Path(bag))
     except OSError:

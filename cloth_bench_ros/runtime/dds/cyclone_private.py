@@ -17,6 +17,7 @@ from __future__ import annotations
 from typing import Any
 
 import cyclonedds._clayer as _clayer
+from cyclonedds.core import Entity
 
 
 def write_cdr(writer: Any, payload: bytes) -> int:
@@ -38,8 +39,6 @@ def delete_entity(entity: Any) -> None:
 
 def missing(participant: Any = None) -> list[str]:
     """Return the private names an installed cyclonedds lacks (`participant`: a live entity)."""
-    from cyclonedds.core import Entity
-
     out = [
         f'cyclonedds._clayer.{name}'
         for name in ('ddspy_write', 'ddspy_take')
