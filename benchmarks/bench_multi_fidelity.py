@@ -24,8 +24,8 @@ import tempfile
 import time
 
 from cloth_bench_ros.identify.objective import evaluate, Trial
-from cloth_bench_ros.identify.spec import IdentifySpec
-from cloth_bench_ros.identify.study import AUTO, identify, TRIALS_FILE
+from cloth_bench_ros.identify.spec import AUTO, IdentifySpec
+from cloth_bench_ros.identify.study import identify, TRIALS_FILE
 from cloth_bench_ros.paths import bundled_bag
 import numpy as np
 

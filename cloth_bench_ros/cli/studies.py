@@ -9,6 +9,7 @@ from pathlib import Path
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere
+from cloth_bench_ros.identify.spec import OBJECTIVES
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import FLAGS, OPTIONS
 from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
@@ -135,8 +136,6 @@ def say_fitted_elsewhere(cells: list, presets: Path | None) -> None:
 
 def scores_every_metric(args: argparse.Namespace) -> bool:
     """Return whether a study's cells need every metric: asked for, or --metric is not CD/HD."""
-    from cloth_bench_ros.identify.objective import OBJECTIVES  # lazy: the engines, +0.3 s
-
     return bool(getattr(args, 'all_metrics', False)) or args.metric not in OBJECTIVES
 
 

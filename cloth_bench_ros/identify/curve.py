@@ -14,7 +14,6 @@ from typing import Any, Sequence
 import optuna
 from optuna.trial import TrialState
 
-AUTO = 0
 AUTO_FIRST, AUTO_MAX_TRIALS, AUTO_TOLERANCE = 32, 512, 0.02
 
 

@@ -46,7 +46,6 @@ from cloth_bench_ros.metric_choice import METRICS
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
-OBJECTIVES = ('cd', 'hd')
 FPS = 30.0
 # A trial bag of a recorded motion carries its task file (rank.trials writes it): the
 # engines follow it on that bag, and the bag's fingerprint changes with it.

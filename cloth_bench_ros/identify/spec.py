@@ -10,8 +10,10 @@ from cloth_bench_ros.command_options import COMMAND_FLAGS
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.options import FLAGS, OPTIONS
 
+AUTO = 0  # trials: the budget chosen from the convergence curve (identify.curve)
 DEFAULT_TRIALS = FLAGS['trials'].default
 DEFAULT_SPAN = 10.0
+OBJECTIVES = ('cd', 'hd')  # the metrics an identification can minimise
 
 
 @dataclass

@@ -34,8 +34,7 @@ import warnings
 from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.identify.curve import (  # noqa: F401  (AUTO: re-exported)
-    AUTO,
+from cloth_bench_ros.identify.curve import (
     AUTO_FIRST,
     AUTO_MAX_TRIALS,
     AUTO_TOLERANCE,
@@ -43,7 +42,6 @@ from cloth_bench_ros.identify.curve import (  # noqa: F401  (AUTO: re-exported)
     budget_reached,
     convergence,
     finite_or_inf,
-    importance,
 )
 from cloth_bench_ros.identify.fidelity import check_fidelity, Pruner
 from cloth_bench_ros.identify.objective import evaluate, Trial, trial_of
@@ -55,7 +53,7 @@ from cloth_bench_ros.identify.problem import (
     study_key,
 )
 from cloth_bench_ros.identify.shared_simulations import SharedSimulations
-from cloth_bench_ros.identify.spec import IdentifySpec
+from cloth_bench_ros.identify.spec import AUTO, IdentifySpec
 from cloth_bench_ros.options import SAMPLERS
 from cloth_bench_ros.safe_io import check_output_dir
 from cloth_bench_ros.studies.dask_executor import open_client, worker_slots

@@ -31,10 +31,10 @@ from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.identify.errors import ProblemChanged
-from cloth_bench_ros.identify.objective import evaluate, OBJECTIVES, Trial
+from cloth_bench_ros.identify.objective import evaluate, Trial
 from cloth_bench_ros.identify.problem import resolved_device, simulated_model
 from cloth_bench_ros.identify.shared_simulations import pool_cells, split_pooled
-from cloth_bench_ros.identify.spec import IdentifySpec
+from cloth_bench_ros.identify.spec import IdentifySpec, OBJECTIVES
 from cloth_bench_ros.identify.study import identify, SUMMARY_FILE
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import FLAGS, OPTIONS
