@@ -23,8 +23,8 @@ from cloth_bench_ros.data.alignment import reference_motion, search_start
 from cloth_bench_ros.data.trials import split_clouds
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.identify.objective import evaluate, Trial
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.studies.objective import evaluate, Trial
 import numpy as np
 
 ENTRANTS = (('mujoco', ()), ('bullet', ()), ('newton', (('model', 'xpbd'),)))

@@ -23,9 +23,10 @@ from pathlib import Path
 import tempfile
 import time
 
+from cloth_bench_ros.identify.objective import evaluate, Trial
+from cloth_bench_ros.identify.spec import AUTO, IdentifySpec
+from cloth_bench_ros.identify.study import identify, TRIALS_FILE
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.studies.identify import AUTO, identify, IdentifySpec, TRIALS_FILE
-from cloth_bench_ros.studies.objective import evaluate, Trial
 import numpy as np
 
 GOAL_CD, GOAL_COST = 0.02, 0.5

@@ -34,7 +34,7 @@ from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.engines.settle import Settler, SETTLES
-from cloth_bench_ros.studies.objective import evaluate, Trial
+from cloth_bench_ros.identify.objective import evaluate, Trial
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]

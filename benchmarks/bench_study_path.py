@@ -23,9 +23,9 @@ import time
 
 from cloth_bench_ros.core import metrics
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.studies import sweep
 from cloth_bench_ros.studies.cells import Cell
 from cloth_bench_ros.studies.run_pipeline import run_pipeline
+from cloth_bench_ros.sweep import study as sweep
 import numpy as np
 
 GOAL = 1.05

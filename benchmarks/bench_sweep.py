@@ -35,8 +35,8 @@ import sys
 import tempfile
 import time
 
-from cloth_bench_ros.studies import sweep as sw
 from cloth_bench_ros.studies.results import load_rows
+from cloth_bench_ros.sweep import study as sw
 
 
 def overhead(rows: list[dict], label: str = '') -> dict[str, float]:

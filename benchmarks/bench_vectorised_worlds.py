@@ -50,7 +50,7 @@ import numpy as np
 
 RATE_HZ = 100.0
 SPREAD = 1.5  # a generation's parameters lie within this factor of the preset
-# The parameters a generation varies: identification's defaults (studies/identify.py).
+# The parameters a generation varies: identification's defaults (identify/study.py).
 VARIED = {
     'newton:xpbd': ('mass', 'spring_stiffness', 'spring_damping', 'bending', 'friction'),
     'newton:vbd': ('mass', 'tri_stiffness', 'tri_damping', 'bending', 'friction'),

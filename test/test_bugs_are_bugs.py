@@ -11,8 +11,8 @@ import sys
 from camera_recording import CAMERA_TOPIC, make_camera_recording
 from cloth_bench_ros.engines.base import Instability
 from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
+from cloth_bench_ros.identify.objective import evaluate, Trial
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.studies.objective import evaluate, Trial
 import numpy as np
 import pytest
 

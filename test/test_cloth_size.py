@@ -12,8 +12,8 @@ from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.identify.objective import evaluate, Trial
 from cloth_bench_ros.studies.direct import run_direct
-from cloth_bench_ros.studies.objective import evaluate, Trial
 from cloth_bench_ros.studies.run_pipeline import RunConfig
 from cloth_bench_ros.validation import parse_cloth_size
 import numpy as np

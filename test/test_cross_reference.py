@@ -11,9 +11,9 @@ from dataclasses import replace
 from cloth_bench_ros.data import BagReader, CLOUD_TOPIC, synth, virtual_camera
 from cloth_bench_ros.report import cross_reference as report_xr
 from cloth_bench_ros.studies import cross_reference as xr
-from cloth_bench_ros.studies import sweep as sw
-from cloth_bench_ros.studies.aggregate import stat
-from cloth_bench_ros.studies.sweep import Cell
+from cloth_bench_ros.sweep import study as sw
+from cloth_bench_ros.sweep.aggregate import stat
+from cloth_bench_ros.sweep.study import Cell
 import numpy as np
 import pytest
 
@@ -212,7 +212,7 @@ def _row(engine, reference, cd, seed, presets='identified', model=None):
 
 
 def test_ranking_has_paired_intervals_and_says_whether_it_holds_across_references():
-    from cloth_bench_ros.studies.ranking_stats import HeldOutRun, rank_runs
+    from cloth_bench_ros.rank.ranking import HeldOutRun, rank_runs
 
     def ranked(samples):  # one reference bag: seeds 1, 2, ...
         return rank_runs({n: [HeldOutRun('bag', s, v) for s, v in enumerate(vs, 1)]

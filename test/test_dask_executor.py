@@ -16,7 +16,7 @@ import sys
 import time
 
 from bag_fixtures import write_hanging_cloth_bag
-from cloth_bench_ros.studies import sweep as sw
+from cloth_bench_ros.sweep import study as sw
 from identify_target import write_engine_target_bag
 import psutil
 import pytest

@@ -17,15 +17,15 @@ from cloth_bench_ros.engines import engine_device, make_engine
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.engines.newton_cloth import available_devices, NewtonCloth, resolve_device
 from cloth_bench_ros.engines.presets import fitted_device, load_preset, preset_set
+from cloth_bench_ros.identify.output import write_outputs
+from cloth_bench_ros.identify.spec import IdentifySpec
 from cloth_bench_ros.paths import bundled_bag
 from cloth_bench_ros.studies.cells import Cell, paper_cells
 from cloth_bench_ros.studies.direct import run_direct
-from cloth_bench_ros.studies.identify import IdentifySpec
-from cloth_bench_ros.studies.identify_output import write_outputs
 from cloth_bench_ros.studies.results import row_key
 from cloth_bench_ros.studies.run_config import RunConfig
 from cloth_bench_ros.studies.run_pipeline import node_parameters
-from cloth_bench_ros.studies.sweep import error_row
+from cloth_bench_ros.sweep.study import error_row
 import numpy as np
 import pytest
 import warp as wp
@@ -127,7 +127,7 @@ def test_engines_lists_the_devices_found(capsys):
 def test_identified_provenance_names_the_device_and_the_preset_does_not(tmp_path):
     from types import SimpleNamespace
 
-    from cloth_bench_ros.studies.identify_output import provenance_text
+    from cloth_bench_ros.identify.output import provenance_text
 
     spec = SimpleNamespace(
         engine='newton', bag=tmp_path / 'no_bag', cloth='towel', primitive='dynamic',

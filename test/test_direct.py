@@ -3,9 +3,9 @@
 import csv
 import math
 
+from cloth_bench_ros.identify.objective import evaluate, Trial
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.studies.direct import run_direct
-from cloth_bench_ros.studies.objective import evaluate, Trial
 from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 import pytest
 

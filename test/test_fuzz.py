@@ -21,7 +21,7 @@ import warnings
 
 from cloth_bench_ros import cli
 from cloth_bench_ros.data import BagReader, BagWriter
-from cloth_bench_ros.studies import sweep as sw
+from cloth_bench_ros.sweep import study as sw
 from mcap.reader import SeekingReader
 import numpy as np
 import pytest

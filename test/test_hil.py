@@ -38,7 +38,7 @@ from cloth_bench_ros.runtime import (
     Time,
 )
 from cloth_bench_ros.runtime.dds import loopback_environment
-from cloth_bench_ros.studies.recommend import load_recommendations, recommend_for_rate
+from cloth_bench_ros.sweep.recommend import load_recommendations, recommend_for_rate
 from dds_domains import random_domain
 import numpy as np
 import pytest
@@ -392,7 +392,7 @@ def test_recommended_falls_back_to_the_shipped_file_with_its_provenance(tmp_path
 
 @pytest.mark.timing
 def test_cli_hil_in_process_with_the_recommended_configuration(hanging_bag, tmp_path, capsys):
-    from cloth_bench_ros.studies.sweep import append_row
+    from cloth_bench_ros.sweep.study import append_row
 
     settings = tmp_path / 'settings'
     settings.mkdir()

@@ -23,7 +23,7 @@ from cloth_bench_ros.core.deadline import (
 from cloth_bench_ros.core.trajectory import full_targets
 from cloth_bench_ros.hil.config import HilConfig
 from cloth_bench_ros.hil.warmup import coarser_grids, warmup
-from cloth_bench_ros.studies.recommend import meets_deadline
+from cloth_bench_ros.sweep.recommend import meets_deadline
 import pytest
 
 pytestmark = pytest.mark.timing  # wall-clock behaviour: run alone (conftest.py)

@@ -16,15 +16,15 @@ from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.studies.identify import (
+from cloth_bench_ros.identify.objective import evaluate, Trial
+from cloth_bench_ros.identify.problem import changed_keys, identify_problem, PROBLEM_FILE
+from cloth_bench_ros.identify.spec import IdentifySpec
+from cloth_bench_ros.identify.study import (
     budget_reached,
     identify,
-    IdentifySpec,
     JOURNAL_FILE,
     search_space,
 )
-from cloth_bench_ros.studies.identify_problem import changed_keys, identify_problem, PROBLEM_FILE
-from cloth_bench_ros.studies.objective import evaluate, Trial
 from identify_target import write_engine_target_bag
 import pytest
 import yaml
@@ -141,7 +141,7 @@ def test_identification_recovers_known_parameters_with_both_samplers_and_resumes
 def test_validation_runs_again_when_more_trials_fitted_other_values(target, tmp_path):
     """A resumed identification validates the values it has now, never the last run's."""
     from cloth_bench_ros.studies.dask_executor import open_client
-    from cloth_bench_ros.studies.identify_output import validate
+    from cloth_bench_ros.identify.output import validate
     from cloth_bench_ros.studies.results import load_rows
 
     spec = IdentifySpec(**{**_spec(target, tmp_path, 'tpe', 1, ['damping'], 1).__dict__,
@@ -277,7 +277,7 @@ def test_the_automatic_budget_stops_at_the_first_doubling_worth_less_than_2_perc
 
 @pytest.mark.slow
 def test_an_automatic_budget_doubles_until_the_curve_flattens(target, tmp_path, monkeypatch):
-    import cloth_bench_ros.studies.identify as identify_module
+    import cloth_bench_ros.identify.study as identify_module
 
     monkeypatch.setattr(identify_module, 'AUTO_FIRST', 4)
     monkeypatch.setattr(identify_module, 'AUTO_MAX_TRIALS', 32)

@@ -12,9 +12,10 @@ import json
 
 from cloth_bench_ros import cli
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.studies.identify import identify, IdentifySpec, TRIALS_FILE
-from cloth_bench_ros.studies.identify_fidelity import coarse_grids, Pruner, STARTUP
-from cloth_bench_ros.studies.objective import evaluate, Trial
+from cloth_bench_ros.identify.fidelity import coarse_grids, Pruner, STARTUP
+from cloth_bench_ros.identify.objective import evaluate, Trial
+from cloth_bench_ros.identify.spec import IdentifySpec
+from cloth_bench_ros.identify.study import identify, TRIALS_FILE
 from identify_target import write_engine_target_bag
 import pytest
 

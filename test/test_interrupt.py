@@ -153,7 +153,7 @@ def test_a_torn_journal_is_repaired_and_identify_resumes(interrupted_identificat
 
 
 def test_repair_journal_keeps_complete_lines_and_refuses_damage_in_the_middle(tmp_path):
-    from cloth_bench_ros.studies.identify import repair_journal
+    from cloth_bench_ros.identify.study import repair_journal
 
     journal = tmp_path / 'study.journal'
     journal.write_text('{"op_code": 0}\n{"op_code": 1}\n{"op_co')

@@ -2,10 +2,10 @@
 The package's layers import only downwards, without circles, and the report runs nothing.
 
 Layers, top to bottom: config -> core -> engines -> data -> live -> runtime -> nodes -> studies ->
-hil -> report -> cli; a module imports only from its own layer or those above it. config is the
-modules at the package's top level (errors, paths, safe_io, validation, metric_choice, options,
-command_options): each is declared in TOP_LEVEL, and a new one without a layer fails. Every import
-counts, also those inside functions and under TYPE_CHECKING.
+sweep -> identify -> rank -> hil -> report -> cli; a module imports only from its own layer or
+those above it. config is the modules at the package's top level (errors, paths, safe_io,
+validation, metric_choice, options, command_options): each is declared in TOP_LEVEL, and a new one
+without a layer fails. Every import counts, also those inside functions and under TYPE_CHECKING.
 """
 
 from __future__ import annotations
@@ -18,11 +18,12 @@ import pytest
 
 PACKAGE = Path(cloth_bench_ros.__file__).parent
 # config: the top-level modules (TOP_LEVEL). A feature package sits where its parts are used:
-# live/ (the live view) below the nodes that stream and write it, hil/ (hardware-in-the-loop)
-# above the studies it reuses.
+# live/ (the live view) below the nodes that stream and write it; sweep/, identify/ (which
+# validates on sweep cells), rank/ (which identifies) and hil/ (which reads the settings sweep)
+# above the shared study machinery in studies/.
 LAYERS = (
-    'config', 'core', 'engines', 'data', 'live', 'runtime', 'nodes', 'studies', 'hil', 'report',
-    'cli',
+    'config', 'core', 'engines', 'data', 'live', 'runtime', 'nodes', 'studies', 'sweep',
+    'identify', 'rank', 'hil', 'report', 'cli',
 )
 
 
@@ -129,17 +130,24 @@ def test_the_report_runs_nothing(graph):
 
 
 def test_the_feature_packages_have_their_place():
-    """data/ (bag input and output) may not import the live view, nor studies/ the hil package."""
+    """data/ may not import the live view, studies/ no feature, a feature none above it."""
     graph = {
         'cloth_bench_ros.data.bag_writer': {'cloth_bench_ros.live.view': 3},
-        'cloth_bench_ros.studies.sweep': {'cloth_bench_ros.hil.study': 5},
+        'cloth_bench_ros.studies.cells': {'cloth_bench_ros.sweep.study': 4},
+        'cloth_bench_ros.sweep.study': {'cloth_bench_ros.hil.study': 5},
+        'cloth_bench_ros.identify.output': {'cloth_bench_ros.rank.trials': 6},
+        'cloth_bench_ros.rank.answer': {'cloth_bench_ros.report.rank': 7},
         'cloth_bench_ros.live.view': {'cloth_bench_ros.data.messages': 1},
+        'cloth_bench_ros.rank.study': {'cloth_bench_ros.identify.study': 2},
     }
     with pytest.raises(AssertionError) as caught:
         test_imports_only_go_downwards(graph)
-    assert 'data may not import live' in str(caught.value)
-    assert 'studies may not import hil' in str(caught.value)
+    for said in ('data may not import live', 'studies may not import sweep',
+                 'sweep may not import hil', 'identify may not import rank',
+                 'rank may not import report'):
+        assert said in str(caught.value)
     assert 'cloth_bench_ros.live.view (line' not in str(caught.value)  # live may import data
+    assert 'cloth_bench_ros.rank.study (line' not in str(caught.value)  # rank may identify
 
 
 def circles(graph: dict[str, dict[str, int]]) -> list[list[str]]:

@@ -4,9 +4,9 @@ import math
 
 from cloth_bench_ros.core.evaluation import FrameScore
 from cloth_bench_ros.core.run_files import write_run_report
+from cloth_bench_ros.rank.ranking import HeldOutRun, rank_runs
 from cloth_bench_ros.report.metric_sections import fig4_table, metrics_table, PAPER_FIG4
 from cloth_bench_ros.report.run_report import result_table
-from cloth_bench_ros.studies.ranking_stats import HeldOutRun, rank_runs
 
 
 def _row(engine: str, seed: int, cd: float, fscore: float, onset: float | None) -> dict:

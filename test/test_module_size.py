@@ -21,7 +21,7 @@ LONG_MODULES = {
     'core/surface_distance.py': 'one algorithm: exact point-to-triangle distances and their grid',
     'data/replay.py': "the recorder's replay plan: every frame of a bag's topic in one account",
     'engines/newton_cloth.py': "one engine's adapter: Newton's two cloth models, grasp and device",
-    'studies/sweep.py': 'the sweep study: its cells, resume and scheduling into one results file',
+    'sweep/study.py': 'the sweep study: its cells, resume and scheduling into one results file',
 }
 
 

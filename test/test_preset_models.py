@@ -15,9 +15,9 @@ from cloth_bench_ros.cli import main
 from cloth_bench_ros.engines import presets
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.engines.newton_cloth import resolve_device
+from cloth_bench_ros.identify.output import write_outputs
+from cloth_bench_ros.identify.spec import IdentifySpec
 from cloth_bench_ros.paths import share_dir
-from cloth_bench_ros.studies.identify import IdentifySpec
-from cloth_bench_ros.studies.identify_output import write_outputs
 from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 import pytest
 import yaml

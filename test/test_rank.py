@@ -17,22 +17,17 @@ from camera_recording import (
 )
 from cloth_bench_ros import cli
 from cloth_bench_ros.engines.mujoco_cloth import MujocoCloth
+from cloth_bench_ros.identify import objective, problem as identify_problem
+from cloth_bench_ros.identify.objective import evaluate, Trial
+from cloth_bench_ros.identify.shared_simulations import SharedSimulations
 from cloth_bench_ros.metric_choice import metric
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.report.rank import (
-    deadline_ms,
-    rank_answer,
-    rank_lines,
-    rank_table,
-    within_reference_error,
-)
+from cloth_bench_ros.rank.answer import deadline_ms, rank_answer, within_reference_error
+from cloth_bench_ros.rank.ranking import Ranked
+from cloth_bench_ros.rank.study import folds, SHARED_FILE
+from cloth_bench_ros.rank.trials import RankTrial, reference_error
+from cloth_bench_ros.report.rank import rank_lines, rank_table
 from cloth_bench_ros.report.rank_report import plot_ranking
-from cloth_bench_ros.studies import identify_problem, objective
-from cloth_bench_ros.studies.objective import evaluate, Trial
-from cloth_bench_ros.studies.rank import folds, SHARED_FILE
-from cloth_bench_ros.studies.rank_trials import RankTrial, reference_error
-from cloth_bench_ros.studies.ranking_stats import Ranked
-from cloth_bench_ros.studies.shared_simulations import SharedSimulations
 import pytest
 
 TINY = ['--topic', CAMERA_TOPIC, '--engine', 'mujoco', '--trials', '2', '--sampler', 'tpe',
@@ -328,7 +323,7 @@ def test_a_simulation_of_another_engine_version_is_not_reused(tmp_path, request)
 
 
 def test_a_simulation_or_cell_of_another_device_is_not_reused(tmp_path, request):
-    from cloth_bench_ros.studies.rank import _cell, RankSpec
+    from cloth_bench_ros.rank.study import _cell, RankSpec
 
     bags, trial = _one_shared_simulation(tmp_path)
     held = RankTrial('t', 'towel', 'dynamic', bags[0], bags[0], 0, 'metadata', 0.0, 132, 104)
@@ -344,8 +339,8 @@ def test_a_simulation_or_cell_of_another_device_is_not_reused(tmp_path, request)
 def test_a_cell_scored_on_every_metric_is_not_kept_across_a_surface_metrics_revision(
     tmp_path, monkeypatch
 ):
-    from cloth_bench_ros.studies import rank
-    from cloth_bench_ros.studies.rank import _cell, RankSpec
+    from cloth_bench_ros.rank import study as rank
+    from cloth_bench_ros.rank.study import _cell, RankSpec
 
     (tmp_path / 'a').write_bytes(b'a')
     bag = str(tmp_path / 'a')

@@ -1,11 +1,11 @@
-"""The ranking's statistics on values whose right answer is known (studies.ranking_stats)."""
+"""The ranking's statistics on values whose right answer is known (rank.ranking)."""
 
 from __future__ import annotations
 
 import itertools
 import json
 
-from cloth_bench_ros.studies.ranking_stats import (
+from cloth_bench_ros.rank.ranking import (
     HeldOutRun,
     rank_runs,
     ranking_record,

@@ -23,7 +23,7 @@ import time
 from bag_fixtures import write_hanging_cloth_bag
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.metric_choice import METRICS
-from cloth_bench_ros.studies import sweep as sw
+from cloth_bench_ros.sweep import study as sw
 import pytest
 
 CHROMIUM = shutil.which('chromium') or shutil.which('chromium-browser')

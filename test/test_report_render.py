@@ -15,11 +15,10 @@ import re
 
 from bag_fixtures import write_hanging_cloth_bag
 from cloth_bench_ros.cli import main
-from cloth_bench_ros.report import selections
-from cloth_bench_ros.studies import aggregate, recommend
-from cloth_bench_ros.studies import sweep as sw
 from cloth_bench_ros.studies.stress import run_case
 from cloth_bench_ros.studies.stress_cases import default_cases
+from cloth_bench_ros.sweep import aggregate, recommend
+from cloth_bench_ros.sweep import study as sw
 import matplotlib.image as mpimg
 import numpy as np
 import pytest
@@ -180,7 +179,7 @@ def test_stat_pareto_and_recommendation():
     s = aggregate.stat(rows, 'CD')
     assert (s.n, s.used, s.diverged, s.errors, s.mean, s.std) == (4, 2, 1, 1, 2.0, 1.0)
     assert '1 diverged' in s.text()
-    assert selections.pareto_front([(1, 5), (2, 4), (3, 6), (0.5, 9), (2, 1), (math.nan, 0)]) == [
+    assert aggregate.pareto_front([(1, 5), (2, 4), (3, 6), (0.5, 9), (2, 1), (math.nan, 0)]) == [
         3,
         0,
         4,

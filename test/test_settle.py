@@ -9,12 +9,12 @@ from cloth_bench_ros.engines import make_engine
 from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.engines.settle import final_hold, HOLD_LIMIT_S, Settler
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.identify.problem import check_problem, PROBLEM_FILE, study_key
 from cloth_bench_ros.studies.cells import Cell
 from cloth_bench_ros.studies.direct import run_direct
-from cloth_bench_ros.studies.identify_problem import check_problem, PROBLEM_FILE, study_key
 from cloth_bench_ros.studies.results import row_key
 from cloth_bench_ros.studies.run_config import RunConfig
-from cloth_bench_ros.studies.sweep import cells_to_run, SweepPlan
+from cloth_bench_ros.sweep.study import cells_to_run, SweepPlan
 import numpy as np
 import pytest
 

@@ -13,7 +13,7 @@ from bag_fixtures import write_hanging_cloth_bag
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.core.scene import ClothGrid
 from cloth_bench_ros.core.task_data import task_file
-from cloth_bench_ros.studies import sweep as sw
+from cloth_bench_ros.sweep import study as sw
 import pytest
 
 

@@ -11,7 +11,7 @@ import shutil
 from bag_fixtures import write_hanging_cloth_bag
 from cloth_bench_ros.cli import main
 from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
-from cloth_bench_ros.studies import sweep as sw
+from cloth_bench_ros.sweep import study as sw
 import pytest
 
 GRID = (6, 8)

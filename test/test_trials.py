@@ -17,7 +17,7 @@ from cloth_bench_ros.data.trials import (
     split_targets,
 )
 from cloth_bench_ros.paths import bundled_bag
-from cloth_bench_ros.studies.rank_trials import prepare_trials
+from cloth_bench_ros.rank.trials import prepare_trials
 import numpy as np
 import pytest
 

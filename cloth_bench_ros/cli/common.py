@@ -11,8 +11,11 @@ from typing import Any, Union
 
 from cloth_bench_ros import options, validation
 from cloth_bench_ros.command_options import COMMAND_FLAGS
+from cloth_bench_ros.engines import engine_class, engine_device, known_engines
+from cloth_bench_ros.engines.presets import preset_set as resolve
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import Option
+import numpy as np
 
 
 class UserError(ClothBenchError):
@@ -153,7 +156,9 @@ def add_renamed(parser: Any, old: str, new: str, split: bool = False) -> None:
 
 def scheduler(text: str) -> str:
     """Return a Dask scheduler address (tcp://127.0.0.1:8786)."""
-    from cloth_bench_ros.studies.dask_executor import check_scheduler_address
+    from cloth_bench_ros.studies.dask_executor import (  # lazy: Dask, +0.6 s on --help
+        check_scheduler_address,
+    )
 
     try:
         return check_scheduler_address(text)
@@ -179,8 +184,6 @@ def presets_options() -> argparse.ArgumentParser:
 
 def preset_set(args: argparse.Namespace) -> Any:
     """Return the PresetSet of --presets (EngineError, one line, for an unknown name or path)."""
-    from cloth_bench_ros.engines.presets import preset_set as resolve
-
     return resolve(args.presets)
 
 
@@ -233,17 +236,16 @@ def replay_params(args: argparse.Namespace) -> dict:
 
 def replay_options(args: argparse.Namespace, task: str = '') -> Any:
     """Return the ReplayOptions of the recording options, as the recorder node builds them."""
-    from cloth_bench_ros.data.alignment import SearchSettings
-    from cloth_bench_ros.data.replay import ReplayOptions
+    from cloth_bench_ros.data import alignment, replay  # lazy: scipy, numba, +1.1 s on --help
 
     p = replay_params(args)
-    return ReplayOptions(
+    return replay.ReplayOptions(
         cloth=args.cloth, primitive=args.primitive, task=task or args.task or '',
         motion=p['motion'], change_of_phase_frame=args.change_of_phase_frame, topic=p['topic'],
         start_time=p['start_time'], targets_topic=p['targets_topic'],
         transform=tuple(p['transform']) if 'transform' in p else None, clean=p['clean'],
         voxel=p['voxel'], table_plane=p['table_plane'], rate_hz=float(args.rate),
-        search=SearchSettings(window=p['align_window'], coarse_step=p['align_step']),
+        search=alignment.SearchSettings(window=p['align_window'], coarse_step=p['align_step']),
         trial=p['trial'], align=p['align'],
     )
 
@@ -265,7 +267,6 @@ def device(text: str) -> str:
     """
     try:
         name = validation.device(text, '--device')
-        from cloth_bench_ros.engines import engine_device
 
         return engine_device('newton', {'device': name})
     except ClothBenchError as exc:  # InputError, or EngineError (also for Newton not installed)
@@ -333,8 +334,7 @@ def engine_models(args: argparse.Namespace) -> None:
 
 def check_bag(bag: Path, topic: str | None = None) -> None:
     """Fail early, in one line naming the bag, unless the cloud topic's first frame decodes."""
-    from cloth_bench_ros.data import BagReader
-    from cloth_bench_ros.data.bag_reader import decode_cloud
+    from cloth_bench_ros.data.bag_reader import BagReader, decode_cloud  # lazy: +0.2 s on --help
 
     with BagReader(bag) as reader:
         topic = reader.cloud_topic(topic)
@@ -347,8 +347,6 @@ def check_bag(bag: Path, topic: str | None = None) -> None:
 
 def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) -> dict[str, dict]:
     """Return --set engine.param=value as {engine: {param: value}}, checked against the schemas."""
-    from cloth_bench_ros.engines import engine_class
-
     overrides = validation.parse_overrides(specs)
     for engine, params in overrides.items():
         if engines is not None and engine not in engines and set(params) == {'device'}:
@@ -371,15 +369,11 @@ def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) 
 
 def available_engines() -> list[str]:
     """Names of the engines that import on this machine."""
-    from cloth_bench_ros.engines import known_engines
-
     return [i.name for i in known_engines() if i.available]
 
 
 def read_transform(path: str):
     """Return a 4x4 matrix from a .npy file or a text file of 16 numbers."""
-    import numpy as np
-
     try:
         if path.endswith('.npy'):
             values = np.load(path).astype(float).ravel()

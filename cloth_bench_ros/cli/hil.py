@@ -8,7 +8,16 @@ from pathlib import Path
 from cloth_bench_ros.cli import common, hil_rate
 from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.cli.studies import tolerance_options
+from cloth_bench_ros.core.deadline import deadline_rule
+from cloth_bench_ros.engines import engine_class
+from cloth_bench_ros.hil import study as hil
+from cloth_bench_ros.hil.layout import resolve_layout
+from cloth_bench_ros.hil.recommendation import all_recommendations, provenance, recommendation_yaml
 from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.paths import bundled_bag
+from cloth_bench_ros.safe_io import atomic_write_text
+from cloth_bench_ros.studies.cloth import study_inputs
+from cloth_bench_ros.studies.results import load_rows
 
 
 HIL_FLAGS: tuple[common.Flag, ...] = (
@@ -60,15 +69,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def cmd_hil(args: argparse.Namespace) -> int:
     """Run each engine and rate with targets on the wall clock and print the deadline table."""
-    from cloth_bench_ros.core.deadline import deadline_rule
-    from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.paths import bundled_bag
-    from cloth_bench_ros.report.hil import hil_table, text_table, write_hil_report
-    from cloth_bench_ros.hil import study as hil
-    from cloth_bench_ros.hil.layout import resolve_layout
-    from cloth_bench_ros.studies.cells import set_label, set_values
-    from cloth_bench_ros.studies.cloth import study_inputs
-    from cloth_bench_ros.studies.sweep import config_label
+    from cloth_bench_ros.report.hil import (  # lazy: matplotlib, +0.5 s on --help
+        hil_table, text_table, write_hil_report,
+    )
+    from cloth_bench_ros.studies.cells import (  # lazy: the engines' presets, +0.4 s
+        config_label, set_label, set_values,
+    )
 
     if args.budget is None:
         args.budget = hil.HIL_DEADLINE_BUDGET
@@ -206,14 +212,6 @@ def cmd_hil(args: argparse.Namespace) -> int:
 
 def _export_recommended(args: argparse.Namespace) -> int:
     """Export the settings sweep's recommendation per engine, task and rate."""
-    from cloth_bench_ros.hil.recommendation import (
-        all_recommendations,
-        provenance,
-        recommendation_yaml,
-    )
-    from cloth_bench_ros.safe_io import atomic_write_text
-    from cloth_bench_ros.studies.sweep import load_rows
-
     if not args.settings:
         raise UserError(
             "--export-recommended needs --settings RESULTS (a settings sweep's results)"

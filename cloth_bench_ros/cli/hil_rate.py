@@ -15,10 +15,14 @@ from pathlib import Path
 
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
-from cloth_bench_ros.core.deadline import deadline_check, DeadlineCheck, holds_rate
+from cloth_bench_ros.core.deadline import deadline_check, deadline_rule, DeadlineCheck, holds_rate
 from cloth_bench_ros.core.table import Table
+from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.hil import study as hil
 from cloth_bench_ros.hil.config import HilConfig
-from cloth_bench_ros.hil.find_rate import miss_fraction, missed
+from cloth_bench_ros.hil.find_rate import find_rate, miss_fraction, missed
+from cloth_bench_ros.hil.warmup import coarser_grids, warmup
+from cloth_bench_ros.safe_io import atomic_write_text
 
 FIND_RATE_FILE = 'find_rate.json'
 
@@ -35,8 +39,6 @@ def add_options(hil: argparse.ArgumentParser) -> None:
 
 def warmup_check(config: HilConfig, budget: float) -> tuple[DeadlineCheck, object]:
     """Time the engine's warm-up on this machine and print its step p99 against the rule."""
-    from cloth_bench_ros.hil.warmup import warmup
-
     timing = warmup(config)
     check = deadline_check(timing.p99_s, config.rate_hz, budget)
     print(f'  warm-up on this machine ({timing.describe()}): {check.verdict()}', flush=True)
@@ -52,10 +54,6 @@ def remedy_line(
     recommended_running: bool,
 ) -> str | None:
     """Return one line naming what would meet the rate, or None if the misses are under it."""
-    from cloth_bench_ros.errors import ClothBenchError
-    from cloth_bench_ros.hil import study as hil
-    from cloth_bench_ros.hil.warmup import coarser_grids, warmup
-
     share = miss_fraction(result)
     if holds_rate([share], args.miss_threshold):
         return None
@@ -113,10 +111,7 @@ def remedy_line(
 
 def find_rates(args: argparse.Namespace, bases: list[HilConfig], out: Path) -> int:
     """Search the highest rate each base configuration holds; print the table, write JSON."""
-    from cloth_bench_ros.core.deadline import deadline_rule
-    from cloth_bench_ros.hil.find_rate import find_rate
-    from cloth_bench_ros.report.hil import text_table
-    from cloth_bench_ros.safe_io import atomic_write_text
+    from cloth_bench_ros.report.hil import text_table  # lazy: matplotlib, +0.5 s on --help
 
     if args.rate:
         raise UserError('--find-rate searches the rate: give --rate-min/--rate-max, not --rate')

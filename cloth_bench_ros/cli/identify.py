@@ -8,13 +8,17 @@ from pathlib import Path
 from cloth_bench_ros import options, validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
+from cloth_bench_ros.cli.run import recordings_motions
+from cloth_bench_ros.core.task_data import load_task
+from cloth_bench_ros.engines.presets import load_preset
+from cloth_bench_ros.identify.spec import AUTO, IdentifySpec
+from cloth_bench_ros.paths import bundled_bag
+from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses, mesh_choice
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 
 def trials_value(text: str, label: str = '--trials') -> int:
     """--trials: a count >= 1, or auto (the study's AUTO)."""
-    from cloth_bench_ros.studies.identify import AUTO
-
     if text.strip().lower() == 'auto':
         return AUTO
     try:
@@ -83,8 +87,9 @@ def _trial_bag(bag: Path, args: argparse.Namespace, out: Path, task: str) -> Pat
     A plain recording is split as `rank` splits it, without an engine (a recorded motion, `task`,
     or a --start-time: the recording is one trial); the trial is written under `out`.
     """
-    from cloth_bench_ros.data import BagReader
-    from cloth_bench_ros.studies.rank_trials import prepare_trials
+    from cloth_bench_ros.data import BagReader  # lazy: the bag readers, +0.2 s on --help
+
+    from cloth_bench_ros.rank.trials import prepare_trials  # lazy: bags, scipy, +0.9 s
 
     with BagReader(bag) as reader:
         if reader.trial is not None:
@@ -101,13 +106,9 @@ def _trial_bag(bag: Path, args: argparse.Namespace, out: Path, task: str) -> Pat
 
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, validate on held-out seeds, write the preset and print the outcome."""
-    from cloth_bench_ros.engines.presets import load_preset
-    from cloth_bench_ros.paths import bundled_bag
-    from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses, mesh_choice
-    from cloth_bench_ros.studies.identify import identify, IdentifySpec, JOURNAL_FILE, TRIALS_FILE
-
-    from cloth_bench_ros.cli.run import recordings_motions
-    from cloth_bench_ros.core.task_data import load_task
+    from cloth_bench_ros.identify.study import (  # lazy: Optuna, Dask, engines, +1.5 s on --help
+        identify, JOURNAL_FILE, TRIALS_FILE,
+    )
 
     load_task(args.primitive, args.task)  # a bad task file: one line, before the work
     common.check_split_without_engine(args, 'identify')

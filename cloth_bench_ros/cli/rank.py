@@ -9,6 +9,12 @@ from pathlib import Path
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.cli.identify import TRIALS
+from cloth_bench_ros.cli.run import recordings_motions
+from cloth_bench_ros.core.task_data import load_task
+from cloth_bench_ros.engines import engine_class
+from cloth_bench_ros.rank.answer import rank_answer
+from cloth_bench_ros.report.rank import rank_lines, rank_table
+from cloth_bench_ros.studies.cloth import cloth_choice
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 RESULT_FILE = 'rank.json'
@@ -16,8 +22,6 @@ RESULT_FILE = 'rank.json'
 
 def _entrant(text: str, label: str = '--engine') -> tuple[str, dict]:
     """--engine NAME or NAME:MODEL (newton:xpbd, newton:vbd)."""
-    from cloth_bench_ros.engines import engine_class
-
     name, _, model = text.strip().partition(':')
     engine_class(name)  # EngineError, one line, for an unknown engine
     return name, ({'model': model} if model else {})
@@ -61,14 +65,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def cmd_rank(args: argparse.Namespace) -> int:
     """Run the protocol, print the table and its sentences, write rank.json."""
-    from cloth_bench_ros.cli.run import recordings_motions
-    from cloth_bench_ros.core.task_data import load_task
-    from cloth_bench_ros.report.rank import rank_answer, rank_lines, rank_table
-    from cloth_bench_ros.studies.cloth import cloth_choice
-    from cloth_bench_ros.studies.rank import CELLS_FILE, DEFAULT_ENTRANTS, run_rank, RankSpec
-    from cloth_bench_ros.studies.rank_trials import recordings_of
+    from cloth_bench_ros.rank import study, trials  # lazy: Optuna, Dask, engines, +1.6 s
 
-    entrants = args.engine or list(DEFAULT_ENTRANTS)
+    entrants = args.engine or list(study.DEFAULT_ENTRANTS)
     fixed = common.engine_overrides(args.set, sorted({e for e, _ in entrants}))
     size, mass = cloth_choice(args.cloth_size, args.cloth_mass, fixed)
     load_task(args.primitive, args.task)  # a bad task file: one line, before the work
@@ -77,12 +76,12 @@ def cmd_rank(args: argparse.Namespace) -> int:
         raise UserError('--trial: rank scores every usable trial of each recording; --trial '
                         'picks the one that run scores or identify fits')
     out = Path(args.output) if args.output else Path('results') / 'rank'
-    bags = recordings_of(args.recordings)
+    bags = trials.recordings_of(args.recordings)
     tasks, motion_lines = recordings_motions(args, bags, out)
     # the split never simulates: its starts are fitted in the recordings (--align onset) or are
     # the recorded motions' first clouds
     replay = common.replay_options(args)
-    spec = RankSpec(
+    spec = study.RankSpec(
         [str(b) for b in bags], out, entrants, replay, args.trials, args.sampler, args.seeds,
         args.rate, args.rates, args.grid, args.metric, args.max_frames, fixed, args.fidelity,
         size, mass, tasks=tasks, cloth_mesh=args.cloth_mesh or '',
@@ -95,11 +94,11 @@ def cmd_rank(args: argparse.Namespace) -> int:
     for line in motion_lines:
         print(line)
     try:
-        raw = run_rank(spec, args.scheduler, args.workers, progress=not args.no_progress)
+        raw = study.run_rank(spec, args.scheduler, args.workers, progress=not args.no_progress)
     except KeyboardInterrupt:
         raise StudyInterrupted(
             f'rank interrupted: every finished identification (journals under {out}/identify) '
-            f'and cell ({out / CELLS_FILE}) is kept; run the same command again to resume'
+            f'and cell ({out / study.CELLS_FILE}) is kept; run the same command again to resume'
         ) from None
     result = rank_answer(raw)
     print(rank_table(result).markdown())

@@ -10,7 +10,16 @@ import time
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
+from cloth_bench_ros.core.cloth_size import targets_grasp_text
+from cloth_bench_ros.core.task_data import load_task
+from cloth_bench_ros.core.trajectory import sample_quintic, to_csv
+from cloth_bench_ros.engines import engine_class, known_engines
+from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere, load_preset
 from cloth_bench_ros.options import MOTION_FLAGS, OPTIONS
+from cloth_bench_ros.paths import bundled_bag
+from cloth_bench_ros.safe_io import check_output_dir
+from cloth_bench_ros.studies.cloth import cloth_choice, cloth_lines, engine_masses, mesh_choice
+from cloth_bench_ros.studies.errors import ProcessRunError
 
 
 RUN_FLAGS: tuple[common.Flag, ...] = (
@@ -70,15 +79,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def _write_motion(args: argparse.Namespace, bag: Path, path: Path) -> tuple[Path, dict]:
     """Write the recorded grippers (--gripper-frames, else --targets-topic) as a task file."""
-    from cloth_bench_ros.data.bag_reader import BagReader
-    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, recorded_task
-    from cloth_bench_ros.data.recorded_motion import write_task
+    from cloth_bench_ros.data import bag_reader, recorded_motion as motion  # lazy: +0.2 s
 
-    with BagReader(bag) as reader:
-        doc = recorded_task(reader, args.topic or '', parse_gripper_frames(args.gripper_frames),
-                            args.targets_topic or '', args.table_z)
+    with bag_reader.BagReader(bag) as reader:
+        doc = motion.recorded_task(reader, args.topic or '',
+                                   motion.parse_gripper_frames(args.gripper_frames),
+                                   args.targets_topic or '', args.table_z)
     path.parent.mkdir(parents=True, exist_ok=True)
-    return write_task(path, doc), doc
+    return motion.write_task(path, doc), doc
 
 
 def recorded_motion(args: argparse.Namespace, bag: Path, out: Path) -> tuple[str, list[str]]:
@@ -88,7 +96,9 @@ def recorded_motion(args: argparse.Namespace, bag: Path, out: Path) -> tuple[str
     --gripper-frames or --targets-topic name them, unless --motion task; the task file is
     written into the report directory.
     """
-    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, table_line
+    from cloth_bench_ros.data.recorded_motion import (  # lazy: +0.2 s on --help
+        parse_gripper_frames, table_line,
+    )
 
     follow = args.motion != 'task' and (
         parse_gripper_frames(args.gripper_frames) or args.targets_topic
@@ -131,7 +141,7 @@ def recordings_motions(
 
 
 def _print_real(summary: dict) -> None:
-    from cloth_bench_ros.core.evaluation import accounting_line
+    from cloth_bench_ros.core.evaluation import accounting_line  # lazy: numba, +0.2 s on --help
 
     real = summary['real']
     acc = real['accounting']
@@ -144,7 +154,6 @@ def _print_real(summary: dict) -> None:
             f'start of the motion: bag time {start["bag_ns"] / 1e9:.3f} s, {start["method"]}, '
             f'precision +/- {start["precision_s"] * 1e3:.1f} ms'
         )
-    from cloth_bench_ros.core.cloth_size import targets_grasp_text
 
     size = tuple(summary['run'].get('cloth_size') or ()) or None
     grasp = targets_grasp_text(real.get('targets_grasp_m'), size)  # type: ignore[arg-type]
@@ -225,8 +234,6 @@ def window_line(summary: dict) -> str:
 
 def _checked_output(path: Path, option: str) -> Path:
     """Return an output directory that can be written, checked before the work starts."""
-    from cloth_bench_ros.safe_io import check_output_dir
-
     try:
         return check_output_dir(path)
     except common.ClothBenchError as exc:
@@ -235,14 +242,10 @@ def _checked_output(path: Path, option: str) -> Path:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Run the node graph on a bag and print the result table."""
-    from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere, load_preset
-    from cloth_bench_ros.paths import bundled_bag
-    from cloth_bench_ros.report.run_report import result_table
-    from cloth_bench_ros.studies.cloth import (
-        cloth_choice, cloth_lines, engine_masses, mesh_choice,
+    from cloth_bench_ros.report.run_report import result_table  # lazy: numba, +0.2 s on --help
+    from cloth_bench_ros.studies.run_pipeline import (  # lazy: the node graph, +0.7 s on --help
+        run_pipeline, RunConfig,
     )
-    from cloth_bench_ros.studies.run_pipeline import run_pipeline, RunConfig
 
     engines = validation.unique(args.engine or [OPTIONS['engine'].default], '--engine')
     for name in engines:
@@ -260,7 +263,6 @@ def cmd_run(args: argparse.Namespace) -> int:
         }
         for name in engines
     }
-    from cloth_bench_ros.core.task_data import load_task
 
     task = load_task(args.primitive, args.task)  # a bad task file: one line, before the run
     bag = Path(args.bag) if args.bag else bundled_bag(args.cloth, args.primitive)
@@ -315,8 +317,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         _checked_output(config.record_comparison, '--record-comparison')
     summary: dict | None
     if args.processes:
-        from cloth_bench_ros.studies.errors import ProcessRunError
-        from cloth_bench_ros.studies.processes import run_processes
+        from cloth_bench_ros.studies.processes import run_processes  # lazy: the node graph, +0.7 s
 
         try:
             summary = run_processes(config)
@@ -367,16 +368,15 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_trajectory(args: argparse.Namespace) -> int:
     """Print a task's motion (--task, else the shipped one of --primitive) as CSV."""
-    from cloth_bench_ros.core.task_data import load_task
-    from cloth_bench_ros.core.trajectory import sample_quintic, to_csv
-
     sys.stdout.write(to_csv(sample_quintic(load_task(args.primitive, args.task), args.rate)))
     return 0
 
 
 def cmd_motion(args: argparse.Namespace) -> int:
     """Write a recording's gripper motion as a task file."""
-    from cloth_bench_ros.data.recorded_motion import parse_gripper_frames, table_line
+    from cloth_bench_ros.data.recorded_motion import (  # lazy: +0.2 s on --help
+        parse_gripper_frames, table_line,
+    )
 
     if not parse_gripper_frames(args.gripper_frames) and not args.targets_topic:
         raise UserError('motion: give the grippers with --gripper-frames LEFT,RIGHT or '
@@ -390,8 +390,7 @@ def cmd_motion(args: argparse.Namespace) -> int:
 
 def cmd_engines(args: argparse.Namespace) -> int:
     """List the engines; with --warm, compile what makes their first run slow."""
-    from cloth_bench_ros.core.surface_metrics import compile_kernels
-    from cloth_bench_ros.engines import engine_class, known_engines
+    from cloth_bench_ros.core.surface_metrics import compile_kernels  # lazy: numba, +0.2 s
 
     print(f'{"engine":<10} {"available":<10} {"version":<10} reason')
     for info in known_engines():

@@ -8,8 +8,11 @@ from pathlib import Path
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import common
+from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere
+from cloth_bench_ros.identify.spec import OBJECTIVES
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import FLAGS, OPTIONS
+from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
 from cloth_bench_ros.studies.errors import StudyInterrupted
 
 TOLERANCE_REL = FLAGS['tolerance_rel'].default  # settings recommendation: CD within this ...
@@ -121,8 +124,6 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def say_fitted_elsewhere(cells: list, presets: Path | None) -> None:
     """Print, per engine and device, one line where the cells' presets were fitted elsewhere."""
-    from cloth_bench_ros.engines.presets import fitted_device, fitted_elsewhere
-
     fitted: dict[tuple[str, str], set] = {}
     for cell in cells:
         fitted.setdefault((cell.engine, cell.device), set()).add(
@@ -135,14 +136,12 @@ def say_fitted_elsewhere(cells: list, presets: Path | None) -> None:
 
 def scores_every_metric(args: argparse.Namespace) -> bool:
     """Return whether a study's cells need every metric: asked for, or --metric is not CD/HD."""
-    from cloth_bench_ros.studies.objective import OBJECTIVES
-
     return bool(getattr(args, 'all_metrics', False)) or args.metric not in OBJECTIVES
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run a sweep's cells on the executor, resuming what is done."""
-    from cloth_bench_ros.studies import sweep as sw
+    from cloth_bench_ros.sweep import study as sw  # lazy: Dask, the node graph, +1.6 s
 
     settings = args.mode == 'settings'
     engines = validation.unique(
@@ -237,7 +236,7 @@ def render(
     metric: str = DEFAULT_METRIC,
 ) -> int:
     """Render the report of `results` into `out` and print its headline tables."""
-    from cloth_bench_ros.report.document import report_directory
+    from cloth_bench_ros.report.document import report_directory  # lazy: matplotlib, +2.3 s
 
     outcome = report_directory(
         Path(results), out, stress, rate, cloth, tol_rel, tol_abs, metric=metric
@@ -278,18 +277,17 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_stress(args: argparse.Namespace) -> int:
     """Run the stress suite and print which cases diverged."""
-    from cloth_bench_ros.studies.stress import run_suite, stress_table, verdict
-    from cloth_bench_ros.studies.stress_cases import select_cases
+    from cloth_bench_ros.studies import stress, stress_cases  # lazy: Dask, engines, +0.9 s
 
     available = common.available_engines()
     engines = validation.unique(
         args.engine or [e for e in ('mujoco', 'bullet', 'newton') if e in available], '--engine'
     )
     presets = common.preset_set(args)
-    cases = select_cases(
+    cases = stress_cases.select_cases(
         engines, args.case, args.max_wall_s, presets, args.task or '', args.cloth_mesh or ''
     )
-    if args.cloth_mesh and any(c.grid for c in select_cases(engines, args.case)):
+    if args.cloth_mesh and any(c.grid for c in stress_cases.select_cases(engines, args.case)):
         print(f'stress: the cases of their own grid are left out: --cloth-mesh {args.cloth_mesh} '
               'is the cloth of every case')
     if args.device is not None:  # Newton's cases on the device asked for
@@ -305,11 +303,11 @@ def cmd_stress(args: argparse.Namespace) -> int:
         return 0
     default_out = 'stress' if presets.is_default else f'stress_{Path(presets.name).name}'
     out = Path(args.output) if args.output else Path('results') / default_out
-    rows = run_suite(
+    rows = stress.run_suite(
         cases, out, args.workers, progress=not args.no_progress, scheduler=args.scheduler
     )
-    print(stress_table(rows).markdown())
-    for engine, diverged in verdict(rows).items():
+    print(stress.stress_table(rows).markdown())
+    for engine, diverged in stress.verdict(rows).items():
         n = sum(r['engine'] == engine for r in rows)
         print(
             f'{engine}: {len(diverged)} of {n} cases diverged'
@@ -321,10 +319,13 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
 def cmd_cross_reference(args: argparse.Namespace) -> int:
     """Score every engine against both synthetic references on the executor; print the table."""
-    from cloth_bench_ros.report.cross_reference import cross_reference_markdown
-    from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
-    from cloth_bench_ros.studies import sweep as sw
-    from cloth_bench_ros.studies.cross_reference import cross_reference_cells, DEFAULT_ENTRANTS
+    from cloth_bench_ros.report.cross_reference import (  # lazy: +0.8 s on --help
+        cross_reference_markdown,
+    )
+    from cloth_bench_ros.studies.cross_reference import (  # lazy: engines, +0.8 s on --help
+        cross_reference_cells, DEFAULT_ENTRANTS,
+    )
+    from cloth_bench_ros.sweep import study as sw  # lazy: Dask, the node graph, +1.6 s
 
     available = common.available_engines()
     entrants = [(e, o) for e, o in DEFAULT_ENTRANTS if e in available]

@@ -199,7 +199,7 @@ def load_preset(
     return values
 
 
-# How a provenance names the device a preset was fitted on (studies.identify_output writes it).
+# How a provenance names the device a preset was fitted on (identify.output writes it).
 _FITTED_ON = re.compile(r'\bon device (cpu|cuda(?::\d+)?)\b')
 _ENTRY_KEY = re.compile(r'\w+ \w+(?: \(\w+\))?$')  # a merged set's "<cloth> <task> (<model>)"
 

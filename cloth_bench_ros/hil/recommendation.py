@@ -10,8 +10,8 @@ from __future__ import annotations
 from datetime import datetime, timezone
 from typing import Sequence
 
-from cloth_bench_ros.studies.aggregate import finite
-from cloth_bench_ros.studies.recommend import DEADLINE_BUDGET, recommend_for_rate, Recommendation
+from cloth_bench_ros.sweep.aggregate import finite
+from cloth_bench_ros.sweep.recommend import DEADLINE_BUDGET, recommend_for_rate, Recommendation
 import numpy as np
 import yaml
 

@@ -26,9 +26,9 @@ from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.hil.config import HilConfig, SIMULATOR_FILE, SUMMARY_FILE, TIMELINE
 from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.studies.cloth import study_inputs
-from cloth_bench_ros.studies.recommend import load_recommendations, recommend_for_rate
 from cloth_bench_ros.studies.results import append_row, load_rows
 from cloth_bench_ros.studies.run_config import RunConfig
+from cloth_bench_ros.sweep.recommend import load_recommendations, recommend_for_rate
 
 
 @dataclass

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from cloth_bench_ros.core.table import inline_html, Table
+from cloth_bench_ros.safe_io import atomic_write_text
 
 # ("h", level, text) | ("p", text) | ("table", Table) | ("figure", Figure) | ("img", file, caption)
 Block = tuple
@@ -104,8 +105,6 @@ def write_document(
 
     One CSV per table (and per `csv_only` table); the documents are written atomically.
     """
-    from cloth_bench_ros.safe_io import atomic_write_text
-
     out_dir.mkdir(parents=True, exist_ok=True)
     for t in csv_only:
         t.write_csv(out_dir / f'{t.name}.csv')

@@ -13,6 +13,9 @@ from functools import partial
 from pathlib import Path
 
 from cloth_bench_ros.core.worst_frames import read_worst_frames, WORST_FRAMES_FILE, WorstFrame
+from cloth_bench_ros.report.blocks import figure_block, heading, paragraph
+from cloth_bench_ros.report.figures import plt
+import numpy as np
 
 MAX_FIGURES = 6  # run directories drawn; the rest are counted in the section's text
 VIEWS = (('side (y-z)', 1, 2), ('top (x-y)', 0, 1))
@@ -27,12 +30,6 @@ def find_worst_frames(results_dir: Path) -> list[Path]:
 
 def plot_worst_frames(frames: list[WorstFrame], path: Path) -> Path:
     """Draw each engine's worst frame: a row per engine, a column per view; the path."""
-    import matplotlib
-
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    import numpy as np
-
     top = max(float(np.max(f.errors)) for f in frames) or 1.0
     fig, axes = plt.subplots(
         len(frames), len(VIEWS), figsize=(3.4 * len(VIEWS) + 0.8, 3.0 * len(frames)),
@@ -64,8 +61,6 @@ def plot_worst_frames(frames: list[WorstFrame], path: Path) -> Path:
 
 def cloth_error_section(results_dir: Path) -> list:
     """Report blocks: the worst frame of each engine of each run found (see module doc)."""
-    from cloth_bench_ros.report.blocks import figure_block, heading, paragraph
-
     files = find_worst_frames(results_dir)
     if not files:
         return []

@@ -10,6 +10,9 @@ from functools import partial
 from pathlib import Path
 import shutil
 
+from cloth_bench_ros.report.blocks import figure_block, heading, paragraph
+from cloth_bench_ros.report.metric_sections import fig4_blocks
+
 
 def comparison_section(results_dir: Path) -> list:
     """
@@ -18,9 +21,6 @@ def comparison_section(results_dir: Path) -> list:
     Run directories are results_dir or one level below; the figure and its animation are copied
     into the report directory when the report is written.
     """
-    from cloth_bench_ros.report.blocks import figure_block, heading, paragraph
-    from cloth_bench_ros.report.metric_sections import fig4_blocks
-
     found = sorted({*results_dir.glob('qualitative.png'), *results_dir.glob('*/qualitative.png')})
     if not found:
         return []

@@ -3,7 +3,7 @@ Cross-reference: every engine's CD_d / CD_q against every synthetic reference, a
 
 An engine of the reference's own family should win on its own reference, and by how much is the
 point (the cells are studies/cross_reference.py's). Engines identified against a reference are
-ranked on it by studies.ranking_stats (the code `rank` ranks with: one reference bag is one
+ranked on it by rank.ranking (the code `rank` ranks with: one reference bag is one
 trial, so the paired bootstrap draws its seeds; divergence rate first, then the metric).
 """
 
@@ -14,12 +14,12 @@ from typing import Sequence
 
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC, metric as metric_choice
 from cloth_bench_ros.options import FLAGS
+from cloth_bench_ros.rank.ranking import HeldOutRun, order_agreement, rank_runs, Ranking
 from cloth_bench_ros.report.blocks import Table
 from cloth_bench_ros.report.ranking import ranking_table
 from cloth_bench_ros.report.selections import engine_label
-from cloth_bench_ros.studies.aggregate import stat
 from cloth_bench_ros.studies.cross_reference import DEFAULT_ENTRANTS, KINDS, MODE, REFERENCES
-from cloth_bench_ros.studies.ranking_stats import HeldOutRun, order_agreement, rank_runs, Ranking
+from cloth_bench_ros.sweep.aggregate import stat
 
 REFERENCE_LABEL = {'mujoco': 'MuJoCo shell ref.', 'newton-vbd': 'Newton VBD ref.'}
 NOTE = (

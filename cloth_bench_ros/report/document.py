@@ -32,6 +32,11 @@ from cloth_bench_ros.report.blocks import (
     table_block,
     write_document,
 )
+from cloth_bench_ros.report.cloth_error import cloth_error_section
+from cloth_bench_ros.report.comparison import comparison_section
+from cloth_bench_ros.report.identification import find_identifications, identification_section
+from cloth_bench_ros.report.metric_sections import metrics_section
+from cloth_bench_ros.report.rank_report import RANK_FILE, rank_report
 from cloth_bench_ros.report.selections import (
     cloths_of,
     DEFAULT_MODE,
@@ -55,7 +60,9 @@ from cloth_bench_ros.report.tables import (
     table3,
     timing_table,
 )
-from cloth_bench_ros.studies.aggregate import finite
+from cloth_bench_ros.studies.results import load_rows, RESULTS_FILE
+from cloth_bench_ros.studies.stress import load_stress, STRESS_FILE
+from cloth_bench_ros.sweep.aggregate import finite
 import numpy as np
 
 
@@ -335,11 +342,6 @@ def render_report(
     metric: str = DEFAULT_METRIC,
 ) -> ReportOutcome:
     """Render every table and figure of the rows into out_dir (report.md, .html, .png, .csv)."""
-    from cloth_bench_ros.report.cloth_error import cloth_error_section
-    from cloth_bench_ros.report.comparison import comparison_section
-    from cloth_bench_ros.report.identification import identification_section
-    from cloth_bench_ros.report.metric_sections import metrics_section
-
     results_dir, out_dir = Path(results_dir), Path(out_dir)
     doc = Document(title)
     pareto: list[dict] = []
@@ -390,12 +392,6 @@ def report_directory(
     With the stress suite and the identifications found beside it; ValueError (one line) when there
     is nothing usable to report.
     """
-    from cloth_bench_ros.report.identification import find_identifications
-    from cloth_bench_ros.studies.results import load_rows, RESULTS_FILE
-    from cloth_bench_ros.studies.stress import load_stress, STRESS_FILE
-
-    from cloth_bench_ros.report.rank_report import RANK_FILE, rank_report
-
     if results.is_dir() and (results / RANK_FILE).is_file():  # a `cloth-bench rank` directory
         md, html, images, tables = rank_report(results, out)
         return ReportOutcome(md, html, images, tables, [], [])

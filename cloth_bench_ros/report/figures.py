@@ -15,26 +15,26 @@ from cloth_bench_ros.report.selections import (
     engine_label,
     engines_of,
     metric_name,
-    pareto_front,
     rates_of,
 )
-from cloth_bench_ros.studies.aggregate import (
+from cloth_bench_ros.sweep.aggregate import (
     compute_per_sim_second,
     finite,
     group,
+    pareto_front,
     stat,
 )
 from cloth_bench_ros.validation import parse_grid
 import matplotlib
 
 matplotlib.use('Agg')  # no display: figures are files
+from matplotlib.lines import Line2D  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter  # noqa: E402
 
 
 def plain_log(ax, axis: str = 'xy') -> None:
     """Log-axis tick labels as plain numbers (0.2, 10, 1000) rather than 2 x 10^-1."""
-    from matplotlib.ticker import FuncFormatter
-
     fmt = FuncFormatter(lambda v, _: f'{v:g}')
     for name in axis:
         a = ax.xaxis if name == 'x' else ax.yaxis
@@ -126,8 +126,6 @@ def plot_fig5(rows: Sequence[dict], cloth: str, path: Path, title: str) -> Path:
         if ax.has_data():
             ax.set_yscale('log')
         plain_log(ax)
-        from matplotlib.ticker import FixedLocator, NullFormatter
-
         ax.xaxis.set_major_locator(FixedLocator(rates_of(sel)))
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel('simulator rate (Hz)')
@@ -261,8 +259,6 @@ def plot_settings(
     Colour: mesh; marker: internal time step; open marker: self-collision on; the Pareto front
     dashed and labelled; the recommended configuration starred.
     """
-    from matplotlib.lines import Line2D
-
     prims = [p for p in ('dynamic', 'quasi_static') if any(r['primitive'] == p for r in rows)]
     fig, axes = plt.subplots(1, len(prims), figsize=(7.5 * len(prims), 5.5), squeeze=False)
     grids = sorted(

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Sequence
 
 from cloth_bench_ros.core.deadline import deadline_rule, within_tolerance
+from cloth_bench_ros.core.hil_timing import latencies, TargetTimeline, UNSET
 from cloth_bench_ros.report.blocks import (
     Document,
     figure_block,
@@ -24,9 +25,10 @@ from cloth_bench_ros.report.blocks import (
     table_block,
     write_document,
 )
+from cloth_bench_ros.report.figures import plt
 from cloth_bench_ros.report.selections import engine_label, metric_name
 from cloth_bench_ros.report.selections import fmt_fixed as _fmt
-from cloth_bench_ros.studies.recommend import (
+from cloth_bench_ros.sweep.recommend import (
     DEADLINE_BUDGET,
     meets_deadline,
     recommend_for_rate,
@@ -200,12 +202,6 @@ def text_table(table: Table) -> str:
 
 def plot_run(timeline, period_s: float, path: Path, title: str) -> Path:
     """Plot latency over the run and its histogram, the deadline in red, skipped targets marked."""
-    import matplotlib
-
-    matplotlib.use('Agg')
-    from cloth_bench_ros.core.hil_timing import latencies, UNSET
-    import matplotlib.pyplot as plt
-
     got = timeline.received != UNSET
     t = (timeline.stamps - timeline.stamps[0]) / 1e9
     lat_ms = latencies(timeline) * 1e3
@@ -247,8 +243,6 @@ def _draw_run(timeline, period_s: float, title: str, path: Path) -> Path:
 
 def write_hil_report(rows: Sequence[dict], results_dir: Path, out_dir: Path) -> Path:
     """hil.md and hil.html (table + per-run plots) and hil.csv in out_dir; the Markdown's path."""
-    from cloth_bench_ros.core.hil_timing import TargetTimeline
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     doc = Document('cloth_bench_ros: hardware in the loop')

@@ -20,7 +20,10 @@ from cloth_bench_ros.report.blocks import (
     Table,
     table_block,
 )
+from cloth_bench_ros.report.figures import plt, save_figure
 from cloth_bench_ros.report.selections import engine_label, fmt_sig
+from cloth_bench_ros.safe_io import read_text_bounded, safe_name, UnsafeInputError
+from cloth_bench_ros.studies.results import ResultsError
 
 SUMMARY_FILE = 'identification.json'
 REQUIRED = {
@@ -38,9 +41,6 @@ REQUIRED = {
 
 def load_identification(path: Path) -> dict:
     """Return an identification.json, checked; ResultsError naming the file if it is not usable."""
-    from cloth_bench_ros.safe_io import read_text_bounded, safe_name, UnsafeInputError
-    from cloth_bench_ros.studies.results import ResultsError
-
     try:
         data = json.loads(read_text_bounded(path))
     except (UnsafeInputError, json.JSONDecodeError) as exc:
@@ -175,8 +175,6 @@ def importance_table(ident: dict, suffix: str) -> Table:
 
 def plot_convergence(ident: dict, path: Path) -> Path | None:
     """Best objective so far against trials, one line per sampler (failed trials marked)."""
-    from cloth_bench_ros.report.figures import plt, save_figure
-
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
     drawn = False
     for name, result in ident['per_sampler'].items():

@@ -19,7 +19,7 @@ from cloth_bench_ros.metric_choice import DEFAULT_METRIC, metric as metric_choic
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.report.blocks import Block, heading, paragraph, Table, table_block
 from cloth_bench_ros.report.selections import engine_label
-from cloth_bench_ros.studies.aggregate import group, stat
+from cloth_bench_ros.sweep.aggregate import group, stat
 
 # The paper's Fig. 4 (towel, one simulation with the identified parameters): the time steps (s
 # from the start of the motion) and the CD / HD (m) under each panel.

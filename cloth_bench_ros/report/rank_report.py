@@ -18,10 +18,12 @@ from typing import Any
 
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.metric_choice import metric as metric_of
+from cloth_bench_ros.rank.answer import deadline_ms
 from cloth_bench_ros.report.blocks import (
     Document, figure_block, heading, paragraph, table_block, write_document,
 )
-from cloth_bench_ros.report.rank import deadline_ms, rank_lines, rank_table
+from cloth_bench_ros.report.figures import plt, save_figure
+from cloth_bench_ros.report.rank import rank_lines, rank_table
 
 RANK_FILE = 'rank.json'
 
@@ -47,8 +49,6 @@ def _axis_label(result: dict) -> str:
 
 def plot_ranking(result: dict, group: str, path: Path) -> Path | None:
     """Draw one group's ranking: mean and 95 % interval per engine, preset, floor."""
-    from cloth_bench_ros.report.figures import plt, save_figure
-
     a = result['answer'][group]
     ranked = a['ranking']
     if not ranked:
@@ -79,8 +79,6 @@ def plot_ranking(result: dict, group: str, path: Path) -> Path | None:
 
 def plot_speed_error(result: dict, group: str, path: Path) -> Path | None:
     """Draw one group's step time p50 at the rate against the held-out mean; Pareto marked."""
-    from cloth_bench_ros.report.figures import plt, save_figure
-
     a = result['answer'][group]
     rate = f'{result["spec"]["rate_hz"]:g}'
     front = set(a['pareto'].get(rate, []))

@@ -1,5 +1,5 @@
 """
-The table of rankings per reference and task (studies.ranking_stats computes them).
+The table of rankings per reference and task (rank.ranking computes them).
 
 Each engine's row: its rank, mean, the 95 % interval of the paired bootstrap, P(rank), its
 finished runs and how many of its runs diverged.
@@ -11,7 +11,7 @@ import math
 from typing import Mapping
 
 from cloth_bench_ros.core.table import Table
-from cloth_bench_ros.studies.ranking_stats import Ranking
+from cloth_bench_ros.rank.ranking import Ranking
 
 
 def _f(value: float | None, digits: int) -> str:

@@ -1,7 +1,7 @@
 """
 Selections over results rows for the report: Pareto fronts, labels, number formats.
 
-Mean +- std per group is studies/aggregate.py's (a study's choice of configuration uses it too).
+Mean +- std per group is sweep/aggregate.py's (a study's choice of configuration uses it too).
 """
 
 from __future__ import annotations
@@ -34,20 +34,6 @@ DEFAULT_MODE = FLAGS['sweep_mode'].default  # a row without a mode: the sweep's 
 
 def metric_name(primitive: str, kind: str) -> str:
     return f'{kind}_{"d" if primitive == "dynamic" else "q"}'
-
-
-def pareto_front(points: Sequence[tuple[float, float]]) -> list[int]:
-    """Return indices of the points not dominated in (x, y), both minimised, sorted by x."""
-    order = sorted(
-        (i for i, (x, y) in enumerate(points) if math.isfinite(x) and math.isfinite(y)),
-        key=lambda i: (points[i][0], points[i][1]),
-    )
-    front, best = [], math.inf
-    for i in order:
-        if points[i][1] < best:
-            front.append(i)
-            best = points[i][1]
-    return front
 
 
 def engine_label(name: str) -> str:

@@ -14,9 +14,9 @@ from cloth_bench_ros.report.selections import (
     fmt_fixed,
     fmt_sig,
     metric_name,
-    pareto_front,
 )
-from cloth_bench_ros.studies.recommend import recommend, settings_results
+from cloth_bench_ros.sweep.aggregate import pareto_front
+from cloth_bench_ros.sweep.recommend import recommend, settings_results
 
 
 def settings_tables(

@@ -7,10 +7,20 @@ from pathlib import Path
 from typing import Sequence
 
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC, metric as metric_choice
+from cloth_bench_ros.rank.ranking import REPLICATES
 from cloth_bench_ros.report import figures
 from cloth_bench_ros.report.blocks import Block, figure_block, heading, paragraph, table_block
+from cloth_bench_ros.report.cross_reference import (
+    cross_reference_section,
+    identified_rankings,
+    ranking_statements,
+)
+from cloth_bench_ros.report.hil import deadline_tables
+from cloth_bench_ros.report.identification import summary_table
+from cloth_bench_ros.report.ranking import ranking_table
 from cloth_bench_ros.report.selections import engine_label, engines_of
 from cloth_bench_ros.report.settings import settings_tables
+from cloth_bench_ros.studies.stress import stress_table, verdict
 
 
 def _plot_settings(rows: Sequence[dict], title: str, chosen: list, path: Path) -> Path | None:
@@ -64,9 +74,6 @@ def settings_section(
     blocks += [paragraph(n) for n in notes]
     for t in s_tables:
         blocks += [heading(3, t.name.replace('settings_', '').replace('_', ' ')), table_block(t)]
-    from cloth_bench_ros.report.hil import (
-        deadline_tables,
-    )  # the deadline criterion (hardware in the loop)
 
     d_tables, d_notes = deadline_tables(rows, tol_rel, tol_abs)
     blocks += [
@@ -78,14 +85,6 @@ def settings_section(
 
 def cross_reference_blocks(rows: Sequence[dict], metric: str = DEFAULT_METRIC) -> list[Block]:
     """Each engine against each synthetic reference (the reference's bias as numbers)."""
-    from cloth_bench_ros.report.cross_reference import (
-        cross_reference_section,
-        identified_rankings,
-        ranking_statements,
-    )
-    from cloth_bench_ros.report.ranking import ranking_table
-    from cloth_bench_ros.studies.ranking_stats import REPLICATES
-
     xref = cross_reference_section(rows, metric)
     if xref is None:
         return []
@@ -111,8 +110,6 @@ def cross_reference_blocks(rows: Sequence[dict], metric: str = DEFAULT_METRIC) -
 
 def stress_section(stress_rows: Sequence[dict]) -> list[Block]:
     """Return the stress suite: which hard cases each engine survives."""
-    from cloth_bench_ros.studies.stress import stress_table, verdict
-
     v = verdict(stress_rows)
     return [
         heading(2, 'Stress suite: hard cases'),
@@ -130,8 +127,6 @@ def stress_section(stress_rows: Sequence[dict]) -> list[Block]:
 
 def identifications_summary(identifications: Sequence[dict]) -> list[Block]:
     """Return one table of every identification's budget, wall time and held-out CD."""
-    from cloth_bench_ros.report.identification import summary_table
-
     return [
         heading(2, 'Identifications: budgets and held-out scores'),
         paragraph(

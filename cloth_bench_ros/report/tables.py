@@ -18,7 +18,7 @@ from cloth_bench_ros.report.selections import (
     PAPER_ENGINES,
     rates_of,
 )
-from cloth_bench_ros.studies.aggregate import finite, group, stat
+from cloth_bench_ros.sweep.aggregate import finite, group, stat
 import numpy as np
 
 # docs/benchmark.md section 6, Table III: (mean, std, bold in the paper) per cloth, metric and

@@ -12,14 +12,13 @@ from typing import Sequence
 
 from cloth_bench_ros.report.figures import plain_log, plt, save_figure
 from cloth_bench_ros.report.selections import ENGINE_COLOR, engine_label, engines_of, FPS
-from cloth_bench_ros.studies.aggregate import finite, group
+from cloth_bench_ros.safe_io import confined_path, UnsafeInputError
+from cloth_bench_ros.sweep.aggregate import finite, group
 import numpy as np
 
 
 def frames_file(results_dir: Path, row: dict) -> Path | None:
     """Return the row's frames.csv if it is a file inside results_dir (rows are untrusted)."""
-    from cloth_bench_ros.safe_io import confined_path, UnsafeInputError
-
     name = row.get('frames_csv')
     if not isinstance(name, str) or not name:
         return None

@@ -19,10 +19,15 @@ from pathlib import Path
 import re
 from typing import Iterable, Sequence
 
-from cloth_bench_ros.engines.presets import PresetSet
+from cloth_bench_ros.core import surface_metrics
+from cloth_bench_ros.data import BagReader
+from cloth_bench_ros.engines import engine_class, engine_device, engine_model
+from cloth_bench_ros.engines.presets import load_preset, PresetSet
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
 from cloth_bench_ros.options import FLAGS, OPTIONS, PRIMITIVES
+from cloth_bench_ros.paths import share_dir
+from cloth_bench_ros.studies.cloth import study_inputs
 from cloth_bench_ros.studies.results import KEY_FIELDS, result_key
 
 DEFAULT_RATES = FLAGS['rates'].default
@@ -97,9 +102,6 @@ class Cell:
     @property
     def device(self) -> str:
         """Return the device the cell's engine runs on (Newton: its `device` or Warp's default)."""
-        from cloth_bench_ros.engines import engine_device
-        from cloth_bench_ros.errors import ClothBenchError
-
         try:
             return engine_device(self.engine, self.params)
         except ClothBenchError:  # an engine or device not on this machine: as the cell names it
@@ -113,17 +115,11 @@ class Cell:
     @property
     def surface_revision(self) -> int:
         """Return the surface metrics' revision the cell is scored with (0: it is not)."""
-        from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
-
-        return SURFACE_REVISION if self.all_metrics else 0
+        return surface_metrics.SURFACE_REVISION if self.all_metrics else 0  # read when keyed
 
     @property
     def model(self) -> str:
         """Return the model the cell's engine runs (its overrides' on its shipped preset's)."""
-        from cloth_bench_ros.engines import engine_model
-        from cloth_bench_ros.engines.presets import load_preset
-        from cloth_bench_ros.errors import ClothBenchError
-
         try:
             preset = load_preset(self.engine, self.cloth, self.primitive)
             return engine_model(self.engine, {**preset, **self.params})
@@ -148,8 +144,6 @@ class Cell:
 
 @lru_cache(maxsize=None)
 def _engine_version(engine: str) -> str:
-    from cloth_bench_ros.engines import engine_class
-
     try:
         return engine_class(engine).version()
     except ClothBenchError:  # an engine not on this machine: its cells are error rows
@@ -172,8 +166,6 @@ def set_values(
     model: the model that runs (an override's; None: the shipped preset's), whose entry the set
     gives. A cell carries its preset as overrides, so its run, key and results row say what it ran.
     """
-    from cloth_bench_ros.engines.presets import load_preset
-
     if presets is None or presets.is_default:
         return {}
     return load_preset(engine, cloth, primitive, presets.directory, model)
@@ -206,8 +198,6 @@ def find_bags(bag_dir: Path | None, cloth: str, primitive: str) -> list[tuple[in
     Names `<cloth>_<primitive>` (the bundled ones) and `<cloth>_<trial>_<primitive>` (the
     importer's) both count. ValueError if there is none.
     """
-    from cloth_bench_ros.paths import share_dir
-
     base = Path(bag_dir) if bag_dir is not None else share_dir('bags')
     pattern = re.compile(_BAG_NAME.format(cloth=re.escape(cloth), primitive=re.escape(primitive)))
     found = []
@@ -225,8 +215,6 @@ def find_bags(bag_dir: Path | None, cloth: str, primitive: str) -> list[tuple[in
 
 
 def _bag_trial(path: Path) -> int:
-    from cloth_bench_ros.data import BagReader
-
     try:
         with BagReader(path) as reader:
             trial = reader.trial
@@ -242,8 +230,6 @@ def with_inputs(cells: Sequence[Cell], task_file: str, cloth_mesh: str) -> list[
     Both are read and checked here (one line, before any cell runs): the mesh is grasped at
     each cell's task's start.
     """
-    from cloth_bench_ros.studies.cloth import study_inputs
-
     if not task_file and not cloth_mesh:
         return list(cells)
     inputs: dict[tuple, dict[str, str]] = {}
@@ -261,8 +247,6 @@ def with_inputs(cells: Sequence[Cell], task_file: str, cloth_mesh: str) -> list[
 
 def _check_engines(engines: Iterable[str], overrides: dict[str, dict]) -> None:
     """Raise EngineError (a ValueError) on an unknown engine or a bad override, before any work."""
-    from cloth_bench_ros.engines import engine_class
-
     for name in engines:
         cls = engine_class(name)
         cls.validate_params(overrides.get(name, {}))
@@ -347,8 +331,6 @@ def settings_cells(
     axes: parameter -> values ("grid" -> [(nx, nz), ...]); None as a value means the preset's.
     An axis naming a parameter that an engine does not have is skipped for that engine.
     """
-    from cloth_bench_ros.engines import engine_class
-
     axes = dict(DEFAULT_SETTINGS_AXES if axes is None else axes)
     overrides = overrides or {}
     _check_engines(engines, overrides)

@@ -16,7 +16,9 @@ from cloth_bench_ros.core.cloth_size import (
     size_text,
 )
 from cloth_bench_ros.core.scene import ClothGrid
-from cloth_bench_ros.core.task_data import Task
+from cloth_bench_ros.core.task_data import load_task, Task
+from cloth_bench_ros.engines import engine_class
+from cloth_bench_ros.engines.presets import sized_params
 from cloth_bench_ros.errors import InputError
 
 
@@ -73,8 +75,6 @@ def study_inputs(
 
     Both are read and checked (one line if bad); '' for what is not given.
     """
-    from cloth_bench_ros.core.task_data import load_task
-
     task = load_task(primitive, task_file or None)
     cloth = run_cloth(grid, size, cloth_mesh or None, task, rate_hz)
     return {
@@ -143,9 +143,6 @@ def engine_masses(
     area: float | None = None,
 ) -> dict[str, tuple[float, float]]:
     """Return per engine (the cloth's total mass it runs with, the mass of its `params`)."""
-    from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.engines.presets import sized_params
-
     out = {}
     for engine, params in params_of.items():
         total = sized_params(engine, dict(params), size, mass, area).get('mass')

@@ -30,8 +30,11 @@ import socket
 from typing import Any, Callable, Iterator, Sequence
 import warnings
 
+from cloth_bench_ros.core import metrics
 from cloth_bench_ros.errors import ClothBenchError
+from distributed import as_completed, Client, KilledWorker, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
+import numpy as np
 
 WORKER_TREE_CACHE_POINTS = 20_000_000  # ~ 400 frames of 50,000 points per worker
 _THREAD_VARS = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS')
@@ -71,11 +74,6 @@ class _WorkerSetup(WorkerPlugin):
         self.local = local
 
     def setup(self, worker: Any) -> None:
-        import warnings
-
-        from cloth_bench_ros.core import metrics
-        import numpy as np
-
         for var in _THREAD_VARS:
             os.environ.setdefault(var, '1')  # the engines are single-threaded: one core per worker
         metrics.keep_trees(WORKER_TREE_CACHE_POINTS)
@@ -155,8 +153,6 @@ class ClusterOnDemand:
 def _cluster_client(
     scheduler: str | None, workers: int | None, plugin: _WorkerSetup
 ) -> Iterator[Any]:
-    from distributed import Client, LocalCluster
-
     if scheduler is not None:
         address = check_scheduler_address(scheduler)
         try:
@@ -223,8 +219,6 @@ def run_tasks(
     innocent one then finishes, and only the one that kills its workers alone goes to on_crash.
     An exception a task raises (a bug: the tasks return their failures as results) is raised here.
     """
-    from distributed import as_completed, KilledWorker
-
     limit = in_flight or 2 * worker_slots(client)
     pending = list(items)[::-1]
     futures = as_completed()

@@ -13,6 +13,7 @@ import hashlib
 from pathlib import Path
 from typing import Any, Sequence
 
+from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.errors import user_path
 
 
@@ -26,8 +27,6 @@ def file_sha256(path: str) -> str:
 
 def task_record(primitive: str, task: str) -> dict[str, str]:
     """Return a task's file and content hash (`task`: a file, '' for the shipped `primitive`)."""
-    from cloth_bench_ros.core.task_data import load_task
-
     loaded = load_task(primitive, task or None)
     return {'file': loaded.path, 'sha256': loaded.sha256}
 

@@ -42,6 +42,7 @@ from cloth_bench_ros.data.synth import reference_config, simulate_reference, Syn
 from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.engines.base import params_for_grid
 from cloth_bench_ros.engines.mujoco_cloth import TIMECONST_SLACK
+from cloth_bench_ros.engines.presets import load_preset
 from cloth_bench_ros.errors import InputError
 import numpy as np
 
@@ -166,8 +167,6 @@ def hanging_length(frames: np.ndarray) -> float:
 
 def engine_frames(engine: str, base: SynthConfig) -> np.ndarray:
     """Run an engine's shipped preset on the tested grid through the trial: vertices per frame."""
-    from cloth_bench_ros.engines.presets import load_preset
-
     tested = ClothGrid()
     config = replace(
         base,

@@ -12,6 +12,7 @@ start (the kernel drops the lock when its holder dies, even by SIGKILL: no stale
 
 from __future__ import annotations
 
+from dataclasses import replace
 import fcntl
 import json
 import math
@@ -23,7 +24,13 @@ from typing import Any, Mapping, Sequence, TypedDict
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import OPTIONS
-from cloth_bench_ros.safe_io import confined_path, read_text_bounded, safe_name, UnsafeInputError
+from cloth_bench_ros.safe_io import (
+    atomic_write_text,
+    confined_path,
+    read_text_bounded,
+    safe_name,
+    UnsafeInputError,
+)
 
 RESULTS_FILE = 'results.jsonl'
 LOCK_FILE = '.results.lock'
@@ -155,8 +162,6 @@ def drop_superseded(path: Path, cells: Sequence[Any], existing: Sequence[dict]) 
 
 def with_kept_scoring(cells: Sequence[Any], existing: Sequence[dict]) -> list[Any]:
     """Return the cells, each CD/HD-only one whose cell is kept scored on every metric as that."""
-    from dataclasses import replace
-
     keys = {row_key(r) for r in existing}
     out = []
     for cell in cells:
@@ -263,8 +268,6 @@ def row_line(row: Mapping[str, Any]) -> str:
 
 def rewrite_rows(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
     """Replace a results file by these rows, atomically (the rest were made with other inputs)."""
-    from cloth_bench_ros.safe_io import atomic_write_text
-
     atomic_write_text(Path(path), ''.join(row_line(r) for r in rows))
 
 
@@ -355,7 +358,7 @@ def cloth_fields(cell: Any, every: bool = False) -> dict[str, Any]:
 
 def bag_fingerprint(bag: str) -> str | None:
     """Return a bag's fingerprint, or None where it cannot be read (the run reports why)."""
-    from cloth_bench_ros.data.bag_layout import fingerprint
+    from cloth_bench_ros.data.bag_layout import fingerprint  # lazy: the bag readers, +0.1 s
 
     try:
         return fingerprint(Path(bag))

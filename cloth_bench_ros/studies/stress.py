@@ -27,21 +27,30 @@ from pathlib import Path
 import time
 from typing import Sequence
 
+from cloth_bench_ros.core.cloth_mesh import mesh_area
+from cloth_bench_ros.core.metrics import StabilityAccumulator
 from cloth_bench_ros.core.table import Table
+from cloth_bench_ros.engines import make_engine
+from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.errors import ClothBenchError, InputError, one_line
+from cloth_bench_ros.safe_io import (
+    atomic_write_text,
+    check_output_dir,
+    read_text_bounded,
+    safe_name,
+    UnsafeInputError,
+)
+from cloth_bench_ros.studies.dask_executor import default_workers, open_client, run_tasks
+from cloth_bench_ros.studies.results import json_safe
 from cloth_bench_ros.studies.stress_cases import case_cloth, case_inputs, case_targets, StressCase
 import numpy as np
+from tqdm import tqdm
 
 STRESS_FILE = 'stress.jsonl'
 
 
 def run_case(case: StressCase) -> dict:
     """Run one case to its end, its divergence or its wall-time budget; raises only on a bug."""
-    from cloth_bench_ros.core.cloth_mesh import mesh_area
-    from cloth_bench_ros.core.metrics import StabilityAccumulator
-    from cloth_bench_ros.engines import make_engine
-    from cloth_bench_ros.engines.presets import load_preset, sized_params
-
     row = {
         'case': case.name,
         'engine': case.engine,
@@ -160,11 +169,6 @@ def run_suite(
     scheduler: str | None = None,
 ) -> list[dict]:
     """Run every case on the executor; rows in the order of `cases` (also to stress.jsonl, .md)."""
-    from cloth_bench_ros.safe_io import atomic_write_text, check_output_dir
-    from cloth_bench_ros.studies.dask_executor import default_workers, open_client, run_tasks
-    from cloth_bench_ros.studies.results import json_safe
-    from tqdm import tqdm
-
     if out_dir is not None:
         out_dir = check_output_dir(out_dir)
     rows: dict[int, dict] = {}
@@ -203,8 +207,6 @@ def run_suite(
 
 def load_stress(path: Path) -> list[dict]:
     """Return the rows of a stress.jsonl, checked as untrusted input."""
-    from cloth_bench_ros.safe_io import read_text_bounded, safe_name, UnsafeInputError
-
     path = Path(path)
     if path.is_dir():
         path = path / STRESS_FILE

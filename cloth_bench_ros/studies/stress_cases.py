@@ -8,13 +8,20 @@ jump); studies/stress.py runs them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 from typing import Sequence
 
+from cloth_bench_ros.core import scene
+from cloth_bench_ros.core.cloth_mesh import run_cloth
+from cloth_bench_ros.core.task_data import load_task
+from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.engines.presets import PresetSet
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.studies.cells import set_values
+from cloth_bench_ros.studies.cloth import study_inputs
 
 MAX_CASE_WALL_S = 120.0
 
@@ -193,11 +200,6 @@ def select_cases(
     `task_file`, `cloth_mesh`: every case runs that task's motion and that cloth (checked here,
     one line); a case of its own grid is left out with a mesh.
     """
-    from dataclasses import replace
-
-    from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.studies.cells import set_values
-
     for name in engines:
         engine_class(name)
     cases = default_cases(engines)
@@ -228,31 +230,22 @@ def select_cases(
 
 def case_task(case: StressCase):
     """Return the Task a case runs: its task file's, else the shipped one of its primitive."""
-    from cloth_bench_ros.core.task_data import load_task
-
     return load_task(case.primitive, case.task_file or None)
 
 
 def case_cloth(case: StressCase):
     """Return the cloth a case runs (core/cloth_mesh.py run_cloth; None: the engine's grid)."""
-    from cloth_bench_ros.core.cloth_mesh import run_cloth
-
     return run_cloth(case.grid, None, case.cloth_mesh or None, case_task(case), case.rate_hz)
 
 
 def case_inputs(case: StressCase) -> dict:
     """Return what a row records of a case's task file and mesh (file and SHA-256; '': none)."""
-    from cloth_bench_ros.studies.cloth import study_inputs
-
     return study_inputs(case.primitive, case.task_file, case.cloth_mesh, case.grid, None,
                         case.rate_hz)
 
 
 def case_targets(case: StressCase):
     """(left, right, quintic_index, dt) of a case: the primitive's targets, transformed."""
-    from cloth_bench_ros.core import scene
-    from cloth_bench_ros.core.trajectory import full_targets
-
     # Sampled every time_compression / rate s of trajectory time, played one sample per 1 / rate.
     samples_per_s = case.rate_hz / case.time_compression
     targets = full_targets(case_task(case), samples_per_s)

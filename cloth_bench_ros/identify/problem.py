@@ -24,8 +24,18 @@ import json
 from pathlib import Path
 from typing import Any, Mapping
 
+from cloth_bench_ros.data.bag_layout import fingerprint
+from cloth_bench_ros.engines import engine_class, engine_device
+from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import InputError
+from cloth_bench_ros.identify.errors import ProblemChanged
+from cloth_bench_ros.identify.objective import bag_task
+from cloth_bench_ros.identify.spec import IdentifySpec
+from cloth_bench_ros.safe_io import atomic_write_text, read_text_bounded
+from cloth_bench_ros.studies.cloth import cloth_name
+from cloth_bench_ros.studies.recording import file_sha256, task_record
+from optuna.distributions import distribution_to_json
 
 PROBLEM_FILE = 'problem.json'
 # How a changed key is named to the user (others: the key itself).
@@ -33,18 +43,8 @@ LABELS = {'engine_version': 'engine version', 'fixed': 'fixed values', 'preset':
           'tasks': 'task file', 'cloth_mesh': 'cloth mesh'}
 
 
-class ProblemChanged(InputError):
-    """An output's journal was fitted to another problem; `changed` names what changed."""
-
-    def __init__(self, message: str, changed: str) -> None:
-        super().__init__(message)
-        self.changed = changed
-
-
-def study_key(spec: Any) -> str:
+def study_key(spec: IdentifySpec) -> str:
     """Return the name of an IdentifySpec's studies in the journal, less the sampler."""
-    from cloth_bench_ros.studies.cloth import cloth_name
-
     other = spec.cloth_size is not None or spec.cloth_mass is not None  # its own study
     cloth = f'-{cloth_name(spec.cloth_size, spec.cloth_mass)}' if other else ''
     return f'{spec.engine}-{spec.cloth}-{spec.primitive}{cloth}'
@@ -57,9 +57,6 @@ def _json(value: Any) -> Any:
 
 @lru_cache(maxsize=64)
 def _simulated_model(engine: str, cloth: str, primitive: str, size: Any, mass: Any) -> str:
-    from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.engines.presets import load_preset, sized_params
-
     preset = sized_params(engine, load_preset(engine, cloth, primitive), size, mass)
     return json.dumps({'engine_version': engine_class(engine).version(), 'preset': preset},
                       sort_keys=True, default=str)
@@ -67,8 +64,6 @@ def _simulated_model(engine: str, cloth: str, primitive: str, size: Any, mass: A
 
 @lru_cache(maxsize=64)
 def _device(engine: str, device: str | None) -> str:
-    from cloth_bench_ros.engines import engine_device
-
     return engine_device(engine, {} if device is None else {'device': device})
 
 
@@ -91,7 +86,7 @@ def simulated_model(engine: str, cloth: str, primitive: str, cloth_size: Any = N
     return model
 
 
-def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
+def identify_problem(spec: IdentifySpec, space: dict, preset: dict) -> dict:
     """
     Return the problem an IdentifySpec identifies over `space` (name -> distribution), as JSON.
 
@@ -100,13 +95,7 @@ def identify_problem(spec: Any, space: dict, preset: dict) -> dict:
     Not in it: the budget, the samplers, the cloth's size and mass, and rank's `pool` and
     `shared` (they change no value).
     """
-    from cloth_bench_ros.data.bag_layout import fingerprint
-    from cloth_bench_ros.engines import engine_class
-    from cloth_bench_ros.studies.objective import bag_task
-    from cloth_bench_ros.studies.recording import file_sha256, task_record
-    from optuna.distributions import distribution_to_json
-
-    bags = [Path(b) for b in (spec.bag, *spec.also)]
+    bags = [Path(spec.bag), *(Path(b) for b in spec.also)]
     return _json({
         'engine': spec.engine,
         'cloth': spec.cloth,
@@ -159,8 +148,6 @@ def changed_keys(old: dict, new: dict) -> list[str]:
 
 def _read_problems(path: Path) -> dict:
     """Return the study -> problem entries of `path` ({} where there is none)."""
-    from cloth_bench_ros.safe_io import read_text_bounded
-
     if not path.exists():
         return {}
     try:
@@ -175,7 +162,7 @@ def _read_problems(path: Path) -> dict:
     return problems
 
 
-def check_problem(spec: Any, problem: dict, journal: Path) -> None:
+def check_problem(spec: IdentifySpec, problem: dict, journal: Path) -> None:
     """
     Refuse, in one line, to resume `journal` where it was fitted to another problem.
 
@@ -194,10 +181,8 @@ def check_problem(spec: Any, problem: dict, journal: Path) -> None:
             'changed); give another --output, or delete that folder to start afresh', changed)
 
 
-def record_problem(spec: Any, problem: dict, journal: Path) -> None:
+def record_problem(spec: IdentifySpec, problem: dict, journal: Path) -> None:
     """Write `problem` as the study's in `<output>/problem.json` (alone, where no journal is)."""
-    from cloth_bench_ros.safe_io import atomic_write_text
-
     path = spec.output / PROBLEM_FILE
     problems = _read_problems(path) if journal.exists() else {}
     problems[study_key(spec)] = problem

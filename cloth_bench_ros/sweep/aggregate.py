@@ -1,4 +1,4 @@
-"""Mean +- std of result rows per group; diverged or failed cells counted, not averaged."""
+"""Mean +- std of result rows per group (diverged or failed cells counted), the Pareto front."""
 
 from __future__ import annotations
 
@@ -69,3 +69,17 @@ def compute_per_sim_second(row: dict) -> float:
     if st is None or not math.isfinite(st):
         return math.nan
     return float(st) * float(row['rate_hz'])
+
+
+def pareto_front(points: Sequence[tuple[float, float]]) -> list[int]:
+    """Return indices of the points not dominated in (x, y), both minimised, sorted by x."""
+    order = sorted(
+        (i for i, (x, y) in enumerate(points) if math.isfinite(x) and math.isfinite(y)),
+        key=lambda i: (points[i][0], points[i][1]),
+    )
+    front, best = [], math.inf
+    for i in order:
+        if points[i][1] < best:
+            front.append(i)
+            best = points[i][1]
+    return front

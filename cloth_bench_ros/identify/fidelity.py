@@ -28,8 +28,12 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from cloth_bench_ros.core.cloth_size import cloth_grid
+from cloth_bench_ros.core.scene import ClothGrid
+from cloth_bench_ros.engines import engine_class
 from cloth_bench_ros.errors import InputError
 import numpy as np
+from optuna.trial import TrialState
 
 FIDELITIES = ('full', 'prune', 'coarse')
 RUNG, KEEP, STARTUP = 0.25, 0.3, 8
@@ -46,9 +50,6 @@ def coarse_grids(
     Each is (nx + 1) // 2 by (nz + 1) // 2 of the next finer one (at least 3 x 3) where that has at
     most half its vertices. InputError where the mesh has none.
     """
-    from cloth_bench_ros.core.cloth_size import cloth_grid
-    from cloth_bench_ros.core.scene import ClothGrid
-
     mesh = cloth_grid(grid, size) or ClothGrid()
     ladder = [(mesh.nx, mesh.nz)]
     while len(ladder) <= rungs:
@@ -68,8 +69,6 @@ def coarse_grids(
 
 def screen_rungs(engine: str) -> int:
     """Return how many coarser meshes `coarse` screens `engine`'s trials on (its halvings)."""
-    from cloth_bench_ros.engines import engine_class
-
     return min(COARSE_RUNGS, engine_class(engine).screen_halvings)
 
 
@@ -119,8 +118,6 @@ class Pruner:
 
     def tell(self, study: Any, trial: Any, result: dict) -> bool:
         """Tell Optuna a trial's result; True where it was handled (pruned or complete)."""
-        from optuna.trial import TrialState
-
         partials = result.get('partials', [result.get('partial')])
         values = {i: float(v) for i, v in enumerate(partials) if v is not None}
         self._keep(values)

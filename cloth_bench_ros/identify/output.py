@@ -17,16 +17,34 @@ import platform
 from typing import Any
 
 from cloth_bench_ros.core.cloth_size import BENCHMARK_AREA, cloth_record, is_benchmark, size_text
+from cloth_bench_ros.data import BagReader
+from cloth_bench_ros.engines import engine_class, engine_device
+from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.identify.curve import best_value, convergence, importance
+from cloth_bench_ros.identify.objective import bag_task, evaluate, trial_of
+from cloth_bench_ros.identify.spec import IdentifySpec
 from cloth_bench_ros.options import FLAGS
+from cloth_bench_ros.safe_io import atomic_write_text
 from cloth_bench_ros.studies.cells import Cell, find_bags
-from cloth_bench_ros.studies.identify_curve import best_value, convergence, importance
-from cloth_bench_ros.studies.results import append_row, json_safe, load_rows, RESULTS_FILE
+from cloth_bench_ros.studies.dask_executor import run_tasks
+from cloth_bench_ros.studies.recording import inputs_record
+from cloth_bench_ros.studies.results import (
+    append_row,
+    json_safe,
+    load_rows,
+    RESULTS_FILE,
+    rewrite_rows,
+    row_key,
+    stale_cells,
+)
+from cloth_bench_ros.sweep.study import cells_to_run, error_row, run_cell
 import numpy as np
+import yaml
 
 PRESETS_DIR = 'presets'
 
 
-def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
+def validation_cells(spec: IdentifySpec, fitted: dict) -> list[Cell]:
     """
     Return the validation cells: seeds other than the identification's, preset and identified.
 
@@ -67,13 +85,8 @@ def validation_cells(spec: Any, fitted: dict) -> list[Cell]:
     return cells
 
 
-def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]:
+def validate(client: Any, spec: IdentifySpec, fitted: dict, progress: bool) -> list[dict]:
     """Run the validation cells (resumable): per bag, preset against identified parameters."""
-    from cloth_bench_ros.studies.dask_executor import run_tasks
-    from cloth_bench_ros.studies.objective import bag_task
-    from cloth_bench_ros.studies.results import rewrite_rows, stale_cells
-    from cloth_bench_ros.studies.sweep import cells_to_run, error_row, run_cell
-
     if spec.cloth_mesh or bag_task(str(spec.bag), spec.task):
         return validate_along(client, spec, fitted)
     results = spec.output / RESULTS_FILE
@@ -118,14 +131,12 @@ def validate(client: Any, spec: Any, fitted: dict, progress: bool) -> list[dict]
     return out
 
 
-def validate_along(client: Any, spec: Any, fitted: dict) -> list[dict]:
+def validate_along(client: Any, spec: IdentifySpec, fitted: dict) -> list[dict]:
     """
     Validate on the fitted bag's held-out seeds along its own task and cloth, as objective trials.
 
     A task file, a recorded motion or a mesh: the sweep's cells run the shipped tasks on grids.
     """
-    from cloth_bench_ros.studies.objective import evaluate, trial_of
-
     seeds = range(spec.seed + 1, spec.seed + 1 + spec.validate_seeds)
     if not seeds:
         return []
@@ -146,16 +157,11 @@ def validate_along(client: Any, spec: Any, fitted: dict) -> list[dict]:
 
 
 def _key(row: dict) -> tuple:
-    from cloth_bench_ros.studies.results import row_key
-
     return row_key(row)
 
 
 def bag_source(bag: Any, limit: int = 120) -> str:
     """Return the head of a bag's `source` (what made it: a reference and its rate), or ''."""
-    from cloth_bench_ros.data import BagReader
-    from cloth_bench_ros.errors import ClothBenchError
-
     try:
         with BagReader(Path(bag)) as reader:
             trial = reader.trial
@@ -166,10 +172,8 @@ def bag_source(bag: Any, limit: int = 120) -> str:
     return head if len(head) <= limit else head[: limit - 3] + '...'
 
 
-def provenance_text(spec: Any, summary: dict, version: str) -> str:
+def provenance_text(spec: IdentifySpec, summary: dict, version: str) -> str:
     """Return the preset file's provenance: what was fitted against what, how, when and where."""
-    from cloth_bench_ros.engines import engine_device
-
     params = ', '.join(f'{k} = {v:.6g}' for k, v in summary['params'].items())
     fixed = ', '.join(f'{k} = {v}' for k, v in spec.fixed.items() if k != 'device')
     fixed = f'fixed {fixed}; ' if fixed else ''
@@ -203,12 +207,8 @@ def provenance_text(spec: Any, summary: dict, version: str) -> str:
     )
 
 
-def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
+def write_outputs(spec: IdentifySpec, base: dict, summary: dict) -> Path:
     """<output>/presets/<engine>.yaml (config/presets format) and <output>/identification.json."""
-    from cloth_bench_ros.engines import engine_class, engine_device
-    from cloth_bench_ros.safe_io import atomic_write_text
-    import yaml
-
     version = engine_class(spec.engine).version() or 'unknown'
     values = {**base, **{k: float(v) for k, v in summary['params'].items()}}
     values.pop('device', None)  # a preset is of the cloth; the device is in the provenance
@@ -241,18 +241,15 @@ def write_outputs(spec: Any, base: dict, summary: dict) -> Path:
     return preset
 
 
-def _inputs(spec: Any) -> dict:
+def _inputs(spec: IdentifySpec) -> dict:
     """Return the task of each bag, the mesh, the gripper frames and the table height."""
-    from cloth_bench_ros.studies.objective import bag_task
-    from cloth_bench_ros.studies.recording import inputs_record
-
     tasks = [bag_task(str(b), spec.task) for b in (spec.bag, *spec.also)]
     return inputs_record(spec.primitive, tasks, spec.cloth_mesh, spec.gripper_frames,
                          spec.table_z)
 
 
 def summarise(
-    spec: Any,
+    spec: IdentifySpec,
     space: dict,
     base: dict,
     before: dict,

@@ -1,5 +1,5 @@
 """
-Simulations that the folds of one ranking share (studies.rank's identifications).
+Simulations that the folds of one ranking share (rank.study's identifications).
 
 A trial's simulation depends on the engine, its parameters, the seed, the rate, the mesh and the
 cloth, never on the recording it is scored against: every trial of a cloth and task is driven
@@ -23,8 +23,12 @@ import math
 from pathlib import Path
 from typing import Any, Sequence
 
+from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.engines.settle import FULL
-from cloth_bench_ros.studies.objective import Trial
+from cloth_bench_ros.identify.objective import Trial
+from cloth_bench_ros.identify.problem import simulated_model
+from cloth_bench_ros.studies.recording import inputs_key
+from cloth_bench_ros.studies.results import append_row
 import numpy as np
 
 # what every key names as the objective: a simulation does not depend on it (rows keep it)
@@ -104,7 +108,6 @@ class SharedSimulations:
                                           'wall_s')},
         }
         self.rows[key] = row
-        from cloth_bench_ros.studies.results import append_row
 
         append_row(self.path, row)
         return fold_result(trial, row, reused=False, names=self.names)
@@ -147,8 +150,6 @@ def split_pooled(pooled: Trial, result: dict, trials: Sequence[Trial]) -> list[d
 
 def bag_identity(bag: str) -> str:
     """Return a bag's path with its fingerprint (data.bag_layout: its files' names and data)."""
-    from cloth_bench_ros.data.bag_layout import fingerprint
-
     return f'{bag}|{fingerprint(Path(bag))}'
 
 
@@ -186,9 +187,6 @@ def _key(trial: Trial) -> str:
     Every field but the bags and the trial's labels, and the engine's version, preset and device
     (another project or engine version, or another device, simulates again).
     """
-    from cloth_bench_ros.studies.identify_problem import simulated_model
-    from cloth_bench_ros.studies.recording import inputs_key
-
     fields = asdict(replace(trial, bag='', also=(), number=-1, sampler='',
                             objective=KEY_OBJECTIVE))
     if fields['settle'] == FULL:  # as rows were keyed before the fast settle existed

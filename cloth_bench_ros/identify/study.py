@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections import deque
 from contextlib import nullcontext
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import partial
 import json
 import math
@@ -31,12 +31,10 @@ import time
 from typing import Any, Sequence
 import warnings
 
-from cloth_bench_ros.command_options import COMMAND_FLAGS
-from cloth_bench_ros.engines.settle import FULL
+from cloth_bench_ros.engines import engine_class
+from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.options import FLAGS, OPTIONS, SAMPLERS
-from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-exported)
-    AUTO,
+from cloth_bench_ros.identify.curve import (
     AUTO_FIRST,
     AUTO_MAX_TRIALS,
     AUTO_TOLERANCE,
@@ -44,19 +42,34 @@ from cloth_bench_ros.studies.identify_curve import (  # noqa: F401  (AUTO: re-ex
     budget_reached,
     convergence,
     finite_or_inf,
-    importance,
 )
-from cloth_bench_ros.studies.identify_problem import (
+from cloth_bench_ros.identify.fidelity import check_fidelity, Pruner
+from cloth_bench_ros.identify.objective import evaluate, Trial, trial_of
+from cloth_bench_ros.identify.output import summarise, validate, write_outputs
+from cloth_bench_ros.identify.problem import (
     check_problem,
     identify_problem,
     record_problem,
     study_key,
 )
-from cloth_bench_ros.studies.objective import evaluate, Trial, trial_of
-from cloth_bench_ros.studies.shared_simulations import SharedSimulations
+from cloth_bench_ros.identify.shared_simulations import SharedSimulations
+from cloth_bench_ros.identify.spec import AUTO, IdentifySpec
+from cloth_bench_ros.options import SAMPLERS
+from cloth_bench_ros.safe_io import check_output_dir
+from cloth_bench_ros.studies.dask_executor import open_client, worker_slots
+from cloth_bench_ros.studies.results import append_row, ResultsLock
+from distributed import KilledWorker
+import optuna
+from optuna.distributions import FloatDistribution
+from optuna.storages import JournalStorage
+from optuna.trial import TrialState
+from tqdm import tqdm
 
-DEFAULT_TRIALS = FLAGS['trials'].default
-DEFAULT_SPAN = 10.0
+try:
+    from optuna.storages.journal import JournalFileBackend as JournalBackend
+except ImportError:  # optuna < 4
+    from optuna.storages import JournalFileStorage as JournalBackend
+
 JOURNAL_FILE = 'study.journal'
 TRIALS_FILE = 'trials.jsonl'
 SUMMARY_FILE = 'identification.json'
@@ -72,46 +85,8 @@ DEFAULT_PARAMS = {
 NOT_FITTED = ('timestep', 'substeps', 'solver_iterations')
 
 
-@dataclass
-class IdentifySpec:
-    """What to identify, against what, how; checked by `check()`."""
-
-    engine: str
-    cloth: str
-    primitive: str
-    bag: Path
-    output: Path
-    sampler: str = FLAGS['sampler'].default
-    trials: int = DEFAULT_TRIALS  # per sampler; AUTO: chosen by doubling (see budget_reached)
-    objective: str = COMMAND_FLAGS['objective'].default
-    params: Sequence[str] = ()
-    seed: int = 0
-    rate_hz: float = OPTIONS['rate_hz'].default
-    grid: tuple[int, int] | None = None
-    fixed: dict = field(default_factory=dict)  # overrides on top of the preset, not fitted
-    span: float = DEFAULT_SPAN
-    max_frames: int | None = None
-    batch: int | None = None  # trials in flight (default: the cluster's worker threads)
-    validate_seeds: int = COMMAND_FLAGS['validate_seeds'].default
-    bag_dir: Path | None = None  # other trials' bags for validation (default: the bag's directory)
-    also: tuple[str, ...] = ()  # more training bags: the objective is the mean over all of them
-    # or prune, coarse: multi-fidelity (studies/identify_fidelity.py)
-    fidelity: str = FLAGS['fidelity'].default
-    cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
-    cloth_mass: float | None = None  # kg, given: not fitted unless named in `params`
-    settle: str = FULL  # the settle phase (engines/settle.py): full (the paper's) or fast
-    pool: tuple[str, ...] = ()  # rank's: every trial of the group, scored by each simulation
-    shared: Path | None = None  # rank's: the folds' simulations (studies.shared_simulations)
-    task: str = ''  # a task file for bags without their own (objective.TASK_IN_BAG)
-    cloth_mesh: str = ''  # --cloth-mesh; '': the grid
-    gripper_frames: str = ''  # recorded only (the task file holds the motion they gave)
-    table_z: float | None = None
-
-
 def default_params(engine: str, model: str | None = None) -> list[str]:
     """Return the parameters fitted by default: the reference's set, else every ranged number."""
-    from cloth_bench_ros.engines import engine_class
-
     schema = engine_class(engine).params
     for key in (f'{engine}:{model}', engine):
         if key in DEFAULT_PARAMS:
@@ -135,9 +110,6 @@ def search_space(engine: str, names: Sequence[str], base: dict, span: float) -> 
     range within a factor `span` either side of the base (preset) value. ValueError for a parameter
     that cannot be fitted.
     """
-    from cloth_bench_ros.engines import engine_class
-    from optuna.distributions import FloatDistribution
-
     schema = {p.name: p for p in engine_class(engine).params}
     space = {}
     for name in names:
@@ -167,15 +139,13 @@ def make_sampler(name: str, seed: int) -> Any:
     CMA-ES starts at the centre of the space, which is the preset for the log-scale parameters
     (their ranges are a factor `span` either side).
     """
-    import optuna
-
     if name == 'cmaes':
         return optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
     if name == 'tpe':
         return optuna.samplers.TPESampler(seed=seed, multivariate=True, n_startup_trials=10)
     if name == 'gp':
         try:
-            import torch  # noqa: F401
+            import torch  # noqa: F401 # lazy: optional, only --sampler gp needs PyTorch
         except ImportError:
             raise InputError(
                 '--sampler gp needs PyTorch (pip install torch); use tpe or cmaes'
@@ -243,18 +213,10 @@ def open_study(spec: IdentifySpec, sampler: str) -> Any:
 
     Trials left running by an interrupted identification are marked failed.
     """
-    import optuna
-    from optuna.storages import JournalStorage
-    from optuna.trial import TrialState
-
-    try:
-        from optuna.storages.journal import JournalFileBackend as Backend
-    except ImportError:  # optuna < 4
-        from optuna.storages import JournalFileStorage as Backend
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     warnings.filterwarnings('ignore', category=optuna.exceptions.ExperimentalWarning)
     repair_journal(spec.output / JOURNAL_FILE)
-    storage = JournalStorage(Backend(str(spec.output / JOURNAL_FILE)))
+    storage = JournalStorage(JournalBackend(str(spec.output / JOURNAL_FILE)))
     study = optuna.create_study(
         study_name=study_name(spec, sampler),
         storage=storage,
@@ -284,12 +246,6 @@ def run_sampler(
     whatever order the workers finish in, so the same trials and automatic budget every time.
     `shared` (a SharedSimulations): a simulation another fold ran already is not run again.
     """
-    from cloth_bench_ros.studies.dask_executor import worker_slots
-    from cloth_bench_ros.studies.identify_fidelity import Pruner
-    from distributed import KilledWorker
-    from optuna.trial import TrialState
-    from tqdm import tqdm
-
     study = open_study(spec, sampler)
     done = (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED)
     finished = len(study.get_trials(deepcopy=False, states=done))
@@ -368,8 +324,6 @@ def run_budgeted(
 
 def record_trial(path: Path, device: str, result: dict) -> None:
     """Append a trial's result to trials.jsonl with the device it ran on."""
-    from cloth_bench_ros.studies.results import append_row
-
     append_row(path, {**result, 'device': device})
 
 
@@ -393,13 +347,6 @@ def identify(
     On `client` where one is given (rank's one cluster for all its folds), else on a cluster of its
     own (`scheduler`, or a local one of `workers` processes).
     """
-    from cloth_bench_ros.engines.presets import load_preset, sized_params
-    from cloth_bench_ros.safe_io import check_output_dir
-    from cloth_bench_ros.studies.dask_executor import open_client
-    from cloth_bench_ros.studies.identify_fidelity import check_fidelity
-    from cloth_bench_ros.studies.identify_output import summarise, validate, write_outputs
-    from cloth_bench_ros.studies.results import ResultsLock
-
     start = time.perf_counter()
     spec.output = check_output_dir(spec.output)
     shipped = load_preset(spec.engine, spec.cloth, spec.primitive)  # for the cloth's size, mass:

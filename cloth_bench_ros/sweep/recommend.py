@@ -24,7 +24,8 @@ from cloth_bench_ros.core.deadline import (
     within_tolerance,
 )
 from cloth_bench_ros.errors import InputError
-from cloth_bench_ros.studies.aggregate import compute_per_sim_second, finite, group, Stat, stat
+from cloth_bench_ros.safe_io import load_yaml_file
+from cloth_bench_ros.sweep.aggregate import compute_per_sim_second, finite, group, Stat, stat
 from cloth_bench_ros.validation import parse_grid
 import numpy as np
 
@@ -223,8 +224,6 @@ def recommend_for_rate(
 
 def load_recommendations(path: Path) -> list[Recommendation]:
     """Return the entries of a recommendation file; ValueError naming the file if malformed."""
-    from cloth_bench_ros.safe_io import load_yaml_file
-
     data = load_yaml_file(path)
     entries = data.get('recommendations') if isinstance(data, dict) else None
     if not isinstance(entries, list):

@@ -27,15 +27,27 @@ import time
 from typing import Any
 
 from cloth_bench_ros.command_options import COMMAND_FLAGS
+from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
+from cloth_bench_ros.core.cloth_size import grasp_width
+from cloth_bench_ros.core.evaluation import OnlineEvaluator
+from cloth_bench_ros.core.phase import first_table_contact
+from cloth_bench_ros.core.pointcloud2 import as_carried, drop_nan
+from cloth_bench_ros.core.task_data import load_task
+from cloth_bench_ros.core.trajectory import full_targets
+from cloth_bench_ros.data import BagReader
+from cloth_bench_ros.data.bag_reader import decode_cloud
 from cloth_bench_ros.data.errors import BagError
+from cloth_bench_ros.engines import make_engine
+from cloth_bench_ros.engines.presets import load_preset, sized_params
 from cloth_bench_ros.engines.settle import FULL, Settler
 from cloth_bench_ros.errors import ClothBenchError, one_line
+from cloth_bench_ros.identify.spec import IdentifySpec
+from cloth_bench_ros.metric_choice import METRICS
 from cloth_bench_ros.options import OPTIONS
 import numpy as np
 
-OBJECTIVES = ('cd', 'hd')
 FPS = 30.0
-# A trial bag of a recorded motion carries its task file (studies.rank_trials writes it): the
+# A trial bag of a recorded motion carries its task file (rank.trials writes it): the
 # engines follow it on that bag, and the bag's fingerprint changes with it.
 TASK_IN_BAG = 'task.yaml'
 _BAG_CACHE: dict[tuple, tuple] = {}
@@ -71,7 +83,7 @@ class Trial:
 
 
 def trial_of(
-    spec: Any, params: dict, number: int, sampler: str, rung: dict | None = None
+    spec: IdentifySpec, params: dict, number: int, sampler: str, rung: dict | None = None
 ) -> Trial:
     """Return an IdentifySpec's trial of `params`; `rung`: the Pruner's rung fields, if any."""
     return Trial(
@@ -98,11 +110,6 @@ def bag_clouds(
     The worker keeps the `keep` bags used last: a trial scored on more bags than the cache held
     would decode every one of them again each trial.
     """
-    from cloth_bench_ros.core.phase import first_table_contact
-    from cloth_bench_ros.core.pointcloud2 import drop_nan
-    from cloth_bench_ros.data import BagReader
-    from cloth_bench_ros.data.bag_reader import decode_cloud
-
     st = os.stat(bag) if os.path.isfile(bag) else os.stat(Path(bag) / 'metadata.yaml')
     key = (str(Path(bag).resolve()), st.st_mtime_ns, st.st_size)
     if key not in _BAG_CACHE:
@@ -212,14 +219,6 @@ def _evaluate(trial: Trial) -> dict:
     }
     engine = None
     try:
-        from cloth_bench_ros.core.cloth_mesh import mesh_area, run_cloth
-        from cloth_bench_ros.core.cloth_size import grasp_width
-        from cloth_bench_ros.core.pointcloud2 import as_carried
-        from cloth_bench_ros.core.task_data import load_task
-        from cloth_bench_ros.core.trajectory import full_targets
-        from cloth_bench_ros.engines import make_engine
-        from cloth_bench_ros.engines.presets import load_preset, sized_params
-
         size = trial.cloth_size
         task = load_task(trial.primitive, bag_task(trial.bag, trial.task) or None)
         targets = full_targets(task, trial.rate_hz, grasp_width(size))
@@ -274,13 +273,11 @@ def _evaluate(trial: Trial) -> dict:
             step_p99_ms=_num(m['step_time']['p99']) * 1e3,
         )
         if trial.all_metrics:
-            from cloth_bench_ros.metric_choice import METRICS
-
             out['metrics'] = {
                 name: float(np.mean([metric.value(b, trial.primitive) for b in per_bag]))
                 for name, metric in METRICS.items()
             }
-        if trial.also:  # per bag too (studies.shared_simulations keeps them for other folds)
+        if trial.also:  # per bag too (identify.shared_simulations keeps them for other folds)
             out['per_bag'] = [_num(b[f'CD_{suffix}']) for b in per_bag]
             out['per_bag_hd'] = [_num(b[f'HD_{suffix}']) for b in per_bag]
             out['per_bag_frames'] = [int(b['frames_in_window']) for b in per_bag]
@@ -328,8 +325,6 @@ def _scored_bag(
     trial: Trial, bag: str, offset: int, faces: np.ndarray | None, task: Any
 ) -> tuple[Any, list[int]]:
     """Return an evaluator core fed with a bag's frames of the window, and their stamps."""
-    from cloth_bench_ros.core.evaluation import OnlineEvaluator
-
     cut, frames = bag_clouds(bag, max(_BAG_CACHE_SIZE, 1 + len(trial.also)))
     core = OnlineEvaluator([trial.engine], task, offset, cut, FPS, faces=faces)
     used = [

@@ -11,7 +11,9 @@ from __future__ import annotations
 import math
 from typing import Any, Sequence
 
-AUTO = 0
+import optuna
+from optuna.trial import TrialState
+
 AUTO_FIRST, AUTO_MAX_TRIALS, AUTO_TOLERANCE = 32, 512, 0.02
 
 
@@ -47,8 +49,6 @@ def finite_or_inf(value: float) -> float:
 
 def convergence(study: Any) -> list[list]:
     """Return [number, value or None, best so far or None] per finished trial (pruned too)."""
-    from optuna.trial import TrialState
-
     out, best = [], math.inf
     for t in sorted(study.get_trials(deepcopy=False), key=lambda t: t.number):
         if t.state not in (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED):
@@ -62,8 +62,6 @@ def convergence(study: Any) -> list[list]:
 
 def importance(study: Any) -> dict[str, float]:
     """Return how much each parameter explains (PED-ANOVA); {} with too few trials."""
-    import optuna
-
     try:
         evaluator = optuna.importance.PedAnovaImportanceEvaluator()
         return {

@@ -34,7 +34,8 @@ from cloth_bench_ros.data.replay import (
 )
 from cloth_bench_ros.data.trial import CLOUD_TOPIC, TrialInfo
 from cloth_bench_ros.data.trials import settings as split_settings
-from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.identify.objective import bag_clouds, TASK_IN_BAG
+from cloth_bench_ros.rank.errors import RankInputError
 import numpy as np
 
 FLOOR_SEED = 0
@@ -44,10 +45,6 @@ FLOOR_SEED = 0
 # the presets' scores by 0.4-7 mm from 2400 to 4800 Hz.
 REFERENCE_ERRORS = {'mujoco': 0.003, 'newton vbd': 0.007}
 REFERENCE_ERROR_SOURCE = 'bags/README.md, "How converged the references are"'
-
-
-class RankInputError(ClothBenchError, ValueError):
-    """A recording given to rank cannot be read; str() names it and says why."""
 
 
 @dataclass
@@ -250,8 +247,6 @@ def _one_trial(
 
     The bag carries the task file it was recorded along (a recorded motion, a --task).
     """
-    from cloth_bench_ros.studies.objective import TASK_IN_BAG
-
     plan = plan_replay(reader, options)  # the start is the recorded motion's or given: no engine
     cop = plan.change_of_phase['frame']
     info = TrialInfo(cloth=options.cloth, trial=0, primitive=options.primitive,
@@ -279,8 +274,6 @@ def _one_trial(
 
 def _window(bag: str, primitive: str) -> list[tuple[int, np.ndarray]]:
     """Return a trial bag's frames (t ns from the start, points) of the scored window."""
-    from cloth_bench_ros.studies.objective import bag_clouds
-
     cut, frames = bag_clouds(bag)
     return [
         (s, p)

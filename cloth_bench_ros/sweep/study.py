@@ -25,13 +25,15 @@ from typing import Sequence
 
 from cloth_bench_ros.core.task_data import load_task
 from cloth_bench_ros.core.trajectory import SUFFIX_TASK
-from cloth_bench_ros.engines.presets import PresetSet
-
+from cloth_bench_ros.engines import engine_class
+from cloth_bench_ros.engines.base import EngineError
+from cloth_bench_ros.engines.presets import CLOTHS, load_preset, PresetSet
 # re-exported: the studies' one vocabulary
 from cloth_bench_ros.engines.settle import FULL
 from cloth_bench_ros.errors import ClothBenchError, InputError
 from cloth_bench_ros.metric_choice import METRICS
 from cloth_bench_ros.options import FLAGS, OPTIONS
+from cloth_bench_ros.safe_io import check_output_dir
 from cloth_bench_ros.studies.cells import (  # noqa: F401
     Cell,
     config_label,
@@ -50,12 +52,7 @@ from cloth_bench_ros.studies.cells import (  # noqa: F401
     with_inputs,
 )
 from cloth_bench_ros.studies.dask_executor import default_workers, open_client, run_tasks
-from cloth_bench_ros.studies.parsing import (  # noqa: F401  (re-exported)
-    parse_grid,
-    parse_overrides,
-    parse_settings_axes,
-    parse_value,
-)
+from cloth_bench_ros.studies.direct import run_direct
 from cloth_bench_ros.studies.results import (  # noqa: F401
     append_row,
     bag_fingerprint,
@@ -73,6 +70,14 @@ from cloth_bench_ros.studies.results import (  # noqa: F401
     with_kept_scoring,
 )
 from cloth_bench_ros.studies.run_config import RunConfig
+from cloth_bench_ros.studies.run_pipeline import run_pipeline
+from cloth_bench_ros.sweep.parsing import (  # noqa: F401  (re-exported)
+    parse_grid,
+    parse_overrides,
+    parse_settings_axes,
+    parse_value,
+)
+from tqdm import tqdm
 
 # -------------------------------------------------------------------------------------- rows
 
@@ -157,9 +162,6 @@ def _cell_fields(cell: Cell) -> dict:
 def _substeps(cell: Cell) -> int | None:
     """Return the internal steps per target of engines with `timestep` and `substeps`."""
     try:
-        from cloth_bench_ros.engines import engine_class
-        from cloth_bench_ros.engines.presets import load_preset
-
         config = engine_class(cell.engine).validate_params(
             {**load_preset(cell.engine, cell.cloth, cell.primitive), **cell.params}
         )
@@ -204,9 +206,6 @@ def run_cell(cell: Cell, out_dir: str) -> dict:
     start = time.perf_counter()
     frames_dir = Path(out_dir) / 'frames' / cell.ident() if cell.keep_frames else None
     try:
-        from cloth_bench_ros.studies.direct import run_direct
-        from cloth_bench_ros.studies.run_pipeline import run_pipeline
-
         config = cell_config(cell, frames_dir)
         # Lockstep cells run at the physics limit (engine, trajectory and evaluator called
         # directly, metrics equal to the node graph's); realtime cells need the graph's clocks.
@@ -280,9 +279,6 @@ def run_sweep(
     scheduler: str | None = None,
 ) -> SweepOutcome:
     """Run every cell not yet in <out_dir>/results.jsonl on the executor, appending its row."""
-    from cloth_bench_ros.safe_io import check_output_dir
-    from tqdm import tqdm
-
     out_dir = check_output_dir(out_dir)
     results = out_dir / RESULTS_FILE
     with ResultsLock(out_dir, desc):
@@ -373,8 +369,6 @@ class SweepPlan:
         return [replace(cell, settle=self.settle) for cell in self._cells()]
 
     def _cells(self) -> list[Cell]:
-        from cloth_bench_ros.engines.presets import CLOTHS
-
         settings = self.mode == 'settings'
         cloths = list(self.cloths) or (['towel'] if settings else list(DEFAULT_CLOTHS))
         for cloth in cloths:
@@ -441,9 +435,6 @@ class SweepPlan:
 
     def _preset_gaps(self, cloths: list[str], primitives: list[str]) -> set[tuple[str, str, str]]:
         """Return the (engine, cloth, task) a named preset set has no values for."""
-        from cloth_bench_ros.engines.base import EngineError
-        from cloth_bench_ros.engines.presets import load_preset
-
         if self.presets is None or self.presets.is_default:
             return set()
         gaps = set()

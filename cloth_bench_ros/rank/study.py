@@ -1,9 +1,9 @@
 """
 `cloth-bench rank`: the engines fitted to a user's cloth, scored on trials they were not fitted to.
 
-The protocol, the same for every engine: the recordings' trials (studies.rank_trials) grouped by
+The protocol, the same for every engine: the recordings' trials (rank.trials) grouped by
 cloth and task; per group, leave-one-trial-out folds (5 folds above 5 trials); per engine and
-fold, identification (studies.identify, the same sampler and budget for every engine) on the
+fold, identification (identify.study, the same sampler and budget for every engine) on the
 training trials, the objective being the mean over them; then the held-out trial scored with the
 identified parameters and with the preset on `seeds` seeds (the evaluator's core, as `run`
 scores); step times at each rate; the cross-task check where a cloth's two tasks were recorded;
@@ -12,7 +12,7 @@ recording's own, its trial bag carrying its task file) pool in their cloth's gro
 trial of a motion its fold was not fitted on is the cross-motion check. Every finished
 identification and cell is kept (the identifications' journals, `cells.jsonl`): the same
 command resumes.
-The ranking itself is the report's (report.rank): this module computes, it does not judge.
+The ranking itself is rank.answer's (the statistics of rank.ranking); this module runs the cells.
 """
 
 from __future__ import annotations
@@ -23,30 +23,36 @@ import json
 from pathlib import Path
 import shutil
 import sys
-from typing import Any, Callable, Sequence, TYPE_CHECKING
+from typing import Any, Callable, Sequence
 
 from cloth_bench_ros.core.cloth_size import cloth_record, grid_vertices
 from cloth_bench_ros.core.surface_metrics import SURFACE_REVISION
 from cloth_bench_ros.data.bag_layout import fingerprint
 from cloth_bench_ros.data.replay import ReplayOptions
 from cloth_bench_ros.engines.settle import FULL
-from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.identify.errors import ProblemChanged
+from cloth_bench_ros.identify.objective import evaluate, Trial
+from cloth_bench_ros.identify.problem import resolved_device, simulated_model
+from cloth_bench_ros.identify.shared_simulations import pool_cells, split_pooled
+from cloth_bench_ros.identify.spec import IdentifySpec, OBJECTIVES
+from cloth_bench_ros.identify.study import identify, SUMMARY_FILE
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import FLAGS, OPTIONS
-from cloth_bench_ros.studies.cloth import cloth_name
-from cloth_bench_ros.studies.identify_problem import resolved_device, simulated_model
-from cloth_bench_ros.studies.objective import evaluate, OBJECTIVES, Trial
-from cloth_bench_ros.studies.rank_trials import (
+from cloth_bench_ros.rank.errors import RankError
+from cloth_bench_ros.rank.trials import (
     floor,
     prepare_trials,
     RankTrial,
     recordings_of,
     reference_error,
 )
-from cloth_bench_ros.studies.recording import inputs_record
-
-if TYPE_CHECKING:
-    from cloth_bench_ros.studies.dask_executor import ClusterOnDemand
+from cloth_bench_ros.safe_io import check_output_dir
+from cloth_bench_ros.studies.cloth import cloth_name
+from cloth_bench_ros.studies.dask_executor import ClusterOnDemand
+from cloth_bench_ros.studies.recording import inputs_key, inputs_record
+from cloth_bench_ros.studies.results import append_row, ResultsLock
+from distributed import as_completed
+from tqdm import tqdm
 
 DEFAULT_ENTRANTS: tuple[tuple[str, dict], ...] = (
     ('mujoco', {}),
@@ -57,10 +63,6 @@ RATES = FLAGS['rates'].default
 MAX_FOLDS = 5
 CELLS_FILE = 'cells.jsonl'
 SHARED_FILE = 'simulations.jsonl'
-
-
-class RankError(ClothBenchError, ValueError):
-    """Rank cannot give an answer (no group with two usable trials); str() says why."""
 
 
 @dataclass
@@ -82,7 +84,7 @@ class RankSpec:
     metric: str = DEFAULT_METRIC  # the ranking metric; cd/hd: the objective too
     max_frames: int | None = None
     fixed: dict = field(default_factory=dict)  # per engine: overrides on every entrant of it
-    # identification's: full, or prune (studies/identify_fidelity.py)
+    # identification's: full, or prune (identify/fidelity.py)
     fidelity: str = FLAGS['fidelity'].default
     cloth_size: tuple[float, float] | None = None  # (W, L) m; None: the benchmark's 0.5 x 0.7
     cloth_mass: float | None = None  # kg, the cloth's (not fitted); None: the preset's per area
@@ -138,14 +140,11 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
     """
     Return the identified parameters of one fold (resumed or reused when already done).
 
-    The folds of an entrant share their simulations (studies.shared_simulations), kept beside
+    The folds of an entrant share their simulations (identify.shared_simulations), kept beside
     the folds' folders: the same values, engine time spent once per parameter set. A fold whose
-    journal was fitted to another problem (studies.identify_problem) is identified afresh. Every
+    journal was fitted to another problem (identify.problem) is identified afresh. Every
     fold runs on the command's one cluster.
     """
-    from cloth_bench_ros.studies.identify import identify, IdentifySpec, SUMMARY_FILE
-    from cloth_bench_ros.studies.identify_problem import ProblemChanged
-
     bags = [t.bag for t in train]
     stamp = json.loads(json.dumps({
         'bags': bags, 'data': [fingerprint(Path(b)) for b in bags], 'trials': spec.trials,
@@ -188,8 +187,6 @@ def _identify(spec: RankSpec, engine: str, overrides: dict, train: list[RankTria
 
 def _inputs_key(spec: RankSpec, trial: RankTrial) -> str:
     """Return the trial's task and the mesh as a key part (their content hashes)."""
-    from cloth_bench_ros.studies.recording import inputs_key
-
     return inputs_key(trial.primitive, trial.task or spec.replay.task, spec.cloth_mesh)
 
 
@@ -234,11 +231,6 @@ def _run_cells(client: Any, left: list[tuple[str, Trial, dict]], path: Path, don
     that cannot run (status error) ends the command: exit 2 for input it refuses, and a bug in a
     worker is raised as it is (exit 1); either way it is never counted as a divergence.
     """
-    from cloth_bench_ros.studies.results import append_row
-    from cloth_bench_ros.studies.shared_simulations import pool_cells, split_pooled
-    from distributed import as_completed
-    from tqdm import tqdm
-
     bar = tqdm(total=len(left), desc='rank cells', unit='cell', disable=not progress,
                file=sys.stderr, dynamic_ncols=True)
 
@@ -285,10 +277,6 @@ def run_rank(
     Every identification and cell runs on one cluster (`scheduler`, or `workers` local processes),
     started when the first of them needs it.
     """
-    from cloth_bench_ros.safe_io import check_output_dir
-    from cloth_bench_ros.studies.dask_executor import ClusterOnDemand
-    from cloth_bench_ros.studies.results import ResultsLock
-
     out = check_output_dir(spec.output)
     with ResultsLock(out, 'rank'), ClusterOnDemand(scheduler, workers,
                                                    out / 'workers.log') as cluster:
