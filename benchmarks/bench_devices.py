@@ -9,8 +9,9 @@ computes, without the node graph) and prints per model, device and mode: steps p
 world (the engine's own step time, median), CD_d / CD_q, their difference from the CPU's (mode
 off), the mean distance of the final vertices from the CPU's, and whether two runs gave
 bit-identical vertices. The CPU runs in the first mode only: Warp runs a CPU kernel's threads
-one after another, so its atomic sums have one order whatever the mode. So one run on a GPU machine says whether the deterministic mode closes
-the CPU/CUDA gap, and at what cost in steps per second.
+one after another, so its atomic sums have one order whatever the mode. So one run on a GPU
+machine says whether the deterministic mode closes the CPU/CUDA gap, and at what cost in steps
+per second.
 Meshes with --grids (default the bundled 11 x 15 and 31 x 43, where CUDA pulls ahead).
 
 Run it on a machine with an NVIDIA GPU (Warp finds it through the driver; nothing else to
