@@ -319,6 +319,9 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
 def cmd_cross_reference(args: argparse.Namespace) -> int:
     """Score every engine against both synthetic references on the executor; print the table."""
+    from cloth_bench_ros.rank.cross_reference import (  # lazy: +0.8 s on --help
+        identified_rankings,
+    )
     from cloth_bench_ros.report.cross_reference import (  # lazy: +0.8 s on --help
         cross_reference_markdown,
     )
@@ -368,7 +371,7 @@ def cmd_cross_reference(args: argparse.Namespace) -> int:
     )
     keys = {c.key() for c in cells}
     rows = [r for r in sw.load_rows(results) if sw.row_key(r) in keys]
-    text = cross_reference_markdown(rows, args.metric)
+    text = cross_reference_markdown(rows, identified_rankings(rows, args.metric), args.metric)
     atomic_write_text(out / 'cross_reference.md', text + '\n')
     print(text)
     return 0
