@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from cloth_bench_ros.data import BagReader, CLOUD_TOPIC, synth, virtual_camera
+from cloth_bench_ros.rank import cross_reference as rank_xr
 from cloth_bench_ros.report import cross_reference as report_xr
 from cloth_bench_ros.studies import cross_reference as xr
 from cloth_bench_ros.sweep import study as sw
@@ -234,7 +235,7 @@ def test_ranking_has_paired_intervals_and_says_whether_it_holds_across_reference
     rows += [_row('bullet', 'newton-vbd', 0.030 + 0.001 * s, s) for s in range(3)]
     rows += [_row('bullet', 'mujoco', 0.01, s, presets='default') for s in range(3)]  # not ranked
     rows.append({**_row('bullet', 'mujoco', None, 3), 'status': 'diverged'})
-    rankings = report_xr.identified_rankings(rows)
+    rankings = rank_xr.identified_rankings(rows)
     assert [r.name for r in rankings[('mujoco', 'dynamic')].ranked] == ['MuJoCo', 'Bullet']
     assert [r.name for r in rankings[('newton-vbd', 'dynamic')].ranked] == ['Bullet', 'MuJoCo']
     bullet = rankings[('mujoco', 'dynamic')].ranked[1]
@@ -246,8 +247,8 @@ def test_ranking_has_paired_intervals_and_says_whether_it_holds_across_reference
     same = [r for r in rows if not (r['reference'] == 'newton-vbd')] + [
         {**r, 'reference': 'newton-vbd'} for r in rows if r['reference'] == 'mujoco'
     ]
-    *_, line = report_xr.ranking_statements(report_xr.identified_rankings(same))
+    *_, line = report_xr.ranking_statements(rank_xr.identified_rankings(same))
     assert 'holds across references: MuJoCo < Bullet' in line
-    md = report_xr.cross_reference_markdown(rows)
+    md = report_xr.cross_reference_markdown(rows, rankings)
     assert 'Bullet, identified' in md and '95 % CI' in md and 'changes between' in md
     assert '| mujoco | dynamic | 2 | Bullet | 0.0410 | 1/4 |' in md

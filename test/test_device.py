@@ -11,7 +11,7 @@ import json
 
 from cloth_bench_ros import validation
 from cloth_bench_ros.cli import build_parser, main
-from cloth_bench_ros.cli.studies import say_fitted_elsewhere
+from cloth_bench_ros.cli.studies_command import say_fitted_elsewhere
 from cloth_bench_ros.core.scene import ClothGrid, GRIPPER_START_LEFT, GRIPPER_START_RIGHT
 from cloth_bench_ros.engines import engine_device, make_engine
 from cloth_bench_ros.engines.base import EngineError

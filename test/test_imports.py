@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import io
 from pathlib import Path
 import re
+import subprocess
+import sys
 import tokenize
 
 import cloth_bench_ros
@@ -106,6 +108,24 @@ def test_every_function_level_import_says_why_it_is_lazy(part):
 def test_function_level_imports_stay_few():
     too_many = over_the_cap(package_imports())
     assert too_many is None, too_many
+
+
+def test_the_parser_loads_no_command_implementation():
+    """`--help` builds every parser; a command's module and its feature load when it runs."""
+    code = (
+        'import sys\n'
+        'from cloth_bench_ros.cli import build_parser, implementation\n'
+        'build_parser()\n'
+        "heavy = ('dask', 'distributed', 'optuna', 'matplotlib', 'scipy', 'rosbags', 'mcap')\n"
+        "print(sorted(m for m in sys.modules if m.endswith('_command') or m in heavy))\n"
+        "implementation('cloth_bench_ros.cli.studies_command:cmd_sweep')\n"
+        "print(sorted(m for m in sys.modules if m.endswith('_command') or m in heavy))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, '-c', code], capture_output=True, text=True, check=True
+    ).stdout.splitlines()
+    assert out[0] == '[]'
+    assert 'cloth_bench_ros.cli.studies_command' in out[1] and 'distributed' in out[1]
 
 
 SAMPLE = """

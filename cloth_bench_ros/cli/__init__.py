@@ -1,11 +1,20 @@
-"""`cloth-bench`: the command-line front door, one module per command group."""
+"""
+`cloth-bench`: the command-line front door, one parser module per command group.
+
+Each command's parser (cli/run.py, cli/studies.py, ...) is light and names the function that
+runs it (`set_defaults(implementation='cloth_bench_ros.cli.run_command:cmd_run')`); `main` loads
+that module only when the command runs, as ros2cli loads its verbs, so that `cloth-bench --help`
+imports none of the features (Dask, Optuna, matplotlib, the bag readers).
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 import os
 import sys
+from typing import Callable
 import warnings
 
 from cloth_bench_ros.cli import data, hil, identify, rank, run, studies
@@ -26,6 +35,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def implementation(name: str) -> Callable[[argparse.Namespace], int]:
+    """Return the command function `module:function` names, its module imported now."""
+    module, _, function = name.partition(':')
+    return getattr(importlib.import_module(module), function)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Parse, run the command; a user error is one line and exit 2, a bug one line and exit 1."""
     parser = build_parser()
@@ -36,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     warnings.formatwarning = lambda message, *_: f'cloth-bench: warning: {message}\n'
     try:
         engine_models(args)
-        return args.func(args)
+        return implementation(args.implementation)(args)
     except BrokenPipeError:  # `cloth-bench ... | head`: the reader left, nothing to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

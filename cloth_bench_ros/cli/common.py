@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable, Iterable
-from contextlib import closing
 from pathlib import Path
 import sys
 from typing import Any, Union
@@ -15,6 +14,7 @@ from cloth_bench_ros.engines import engine_class, engine_device, known_engines
 from cloth_bench_ros.engines.presets import preset_set as resolve
 from cloth_bench_ros.errors import ClothBenchError
 from cloth_bench_ros.options import Option
+from cloth_bench_ros.studies.errors import check_scheduler_address
 import numpy as np
 
 
@@ -156,10 +156,6 @@ def add_renamed(parser: Any, old: str, new: str, split: bool = False) -> None:
 
 def scheduler(text: str) -> str:
     """Return a Dask scheduler address (tcp://127.0.0.1:8786)."""
-    from cloth_bench_ros.studies.dask_executor import (  # lazy: Dask, +0.6 s on --help
-        check_scheduler_address,
-    )
-
     try:
         return check_scheduler_address(text)
     except ClothBenchError as exc:
@@ -232,22 +228,6 @@ def replay_params(args: argparse.Namespace) -> dict:
     if args.transform:
         params['transform'] = [float(v) for v in read_transform(args.transform).ravel()]
     return params
-
-
-def replay_options(args: argparse.Namespace, task: str = '') -> Any:
-    """Return the ReplayOptions of the recording options, as the recorder node builds them."""
-    from cloth_bench_ros.data import alignment, replay  # lazy: scipy, numba, +1.1 s on --help
-
-    p = replay_params(args)
-    return replay.ReplayOptions(
-        cloth=args.cloth, primitive=args.primitive, task=task or args.task or '',
-        motion=p['motion'], change_of_phase_frame=args.change_of_phase_frame, topic=p['topic'],
-        start_time=p['start_time'], targets_topic=p['targets_topic'],
-        transform=tuple(p['transform']) if 'transform' in p else None, clean=p['clean'],
-        voxel=p['voxel'], table_plane=p['table_plane'], rate_hz=float(args.rate),
-        search=alignment.SearchSettings(window=p['align_window'], coarse_step=p['align_step']),
-        trial=p['trial'], align=p['align'],
-    )
 
 
 def executor_options() -> argparse.ArgumentParser:
@@ -330,19 +310,6 @@ def engine_models(args: argparse.Namespace) -> None:
     args.engine = names[0] if isinstance(given, str) else names
     if models:
         args.set = [*(f'{n}.model={m}' for n, m in models.items()), *(args.set or [])]
-
-
-def check_bag(bag: Path, topic: str | None = None) -> None:
-    """Fail early, in one line naming the bag, unless the cloud topic's first frame decodes."""
-    from cloth_bench_ros.data.bag_reader import BagReader, decode_cloud  # lazy: +0.2 s on --help
-
-    with BagReader(bag) as reader:
-        topic = reader.cloud_topic(topic)
-        with closing(reader.raw_messages([topic])) as frames:  # its file is closed here
-            first = next(frames, None)
-        if first is None:
-            raise UserError(f'bag {bag}: no PointCloud2 message on {topic} could be read')
-        decode_cloud(bag, topic, 0, first[2], first[3])
 
 
 def engine_overrides(specs: list[str] | None, engines: list[str] | None = None) -> dict[str, dict]:

@@ -13,7 +13,6 @@ from dataclasses import replace
 import json
 from pathlib import Path
 
-from cloth_bench_ros.cli import common
 from cloth_bench_ros.cli.common import UserError
 from cloth_bench_ros.core.deadline import deadline_check, deadline_rule, DeadlineCheck, holds_rate
 from cloth_bench_ros.core.table import Table
@@ -22,19 +21,10 @@ from cloth_bench_ros.hil import study as hil
 from cloth_bench_ros.hil.config import HilConfig
 from cloth_bench_ros.hil.find_rate import find_rate, miss_fraction, missed
 from cloth_bench_ros.hil.warmup import coarser_grids, warmup
+from cloth_bench_ros.report.hil import text_table
 from cloth_bench_ros.safe_io import atomic_write_text
 
 FIND_RATE_FILE = 'find_rate.json'
-
-
-FIND_RATE_FLAGS: tuple[common.Flag, ...] = (
-    'find_rate', 'miss_threshold', 'rate_min', 'rate_max', 'rate_tolerance', 'repeats',
-)
-
-
-def add_options(hil: argparse.ArgumentParser) -> None:
-    """Register --find-rate and its options, and the miss threshold."""
-    common.add_options(hil, FIND_RATE_FLAGS)
 
 
 def warmup_check(config: HilConfig, budget: float) -> tuple[DeadlineCheck, object]:
@@ -111,8 +101,6 @@ def remedy_line(
 
 def find_rates(args: argparse.Namespace, bases: list[HilConfig], out: Path) -> int:
     """Search the highest rate each base configuration holds; print the table, write JSON."""
-    from cloth_bench_ros.report.hil import text_table  # lazy: matplotlib, +0.5 s on --help
-
     if args.rate:
         raise UserError('--find-rate searches the rate: give --rate-min/--rate-max, not --rate')
     if args.rate_min >= args.rate_max:

@@ -28,6 +28,21 @@ UNAVAILABLE = {
 }
 
 
+# An engine's name as a table or figure says it (the cross-reference study names its entrants so).
+ENGINE_LABEL = {
+    'mujoco': 'MuJoCo',
+    'bullet': 'Bullet',
+    'flex': 'Flex',
+    'sofa': 'SOFA',
+    'newton': 'Newton',
+}
+
+
+def engine_label(name: str) -> str:
+    """Return an engine's display name (its registered name if it has none)."""
+    return ENGINE_LABEL.get(name, name)
+
+
 # The extra of this package that installs an engine's dependencies, named when they are missing.
 ENGINE_EXTRAS = {'newton': 'newton'}
 

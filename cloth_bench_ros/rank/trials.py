@@ -7,10 +7,10 @@ world and cleaned) and split into the repetitions of the task (data.trials: from
 targets when it has them, else from the clouds); each usable repetition is written as a bag of
 the project's layout (stamps from the start of the motion, the change of phase found in its
 clouds), which identification and scoring then read as they read any trial. A recording with a
-recorded motion (its task file, `cli.run.recorded_motion`) is one trial from its first cloud, as
-`run` scores it; its bag carries that task file (objective.TASK_IN_BAG), which the engines follow
-on it. The floor is the distance between two real trials of one cloth and task, as an engine's
-is measured.
+recorded motion (its task file, `cli.run_command.recorded_motion`) is one trial from its first
+cloud, as `run` scores it; its bag carries that task file (objective.TASK_IN_BAG), which the
+engines follow on it. The floor is the distance between two real trials of one cloth and task,
+as an engine's is measured.
 """
 
 from __future__ import annotations

@@ -2,9 +2,8 @@
 Cross-reference: every engine's CD_d / CD_q against every synthetic reference, and the ranking.
 
 An engine of the reference's own family should win on its own reference, and by how much is the
-point (the cells are studies/cross_reference.py's). Engines identified against a reference are
-ranked on it by rank.ranking (the code `rank` ranks with: one reference bag is one
-trial, so the paired bootstrap draws its seeds; divergence rate first, then the metric).
+point (the cells are studies/cross_reference.py's). The ranking of the identified engines per
+reference is rank/cross_reference.py's: this module renders the rankings it is given.
 """
 
 from __future__ import annotations
@@ -13,11 +12,12 @@ import math
 from typing import Sequence
 
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC, metric as metric_choice
-from cloth_bench_ros.options import FLAGS
-from cloth_bench_ros.rank.ranking import HeldOutRun, order_agreement, rank_runs, Ranking
+from cloth_bench_ros.rank.cross_reference import (
+    cross_reference_rows, entrant_name, row_entrant, TASKS,
+)
+from cloth_bench_ros.rank.ranking import order_agreement, Ranking
 from cloth_bench_ros.report.blocks import Table
 from cloth_bench_ros.report.ranking import ranking_table
-from cloth_bench_ros.report.selections import engine_label
 from cloth_bench_ros.studies.cross_reference import DEFAULT_ENTRANTS, KINDS, MODE, REFERENCES
 from cloth_bench_ros.sweep.aggregate import stat
 
@@ -33,45 +33,24 @@ NOTE = (
 )
 
 
-def entrant_name(engine: str, overrides: dict) -> str:
-    """Return an entrant's name: "newton (vbd)" for a model override, else the engine's label."""
-    model = overrides.get('model')
-    return f'{engine_label(engine)} ({model})' if model else engine_label(engine)
-
-
-# Engines entered with several models (Newton: vbd, xpbd): their model is part of the name.
-MODEL_ENGINES = {engine for engine, overrides in DEFAULT_ENTRANTS if 'model' in overrides}
-
-
-def _entrant(row: dict) -> tuple[str, str, str]:
-    """Return (engine, model or '', kind) of a row; kind: preset or identified."""
-    kind = 'preset' if row.get('presets', FLAGS['presets'].default) == 'default' else 'identified'
-    model = (row.get('params') or {}).get('model', '') if row['engine'] in MODEL_ENGINES else ''
-    return row['engine'], model, kind
-
-
-def _selected(rows: Sequence[dict]) -> list[dict]:
-    return [r for r in rows if r.get('mode') == MODE and r.get('reference') in REFERENCES]
-
-
 def cross_reference_table(
     rows: Sequence[dict], digits: int = 4, metric: str = DEFAULT_METRIC
 ) -> Table | None:
     """Return entrants x (reference, task) of the metric (CD_d / CD_q by default), or None."""
     chosen = metric_choice(metric)
-    sel = _selected(rows)
+    sel = cross_reference_rows(rows)
     if not sel:
         return None
-    primitives = [p for p in ('dynamic', 'quasi_static') if any(r['primitive'] == p for r in sel)]
+    primitives = [p for p in TASKS if any(r['primitive'] == p for r in sel)]
     references = [ref for ref in REFERENCES if any(r['reference'] == ref for r in sel)]
     columns = [(ref, p) for ref in references for p in primitives]
     # The default entrants' order (preset, then identified), then any other.
     order = [(e, o.get('model', ''), k) for k in KINDS for e, o in DEFAULT_ENTRANTS]
-    found = {_entrant(r) for r in sel}
+    found = {row_entrant(r) for r in sel}
     entrants = sorted(found, key=lambda e: (order.index(e) if e in order else len(order), e))
     by: dict[tuple, list[dict]] = {}
     for r in sel:
-        by.setdefault(_entrant(r) + (r['reference'], r['primitive']), []).append(r)
+        by.setdefault(row_entrant(r) + (r['reference'], r['primitive']), []).append(r)
     stats = {e + col: stat(by.get(e + col, []), chosen.key) for e in entrants for col in columns}
     best = {
         col: min(
@@ -99,32 +78,6 @@ def cross_reference_table(
     return Table('cross_reference', headers, body, 'l' + 'r' * len(columns))
 
 
-def identified_rankings(
-    rows: Sequence[dict], metric: str = DEFAULT_METRIC
-) -> dict[tuple[str, str], Ranking]:
-    """Return {(reference, task): identified engines ranked on it by the metric, bootstrapped."""
-    chosen = metric_choice(metric)
-    sel = [r for r in _selected(rows) if _entrant(r)[2] == 'identified']
-    out = {}
-    for ref in REFERENCES:
-        for task in ('dynamic', 'quasi_static'):
-            runs: dict[str, list[HeldOutRun]] = {}
-            for r in sel:
-                if r['reference'] == ref and r['primitive'] == task:
-                    engine, model, _ = _entrant(r)
-                    name = entrant_name(engine, {'model': model} if model else {})
-                    value = chosen.row_value(r) if r.get('status') == 'ok' else None
-                    runs.setdefault(name, []).append(HeldOutRun(
-                        str(r.get('bag', ref)), int(r['seed']), value,
-                        r.get('status') == 'diverged',
-                    ))
-            if runs:
-                out[(ref, task)] = rank_runs(
-                    runs, higher_is_better=chosen.higher_is_better, absolute=chosen.absolute
-                )
-    return out
-
-
 def ranking_statements(rankings: dict[tuple[str, str], Ranking]) -> list[str]:
     """
     Return the lines said under the ranking table.
@@ -136,20 +89,23 @@ def ranking_statements(rankings: dict[tuple[str, str], Ranking]) -> list[str]:
         f'{REFERENCE_LABEL[ref]} {task}: {ranking.significance()}'
         for (ref, task), ranking in rankings.items() if len(ranking.ranked) > 1
     ]
-    for task in ('dynamic', 'quasi_static'):
+    for task in TASKS:
         per_ref = {REFERENCE_LABEL[ref]: r for (ref, t), r in rankings.items() if t == task}
         if per_ref:
             lines.append(f'{task}: {order_agreement(per_ref)}')
     return lines
 
 
-def cross_reference_markdown(rows: Sequence[dict], metric: str = DEFAULT_METRIC) -> str:
-    """Return the matrix, the ranking of identified engines and the statements, as Markdown."""
+def cross_reference_markdown(
+    rows: Sequence[dict],
+    rankings: dict[tuple[str, str], Ranking],
+    metric: str = DEFAULT_METRIC,
+) -> str:
+    """Return the matrix, the given ranking of the identified engines, its lines, as Markdown."""
     table = cross_reference_table(rows, metric=metric)
     if table is None:
         return '(no rows)'
     parts = [table.markdown()]
-    rankings = identified_rankings(rows, metric)
     if rankings:
         parts.append(ranking_table('ranking', rankings).markdown())
         parts.append('\n'.join(f'- {line}' for line in ranking_statements(rankings)))

@@ -16,11 +16,14 @@ from datetime import datetime, timezone
 from functools import partial
 from pathlib import Path
 import re
-from typing import Sequence
+from typing import Mapping, Sequence
 
+from cloth_bench_ros.engines import engine_label
 from cloth_bench_ros.errors import InputError
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC
 from cloth_bench_ros.options import OPTIONS
+from cloth_bench_ros.rank.cross_reference import identified_rankings
+from cloth_bench_ros.rank.ranking import Ranking
 from cloth_bench_ros.report import figures, time_figures
 from cloth_bench_ros.report.blocks import (
     Block,
@@ -40,7 +43,6 @@ from cloth_bench_ros.report.rank_report import RANK_FILE, rank_report
 from cloth_bench_ros.report.selections import (
     cloths_of,
     DEFAULT_MODE,
-    engine_label,
     fmt_fixed,
     fmt_sig,
     paper_rows,
@@ -340,8 +342,14 @@ def render_report(
     title: str = 'cloth_bench_ros: speed against error',
     identifications: Sequence[dict] = (),
     metric: str = DEFAULT_METRIC,
+    xref_rankings: Mapping[tuple[str, str], Ranking] | None = None,
 ) -> ReportOutcome:
-    """Render every table and figure of the rows into out_dir (report.md, .html, .png, .csv)."""
+    """
+    Render every table and figure of the rows into out_dir (report.md, .html, .png, .csv).
+
+    xref_rankings: the cross-reference study's identified engines ranked per reference and task
+    (rank/cross_reference.py's `identified_rankings` of the rows), rendered as given.
+    """
     results_dir, out_dir = Path(results_dir), Path(out_dir)
     doc = Document(title)
     pareto: list[dict] = []
@@ -368,7 +376,7 @@ def render_report(
     for ident in identifications:
         doc.extend(identification_section(ident, rows))
     doc.extend(metrics_section(rows, metric))
-    doc.extend(cross_reference_blocks(rows, metric))
+    doc.extend(cross_reference_blocks(rows, dict(xref_rankings or {}), metric))
     doc.extend(comparison_section(results_dir))
     doc.extend(cloth_error_section(results_dir))
     tables = {t.name: t for t in doc.tables()}
@@ -423,4 +431,5 @@ def report_directory(
         tol_abs,
         identifications=identifications,
         metric=metric,
+        xref_rankings=identified_rankings(rows, metric),
     )

@@ -10,9 +10,9 @@ import math
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.engines import engine_label
 from cloth_bench_ros.report.selections import (
     ENGINE_COLOR,
-    engine_label,
     engines_of,
     metric_name,
     rates_of,

@@ -17,6 +17,7 @@ from typing import Sequence
 
 from cloth_bench_ros.core.deadline import deadline_rule, within_tolerance
 from cloth_bench_ros.core.hil_timing import latencies, TargetTimeline, UNSET
+from cloth_bench_ros.engines import engine_label
 from cloth_bench_ros.report.blocks import (
     Document,
     figure_block,
@@ -26,8 +27,8 @@ from cloth_bench_ros.report.blocks import (
     write_document,
 )
 from cloth_bench_ros.report.figures import plt
-from cloth_bench_ros.report.selections import engine_label, metric_name
 from cloth_bench_ros.report.selections import fmt_fixed as _fmt
+from cloth_bench_ros.report.selections import metric_name
 from cloth_bench_ros.sweep.recommend import (
     DEADLINE_BUDGET,
     meets_deadline,

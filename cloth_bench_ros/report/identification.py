@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.engines import engine_label
 from cloth_bench_ros.report.blocks import (
     Block,
     figure_block,
@@ -21,7 +22,7 @@ from cloth_bench_ros.report.blocks import (
     table_block,
 )
 from cloth_bench_ros.report.figures import plt, save_figure
-from cloth_bench_ros.report.selections import engine_label, fmt_sig
+from cloth_bench_ros.report.selections import fmt_sig
 from cloth_bench_ros.safe_io import read_text_bounded, safe_name, UnsafeInputError
 from cloth_bench_ros.studies.results import ResultsError
 

@@ -15,10 +15,10 @@ import math
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.engines import engine_label
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC, metric as metric_choice, METRICS
 from cloth_bench_ros.options import OPTIONS
 from cloth_bench_ros.report.blocks import Block, heading, paragraph, Table, table_block
-from cloth_bench_ros.report.selections import engine_label
 from cloth_bench_ros.sweep.aggregate import group, stat
 
 # The paper's Fig. 4 (towel, one simulation with the identified parameters): the time steps (s

@@ -1,5 +1,5 @@
 """
-Selections over results rows for the report: Pareto fronts, labels, number formats.
+Selections over results rows for the report: Pareto fronts, colours, number formats.
 
 Mean +- std per group is sweep/aggregate.py's (a study's choice of configuration uses it too).
 """
@@ -12,13 +12,6 @@ from typing import Iterable, Sequence
 
 from cloth_bench_ros.options import FLAGS, OPTIONS
 
-ENGINE_LABEL = {
-    'mujoco': 'MuJoCo',
-    'bullet': 'Bullet',
-    'flex': 'Flex',
-    'sofa': 'SOFA',
-    'newton': 'Newton',
-}
 ENGINE_COLOR = {
     'mujoco': 'tab:blue',
     'bullet': 'tab:orange',
@@ -34,10 +27,6 @@ DEFAULT_MODE = FLAGS['sweep_mode'].default  # a row without a mode: the sweep's 
 
 def metric_name(primitive: str, kind: str) -> str:
     return f'{kind}_{"d" if primitive == "dynamic" else "q"}'
-
-
-def engine_label(name: str) -> str:
-    return ENGINE_LABEL.get(name, name)
 
 
 def fmt_fixed(value, digits: int = 3, scale: float = 1.0) -> str:

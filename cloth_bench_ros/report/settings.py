@@ -7,9 +7,9 @@ import math
 from typing import Sequence
 
 from cloth_bench_ros.core.deadline import within_tolerance
+from cloth_bench_ros.engines import engine_label
 from cloth_bench_ros.report.blocks import Table
 from cloth_bench_ros.report.selections import (
-    engine_label,
     engines_of,
     fmt_fixed,
     fmt_sig,

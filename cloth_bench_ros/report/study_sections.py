@@ -6,19 +6,19 @@ from functools import partial
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.engines import engine_label
 from cloth_bench_ros.metric_choice import DEFAULT_METRIC, metric as metric_choice
-from cloth_bench_ros.rank.ranking import REPLICATES
+from cloth_bench_ros.rank.ranking import Ranking, REPLICATES
 from cloth_bench_ros.report import figures
 from cloth_bench_ros.report.blocks import Block, figure_block, heading, paragraph, table_block
 from cloth_bench_ros.report.cross_reference import (
     cross_reference_section,
-    identified_rankings,
     ranking_statements,
 )
 from cloth_bench_ros.report.hil import deadline_tables
 from cloth_bench_ros.report.identification import summary_table
 from cloth_bench_ros.report.ranking import ranking_table
-from cloth_bench_ros.report.selections import engine_label, engines_of
+from cloth_bench_ros.report.selections import engines_of
 from cloth_bench_ros.report.settings import settings_tables
 from cloth_bench_ros.studies.stress import stress_table, verdict
 
@@ -83,13 +83,16 @@ def settings_section(
     return blocks
 
 
-def cross_reference_blocks(rows: Sequence[dict], metric: str = DEFAULT_METRIC) -> list[Block]:
-    """Each engine against each synthetic reference (the reference's bias as numbers)."""
+def cross_reference_blocks(
+    rows: Sequence[dict],
+    rankings: dict[tuple[str, str], Ranking],
+    metric: str = DEFAULT_METRIC,
+) -> list[Block]:
+    """Each engine against each synthetic reference, and the given ranking of identified ones."""
     xref = cross_reference_section(rows, metric)
     if xref is None:
         return []
     blocks = [heading(2, xref[0]), paragraph(xref[1]), table_block(xref[2])]
-    rankings = identified_rankings(rows, metric)
     if rankings:
         blocks += [
             heading(3, 'Ranking of the identified engines, with bootstrap intervals'),

@@ -7,10 +7,10 @@ import math
 import re
 from typing import Sequence
 
+from cloth_bench_ros.engines import engine_label
 from cloth_bench_ros.report.blocks import Table
 from cloth_bench_ros.report.selections import (
     cloths_of,
-    engine_label,
     engines_of,
     fmt_fixed,
     fmt_sig,

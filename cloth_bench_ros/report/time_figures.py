@@ -10,8 +10,9 @@ import csv
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.engines import engine_label
 from cloth_bench_ros.report.figures import plain_log, plt, save_figure
-from cloth_bench_ros.report.selections import ENGINE_COLOR, engine_label, engines_of, FPS
+from cloth_bench_ros.report.selections import ENGINE_COLOR, engines_of, FPS
 from cloth_bench_ros.safe_io import confined_path, UnsafeInputError
 from cloth_bench_ros.sweep.aggregate import finite, group
 import numpy as np

@@ -31,7 +31,7 @@ from typing import Any, Callable, Iterator, Sequence
 import warnings
 
 from cloth_bench_ros.core import metrics
-from cloth_bench_ros.errors import ClothBenchError
+from cloth_bench_ros.studies.errors import check_scheduler_address, ExecutorError
 from distributed import as_completed, Client, KilledWorker, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 import numpy as np
@@ -53,10 +53,6 @@ def quiet_shutdown() -> Iterator[None]:
         logging.getLogger('asyncio').setLevel(logging.CRITICAL)
         warnings.filterwarnings('ignore', message='coroutine .* was never awaited')
         raise
-
-
-class ExecutorError(ClothBenchError, ValueError):
-    """A scheduler that cannot be reached or used; str() is one line."""
 
 
 def default_workers() -> int:
@@ -90,17 +86,6 @@ class _WorkerSetup(WorkerPlugin):
             except OSError:
                 pass
         warnings.simplefilter('ignore')
-
-
-def check_scheduler_address(address: str) -> str:
-    """`address` if it looks like tcp://HOST:PORT (or tls://), else ExecutorError."""
-    scheme, sep, rest = address.partition('://')
-    host, colon, port = rest.rpartition(':')
-    if not sep or scheme not in ('tcp', 'tls') or not colon or not host or not port.isdigit():
-        raise ExecutorError(
-            f'--scheduler {address!r} is not tcp://HOST:PORT (e.g. tcp://127.0.0.1:8786)'
-        )
-    return address
 
 
 @contextlib.contextmanager
