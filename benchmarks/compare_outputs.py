@@ -339,7 +339,8 @@ def compare_records(old: Path, new: Path) -> int:
             continue
         outcome = compare_command(old / name, new / name, paths)
         deprecations += [f'{name}: {line}' for line in dict.fromkeys(outcome.deprecations)]
-        note = f' ({outcome.uncompared} figures or logs not compared)' if outcome.uncompared else ''
+        uncompared = outcome.uncompared
+        note = f' ({uncompared} figures or logs not compared)' if uncompared else ''
         if not outcome.differences:
             print(f'{name:28s} same{note}')
         elif name.startswith('help_'):

@@ -15,6 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
+from cloth_bench_ros.command_options import REFERENCES
 from cloth_bench_ros.engines.base import EngineError
 from cloth_bench_ros.engines.presets import identified_set_of, load_preset, preset_set
 from cloth_bench_ros.errors import InputError
@@ -23,7 +24,6 @@ from cloth_bench_ros.paths import share_dir
 from cloth_bench_ros.studies.cells import Cell, config_label, CROSS_REFERENCE, set_label
 
 MODE = CROSS_REFERENCE
-REFERENCES = ('mujoco', 'newton-vbd')
 KINDS = ('preset', 'identified')
 SEED_START = 1  # the identifications ran on seed 0: every cross-reference seed is held out
 # (engine, parameter overrides of its preset): the entrants of the table.
