@@ -196,6 +196,11 @@ def _ros2_run_nodes(output: Path) -> dict[str, tuple[str, str]]:
     }
 
 
+# A node graph runs the short bundled fling in 4-10 s; a node still running after this is a hang,
+# said as one within a minute rather than after the suite's timeouts.
+GRAPH_BUDGET_S = 60
+
+
 def _node_graph(tmp_path, real: set[str], nodes: dict[str, tuple[str, str]]) -> None:
     """
     Run nodes one process each, as `ros2 run` or `ros2 launch` starts them, in one namespace.
@@ -204,7 +209,8 @@ def _node_graph(tmp_path, real: set[str], nodes: dict[str, tuple[str, str]]) -> 
     real rclpy over Fast DDS, the others on the embedded runtime over Cyclone DDS (loopback); the
     evaluator ends the run, the others are then stopped with SIGINT (as the launch file's
     OnProcessExit or a user would). Every process must exit 0 (one still running 30 s after SIGINT
-    is killed); a simulator that ends before the evaluator fails the case at once.
+    is killed); a simulator that ends before the evaluator fails the case at once, and a node
+    still running after GRAPH_BUDGET_S fails it as a hang, with every node's log.
     """
     domain = random.randint(1, 101)
     embedded_env = ' '.join(
@@ -218,7 +224,7 @@ def _node_graph(tmp_path, real: set[str], nodes: dict[str, tuple[str, str]]) -> 
              for name in nodes}
     launches = [
         # $! is this node's `timeout`; the node is its only child
-        f'(timeout 300 {pythons[name]} -m cloth_bench_ros.nodes.{executable} {args}'
+        f'(timeout {GRAPH_BUDGET_S} {pythons[name]} -m cloth_bench_ros.nodes.{executable} {args}'
         f' > {files[name]["log"]} 2>&1 & echo $! > {files[name]["pid"]}; wait $!;'
         f' echo $? > {files[name]["status"]}) &'
         for name, (executable, args) in nodes.items()
@@ -245,6 +251,13 @@ def _node_graph(tmp_path, real: set[str], nodes: dict[str, tuple[str, str]]) -> 
     if len(real) < len(nodes):  # Fast DDS meets Cyclone's unicast discovery on loopback
         env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     subprocess.run(ros_script(script), env=env, timeout=600)
+    statuses = {name: files[name]['status'].read_text().strip() for name in nodes
+                if files[name]['status'].exists()}
+    hung = [name for name, status in statuses.items() if status == '124']  # `timeout` ended it
+    assert not hung, (
+        f'the graph hung: {", ".join(hung)} still running after {GRAPH_BUDGET_S} s (a run takes'
+        ' 4-10 s): ' + '\n'.join(f'{name}: ' + files[name]['log'].read_text() for name in nodes)
+    )
     early = [n for n in (tmp_path / 'ended_first').read_text().split() if n != 'evaluator']
     assert not early, f'{", ".join(early)} ended before the evaluator: ' + '\n'.join(
         files[name]['log'].read_text() for name in early
