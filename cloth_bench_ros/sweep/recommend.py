@@ -44,6 +44,7 @@ RECOMMENDATION_KEYS = (
     'tolerance_m',
     'meets_deadline',
 )
+MEASURED_KEYS = RECOMMENDATION_KEYS[RECOMMENDATION_KEYS.index('cd'):]  # optional in a file
 
 # DEADLINE_BUDGET (core/deadline.py): the step's share of the period; the rest is the round trip
 # (two DDS hops, the messages in Python), 0.4-0.5 ms on a 2-core machine, so at 1 kHz a
@@ -258,18 +259,7 @@ def load_recommendations(path: Path) -> list[Recommendation]:
                 str(e['config']),
                 tuple(grid) if grid else None,
                 params,
-                **{
-                    k: e[k]
-                    for k in (
-                        'cd',
-                        'step_p99_ms',
-                        'best_config',
-                        'best_cd',
-                        'tolerance_m',
-                        'meets_deadline',
-                    )
-                    if k in e
-                },
+                **{k: e[k] for k in MEASURED_KEYS if k in e},
             )
         )
     return out
